@@ -1,0 +1,69 @@
+"""The mission language: text -> AST -> checked program -> statechart.
+
+Pure: nothing but `dsl.loader` touches the disk, and nothing prints. Errors come back as
+located `Diagnostic`s (all of a file's in one run), never as a traceback.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from dsl.build import Builder
+from dsl.catalog import Catalog
+from dsl.checker import Checker, Program
+from dsl.errors import Diagnostic, MissionError, Reporter, Severity
+from dsl.loader import load_file, load_text
+from dsl.statechart import Statechart
+
+__all__ = ["Compiled", "compile_file", "compile_text", "compile_program", "Diagnostic", "MissionError",
+           "Statechart"]
+
+
+@dataclass
+class Compiled:
+    """The result of compiling one mission file: a statechart if there were no errors."""
+
+    file: str
+    statechart: Statechart | None
+    diagnostics: list[Diagnostic] = field(default_factory=list)
+    sources: dict[str, str] = field(default_factory=dict)
+
+    @property
+    def ok(self) -> bool:
+        return not any(d.severity is Severity.ERROR for d in self.diagnostics)
+
+    def raise_for_errors(self) -> Statechart | None:
+        """The statechart (None for a library file with no mission), or MissionError."""
+        if not self.ok:
+            raise MissionError(self.diagnostics, self.sources)
+        return self.statechart
+
+
+def compile_program(program: Program, catalog: Catalog, report: Reporter) -> Statechart | None:
+    """Check a parsed program and, if it has no errors and a mission, build its statechart."""
+    if report.failed:  # syntax errors: semantic checks would only echo them
+        return None
+    checked = Checker(program, catalog, report).run()
+    mission = program.mission
+    if report.failed or mission is None:
+        return None
+    chart = Builder(checked, catalog, report).build(mission, program.main)
+    return None if report.failed else chart
+
+
+def _finish(program: Program, catalog: Catalog, report: Reporter) -> Compiled:
+    chart = compile_program(program, catalog, report)
+    diags = sorted(report.diagnostics, key=lambda d: (d.span.file != program.main, d.span.file,
+                                                        d.span.line, d.span.column))
+    return Compiled(program.main, chart, diags, program.sources)
+
+
+def compile_file(path: str | Path, catalog: Catalog) -> Compiled:
+    report = Reporter()
+    return _finish(load_file(path, report), catalog, report)
+
+
+def compile_text(text: str, catalog: Catalog, file: str = "<string>") -> Compiled:
+    report = Reporter()
+    return _finish(load_text(text, file, report), catalog, report)

@@ -1,0 +1,158 @@
+"""What the system knows about components, as pure data: the checker's view of the manifests.
+
+Elementary behaviors, resource controllers (RC), aggregates (ARC) and data types are not
+declared in missions; they come from `components/<Name>/manifest.yaml`, loaded by
+`drd.manifests`. The language only needs this typed summary of them, so `dsl/` stays free
+of I/O and a test can build a catalog by hand.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Mapping
+from dataclasses import dataclass, field
+from enum import Enum
+from types import MappingProxyType
+
+#: The value types of the language. Resource and data types are component names.
+SCALAR_TYPES = ("int", "float", "bool", "str", "duration")
+
+
+class Kind(str, Enum):
+    BEHAVIOR = "behavior"
+    """An elementary behavior: a leaf state, run as a component instance."""
+    RC = "rc"
+    """A resource controller: one device behind an interface (a drive, a camera)."""
+    ARC = "arc"
+    """An aggregate resource controller: a typed group of RCs (a Ranger)."""
+    DATA = "data"
+    """A shared data type (`shared map: OccupancyMap`)."""
+
+
+class Process(str, Enum):
+    CONTAINER = "container"
+    """Runs in one of the Creator's pre-started worker processes (fast to place)."""
+    DEDICATED = "dedicated"
+    """Gets a process of its own."""
+
+
+@dataclass(frozen=True, slots=True)
+class ParamSpec:
+    """A typed parameter. `default` is a Python value (durations in seconds)."""
+
+    name: str
+    type: str
+    default: object = None
+    required: bool = False
+    description: str = ""
+
+
+@dataclass(frozen=True, slots=True)
+class NeedSpec:
+    """A resource an elementary behavior uses.
+
+    `of` lists ARC types, in order of preference, whose part may serve the need when an
+    ancestor holds such an aggregate (`camera: Camera of [Scout, Ranger]`).
+    """
+
+    name: str
+    type: str
+    of: tuple[str, ...] = ()
+    quantity: float | None = None
+    description: str = ""
+
+
+@dataclass(frozen=True, slots=True)
+class RecordSpec:
+    """A named record with typed fields: a component output or an event."""
+
+    name: str
+    fields: Mapping[str, str] = field(default_factory=dict)
+    type: str = "record"
+    description: str = ""
+
+
+@dataclass(frozen=True, slots=True)
+class Scheduling:
+    """Core and priority assignment (ESAIR): CPU affinity and nice level."""
+
+    cores: tuple[int, ...] | None = None
+    nice: int = 0
+
+
+@dataclass(frozen=True, slots=True)
+class ComponentType:
+    """One manifest, typed. Fields that do not apply to a kind stay empty."""
+
+    name: str
+    kind: Kind
+    description: str = ""
+    params: tuple[ParamSpec, ...] = ()
+    needs: tuple[NeedSpec, ...] = ()
+    outputs: tuple[RecordSpec, ...] = ()
+    events: tuple[RecordSpec, ...] = ()
+    interfaces: tuple[str, ...] = ()
+    parts: Mapping[str, str] = field(default_factory=dict)
+    properties: Mapping[str, str] = field(default_factory=dict)
+    sharable: bool = False
+    capacity: float | None = None
+    multiplicity: int | None = None
+    entry_point: str | None = None
+    process: Process = Process.CONTAINER
+    scheduling: Scheduling = Scheduling()
+    source: str = "<builtin>"
+
+    def param(self, name: str) -> ParamSpec | None:
+        return next((p for p in self.params if p.name == name), None)
+
+    def output(self, name: str) -> RecordSpec | None:
+        return next((o for o in self.outputs if o.name == name), None)
+
+    @property
+    def is_resource(self) -> bool:
+        return self.kind in (Kind.RC, Kind.ARC)
+
+
+#: Properties every resource has, whatever its manifest says.
+BUILTIN_PROPERTIES: Mapping[str, str] = MappingProxyType({"id": "str", "host": "str"})
+
+
+@dataclass(frozen=True)
+class Catalog:
+    """Every known component type by name, and every event any of them emits."""
+
+    components: Mapping[str, ComponentType]
+
+    @classmethod
+    def of(cls, types: Iterable[ComponentType]) -> Catalog:
+        return cls({t.name: t for t in types})
+
+    def get(self, name: str) -> ComponentType | None:
+        return self.components.get(name)
+
+    def names(self, *kinds: Kind) -> list[str]:
+        return [n for n, t in self.components.items() if not kinds or t.kind in kinds]
+
+    @property
+    def events(self) -> dict[str, RecordSpec]:
+        out: dict[str, RecordSpec] = {}
+        for t in self.components.values():
+            for e in t.events:
+                out.setdefault(e.name, e)
+        return out
+
+    def properties(self, type_name: str) -> dict[str, str]:
+        """The queryable properties of a resource type (`scout.carrier`, `cam.id`)."""
+        t = self.components.get(type_name)
+        props = dict(BUILTIN_PROPERTIES)
+        if t is not None:
+            props.update(t.properties)
+            props.update(t.parts)  # `ranger.camera` names the part
+        return props
+
+    def part_of(self, arc: str, rc_type: str) -> str | None:
+        """The name of the single part of `arc` with type `rc_type`, if exactly one."""
+        t = self.components.get(arc)
+        if t is None or t.kind is not Kind.ARC:
+            return None
+        hits = [n for n, ty in t.parts.items() if ty == rc_type]
+        return hits[0] if len(hits) == 1 else None

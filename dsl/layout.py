@@ -1,0 +1,89 @@
+"""The post-lexer: where newlines count, and which `/` and `;` start or separate actions.
+
+Newlines end items, except inside `( )` and `[ ]`, so long argument lists may wrap.
+`;` is an item separator too, except inside a transition's action list:
+`A -> B / set x = 1; log "y"`. An action list starts at a `/` followed by an action
+keyword (`set emit release log` are reserved, so `x / set` can never be a division) and
+its `;` are those followed by an action keyword. One token of look-ahead decides both.
+
+The state lives on the instance, not in the generator, because lark starts a fresh
+`process()` when it resumes after a syntax error: a token already pulled for look-ahead
+must not be lost, or one error would cascade into the next line.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from itertools import chain
+
+from lark import Token
+from lark.lark import PostLex
+
+OPENERS = {"LPAR", "LSQB"}
+CLOSERS = {"RPAR", "RSQB"}
+ACTION_KEYWORDS = {"SET", "EMIT", "RELEASE", "LOG"}
+
+
+class Layout(PostLex):
+    """Drops, folds and retypes separator tokens; remembers the last tokens for errors."""
+
+    always_accept = ("_SEP", "SLASH")
+
+    def __init__(self) -> None:
+        self.reset()
+
+    def reset(self) -> None:
+        """Forget everything: called before each parse."""
+        self.history: list[Token] = []
+        self.pending: list[Token] = []  # pulled from the lexer, not yet given to the parser
+        self.depth = 0
+
+    def save(self) -> tuple[list[Token], list[Token], int]:
+        return self.history, self.pending, self.depth
+
+    def restore(self, state: tuple[list[Token], list[Token], int]) -> None:
+        self.history, self.pending, self.depth = state
+
+    def process(self, stream: Iterator[Token]) -> Iterator[Token]:
+        replay, self.pending = self.pending, []
+        held: Token | None = None  # a _SEP or SLASH waiting for the next token
+        for tok in chain(replay, stream):
+            kind = tok.type
+            if kind == "_SEP":
+                if self.depth > 0:
+                    continue
+                if held is not None and held.type == "_SEP":  # fold a run into one
+                    held = Token.new_borrow_pos("_SEP", held.value + tok.value, held)
+                    continue
+            if held is not None:
+                self.pending = [tok]
+                yield self._emit(_resolve(held, tok))
+                self.pending = []
+                held = None
+            if kind in OPENERS:
+                self.depth += 1
+            elif kind in CLOSERS:
+                self.depth = max(0, self.depth - 1)
+            if kind in ("_SEP", "SLASH"):
+                held = tok
+                continue
+            yield self._emit(tok)
+        if held is not None:
+            yield self._emit(held)
+
+    def _emit(self, tok: Token) -> Token:
+        self.history.append(tok)
+        if len(self.history) > 4:
+            del self.history[0]
+        return tok
+
+
+def _resolve(held: Token, nxt: Token) -> Token:
+    """Retype a held `/` or `;` by the token that follows it."""
+    if nxt.type not in ACTION_KEYWORDS:
+        return held
+    if held.type == "SLASH":
+        return Token.new_borrow_pos("ACTION_SLASH", held.value, held)
+    if "\n" not in held.value:
+        return Token.new_borrow_pos("ACTION_SEMI", held.value, held)
+    return held

@@ -1,0 +1,75 @@
+"""Reading mission files and their imports: the only module of `dsl` that touches the disk."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from dsl.checker import Program
+from dsl.errors import Reporter, Span
+from dsl.parser import parse
+
+#: Larger files are refused before parsing (a mission is text a person writes).
+MAX_FILE_BYTES = 16 * 1024 * 1024
+
+
+def decode(data: bytes, file: str, report: Reporter) -> str:
+    """UTF-8 text, or a located error at the first bad byte (and the text with replacements)."""
+    try:
+        return data.decode("utf-8")
+    except UnicodeDecodeError as e:
+        line = data.count(b"\n", 0, e.start) + 1
+        col = e.start - (data.rfind(b"\n", 0, e.start) + 1) + 1
+        report.error("encoding", f"not valid UTF-8: byte 0x{data[e.start]:02x} cannot start or continue a character",
+                     Span(file, line, col, line, col + 1), "save the file as UTF-8")
+        return data.decode("utf-8", errors="replace")
+
+
+def load_text(text: str, file: str, report: Reporter, base: Path | None = None) -> Program:
+    """Parse `text` as the main file; imports are read relative to `base` (default: the cwd)."""
+    program = Program(file, {}, {})
+    _add(program, text, file, base or Path.cwd(), report)
+    return program
+
+
+def load_file(path: str | Path, report: Reporter) -> Program:
+    """Read and parse a mission file and, recursively, the files it imports."""
+    path = Path(path)
+    name = str(path)
+    program = Program(name, {}, {})
+    text = _read(path, name, report, None)
+    if text is not None:
+        _add(program, text, name, path.parent, report)
+    return program
+
+
+def _read(path: Path, name: str, report: Reporter, at: Span | None) -> str | None:
+    where = at or Span(name, 1, 1, 1, 1)
+    try:
+        if path.stat().st_size > MAX_FILE_BYTES:
+            report.error("io", f"{name} is larger than {MAX_FILE_BYTES // 2**20} MiB", where)
+            return None
+        data = path.read_bytes()
+    except OSError as e:
+        what = "cannot read imported file" if at else "cannot read"
+        report.error("io", f"{what} {name}: {e.strerror or e}", where)
+        return None
+    return decode(data, name, report)
+
+
+def _add(program: Program, text: str, name: str, base: Path, report: Reporter) -> None:
+    program.sources[name] = text
+    tree, errors = parse(text, name)
+    report.diagnostics.extend(errors)
+    if tree is None:
+        return
+    program.files[name] = tree
+    for imp in tree.imports:
+        target = base / imp.path
+        key = str(target)
+        if key in program.sources:
+            continue
+        sub = _read(target, key, report, imp.span)
+        if sub is None:
+            program.sources[key] = ""
+            continue
+        _add(program, sub, key, target.parent, report)

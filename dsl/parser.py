@@ -1,0 +1,571 @@
+"""Text to AST: the LALR parser, its inline transformer, and syntax errors in the user's words.
+
+The transformer runs inside the parser (lark's `transformer=` option), so AST nodes are
+built at each reduction and no parse tree is ever materialised: this is both faster and
+free of recursion, whatever the nesting depth of the input. Syntax errors are translated
+through a table keyed by what came before the bad token (as lark does for its own
+grammar language), and the parser recovers by inserting a missing token or skipping a
+bad one, so several syntax errors of a file are reported in one run.
+"""
+
+from __future__ import annotations
+
+import threading
+from collections.abc import Callable, Sequence
+from functools import cache
+from importlib import resources
+from typing import Any
+
+from lark import Lark, Token, Transformer
+from lark.exceptions import UnexpectedCharacters, UnexpectedInput, UnexpectedToken
+
+from dsl import ast
+from dsl.errors import Diagnostic, Span
+from dsl.layout import Layout
+
+#: Expressions nested deeper than this are rejected (they would only come from a generator).
+MAX_EXPR_DEPTH = 100
+#: After this many syntax errors in one file the parser stops trying to recover.
+MAX_SYNTAX_ERRORS = 10
+
+KEYWORDS = frozenset(
+    "import mission behavior priority needs where quantity for shared var as parallel all any until "
+    "start done fail when on error after set emit release log plan concurrent true false and or not "
+    "event".split()
+)
+
+# Tokens that can start an item or a declaration: when one is acceptable we are between items.
+ITEM_STARTS = frozenset({"NAME", "NEEDS", "SHARED", "VAR", "PARALLEL", "PLAN", "START", "MISSION",
+                         "BEHAVIOR", "IMPORT"})
+
+_ESCAPES = {"n": "\n", "t": "\t", '"': '"', "\\": "\\", "{": "{", "}": "}"}
+
+# What each terminal is called in a message.
+_TERMINAL_WORDS = {
+    "NAME": "a name", "INT": "an integer", "FLOAT": "a number", "DURATION": "a duration (e.g. 30s)",
+    "STRING": 'a string ("...")', "_SEP": "a newline or ;", "$END": "the end of the file",
+    "RBRACE": "}", "LBRACE": "{", "LPAR": "(", "RPAR": ")", "LSQB": "[", "RSQB": "]", "COMMA": ",",
+    "COLON": ":", "EQUAL": "=", "DOT": ".", "ARROW": "->", "CMP": "a comparison", "LT": "<",
+    "PLUS": "+", "MINUS": "-", "STAR": "*", "SLASH": "/", "PERCENT": "%", "ACTION_SLASH": "/",
+    "ACTION_SEMI": ";", "__ANON_0": "..",
+}
+
+# Messages keyed by the token before the error: what the user was in the middle of writing.
+AFTER_TOKEN = {
+    "ARROW": "expected a state or done/fail after ->",
+    "MISSION": "expected the mission's name after mission",
+    "BEHAVIOR": "expected the behavior's name after behavior",
+    "NEEDS": "expected `name: Type` after needs",
+    "SHARED": "expected `name: Type` after shared",
+    "VAR": "expected `name: type = value` after var",
+    "FOR": "expected a duration after for (e.g. 5s)",
+    "AFTER": "expected a duration after after (e.g. 2min)",
+    "ON": "expected an event name or error after on",
+    "WHEN": "expected a condition after when",
+    "AS": "expected an alias name after as",
+    "PRIORITY": "expected a priority number after priority (1 is the highest)",
+    "IMPORT": 'expected a file name in quotes after import',
+    "PLAN": "expected { or concurrent after plan",
+    "CONCURRENT": "expected { after plan concurrent",
+    "PARALLEL": "expected { or all/any/until after parallel",
+    "UNTIL": "expected the name of the child that ends the parallel block after until",
+    "LT": "expected a plan step after <",
+    "ACTION_SLASH": "expected an action after / (set, emit, release or log)",
+    "ACTION_SEMI": "expected an action after ; (set, emit, release or log)",
+    "SET": "expected `variable = value` after set",
+    "EMIT": "expected an event name after emit",
+    "LOG": 'expected a message in quotes after log',
+}
+
+
+def _span(file: str, tok: Token) -> Span:
+    return Span(file, tok.line or 1, tok.column or 1, tok.end_line or tok.line or 1,
+                tok.end_column or (tok.column or 1) + 1)
+
+
+class _Builder(Transformer):  # type: ignore[type-arg]
+    """Builds AST nodes at each reduction. One instance per Lark object; state is per parse."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.file = "<string>"
+        self.errors: list[Diagnostic] = []
+        self.depth: dict[int, int] = {}
+        self.line_offset = 0
+        self.column_offset = 0
+        self.subparse: Callable[[str, Token], ast.Expr | None] | None = None
+
+    # -- positions
+    def tspan(self, tok: Token) -> Span:
+        s = _span(self.file, tok)
+        if self.line_offset or self.column_offset:
+            return Span(s.file, s.line + self.line_offset, s.column + self.column_offset,
+                        s.end_line + self.line_offset, s.end_column + self.column_offset)
+        return s
+
+    def pos(self, x: Any) -> Span | None:
+        if isinstance(x, Token):
+            return self.tspan(x)
+        return getattr(x, "span", None)
+
+    def cover(self, first: Any, last: Any) -> Span:
+        a, b = self.pos(first), self.pos(last)
+        assert a is not None and b is not None
+        return a.to(b)
+
+    def expr(self, node: ast.Expr, *subs: ast.Expr) -> ast.Expr:
+        depth = 1 + max((self.depth.get(id(s), 1) for s in subs), default=0)
+        if depth > MAX_EXPR_DEPTH:
+            if not any(d.code == "nesting" for d in self.errors):
+                self.errors.append(Diagnostic(
+                    "nesting", f"expression nested too deeply (more than {MAX_EXPR_DEPTH} levels)",
+                    node.span, "split it with var or shorten it"))
+            return ast.Literal(0, span=node.span)
+        if depth > 1:
+            self.depth[id(node)] = depth
+        return node
+
+    # -- declarations
+    def start(self, c: list[Any]) -> ast.MissionFile:
+        imports = tuple(x for x in c if isinstance(x, ast.Import))
+        behaviors = tuple(x for x in c if isinstance(x, ast.Behavior))
+        return ast.MissionFile(imports, behaviors, path=self.file)
+
+    def import_decl(self, c: list[Any]) -> ast.Import:
+        return ast.Import(self.text(c[1]), span=self.cover(c[0], c[1]))
+
+    def mission(self, c: list[Any]) -> ast.Behavior:
+        items, end = c[2]
+        return ast.Behavior(str(c[1]), (), items, None, True, span=self.cover(c[0], end),
+                            name_span=self.tspan(c[1]))
+
+    def behavior(self, c: list[Any]) -> ast.Behavior:
+        items, end = c[4]
+        return ast.Behavior(str(c[1]), c[2] or (), items, c[3], False, span=self.cover(c[0], end),
+                            name_span=self.tspan(c[1]))
+
+    def param_list(self, c: list[Any]) -> tuple[ast.Param, ...]:
+        return tuple(p for p in c if p is not None)
+
+    def param(self, c: list[Any]) -> ast.Param:
+        last = c[2] if c[2] is not None else c[1]
+        return ast.Param(str(c[0]), self.typeref(c[1]), c[2], span=self.cover(c[0], last))
+
+    def priority(self, c: list[Any]) -> int:
+        return int(c[0])
+
+    def block(self, c: list[Any]) -> tuple[tuple[ast.Item, ...], Token]:
+        return tuple(c[:-1]), c[-1]
+
+    def typeref(self, tok: Token) -> ast.TypeRef:
+        return ast.TypeRef(str(tok), span=self.tspan(tok))
+
+    # -- body items
+    def needs(self, c: list[Any]) -> ast.Need:
+        kw, name, typ, where, quantity, slice_ = c
+        last = next(x for x in (slice_, quantity, where, typ) if x is not None)
+        return ast.Need(str(name), self.typeref(typ), where, quantity, slice_, span=self.cover(kw, last))
+
+    def where(self, c: list[Any]) -> ast.Expr:
+        return c[0]  # type: ignore[no-any-return]
+
+    quantity = where
+
+    def slice(self, c: list[Any]) -> ast.Duration:
+        return self.duration([c[1]])  # type: ignore[return-value]
+
+    def shared(self, c: list[Any]) -> ast.Shared:
+        return ast.Shared(str(c[1]), self.typeref(c[2]), span=self.cover(c[0], c[2]))
+
+    def var(self, c: list[Any]) -> ast.Var:
+        last = c[3] if c[3] is not None else c[2]
+        return ast.Var(str(c[1]), self.typeref(c[2]), c[3], span=self.cover(c[0], last))
+
+    def child(self, c: list[Any]) -> ast.Child:
+        name, args, mult, alias, prio = c
+        end: Any = name
+        for part in (args and args[1], mult, alias):
+            if part is not None:
+                end = part
+        span = self.cover(name, end)
+        return ast.Child(str(name), args[0] if args else None, mult, alias and str(alias), prio, span=span)
+
+    def args(self, c: list[Any]) -> tuple[tuple[ast.Arg, ...], Token]:
+        return tuple(a for a in c[:-1] if a is not None), c[-1]
+
+    def arg(self, c: list[Any]) -> ast.Arg:
+        return ast.Arg(str(c[0]), c[1], span=self.cover(c[0], c[1]))
+
+    def mult_exact(self, c: list[Any]) -> ast.Multiplicity:
+        return ast.Multiplicity(c[1], span=self.cover(c[0], c[-1]))
+
+    def mult_range(self, c: list[Any]) -> ast.Multiplicity:
+        return ast.Multiplicity(c[1], c[2], span=self.cover(c[0], c[-1]))
+
+    def mult_open(self, c: list[Any]) -> ast.Multiplicity:
+        return ast.Multiplicity(c[1], None, True, span=self.cover(c[0], c[-1]))
+
+    def alias(self, c: list[Any]) -> Token:
+        return c[0]  # type: ignore[no-any-return]
+
+    def parallel(self, c: list[Any]) -> ast.Parallel:
+        policy = c[1]
+        children = tuple(x for x in c[2:-1] if x is not None)
+        span = self.cover(c[0], c[-1])
+        if policy is None:
+            return ast.Parallel(ast.Policy.ALL, children, None, False, span=span)
+        return ast.Parallel(ast.Policy(str(policy[0])), children, policy[1] and str(policy[1]), span=span)
+
+    def policy(self, c: list[Any]) -> tuple[Token, Token | None]:
+        return c[0], (c[1] if len(c) > 1 else None)
+
+    def transition(self, c: list[Any]) -> ast.Transition:
+        src, _, dst, trig, guard, actions = c
+        kind, event, cond, delay, event_tok = trig or (ast.TriggerKind.COMPLETION, None, None, None, None)
+        end: Any = dst
+        for part in (cond or delay or event_tok, guard and guard[1], actions and actions[-1]):
+            if part is not None:
+                end = part
+        return ast.Transition(str(src), str(dst), kind, event, cond, delay, guard and guard[0],
+                              tuple(actions or ()), span=self.cover(src, end),
+                              source_span=self.tspan(src), target_span=self.tspan(dst))
+
+    def source(self, c: list[Any]) -> Token:
+        return c[0]  # type: ignore[no-any-return]
+
+    target = source
+
+    def when(self, c: list[Any]) -> tuple[Any, ...]:
+        return ast.TriggerKind.CHANGE, None, c[0], None, None
+
+    def on_error(self, c: list[Any]) -> tuple[Any, ...]:
+        return ast.TriggerKind.ERROR, None, None, None, None
+
+    def on_event(self, c: list[Any]) -> tuple[Any, ...]:
+        return ast.TriggerKind.EVENT, str(c[0]), None, None, c[0]
+
+    def after(self, c: list[Any]) -> tuple[Any, ...]:
+        return ast.TriggerKind.TIMEOUT, None, None, self.duration([c[0]]), None
+
+    def guard(self, c: list[Any]) -> tuple[ast.Expr, Token]:
+        return c[0], c[1]
+
+    def actions(self, c: list[Any]) -> list[ast.Action]:
+        return [a for a in c if not isinstance(a, Token)]
+
+    def set_action(self, c: list[Any]) -> ast.SetAction:
+        return ast.SetAction(str(c[1]), c[2], span=self.cover(c[0], c[2]))
+
+    def emit_action(self, c: list[Any]) -> ast.EmitAction:
+        args = c[2]
+        return ast.EmitAction(str(c[1]), args[0] if args else None,
+                              span=self.cover(c[0], args[1] if args else c[1]))
+
+    def release_action(self, c: list[Any]) -> ast.ReleaseAction:
+        return ast.ReleaseAction(str(c[1]), span=self.cover(c[0], c[2]))
+
+    def log_action(self, c: list[Any]) -> ast.LogAction:
+        return ast.LogAction(self.string([c[1]]), span=self.cover(c[0], c[1]))
+
+    def plan(self, c: list[Any]) -> ast.Plan:
+        chains = tuple(x for x in c[2:-1] if x is not None)
+        return ast.Plan(c[1] is not None, chains, span=self.cover(c[0], c[-1]))
+
+    def chain(self, c: list[Any]) -> tuple[ast.PlanStep, ...]:
+        return tuple(x for x in c if isinstance(x, ast.PlanStep))
+
+    def step(self, c: list[Any]) -> ast.PlanStep:
+        return ast.PlanStep(str(c[0]), span=self.tspan(c[0]))
+
+    # -- expressions
+    def or_op(self, c: list[Any]) -> ast.Expr:
+        return self.expr(ast.Binary("or", c[0], c[1], span=self.cover(c[0], c[1])), c[0], c[1])
+
+    def and_op(self, c: list[Any]) -> ast.Expr:
+        return self.expr(ast.Binary("and", c[0], c[1], span=self.cover(c[0], c[1])), c[0], c[1])
+
+    def not_op(self, c: list[Any]) -> ast.Expr:
+        return self.expr(ast.Unary("not", c[0], span=c[0].span), c[0])
+
+    def compare(self, c: list[Any]) -> ast.Expr:
+        return self.expr(ast.Binary(str(c[1]), c[0], c[2], span=self.cover(c[0], c[2])), c[0], c[2])
+
+    binary = compare
+
+    def neg(self, c: list[Any]) -> ast.Expr:
+        return self.expr(ast.Unary("-", c[1], span=self.cover(c[0], c[1])), c[1])
+
+    def attr(self, c: list[Any]) -> ast.Expr:
+        return self.expr(ast.Attr(c[0], str(c[1]), span=self.cover(c[0], c[1])), c[0])
+
+    def int_lit(self, c: list[Any]) -> ast.Expr:
+        return ast.Literal(int(c[0]), span=self.tspan(c[0]))
+
+    def float_lit(self, c: list[Any]) -> ast.Expr:
+        return ast.Literal(float(c[0]), span=self.tspan(c[0]))
+
+    def true_lit(self, c: list[Any]) -> ast.Expr:
+        return ast.Literal(True, span=self.tspan(c[0]))
+
+    def false_lit(self, c: list[Any]) -> ast.Expr:
+        return ast.Literal(False, span=self.tspan(c[0]))
+
+    def duration(self, c: list[Any]) -> ast.Expr:
+        text = str(c[0])
+        seconds = ast.parse_duration(text)
+        return ast.Duration(seconds if seconds is not None else 0.0, text, span=self.tspan(c[0]))
+
+    def name(self, c: list[Any]) -> ast.Expr:
+        return ast.Name(str(c[0]), span=self.tspan(c[0]))
+
+    def call(self, c: list[Any]) -> ast.Expr:
+        args, where = c[1] if c[1] is not None else ((), None)
+        node = ast.Call(str(c[0]), args, where, span=self.cover(c[0], c[2]))
+        return self.expr(node, *ast.children_of(node))
+
+    def call_args(self, c: list[Any]) -> tuple[tuple[ast.Expr, ...], ast.Expr | None]:
+        return (c[0], *c[2:]), c[1]
+
+    def string(self, c: list[Any]) -> ast.Expr:
+        tok: Token = c[0]
+        span = self.tspan(tok)
+        parts = self.split_string(tok)
+        if all(isinstance(p, str) for p in parts):
+            return ast.Literal("".join(p for p in parts if isinstance(p, str)), span=span)
+        return self.expr(ast.Interp(tuple(parts), span=span), *(p for p in parts if isinstance(p, ast.Expr)))
+
+    def text(self, tok: Token) -> str:
+        return "".join(p for p in self.split_string(tok) if isinstance(p, str))
+
+    def split_string(self, tok: Token) -> list[str | ast.Expr]:
+        """Unescape a string literal and cut out its `{expr}` parts."""
+        raw = str(tok)[1:-1]
+        parts: list[str | ast.Expr] = []
+        buf: list[str] = []
+        i = 0
+        while i < len(raw):
+            ch = raw[i]
+            if ch == "\\" and i + 1 < len(raw):
+                esc = raw[i + 1]
+                if esc not in _ESCAPES:
+                    self.errors.append(Diagnostic(
+                        "syntax", f"unknown escape \\{esc} in string", self._inner(tok, i, i + 2),
+                        'write \\\\ for a backslash; known escapes: \\n \\t \\" \\\\ \\{ \\}'))
+                buf.append(_ESCAPES.get(esc, esc))
+                i += 2
+            elif ch == "{":
+                close = raw.find("}", i)
+                if close < 0:
+                    self.errors.append(Diagnostic("syntax", "unclosed { in string", self._inner(tok, i, i + 1),
+                                                  "close it with } or write \\{ for a brace"))
+                    break
+                if buf:
+                    parts.append("".join(buf))
+                    buf = []
+                inner = self.subparse(raw[i + 1:close], self._at(tok, i + 1)) if self.subparse else None
+                if inner is not None:
+                    parts.append(inner)
+                i = close + 1
+            elif ch == "}":
+                self.errors.append(Diagnostic("syntax", "unmatched } in string", self._inner(tok, i, i + 1),
+                                              "write \\} for a literal brace"))
+                i += 1
+            else:
+                buf.append(ch)
+                i += 1
+        if buf or not parts:
+            parts.append("".join(buf))
+        return parts
+
+    def _at(self, tok: Token, offset: int) -> Token:
+        col = (tok.column or 1) + 1 + offset
+        return Token("STRING", "", 0, tok.line, col, tok.line, col + 1)
+
+    def _inner(self, tok: Token, start: int, end: int) -> Span:
+        s = self.tspan(tok)
+        return Span(s.file, s.line, s.column + 1 + start, s.line, s.column + 1 + end)
+
+
+@cache
+def _grammar() -> str:
+    return resources.files("dsl").joinpath("mission.lark").read_text(encoding="utf-8")
+
+
+class Parser:
+    """A reusable mission parser. Thread-safe: one parse at a time per instance."""
+
+    def __init__(self) -> None:
+        self.builder = _Builder()
+        self.layout = Layout()
+        self.lark = Lark(_grammar(), parser="lalr", lexer="basic", postlex=self.layout,
+                         transformer=self.builder, start=["start", "expr"], maybe_placeholders=True)
+        self.builder.subparse = self._subexpr
+        self.lock = threading.Lock()
+
+    def parse(self, text: str, file: str = "<string>") -> tuple[ast.MissionFile | None, list[Diagnostic]]:
+        """Parse one file's text. Returns the AST (None if unrecoverable) and syntax diagnostics."""
+        with self.lock:
+            b = self.builder
+            b.file, b.errors, b.depth = file, [], {}
+            b.line_offset = b.column_offset = 0
+            self.layout.reset()
+            recovery = _Recovery(self, file)
+            try:
+                tree = self.lark.parse(text, start="start", on_error=recovery)
+            except UnexpectedInput as e:
+                recovery.report(e)
+                tree = None
+            errors = recovery.diagnostics + b.errors
+            errors.sort(key=lambda d: (d.span.line, d.span.column))
+            b.depth = {}
+            return (tree if isinstance(tree, ast.MissionFile) else None), errors
+
+    def _subexpr(self, text: str, at: Token) -> ast.Expr | None:
+        """Parse an interpolated `{expr}` with positions relative to the string token."""
+        b = self.builder
+        saved, layout = (b.line_offset, b.column_offset), self.layout.save()
+        self.layout.reset()
+        b.line_offset, b.column_offset = (at.line or 1) - 1, (at.column or 1) - 1
+        try:
+            result = self.lark.parse(text, start="expr")
+        except UnexpectedInput as e:
+            result = None
+            b.errors.append(Diagnostic(
+                "syntax", f"bad expression in string interpolation: {_describe_token_error(e)}",
+                Span(b.file, at.line or 1, (at.column or 1) + e.column - 1,
+                     at.line or 1, (at.column or 1) + e.column), "write \\{ for a literal brace"))
+        finally:
+            b.line_offset, b.column_offset = saved
+            self.layout.restore(layout)
+        return result if isinstance(result, ast.Expr) else None
+
+
+class _Recovery:
+    """lark's on_error hook: record a located error, then repair by insertion or skipping."""
+
+    def __init__(self, parser: Parser, file: str) -> None:
+        self.parser = parser
+        self.file = file
+        self.diagnostics: list[Diagnostic] = []
+        self.lines: set[int] = set()
+
+    def __call__(self, e: UnexpectedInput) -> bool:
+        self.report(e)
+        if len(self.diagnostics) >= MAX_SYNTAX_ERRORS:
+            return False
+        if isinstance(e, UnexpectedToken) and e.interactive_parser is not None:
+            self._repair(e)
+        return True
+
+    def report(self, e: UnexpectedInput) -> None:
+        d = syntax_diagnostic(e, self.parser.layout.history, self.file)
+        if d.span.line not in self.lines:  # one error per line: the rest are usually echoes
+            self.lines.add(d.span.line)
+            self.diagnostics.append(d)
+
+    def _repair(self, e: UnexpectedToken) -> None:
+        """Insert the one missing token that lets the parser accept the bad one, if any."""
+        ip = e.interactive_parser
+        for name in sorted(ip.accepts() - {"$END"}, key=_repair_order):
+            trial = ip.copy()
+            try:
+                trial.feed_token(self._dummy(name, e.token))
+                if e.token.type == "$END" or e.token.type in trial.accepts():
+                    ip.feed_token(self._dummy(name, e.token))
+                    if e.token.type != "$END":
+                        ip.feed_token(e.token)
+                    return
+            except UnexpectedInput:
+                continue
+
+    def _dummy(self, name: str, at: Token) -> Token:
+        values = {"NAME": "_", "INT": "0", "FLOAT": "0.0", "DURATION": "0s", "STRING": '""', "_SEP": "\n"}
+        if name not in values:
+            term = self.parser.lark.get_terminal(name)
+            values[name] = str(term.pattern.value)
+        return Token.new_borrow_pos(name, values[name], at)
+
+
+def _repair_order(name: str) -> tuple[int, str]:
+    preferred = ["_SEP", "RPAR", "RSQB", "RBRACE", "NAME", "INT"]
+    return (preferred.index(name) if name in preferred else len(preferred), name)
+
+
+def syntax_diagnostic(e: UnexpectedInput, history: Sequence[Token], file: str) -> Diagnostic:
+    """Translate a lark error into a located message in the user's words."""
+    if isinstance(e, UnexpectedCharacters):
+        ch = e.char if hasattr(e, "char") else "?"
+        span = Span(file, e.line, e.column, e.line, e.column + 1)
+        hint = "strings use double quotes" if ch == "'" else None
+        return Diagnostic("syntax", f"syntax: unexpected character {ch!r}", span, hint)
+    assert isinstance(e, UnexpectedToken)
+    tok = e.token
+    earlier = [t for t in history if t is not tok]
+    prev = earlier[-1] if earlier else None
+    at_end = tok.type in ("_SEP", "$END", "RBRACE")
+    span = _after(file, prev) if (at_end and prev is not None) else _span(file, tok)
+    hint = _keyword_hint(tok, e.expected)
+    if prev is not None and prev.type in AFTER_TOKEN and tok.type != "$END":
+        return Diagnostic("syntax", f"syntax: {AFTER_TOKEN[prev.type]}", span, hint)
+    if tok.type == "$END":
+        missing = "}" if "RBRACE" in e.expected else _describe(e.expected)
+        return Diagnostic("syntax", f"syntax: the file ends too early: expected {missing}", span,
+                          "every { needs a matching }" if missing == "}" else None)
+    if "_SEP" in e.expected and not (e.expected & ITEM_STARTS) and prev is not None and tok.type != "_SEP":
+        return Diagnostic("syntax", f"syntax: expected a newline or ; after {_show(prev)}", _after(file, prev),
+                          hint or f"{_show(tok)} starts a new item: put it on its own line")
+    return Diagnostic("syntax", f"syntax: {_describe_token_error(e)}", span, hint)
+
+
+def _describe_token_error(e: UnexpectedInput) -> str:
+    if isinstance(e, UnexpectedToken):
+        return f"expected {_describe(e.expected)}, got {_show(e.token)}"
+    return str(e).splitlines()[0]
+
+
+def _after(file: str, tok: Token) -> Span:
+    line, col = tok.end_line or tok.line or 1, tok.end_column or (tok.column or 1) + len(tok)
+    if tok.type == "_SEP":
+        line, col = tok.line or 1, tok.column or 1
+    return Span(file, line, col, line, col + 1)
+
+
+def _show(tok: Token) -> str:
+    if tok.type == "$END":
+        return "the end of the file"
+    if tok.type == "_SEP":
+        return "the end of the line" if "\n" in tok.value else ";"
+    return f"`{tok.value}`"
+
+
+def _describe(expected: set[str] | frozenset[str]) -> str:
+    shown = {t for t in expected if not t.startswith("__")}
+    if shown - {"_SEP", "$END"}:
+        shown -= {"_SEP", "$END"}  # optional separators only clutter the list
+    words = sorted({_TERMINAL_WORDS.get(t, t.lower() if t.isupper() else t) for t in shown}
+                   or {"something else"})
+    return words[0] if len(words) == 1 else ", ".join(words[:-1]) + " or " + words[-1]
+
+
+def _keyword_hint(tok: Token, expected: set[str] | frozenset[str]) -> str | None:
+    """Explain the usual causes: a keyword where a name belongs, or glued to a name."""
+    if tok.type in ("SET", "EMIT", "RELEASE", "LOG") and tok.type not in expected:
+        return f"actions such as {tok.value} follow a / at the end of a transition: A -> B / {tok.value} ..."
+    if tok.type != "NAME" and tok.value in KEYWORDS:
+        return f"{tok.value} is a reserved word: choose another name"
+    if tok.type == "NAME":
+        for kw in sorted(KEYWORDS, key=len, reverse=True):
+            if kw.upper() in expected and tok.value.startswith(kw) and len(tok.value) > len(kw):
+                return f"put a space between {kw} and {tok.value[len(kw):]}"
+    return None
+
+
+_default: Parser | None = None
+
+
+def parse(text: str, file: str = "<string>") -> tuple[ast.MissionFile | None, list[Diagnostic]]:
+    """Parse with a shared parser instance (building the LALR tables once per process)."""
+    global _default
+    if _default is None:
+        _default = Parser()
+    return _default.parse(text, file)
