@@ -1,0 +1,103 @@
+"""What every command shares: consoles, exit codes, error rendering, the safety net.
+
+No traceback reaches a user: `run_app` turns anything unexpected into one clear line and
+exit code 2 (set `DRD_DEBUG=1` to see the traceback instead).
+"""
+
+from __future__ import annotations
+
+import os
+import sys
+import traceback
+from collections.abc import Callable, Mapping, Sequence
+from pathlib import Path
+from typing import NoReturn
+
+import click
+import typer
+from rich.console import Console
+from rich.text import Text
+
+from dsl.catalog import Catalog
+from dsl.errors import Diagnostic, Severity, caret, source_line
+
+#: Exit codes, the same for every command.
+OK, MISSION_FAILED, INVALID = 0, 1, 2
+
+out = Console(highlight=False, soft_wrap=True)
+err = Console(stderr=True, highlight=False, soft_wrap=True)
+
+ComponentsOption = typer.Option(
+    None, "--components", "-C", help="Extra folder of component manifests (repeatable; also $DRD_COMPONENTS).",
+    show_default=False)
+
+
+def debug() -> bool:
+    return os.environ.get("DRD_DEBUG", "") not in ("", "0")
+
+
+def fail(message: str, code: int = INVALID, hint: str | None = None) -> NoReturn:
+    """Print a one-line error (and a hint) to stderr and exit."""
+    err.print(Text.assemble(("error: ", "bold red"), message))
+    if hint:
+        err.print(Text.assemble(("  hint: ", "cyan"), hint))
+    raise typer.Exit(code)
+
+
+def catalog(extra: Sequence[Path] | None) -> Catalog:
+    """The component catalog, or a clear exit naming the bad manifest file and key."""
+    from drd.manifests import ManifestError, default_dirs, load_catalog
+
+    dirs = default_dirs() + [Path(p) for p in extra or ()]
+    for d in extra or ():
+        if not Path(d).is_dir():
+            fail(f"--components {d}: no such folder")
+    try:
+        return load_catalog(dirs)
+    except ManifestError as e:
+        for p in e.problems:
+            err.print(Text.assemble(("error: ", "bold red"), str(p)))
+        raise typer.Exit(INVALID) from None
+
+
+def render_diagnostic(d: Diagnostic, sources: Mapping[str, str], console: Console = err) -> None:
+    """file:line:col, the message, the source line with a caret, notes and the hint."""
+    colour = "red" if d.severity is Severity.ERROR else "yellow"
+    console.print(Text.assemble((f"{d.span}: ", "bold"), (f"{d.severity.value}: ", f"bold {colour}"), d.message))
+    line = source_line(d.span, sources)
+    if line is not None:
+        line = "".join(ch if ch.isprintable() else "\ufffd" for ch in line.expandtabs(1))
+        start, width = caret(d.span, line)
+        gutter = f"{d.span.line:>5} | "
+        console.print(Text(gutter, style="dim") + Text(line))
+        console.print(Text(" " * (len(gutter) - 2) + "| ", style="dim") + Text(" " * start + "^" * width,
+                                                                                  style=f"bold {colour}"))
+    for text, where in d.notes:
+        console.print(Text.assemble(("  note: ", "dim"), f"{where}: {text}"))
+    if d.hint:
+        console.print(Text.assemble(("  hint: ", "cyan"), d.hint))
+
+
+def run_app(app: Callable[..., object], prog: str) -> NoReturn:
+    """Run a typer app with the safety net: clean errors, documented exit codes."""
+    try:
+        rc = app(prog_name=prog, standalone_mode=False)
+    except typer.Exit as e:
+        sys.exit(e.exit_code)
+    except click.exceptions.Abort:
+        err.print("aborted")
+        sys.exit(130)
+    except click.ClickException as e:
+        e.show()
+        sys.exit(INVALID)
+    except KeyboardInterrupt:
+        err.print("interrupted")
+        sys.exit(130)
+    except Exception as e:  # the last line of defence: never a traceback for a user
+        if debug():
+            traceback.print_exc()
+        else:
+            err.print(Text.assemble(("error: ", "bold red"), f"{type(e).__name__}: {e}"))
+            err.print(Text("  (set DRD_DEBUG=1 to see the traceback)", style="dim"))
+        sys.exit(INVALID)
+    sys.exit(rc if isinstance(rc, int) else OK)

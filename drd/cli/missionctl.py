@@ -1,0 +1,176 @@
+"""`missionctl`: the operator's command line. Commands that need no cluster live here first."""
+
+from __future__ import annotations
+
+import json
+import shutil
+import subprocess
+from enum import Enum
+from pathlib import Path
+
+import typer
+from rich.text import Text
+from rich.tree import Tree
+
+from drd.cli.common import INVALID, OK, ComponentsOption, catalog, err, fail, out, render_diagnostic, run_app
+from dsl import Compiled, compile_file
+from dsl.export import need_label, state_label, to_dict, to_dot, to_mermaid, trigger_label
+from dsl.statechart import State, Statechart, StateKind
+
+app = typer.Typer(
+    help="Write, check and run robot-team missions.",
+    no_args_is_help=True,
+    add_completion=False,
+    rich_markup_mode=None,
+)
+
+
+class Format(str, Enum):
+    tree = "tree"
+    json = "json"
+    dot = "dot"
+    mermaid = "mermaid"
+
+
+FORMAT_BY_SUFFIX = {".json": Format.json, ".dot": Format.dot, ".gv": Format.dot, ".mmd": Format.mermaid,
+                    ".mermaid": Format.mermaid, ".txt": Format.tree}
+IMAGE_SUFFIXES = {".svg": "svg", ".png": "png", ".pdf": "pdf"}
+
+
+@app.command()
+def validate(
+    files: list[Path] = typer.Argument(..., help="Mission files to check.", show_default=False),
+    as_json: bool = typer.Option(False, "--json", help="Print structured diagnostics as JSON."),
+    components: list[Path] = ComponentsOption,
+) -> int:
+    """Check mission files: syntax, names, types, plans, resources. Exit 0 if all are valid, 2 if not."""
+    cat = catalog(components)
+    results = [compile_file(f, cat) for f in files]
+    if as_json:
+        out.print_json(json.dumps([_result_dict(r) for r in results]))
+    else:
+        for r in results:
+            for d in r.diagnostics:
+                render_diagnostic(d, r.sources)
+            if r.ok:
+                what = (f"mission {r.statechart.name}, {len(r.statechart.states)} states" if r.statechart
+                        else "behaviors only, no mission")
+                out.print(Text.assemble(("✓ ", "bold green"), f"{r.file}: valid ({what})"))
+            else:
+                n = sum(1 for d in r.diagnostics if d.severity.value == "error")
+                err.print(Text.assemble(("✗ ", "bold red"), f"{r.file}: {n} error{'s' if n != 1 else ''}"))
+    return OK if all(r.ok for r in results) else INVALID
+
+
+def _result_dict(r: Compiled) -> dict[str, object]:
+    return {
+        "file": r.file,
+        "valid": r.ok,
+        "mission": r.statechart.name if r.statechart else None,
+        "states": len(r.statechart.states) if r.statechart else 0,
+        "diagnostics": [d.to_dict() for d in r.diagnostics],
+    }
+
+
+@app.command()
+def plan(
+    file: Path = typer.Argument(..., help="The mission file.", show_default=False),
+    fmt: Format = typer.Option(None, "--format", "-f", help="tree (default), json, dot or mermaid.",
+                               show_default=False),
+    output: Path = typer.Option(None, "--output", "-o", show_default=False,
+                                help="Write to a file: .svg/.png/.pdf are drawn with Graphviz's dot; "
+                                     ".json/.dot/.mmd/.txt pick the format."),
+    components: list[Path] = ComponentsOption,
+) -> int:
+    """Show the compiled statechart: states, transitions, resources and how they are bound."""
+    result = compile_file(file, catalog(components))
+    for d in result.diagnostics:
+        render_diagnostic(d, result.sources)
+    if not result.ok:
+        return INVALID
+    chart = result.statechart
+    if chart is None:
+        fail(f"{file} declares no mission, so there is nothing to plan",
+             hint="add `mission Name { ... }` or plan the file that imports this one")
+    suffix = output.suffix.lower() if output else ""
+    if suffix in IMAGE_SUFFIXES:
+        _draw(chart, output, IMAGE_SUFFIXES[suffix])
+        return OK
+    fmt = fmt or FORMAT_BY_SUFFIX.get(suffix, Format.tree)
+    if fmt is Format.tree:
+        tree = _tree(chart)
+        if output:
+            from rich.console import Console
+
+            with output.open("w", encoding="utf-8") as fh:
+                Console(file=fh, width=120, no_color=True).print(tree)
+        else:
+            out.print(tree)
+    else:
+        text = {Format.json: lambda: json.dumps(to_dict(chart), indent=2, ensure_ascii=False) + "\n",
+                Format.dot: lambda: to_dot(chart), Format.mermaid: lambda: to_mermaid(chart)}[fmt]()
+        if output:
+            output.write_text(text, encoding="utf-8")
+        else:
+            out.out(text, end="")
+    if output:
+        err.print(Text.assemble(("✓ ", "bold green"), f"wrote {output}"))
+    return OK
+
+
+def _draw(chart: Statechart, output: Path, kind: str) -> None:
+    dot = shutil.which("dot")
+    if dot is None:
+        fail(f"drawing {output.name} needs Graphviz's `dot`, which is not installed",
+             hint="install Graphviz (e.g. `apt-get install graphviz`), or write text with "
+                  "--format dot or --format mermaid")
+    proc = subprocess.run([dot, f"-T{kind}", "-o", str(output)], input=to_dot(chart), text=True,
+                          capture_output=True, timeout=120, check=False)
+    if proc.returncode != 0:
+        fail(f"Graphviz's dot failed on {output.name}: {proc.stderr.strip()[:500]}")
+    err.print(Text.assemble(("✓ ", "bold green"), f"drew {output}"))
+
+
+_KIND_STYLE = {StateKind.COMPOUND: "bold", StateKind.PARALLEL: "bold magenta", StateKind.MULTI: "bold yellow",
+               StateKind.LEAF: "", StateKind.FINAL: "dim"}
+
+
+def _tree(chart: Statechart) -> Tree:
+    root = chart[chart.root]
+    tree = Tree(_label(root))
+    _grow(chart, root, tree)
+    return tree
+
+
+def _grow(chart: Statechart, state: State, node: Tree) -> None:
+    for t in state.starts:
+        node.add(Text.assemble(("start → ", "green"), t.target.rsplit("/", 1)[-1], f"  {trigger_label(t)}"))
+    for child in chart.children(state.id):
+        if child.kind is StateKind.FINAL:
+            continue
+        branch = node.add(_label(child, initial=child.id == state.initial))
+        for n in child.needs:
+            style = "cyan" if n.requested else "dim cyan"
+            branch.add(Text("⚙ " + need_label(n), style=style))
+        for t in child.transitions:
+            label = trigger_label(t)
+            arrow = Text.assemble(("→ ", "dim" if t.generated else "green"), t.target.rsplit("/", 1)[-1],
+                                  (f"  {label}" if label else "", "dim" if t.generated else ""))
+            branch.add(arrow)
+        _grow(chart, child, branch)
+
+
+def _label(s: State, initial: bool = False) -> Text:
+    text = Text()
+    if initial:
+        text.append("▸ ", style="green")
+    text.append(s.name, style=_KIND_STYLE[s.kind] or "bold blue")
+    text.append(f"  {s.kind.value}", style="dim")
+    extra = state_label(s)
+    if extra:
+        text.append(f"  {extra}", style="")
+    return text
+
+
+def main() -> None:
+    run_app(app, "missionctl")

@@ -1,0 +1,171 @@
+"""The expression evaluator: our own, never Python's `eval`.
+
+Values are Python ints, floats, bools and strings; durations evaluate to seconds (float).
+Names come from a mapping the caller builds (parameters, variables, shared data,
+resources, child outputs, `event`); attributes read mappings by key and objects by
+public attribute; `count(Type where ...)` is answered by a callback, because only the
+runtime knows which resources exist.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping, Sized
+
+from dsl import ast
+from dsl.errors import Span
+from dsl.exprtypes import snake
+
+#: `count(type_name, predicate)`: how many known resources of a type satisfy the predicate.
+CountFn = Callable[[str, Callable[[object], bool] | None], int]
+
+
+class EvalError(Exception):
+    """An expression could not be evaluated (unknown name, division by zero, bad operand)."""
+
+    def __init__(self, message: str, span: Span):
+        super().__init__(f"{span}: {message}")
+        self.message = message
+        self.span = span
+
+
+def evaluate(expr: ast.Expr, names: Mapping[str, object], count: CountFn | None = None) -> object:
+    """The value of `expr` with `names` in scope."""
+    return _Evaluator(names, count).eval(expr)
+
+
+def truthy(expr: ast.Expr | None, names: Mapping[str, object], count: CountFn | None = None) -> bool:
+    """A guard or condition: absent means true; anything but a bool is an error."""
+    if expr is None:
+        return True
+    value = evaluate(expr, names, count)
+    if not isinstance(value, bool):
+        raise EvalError(f"a condition must be true or false, got {format_value(value)}", expr.span)
+    return value
+
+
+def format_value(v: object) -> str:
+    """How values appear in interpolated strings and messages."""
+    if isinstance(v, bool):
+        return "true" if v else "false"
+    if isinstance(v, float):
+        return f"{v:g}"
+    return str(v)
+
+
+class _Evaluator:
+    def __init__(self, names: Mapping[str, object], count: CountFn | None):
+        self.names = names
+        self.count = count
+
+    def eval(self, e: ast.Expr) -> object:
+        match e:
+            case ast.Literal(value=v):
+                return v
+            case ast.Duration(seconds=s):
+                return s
+            case ast.Interp(parts=parts):
+                return "".join(p if isinstance(p, str) else format_value(self.eval(p)) for p in parts)
+            case ast.Name(id=n):
+                if n not in self.names:
+                    raise EvalError(f"{n} has no value here", e.span)
+                return self.names[n]
+            case ast.Attr(obj=o, attr=a):
+                return _attribute(self.eval(o), a, e.span)
+            case ast.Call():
+                return self._call(e)
+            case ast.Unary(op="not", operand=x):
+                return not self._bool(x)
+            case ast.Unary(operand=x):
+                return -self._number(x)
+            case ast.Binary(op="and", left=lhs, right=rhs):
+                return self._bool(lhs) and self._bool(rhs)
+            case ast.Binary(op="or", left=lhs, right=rhs):
+                return self._bool(lhs) or self._bool(rhs)
+            case ast.Binary():
+                return self._binary(e)
+        raise EvalError(f"cannot evaluate {type(e).__name__}", getattr(e, "span", Span("?", 1, 1, 1, 1)))
+
+    def _bool(self, e: ast.Expr) -> bool:
+        v = self.eval(e)
+        if not isinstance(v, bool):
+            raise EvalError(f"expected true or false, got {format_value(v)}", e.span)
+        return v
+
+    def _number(self, e: ast.Expr) -> int | float:
+        v = self.eval(e)
+        if isinstance(v, bool) or not isinstance(v, int | float):
+            raise EvalError(f"expected a number, got {format_value(v)}", e.span)
+        return v
+
+    def _binary(self, e: ast.Binary) -> object:
+        lhs, rhs = self.eval(e.left), self.eval(e.right)
+        op = e.op
+        try:
+            match op:
+                case "==":
+                    return lhs == rhs
+                case "!=":
+                    return lhs != rhs
+                case "<":
+                    return lhs < rhs  # type: ignore[operator]
+                case "<=":
+                    return lhs <= rhs  # type: ignore[operator]
+                case ">":
+                    return lhs > rhs  # type: ignore[operator]
+                case ">=":
+                    return lhs >= rhs  # type: ignore[operator]
+                case "+":
+                    return lhs + rhs  # type: ignore[operator]
+                case "-":
+                    return lhs - rhs  # type: ignore[operator]
+                case "*":
+                    if isinstance(lhs, str) or isinstance(rhs, str):
+                        raise TypeError("no string repetition")
+                    return lhs * rhs  # type: ignore[operator]
+                case "/":
+                    return lhs / rhs  # type: ignore[operator]
+                case "%":
+                    return lhs % rhs  # type: ignore[operator]
+        except ZeroDivisionError:
+            raise EvalError("division by zero", e.span) from None
+        except TypeError:
+            raise EvalError(f"cannot apply {op} to {format_value(lhs)} and {format_value(rhs)}", e.span) from None
+        raise EvalError(f"unknown operator {op}", e.span)
+
+    def _call(self, e: ast.Call) -> object:
+        if e.func == "count":
+            if self.count is None or not e.args or not isinstance(e.args[0], ast.Name):
+                raise EvalError("count(...) is not available here", e.span)
+            type_name = e.args[0].id
+            pred = None
+            if e.where is not None:
+                where, var = e.where, snake(type_name)
+
+                def pred(candidate: object) -> bool:
+                    return truthy(where, {**self.names, var: candidate}, self.count)
+            return self.count(type_name, pred)
+        values = [self.eval(a) for a in e.args]
+        if e.func == "len":
+            if not isinstance(values[0], Sized):
+                raise EvalError(f"len of {format_value(values[0])}", e.span)
+            return len(values[0])
+        if e.func == "abs":
+            return abs(self._number(e.args[0]))
+        if e.func in ("min", "max"):
+            nums = [self._number(a) for a in e.args]
+            return min(nums) if e.func == "min" else max(nums)
+        raise EvalError(f"unknown function {e.func}", e.span)
+
+
+def _attribute(obj: object, attr: str, span: Span) -> object:
+    if isinstance(obj, Mapping):
+        if attr in obj:
+            return obj[attr]
+    elif not attr.startswith("_") and hasattr(obj, attr):
+        value = getattr(obj, attr)
+        if not callable(value):
+            return value
+    raise EvalError(f"{format_value(obj)} has no {attr}", span)
+
+
+__all__ = ["CountFn", "EvalError", "evaluate", "format_value", "truthy"]

@@ -1,0 +1,223 @@
+"""The statechart as data for people and tools: JSON, Graphviz dot, Mermaid, one-line labels.
+
+Pure string building; the CLI decides where it goes (and runs `dot` for SVG/PNG).
+"""
+
+from __future__ import annotations
+
+import json
+from typing import Any
+
+from dsl import ast, printer
+from dsl.statechart import ResourceNeed, State, Statechart, StateKind, Transition
+
+SCHEMA_VERSION = 1
+
+
+def trigger_label(t: Transition) -> str:
+    """`completion`, `when x > 1`, `on MotionDetected`, `on error`, `after 2min`, with guard and actions."""
+    match t.kind:
+        case ast.TriggerKind.CHANGE:
+            out = f"when {printer.expr(t.condition)}" if t.condition is not None else "when"
+        case ast.TriggerKind.EVENT:
+            out = f"on {t.event}"
+        case ast.TriggerKind.ERROR:
+            out = "on error"
+        case ast.TriggerKind.TIMEOUT:
+            out = f"after {_seconds(t.delay or 0.0)}"
+        case _:
+            out = ""
+    if t.guard is not None:
+        out += f" [{printer.expr(t.guard)}]"
+    if t.actions:
+        out += " / " + "; ".join(printer.action(a) for a in t.actions)
+    return out.strip()
+
+
+def state_label(s: State) -> str:
+    """One line about a state: kind, component, policy, multiplicity, priority."""
+    bits: list[str] = []
+    if s.kind is StateKind.LEAF and (s.component != s.name or s.args):
+        bits.append(f"{s.component}" + _args(s))
+    elif s.kind is StateKind.MULTI and s.multiplicity is not None:
+        m = s.multiplicity
+        hi = "" if m.exact else ".." + ("*" if m.unbounded else printer.expr(m.high))  # type: ignore[arg-type]
+        bits.append(f"{s.component}[{printer.expr(m.low)}{hi}]")
+    elif s.kind in (StateKind.COMPOUND, StateKind.PARALLEL):
+        if s.component != s.name.removesuffix("[*]") or s.args:
+            bits.append(f"{s.component}" + _args(s))
+        if s.policy is not None:
+            bits.append(f"parallel {s.policy.value}" + (f" {s.until.rsplit('/', 1)[-1]}" if s.until else ""))
+    if s.after:
+        bits.append("after " + ", ".join(a.rsplit("/", 1)[-1] for a in s.after))
+    if s.kind is not StateKind.FINAL:
+        bits.append(f"priority {s.priority}")
+    return " · ".join(bits)
+
+
+def need_label(n: ResourceNeed) -> str:
+    out = f"{n.name}: {n.type}"
+    if n.bound_to is not None:
+        holder, name, part = n.bound_to
+        out += f" ← {name}" + (f".{part}" if part else "")
+    else:
+        if n.where is not None:
+            out += f" where {printer.expr(n.where)}"
+        if n.quantity is not None:
+            q = n.quantity
+            out += f" quantity {printer.expr(q) if isinstance(q, ast.Expr) else f'{q:g}'}"
+        if n.slice is not None:
+            out += f" for {_seconds(n.slice)}"
+    return out
+
+
+def to_dict(chart: Statechart) -> dict[str, Any]:
+    """A stable, versioned JSON form of the whole chart."""
+    return {
+        "schema": SCHEMA_VERSION,
+        "mission": chart.name,
+        "file": chart.file,
+        "root": chart.root,
+        "states": [_state_dict(s) for s in chart.walk()],
+    }
+
+
+def to_json(chart: Statechart) -> str:
+    return json.dumps(to_dict(chart), indent=2, ensure_ascii=False)
+
+
+def _state_dict(s: State) -> dict[str, Any]:
+    return {
+        "id": s.id,
+        "name": s.name,
+        "kind": s.kind.value,
+        "parent": s.parent,
+        "children": list(s.children),
+        "initial": s.initial,
+        "component": s.component,
+        "args": {a.name: printer.expr(a.value) for a in s.args},
+        "priority": s.priority,
+        "policy": s.policy.value if s.policy else None,
+        "until": s.until,
+        "after": list(s.after),
+        "multiplicity": _mult(s.multiplicity),
+        "success": s.success,
+        "needs": [{"name": n.name, "type": n.type, "bound_to": list(n.bound_to) if n.bound_to else None,
+                   "where": printer.expr(n.where) if n.where is not None else None,
+                   "quantity": (printer.expr(n.quantity) if isinstance(n.quantity, ast.Expr) else n.quantity),
+                   "slice": n.slice} for n in s.needs],
+        "shared": [{"name": n, "type": t} for n, t in s.shared],
+        "vars": [{"name": v.name, "type": v.type.name, "value": printer.expr(v.value) if v.value else None}
+                 for v in s.vars],
+        "transitions": [_transition_dict(t) for t in (*s.starts, *s.transitions)],
+        "line": s.span.line,
+    }
+
+
+def _transition_dict(t: Transition) -> dict[str, Any]:
+    return {
+        "source": t.source, "target": t.target, "trigger": t.kind.value, "event": t.event,
+        "condition": printer.expr(t.condition) if t.condition is not None else None,
+        "delay": t.delay, "guard": printer.expr(t.guard) if t.guard is not None else None,
+        "actions": [printer.action(a) for a in t.actions], "generated": t.generated,
+    }
+
+
+def _mult(m: ast.Multiplicity | None) -> dict[str, Any] | None:
+    if m is None:
+        return None
+    return {"min": printer.expr(m.low),
+            "max": None if m.unbounded else printer.expr(m.high if m.high is not None else m.low)}
+
+
+def to_dot(chart: Statechart) -> str:
+    """Graphviz: composite states as clusters, transitions as edges, start and final as dots."""
+    out = ["digraph statechart {", '  compound=true; rankdir=LR; fontname="Helvetica";',
+           '  node [shape=box, style="rounded,filled", fillcolor="#f4f6fb", fontname="Helvetica", fontsize=10];',
+           '  edge [fontname="Helvetica", fontsize=9];']
+    ids = {s.id: f"s{i}" for i, s in enumerate(chart.walk())}
+
+    def anchor(sid: str) -> str:
+        s = chart[sid]
+        return ids[sid] + ("_in" if s.children and s.kind is not StateKind.FINAL else "")
+
+    def emit(s: State, indent: str) -> None:
+        label = _dot_escape(s.name + "\\n" + state_label(s) + "".join("\\n" + need_label(n) for n in s.needs))
+        if s.kind is StateKind.FINAL:
+            color = "#2e7d32" if s.success else "#c62828"
+            out.append(f'{indent}{ids[s.id]} [label="{s.name}", shape=doublecircle, fillcolor="{color}", '
+                       'fontcolor=white, width=0.3];')
+            return
+        if not s.children:
+            out.append(f'{indent}{ids[s.id]} [label="{label}"];')
+            return
+        style = "dashed" if s.kind is StateKind.PARALLEL else "rounded"
+        out.append(f"{indent}subgraph cluster_{ids[s.id]} {{")
+        out.append(f'{indent}  label="{label}"; style="{style}"; color="#5c6bc0";')
+        out.append(f'{indent}  {ids[s.id]}_in [shape=point, width=0.12, label=""];')
+        for c in chart.children(s.id):
+            emit(c, indent + "  ")
+        out.append(f"{indent}}}")
+        if s.initial:
+            out.append(f"{indent}{ids[s.id]}_in -> {anchor(s.initial)};")
+
+    emit(chart[chart.root], "  ")
+    for t in chart.transitions():
+        style = ", style=dashed, color=gray40" if t.generated else ""
+        label = _dot_escape(trigger_label(t))
+        clip = "".join(f", {end}=cluster_{ids[sid]}" for end, sid in (("ltail", t.source), ("lhead", t.target))
+                       if chart[sid].children and chart[sid].kind is not StateKind.FINAL)
+        out.append(f'  {anchor(t.source)} -> {anchor(t.target)} [label="{label}"{style}{clip}];')
+    out.append("}")
+    return "\n".join(out) + "\n"
+
+
+def to_mermaid(chart: Statechart) -> str:
+    """Mermaid `stateDiagram-v2` text (renders on GitHub and in most docs tools)."""
+    ids = {s.id: f"s{i}" for i, s in enumerate(chart.walk())}
+    out = ["stateDiagram-v2"]
+
+    def emit(s: State, indent: str) -> None:
+        label = _mm_escape(f"{s.name}: {state_label(s)}") if s.kind is not StateKind.FINAL else s.name
+        out.append(f'{indent}state "{label}" as {ids[s.id]}')
+        if not s.children:
+            return
+        out.append(f"{indent}state {ids[s.id]} {{")
+        regions = [c for c in chart.children(s.id) if c.kind is not StateKind.FINAL]
+        for i, c in enumerate(chart.children(s.id)):
+            if s.kind is StateKind.PARALLEL and c.kind is not StateKind.FINAL and 0 < i < len(regions):
+                out.append(f"{indent}  --")
+            emit(c, indent + "  ")
+        if s.initial:
+            out.append(f"{indent}  [*] --> {ids[s.initial]}")
+        for c in chart.children(s.id):
+            for t in c.transitions:
+                label = _mm_escape(trigger_label(t))
+                arrow = f"{indent}  {ids[t.source]} --> {ids[t.target]}"
+                out.append(arrow + (f" : {label}" if label else ""))
+            if c.kind is StateKind.FINAL and c.success:
+                out.append(f"{indent}  {ids[c.id]} --> [*]")
+        out.append(f"{indent}}}")
+
+    emit(chart[chart.root], "  ")
+    out.append(f"  [*] --> {ids[chart.root]}")
+    return "\n".join(out) + "\n"
+
+
+def _args(s: State) -> str:
+    return "(" + ", ".join(f"{a.name}: {printer.expr(a.value)}" for a in s.args) + ")" if s.args else ""
+
+
+def _seconds(x: float) -> str:
+    for unit, size in (("h", 3600), ("min", 60), ("s", 1)):
+        if x >= size and x % size == 0:
+            return f"{int(x // size)}{unit}"
+    return f"{x * 1000:g}ms" if x < 1 else f"{x:g}s"
+
+
+def _dot_escape(s: str) -> str:
+    return s.replace("\\", "\\\\").replace('"', '\\"').replace("\\\\n", "\\n")
+
+
+def _mm_escape(s: str) -> str:
+    return s.replace('"', "'").replace(":", "∶").replace(";", ",").replace("{", "(").replace("}", ")")
