@@ -54,6 +54,7 @@ class Body:
     parallels: list[ast.Parallel] = field(default_factory=list)
     plans: list[ast.Plan] = field(default_factory=list)
     transitions: list[ast.Transition] = field(default_factory=list)
+    implicit: set[str] = field(default_factory=set)  # named only in transitions or plans
 
     @property
     def parallel(self) -> ast.Parallel | None:
@@ -86,15 +87,21 @@ def summarize(b: ast.Behavior) -> Body:
                 body.transitions.append(item)
     for child in body.declared:
         body.children.setdefault(child.key, child)
+
+    def implicit(name: str, span: Span) -> None:
+        if name not in body.children:
+            body.children[name] = ast.Child(name, span=span)
+            body.implicit.add(name)
+
     for plan in body.plans:
         for chain in plan.chains:
             for step in chain:
-                body.children.setdefault(step.name, ast.Child(step.name, span=step.span))
+                implicit(step.name, step.span)
     for t in body.transitions:
         if t.source != "start":
-            body.children.setdefault(t.source, ast.Child(t.source, span=t.source_span))
+            implicit(t.source, t.source_span)
         if t.target not in ("done", "fail"):
-            body.children.setdefault(t.target, ast.Child(t.target, span=t.target_span))
+            implicit(t.target, t.target_span)
     return body
 
 
@@ -160,7 +167,7 @@ class Checker:
     def _call_graph(self) -> list[str]:
         """Reject recursion and absurd depth; compute inherited scopes; return a checking order."""
         g: nx.DiGraph = nx.DiGraph()
-        g.add_nodes_from(self.behaviors)
+        g.add_nodes_from((name, {"rank": i}) for i, name in enumerate(self.behaviors))
         for name, body in self.bodies.items():
             for child in body.children.values():
                 if child.name in self.behaviors:
@@ -288,11 +295,11 @@ class Checker:
             if child.key in seen:
                 self.report.error("duplicate", f"{child.key} names both a child and a declaration in {b.name}",
                                   child.span)
-        for child in body.children.values():
-            self._child(child, scope)
+        for key, child in body.children.items():
+            self._child(child, scope, b.name if key in body.implicit else None)
 
-    def _child(self, child: ast.Child, scope: Scope) -> None:
-        target = self._callee(child.name, child.span)
+    def _child(self, child: ast.Child, scope: Scope, implicit_in: str | None = None) -> None:
+        target = self._callee(child.name, child.span, implicit_in)
         if child.priority is not None and child.priority < 1:
             self.report.error("priority", "priority must be 1 or more (1 is the highest)", child.span)
         if child.mult is not None:
@@ -317,7 +324,7 @@ class Checker:
                 self.report.error("missing-parameter", f"{child.name} needs parameter {spec.name}", child.span,
                                   f"write {child.name}({spec.name}: ...)")
 
-    def _callee(self, name: str, span: Span) -> ast.Behavior | ComponentType | None:
+    def _callee(self, name: str, span: Span, implicit_in: str | None = None) -> ast.Behavior | ComponentType | None:
         if name in self.behaviors:
             return self.behaviors[name]
         ct = self.catalog.get(name)
@@ -329,6 +336,11 @@ class Checker:
                               f"data is declared with shared: shared x: {name}")
             return None
         known = [*self.behaviors, *self.catalog.names(Kind.BEHAVIOR)]
+        if implicit_in is not None:  # named only in a transition or plan: the user meant a state
+            siblings = self.bodies[implicit_in].children
+            self.report.error("unknown-state", f"unknown state {name}: no child of {implicit_in} and no behavior "
+                              "has this name", span, did_you_mean(name, [*siblings, *known]))
+            return None
         self.report.error("unknown-behavior", f"unknown behavior {name}", span, did_you_mean(name, known))
         return None
 

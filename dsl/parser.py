@@ -431,7 +431,8 @@ class Parser:
         except UnexpectedInput as e:
             result = None
             b.errors.append(Diagnostic(
-                "syntax", f"bad expression in string interpolation: {_describe_token_error(e)}",
+                "syntax", "bad expression in string interpolation: "
+                + _describe_token_error(e).replace("the end of the file", "the end of the expression"),
                 Span(b.file, at.line or 1, (at.column or 1) + e.column - 1,
                      at.line or 1, (at.column or 1) + e.column), "write \\{ for a literal brace"))
         finally:

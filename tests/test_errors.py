@@ -1,0 +1,182 @@
+"""Every check, one bad mission and its exact message: a table tested in one loop.
+
+Like lark's GRAMMAR_ERRORS table, each row pins a message the user sees, its position
+(line:column) and, where there is one, a piece of the hint. A message changes only with
+this table.
+"""
+
+from __future__ import annotations
+
+import pytest
+
+from dsl import compile_text
+from dsl.catalog import Catalog
+
+
+def m(body: str, extra: str = "") -> str:
+    """A mission around `body` (line 2 onward), with extra declarations after it."""
+    return "mission M {\n" + body + "\n}\n" + extra
+
+
+# (id, source, "line:col message", hint fragment or None)
+ERRORS: list[tuple[str, str, str, str | None]] = [
+    # ---- syntax
+    ("arrow-without-target", m("  needs r: Ranger\n  FollowCorridor ->"), "3:20 syntax: expected a state or "
+     "done/fail after ->", None),
+    ("missing-separator", m("  needs r: Ranger\n  FollowCorridor(speed: 0.5) AvoidObstacles"),
+     "3:29 syntax: expected a newline or ; after `)`", "starts a new item"),
+    ("glued-keyword", "missionpatrol M {}\n", "1:1 syntax: expected behavior, import or mission, got `missionpatrol`",
+     "put a space between mission and patrol"),
+    ("reserved-word", m("  var event: int = 0"), "2:7 syntax: expected `name: type = value` after var",
+     "event is a reserved word"),
+    ("single-quotes", m("  Inspect(label: 'a')", "behavior Inspect(label: str) { Observe }"),
+     "2:18 syntax: unexpected character \"'\"", "double quotes"),
+    ("unclosed-brace", "mission M {\n  Observe\n", "2:10 syntax: the file ends too early: expected }", "matching }"),
+    ("action-outside-transition", m("  log \"hi\""), "2:3 syntax: expected a name, needs, parallel, plan, shared, "
+     "start, var or }, got `log`", "follow a / at the end of a transition"),
+    ("after-needs-duration", m("  Observe\n  Observe -> done after soon"),
+     "3:25 syntax: expected a duration after after (e.g. 2min)", None),
+    ("bad-escape", m('  Observe\n  Observe -> done / log "a\\qb"'), "3:27 unknown escape \\q in string", None),
+    ("unclosed-interpolation", m('  Observe\n  Observe -> done / log "a{b"'), "3:27 unclosed { in string", None),
+    ("bad-interpolation", m('  Observe\n  Observe -> done / log "a{1 +}"'),
+     "3:30 bad expression in string interpolation: expected (, -, a duration (e.g. 30s), a name, a number, "
+     "a string (\"...\"), an integer, event, false or true, got the end of the expression", None),
+    # ---- names
+    ("unknown-behavior", m("  DetectDor(min_width: 0.7)"), "2:3 unknown behavior DetectDor", "did you mean DetectDoor?"),
+    ("unknown-state", m("  needs r: Ranger\n  start -> Calibrate\n  Calibrate -> Finsh"),
+     "4:16 unknown state Finsh: no child of M and no behavior has this name", None),
+    ("unknown-resource", m("  needs r: Rangr\n  Calibrate"), "2:12 unknown resource type Rangr",
+     "did you mean Ranger?"),
+    ("unknown-type", m("  var n: integer = 0\n  Calibrate"), "2:10 unknown type integer", None),
+    ("unknown-data-type", m("  shared map: OccupancyMapp\n  Calibrate"), "2:15 unknown data type OccupancyMapp",
+     "did you mean OccupancyMap?"),
+    ("unknown-parameter", m("  FollowCorridor(sped: 0.5)"), "2:18 FollowCorridor has no parameter sped",
+     "did you mean speed?"),
+    ("missing-parameter", m("  Inspect", "behavior Inspect(label: str) { Observe }"),
+     "2:3 Inspect needs parameter label", "Inspect(label: ...)"),
+    ("unknown-event", m("  Watch\n  Watch -> done on MotionDetcted"), "3:3 unknown event MotionDetcted",
+     "did you mean MotionDetected?"),
+    ("unknown-name", m("  var n: int = 0\n  Watch\n  Watch -> done when m > 1"), "4:22 unknown name m",
+     "did you mean n?"),
+    ("unknown-property", m("  needs s: Scout where s.carier == \"x\"\n  Watch"), "2:24 Scout has no property carier",
+     "did you mean carrier?"),
+    ("unknown-output", m("  start -> DetectDoor\n  DetectDoor -> done [DetectDoor.dor.width > 1]"),
+     "3:23 DetectDoor has no output dor", "did you mean door?"),
+    ("unknown-field", m("  start -> DetectDoor\n  DetectDoor -> done [DetectDoor.door.widht > 1]"),
+     "3:23 door has no field widht", "did you mean width?"),
+    ("event-outside-on", m("  Watch\n  Watch -> done when event.area > 1"),
+     "3:22 event is only defined in a transition triggered by on EVENT", None),
+    ("unknown-function", m("  Watch\n  Watch -> done when cont(Scout) > 1"), "3:22 unknown function cont",
+     "did you mean count?"),
+    ("count-unknown-type", m("  Watch\n  Watch -> done when count(Scot) > 1"),
+     "3:28 unknown resource type Scot", "did you mean Scout?"),
+    ("set-unknown-var", m("  Watch\n  Watch -> done / set laps = 1"), "3:19 set laps: M has no var laps",
+     "var laps: int = 0"),
+    ("release-unknown", m("  needs r: Ranger\n  Calibrate\n  Calibrate -> done / release(ranger)"),
+     "4:23 release(ranger): no resource ranger is held here", None),
+    ("not-a-behavior", m("  Camera"), "2:3 Camera is a resource, not a behavior", "needs x: Camera"),
+    ("data-as-child", m("  DoorLog"), "2:3 DoorLog is a data type, not a behavior", "shared x: DoorLog"),
+    ("until-unknown", m("  parallel until Watch { FollowCorridor; Observe }"),
+     "2:3 parallel until Watch: no such child in the block", None),
+    # ---- types
+    ("wrong-type", m("  FollowCorridor(speed: \"fast\")"), "2:25 speed expects float, got str", None),
+    ("duration-needs-unit", m("  Watch(duration: 60)"), "2:19 duration expects duration, got int",
+     "write a unit"),
+    ("guard-not-bool", m("  var n: int = 0\n  Watch\n  Watch -> done [n + 1]"), "4:18 a guard expects bool, got int",
+     None),
+    ("compare-mismatch", m("  var n: int = 0\n  Watch\n  Watch -> done when n == \"x\""),
+     "4:22 cannot compare int with str", None),
+    ("arith-mismatch", m("  var n: int = 0\n  Watch\n  Watch -> done / set n = n + \"x\""),
+     "4:27 cannot apply + to int and str", None),
+    ("var-init", m("  var n: int = true\n  Watch"), "2:16 var n expects int, got bool", None),
+    ("param-default", m("  Inspect", "behavior Inspect(n: int = 1.5) { Observe }"),
+     "4:27 parameter n expects int, got float", None),
+    ("quantity-not-sharable", m("  needs c: Camera quantity 2\n  Observe"),
+     "2:28 quantity applies to sharable resources; Camera is not sharable", None),
+    ("emit-field-type", m("  Watch\n  Watch -> done / emit MotionDetected(area: \"big\")"),
+     "3:45 area expects float, got str", None),
+    # ---- structure
+    ("several-children", m("  needs r: Ranger\n  Calibrate\n  ReturnToStart"),
+     "1:9 M has several children (Calibrate, ReturnToStart) and no way to start", "start -> Calibrate"),
+    ("unreachable", m("  needs r: Ranger\n  start -> Calibrate\n  ReturnToStart"),
+     "4:3 ReturnToStart is never reached: no transition leads to it", "Calibrate -> ReturnToStart"),
+    ("plan-cycle", m("  needs r: Ranger\n  plan { Calibrate < ReturnToStart < Calibrate }"),
+     "3:3 plan cycle: Calibrate < ReturnToStart < Calibrate", None),
+    ("outside-parallel", m("  needs r: Ranger\n  parallel { Calibrate }\n  ReturnToStart"),
+     "4:3 ReturnToStart is outside the parallel block of M", None),
+    ("two-plans", m("  needs r: Ranger\n  plan { Calibrate }\n  plan { ReturnToStart }"),
+     "4:3 M has more than one parallel block or plan", None),
+    ("parallel-sibling-transition", m("  needs r: Ranger\n  parallel { Calibrate; ReturnToStart }\n"
+                                      "  Calibrate -> ReturnToStart"),
+     "4:16 Calibrate -> ReturnToStart: in a parallel block or concurrent plan a transition leads only to done, "
+     "fail or back to its source", None),
+    ("recursion", m("  A", "behavior A { B }\nbehavior B { A }"), "4:14 behavior A includes itself: A > B > A", None),
+    ("multiplicity-never", m("  Observe[3..1]"), "2:10 multiplicity [3..1] can never hold: the minimum is above "
+     "the maximum", None),
+    ("multiplicity-negative", m("  Observe[-1..2]"), "2:10 multiplicity -1 can never hold: it must be 0 or more",
+     None),
+    ("multiplicity-zero", m("  Observe[0]"), "2:10 multiplicity [0] creates no instance", None),
+    ("multiplicity-type", m("  Observe[1.5..2]"), "2:11 multiplicity expects int, got float", None),
+    ("priority-zero", m("  Observe priority 0"), "2:3 priority must be 1 or more (1 is the highest)", None),
+    # ---- duplicates
+    ("duplicate-behavior", m("  A", "behavior A { Observe }\nbehavior A { Watch }"),
+     "5:10 behavior A is declared twice", None),
+    ("behavior-shadows-component", m("  Observe", "behavior Watch { Observe }"),
+     "4:10 Watch is already a elementary behavior component", None),
+    ("duplicate-declaration", m("  var n: int = 0\n  var n: int = 1\n  Observe"), "3:3 n is declared twice in M",
+     None),
+    ("duplicate-child", m("  parallel { Observe; Observe }"), "2:23 two children of M are named Observe",
+     "give one an alias"),
+    ("duplicate-argument", m("  Observe(duration: 1s, duration: 2s)"), "2:25 duration is given twice", None),
+    ("two-missions", m("  Observe", "mission N { Observe }"), "4:9 a file holds at most one mission; M came first",
+     None),
+    # ---- resources
+    ("ambiguous-binding", m("  needs a: Camera\n  needs b: Camera\n  Observe"),
+     "4:3 ambiguous resource binding: camera (Camera) could come from a or b", "name one of them camera"),
+]
+
+
+@pytest.mark.parametrize("case", ERRORS, ids=[row[0] for row in ERRORS])
+def test_error_table(case: tuple[str, str, str, str | None], catalog: Catalog) -> None:
+    _, source, expected, hint = case
+    result = compile_text(source, catalog, "t.mission")
+    got = [f"{d.span.line}:{d.span.column} {d.message}" for d in result.diagnostics]
+    assert expected in got, f"expected {expected!r}, got {got}"
+    if hint is not None:
+        d = result.diagnostics[got.index(expected)]
+        assert d.hint is not None and hint in d.hint, f"hint {d.hint!r} lacks {hint!r}"
+
+
+def test_table_covers_every_diagnostic_code(catalog: Catalog) -> None:
+    codes = set()
+    for _, source, _, _ in ERRORS:
+        codes |= {d.code for d in compile_text(source, catalog, "t.mission").diagnostics}
+    expected = {"syntax", "unknown-behavior", "unknown-state", "unknown-resource", "unknown-type", "unknown-parameter",
+                "missing-parameter", "unknown-event", "unknown-name", "type", "not-a-behavior", "quantity",
+                "structure", "unreachable", "plan-cycle", "recursion", "multiplicity", "priority", "duplicate",
+                "ambiguous-binding"}
+    assert expected <= codes, f"no table row for {sorted(expected - codes)}"
+
+
+def test_all_errors_of_a_file_in_one_run(catalog: Catalog) -> None:
+    source = m("  FollowCorridor(speed: \"x\")\n  DetectDor\n  Watch(duraton: 1s)", "")
+    result = compile_text(source, catalog, "t.mission")
+    assert len([d for d in result.diagnostics if d.severity.value == "error"]) >= 3
+
+
+def test_several_syntax_errors_in_one_run(catalog: Catalog) -> None:
+    result = compile_text(m("  A ->\n  B ->\n  C -> D"), catalog, "t.mission")
+    assert [(d.span.line, d.message) for d in result.diagnostics] == [
+        (2, "syntax: expected a state or done/fail after ->"),
+        (3, "syntax: expected a state or done/fail after ->")]
+
+
+def test_rendered_error_shows_line_and_caret(catalog: Catalog) -> None:
+    result = compile_text(m("  DetectDor(min_width: 0.7)"), catalog, "t.mission")
+    text = result.diagnostics[0].render(result.sources)
+    assert text.splitlines() == [
+        "t.mission:2:3: error: unknown behavior DetectDor",
+        "    2 |   DetectDor(min_width: 0.7)",
+        "      |   ^^^^^^^^^^^^^^^^^^^^^^^^^",
+        "  hint: did you mean DetectDoor?",
+    ]
