@@ -1,0 +1,2 @@
+"""Standard components: one folder per component with a manifest.yaml;
+implementations arrive with the simulator."""

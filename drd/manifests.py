@@ -1,0 +1,522 @@
+"""Component manifests: `components/<Name>/manifest.yaml` loaded into a `dsl.catalog.Catalog`.
+
+A manifest is the single description of a component type, so loading is strict: every
+problem in every manifest is collected and raised once, as a `ManifestError`, and a broken
+catalog is fixed in one pass. `parse_manifest` (one manifest) and `check_references`
+(between manifests) are pure; only `load_catalog` touches the file system. Entry points
+are checked for form only, never imported: a host imports just the drivers it runs.
+"""
+
+from __future__ import annotations
+
+import os
+import re
+from collections.abc import Callable, Hashable, Iterable, Iterator, Mapping, Sequence
+from dataclasses import dataclass
+from enum import Enum
+from functools import lru_cache
+from pathlib import Path
+from typing import Any, TypeVar
+
+import yaml
+
+import components
+from dsl.ast import parse_duration
+from dsl.catalog import (
+    BUILTIN_PROPERTIES,
+    SCALAR_TYPES,
+    Catalog,
+    ComponentType,
+    Kind,
+    NeedSpec,
+    ParamSpec,
+    Process,
+    RecordSpec,
+    Scheduling,
+)
+from dsl.errors import did_you_mean
+
+MANIFEST = "manifest.yaml"
+#: Extra component folders, os.pathsep-separated; later folders override earlier ones.
+ENV_VAR = "DRD_COMPONENTS"
+
+_COMMON = ("name", "kind", "description")
+_RUNNABLE = ("entry_point", "process", "multiplicity", "scheduling", "params")
+#: The keys each kind may use, in the order manifests write them.
+KEYS: Mapping[Kind, tuple[str, ...]] = {
+    Kind.BEHAVIOR: (*_COMMON, *_RUNNABLE, "needs", "outputs", "events", "interfaces"),
+    Kind.RC: (*_COMMON, *_RUNNABLE, "interfaces", "sharable", "capacity", "properties"),
+    Kind.ARC: (*_COMMON, "properties", "parts"),
+    Kind.DATA: _COMMON,
+}
+REQUIRED: Mapping[Kind, tuple[str, ...]] = {
+    Kind.BEHAVIOR: (*_COMMON, "entry_point"),
+    Kind.RC: (*_COMMON, "entry_point", "interfaces"),
+    Kind.ARC: (*_COMMON, "parts"),
+    Kind.DATA: _COMMON,
+}
+#: Every manifest key, in canonical order.
+KEY_ORDER: tuple[str, ...] = tuple(dict.fromkeys(k for keys in KEYS.values() for k in keys))
+
+_NAME = re.compile(r"[A-Za-z_][A-Za-z0-9_]*")
+_ENTRY_POINT = re.compile(r"[A-Za-z_]\w*(\.[A-Za-z_]\w*)*:[A-Za-z_]\w*", re.ASCII)
+_A = {Kind.BEHAVIOR: "a behavior", Kind.RC: "an rc", Kind.ARC: "an arc", Kind.DATA: "a data type"}
+_PYTYPES: Mapping[str, Any] = {"int": int, "float": (int, float), "bool": bool, "str": str}
+_E = TypeVar("_E", bound=Enum)
+
+
+@dataclass(frozen=True, slots=True)
+class ManifestProblem:
+    """One problem in one manifest. `key` is a dotted path such as `params.speed.type`."""
+
+    file: str
+    key: str
+    message: str
+    line: int | None = None
+
+    def __str__(self) -> str:
+        where = f"{self.file}:{self.line}" if self.line else self.file
+        return ": ".join(part for part in (where, self.key, self.message) if part)
+
+
+class ManifestError(Exception):
+    """The component manifests have problems; carries all of them, from every manifest."""
+
+    def __init__(self, problems: Iterable[ManifestProblem]) -> None:
+        self.problems = tuple(problems)
+        super().__init__("\n".join(map(str, self.problems)))
+
+    def __reduce__(self) -> tuple[type[ManifestError], tuple[tuple[ManifestProblem, ...]]]:
+        return type(self), (self.problems,)  # picklable, so it can cross a process boundary
+
+
+# ---------------------------------------------------------------- one manifest (pure)
+
+
+def parse_manifest(data: object, source: str) -> tuple[ComponentType | None, list[ManifestProblem]]:
+    """Check one manifest's YAML data and convert it; `source` names it in problems.
+
+    The type is built whenever name and kind are usable, even if other keys have problems,
+    so that references to it from other manifests still resolve; any problem is fatal.
+    """
+    c = _Checker(source)
+    if not isinstance(data, dict):
+        c.fail("", f"expected a mapping of manifest keys, got {_got(data)}")
+        return None, c.problems
+    kind = c.choice(data["kind"], "kind", Kind) if "kind" in data else None
+    allowed = KEYS[kind] if kind else KEY_ORDER
+    for key in data:
+        if kind and key in KEY_ORDER and key not in allowed:
+            c.fail(key, f"does not apply to {_A[kind]} manifest")
+        elif key not in allowed:
+            c.fail(str(key), f"unknown key{_hint(str(key), allowed)}")
+    for key in REQUIRED[kind] if kind else _COMMON:
+        if key not in data:
+            c.fail(key, "required key missing")
+    name = c.name(data["name"], "name") if "name" in data else None
+    if name in SCALAR_TYPES:
+        c.fail("name", f"{name} is a built-in type")
+        name = None
+    fields = {k: parse(c, data[k], k) for k, parse in _PARSERS.items() if k in data and k in allowed}
+    if kind is None or name is None:
+        return None, c.problems
+    _check_rules(c, kind, data, fields)
+    return ComponentType(name=name, kind=kind, source=source, **fields), c.problems
+
+
+def _check_rules(c: _Checker, kind: Kind, data: Mapping[str, Any], fields: Mapping[str, Any]) -> None:
+    """Rules that tie keys of one manifest together."""
+    if kind is Kind.RC and isinstance(data.get("interfaces"), list) and len(fields["interfaces"]) != 1:
+        c.fail("interfaces", f"an rc implements exactly one interface, got {len(fields['interfaces'])}")
+    if fields.get("sharable") and data.get("capacity") is None:
+        c.fail("capacity", "required when sharable is true")
+    if not data.get("sharable") and data.get("capacity") is not None:
+        c.fail("capacity", "only a sharable rc has a capacity")
+    for clash in fields.get("properties", {}).keys() & fields.get("parts", {}).keys():
+        c.fail(f"properties.{clash}", "also the name of a part")
+
+
+class _Checker:
+    """Collects the problems of one manifest; typed readers report and return a safe value."""
+
+    def __init__(self, source: str) -> None:
+        self.source = source
+        self.problems: list[ManifestProblem] = []
+
+    def fail(self, key: str, message: str) -> None:
+        self.problems.append(ManifestProblem(self.source, key, message))
+
+    def keys(self, data: Mapping[Any, Any], key: str, allowed: Sequence[str], required: str = "") -> None:
+        for k in data:
+            if k not in allowed:
+                self.fail(f"{key}.{k}", f"unknown key{_hint(str(k), allowed)}")
+        if required and required not in data:
+            self.fail(f"{key}.{required}", "required key missing")
+
+    def text(self, value: object, key: str) -> str:
+        if isinstance(value, str):
+            return value
+        self.fail(key, f"expected a string, got {_got(value)}")
+        return ""
+
+    def name(self, value: object, key: str) -> str | None:
+        text = self.text(value, key)
+        if _NAME.fullmatch(text):
+            return text
+        if isinstance(value, str):
+            self.fail(key, f"{value!r} is not a name (letters, digits and _, not starting with a digit)")
+        return None
+
+    def names(self, value: object, key: str) -> tuple[str, ...]:
+        if not isinstance(value, list):
+            self.fail(key, f"expected a list of names, got {_got(value)}")
+            return ()
+        return tuple(n for n in (self.name(v, key) for v in value) if n)
+
+    def flag(self, value: object, key: str) -> bool:
+        if isinstance(value, bool):
+            return value
+        self.fail(key, f"expected true or false, got {_got(value)}")
+        return False
+
+    def positive(self, value: object, key: str, integer: bool = False) -> Any:
+        if _is_number(value, integer) and value > 0:  # type: ignore[operator]
+            return value if integer else float(value)  # type: ignore[arg-type]
+        self.fail(key, f"expected a positive {'integer' if integer else 'number'}, got {_got(value)}")
+        return None
+
+    def choice(self, value: object, key: str, enum: type[_E]) -> _E | None:
+        options = [str(m.value) for m in enum]
+        if isinstance(value, str) and value in options:
+            return enum(value)
+        hint = _hint(str(value), options) or f" (expected one of {', '.join(options)})"
+        self.fail(key, f"unknown {key} {_show(value)}{hint}")
+        return None
+
+    def entries(self, value: object, key: str, item: type) -> Iterator[tuple[str, Any, str]]:
+        """The (name, item, key path) of a mapping whose keys are names and items `item`s."""
+        if not isinstance(value, dict):
+            self.fail(key, f"expected a mapping, got {_got(value)}")
+            return
+        for k, v in value.items():
+            path = f"{key}.{k}"
+            if self.name(k, path) is None:
+                continue
+            if isinstance(v, item):
+                yield k, v, path
+            else:
+                self.fail(path, f"expected {'a mapping' if item is dict else 'a type name'}, got {_got(v)}")
+
+
+def _entry_point(c: _Checker, value: object, key: str) -> str | None:
+    text = c.text(value, key)
+    if text and not _ENTRY_POINT.fullmatch(text):
+        c.fail(key, f"expected 'package.module:Class', got {text!r}")
+    return text or None
+
+
+def _scheduling(c: _Checker, value: object, key: str) -> Scheduling:
+    data = value if isinstance(value, dict) else {}
+    if not isinstance(value, dict):
+        c.fail(key, f"expected a mapping, got {_got(value)}")
+    c.keys(data, key, ("cores", "nice"))
+    cores = data.get("cores")
+    if cores is not None and not (isinstance(cores, list) and all(_is_core(n) for n in cores)):
+        c.fail(f"{key}.cores", f"expected a list of core numbers or null, got {_got(cores)}")
+        cores = None
+    nice = data.get("nice", 0)
+    if not (_is_number(nice, True) and -20 <= nice <= 19):
+        c.fail(f"{key}.nice", f"expected an integer from -20 to 19, got {_got(nice)}")
+        nice = 0
+    return Scheduling(None if cores is None else tuple(cores), nice)
+
+
+def _params(c: _Checker, value: object, key: str) -> tuple[ParamSpec, ...]:
+    out = []
+    for name, spec, path in c.entries(value, key, dict):
+        c.keys(spec, path, ("type", "default", "description"), required="type")
+        type_ = c.text(spec.get("type", ""), f"{path}.type")
+        default = spec.get("default")
+        if "default" in spec and type_ in SCALAR_TYPES:
+            default = _default(c, default, type_, f"{path}.default")
+        description = c.text(spec.get("description", ""), f"{path}.description")
+        out.append(ParamSpec(name, type_, default, "default" not in spec, description))
+    return tuple(out)
+
+
+def _default(c: _Checker, value: object, type_: str, key: str) -> object:
+    """The default as a Python value: durations in seconds, ints widened for floats."""
+    if type_ == "duration":
+        seconds = parse_duration(value) if isinstance(value, str) else None
+        if seconds is None:
+            c.fail(key, f"expects a duration such as 60s or 250ms, got {_got(value)}")
+        return seconds
+    if isinstance(value, bool) != (type_ == "bool") or not isinstance(value, _PYTYPES[type_]):
+        c.fail(key, f"expects {type_}, got {_got(value)}")
+        return None
+    return float(value) if type_ == "float" else value
+
+
+def _needs(c: _Checker, value: object, key: str) -> tuple[NeedSpec, ...]:
+    out = []
+    for name, spec, path in c.entries(value, key, dict):
+        c.keys(spec, path, ("type", "of", "quantity", "description"), required="type")
+        quantity = spec.get("quantity")
+        out.append(NeedSpec(
+            name,
+            c.text(spec.get("type", ""), f"{path}.type"),
+            c.names(spec.get("of", []), f"{path}.of"),
+            None if quantity is None else c.positive(quantity, f"{path}.quantity"),
+            c.text(spec.get("description", ""), f"{path}.description"),
+        ))
+    return tuple(out)
+
+
+def _records(c: _Checker, value: object, key: str) -> tuple[RecordSpec, ...]:
+    out = []
+    for name, spec, path in c.entries(value, key, dict):
+        c.keys(spec, path, ("fields", "description"))
+        fields = _typemap(c, spec.get("fields", {}), f"{path}.fields")
+        description = c.text(spec.get("description", ""), f"{path}.description")
+        out.append(RecordSpec(name, fields, description=description))
+    return tuple(out)
+
+
+def _typemap(c: _Checker, value: object, key: str) -> dict[str, str]:
+    return {name: type_ for name, type_, _ in c.entries(value, key, str)}
+
+
+def _properties(c: _Checker, value: object, key: str) -> dict[str, str]:
+    props = _typemap(c, value, key)
+    for name in props.keys() & BUILTIN_PROPERTIES.keys():
+        c.fail(f"{key}.{name}", f"{name} is built in: every resource has {' and '.join(BUILTIN_PROPERTIES)}")
+    return props
+
+
+_Parser = Callable[[_Checker, Any, str], Any]
+_PARSERS: dict[str, _Parser] = {
+    "description": _Checker.text,
+    "entry_point": _entry_point,
+    "process": lambda c, v, k: c.choice(v, k, Process) or Process.CONTAINER,
+    "multiplicity": lambda c, v, k: None if v is None else c.positive(v, k, integer=True),
+    "scheduling": _scheduling,
+    "params": _params,
+    "needs": _needs,
+    "outputs": _records,
+    "events": _records,
+    "interfaces": _Checker.names,
+    "sharable": _Checker.flag,
+    "capacity": lambda c, v, k: None if v is None else c.positive(v, k),
+    "properties": _properties,
+    "parts": _typemap,
+}
+
+
+# ---------------------------------------------------------------- between manifests (pure)
+
+
+def check_references(types: Iterable[ComponentType]) -> list[ManifestProblem]:
+    """Problems that need the whole catalog: unknown types, needs no ARC can serve, clashes."""
+    by_name = {t.name: t for t in types}
+    problems: list[ManifestProblem] = []
+    events: dict[str, tuple[RecordSpec, ComponentType]] = {}
+    for t in by_name.values():
+        problems += _References(t, by_name).check()
+        for e in t.events:
+            first, owner = events.setdefault(e.name, (e, t))
+            if dict(first.fields) != dict(e.fields):
+                message = f"fields differ from {e.name} in {owner.name} ({owner.source})"
+                problems.append(ManifestProblem(t.source, f"events.{e.name}", message))
+    return problems
+
+
+class _References:
+    """Checks the type names one manifest uses against the other manifests."""
+
+    def __init__(self, t: ComponentType, types: Mapping[str, ComponentType]) -> None:
+        self.t, self.types = t, types
+        self.problems: list[ManifestProblem] = []
+
+    def fail(self, key: str, message: str) -> None:
+        self.problems.append(ManifestProblem(self.t.source, key, message))
+
+    def ref(self, type_: str, key: str, *kinds: Kind, scalars: bool = False) -> ComponentType | None:
+        """The component `type_` names, if it exists and is of one of `kinds` (any if none)."""
+        target = self.types.get(type_)
+        wanted = " or ".join(_A[k] for k in kinds)
+        if not type_ or (scalars and type_ in SCALAR_TYPES):
+            return None
+        if type_ in SCALAR_TYPES:
+            self.fail(key, f"{type_} is a value type, expected {wanted}")
+        elif target is None:
+            known = [n for n, t in self.types.items() if not kinds or t.kind in kinds]
+            known += SCALAR_TYPES if scalars else ()
+            self.fail(key, f"unknown type {type_!r}{_hint(type_, known)}")
+        elif kinds and target.kind not in kinds:
+            self.fail(key, f"{type_} is {_A[target.kind]}, expected {wanted}")
+            return None
+        return target
+
+    def check(self) -> list[ManifestProblem]:
+        t = self.t
+        for p in t.params:
+            target = self.ref(p.type, f"params.{p.name}.type", scalars=True)
+            if target and not p.required and not isinstance(p.default, str):
+                self.fail(f"params.{p.name}.default", f"expects a {p.type} id, got {_got(p.default)}")
+        for n in t.needs:
+            self.need(n)
+        for kind, records in (("outputs", t.outputs), ("events", t.events)):
+            for r in records:
+                for field, type_ in r.fields.items():
+                    self.ref(type_, f"{kind}.{r.name}.fields.{field}", scalars=True)
+        for name, type_ in t.properties.items():
+            self.ref(type_, f"properties.{name}", scalars=True)
+        for name, type_ in t.parts.items():
+            self.ref(type_, f"parts.{name}", Kind.RC)
+        for i in t.interfaces:
+            self.ref(i, "interfaces", Kind.RC)
+        if t.kind is Kind.BEHAVIOR:
+            for n in t.needs:
+                if n.type not in t.interfaces and getattr(self.types.get(n.type), "kind", None) is Kind.RC:
+                    self.fail("interfaces", f"does not list {n.type}, used by needs.{n.name}")
+        return self.problems
+
+    def need(self, n: NeedSpec) -> None:
+        key = f"needs.{n.name}"
+        target = self.ref(n.type, f"{key}.type", Kind.RC, Kind.ARC)
+        for arc_name in n.of:
+            arc = self.ref(arc_name, f"{key}.of", Kind.ARC)
+            hits = [p for p, ty in arc.parts.items() if ty == n.type] if arc and target else [""]
+            if not hits:
+                self.fail(f"{key}.of", f"{arc_name} has no {n.type} part")
+            elif len(hits) > 1:
+                self.fail(f"{key}.of", f"{arc_name} has several {n.type} parts ({', '.join(hits)})")
+        if n.quantity is None or target is None:
+            return
+        if not target.sharable:
+            self.fail(f"{key}.quantity", f"{n.type} is not sharable; only a sharable rc has a quantity")
+        elif target.capacity is not None and n.quantity > target.capacity:
+            self.fail(f"{key}.quantity", f"{n.quantity:g} exceeds the capacity of {n.type}"
+                      f" ({target.capacity:g})")
+
+
+# ---------------------------------------------------------------- loading (I/O)
+
+
+def default_dirs() -> list[Path]:
+    """The standard components, then the folders of `DRD_COMPONENTS`, later overriding earlier."""
+    extra = os.environ.get(ENV_VAR, "").split(os.pathsep)
+    return [Path(components.__file__).parent, *(Path(p).expanduser() for p in extra if p)]
+
+
+def load_catalog(dirs: Sequence[Path] | None = None) -> Catalog:
+    """Every `*/manifest.yaml` under `dirs` (default: `default_dirs()`), checked, as a Catalog.
+
+    A later folder's component replaces an earlier one of the same name.
+
+    Raises:
+        ManifestError: with every problem of every manifest, once all have been read.
+    """
+    cwd = Path.cwd()
+    problems: list[ManifestProblem] = []
+    merged: dict[str, ComponentType] = {}
+    for root in dict.fromkeys(Path(d).resolve() for d in (default_dirs() if dirs is None else dirs)):
+        if not root.is_dir():
+            problems.append(ManifestProblem(_display(root, cwd), "", "no such component directory"))
+            continue
+        here: dict[str, ComponentType] = {}
+        for path in sorted(root.glob(f"*/{MANIFEST}")):
+            t, found = _read(path, _display(path, cwd))
+            problems += found
+            if t is None:
+                continue
+            if t.name != path.parent.name:
+                problems.append(ManifestProblem(t.source, "name", f"{t.name} does not match its folder"
+                                                f" {path.parent.name}"))
+            if t.name in here:
+                problems.append(ManifestProblem(t.source, "name", f"duplicate component {t.name},"
+                                                f" also in {here[t.name].source}"))
+            here.setdefault(t.name, t)
+        merged.update(here)
+    problems += check_references(merged.values())
+    if problems:
+        raise ManifestError(sorted(problems, key=lambda p: p.file))
+    return Catalog.of(merged.values())
+
+
+def _read(path: Path, source: str) -> tuple[ComponentType | None, list[ManifestProblem]]:
+    try:
+        stat = path.stat()
+    except OSError as e:
+        return None, [ManifestProblem(source, "", f"cannot read: {e}")]
+    t, problems = _read_stamped(path, source, stat.st_mtime_ns, stat.st_size)
+    return t, list(problems)
+
+
+@lru_cache(maxsize=512)
+def _read_stamped(path: Path, source: str, mtime_ns: int, size: int,
+                  ) -> tuple[ComponentType | None, tuple[ManifestProblem, ...]]:
+    """Parse one file, cached on its stamp: daemons and tests reload unchanged manifests often."""
+    try:
+        data = yaml.load(path.read_text(encoding="utf-8"), Loader=_StrictLoader)  # a SafeLoader
+    except yaml.MarkedYAMLError as e:
+        mark = e.problem_mark or e.context_mark
+        line = mark.line + 1 if mark else None
+        return None, (ManifestProblem(source, "", f"invalid YAML: {e.problem or e.context}", line),)
+    except (OSError, UnicodeDecodeError, yaml.YAMLError) as e:
+        return None, (ManifestProblem(source, "", f"cannot read: {e}"),)
+    t, problems = parse_manifest(data, source)
+    return t, tuple(problems)
+
+
+def _display(path: Path, cwd: Path) -> str:
+    """The path as the user sees it: relative to the working directory when inside it."""
+    return (path.relative_to(cwd) if path.is_relative_to(cwd) else path).as_posix()
+
+
+class _StrictLoader(yaml.SafeLoader):
+    """A SafeLoader that rejects duplicate keys, which PyYAML would silently overwrite."""
+
+
+def _construct_mapping(loader: _StrictLoader, node: yaml.MappingNode) -> dict[Any, Any]:
+    seen: set[Hashable] = set()
+    for key_node, _ in node.value:
+        key = loader.construct_object(key_node)
+        if not isinstance(key, Hashable):
+            continue  # SafeLoader reports unhashable keys itself
+        if key in seen:
+            raise yaml.constructor.ConstructorError(None, None, f"duplicate key {key!r}", key_node.start_mark)
+        seen.add(key)
+    return loader.construct_mapping(node)
+
+
+_StrictLoader.add_constructor(yaml.resolver.BaseResolver.DEFAULT_MAPPING_TAG, _construct_mapping)
+
+
+# ---------------------------------------------------------------- small helpers
+
+
+def _is_number(value: object, integer: bool = False) -> bool:
+    return isinstance(value, int if integer else (int, float)) and not isinstance(value, bool)
+
+
+def _is_core(value: object) -> bool:
+    return _is_number(value, integer=True) and value >= 0  # type: ignore[operator]
+
+
+def _got(value: object) -> str:
+    """How a wrong value is named in a message: `str 'fast'`, `null`, `a list`."""
+    if value is None:
+        return "null"
+    if isinstance(value, dict | list):
+        return "a mapping" if isinstance(value, dict) else "a list"
+    return f"{type(value).__name__} {_show(value)}"
+
+
+def _show(value: object) -> str:
+    return repr(value) if isinstance(value, str) else str(value)
+
+
+def _hint(value: str, candidates: Iterable[str]) -> str:
+    hint = did_you_mean(value, candidates)
+    return f" ({hint})" if hint else ""
