@@ -21,7 +21,7 @@ from typing import Any, TypeVar
 import yaml
 
 import components
-from dsl.ast import parse_duration
+from dsl.ast import KEYWORDS, parse_duration
 from dsl.catalog import (
     BUILTIN_PROPERTIES,
     SCALAR_TYPES,
@@ -161,6 +161,9 @@ class _Checker:
 
     def name(self, value: object, key: str) -> str | None:
         text = self.text(value, key)
+        if text in KEYWORDS:
+            self.fail(key, f"{text!r} is a reserved word of the mission language; choose another name")
+            return None
         if _NAME.fullmatch(text):
             return text
         if isinstance(value, str):

@@ -14,6 +14,13 @@ from enum import Enum
 
 from dsl.errors import NOWHERE, Span
 
+#: Reserved words: never accepted as names (a keyword glued to a name is a name, not the keyword).
+KEYWORDS = frozenset(
+    "import mission behavior priority needs where quantity for shared var as parallel all any until "
+    "start done fail when on error after set emit release log plan concurrent true false and or not "
+    "event".split()
+)
+
 #: Seconds per duration unit, as written in the language (`250ms 30s 5min 2h`).
 DURATION_UNITS = {"ms": 0.001, "s": 1.0, "min": 60.0, "h": 3600.0}
 _DURATION = re.compile(r"(\d+(?:\.\d+)?)(ms|s|min|h)")

@@ -20,6 +20,7 @@ from lark import Lark, Token, Transformer
 from lark.exceptions import UnexpectedCharacters, UnexpectedInput, UnexpectedToken
 
 from dsl import ast
+from dsl.ast import KEYWORDS
 from dsl.errors import Diagnostic, Span
 from dsl.layout import Layout
 
@@ -28,11 +29,6 @@ MAX_EXPR_DEPTH = 100
 #: After this many syntax errors in one file the parser stops trying to recover.
 MAX_SYNTAX_ERRORS = 10
 
-KEYWORDS = frozenset(
-    "import mission behavior priority needs where quantity for shared var as parallel all any until "
-    "start done fail when on error after set emit release log plan concurrent true false and or not "
-    "event".split()
-)
 
 # Tokens that can start an item or a declaration: when one is acceptable we are between items.
 ITEM_STARTS = frozenset({"NAME", "NEEDS", "SHARED", "VAR", "PARALLEL", "PLAN", "START", "MISSION",
