@@ -10,9 +10,11 @@ from __future__ import annotations
 
 import re
 from dataclasses import dataclass, field
-from enum import Enum
+from enum import StrEnum
 
 from dsl.errors import NOWHERE, Span
+
+# Every node keeps its span, keyword-only and ignored by equality (NOWHERE when built by hand).
 
 #: Reserved words: never accepted as names (a keyword glued to a name is a name, not the keyword).
 KEYWORDS = frozenset(
@@ -32,17 +34,14 @@ def parse_duration(text: str) -> float | None:
     return float(m.group(1)) * DURATION_UNITS[m.group(2)] if m else None
 
 
-def _span() -> Span:
-    """A keyword-only span, ignored by equality; NOWHERE when a node is built by hand."""
-    return field(default=NOWHERE, compare=False, repr=False, kw_only=True)
-
-
 # ---------------------------------------------------------------- expressions
 
 
 @dataclass(frozen=True, slots=True)
 class Expr:
-    """Base of every expression node."""
+    """Base of every expression node: each knows where it was written."""
+
+    span: Span = field(default=NOWHERE, compare=False, repr=False, kw_only=True)
 
 
 @dataclass(frozen=True, slots=True)
@@ -50,7 +49,6 @@ class Literal(Expr):
     """An int, float, bool or a string without interpolation."""
 
     value: int | float | bool | str
-    span: Span = _span()
 
 
 @dataclass(frozen=True, slots=True)
@@ -59,7 +57,6 @@ class Duration(Expr):
 
     seconds: float
     text: str
-    span: Span = _span()
 
 
 @dataclass(frozen=True, slots=True)
@@ -67,7 +64,6 @@ class Interp(Expr):
     """A string with `{expr}` interpolation: literal parts and expressions, in order."""
 
     parts: tuple[str | Expr, ...]
-    span: Span = _span()
 
 
 @dataclass(frozen=True, slots=True)
@@ -75,7 +71,6 @@ class Name(Expr):
     """A parameter, variable, shared datum, resource, child or `event`."""
 
     id: str
-    span: Span = _span()
 
 
 @dataclass(frozen=True, slots=True)
@@ -84,7 +79,6 @@ class Attr(Expr):
 
     obj: Expr
     attr: str
-    span: Span = _span()
 
 
 @dataclass(frozen=True, slots=True)
@@ -94,14 +88,12 @@ class Call(Expr):
     func: str
     args: tuple[Expr, ...]
     where: Expr | None = None
-    span: Span = _span()
 
 
 @dataclass(frozen=True, slots=True)
 class Unary(Expr):
     op: str  # "-" or "not"
     operand: Expr
-    span: Span = _span()
 
 
 @dataclass(frozen=True, slots=True)
@@ -109,7 +101,6 @@ class Binary(Expr):
     op: str  # and or == != < <= > >= + - * / %
     left: Expr
     right: Expr
-    span: Span = _span()
 
 
 # ---------------------------------------------------------------- body items
@@ -118,7 +109,7 @@ class Binary(Expr):
 @dataclass(frozen=True, slots=True)
 class TypeRef:
     name: str
-    span: Span = _span()
+    span: Span = field(default=NOWHERE, compare=False, repr=False, kw_only=True)
 
 
 @dataclass(frozen=True, slots=True)
@@ -126,14 +117,14 @@ class Param:
     name: str
     type: TypeRef
     default: Expr | None = None
-    span: Span = _span()
+    span: Span = field(default=NOWHERE, compare=False, repr=False, kw_only=True)
 
 
 @dataclass(frozen=True, slots=True)
 class Arg:
     name: str
     value: Expr
-    span: Span = _span()
+    span: Span = field(default=NOWHERE, compare=False, repr=False, kw_only=True)
 
 
 @dataclass(frozen=True, slots=True)
@@ -145,7 +136,7 @@ class Need:
     where: Expr | None = None
     quantity: Expr | None = None
     slice: Duration | None = None
-    span: Span = _span()
+    span: Span = field(default=NOWHERE, compare=False, repr=False, kw_only=True)
 
 
 @dataclass(frozen=True, slots=True)
@@ -154,7 +145,7 @@ class Shared:
 
     name: str
     type: TypeRef
-    span: Span = _span()
+    span: Span = field(default=NOWHERE, compare=False, repr=False, kw_only=True)
 
 
 @dataclass(frozen=True, slots=True)
@@ -162,7 +153,7 @@ class Var:
     name: str
     type: TypeRef
     value: Expr | None = None
-    span: Span = _span()
+    span: Span = field(default=NOWHERE, compare=False, repr=False, kw_only=True)
 
 
 @dataclass(frozen=True, slots=True)
@@ -172,7 +163,7 @@ class Multiplicity:
     low: Expr
     high: Expr | None = None
     unbounded: bool = False
-    span: Span = _span()
+    span: Span = field(default=NOWHERE, compare=False, repr=False, kw_only=True)
 
     @property
     def exact(self) -> bool:
@@ -191,7 +182,7 @@ class Child:
     mult: Multiplicity | None = None
     alias: str | None = None
     priority: int | None = None
-    span: Span = _span()
+    span: Span = field(default=NOWHERE, compare=False, repr=False, kw_only=True)
 
     @property
     def key(self) -> str:
@@ -199,7 +190,7 @@ class Child:
         return self.alias or self.name
 
 
-class Policy(str, Enum):
+class Policy(StrEnum):
     ALL = "all"
     """A parallel block is done when every child is done (the default)."""
     ANY = "any"
@@ -214,10 +205,10 @@ class Parallel:
     children: tuple[Child, ...]
     until: str | None = None
     explicit: bool = True  # `parallel all` written out, or just `parallel`
-    span: Span = _span()
+    span: Span = field(default=NOWHERE, compare=False, repr=False, kw_only=True)
 
 
-class TriggerKind(str, Enum):
+class TriggerKind(StrEnum):
     COMPLETION = "completion"
     """The source finished successfully."""
     CHANGE = "change"
@@ -234,26 +225,26 @@ class TriggerKind(str, Enum):
 class SetAction:
     name: str
     value: Expr
-    span: Span = _span()
+    span: Span = field(default=NOWHERE, compare=False, repr=False, kw_only=True)
 
 
 @dataclass(frozen=True, slots=True)
 class EmitAction:
     event: str
     args: tuple[Arg, ...] | None = None
-    span: Span = _span()
+    span: Span = field(default=NOWHERE, compare=False, repr=False, kw_only=True)
 
 
 @dataclass(frozen=True, slots=True)
 class ReleaseAction:
     resource: str
-    span: Span = _span()
+    span: Span = field(default=NOWHERE, compare=False, repr=False, kw_only=True)
 
 
 @dataclass(frozen=True, slots=True)
 class LogAction:
     message: Expr  # Literal(str) or Interp
-    span: Span = _span()
+    span: Span = field(default=NOWHERE, compare=False, repr=False, kw_only=True)
 
 
 Action = SetAction | EmitAction | ReleaseAction | LogAction
@@ -271,15 +262,15 @@ class Transition:
     delay: Duration | None = None
     guard: Expr | None = None
     actions: tuple[Action, ...] = ()
-    span: Span = _span()
-    source_span: Span = _span()
-    target_span: Span = _span()
+    span: Span = field(default=NOWHERE, compare=False, repr=False, kw_only=True)
+    source_span: Span = field(default=NOWHERE, compare=False, repr=False, kw_only=True)
+    target_span: Span = field(default=NOWHERE, compare=False, repr=False, kw_only=True)
 
 
 @dataclass(frozen=True, slots=True)
 class PlanStep:
     name: str
-    span: Span = _span()
+    span: Span = field(default=NOWHERE, compare=False, repr=False, kw_only=True)
 
 
 @dataclass(frozen=True, slots=True)
@@ -288,7 +279,7 @@ class Plan:
 
     concurrent: bool
     chains: tuple[tuple[PlanStep, ...], ...]
-    span: Span = _span()
+    span: Span = field(default=NOWHERE, compare=False, repr=False, kw_only=True)
 
 
 Item = Need | Shared | Var | Child | Parallel | Transition | Plan
@@ -306,14 +297,14 @@ class Behavior:
     body: tuple[Item, ...]
     priority: int | None = None
     is_mission: bool = False
-    span: Span = _span()
-    name_span: Span = _span()
+    span: Span = field(default=NOWHERE, compare=False, repr=False, kw_only=True)
+    name_span: Span = field(default=NOWHERE, compare=False, repr=False, kw_only=True)
 
 
 @dataclass(frozen=True, slots=True)
 class Import:
     path: str
-    span: Span = _span()
+    span: Span = field(default=NOWHERE, compare=False, repr=False, kw_only=True)
 
 
 @dataclass(frozen=True, slots=True)

@@ -10,14 +10,14 @@ from __future__ import annotations
 
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
-from enum import Enum
+from enum import StrEnum
 from types import MappingProxyType
 
 #: The value types of the language. Resource and data types are component names.
 SCALAR_TYPES = ("int", "float", "bool", "str", "duration")
 
 
-class Kind(str, Enum):
+class Kind(StrEnum):
     BEHAVIOR = "behavior"
     """An elementary behavior: a leaf state, run as a component instance."""
     RC = "rc"
@@ -28,7 +28,7 @@ class Kind(str, Enum):
     """A shared data type (`shared map: OccupancyMap`)."""
 
 
-class Process(str, Enum):
+class Process(StrEnum):
     CONTAINER = "container"
     """Runs in one of the Creator's pre-started worker processes (fast to place)."""
     DEDICATED = "dedicated"

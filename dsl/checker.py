@@ -364,7 +364,8 @@ class Checker:
     # ------------------------------------------------------------- body structure
     def _structure(self, b: ast.Behavior, body: Body) -> None:
         if len(body.parallels) > 1 or len(body.plans) > 1 or (body.parallels and body.plans):
-            extra = (body.parallels + body.plans)[1]  # type: ignore[operator]
+            blocks: list[ast.Parallel | ast.Plan] = [*body.parallels, *body.plans]
+            extra = blocks[1]
             self.report.error("structure", f"{b.name} has more than one parallel block or plan", extra.span,
                               "put the extra block in a behavior of its own and use that as a child")
             return
@@ -392,7 +393,8 @@ class Checker:
             names = ", ".join(list(body.children)[:4])
             first = next(iter(body.children))
             self.report.error("structure", f"{b.name} has several children ({names}) and no way to start",
-                              b.name_span, f"say which runs first (start -> {first}), or use a plan or a parallel block")
+                              b.name_span,
+                              f"say which runs first (start -> {first}), or use a plan or a parallel block")
             return
         entry = {t.target for t in starts} or set(list(body.children)[:1])
         self._reachability(b, body, entry)

@@ -148,8 +148,9 @@ class Typer:
             if out is not None:
                 return out
             outputs = [o.name for o in ct.outputs] if ct else []
+            listed = f"its outputs: {', '.join(outputs)}" if outputs else None
             self.report.error("unknown-name", f"{base.component} has no output {attr}", expr.span,
-                              did_you_mean(attr, outputs) or (f"its outputs: {', '.join(outputs)}" if outputs else None))
+                              did_you_mean(attr, outputs) or listed)
             return ANY
         ct = self.catalog.get(base)
         if ct is not None and ct.kind in (Kind.RC, Kind.ARC):

@@ -463,8 +463,8 @@ class _Recovery:
     def _repair(self, e: UnexpectedToken) -> None:
         """Insert the one missing token that lets the parser accept the bad one, if any."""
         ip = e.interactive_parser
-        for name in sorted(ip.accepts() - {"$END"}, key=_repair_order):
-            trial = ip.copy()
+        for name in sorted(ip.accepts() - {"$END"}, key=_repair_order):  # type: ignore[no-untyped-call]
+            trial = ip.copy()  # type: ignore[no-untyped-call]
             try:
                 trial.feed_token(self._dummy(name, e.token))
                 if e.token.type == "$END" or e.token.type in trial.accepts():

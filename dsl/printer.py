@@ -39,10 +39,10 @@ def _expr(e: ast.Expr) -> tuple[str, int]:
         case ast.Attr(obj=o, attr=a):
             return f"{_wrap(o, _ATOM)}.{a}", _ATOM
         case ast.Call(func=f, args=args, where=w):
-            parts = [expr(a) for a in args]
-            if w is not None and parts:
-                parts[0] += f" where {expr(w)}"
-            return f"{f}({', '.join(parts)})", _ATOM
+            shown = [expr(a) for a in args]
+            if w is not None and shown:
+                shown[0] += f" where {expr(w)}"
+            return f"{f}({', '.join(shown)})", _ATOM
         case ast.Unary(op="not", operand=x):
             return f"not {_wrap(x, _PREC['not'])}", _PREC["not"]
         case ast.Unary(op=_, operand=x):

@@ -14,13 +14,13 @@ from __future__ import annotations
 
 from collections.abc import Iterator, Mapping
 from dataclasses import dataclass, field
-from enum import Enum
+from enum import StrEnum
 
 from dsl import ast
 from dsl.errors import NOWHERE, Span
 
 
-class StateKind(str, Enum):
+class StateKind(StrEnum):
     COMPOUND = "compound"
     """One active child at a time; transitions move between them."""
     PARALLEL = "parallel"

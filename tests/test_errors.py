@@ -42,7 +42,8 @@ ERRORS: list[tuple[str, str, str, str | None]] = [
      "3:30 bad expression in string interpolation: expected (, -, a duration (e.g. 30s), a name, a number, "
      "a string (\"...\"), an integer, event, false or true, got the end of the expression", None),
     # ---- names
-    ("unknown-behavior", m("  DetectDor(min_width: 0.7)"), "2:3 unknown behavior DetectDor", "did you mean DetectDoor?"),
+    ("unknown-behavior", m("  DetectDor(min_width: 0.7)"), "2:3 unknown behavior DetectDor",
+     "did you mean DetectDoor?"),
     ("unknown-state", m("  needs r: Ranger\n  start -> Calibrate\n  Calibrate -> Finsh"),
      "4:16 unknown state Finsh: no child of M and no behavior has this name", None),
     ("unknown-resource", m("  needs r: Rangr\n  Calibrate"), "2:12 unknown resource type Rangr",

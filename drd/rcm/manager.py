@@ -1,0 +1,550 @@
+"""The Resource Pool: who gets which units, when, and who waits (pure, no I/O, no clock).
+
+Every public call takes `now` (seconds) and returns a tuple of decision records; time only moves
+through those arguments. Each call first applies what became due by `now` (expired leases, slice
+boundaries, reservations coming due), so the outcome does not depend on how often `tick` is called.
+
+Policy:
+
+- All-or-nothing: a request is granted only when every need is met at once (`solver`).
+- Priority 1 first. A waiting request *claims* every unit it might use (the units of all its
+  possible assignments). A unit is usable by a request only if no better-placed waiter claims it,
+  so a lower priority waits while a higher one waits for or holds any unit it needs, and equal
+  priorities queue FIFO (by request order). Claims are indexed per unit in heaps, so a request or a
+  freed unit only looks at the head waiter of the units involved: O(log n) in the queue length.
+- Slices: a holder keeps its exclusive units for at least its slice (`NeedRequest.slice`, else
+  `default_slice`; the longest of its exclusive needs). From that slice boundary on it is in
+  overtime: an equal- or higher-priority waiter that can then be granted takes its units at once,
+  and the holder is `Revoked` (suspended) and queued again at the back of its priority; it is
+  resumed later by a `Granted(resumed=True)`. Equal priorities thus rotate round-robin and a
+  higher priority displaces a lower one at the holder's slice boundary, never before. Sharable
+  units are never preempted, and a holder is never preempted by its own descendant or ancestor.
+- Sharable units: the quantities granted on a unit never exceed its capacity.
+- Leases: a grant lasts `lease` seconds unless renewed; an expired lease is `Released("expired")`.
+- Fencing: a unit's epoch strictly increases with each grant of it (kept across hot-plug).
+- Deadlocks: a holder path is owned by its prefixes, so "A" holding X while "A/child" waits is
+  hold-and-wait. The wait-for graph (waiter -> holders and better claimants that alone stand in
+  its way; holder -> its waiting descendants) is searched with networkx whenever some holder has
+  a waiting descendant. Resolution: the victim is the waiting request on the cycle with the
+  lowest priority (largest number), ties broken by the most recent first request; its request is
+  cancelled and reported as `Deadlock(cycle, victim)`.
+- Reservations (preallocation): a reserved request holds nothing before `at`; from `at` it queues
+  ahead of every request of equal priority.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections.abc import Collection, Iterable
+from heapq import heappop, heappush
+from itertools import count, islice
+
+from drd.rcm.deadlock import choose_victim, find_cycle, same_owner
+from drd.rcm.model import (
+    Aggregate,
+    Deadlock,
+    Decision,
+    Granted,
+    Released,
+    ReleaseReason,
+    Renewed,
+    Request,
+    Reserved,
+    Revoked,
+    Unit,
+    Unsatisfiable,
+    Waiting,
+    units_of,
+)
+from drd.rcm.solver import EPS, Solution, alternatives, diagnose, first_solution, solutions
+from drd.rcm.state import Hold, Key, Pending, Registry, Wait, WaitQueue
+
+# Event kinds, in the order they are applied when due at the same instant.
+_LEASE, _RESERVE, _SLICE = 0, 1, 2
+
+
+class ResourceManager:
+    """The Resource Controller Manager's decisions, as a pure state machine (see module docstring).
+
+    :param lease: seconds a grant lasts without `renew`.
+    :param default_slice: minimum holding time on exclusive units when a need sets none.
+    :param max_alternatives: assignments enumerated per waiting request to compute its claims;
+        beyond it a waiter claims every unit of its need types (safe, just less precise).
+    """
+
+    def __init__(
+        self, *, lease: float = 3.0, default_slice: float = 5.0, max_alternatives: int = 256
+    ) -> None:
+        if not (lease > 0 and default_slice > 0 and max_alternatives > 0):
+            raise ValueError("lease, default_slice and max_alternatives must be > 0")
+        self.lease = lease
+        self.default_slice = default_slice
+        self.max_alternatives = max_alternatives
+        self._now = -math.inf
+        self._order = count()
+        self._reg = Registry()
+        self._queue = WaitQueue()
+        self._holds: dict[str, Hold] = {}
+        self._pending: dict[str, Pending] = {}
+        self._overtime: set[str] = set()
+        self._events: list[tuple[float, int, int, str]] = []  # (time, kind, token, holder)
+        self._frees = 0  # bumped whenever capacity is given back
+
+    # -- hot-plug and the Static Dependency Database -------------------------------------------
+
+    def add_unit(self, unit: Unit, now: float) -> tuple[Decision, ...]:
+        """Register an RC; waiters of its type are reconsidered (it may be just what they need)."""
+        out = self._begin(now)
+        self._reg.add(unit)
+        self._reconsider(self._queue.of_type(unit.type), now, out, {unit.id})
+        return self._finish(now, out)
+
+    def add_aggregate(self, aggregate: Aggregate, now: float) -> tuple[Decision, ...]:
+        """Register an ARC instance; its parts must be registered units."""
+        out = self._begin(now)
+        self._reg.add(aggregate)
+        self._reconsider(self._queue.of_type(aggregate.type), now, out, set(aggregate.units))
+        return self._finish(now, out)
+
+    def remove_host(self, host: str, now: float) -> tuple[Decision, ...]:
+        """A host is gone: drop its units and aggregates (and aggregates using its units).
+
+        Every holder of a lost unit or aggregate loses its whole grant (`Released("host lost")`),
+        waiters that can no longer ever be met get `Unsatisfiable`, the rest keep waiting.
+        """
+        out = self._begin(now)
+        reg = self._reg
+        units = {u for u, unit in reg.units.items() if unit.host == host}
+        aggs = {a for a, agg in reg.aggregates.items() if agg.host == host or not units.isdisjoint(agg.units)}
+        touched = units.union(*(reg.aggregates[a].units for a in aggs))
+        lost = {
+            h
+            for u in touched
+            for h in reg.used.get(u, ())
+            if not units.isdisjoint(self._holds[h].quantities())
+            or any(c.id in aggs for c in self._holds[h].chosen.values())
+        }
+        affected = {h for u in touched for h in self._queue.claimants(u)}
+        freed: set[str] = set()
+        for holder in sorted(lost):
+            released = self._end_hold(holder)
+            out.append(Released(holder, released, "host lost"))
+            freed.update(released)
+        for cid in sorted(aggs | units):
+            reg.remove(cid)
+            self._queue.drop_unit(cid)
+        self._reconsider(sorted(affected, key=lambda h: self._queue.waits[h].key), now, out, freed)
+        return self._finish(now, out)
+
+    def set_property(
+        self, resource_id: str, key: str, value: object, now: float | None = None
+    ) -> tuple[Decision, ...]:
+        """Change a static dependency (a launched Scout leaves its magazine).
+
+        Waiters with a need of that type are reconsidered; holders keep what they were granted.
+        Without `now`, the time of the previous call is used.
+        """
+        if now is None:
+            now = self._now if self._now > -math.inf else 0.0
+        out = self._begin(now)
+        old = self._reg.candidate(resource_id)
+        self._reg.replace(dataclasses.replace(old, properties={**old.properties, key: value}))
+        self._reconsider(self._queue.of_type(old.type), now, out, set())
+        return self._finish(now, out)
+
+    # -- requests --------------------------------------------------------------------------------
+
+    def request(self, request: Request, now: float) -> tuple[Decision, ...]:
+        """Ask for all needs of a behavior: `Granted`, `Waiting` or `Unsatisfiable` (+ effects)."""
+        out = self._begin(now)
+        self._check_new_holder(request.holder)
+        self._admit(request, now, out)
+        return self._finish(now, out)
+
+    def reserve(self, request: Request, now: float, at: float) -> tuple[Decision, ...]:
+        """Preallocate: from `at` the request queues ahead of all requests of its priority.
+
+        It holds and claims nothing before `at` (so it cannot create hold-and-wait):
+        `Reserved` now, then `Granted` or `Waiting` once due.
+        """
+        out = self._begin(now)
+        self._check_new_holder(request.holder)
+        problem = diagnose(request.needs, self._reg)
+        if at <= now or problem is not None:
+            self._admit(request, now, out, reserved_at=at)
+        else:
+            order = next(self._order)
+            self._pending[request.holder] = Pending(request, at, order)
+            heappush(self._events, (at, _RESERVE, order, request.holder))
+            out.append(Reserved(request.holder, at))
+        return self._finish(now, out)
+
+    def release(self, holder: str, now: float, units: Collection[str] | None = None) -> tuple[Decision, ...]:
+        """Give back everything, or only `units` (need names, candidate ids or unit ids).
+
+        A need is released whole by its name or candidate id; releasing a single unit of a need
+        keeps the need's other units held, but that need is no longer resumed after a revocation.
+        Names not held are ignored (a release racing a revocation is harmless). Releasing
+        everything while suspended withdraws the queued request.
+        """
+        out = self._begin(now)
+        hold = self._holds.get(holder)
+        wait = self._queue.get(holder)
+        if hold is None:
+            if wait is not None and units is None:
+                self._withdraw(wait, "release", now, out)
+            return self._finish(now, out)
+        if units is None:
+            freed, changed = self._end_hold(holder), ()
+        else:
+            freed, changed = self._release_part(hold, set(units))
+        if freed or changed:
+            out.append(Released(holder, freed, "release"))
+            self._dispatch((*freed, *changed), now, out)
+        return self._finish(now, out)
+
+    def renew(self, holder: str, now: float) -> tuple[Decision, ...]:
+        """Keep a grant alive for another `lease` seconds; nothing if it is not held (any more)."""
+        out = self._begin(now)
+        hold = self._holds.get(holder)
+        if hold is not None:
+            hold.lease_until = now + self.lease
+            heappush(self._events, (hold.lease_until, _LEASE, hold.gid, holder))
+            out.append(Renewed(holder, hold.lease_until))
+        return self._finish(now, out)
+
+    def cancel(self, holder: str, now: float) -> tuple[Decision, ...]:
+        """Drop a holder's grant, queued request or reservation: `Released("cancelled")`."""
+        out = self._begin(now)
+        wait = self._queue.get(holder)
+        if holder in self._holds:
+            units = self._end_hold(holder)
+            out.append(Released(holder, units, "cancelled"))
+            self._dispatch(units, now, out)
+        elif wait is not None:
+            self._withdraw(wait, "cancelled", now, out)
+        elif self._pending.pop(holder, None) is not None:
+            out.append(Released(holder, (), "cancelled"))
+        return self._finish(now, out)
+
+    def tick(self, now: float) -> tuple[Decision, ...]:
+        """Apply what is due by `now`: lease expiry, slice boundaries, reservations."""
+        return self._finish(now, self._begin(now))
+
+    # -- queries -----------------------------------------------------------------------------
+
+    def holders(self, unit_id: str) -> tuple[str, ...]:
+        """Who holds a unit now."""
+        return tuple(sorted(self._reg.used.get(unit_id, ())))
+
+    def queue(self) -> tuple[str, ...]:
+        """The waiting holders in the order they would be served (due reservations first)."""
+        return tuple(self._queue.order())
+
+    def snapshot(self) -> dict[str, object]:
+        """The whole state as plain dicts and lists, for `missionctl resources` and JSON traces."""
+        return {
+            "time": None if self._now == -math.inf else self._now,
+            **self._reg.describe(),
+            "holds": {h: hold.describe() for h, hold in sorted(self._holds.items())},
+            "queue": [self._queue.waits[h].describe() for h in self._queue.order()],
+            "reservations": {
+                h: {"priority": p.request.priority, "at": p.at} for h, p in sorted(self._pending.items())
+            },
+        }
+
+    # -- time ----------------------------------------------------------------------------------
+
+    def _begin(self, now: float) -> list[Decision]:
+        """Check the clock and apply every event due by `now`, in time order."""
+        if now < self._now:
+            raise ValueError(f"time went backwards: {now} < {self._now}")
+        self._now = now
+        out: list[Decision] = []
+        while self._events and self._events[0][0] <= now:
+            time, kind, token, holder = heappop(self._events)
+            hold = self._holds.get(holder)
+            if kind == _LEASE and hold is not None and hold.gid == token and hold.lease_until == time:
+                units = self._end_hold(holder)
+                out.append(Released(holder, units, "expired"))
+                self._dispatch(units, now, out)
+            elif kind == _SLICE and hold is not None and hold.gid == token:
+                hold.overtime = True
+                self._overtime.add(holder)
+                self._dispatch([u for u in hold.quantities() if not self._reg.units[u].sharable], now, out)
+            elif kind == _RESERVE and holder in self._pending and self._pending[holder].order == token:
+                pending = self._pending.pop(holder)
+                self._admit(pending.request, now, out, reserved_at=pending.at, since=pending.order)
+        return out
+
+    def _finish(self, now: float, out: list[Decision]) -> tuple[Decision, ...]:
+        """Break wait-for cycles (only possible while some holder has a waiting descendant)."""
+        while self._queue.nested:
+            cycle = find_cycle(self._queue.nested, self._successors)
+            if cycle is None:
+                break
+            victim = choose_victim((h for h in cycle if h in self._queue), self._rank)
+            wait = self._queue.waits[victim]
+            self._queue.remove(wait)
+            out.append(Deadlock(cycle, victim))
+            self._dispatch(wait.claims, now, out)
+        return tuple(out)
+
+    # -- the queue -----------------------------------------------------------------------------
+
+    def _admit(
+        self,
+        request: Request,
+        now: float,
+        out: list[Decision],
+        *,
+        reserved_at: float | None = None,
+        since: int | None = None,
+    ) -> None:
+        problem = diagnose(request.needs, self._reg)
+        if problem is not None:
+            out.append(Unsatisfiable(request.holder, *problem))
+            return
+        order = next(self._order)
+        key = (
+            (request.priority, 1, 0.0, order)
+            if reserved_at is None
+            else (request.priority, 0, reserved_at, order)
+        )
+        wait = Wait(request, key, order if since is None else since, resumed=False, given={})
+        touched = self._try_grant(wait, now, out)
+        if touched is not None:
+            self._dispatch(touched, now, out)
+            return
+        alts, capped = self._enqueue(wait)
+        out.append(Waiting(request.holder, self._blocking(wait, alts, capped)[1]))
+
+    def _enqueue(self, wait: Wait) -> tuple[list[Solution], bool]:
+        alts, capped = alternatives(wait.request.needs, self._reg, wait.given, self.max_alternatives)
+        self._queue.add(wait, self._claims_of(wait, alts, capped), self._holds)
+        return alts, capped
+
+    def _withdraw(self, wait: Wait, reason: ReleaseReason, now: float, out: list[Decision]) -> None:
+        self._queue.remove(wait)
+        out.append(Released(wait.holder, (), reason))
+        self._dispatch(wait.claims, now, out)
+
+    def _claims_of(self, wait: Wait, alts: list[Solution], capped: bool) -> frozenset[str]:
+        claims = {u for solution in alts for u in solution.units()}
+        if capped:  # too many assignments to list: claim every unit of the need types
+            for need in wait.request.needs:
+                for candidate in self._reg.candidates(need.type):
+                    claims.update(units_of(candidate))
+        return frozenset(claims)
+
+    def _reconsider(self, holders: Iterable[str], now: float, out: list[Decision], extra: set[str]) -> None:
+        """Recompute the claims of waiters after the resources changed, then serve who can be."""
+        touched = set(extra)
+        for holder in holders:
+            wait = self._queue.waits[holder]
+            alts, capped = alternatives(wait.request.needs, self._reg, wait.given, self.max_alternatives)
+            touched |= wait.claims
+            if not alts:
+                self._queue.remove(wait)
+                need, reason = diagnose(wait.request.needs, self._reg, wait.given) or ("", "")
+                out.append(Unsatisfiable(holder, need, reason))
+                continue
+            self._queue.reclaim(wait, self._claims_of(wait, alts, capped))
+            touched |= wait.claims
+        self._dispatch(touched, now, out)
+
+    # -- granting ------------------------------------------------------------------------------
+
+    def _room(self, unit_id: str, wait: Wait, preempt: bool) -> float:
+        """How much of a unit `wait` may take now (optionally counting preemptible holders)."""
+        head = self._queue.head(unit_id)
+        if head is not None and head[0] < wait.key:
+            return 0.0  # a better-placed waiter claims it
+        unit = self._reg.units[unit_id]
+        holders = self._reg.used.get(unit_id)
+        if preempt and holders and not unit.sharable:
+            if all(self._preemptible(self._holds[h], wait) for h in holders):
+                return unit.capacity
+        return self._reg.free(unit_id)
+
+    def _preemptible(self, hold: Hold, wait: Wait) -> bool:
+        return (
+            hold.overtime
+            and hold.request.priority >= wait.request.priority
+            and not same_owner(hold.request.holder, wait.holder)
+        )
+
+    def _try_grant(self, wait: Wait, now: float, out: list[Decision]) -> set[str] | None:
+        """Grant `wait` if it can be, revoking overtime holders if needed; the units to re-dispatch."""
+        needs, given = wait.request.needs, wait.given
+        solution = first_solution(needs, self._reg, lambda u: self._room(u, wait, False), given)
+        if solution is None and self._overtime:
+            # Preempt as few holders as possible: free units first, then overtime holders.
+            ranked = islice(solutions(needs, self._reg, lambda u: self._room(u, wait, True), given), 64)
+            solution = min(ranked, key=lambda s: len(self._victims(s)), default=None)
+        if solution is None:
+            return None
+        touched: set[str] = set()
+        if self._queue.get(wait.holder) is wait:
+            self._queue.remove(wait)
+            touched |= wait.claims
+        for victim in self._victims(solution):
+            touched.update(self._revoke(victim, out, by=wait.holder))
+        self._grant(wait, solution, now, out)
+        return touched
+
+    def _victims(self, solution: Solution) -> list[str]:
+        """The holders a solution takes exclusive units from (all preemptible by construction)."""
+        units = [u for u in solution.units() if not self._reg.units[u].sharable]
+        return sorted({h for u in units for h in self._reg.used.get(u, ())})
+
+    def _grant(self, wait: Wait, solution: Solution, now: float, out: list[Decision]) -> None:
+        holder = wait.holder
+        units = solution.units()
+        epochs = {unit: self._reg.next_epoch(unit) for unit in units}
+        for unit, quantity in solution.totals().items():
+            self._reg.set_use(unit, holder, quantity)
+        slices = [
+            need.slice or self.default_slice
+            for need in wait.request.needs
+            if any(not self._reg.units[u].sharable for u in solution.demand[need.name])
+        ]
+        slice_until = now + max(slices) if slices else now
+        hold = Hold(
+            request=wait.request,
+            gid=next(self._order),
+            since=wait.since,
+            chosen=dict(solution.chosen),
+            alloc={name: dict(demand) for name, demand in solution.demand.items()},
+            given=dict(wait.given),
+            lease_until=now + self.lease,
+            slice_until=slice_until,
+            granted_at=now,
+        )
+        self._holds[holder] = hold
+        self._queue.hold_added(holder)
+        heappush(self._events, (hold.lease_until, _LEASE, hold.gid, holder))
+        if slices:
+            heappush(self._events, (slice_until, _SLICE, hold.gid, holder))
+        assignment = solution.assignment
+        out.append(Granted(holder, assignment, units, epochs, hold.lease_until, slice_until, wait.resumed))
+
+    def _revoke(self, holder: str, out: list[Decision], *, by: str) -> tuple[str, ...]:
+        """Suspend a holder: free its units and queue its intact needs again, at the back."""
+        hold = self._holds[holder]
+        units = self._end_hold(holder)
+        out.append(Revoked(holder, units, "preempted", by))
+        if not hold.alloc:  # every need was (partly) given back: nothing left to resume
+            return units
+        given = dict(hold.given)
+        given.update({name: c for name, c in hold.chosen.items() if name not in hold.alloc})
+        needs = tuple(n for n in hold.request.needs if n.name in hold.alloc)
+        request = dataclasses.replace(hold.request, needs=needs)
+        key = (request.priority, 1, 0.0, next(self._order))
+        self._enqueue(Wait(request, key, hold.since, resumed=True, given=given))
+        return units
+
+    def _end_hold(self, holder: str) -> tuple[str, ...]:
+        hold = self._holds.pop(holder)
+        units = tuple(hold.quantities())
+        for unit in units:
+            self._reg.set_use(unit, holder, 0.0)
+        self._overtime.discard(holder)
+        self._queue.hold_removed(holder, self._holds)
+        self._frees += 1
+        return units
+
+    def _release_part(self, hold: Hold, names: set[str]) -> tuple[tuple[str, ...], tuple[str, ...]]:
+        """Release needs (by name or candidate id) and units: (units given up, units reduced)."""
+        holder = hold.request.holder
+        before = hold.quantities()
+        hold.give_back(names)
+        after = hold.quantities()
+        reduced = [u for u, quantity in before.items() if after.get(u, 0.0) < quantity]
+        for unit in reduced:
+            self._reg.set_use(unit, holder, after.get(unit, 0.0))
+        if not after:
+            self._end_hold(holder)
+        elif reduced:
+            self._frees += 1
+        return tuple(u for u in reduced if u not in after), tuple(u for u in reduced if u in after)
+
+    def _dispatch(self, units: Iterable[str], now: float, out: list[Decision]) -> None:
+        """Serve the head waiters of units that may have room, best-placed first.
+
+        Only heads are tried: a head that cannot be granted keeps its units for itself, so the
+        waiters behind it on those units could not be granted either.
+        """
+        todo: list[tuple[Key, str]] = []
+
+        def seed(unit_ids: Iterable[str]) -> None:
+            for unit_id in unit_ids:
+                if self._may_open(unit_id):
+                    head = self._queue.head(unit_id)
+                    if head is not None:
+                        heappush(todo, head)
+
+        seed(units)
+        failed: dict[str, int] = {}
+        while todo:
+            key, holder = heappop(todo)
+            wait = self._queue.get(holder)
+            if wait is None or wait.key != key or failed.get(holder) == self._frees:
+                continue
+            touched = self._try_grant(wait, now, out)
+            if touched is None:
+                failed[holder] = self._frees  # retried only if capacity is given back meanwhile
+            else:
+                seed(touched)
+
+    def _may_open(self, unit_id: str) -> bool:
+        """Whether a unit has room, or an exclusive holder in overtime that could be preempted."""
+        unit = self._reg.units.get(unit_id)
+        if unit is None:
+            return False
+        if self._reg.free(unit_id) > EPS:
+            return True
+        return not unit.sharable and any(h in self._overtime for h in self._reg.used.get(unit_id, ()))
+
+    # -- deadlocks -----------------------------------------------------------------------------
+
+    def _successors(self, node: str) -> list[str]:
+        """Wait-for edges: a holder waits for its waiting descendants, a waiter for its blockers."""
+        if node in self._holds:
+            return sorted(self._queue.descendants(node))
+        wait = self._queue.get(node)
+        if wait is None:
+            return []
+        alts, capped = alternatives(wait.request.needs, self._reg, wait.given, self.max_alternatives)
+        return list(self._blocking(wait, alts, capped)[0])
+
+    def _blocking(
+        self, wait: Wait, alts: list[Solution], capped: bool
+    ) -> tuple[tuple[str, ...], tuple[str, ...]]:
+        """(who stands in the way of every assignment, who stands in the way of some).
+
+        Only the first are wait-for edges: a waiter with another way out is not deadlocked.
+        """
+        common: set[str] | None = None
+        every: set[str] = set()
+        for solution in alts:
+            blockers: set[str] = set()
+            for unit, quantity in solution.totals().items():
+                head = self._queue.head(unit)
+                if head is not None and head[0] < wait.key:
+                    blockers.add(head[1])
+                if self._reg.free(unit) < quantity - EPS:
+                    blockers.update(self._reg.used.get(unit, ()))
+            every |= blockers
+            common = blockers if common is None else common & blockers
+        definite = () if capped or common is None else tuple(sorted(common))
+        return definite, tuple(sorted(every))
+
+    def _rank(self, holder: str) -> tuple[int, int]:
+        wait = self._queue.waits[holder]
+        return wait.request.priority, wait.since
+
+    def _check_new_holder(self, holder: str) -> None:
+        if holder in self._holds or holder in self._queue or holder in self._pending:
+            raise ValueError(f"{holder} already has a request; release or cancel it first")

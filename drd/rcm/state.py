@@ -1,0 +1,308 @@
+"""The manager's bookkeeping: the resource registry with its usage, and the indexed wait queue.
+
+Kept apart from the policy in `manager` so that each index has one owner that keeps it
+consistent: usage sums per unit, per-unit heaps of claiming waiters, waiters per need type, and
+waiters per ancestor path (for the wait-for graph).
+"""
+
+from __future__ import annotations
+
+from bisect import insort
+from collections.abc import Container, Iterator
+from dataclasses import dataclass, field
+from heapq import heappop, heappush
+
+from drd.rcm.deadlock import ancestors
+from drd.rcm.model import Aggregate, Candidate, Request, Unit
+
+#: Queue order: (priority, 0 for a due reservation else 1, reservation time, request order).
+Key = tuple[int, int, float, int]
+
+
+@dataclass(slots=True, eq=False)
+class Wait:
+    """A queued request. `claims` are the units of all its possible assignments."""
+
+    request: Request
+    key: Key
+    since: int  # order of the first request, kept across revocations
+    resumed: bool
+    given: dict[str, Candidate]
+    claims: frozenset[str] = frozenset()
+
+    @property
+    def holder(self) -> str:
+        return self.request.holder
+
+    def describe(self) -> dict[str, object]:
+        return {
+            "holder": self.holder,
+            "priority": self.request.priority,
+            "mission": self.request.mission,
+            "needs": {n.name: n.type for n in self.request.needs},
+            "resumed": self.resumed,
+        }
+
+
+@dataclass(slots=True, eq=False)
+class Hold:
+    """A grant in force. `alloc` covers intact needs; `loose` what is left of needs partly released."""
+
+    request: Request
+    gid: int
+    since: int
+    chosen: dict[str, Candidate]
+    alloc: dict[str, dict[str, float]]
+    given: dict[str, Candidate]
+    lease_until: float
+    slice_until: float
+    granted_at: float
+    loose: dict[str, float] = field(default_factory=dict)
+    overtime: bool = False
+
+    def quantities(self) -> dict[str, float]:
+        """What the holder takes of each unit, in grant order."""
+        total: dict[str, float] = {}
+        for demand in (*self.alloc.values(), self.loose):
+            for unit, quantity in demand.items():
+                total[unit] = total.get(unit, 0.0) + quantity
+        return total
+
+    def give_back(self, names: set[str]) -> None:
+        """Drop needs named by need name or candidate id, and units named by id.
+
+        A need losing only some of its units is no longer intact: what remains of it is `loose`.
+        """
+        held = self.quantities().keys()
+        for name, candidate in self.chosen.items():
+            if name in self.alloc and (name in names or candidate.id in names):
+                del self.alloc[name]
+        unit_ids = names & held
+        for name in [n for n, demand in self.alloc.items() if not unit_ids.isdisjoint(demand)]:
+            for unit, quantity in self.alloc.pop(name).items():
+                self.loose[unit] = self.loose.get(unit, 0.0) + quantity
+        for unit in unit_ids:
+            self.loose.pop(unit, None)
+
+    def describe(self) -> dict[str, object]:
+        return {
+            "priority": self.request.priority,
+            "mission": self.request.mission,
+            "assignment": {n: c.id for n, c in self.chosen.items() if n in self.alloc},
+            "units": list(self.quantities()),
+            "granted_at": self.granted_at,
+            "lease_until": self.lease_until,
+            "slice_until": self.slice_until,
+        }
+
+
+@dataclass(slots=True, eq=False)
+class Pending:
+    """A reservation not yet due."""
+
+    request: Request
+    at: float
+    order: int
+
+
+class Registry:
+    """Known units and aggregates (by type, in id order) and how much of each unit is in use.
+
+    Implements the solver's `Catalog`. Epochs survive a unit's removal so that fencing tokens keep
+    increasing when a host comes back.
+    """
+
+    def __init__(self) -> None:
+        self.units: dict[str, Unit] = {}
+        self.aggregates: dict[str, Aggregate] = {}
+        self.epochs: dict[str, int] = {}
+        self.used: dict[str, dict[str, float]] = {}  # unit -> holder -> quantity
+        self.load: dict[str, float] = {}
+        self._by_type: dict[str, list[str]] = {}
+
+    def candidates(self, type: str) -> Iterator[Candidate]:
+        """Units and aggregates of a type, by id."""
+        for cid in self._by_type.get(type, ()):
+            yield self.candidate(cid)
+
+    def unit(self, unit_id: str) -> Unit:
+        """A registered unit."""
+        return self.units[unit_id]
+
+    def candidate(self, cid: str) -> Candidate:
+        """A registered unit or aggregate."""
+        found = self.units.get(cid) or self.aggregates.get(cid)
+        if found is None:
+            raise KeyError(f"unknown resource {cid!r}")
+        return found
+
+    def add(self, candidate: Candidate) -> None:
+        if candidate.id in self.units or candidate.id in self.aggregates:
+            raise ValueError(f"resource {candidate.id!r} is already registered")
+        if isinstance(candidate, Aggregate):
+            missing = [u for u in candidate.units if u not in self.units]
+            if missing:
+                raise ValueError(f"aggregate {candidate.id}: unknown part units {', '.join(missing)}")
+            self.aggregates[candidate.id] = candidate
+        else:
+            self.units[candidate.id] = candidate
+            self.epochs.setdefault(candidate.id, 0)
+        insort(self._by_type.setdefault(candidate.type, []), candidate.id)
+
+    def replace(self, candidate: Candidate) -> None:
+        """Swap in a new version of a registered resource (same id and type)."""
+        if isinstance(candidate, Aggregate):
+            self.aggregates[candidate.id] = candidate
+        else:
+            self.units[candidate.id] = candidate
+
+    def remove(self, cid: str) -> None:
+        """Forget a resource; its usage must already be given back."""
+        candidate = self.candidate(cid)
+        ids = self._by_type[candidate.type]
+        ids.remove(cid)
+        if not ids:
+            del self._by_type[candidate.type]
+        self.aggregates.pop(cid, None)
+        self.units.pop(cid, None)
+        self.load.pop(cid, None)
+
+    def describe(self) -> dict[str, object]:
+        """Units (with usage and epochs) and aggregates as plain dicts."""
+        units = {
+            u: {
+                "type": unit.type,
+                "host": unit.host,
+                "sharable": unit.sharable,
+                "capacity": unit.capacity,
+                "load": self.load.get(u, 0.0),
+                "epoch": self.epochs[u],
+                "holders": dict(sorted(self.used.get(u, {}).items())),
+                "properties": dict(unit.properties),
+            }
+            for u, unit in sorted(self.units.items())
+        }
+        aggregates = {
+            a: {
+                "type": agg.type,
+                "host": agg.host,
+                "parts": dict(agg.parts),
+                "properties": dict(agg.properties),
+            }
+            for a, agg in sorted(self.aggregates.items())
+        }
+        return {"units": units, "aggregates": aggregates}
+
+    def free(self, unit_id: str) -> float:
+        return self.units[unit_id].capacity - self.load.get(unit_id, 0.0)
+
+    def set_use(self, unit_id: str, holder: str, quantity: float) -> None:
+        """Record what `holder` takes of a unit (0 removes it), keeping the load sum exact."""
+        used = self.used.setdefault(unit_id, {})
+        if quantity > 0:
+            used[holder] = quantity
+        else:
+            used.pop(holder, None)
+        if used:
+            self.load[unit_id] = sum(used.values())
+        else:
+            del self.used[unit_id]
+            self.load[unit_id] = 0.0
+
+    def next_epoch(self, unit_id: str) -> int:
+        self.epochs[unit_id] += 1
+        return self.epochs[unit_id]
+
+
+class WaitQueue:
+    """Waiting requests, indexed so that nothing scans the whole queue.
+
+    - per unit, a heap of (key, holder) of the waiters claiming it; stale entries (granted,
+      re-keyed or no longer claiming) are dropped lazily by `head`;
+    - per need type, the waiters asking for it (to reconsider when such resources change);
+    - per path, the waiting descendants, and `nested`: waiters with a holding ancestor.
+    """
+
+    def __init__(self) -> None:
+        self.waits: dict[str, Wait] = {}
+        self.nested: set[str] = set()
+        self._claimants: dict[str, list[tuple[Key, str]]] = {}
+        self._typed: dict[str, set[str]] = {}
+        self._desc: dict[str, set[str]] = {}
+
+    def __contains__(self, holder: object) -> bool:
+        return holder in self.waits
+
+    def get(self, holder: str) -> Wait | None:
+        return self.waits.get(holder)
+
+    def add(self, wait: Wait, claims: frozenset[str], holding: Container[str]) -> None:
+        holder = wait.holder
+        self.waits[holder] = wait
+        wait.claims = frozenset()
+        self.reclaim(wait, claims)
+        for need in wait.request.needs:
+            self._typed.setdefault(need.type, set()).add(holder)
+        for path in ancestors(holder):
+            self._desc.setdefault(path, set()).add(holder)
+            if path in holding:
+                self.nested.add(holder)
+
+    def remove(self, wait: Wait) -> None:
+        holder = wait.holder
+        del self.waits[holder]
+        for need in wait.request.needs:
+            typed = self._typed[need.type]
+            typed.discard(holder)
+            if not typed:
+                del self._typed[need.type]
+        for path in ancestors(holder):
+            self._desc[path].discard(holder)
+            if not self._desc[path]:
+                del self._desc[path]
+        self.nested.discard(holder)
+
+    def reclaim(self, wait: Wait, claims: frozenset[str]) -> None:
+        """Set the units a waiter claims (entries for units it drops go stale)."""
+        for unit in claims - wait.claims:
+            heappush(self._claimants.setdefault(unit, []), (wait.key, wait.holder))
+        wait.claims = claims
+
+    def head(self, unit: str) -> tuple[Key, str] | None:
+        """The best-placed waiter claiming a unit."""
+        heap = self._claimants.get(unit)
+        while heap:
+            key, holder = heap[0]
+            wait = self.waits.get(holder)
+            if wait is not None and wait.key == key and unit in wait.claims:
+                return key, holder
+            heappop(heap)
+        return None
+
+    def claimants(self, unit: str) -> set[str]:
+        """Every waiter claiming a unit (a full heap walk: for rare events such as host loss)."""
+        return {
+            h for key, h in self._claimants.get(unit, ()) if h in self.waits and unit in self.waits[h].claims
+        }
+
+    def drop_unit(self, unit: str) -> None:
+        self._claimants.pop(unit, None)
+
+    def of_type(self, type: str) -> list[str]:
+        """The waiters with a need of this type, best-placed first."""
+        return sorted(self._typed.get(type, ()), key=lambda h: self.waits[h].key)
+
+    def descendants(self, path: str) -> set[str]:
+        return self._desc.get(path, set())
+
+    def hold_added(self, holder: str) -> None:
+        self.nested.update(self._desc.get(holder, ()))
+
+    def hold_removed(self, holder: str, holding: Container[str]) -> None:
+        for waiter in self._desc.get(holder, ()):
+            if not any(path in holding for path in ancestors(waiter)):
+                self.nested.discard(waiter)
+
+    def order(self) -> list[str]:
+        """Every waiter, best-placed first."""
+        return [h for _, h in sorted((w.key, h) for h, w in self.waits.items())]
