@@ -61,13 +61,19 @@ class Builder:
         behavior = self.checked.behaviors.get(child.name)
         args = child.args or ()
         if behavior is None:
+            ct = self.catalog.get(child.name)
+            defaults = tuple(ast.Arg(p.name, _literal(p.default, p.type)) for p in (ct.params if ct else ())
+                             if not p.required)
             self.states[sid] = State(sid, name, StateKind.LEAF, parent, depth, component=child.name, args=args,
-                                     needs=self._leaf_needs(child, held), priority=prio, span=child.span)
+                                     defaults=defaults, needs=self._leaf_needs(child, held), priority=prio,
+                                     span=child.span)
             return
         body = self.checked.bodies[behavior.name]
         needs = tuple(self._need(n, held) for n in body.needs)
+        defaults = tuple(ast.Arg(p.name, p.default, span=p.span) for p in behavior.params if p.default is not None)
         self.states[sid] = State(sid, name, StateKind.COMPOUND, parent, depth, component=behavior.name, args=args,
-                                 needs=needs, shared=tuple((s.name, s.type.name) for s in body.shared),
+                                 defaults=defaults, needs=needs,
+                                 shared=tuple((s.name, s.type.name) for s in body.shared),
                                  vars=tuple(body.vars), priority=prio, span=child.span)
         inner = tuple(_Held(sid, n.name, n.type.name) for n in body.needs) + held
         kids = {key: self._child(sid, c, depth + 1, prio, inner) for key, c in body.children.items()}
@@ -176,6 +182,14 @@ class Builder:
         self._reported.add((msg, span))
         self.report.error("ambiguous-binding", msg, span,
                           f"name one of them {name} so it is chosen by name, or keep one {typ} in scope")
+
+
+def _literal(value: object, type_name: str) -> ast.Expr:
+    """A manifest default (a Python value) as a constant expression."""
+    if type_name == "duration" and isinstance(value, int | float):
+        return ast.Duration(float(value), f"{value:g}s")
+    assert isinstance(value, bool | int | float | str), value
+    return ast.Literal(value)
 
 
 def _completion(domain: str, source: str, target: str) -> Transition:

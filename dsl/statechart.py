@@ -83,6 +83,7 @@ class State:
     starts: tuple[Transition, ...] = ()  # several or guarded `start ->`: the first enabled one wins
     component: str | None = None  # leaf: component type; compound/parallel: behavior name
     args: tuple[ast.Arg, ...] = ()  # evaluated in the parent's scope on entry
+    defaults: tuple[ast.Arg, ...] = ()  # declared parameter defaults, constants, applied before args
     needs: tuple[ResourceNeed, ...] = ()
     shared: tuple[tuple[str, str], ...] = ()
     vars: tuple[ast.Var, ...] = ()

@@ -1,0 +1,69 @@
+"""Elementary behaviors: components with an explicit lifecycle, driven by the executive.
+
+The lifecycle follows py_trees' split: `setup` once with the context (parameters,
+resources, emit), `start` on entry, `step` each control cycle (non-blocking, returns a
+`Status`), `suspend`/`resume` when the Resource Controller Manager takes a resource away
+and gives it back, `terminate` on exit whatever the reason. A component that raises fails
+its state (an `error` trigger), never the executive.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
+from enum import StrEnum
+from typing import Any
+
+
+class Status(StrEnum):
+    RUNNING = "running"
+    """Still working; step again next cycle."""
+    SUCCESS = "success"
+    """Finished well: the state completes (completion transitions may fire)."""
+    FAILURE = "failure"
+    """Finished badly: the state fails (`on error` transitions may fire)."""
+
+
+@dataclass
+class Context:
+    """What a component instance may use: its parameters, resources and the mission's events."""
+
+    path: str
+    params: Mapping[str, Any]
+    resources: Mapping[str, str]  # need name -> resource id (unit or aggregate part)
+    emit: Callable[..., None]  # emit(name, **fields)
+    log: Callable[[str], None]
+    now: Callable[[], float]
+    outputs: dict[str, Any] = field(default_factory=dict)
+    services: Mapping[str, Any] = field(default_factory=dict)  # drivers, simulator handles
+
+
+class Component:
+    """Base class of every elementary behavior. Override what you need; defaults do nothing."""
+
+    def __init__(self) -> None:
+        self.ctx: Context | None = None
+
+    def setup(self, ctx: Context) -> None:
+        """Once, before start: keep the context, open drivers."""
+        self.ctx = ctx
+
+    def start(self) -> None:
+        """On entry, just in time."""
+
+    def step(self, now: float) -> Status:
+        """One control cycle; must return quickly."""
+        return Status.RUNNING
+
+    def suspend(self) -> None:
+        """A resource was taken away: stop actuating."""
+
+    def resume(self) -> None:
+        """The resource is back."""
+
+    def terminate(self, status: Status) -> None:
+        """On exit, whatever the reason (success, failure, or stopped while RUNNING)."""
+
+
+#: How the executive finds component classes by name.
+Registry = Mapping[str, Callable[[], Component]]

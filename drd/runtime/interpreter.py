@@ -1,0 +1,638 @@
+"""Run a compiled statechart: run-to-completion steps over a tree of active instances.
+
+`Interpreter.step()` is one macro step at the clock's current time: apply the Resource
+Controller Manager's decisions (slice boundaries, lease expiry), step every running
+component once, then take transitions (completion, error, change, timeout, event) until
+nothing more is enabled. Taking a transition exits the source (children first: each
+component gets `terminate`, each grant is released), runs the actions, then enters the
+target. A failure with no `on error` propagates to the parent like an exception; a
+multiplicity fails only when fewer than its minimum instances succeeded. The
+interpreter never sleeps and never reads the wall clock; it reports through listeners.
+"""
+
+from __future__ import annotations
+
+import collections
+from collections.abc import Callable, Iterable, Mapping
+from dataclasses import dataclass, field
+from enum import StrEnum
+from typing import Any
+
+from drd.rcm import Deadlock, Granted, NeedRequest, Released, Request, ResourceManager, Revoked, Unsatisfiable
+from drd.rcm import Waiting as WaitingDecision
+from drd.runtime import records as rec
+from drd.runtime.clock import Clock
+from drd.runtime.component import Component, Context, Registry, Status
+from drd.runtime.pool import ResourcePool, ResourceView
+from dsl import ast
+from dsl.evaluate import EvalError, evaluate, format_value, truthy
+from dsl.export import trigger_label
+from dsl.statechart import ResourceNeed, State, Statechart, StateKind, Transition
+
+#: Transitions one macro step may take before the chart is declared livelocked.
+MAX_MICROSTEPS = 10_000
+
+Listener = Callable[[rec.Record], None]
+
+
+class Phase(StrEnum):
+    WAITING = "waiting"
+    """Entered, waiting for the Resource Controller Manager to grant its needs."""
+    ACTIVE = "active"
+    """Running: children entered, component stepping."""
+    SUSPENDED = "suspended"
+    """A resource was taken away at a slice boundary; resumes when granted again."""
+    DONE = "done"
+    """Exited (successfully, failed or stopped)."""
+
+
+@dataclass(eq=False)
+class Node:
+    """One active instance of a state."""
+
+    state: State
+    path: str
+    parent: Node | None
+    entered: float
+    phase: Phase = Phase.WAITING
+    scope: dict[str, Any] = field(default_factory=dict)  # params, vars, shared, resources
+    outputs: dict[str, Any] = field(default_factory=dict)  # finished children's outputs by name
+    children: list[Node] = field(default_factory=list)
+    finished: set[str] = field(default_factory=set)  # ids of children that succeeded (parallel)
+    component: Component | None = None
+    context: Context | None = None
+    assignment: dict[str, str] = field(default_factory=dict)  # requested need -> resource id
+    requested: bool = False
+    lease_until: float = 0.0
+    instances: int = 0  # multi: created so far
+    succeeded: int = 0
+    failed: int = 0
+    bounds: tuple[int, int] = (0, 0)
+    suspended_by: str = ""
+
+    def visible(self) -> dict[str, Any]:
+        """What descendants may read: shared data and resources."""
+        names = {n for n, _ in self.state.shared} | {n.name for n in self.state.needs}
+        return {k: v for k, v in self.scope.items() if k in names}
+
+
+class Interpreter:
+    """Executes one mission. Drive it with `start()`, then `step()` whenever time advances."""
+
+    def __init__(self, chart: Statechart, registry: Registry, rcm: ResourceManager, clock: Clock, *,
+                 pool: ResourcePool | None = None, mission: str = "", services: Mapping[str, Any] | None = None,
+                 lease: float = 3.0):
+        self.chart = chart
+        self.registry = registry
+        self.rcm = rcm
+        self.clock = clock
+        self.pool = pool or ResourcePool(rcm)
+        self.mission = mission or chart.name
+        self.services = dict(services or {})
+        self.lease = lease
+        self.listeners: list[Listener] = []
+        self.root: Node | None = None
+        self.outcome: str | None = None
+        self.reason = ""
+        self.events: collections.deque[rec.Event] = collections.deque()
+        self.holders: dict[str, Node] = {}  # request holder path -> node
+        self._finishing: list[tuple[Node, bool, str]] = []
+
+    # ------------------------------------------------------------- public API
+    def attach(self, listener: Listener) -> None:
+        self.listeners.append(listener)
+
+    def start(self) -> None:
+        """Enter the root state (and, through grants, everything below it)."""
+        root_state = self.chart[self.chart.root]
+        self.root = self._enter(root_state, root_state.id, None, {})
+        self._settle()
+
+    def step(self) -> None:
+        """One macro step at `clock.now()`."""
+        if self.outcome is not None:
+            return
+        now = self.clock.now()
+        self._apply(self.rcm.tick(now))
+        self._renew(now)
+        for node in list(self._leaves()):
+            if node.phase is Phase.ACTIVE and node.component is not None:
+                status = self._guard_call(node, lambda c=node.component: c.step(now))
+                if status in (Status.SUCCESS, Status.FAILURE):
+                    self._finish(node, status is Status.SUCCESS, "" if status is Status.SUCCESS else "failed")
+        self._settle()
+
+    def emit(self, name: str, source: str = "operator", **fields: Any) -> None:
+        """Queue an event (from a component, an action or the operator)."""
+        record = rec.Event(self.clock.now(), source, name, dict(fields))
+        self._notify(record)
+        self.events.append(record)
+
+    def stop(self, reason: str = "stopped by operator") -> None:
+        """Shut everything down, children first; idempotent."""
+        if self.root is not None and self.root.phase is not Phase.DONE:
+            self._exit(self.root, "stopped")
+        if self.outcome is None:
+            self._end("stopped", reason)
+
+    def add_resources(self, resources: Iterable[Any]) -> None:
+        """Hot-plug: new units and aggregates; running multiplicities may grow."""
+        self._apply(self.pool.add(resources, self.clock.now()))
+        self._grow_multis()
+        self._settle()
+
+    def set_property(self, rid: str, key: str, value: object) -> None:
+        """Change a static dependency at run time (constraints and counts see it)."""
+        self._apply(self.pool.set_property(rid, key, value, self.clock.now()))
+        self._settle()
+
+    @property
+    def finished(self) -> bool:
+        return self.outcome is not None
+
+    def active(self) -> list[Node]:
+        """Every live node, parents first."""
+        out: list[Node] = []
+        stack = [self.root] if self.root is not None and self.root.phase is not Phase.DONE else []
+        while stack:
+            n = stack.pop()
+            out.append(n)
+            stack.extend(reversed(n.children))
+        return out
+
+    def snapshot(self) -> dict[str, Any]:
+        """The active state tree, for status views and JSON."""
+        def tree(n: Node) -> dict[str, Any]:
+            return {"path": n.path, "kind": n.state.kind.value, "phase": n.phase.value,
+                    "resources": dict(n.assignment), "children": [tree(c) for c in n.children]}
+        return {"mission": self.mission, "outcome": self.outcome, "reason": self.reason,
+                "time": self.clock.now(), "tree": tree(self.root) if self.root else None}
+
+    # ------------------------------------------------------------- entering
+    def _enter(self, state: State, path: str, parent: Node | None, params: dict[str, Any]) -> Node:
+        node = Node(state, path, parent, self.clock.now(), scope=dict(params))
+        if parent is not None:
+            parent.children.append(node)
+        self._notify(rec.Entered(node.entered, path, state.id))
+        for name, _type in state.shared:
+            node.scope[name] = {}
+        try:
+            for var in state.vars:
+                node.scope[var.name] = evaluate(var.value, self._names(node), self.pool.count) if var.value else None
+        except EvalError as e:
+            self._finish(node, False, e.message)
+            return node
+        requested = [n for n in state.needs if n.requested]
+        if requested:
+            self._request(node, requested)
+        else:
+            self._activate(node)
+        return node
+
+    def _request(self, node: Node, needs: list[ResourceNeed]) -> None:
+        try:
+            reqs = tuple(self._need_request(node, n) for n in needs)
+        except EvalError as e:
+            self._finish(node, False, e.message)
+            return
+        node.requested = True
+        self.holders[node.path] = node
+        self._notify(rec.Waiting(self.clock.now(), node.path, tuple(f"{n.name}: {n.type}" for n in needs)))
+        self._apply(self.rcm.request(Request(node.path, node.state.priority, reqs, self.mission), self.clock.now()))
+
+    def _need_request(self, node: Node, need: ResourceNeed) -> NeedRequest:
+        quantity = need.quantity
+        if isinstance(quantity, ast.Expr):
+            value = evaluate(quantity, self._names(node), self.pool.count)
+            quantity = float(value) if isinstance(value, int | float) else 1.0
+        where = None
+        if need.where is not None:
+            expr, base = need.where, node
+
+            def where(cand: Any, chosen: Mapping[str, Any]) -> bool:
+                names = self._names(base)
+                names.update({k: ResourceView(v, self.pool) for k, v in chosen.items()})
+                names[need.name] = ResourceView(cand, self.pool)
+                try:
+                    return truthy(expr, names, self.pool.count)
+                except EvalError:
+                    return False
+        return NeedRequest(need.name, need.type, float(quantity or 1.0), need.slice, where)
+
+    def _activate(self, node: Node) -> None:
+        node.phase = Phase.ACTIVE
+        state = node.state
+        match state.kind:
+            case StateKind.LEAF:
+                self._start_component(node)
+            case StateKind.COMPOUND:
+                target = self._initial(node)
+                if target is not None:
+                    self._enter_child(node, target)
+            case StateKind.PARALLEL:
+                for cid in state.children:
+                    child = self.chart[cid]
+                    if child.kind is not StateKind.FINAL and not child.after:
+                        self._enter_child(node, child)
+            case StateKind.MULTI:
+                self._start_multi(node)
+
+    def _initial(self, node: Node) -> State | None:
+        for t in node.state.starts:
+            if self._enabled_guard(node, t, None):
+                self._take_actions(node, t, None)
+                return self.chart[t.target]
+        return self.chart[node.state.initial] if node.state.initial else None
+
+    def _enter_child(self, parent: Node, state: State, index: int | None = None) -> Node | None:
+        if state.kind is StateKind.FINAL:
+            self._finish(parent, bool(state.success), "" if state.success else "reached fail")
+            return None
+        base = parent.path if parent.state.kind is not StateKind.MULTI else parent.path
+        path = f"{base}[{index}]" if index is not None else f"{base}/{state.name}"
+        domain = parent.parent if parent.state.kind is StateKind.MULTI else parent
+        try:
+            params = {a.name: evaluate(a.value, self._names(domain), self.pool.count) for a in state.args} \
+                if domain is not None else {}
+        except EvalError as e:
+            self._notify(rec.Log(self.clock.now(), path, f"cannot enter: {e.message}"))
+            self._finish(parent, False, e.message)
+            return None
+        defaults = {a.name: evaluate(a.value, {}) for a in state.defaults}
+        return self._enter(state, path, parent, defaults | params)
+
+    def _start_multi(self, node: Node) -> None:
+        m = node.state.multiplicity
+        assert m is not None
+        names = self._names(node.parent) if node.parent else {}
+        try:
+            low = int(evaluate(m.low, names, self.pool.count))  # type: ignore[call-overload]
+            high = low if m.exact else (
+                int(evaluate(m.high, names, self.pool.count)) if m.high is not None  # type: ignore[call-overload]
+                else max(low, self._capacity(node)))
+        except (EvalError, TypeError, ValueError) as e:
+            self._finish(node, False, f"multiplicity: {e}")
+            return
+        node.bounds = (low, high)
+        if high < low:
+            self._finish(node, False, f"{node.state.name} needs at least {low} instances, only {high} possible")
+            return
+        if high == 0:
+            self._finish(node, True)
+            return
+        self._grow_multi(node)
+
+    def _capacity(self, node: Node) -> int:
+        """For `[a..*]`: as many instances as the template's first requested resource type allows."""
+        template = self.chart[node.state.children[0]]
+        need = next((n for n in template.needs if n.requested), None)
+        return self.pool.count(need.type, None) if need else 0
+
+    def _grow_multi(self, node: Node) -> None:
+        template = self.chart[node.state.children[0]]
+        while node.instances < node.bounds[1] and node.phase is Phase.ACTIVE:
+            index = node.instances
+            node.instances += 1
+            self._enter_child(node, template, index)
+
+    def _grow_multis(self) -> None:
+        for node in self.active():
+            m = node.state.multiplicity
+            if node.state.kind is StateKind.MULTI and m is not None and m.high is not None and not m.exact:
+                try:
+                    high = int(evaluate(m.high, self._names(node.parent) if node.parent else {},  # type: ignore[call-overload]
+                                        self.pool.count))
+                except (EvalError, TypeError, ValueError):
+                    continue
+                if high > node.bounds[1]:
+                    node.bounds = (node.bounds[0], high)
+                    self._grow_multi(node)
+
+    def _start_component(self, node: Node) -> None:
+        name = node.state.component or ""
+        factory = self.registry.get(name)
+        if factory is None:
+            self._finish(node, False, f"no implementation of component {name} is available")
+            return
+        resources = {}
+        for need in node.state.needs:
+            rid = node.assignment.get(need.name) or self._bound(node, need)
+            if rid:
+                resources[need.name] = rid
+        shared = {}
+        for anc in self._ancestors(node):
+            for k, _ in anc.state.shared:
+                shared.setdefault(k, anc.scope.get(k))
+        ctx = Context(node.path, dict(node.scope), resources,
+                      lambda ev, **f: self.emit(ev, node.path, **f),
+                      lambda text: self._notify(rec.Log(self.clock.now(), node.path, text)),
+                      self.clock.now, services={**self.services, "shared": shared})
+        node.context = ctx
+        comp = self._guard_call(node, factory)
+        if not isinstance(comp, Component):
+            return
+        node.component = comp
+        self._guard_call(node, lambda: comp.setup(ctx))
+        self._guard_call(node, comp.start)
+
+    def _bound(self, node: Node, need: ResourceNeed) -> str | None:
+        if need.bound_to is None:
+            return None
+        state_id, name, part = need.bound_to
+        for anc in self._ancestors(node):
+            if anc.state.id == state_id and name in anc.assignment:
+                return self.pool.part(anc.assignment[name], part)
+        return None
+
+    # ------------------------------------------------------------- finishing and transitions
+    def _finish(self, node: Node, success: bool, reason: str = "") -> None:
+        """A node completed (or failed): let its parent react, after the current call returns."""
+        self._finishing.append((node, success, reason))
+
+    def _settle(self) -> None:
+        """Run to completion: finish nodes and take enabled transitions until quiet."""
+        for _ in range(MAX_MICROSTEPS):
+            if self.outcome is not None:
+                return
+            if self._finishing:
+                node, ok, why = self._finishing.pop(0)
+                if node.phase is not Phase.DONE or node is self.root:
+                    self._complete(node, ok, why)
+                continue
+            if self._fire_one():
+                continue
+            if self.events:
+                self._dispatch(self.events.popleft())
+                continue
+            return
+        self.stop("livelock: transitions keep firing without time passing")
+        self.outcome, self.reason = "failure", "livelock: transitions keep firing without time passing"
+
+    def _complete(self, node: Node, ok: bool, why: str) -> None:
+        parent = node.parent
+        if parent is None:
+            self._exit(node, "success" if ok else "failure")
+            self._end("success" if ok else "failure", why)
+            return
+        if node.phase is not Phase.DONE:
+            self._exit(node, "success" if ok else "failure")
+        if node.state.kind is StateKind.LEAF and node.context is not None:
+            parent.outputs[node.state.name] = dict(node.context.outputs)
+        kind = ast.TriggerKind.COMPLETION if ok else ast.TriggerKind.ERROR
+        for t in node.state.transitions:
+            if t.kind is kind and self._enabled_guard(parent_domain(node), t, None):
+                self._take(node, t, None)
+                return
+        pk = parent.state.kind
+        if pk is StateKind.MULTI:
+            self._instance_done(parent, ok, why)
+        elif not ok:
+            self._finish(parent, False, why or f"{node.path} failed")
+        elif pk is StateKind.PARALLEL:
+            parent.finished.add(node.state.id)
+            self._region_done(parent, node)
+        elif pk is StateKind.COMPOUND:
+            self._finish(parent, True)
+
+    def _region_done(self, parent: Node, node: Node) -> None:
+        state = parent.state
+        regions = [c for c in state.children if self.chart[c].kind is not StateKind.FINAL]
+        if state.policy is ast.Policy.ANY or (state.policy is ast.Policy.UNTIL and node.state.id == state.until):
+            self._finish(parent, True)
+            return
+        if all(r in parent.finished for r in regions):
+            self._finish(parent, True)
+            return
+        running = {c.state.id for c in parent.children if c.phase is not Phase.DONE}
+        for rid in regions:
+            child = self.chart[rid]
+            if child.after and rid not in running and rid not in parent.finished \
+                    and all(a in parent.finished for a in child.after):
+                self._enter_child(parent, child)
+
+    def _instance_done(self, multi: Node, ok: bool, why: str) -> None:
+        if ok:
+            multi.succeeded += 1
+        else:
+            multi.failed += 1
+            self._notify(rec.Log(self.clock.now(), multi.path, f"an instance failed: {why}"))
+        low, _ = multi.bounds
+        running = [c for c in multi.children if c.phase is not Phase.DONE]
+        if multi.succeeded + len(running) < low:
+            self._finish(multi, False, f"only {multi.succeeded} of at least {low} instances of "
+                         f"{multi.state.name} can succeed")
+        elif not running:
+            self._finish(multi, True)
+
+    def _fire_one(self) -> bool:
+        """Take the first enabled change or timeout transition, if any."""
+        now = self.clock.now()
+        for node in self.active():
+            if node.parent is None:
+                continue
+            for t in node.state.transitions:
+                if t.kind is ast.TriggerKind.TIMEOUT and t.delay is not None and now - node.entered >= t.delay:
+                    pass
+                elif t.kind is ast.TriggerKind.CHANGE and t.condition is not None:
+                    if not self._truthy(parent_domain(node), t.condition, None):
+                        continue
+                else:
+                    continue
+                if self._enabled_guard(parent_domain(node), t, None):
+                    self._take(node, t, None)
+                    return True
+        return False
+
+    def _dispatch(self, event: rec.Event) -> None:
+        for node in self.active():
+            if node.parent is None or node.phase is Phase.DONE:
+                continue
+            for t in node.state.transitions:
+                if t.kind is ast.TriggerKind.EVENT and t.event == event.name \
+                        and self._enabled_guard(parent_domain(node), t, event):
+                    self._take(node, t, event)
+                    break
+
+    def _take(self, node: Node, t: Transition, event: rec.Event | None) -> None:
+        domain = parent_domain(node)
+        target = self.chart[t.target]
+        self._notify(rec.Taken(self.clock.now(), node.path, _target_path(domain, target), t.kind.value,
+                               trigger_label(t)))
+        if node.phase is not Phase.DONE:
+            self._exit(node, "stopped")
+        if target.kind is StateKind.FINAL and domain.state.kind is StateKind.PARALLEL:
+            for c in list(domain.children):
+                if c.phase is not Phase.DONE:
+                    self._exit(c, "stopped")
+        self._take_actions(domain, t, event)
+        if domain.phase is not Phase.DONE:
+            self._enter_child(domain, target)
+
+    def _take_actions(self, domain: Node, t: Transition, event: rec.Event | None) -> None:
+        for a in t.actions:
+            try:
+                self._action(domain, a, event)
+            except EvalError as e:
+                self._notify(rec.Log(self.clock.now(), domain.path, f"action failed: {e.message}"))
+
+    def _action(self, domain: Node, a: ast.Action, event: rec.Event | None) -> None:
+        names = self._names(domain, event)
+        match a:
+            case ast.SetAction(name=n, value=v):
+                domain.scope[n] = evaluate(v, names, self.pool.count)
+            case ast.EmitAction(event=ev, args=args):
+                fields = {arg.name: evaluate(arg.value, names, self.pool.count) for arg in args or ()}
+                self.emit(ev, domain.path, **fields)
+            case ast.ReleaseAction(resource=r):
+                self._release_need(domain, r)
+            case ast.LogAction(message=m):
+                self._notify(rec.Log(self.clock.now(), domain.path, format_value(evaluate(m, names, self.pool.count))))
+
+    def _release_need(self, domain: Node, name: str) -> None:
+        holder = next((n for n in [domain, *self._ancestors(domain)] if name in n.assignment), None)
+        if holder is None:
+            return
+        units = self.pool.units(holder.assignment[name])
+        self._apply(self.rcm.release(holder.path, self.clock.now(), units))
+
+    # ------------------------------------------------------------- exiting
+    def _exit(self, node: Node, status: str) -> None:
+        """Exit children first, terminate the component, give resources back."""
+        if node.phase is Phase.DONE:
+            return
+        for child in list(reversed(node.children)):
+            self._exit(child, "stopped" if status != "failure" else "stopped")
+        if node.component is not None:
+            final = {"success": Status.SUCCESS, "failure": Status.FAILURE}.get(status, Status.RUNNING)
+            comp = node.component
+            self._guard_call(node, lambda: comp.terminate(final), on_error=False)
+        node.phase = Phase.DONE
+        if node.requested:
+            self.holders.pop(node.path, None)
+            now = self.clock.now()
+            self._apply(self.rcm.release(node.path, now) if node.assignment else self.rcm.cancel(node.path, now))
+        if node.parent is not None and node in node.parent.children:
+            node.parent.children.remove(node)
+        self._notify(rec.Exited(self.clock.now(), node.path, node.state.id, status))
+
+    def _end(self, outcome: str, reason: str) -> None:
+        if self.outcome is None:
+            self.outcome, self.reason = outcome, reason
+            self._notify(rec.Finished(self.clock.now(), self.chart.root, outcome, reason))
+
+    # ------------------------------------------------------------- resources
+    def _apply(self, decisions: Iterable[object]) -> None:
+        for d in decisions:
+            holder = getattr(d, "holder", None) or getattr(d, "victim", None)
+            node = self.holders.get(holder) if isinstance(holder, str) else None
+            if node is None:
+                continue
+            now = self.clock.now()
+            match d:
+                case Granted():
+                    node.assignment = dict(d.assignment)
+                    node.lease_until = d.lease_until
+                    for need, rid in d.assignment.items():
+                        node.scope[need] = self.pool.view(rid)
+                    self._notify(rec.Granted(now, node.path, dict(d.assignment), dict(d.epochs)))
+                    if node.phase is Phase.WAITING:
+                        self._activate(node)
+                    elif node.phase is Phase.SUSPENDED:
+                        self._suspend(node, False)
+                case Revoked():
+                    self._notify(rec.Revoked(now, node.path, d.units, f"preempted by {d.by}"))
+                    self._suspend(node, True)
+                case Released(reason="release"):
+                    self._notify(rec.Released(now, node.path, d.units, "release"))
+                case Released():
+                    self._notify(rec.Released(now, node.path, d.units, d.reason))
+                    if node.phase is not Phase.DONE:
+                        self._finish(node, False, f"lost its resources ({d.reason})")
+                case Unsatisfiable():
+                    self._finish(node, False, f"resource need {d.need} can never be satisfied: {d.reason}")
+                case Deadlock():
+                    self._finish(node, False, f"cancelled to break a resource deadlock: {' -> '.join(d.cycle)}")
+                case WaitingDecision():
+                    self._notify(rec.Waiting(now, node.path, (), d.blocked_by))
+
+    def _suspend(self, node: Node, suspend: bool) -> None:
+        node.phase = Phase.SUSPENDED if suspend else Phase.ACTIVE
+        self._notify((rec.Suspended if suspend else rec.Resumed)(self.clock.now(), node.path))
+        stack = list(node.children)
+        while stack:
+            n = stack.pop()
+            stack.extend(n.children)
+            if n.component is not None and n.phase is not Phase.DONE:
+                comp = n.component
+                self._guard_call(n, comp.suspend if suspend else comp.resume)
+                n.phase = Phase.SUSPENDED if suspend else Phase.ACTIVE
+        if node.component is not None:
+            comp = node.component
+            self._guard_call(node, comp.suspend if suspend else comp.resume)
+
+    def _renew(self, now: float) -> None:
+        for holder, node in list(self.holders.items()):
+            if node.assignment and node.lease_until - now < self.lease / 2:
+                for d in self.rcm.renew(holder, now):
+                    until = getattr(d, "lease_until", None)
+                    if until is not None:
+                        node.lease_until = until
+
+    # ------------------------------------------------------------- helpers
+    def _names(self, node: Node | None, event: rec.Event | None = None) -> dict[str, Any]:
+        if node is None:
+            return {}
+        names: dict[str, Any] = {}
+        for anc in reversed(self._ancestors(node)):
+            names.update(anc.visible())
+        names.update(node.scope)
+        names.update(node.outputs)
+        if event is not None:
+            names["event"] = event.fields
+        return names
+
+    @staticmethod
+    def _ancestors(node: Node) -> list[Node]:
+        out = []
+        p = node.parent
+        while p is not None:
+            out.append(p)
+            p = p.parent
+        return out
+
+    def _truthy(self, node: Node, expr: ast.Expr, event: rec.Event | None) -> bool:
+        try:
+            return truthy(expr, self._names(node, event), self.pool.count)
+        except EvalError as e:
+            self._notify(rec.Log(self.clock.now(), node.path, f"condition error: {e.message}"))
+            return False
+
+    def _enabled_guard(self, domain: Node, t: Transition, event: rec.Event | None) -> bool:
+        return t.guard is None or self._truthy(domain, t.guard, event)
+
+    def _leaves(self) -> list[Node]:
+        return [n for n in self.active() if n.state.kind is StateKind.LEAF]
+
+    def _guard_call(self, node: Node, fn: Callable[[], Any], on_error: bool = True) -> Any:
+        """Call component code; an exception fails the node, never the executive."""
+        try:
+            return fn()
+        except Exception as e:  # component code is not ours to trust
+            self._notify(rec.Log(self.clock.now(), node.path, f"component raised {type(e).__name__}: {e}"))
+            if on_error:
+                self._finish(node, False, f"component raised {type(e).__name__}: {e}")
+            return None
+
+    def _notify(self, record: rec.Record) -> None:
+        for listener in self.listeners:
+            listener(record)
+
+
+def parent_domain(node: Node) -> Node:
+    """The node whose body declares `node`'s transitions (a multi's parent for instances)."""
+    assert node.parent is not None
+    return node.parent
+
+
+def _target_path(domain: Node, target: State) -> str:
+    return f"{domain.path}/{target.name}"

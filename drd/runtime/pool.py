@@ -1,0 +1,114 @@
+"""The resources the executive knows, as the Resource Controller Manager's candidates and as
+values expressions can read (`ranger.battery`, `scout.carrier == ranger`)."""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Iterable, Iterator, Mapping
+
+from drd.rcm import Aggregate, Candidate, ResourceManager, Unit
+
+
+class ResourceView(Mapping[str, object]):
+    """A resource as an expression sees it: its properties, `id`, `host` and parts.
+
+    It compares equal to its id, so `scout.carrier == ranger` holds when the Scout's
+    `carrier` property names that Ranger.
+    """
+
+    __slots__ = ("_cand", "_pool")
+
+    def __init__(self, cand: Candidate, pool: ResourcePool):
+        self._cand = cand
+        self._pool = pool
+
+    @property
+    def id(self) -> str:
+        return self._cand.id
+
+    def _data(self) -> dict[str, object]:
+        c = self._cand
+        data: dict[str, object] = {"id": c.id, "host": c.host, **self._pool.properties(c.id)}
+        if isinstance(c, Aggregate):
+            for part, unit in c.parts.items():
+                data[part] = self._pool.view(unit)
+        return data
+
+    def __getitem__(self, key: str) -> object:
+        return self._data()[key]
+
+    def __iter__(self) -> Iterator[str]:
+        return iter(self._data())
+
+    def __len__(self) -> int:
+        return len(self._data())
+
+    def __eq__(self, other: object) -> bool:
+        if isinstance(other, ResourceView):
+            return other.id == self.id
+        if isinstance(other, str):
+            return other == self.id
+        return NotImplemented
+
+    def __hash__(self) -> int:
+        return hash(self.id)
+
+    def __repr__(self) -> str:
+        return f"<{self._cand.type} {self.id}>"
+
+    def __str__(self) -> str:
+        return self.id
+
+
+class ResourcePool:
+    """Every unit and aggregate by id, kept in step with the manager (hot-plug, properties)."""
+
+    def __init__(self, rcm: ResourceManager):
+        self.rcm = rcm
+        self.candidates: dict[str, Candidate] = {}
+        self._props: dict[str, dict[str, object]] = {}
+
+    def add(self, resources: Iterable[Candidate], now: float) -> list[object]:
+        """Register units before the aggregates that use them; returns the manager's decisions."""
+        decisions: list[object] = []
+        items = sorted(resources, key=lambda c: isinstance(c, Aggregate))
+        for c in items:
+            self.candidates[c.id] = c
+            self._props[c.id] = dict(c.properties)
+            if isinstance(c, Unit):
+                decisions.extend(self.rcm.add_unit(c, now))
+            else:
+                decisions.extend(self.rcm.add_aggregate(c, now))
+        return decisions
+
+    def set_property(self, rid: str, key: str, value: object, now: float) -> list[object]:
+        """Change the Static Dependency Database (a launched Scout leaves its magazine)."""
+        self._props.setdefault(rid, {})[key] = value
+        return list(self.rcm.set_property(rid, key, value, now))
+
+    def properties(self, rid: str) -> dict[str, object]:
+        return self._props.get(rid, {})
+
+    def view(self, rid: str) -> ResourceView | None:
+        c = self.candidates.get(rid)
+        return ResourceView(c, self) if c is not None else None
+
+    def units(self, rid: str) -> tuple[str, ...]:
+        c = self.candidates.get(rid)
+        if isinstance(c, Aggregate):
+            return c.units
+        return (rid,) if c is not None else ()
+
+    def part(self, rid: str, part: str | None) -> str:
+        """The id of `part` of aggregate `rid` (or `rid` itself when no part is named)."""
+        c = self.candidates.get(rid)
+        if part is None or not isinstance(c, Aggregate):
+            return rid
+        return c.parts.get(part, rid)
+
+    def count(self, type_name: str, pred: Callable[[object], bool] | None) -> int:
+        """How many known resources of a type satisfy `pred` (for `count(Type where ...)`)."""
+        n = 0
+        for c in self.candidates.values():
+            if c.type == type_name and (pred is None or pred(ResourceView(c, self))):
+                n += 1
+        return n

@@ -1,0 +1,99 @@
+"""What listeners receive: one frozen record per entry, exit, transition, grant, event...
+
+Every record names the behavior instance by its path (aliases and instance indices
+included, e.g. `SharedCamera/first/Observe` or `CorridorSurveillance/RoomSurveillance[2]`)
+and the sim or wall time it happened at. `to_dict` gives the JSON-lines trace form.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass, field
+from typing import Any
+
+
+@dataclass(frozen=True, slots=True)
+class Record:
+    at: float
+    path: str
+
+    @property
+    def kind(self) -> str:
+        return type(self).__name__.lower()
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"kind": self.kind, **asdict(self)}
+
+
+@dataclass(frozen=True, slots=True)
+class Entered(Record):
+    state: str
+
+
+@dataclass(frozen=True, slots=True)
+class Exited(Record):
+    state: str
+    status: str  # success, failure, stopped
+
+
+@dataclass(frozen=True, slots=True)
+class Taken(Record):
+    """A transition: `path` is the source instance, `target` the target's path."""
+
+    target: str
+    trigger: str
+    label: str = ""
+
+
+@dataclass(frozen=True, slots=True)
+class Waiting(Record):
+    needs: tuple[str, ...]
+    blocked_by: tuple[str, ...] = ()
+
+
+@dataclass(frozen=True, slots=True)
+class Granted(Record):
+    resources: dict[str, str] = field(default_factory=dict)  # need -> resource id
+    epochs: dict[str, int] = field(default_factory=dict)
+
+
+@dataclass(frozen=True, slots=True)
+class Revoked(Record):
+    resources: tuple[str, ...] = ()
+    reason: str = ""
+
+
+@dataclass(frozen=True, slots=True)
+class Released(Record):
+    resources: tuple[str, ...] = ()
+    reason: str = ""
+
+
+@dataclass(frozen=True, slots=True)
+class Suspended(Record):
+    pass
+
+
+@dataclass(frozen=True, slots=True)
+class Resumed(Record):
+    pass
+
+
+@dataclass(frozen=True, slots=True)
+class Event(Record):
+    """An event emitted by a component or an action; `path` is who emitted it."""
+
+    name: str
+    fields: dict[str, Any] = field(default_factory=dict)
+
+
+@dataclass(frozen=True, slots=True)
+class Log(Record):
+    text: str
+
+
+@dataclass(frozen=True, slots=True)
+class Finished(Record):
+    """The mission ended: `outcome` is success, failure or stopped."""
+
+    outcome: str
+    reason: str = ""

@@ -1,0 +1,118 @@
+"""Test components and a harness for running compiled missions on a simulated clock."""
+
+from __future__ import annotations
+
+from collections.abc import Iterable
+from typing import Any
+
+from drd.rcm import Aggregate, ResourceManager, Unit
+from drd.runtime import records as rec
+from drd.runtime.clock import SimClock
+from drd.runtime.component import Component, Status
+from drd.runtime.interpreter import Interpreter
+from drd.runtime.pool import ResourcePool
+from dsl.statechart import Statechart
+
+
+class Timed(Component):
+    """Succeeds after `duration` seconds of un-suspended time (default 1 s)."""
+
+    def start(self) -> None:
+        assert self.ctx is not None
+        self.needed = float(self.ctx.params.get("duration", 1.0))
+        self.active = 0.0
+        self.last = self.ctx.now()
+        self.suspended = False
+
+    def step(self, now: float) -> Status:
+        if not self.suspended:
+            self.active += now - self.last
+        self.last = now
+        return Status.SUCCESS if self.active >= self.needed - 1e-9 else Status.RUNNING
+
+    def suspend(self) -> None:
+        self.suspended = True
+
+    def resume(self) -> None:
+        assert self.ctx is not None
+        self.suspended = False
+        self.last = self.ctx.now()
+
+
+class Forever(Component):
+    """Runs until stopped; counts lifecycle calls so tests can check shutdown."""
+
+    calls: list[tuple[str, str]] = []
+
+    def start(self) -> None:
+        assert self.ctx is not None
+        Forever.calls.append(("start", self.ctx.path))
+
+    def terminate(self, status: Status) -> None:
+        assert self.ctx is not None
+        Forever.calls.append(("terminate", self.ctx.path))
+
+
+class Fails(Component):
+    def step(self, now: float) -> Status:
+        return Status.FAILURE
+
+
+class Raises(Component):
+    def step(self, now: float) -> Status:
+        raise RuntimeError("sensor on fire")
+
+
+class Emits(Component):
+    """Emits MotionDetected(area) once, then succeeds."""
+
+    def step(self, now: float) -> Status:
+        assert self.ctx is not None
+        self.ctx.emit("MotionDetected", area=0.5, x=1.0, y=2.0)
+        return Status.SUCCESS
+
+
+def ranger_world(rangers: int = 1, scouts_each: int = 2) -> list[Any]:
+    out: list[Any] = []
+    for r in range(1, rangers + 1):
+        rid = f"ranger{r}"
+        parts = {}
+        for part, typ in (("drive", "Drive"), ("ranges", "RangeSensor"), ("camera", "Camera"),
+                          ("launcher", "Launcher")):
+            out.append(Unit(f"{rid}.{part}", typ, host=rid))
+            parts[part] = f"{rid}.{part}"
+        out.append(Aggregate(rid, "Ranger", parts, {"battery": 1.0}, host=rid))
+        for s in range(1, scouts_each + 1):
+            sid = f"{rid}.scout{s}"
+            sparts = {}
+            for part, typ in (("wheels", "Drive"), ("foot", "Jump"), ("camera", "Camera")):
+                out.append(Unit(f"{sid}.{part}", typ, host=rid))
+                sparts[part] = f"{sid}.{part}"
+            out.append(Unit(f"{sid}.radio", "RadioChannel", sharable=True, capacity=10, host=rid))
+            sparts["radio"] = f"{sid}.radio"
+            out.append(Aggregate(sid, "Scout", sparts, {"carrier": rid, "battery": 1.0}, host=rid))
+    return out
+
+
+class Harness:
+    """An interpreter on a SimClock with every record kept."""
+
+    def __init__(self, chart: Statechart, registry: dict[str, Any], resources: Iterable[Any],
+                 slice_: float = 5.0):
+        self.clock = SimClock()
+        self.rcm = ResourceManager(default_slice=slice_)
+        self.pool = ResourcePool(self.rcm)
+        self.pool.add(resources, 0.0)
+        self.records: list[rec.Record] = []
+        self.interp = Interpreter(chart, registry, self.rcm, self.clock, pool=self.pool)
+        self.interp.attach(self.records.append)
+
+    def run(self, until: float = 600.0, dt: float = 0.5) -> str | None:
+        self.interp.start()
+        while not self.interp.finished and self.clock.now() < until:
+            self.clock.advance(dt)
+            self.interp.step()
+        return self.interp.outcome
+
+    def of(self, kind: type[rec.Record]) -> list[Any]:
+        return [r for r in self.records if isinstance(r, kind)]

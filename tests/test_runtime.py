@@ -1,0 +1,160 @@
+"""The statechart runtime with the Resource Controller Manager, on a simulated clock."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from drd.rcm import Unit
+from drd.runtime import records as rec
+from dsl import compile_text
+from dsl.catalog import Catalog
+from dsl.statechart import Statechart
+from tests.conftest import shared_examples
+from tests.runtime_support import Emits, Fails, Forever, Harness, Raises, Timed, ranger_world
+
+
+def compiled(text: str, catalog: Catalog) -> Statechart:
+    r = compile_text(text, catalog, "t.mission")
+    assert r.ok and r.statechart is not None, "\n".join(d.render(r.sources) for d in r.diagnostics)
+    return r.statechart
+
+
+def grants_of(h: Harness, path_suffix: str) -> list[float]:
+    return [r.at for r in h.of(rec.Granted) if r.path.endswith(path_suffix)]
+
+
+def test_fig8_round_robin_then_lower_priority(catalog: Catalog) -> None:
+    """Two priority-1 behaviors alternate 5 s slices on one camera; priority 2 starts after both."""
+    path = shared_examples() / "shared_camera.mission"
+    chart = compiled(path.read_text(), catalog)
+    h = Harness(chart, {"Observe": Timed}, [Unit("ranger1.camera", "Camera")])
+    assert h.run() == "success"
+    holds = [(r.at, r.path.rsplit("/", 1)[-1]) for r in h.of(rec.Granted)]
+    order = [who for _, who in holds]
+    assert order[:4] == ["first", "second", "first", "second"], holds
+    third = [t for t, who in holds if who == "third"]
+    done = {r.path.rsplit("/", 1)[-1]: r.at for r in h.of(rec.Exited) if r.path.count("/") == 1}
+    assert third and third[0] >= max(done["first"], done["second"])
+    assert all(b - a >= 5.0 - 1e-9 for (a, _), (b, _) in zip(holds[:4], holds[1:5], strict=True))
+    logs = [r.text for r in h.of(rec.Log)]
+    assert {"inspection a finished", "inspection b finished", "inspection c finished"} <= set(logs)
+
+
+def test_sequence_with_release_and_outputs(catalog: Catalog) -> None:
+    text = """
+mission M {
+    needs ranger: Ranger
+    var seen: int = 0
+    start -> Calibrate
+    Calibrate -> AlignRanger / set seen = seen + 1
+    AlignRanger -> done [seen == 1] / release(ranger)
+}"""
+    h = Harness(compiled(text, catalog), {"Calibrate": Timed, "AlignRanger": Timed}, ranger_world())
+    assert h.run() == "success"
+    taken = [(r.path.rsplit("/", 1)[-1], r.target.rsplit("/", 1)[-1]) for r in h.of(rec.Taken)]
+    assert taken == [("Calibrate", "AlignRanger"), ("AlignRanger", "done")]
+    assert h.of(rec.Released)[0].resources  # release(ranger) gave the units back before the exit
+
+
+def test_error_propagates_unless_handled(catalog: Catalog) -> None:
+    unhandled = "mission M {\n needs r: Ranger\n start -> Calibrate\n Calibrate -> ReturnToStart\n ReturnToStart\n}"
+    h = Harness(compiled(unhandled, catalog), {"Calibrate": Fails, "ReturnToStart": Timed}, ranger_world())
+    assert h.run() == "failure"
+    handled = unhandled.replace(" ReturnToStart\n}", " ReturnToStart\n Calibrate -> ReturnToStart on error\n}")
+    h = Harness(compiled(handled, catalog), {"Calibrate": Fails, "ReturnToStart": Timed}, ranger_world())
+    assert h.run() == "success"
+
+
+def test_component_that_raises_fails_its_state_not_the_executive(catalog: Catalog) -> None:
+    text = "mission M {\n needs r: Ranger\n start -> Calibrate\n Calibrate -> ReturnToStart on error\n ReturnToStart\n}"
+    h = Harness(compiled(text, catalog), {"Calibrate": Raises, "ReturnToStart": Timed}, ranger_world())
+    assert h.run() == "success"
+    assert any("RuntimeError: sensor on fire" in r.text for r in h.of(rec.Log))
+
+
+def test_timeout_and_operator_event(catalog: Catalog) -> None:
+    text = """
+mission M {
+    needs r: Ranger
+    start -> Calibrate
+    Calibrate -> fail after 2s
+    Calibrate -> done on MotionDetected
+}"""
+    h = Harness(compiled(text, catalog), {"Calibrate": Forever}, ranger_world())
+    assert h.run(until=10) == "failure"  # no event: the timeout fires
+    assert [r.trigger for r in h.of(rec.Taken)] == ["timeout"]
+    h = Harness(compiled(text, catalog), {"Calibrate": Forever}, ranger_world())
+    h.interp.start()
+    h.clock.advance(1.0)
+    h.interp.emit("MotionDetected", area=1.0)
+    h.interp.step()
+    assert h.interp.outcome == "success"
+
+
+def test_component_event_with_guard_and_action(catalog: Catalog) -> None:
+    text = """
+mission M {
+    needs r: Ranger
+    var area: float = 0.0
+    parallel { Calibrate; Watch }
+    Calibrate -> done on MotionDetected [event.area > 0.2] / set area = event.area
+}"""
+    h = Harness(compiled(text, catalog), {"Calibrate": Forever, "Watch": Emits}, ranger_world())
+    assert h.run(until=10) == "success"
+    assert [(r.name, r.path) for r in h.of(rec.Event)] == [("MotionDetected", "M/Watch")]
+    assert h.interp.root is not None and h.interp.root.scope["area"] == 0.5
+
+
+def test_multiplicity_graceful_degradation(catalog: Catalog) -> None:
+    text = """
+mission M { Room[1..count(Scout)] }
+behavior Room { needs s: Scout
+    Watch }"""
+    calls = {"n": 0}
+
+    class SometimesFails(Timed):
+        def step(self, now: float):  # type: ignore[no-untyped-def]
+            calls["n"] += 1
+            assert self.ctx is not None
+            return Fails().step(now) if self.ctx.path.endswith("[0]/Watch") else super().step(now)
+
+    h = Harness(compiled(text, catalog), {"Watch": SometimesFails}, ranger_world(1, 3))
+    assert h.run() == "success"  # one instance of three failed: still at least 1
+    exits = {r.path: r.status for r in h.of(rec.Exited) if r.path.count("/") == 1 and "[" in r.path}
+    assert exits == {"M/Room[0]": "failure", "M/Room[1]": "success", "M/Room[2]": "success"}
+    h = Harness(compiled(text.replace("[1..", "[3.."), catalog), {"Watch": SometimesFails}, ranger_world(1, 3))
+    assert h.run() == "failure"
+
+
+@pytest.mark.parametrize("when", ["waiting", "running", "suspended", "twice"])
+def test_stop_shuts_everything_down(catalog: Catalog, when: str) -> None:
+    text = "mission M {\n parallel { A as a; A as b }\n}\nbehavior A { needs c: Camera for 1s\n Observe }"
+    Forever.calls = []
+    h = Harness(compiled(text, catalog), {"Observe": Forever}, [Unit("cam", "Camera")], slice_=1.0)
+    h.interp.start()
+    steps = {"waiting": 0, "running": 1, "suspended": 3, "twice": 2}[when]
+    for _ in range(steps):
+        h.clock.advance(0.75)
+        h.interp.step()
+    if when == "suspended":
+        assert any(isinstance(r, rec.Suspended) for r in h.records)
+    h.interp.stop()
+    if when == "twice":
+        h.interp.stop()
+    assert h.interp.outcome == "stopped" and h.interp.active() == []
+    starts = [p for c, p in Forever.calls if c == "start"]
+    terminates = [p for c, p in Forever.calls if c == "terminate"]
+    assert sorted(starts) == sorted(terminates)  # every started component was terminated, once
+    assert h.rcm.holders("cam") == () and not h.rcm.queue()
+    assert len(h.of(rec.Finished)) == 1
+
+
+def test_trace_names_instances_and_resources(catalog: Catalog, tmp_path: Path) -> None:
+    path = shared_examples() / "shared_camera.mission"
+    h = Harness(compiled(path.read_text(), catalog), {"Observe": Timed}, [Unit("ranger1.camera", "Camera")])
+    h.run()
+    g = h.of(rec.Granted)[0]
+    assert g.path == "SharedCamera/first" and g.resources == {"cam": "ranger1.camera"}
+    assert g.to_dict()["kind"] == "granted"
