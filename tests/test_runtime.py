@@ -158,3 +158,21 @@ def test_trace_names_instances_and_resources(catalog: Catalog, tmp_path: Path) -
     g = h.of(rec.Granted)[0]
     assert g.path == "SharedCamera/first" and g.resources == {"cam": "ranger1.camera"}
     assert g.to_dict()["kind"] == "granted"
+
+
+def test_trace_writer_writes_one_json_line_per_record(catalog: Catalog, tmp_path: Path) -> None:
+    import json
+
+    from drd.runtime.trace import TraceWriter
+
+    path = shared_examples() / "shared_camera.mission"
+    h = Harness(compiled(path.read_text(), catalog), {"Observe": Timed}, [Unit("ranger1.camera", "Camera")])
+    out = tmp_path / "trace.jsonl"
+    with out.open("w") as fh:
+        h.interp.attach(TraceWriter(fh))
+        h.run()
+    lines = [json.loads(line) for line in out.read_text().splitlines()]
+    assert len(lines) == len(h.records)
+    assert lines[-1]["kind"] == "finished" and lines[-1]["outcome"] == "success"
+    granted = [x for x in lines if x["kind"] == "granted"]
+    assert granted[0]["path"] == "SharedCamera/first" and granted[0]["resources"] == {"cam": "ranger1.camera"}

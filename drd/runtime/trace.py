@@ -1,0 +1,28 @@
+"""A listener that writes every record as one JSON line: the `--trace` file."""
+
+from __future__ import annotations
+
+import json
+from typing import IO, Any
+
+from drd.runtime.records import Record
+
+
+def _default(value: Any) -> Any:
+    """Resources and other objects appear by their id or text."""
+    return getattr(value, "id", None) or str(value)
+
+
+class TraceWriter:
+    """Attach with `interpreter.attach(TraceWriter(fh))`; each record becomes one line."""
+
+    def __init__(self, out: IO[str], flush_every: int = 64):
+        self.out = out
+        self.flush_every = flush_every
+        self.count = 0
+
+    def __call__(self, record: Record) -> None:
+        self.out.write(json.dumps(record.to_dict(), default=_default, separators=(",", ":")) + "\n")
+        self.count += 1
+        if self.count % self.flush_every == 0:
+            self.out.flush()
