@@ -176,3 +176,72 @@ def test_trace_writer_writes_one_json_line_per_record(catalog: Catalog, tmp_path
     assert lines[-1]["kind"] == "finished" and lines[-1]["outcome"] == "success"
     granted = [x for x in lines if x["kind"] == "granted"]
     assert granted[0]["path"] == "SharedCamera/first" and granted[0]["resources"] == {"cam": "ranger1.camera"}
+
+
+ROOMS = """
+mission M { Room[1..count(Scout)] }
+behavior Room { needs s: Scout
+    Watch }"""
+
+
+def test_lost_host_fails_only_its_instances(catalog: Catalog) -> None:
+    from tests.runtime_support import Forever
+
+    h = Harness(compiled(ROOMS, catalog), {"Watch": Forever}, ranger_world(2, 1))
+    h.interp.start()
+    h.clock.advance(1.0)
+    h.interp.step()
+    assert sorted(r.path for r in h.of(rec.Granted)) == ["M/Room[0]", "M/Room[1]"]
+    h.interp.remove_host("ranger2")
+    exits = {r.path: r.status for r in h.of(rec.Exited)}
+    lost = [p for p, st in exits.items() if st == "failure"]
+    assert lost == ["M/Room[1]"] and h.interp.outcome is None  # the mission goes on with one Room
+    released = h.of(rec.Released)
+    assert released and released[0].reason == "host lost"
+
+
+def test_new_scout_grows_a_running_multiplicity(catalog: Catalog) -> None:
+    from tests.runtime_support import Forever
+
+    world = ranger_world(1, 2)
+    h = Harness(compiled(ROOMS, catalog), {"Watch": Forever}, world)
+    h.interp.start()
+    assert h.interp.root is not None
+    extra = [r for r in ranger_world(2, 1) if r.id.startswith("ranger2")]
+    h.interp.add_resources(extra)
+    rooms = [n.path for n in h.interp.active() if n.path.startswith("M/Room[") and "/Watch" not in n.path]
+    assert rooms == ["M/Room[0]", "M/Room[1]", "M/Room[2]"]
+
+
+def test_two_missions_share_one_manager_by_priority(catalog: Catalog) -> None:
+    from drd.rcm import ResourceManager
+    from drd.runtime.clock import SimClock
+    from drd.runtime.interpreter import Interpreter
+    from drd.runtime.pool import ResourcePool
+
+    low = compiled("mission Low { needs c: Camera\n Observe(duration: 2s) }", catalog)
+    high = compiled("mission High { A priority 1 }\nbehavior A { needs c: Camera\n Observe(duration: 2s) }",
+                    catalog)
+    low_prio = compiled("mission Low { A priority 2 }\nbehavior A { needs c: Camera\n Observe(duration: 12s) }",
+                        catalog)
+    del low
+    clock, rcm = SimClock(), ResourceManager()
+    pool = ResourcePool(rcm)
+    pool.add([Unit("cam", "Camera")], 0.0)
+    log: list[rec.Record] = []
+    runs = [Interpreter(chart, {"Observe": Timed}, rcm, clock, pool=pool) for chart in (low_prio, high)]
+    for r in runs:
+        r.attach(log.append)
+    runs[0].start()
+    runs[1].start()
+    while not all(r.finished for r in runs) and clock.now() < 60:
+        clock.advance(0.5)
+        for r in runs:
+            r.step()
+    assert [r.outcome for r in runs] == ["success", "success"]
+    granted = [(g.at, g.path) for g in log if isinstance(g, rec.Granted)]
+    assert granted[0][1] == "Low/A"  # first come, while the camera was free
+    finished = {f.path: f.at for f in log if isinstance(f, rec.Finished)}
+    assert finished["High"] < finished["Low"]  # priority 1 took the camera at the slice boundary
+    revoked = [r for r in log if isinstance(r, rec.Revoked)]
+    assert [(r.path, r.at) for r in revoked] == [("Low/A", 5.0)]

@@ -16,11 +16,13 @@ Policy:
   `default_slice`; the longest of its exclusive needs). From that slice boundary on it is in
   overtime: an equal- or higher-priority waiter that can then be granted takes its units at once,
   and the holder is `Revoked` (suspended) and queued again at the back of its priority; it is
-  resumed later by a `Granted(resumed=True)`. Equal priorities thus rotate round-robin and a
+  resumed later by a `Granted(resumed=True)` (resuming is that flag, not a record of its own; it
+  may name other units of the same types). Equal priorities thus rotate round-robin and a
   higher priority displaces a lower one at the holder's slice boundary, never before. Sharable
   units are never preempted, and a holder is never preempted by its own descendant or ancestor.
 - Sharable units: the quantities granted on a unit never exceed its capacity.
-- Leases: a grant lasts `lease` seconds unless renewed; an expired lease is `Released("expired")`.
+- Leases: a grant lasts `lease` seconds unless renewed; at `now >= lease_until` it is
+  `Released("expired")`. Waiting requests have no lease.
 - Fencing: a unit's epoch strictly increases with each grant of it (kept across hot-plug).
 - Deadlocks: a holder path is owned by its prefixes, so "A" holding X while "A/child" waits is
   hold-and-wait. The wait-for graph (waiter -> holders and better claimants that alone stand in
@@ -39,6 +41,7 @@ import math
 from collections.abc import Collection, Iterable
 from heapq import heappop, heappush
 from itertools import count, islice
+from typing import Any
 
 from drd.rcm.deadlock import choose_victim, find_cycle, same_owner
 from drd.rcm.model import (
@@ -57,7 +60,7 @@ from drd.rcm.model import (
     Waiting,
     units_of,
 )
-from drd.rcm.solver import EPS, Solution, alternatives, diagnose, first_solution, solutions
+from drd.rcm.solver import EPS, Solution, diagnose, first_solution, solutions
 from drd.rcm.state import Hold, Key, Pending, Registry, Wait, WaitQueue
 
 # Event kinds, in the order they are applied when due at the same instant.
@@ -73,9 +76,7 @@ class ResourceManager:
         beyond it a waiter claims every unit of its need types (safe, just less precise).
     """
 
-    def __init__(
-        self, *, lease: float = 3.0, default_slice: float = 5.0, max_alternatives: int = 256
-    ) -> None:
+    def __init__(self, *, lease: float = 3.0, default_slice: float = 5.0, max_alternatives: int = 256) -> None:
         if not (lease > 0 and default_slice > 0 and max_alternatives > 0):
             raise ValueError("lease, default_slice and max_alternatives must be > 0")
         self.lease = lease
@@ -137,9 +138,7 @@ class ResourceManager:
         self._reconsider(sorted(affected, key=lambda h: self._queue.waits[h].key), now, out, freed)
         return self._finish(now, out)
 
-    def set_property(
-        self, resource_id: str, key: str, value: object, now: float | None = None
-    ) -> tuple[Decision, ...]:
+    def set_property(self, resource_id: str, key: str, value: object, now: float | None = None) -> tuple[Decision, ...]:
         """Change a static dependency (a launched Scout leaves its magazine).
 
         Waiters with a need of that type are reconsidered; holders keep what they were granted.
@@ -195,8 +194,9 @@ class ResourceManager:
             if wait is not None and units is None:
                 self._withdraw(wait, "release", now, out)
             return self._finish(now, out)
+        changed: tuple[str, ...] = ()
         if units is None:
-            freed, changed = self._end_hold(holder), ()
+            freed = self._end_hold(holder)
         else:
             freed, changed = self._release_part(hold, set(units))
         if freed or changed:
@@ -242,16 +242,14 @@ class ResourceManager:
         """The waiting holders in the order they would be served (due reservations first)."""
         return tuple(self._queue.order())
 
-    def snapshot(self) -> dict[str, object]:
+    def snapshot(self) -> dict[str, Any]:
         """The whole state as plain dicts and lists, for `missionctl resources` and JSON traces."""
         return {
             "time": None if self._now == -math.inf else self._now,
             **self._reg.describe(),
             "holds": {h: hold.describe() for h, hold in sorted(self._holds.items())},
             "queue": [self._queue.waits[h].describe() for h in self._queue.order()],
-            "reservations": {
-                h: {"priority": p.request.priority, "at": p.at} for h, p in sorted(self._pending.items())
-            },
+            "reservations": {h: {"priority": p.request.priority, "at": p.at} for h, p in sorted(self._pending.items())},
         }
 
     # -- time ----------------------------------------------------------------------------------
@@ -302,55 +300,60 @@ class ResourceManager:
         reserved_at: float | None = None,
         since: int | None = None,
     ) -> None:
-        problem = diagnose(request.needs, self._reg)
-        if problem is not None:
-            out.append(Unsatisfiable(request.holder, *problem))
-            return
         order = next(self._order)
-        key = (
-            (request.priority, 1, 0.0, order)
-            if reserved_at is None
-            else (request.priority, 0, reserved_at, order)
-        )
+        key = (request.priority, 1, 0.0, order) if reserved_at is None else (request.priority, 0, reserved_at, order)
         wait = Wait(request, key, order if since is None else since, resumed=False, given={})
         touched = self._try_grant(wait, now, out)
         if touched is not None:
             self._dispatch(touched, now, out)
             return
-        alts, capped = self._enqueue(wait)
-        out.append(Waiting(request.holder, self._blocking(wait, alts, capped)[1]))
+        alts, capped = self._reg.alternatives(request.needs, {}, self.max_alternatives)
+        if not alts:  # not even on an empty system: say which need and why
+            out.append(Unsatisfiable(request.holder, *(diagnose(request.needs, self._reg) or ("", ""))))
+            return
+        demand = self._enqueue(wait, alts, capped)
+        blockers = set().union(*(self._blockers(wait, unit, quantity) for unit, quantity in demand.items()))
+        out.append(Waiting(request.holder, tuple(sorted(blockers))))
 
-    def _enqueue(self, wait: Wait) -> tuple[list[Solution], bool]:
-        alts, capped = alternatives(wait.request.needs, self._reg, wait.given, self.max_alternatives)
-        self._queue.add(wait, self._claims_of(wait, alts, capped), self._holds)
-        return alts, capped
+    def _enqueue(self, wait: Wait, alts: list[Solution] | None = None, capped: bool = False) -> dict[str, float]:
+        """Queue a request with the units it claims; returns the most it may take of each."""
+        if alts is None:
+            alts, capped = self._reg.alternatives(wait.request.needs, wait.given, self.max_alternatives)
+        demand = self._claims_of(wait, alts, capped)
+        self._queue.add(wait, frozenset(demand), self._holds)
+        return demand
 
     def _withdraw(self, wait: Wait, reason: ReleaseReason, now: float, out: list[Decision]) -> None:
         self._queue.remove(wait)
         out.append(Released(wait.holder, (), reason))
         self._dispatch(wait.claims, now, out)
 
-    def _claims_of(self, wait: Wait, alts: list[Solution], capped: bool) -> frozenset[str]:
-        claims = {u for solution in alts for u in solution.units()}
+    def _claims_of(self, wait: Wait, alts: list[Solution], capped: bool) -> dict[str, float]:
+        """The units of all possible assignments, with the most each assignment takes of them."""
+        demand: dict[str, float] = {}
+        for solution in alts:
+            for unit, quantity in solution.totals.items():
+                demand[unit] = max(quantity, demand.get(unit, 0.0))
         if capped:  # too many assignments to list: claim every unit of the need types
             for need in wait.request.needs:
                 for candidate in self._reg.candidates(need.type):
-                    claims.update(units_of(candidate))
-        return frozenset(claims)
+                    for unit in units_of(candidate):
+                        demand.setdefault(unit, need.quantity)
+        return demand
 
     def _reconsider(self, holders: Iterable[str], now: float, out: list[Decision], extra: set[str]) -> None:
         """Recompute the claims of waiters after the resources changed, then serve who can be."""
         touched = set(extra)
         for holder in holders:
             wait = self._queue.waits[holder]
-            alts, capped = alternatives(wait.request.needs, self._reg, wait.given, self.max_alternatives)
+            alts, capped = self._reg.alternatives(wait.request.needs, wait.given, self.max_alternatives)
             touched |= wait.claims
             if not alts:
                 self._queue.remove(wait)
                 need, reason = diagnose(wait.request.needs, self._reg, wait.given) or ("", "")
                 out.append(Unsatisfiable(holder, need, reason))
                 continue
-            self._queue.reclaim(wait, self._claims_of(wait, alts, capped))
+            self._queue.reclaim(wait, frozenset(self._claims_of(wait, alts, capped)))
             touched |= wait.claims
         self._dispatch(touched, now, out)
 
@@ -358,15 +361,16 @@ class ResourceManager:
 
     def _room(self, unit_id: str, wait: Wait, preempt: bool) -> float:
         """How much of a unit `wait` may take now (optionally counting preemptible holders)."""
-        head = self._queue.head(unit_id)
-        if head is not None and head[0] < wait.key:
-            return 0.0  # a better-placed waiter claims it
         unit = self._reg.units[unit_id]
         holders = self._reg.used.get(unit_id)
+        room = self._reg.free(unit_id)
         if preempt and holders and not unit.sharable:
             if all(self._preemptible(self._holds[h], wait) for h in holders):
-                return unit.capacity
-        return self._reg.free(unit_id)
+                room = unit.capacity
+        if room <= EPS:
+            return 0.0  # full: no need to look at the queue
+        head = self._queue.head(unit_id)
+        return 0.0 if head is not None and head[0] < wait.key else room  # a better waiter claims it
 
     def _preemptible(self, hold: Hold, wait: Wait) -> bool:
         return (
@@ -396,14 +400,14 @@ class ResourceManager:
 
     def _victims(self, solution: Solution) -> list[str]:
         """The holders a solution takes exclusive units from (all preemptible by construction)."""
-        units = [u for u in solution.units() if not self._reg.units[u].sharable]
+        units = [u for u in solution.units if not self._reg.units[u].sharable]
         return sorted({h for u in units for h in self._reg.used.get(u, ())})
 
     def _grant(self, wait: Wait, solution: Solution, now: float, out: list[Decision]) -> None:
         holder = wait.holder
-        units = solution.units()
+        units = solution.units
         epochs = {unit: self._reg.next_epoch(unit) for unit in units}
-        for unit, quantity in solution.totals().items():
+        for unit, quantity in solution.totals.items():
             self._reg.set_use(unit, holder, quantity)
         slices = [
             need.slice or self.default_slice
@@ -431,7 +435,10 @@ class ResourceManager:
         out.append(Granted(holder, assignment, units, epochs, hold.lease_until, slice_until, wait.resumed))
 
     def _revoke(self, holder: str, out: list[Decision], *, by: str) -> tuple[str, ...]:
-        """Suspend a holder: free its units and queue its intact needs again, at the back."""
+        """Suspend a holder: free its units and queue its intact needs again, at the back.
+
+        Returns the units to re-dispatch: those freed and those the requeued request claims.
+        """
         hold = self._holds[holder]
         units = self._end_hold(holder)
         out.append(Revoked(holder, units, "preempted", by))
@@ -442,8 +449,9 @@ class ResourceManager:
         needs = tuple(n for n in hold.request.needs if n.name in hold.alloc)
         request = dataclasses.replace(hold.request, needs=needs)
         key = (request.priority, 1, 0.0, next(self._order))
-        self._enqueue(Wait(request, key, hold.since, resumed=True, given=given))
-        return units
+        wait = Wait(request, key, hold.since, resumed=True, given=given)
+        self._enqueue(wait)
+        return (*units, *wait.claims)  # it may resume at once elsewhere (another free camera)
 
     def _end_hold(self, holder: str) -> tuple[str, ...]:
         hold = self._holds.pop(holder)
@@ -516,30 +524,27 @@ class ResourceManager:
         wait = self._queue.get(node)
         if wait is None:
             return []
-        alts, capped = alternatives(wait.request.needs, self._reg, wait.given, self.max_alternatives)
-        return list(self._blocking(wait, alts, capped)[0])
+        alts, capped = self._reg.alternatives(wait.request.needs, wait.given, self.max_alternatives)
+        return list(self._blocking(wait, alts, capped))
 
-    def _blocking(
-        self, wait: Wait, alts: list[Solution], capped: bool
-    ) -> tuple[tuple[str, ...], tuple[str, ...]]:
-        """(who stands in the way of every assignment, who stands in the way of some).
+    def _blocking(self, wait: Wait, alts: list[Solution], capped: bool) -> tuple[str, ...]:
+        """Who stands in the way of every possible assignment of `wait`.
 
-        Only the first are wait-for edges: a waiter with another way out is not deadlocked.
+        Only those are wait-for edges: a waiter with another way out is not deadlocked.
         """
         common: set[str] | None = None
-        every: set[str] = set()
         for solution in alts:
-            blockers: set[str] = set()
-            for unit, quantity in solution.totals().items():
-                head = self._queue.head(unit)
-                if head is not None and head[0] < wait.key:
-                    blockers.add(head[1])
-                if self._reg.free(unit) < quantity - EPS:
-                    blockers.update(self._reg.used.get(unit, ()))
-            every |= blockers
+            blockers = set().union(*(self._blockers(wait, u, q) for u, q in solution.totals.items()))
             common = blockers if common is None else common & blockers
-        definite = () if capped or common is None else tuple(sorted(common))
-        return definite, tuple(sorted(every))
+        return () if capped or common is None else tuple(sorted(common))
+
+    def _blockers(self, wait: Wait, unit: str, quantity: float) -> set[str]:
+        """Who keeps `quantity` of `unit` from `wait`: its holders if full, a better claimant."""
+        found = set(self._reg.used.get(unit, ())) if self._reg.free(unit) < quantity - EPS else set()
+        head = self._queue.head(unit)
+        if head is not None and head[0] < wait.key:
+            found.add(head[1])
+        return found
 
     def _rank(self, holder: str) -> tuple[int, int]:
         wait = self._queue.waits[holder]

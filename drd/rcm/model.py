@@ -116,8 +116,8 @@ class Request:
             raise ValueError("a request needs a holder path")
         object.__setattr__(self, "needs", tuple(self.needs))
         names = [need.name for need in self.needs]
-        duplicates = sorted({name for name in names if names.count(name) > 1})
-        if duplicates:
+        if len(set(names)) != len(names):
+            duplicates = sorted({name for name in names if names.count(name) > 1})
             raise ValueError(f"request of {self.holder}: duplicate need names {', '.join(duplicates)}")
 
 

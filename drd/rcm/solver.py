@@ -32,29 +32,27 @@ class Catalog(Protocol):
         """A registered unit."""
         ...
 
+    def demand(self, candidate: Candidate, need: NeedRequest) -> Mapping[str, float]:
+        """What `candidate` takes of each of its units for `need` (see `demand_of`); read-only."""
+        ...
+
 
 @dataclass(frozen=True, slots=True)
 class Solution:
-    """One full assignment: need -> candidate, and what each need takes of each unit."""
+    """One full assignment: need -> candidate, what each need takes of each unit, and the sums."""
 
     chosen: Mapping[str, Candidate]
     demand: Mapping[str, Mapping[str, float]]
+    totals: Mapping[str, float]  # unit -> quantity over all needs, in need order
 
     @property
     def assignment(self) -> dict[str, str]:
         return {need: candidate.id for need, candidate in self.chosen.items()}
 
+    @property
     def units(self) -> tuple[str, ...]:
         """Every unit taken, once, in need order."""
-        return tuple(dict.fromkeys(u for demand in self.demand.values() for u in demand))
-
-    def totals(self) -> dict[str, float]:
-        """The quantity taken of each unit, summed over the needs."""
-        total: dict[str, float] = {}
-        for demand in self.demand.values():
-            for unit, quantity in demand.items():
-                total[unit] = total.get(unit, 0.0) + quantity
-        return total
+        return tuple(self.totals)
 
 
 def demand_of(catalog: Catalog, candidate: Candidate, need: NeedRequest) -> dict[str, float]:
@@ -81,7 +79,7 @@ def solutions(
     """
     chosen: dict[str, Candidate] = dict(given or {})
     view = MappingProxyType(chosen)
-    demands: dict[str, dict[str, float]] = {}
+    demands: dict[str, Mapping[str, float]] = {}
     used: dict[str, float] = {}
     rooms: dict[str, float] = {}
 
@@ -94,27 +92,34 @@ def solutions(
                 return False
         return True
 
+    def leaf() -> Solution:
+        totals: dict[str, float] = {}
+        for demand in demands.values():
+            for unit_id, quantity in demand.items():
+                totals[unit_id] = totals.get(unit_id, 0.0) + quantity
+        return Solution({need.name: chosen[need.name] for need in needs}, dict(demands), totals)
+
     def search(index: int) -> Iterator[Solution]:
-        if index == len(needs):
-            picked = {need.name: chosen[need.name] for need in needs}
-            yield Solution(picked, {name: dict(demand) for name, demand in demands.items()})
-            return
         need = needs[index]
+        last = index == len(needs) - 1  # leaves are yielded here: no generator per candidate
         for candidate in catalog.candidates(need.type):
-            demand = demand_of(catalog, candidate, need)
+            demand = catalog.demand(candidate, need)
             # Capacity first: it is cheap, and `where` may be arbitrary compiled mission code.
             if not fits(demand) or (need.where is not None and not need.where(candidate, view)):
                 continue
-            for unit_id, quantity in demand.items():
-                used[unit_id] = used.get(unit_id, 0.0) + quantity
             chosen[need.name] = candidate
             demands[need.name] = demand
-            yield from search(index + 1)
+            if last:
+                yield leaf()
+            else:
+                for unit_id, quantity in demand.items():
+                    used[unit_id] = used.get(unit_id, 0.0) + quantity
+                yield from search(index + 1)
+                for unit_id, quantity in demand.items():
+                    used[unit_id] -= quantity
             del chosen[need.name], demands[need.name]
-            for unit_id, quantity in demand.items():
-                used[unit_id] -= quantity
 
-    return search(0)
+    return search(0) if needs else iter((leaf(),))
 
 
 def first_solution(

@@ -8,12 +8,14 @@ waiters per ancestor path (for the wait-for graph).
 from __future__ import annotations
 
 from bisect import insort
-from collections.abc import Container, Iterator
+from collections.abc import Container, Mapping
 from dataclasses import dataclass, field
 from heapq import heappop, heappush
+from typing import Any
 
 from drd.rcm.deadlock import ancestors
-from drd.rcm.model import Aggregate, Candidate, Request, Unit
+from drd.rcm.model import Aggregate, Candidate, NeedRequest, Request, Unit
+from drd.rcm.solver import Solution, alternatives, demand_of
 
 #: Queue order: (priority, 0 for a due reservation else 1, reservation time, request order).
 Key = tuple[int, int, float, int]
@@ -34,7 +36,7 @@ class Wait:
     def holder(self) -> str:
         return self.request.holder
 
-    def describe(self) -> dict[str, object]:
+    def describe(self) -> dict[str, Any]:
         return {
             "holder": self.holder,
             "priority": self.request.priority,
@@ -84,7 +86,7 @@ class Hold:
         for unit in unit_ids:
             self.loose.pop(unit, None)
 
-    def describe(self) -> dict[str, object]:
+    def describe(self) -> dict[str, Any]:
         return {
             "priority": self.request.priority,
             "mission": self.request.mission,
@@ -119,15 +121,43 @@ class Registry:
         self.used: dict[str, dict[str, float]] = {}  # unit -> holder -> quantity
         self.load: dict[str, float] = {}
         self._by_type: dict[str, list[str]] = {}
+        self._demands: dict[tuple[str, float], dict[str, float]] = {}
+        self._typed: dict[str, tuple[Candidate, ...]] = {}
+        self._alternatives: dict[tuple[NeedRequest, ...], tuple[list[Solution], bool]] = {}
 
-    def candidates(self, type: str) -> Iterator[Candidate]:
-        """Units and aggregates of a type, by id."""
-        for cid in self._by_type.get(type, ()):
-            yield self.candidate(cid)
+    def candidates(self, type: str) -> tuple[Candidate, ...]:
+        """Units and aggregates of a type, by id (cached until a resource of that type changes)."""
+        found = self._typed.get(type)
+        if found is None:
+            found = self._typed[type] = tuple(self.candidate(cid) for cid in self._by_type.get(type, ()))
+        return found
 
     def unit(self, unit_id: str) -> Unit:
         """A registered unit."""
         return self.units[unit_id]
+
+    def demand(self, candidate: Candidate, need: NeedRequest) -> Mapping[str, float]:
+        """What a candidate takes of its units for a need (cached: parts never change)."""
+        key = (candidate.id, need.quantity)
+        demand = self._demands.get(key)
+        if demand is None:
+            demand = self._demands[key] = demand_of(self, candidate, need)
+        return demand
+
+    def alternatives(
+        self, needs: tuple[NeedRequest, ...], given: Mapping[str, Candidate], limit: int
+    ) -> tuple[list[Solution], bool]:
+        """`solver.alternatives`, cached per needs until any resource changes.
+
+        The instances of one behavior share their needs, so a queue of a thousand RoomSurveillance
+        instances enumerates their assignments once. `where` must depend only on its arguments.
+        """
+        if given:
+            return alternatives(needs, self, given, limit)
+        found = self._alternatives.get(needs)
+        if found is None:
+            found = self._alternatives[needs] = alternatives(needs, self, None, limit)
+        return found
 
     def candidate(self, cid: str) -> Candidate:
         """A registered unit or aggregate."""
@@ -148,6 +178,8 @@ class Registry:
             self.units[candidate.id] = candidate
             self.epochs.setdefault(candidate.id, 0)
         insort(self._by_type.setdefault(candidate.type, []), candidate.id)
+        self._typed.pop(candidate.type, None)
+        self._alternatives.clear()
 
     def replace(self, candidate: Candidate) -> None:
         """Swap in a new version of a registered resource (same id and type)."""
@@ -155,6 +187,8 @@ class Registry:
             self.aggregates[candidate.id] = candidate
         else:
             self.units[candidate.id] = candidate
+        self._typed.pop(candidate.type, None)
+        self._alternatives.clear()
 
     def remove(self, cid: str) -> None:
         """Forget a resource; its usage must already be given back."""
@@ -166,8 +200,11 @@ class Registry:
         self.aggregates.pop(cid, None)
         self.units.pop(cid, None)
         self.load.pop(cid, None)
+        self._demands.clear()
+        self._typed.pop(candidate.type, None)
+        self._alternatives.clear()
 
-    def describe(self) -> dict[str, object]:
+    def describe(self) -> dict[str, Any]:
         """Units (with usage and epochs) and aggregates as plain dicts."""
         units = {
             u: {
@@ -251,11 +288,11 @@ class WaitQueue:
     def remove(self, wait: Wait) -> None:
         holder = wait.holder
         del self.waits[holder]
-        for need in wait.request.needs:
-            typed = self._typed[need.type]
+        for type in {need.type for need in wait.request.needs}:
+            typed = self._typed[type]
             typed.discard(holder)
             if not typed:
-                del self._typed[need.type]
+                del self._typed[type]
         for path in ancestors(holder):
             self._desc[path].discard(holder)
             if not self._desc[path]:
@@ -281,9 +318,7 @@ class WaitQueue:
 
     def claimants(self, unit: str) -> set[str]:
         """Every waiter claiming a unit (a full heap walk: for rare events such as host loss)."""
-        return {
-            h for key, h in self._claimants.get(unit, ()) if h in self.waits and unit in self.waits[h].claims
-        }
+        return {h for key, h in self._claimants.get(unit, ()) if h in self.waits and unit in self.waits[h].claims}
 
     def drop_unit(self, unit: str) -> None:
         self._claimants.pop(unit, None)

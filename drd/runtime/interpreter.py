@@ -21,6 +21,7 @@ from typing import Any
 from drd.rcm import Deadlock, Granted, NeedRequest, Released, Request, ResourceManager, Revoked, Unsatisfiable
 from drd.rcm import Waiting as WaitingDecision
 from drd.runtime import records as rec
+from drd.runtime.broker import ResourceBroker
 from drd.runtime.clock import Clock
 from drd.runtime.component import Component, Context, Registry, Status
 from drd.runtime.pool import ResourcePool, ResourceView
@@ -79,14 +80,14 @@ class Node:
 class Interpreter:
     """Executes one mission. Drive it with `start()`, then `step()` whenever time advances."""
 
-    def __init__(self, chart: Statechart, registry: Registry, rcm: ResourceManager, clock: Clock, *,
+    def __init__(self, chart: Statechart, registry: Registry, rcm: ResourceManager | ResourceBroker, clock: Clock, *,
                  pool: ResourcePool | None = None, mission: str = "", services: Mapping[str, Any] | None = None,
                  lease: float = 3.0):
         self.chart = chart
         self.registry = registry
-        self.rcm = rcm
         self.clock = clock
         self.pool = pool or ResourcePool(rcm)
+        self.rcm = self.pool.broker  # every decision reaches every mission sharing the manager
         self.mission = mission or chart.name
         self.services = dict(services or {})
         self.lease = lease
@@ -97,6 +98,7 @@ class Interpreter:
         self.events: collections.deque[rec.Event] = collections.deque()
         self.holders: dict[str, Node] = {}  # request holder path -> node
         self._finishing: list[tuple[Node, bool, str]] = []
+        self.rcm.attach(self._apply)
 
     # ------------------------------------------------------------- public API
     def attach(self, listener: Listener) -> None:
@@ -113,7 +115,7 @@ class Interpreter:
         if self.outcome is not None:
             return
         now = self.clock.now()
-        self._apply(self.rcm.tick(now))
+        self.rcm.tick(now)
         self._renew(now)
         for node in list(self._leaves()):
             if node.phase is Phase.ACTIVE and node.component is not None:
@@ -137,13 +139,18 @@ class Interpreter:
 
     def add_resources(self, resources: Iterable[Any]) -> None:
         """Hot-plug: new units and aggregates; running multiplicities may grow."""
-        self._apply(self.pool.add(resources, self.clock.now()))
+        self.pool.add(resources, self.clock.now())
         self._grow_multis()
+        self._settle()
+
+    def remove_host(self, host: str) -> None:
+        """A host vanished: its grants are freed and the behaviors that held them fail (or degrade)."""
+        self.pool.remove_host(host, self.clock.now())
         self._settle()
 
     def set_property(self, rid: str, key: str, value: object) -> None:
         """Change a static dependency at run time (constraints and counts see it)."""
-        self._apply(self.pool.set_property(rid, key, value, self.clock.now()))
+        self.pool.set_property(rid, key, value, self.clock.now())
         self._settle()
 
     @property
@@ -198,7 +205,7 @@ class Interpreter:
         node.requested = True
         self.holders[node.path] = node
         self._notify(rec.Waiting(self.clock.now(), node.path, tuple(f"{n.name}: {n.type}" for n in needs)))
-        self._apply(self.rcm.request(Request(node.path, node.state.priority, reqs, self.mission), self.clock.now()))
+        self.rcm.request(Request(node.path, node.state.priority, reqs, self.mission), self.clock.now())
 
     def _need_request(self, node: Node, need: ResourceNeed) -> NeedRequest:
         quantity = need.quantity
@@ -492,8 +499,7 @@ class Interpreter:
         holder = next((n for n in [domain, *self._ancestors(domain)] if name in n.assignment), None)
         if holder is None:
             return
-        units = self.pool.units(holder.assignment[name])
-        self._apply(self.rcm.release(holder.path, self.clock.now(), units))
+        self.rcm.release(holder.path, self.clock.now(), [name])  # by need name: exact even on shared units
 
     # ------------------------------------------------------------- exiting
     def _exit(self, node: Node, status: str) -> None:
@@ -510,12 +516,16 @@ class Interpreter:
         if node.requested:
             self.holders.pop(node.path, None)
             now = self.clock.now()
-            self._apply(self.rcm.release(node.path, now) if node.assignment else self.rcm.cancel(node.path, now))
+            if node.assignment:
+                self.rcm.release(node.path, now)
+            else:
+                self.rcm.cancel(node.path, now)
         if node.parent is not None and node in node.parent.children:
             node.parent.children.remove(node)
         self._notify(rec.Exited(self.clock.now(), node.path, node.state.id, status))
 
     def _end(self, outcome: str, reason: str) -> None:
+        self.rcm.detach(self._apply)
         if self.outcome is None:
             self.outcome, self.reason = outcome, reason
             self._notify(rec.Finished(self.clock.now(), self.chart.root, outcome, reason))

@@ -5,7 +5,8 @@ from __future__ import annotations
 
 from collections.abc import Callable, Iterable, Iterator, Mapping
 
-from drd.rcm import Aggregate, Candidate, ResourceManager, Unit
+from drd.rcm import Aggregate, Candidate, ResourceManager
+from drd.runtime.broker import ResourceBroker
 
 
 class ResourceView(Mapping[str, object]):
@@ -62,28 +63,28 @@ class ResourceView(Mapping[str, object]):
 class ResourcePool:
     """Every unit and aggregate by id, kept in step with the manager (hot-plug, properties)."""
 
-    def __init__(self, rcm: ResourceManager):
-        self.rcm = rcm
+    def __init__(self, rcm: ResourceManager | ResourceBroker):
+        self.broker = rcm if isinstance(rcm, ResourceBroker) else ResourceBroker(rcm)
         self.candidates: dict[str, Candidate] = {}
         self._props: dict[str, dict[str, object]] = {}
 
-    def add(self, resources: Iterable[Candidate], now: float) -> list[object]:
-        """Register units before the aggregates that use them; returns the manager's decisions."""
-        decisions: list[object] = []
-        items = sorted(resources, key=lambda c: isinstance(c, Aggregate))
-        for c in items:
+    def add(self, resources: Iterable[Candidate], now: float) -> None:
+        """Register units before the aggregates that use them (decisions go to the broker's listeners)."""
+        for c in sorted(resources, key=lambda c: isinstance(c, Aggregate)):
             self.candidates[c.id] = c
             self._props[c.id] = dict(c.properties)
-            if isinstance(c, Unit):
-                decisions.extend(self.rcm.add_unit(c, now))
-            else:
-                decisions.extend(self.rcm.add_aggregate(c, now))
-        return decisions
+            self.broker.add(c, now)
 
-    def set_property(self, rid: str, key: str, value: object, now: float) -> list[object]:
+    def remove_host(self, host: str, now: float) -> None:
+        """Forget a vanished host's resources; the manager frees their grants."""
+        for rid in [rid for rid, c in self.candidates.items() if c.host == host]:
+            del self.candidates[rid]
+        self.broker.remove_host(host, now)
+
+    def set_property(self, rid: str, key: str, value: object, now: float) -> None:
         """Change the Static Dependency Database (a launched Scout leaves its magazine)."""
         self._props.setdefault(rid, {})[key] = value
-        return list(self.rcm.set_property(rid, key, value, now))
+        self.broker.set_property(rid, key, value, now)
 
     def properties(self, rid: str) -> dict[str, object]:
         return self._props.get(rid, {})

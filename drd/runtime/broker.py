@@ -1,0 +1,63 @@
+"""One Resource Controller Manager shared by several missions.
+
+The manager returns its decisions to whoever called it, but a release by one mission can
+grant a waiter of another. The broker calls the manager and hands every decision to every
+attached listener (each interpreter keeps those naming its own holders), so several
+missions share one manager by priority, in one process or behind the daemon.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Collection, Iterable
+from typing import Any
+
+from drd.rcm import Aggregate, Decision, Request, ResourceManager, Unit
+
+DecisionListener = Callable[[Iterable[Decision]], None]
+
+
+class ResourceBroker:
+    def __init__(self, rcm: ResourceManager):
+        self.rcm = rcm
+        self.listeners: list[DecisionListener] = []
+
+    def attach(self, listener: DecisionListener) -> None:
+        self.listeners.append(listener)
+
+    def detach(self, listener: DecisionListener) -> None:
+        if listener in self.listeners:
+            self.listeners.remove(listener)
+
+    def _publish(self, decisions: tuple[Decision, ...]) -> tuple[Decision, ...]:
+        for listener in list(self.listeners):
+            listener(decisions)
+        return decisions
+
+    def request(self, req: Request, now: float) -> tuple[Decision, ...]:
+        return self._publish(self.rcm.request(req, now))
+
+    def release(self, holder: str, now: float, units: Collection[str] | None = None) -> tuple[Decision, ...]:
+        return self._publish(self.rcm.release(holder, now, units))
+
+    def cancel(self, holder: str, now: float) -> tuple[Decision, ...]:
+        return self._publish(self.rcm.cancel(holder, now))
+
+    def renew(self, holder: str, now: float) -> tuple[Decision, ...]:
+        return self._publish(self.rcm.renew(holder, now))
+
+    def tick(self, now: float) -> tuple[Decision, ...]:
+        return self._publish(self.rcm.tick(now))
+
+    def remove_host(self, host: str, now: float) -> tuple[Decision, ...]:
+        return self._publish(self.rcm.remove_host(host, now))
+
+    def set_property(self, rid: str, key: str, value: object, now: float) -> tuple[Decision, ...]:
+        return self._publish(self.rcm.set_property(rid, key, value, now))
+
+    def add(self, resource: Unit | Aggregate, now: float) -> tuple[Decision, ...]:
+        if isinstance(resource, Unit):
+            return self._publish(self.rcm.add_unit(resource, now))
+        return self._publish(self.rcm.add_aggregate(resource, now))
+
+    def __getattr__(self, name: str) -> Any:
+        return getattr(self.rcm, name)  # queries: holders, queue, snapshot
