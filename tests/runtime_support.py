@@ -108,7 +108,8 @@ class Harness:
         self.interp.attach(self.records.append)
 
     def run(self, until: float = 600.0, dt: float = 0.5) -> str | None:
-        self.interp.start()
+        if self.interp.root is None:
+            self.interp.start()
         while not self.interp.finished and self.clock.now() < until:
             self.clock.advance(dt)
             self.interp.step()
@@ -116,3 +117,16 @@ class Harness:
 
     def of(self, kind: type[rec.Record]) -> list[Any]:
         return [r for r in self.records if isinstance(r, kind)]
+
+
+class FailsFirst(Timed):
+    """Instance [0] fails; the others run their duration."""
+
+    def step(self, now: float) -> Status:
+        assert self.ctx is not None
+        if "[0]/" in self.ctx.path:
+            return Status.FAILURE
+        return super().step(now)
+
+
+COMPONENTS = {c.__name__: c for c in (Timed, Forever, Fails, Raises, Emits, FailsFirst)}

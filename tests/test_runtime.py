@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Any
 
 import pytest
 
@@ -245,3 +246,52 @@ def test_two_missions_share_one_manager_by_priority(catalog: Catalog) -> None:
     assert finished["High"] < finished["Low"]  # priority 1 took the camera at the slice boundary
     revoked = [r for r in log if isinstance(r, rec.Revoked)]
     assert [(r.path, r.at) for r in revoked] == [("Low/A", 5.0)]
+
+
+class StopsOnStart(Forever):
+    """Calls stop from inside its own start(): a stop during entry."""
+
+    interp: Any = None
+
+    def start(self) -> None:
+        super().start()
+        StopsOnStart.interp.stop("stopped during entry")
+
+
+def test_stop_during_entry(catalog: Catalog) -> None:
+    Forever.calls = []
+    text = "mission M {\n needs r: Ranger\n parallel { Calibrate; AlignRanger; ReturnToStart }\n}"
+    h = Harness(compiled(text, catalog), {"Calibrate": Forever, "AlignRanger": StopsOnStart,
+                                         "ReturnToStart": Forever}, ranger_world())
+    StopsOnStart.interp = h.interp
+    h.interp.start()
+    assert h.interp.outcome == "stopped" and h.interp.active() == []
+    started = [p for c, p in Forever.calls if c == "start"]
+    assert started == ["M/Calibrate", "M/AlignRanger"]  # ReturnToStart was never entered
+    assert sorted(p for c, p in Forever.calls if c == "terminate") == sorted(started)
+    assert h.rcm.holders("ranger1.drive") == ()
+
+
+def test_stop_during_a_transition(catalog: Catalog) -> None:
+    Forever.calls = []
+    text = "mission M {\n needs r: Ranger\n start -> Calibrate\n Calibrate -> ReturnToStart\n ReturnToStart\n}"
+    h = Harness(compiled(text, catalog), {"Calibrate": Timed, "ReturnToStart": Forever}, ranger_world())
+    h.interp.attach(lambda r: h.interp.stop("stopped mid-transition") if isinstance(r, rec.Taken) else None)
+    assert h.run(until=5) == "stopped"
+    assert Forever.calls == []  # the target was never entered
+    assert h.interp.active() == [] and h.rcm.holders("ranger1.drive") == ()
+
+
+def test_static_dependencies_change_at_run_time(catalog: Catalog) -> None:
+    text = """
+mission M {
+    needs r: Ranger
+    var aboard: int = 0
+    start -> Calibrate
+    Calibrate -> done / set aboard = count(Scout where scout.carrier == r)
+}"""
+    h = Harness(compiled(text, catalog), {"Calibrate": Timed}, ranger_world(1, 3))
+    h.interp.start()
+    h.interp.set_property("ranger1.scout2", "carrier", "")  # launched: it left the magazine
+    h.run()
+    assert h.interp.root is not None and h.interp.root.scope["aboard"] == 2

@@ -106,8 +106,10 @@ class Interpreter:
 
     def start(self) -> None:
         """Enter the root state (and, through grants, everything below it)."""
+        if self.root is not None:
+            raise RuntimeError("this interpreter has already started")
         root_state = self.chart[self.chart.root]
-        self.root = self._enter(root_state, root_state.id, None, {})
+        self._enter(root_state, root_state.id, None, {})
         self._settle()
 
     def step(self) -> None:
@@ -180,6 +182,8 @@ class Interpreter:
         node = Node(state, path, parent, self.clock.now(), scope=dict(params))
         if parent is not None:
             parent.children.append(node)
+        else:
+            self.root = node  # before anything can call stop()
         self._notify(rec.Entered(node.entered, path, state.id))
         for name, _type in state.shared:
             node.scope[name] = {}
@@ -227,6 +231,8 @@ class Interpreter:
         return NeedRequest(need.name, need.type, float(quantity or 1.0), need.slice, where)
 
     def _activate(self, node: Node) -> None:
+        if self.outcome is not None or node.phase is Phase.DONE:
+            return
         node.phase = Phase.ACTIVE
         state = node.state
         match state.kind:
@@ -252,6 +258,8 @@ class Interpreter:
         return self.chart[node.state.initial] if node.state.initial else None
 
     def _enter_child(self, parent: Node, state: State, index: int | None = None) -> Node | None:
+        if self.outcome is not None or parent.phase is Phase.DONE:  # stopped meanwhile (e.g. by a listener)
+            return None
         if state.kind is StateKind.FINAL:
             self._finish(parent, bool(state.success), "" if state.success else "reached fail")
             return None
