@@ -81,9 +81,9 @@ def source_line(span: Span, sources: Mapping[str, str] | None) -> str | None:
     """The text of the span's first line, if the source is known."""
     if not sources or span.file not in sources:
         return None
-    lines = sources[span.file].splitlines()
+    lines = sources[span.file].split("\n")  # as the lexer counts lines: \n only (not \f, \u2028...)
     if 1 <= span.line <= len(lines):
-        return lines[span.line - 1]
+        return lines[span.line - 1].removesuffix("\r")
     return "" if span.line == len(lines) + 1 else None
 
 

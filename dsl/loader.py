@@ -18,7 +18,8 @@ def decode(data: bytes, file: str, report: Reporter) -> str:
         return data.decode("utf-8")
     except UnicodeDecodeError as e:
         line = data.count(b"\n", 0, e.start) + 1
-        col = e.start - (data.rfind(b"\n", 0, e.start) + 1) + 1
+        line_start = data.rfind(b"\n", 0, e.start) + 1
+        col = len(data[line_start:e.start].decode("utf-8", "replace")) + 1  # in characters, like every column
         report.error("encoding", f"not valid UTF-8: byte 0x{data[e.start]:02x} cannot start or continue a character",
                      Span(file, line, col, line, col + 1), "save the file as UTF-8")
         return data.decode("utf-8", errors="replace")

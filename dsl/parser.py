@@ -476,7 +476,8 @@ class _Recovery:
                 continue
 
     def _dummy(self, name: str, at: Token) -> Token:
-        values = {"NAME": "_", "INT": "0", "FLOAT": "0.0", "DURATION": "0s", "STRING": '""', "_SEP": "\n"}
+        values = {"NAME": "_", "INT": "0", "FLOAT": "0.0", "DURATION": "0s", "STRING": '""', "_SEP": "\n",
+                  "ACTION_SLASH": "/", "ACTION_SEMI": ";"}  # declared terminals have no pattern
         if name not in values:
             term = self.parser.lark.get_terminal(name)
             values[name] = str(term.pattern.value)
