@@ -101,7 +101,7 @@ def parse_manifest(data: object, source: str) -> tuple[ComponentType | None, lis
     """
     c = _Checker(source)
     if not isinstance(data, dict):
-        c.fail("", f"expected a mapping of manifest keys, got {_got(data)}")
+        c.fail("", f"expected a mapping of manifest keys, got {got(data)}")
         return None, c.problems
     kind = c.choice(data["kind"], "kind", Kind) if "kind" in data else None
     allowed = KEYS[kind] if kind else KEY_ORDER
@@ -156,7 +156,7 @@ class _Checker:
     def text(self, value: object, key: str) -> str:
         if isinstance(value, str):
             return value
-        self.fail(key, f"expected a string, got {_got(value)}")
+        self.fail(key, f"expected a string, got {got(value)}")
         return ""
 
     def name(self, value: object, key: str) -> str | None:
@@ -172,20 +172,20 @@ class _Checker:
 
     def names(self, value: object, key: str) -> tuple[str, ...]:
         if not isinstance(value, list):
-            self.fail(key, f"expected a list of names, got {_got(value)}")
+            self.fail(key, f"expected a list of names, got {got(value)}")
             return ()
         return tuple(n for n in (self.name(v, key) for v in value) if n)
 
     def flag(self, value: object, key: str) -> bool:
         if isinstance(value, bool):
             return value
-        self.fail(key, f"expected true or false, got {_got(value)}")
+        self.fail(key, f"expected true or false, got {got(value)}")
         return False
 
     def positive(self, value: object, key: str, integer: bool = False) -> Any:
-        if _is_number(value, integer) and value > 0:  # type: ignore[operator]
+        if is_number(value, integer) and value > 0:  # type: ignore[operator]
             return value if integer else float(value)  # type: ignore[arg-type]
-        self.fail(key, f"expected a positive {'integer' if integer else 'number'}, got {_got(value)}")
+        self.fail(key, f"expected a positive {'integer' if integer else 'number'}, got {got(value)}")
         return None
 
     def choice(self, value: object, key: str, enum: type[_E]) -> _E | None:
@@ -193,13 +193,13 @@ class _Checker:
         if isinstance(value, str) and value in options:
             return enum(value)
         hint = _hint(str(value), options) or f" (expected one of {', '.join(options)})"
-        self.fail(key, f"unknown {key} {_show(value)}{hint}")
+        self.fail(key, f"unknown {key} {show(value)}{hint}")
         return None
 
     def entries(self, value: object, key: str, item: type) -> Iterator[tuple[str, Any, str]]:
         """The (name, item, key path) of a mapping whose keys are names and items `item`s."""
         if not isinstance(value, dict):
-            self.fail(key, f"expected a mapping, got {_got(value)}")
+            self.fail(key, f"expected a mapping, got {got(value)}")
             return
         for k, v in value.items():
             path = f"{key}.{k}"
@@ -208,7 +208,7 @@ class _Checker:
             if isinstance(v, item):
                 yield k, v, path
             else:
-                self.fail(path, f"expected {'a mapping' if item is dict else 'a type name'}, got {_got(v)}")
+                self.fail(path, f"expected {'a mapping' if item is dict else 'a type name'}, got {got(v)}")
 
 
 def _entry_point(c: _Checker, value: object, key: str) -> str | None:
@@ -221,15 +221,15 @@ def _entry_point(c: _Checker, value: object, key: str) -> str | None:
 def _scheduling(c: _Checker, value: object, key: str) -> Scheduling:
     data = value if isinstance(value, dict) else {}
     if not isinstance(value, dict):
-        c.fail(key, f"expected a mapping, got {_got(value)}")
+        c.fail(key, f"expected a mapping, got {got(value)}")
     c.keys(data, key, ("cores", "nice"))
     cores = data.get("cores")
     if cores is not None and not (isinstance(cores, list) and all(_is_core(n) for n in cores)):
-        c.fail(f"{key}.cores", f"expected a list of core numbers or null, got {_got(cores)}")
+        c.fail(f"{key}.cores", f"expected a list of core numbers or null, got {got(cores)}")
         cores = None
     nice = data.get("nice", 0)
-    if not (_is_number(nice, True) and -20 <= nice <= 19):
-        c.fail(f"{key}.nice", f"expected an integer from -20 to 19, got {_got(nice)}")
+    if not (is_number(nice, True) and -20 <= nice <= 19):
+        c.fail(f"{key}.nice", f"expected an integer from -20 to 19, got {got(nice)}")
         nice = 0
     return Scheduling(None if cores is None else tuple(cores), nice)
 
@@ -252,10 +252,10 @@ def _default(c: _Checker, value: object, type_: str, key: str) -> object:
     if type_ == "duration":
         seconds = parse_duration(value) if isinstance(value, str) else None
         if seconds is None:
-            c.fail(key, f"expects a duration such as 60s or 250ms, got {_got(value)}")
+            c.fail(key, f"expects a duration such as 60s or 250ms, got {got(value)}")
         return seconds
     if isinstance(value, bool) != (type_ == "bool") or not isinstance(value, _PYTYPES[type_]):
-        c.fail(key, f"expects {type_}, got {_got(value)}")
+        c.fail(key, f"expects {type_}, got {got(value)}")
         return None
     return float(value) if type_ == "float" else value
 
@@ -365,7 +365,7 @@ class _References:
         for p in t.params:
             target = self.ref(p.type, f"params.{p.name}.type", scalars=True)
             if target and not p.required and not isinstance(p.default, str):
-                self.fail(f"params.{p.name}.default", f"expects a {p.type} id, got {_got(p.default)}")
+                self.fail(f"params.{p.name}.default", f"expects a {p.type} id, got {got(p.default)}")
         for n in t.needs:
             self.need(n)
         for kind, records in (("outputs", t.outputs), ("events", t.events)):
@@ -461,7 +461,7 @@ def _read_stamped(path: Path, source: str, mtime_ns: int, size: int,
                   ) -> tuple[ComponentType | None, tuple[ManifestProblem, ...]]:
     """Parse one file, cached on its stamp: daemons and tests reload unchanged manifests often."""
     try:
-        data = yaml.load(path.read_text(encoding="utf-8"), Loader=_StrictLoader)  # a SafeLoader
+        data = yaml.load(path.read_text(encoding="utf-8"), Loader=StrictLoader)  # a SafeLoader
     except yaml.MarkedYAMLError as e:
         mark = e.problem_mark or e.context_mark
         line = mark.line + 1 if mark else None
@@ -477,11 +477,11 @@ def _display(path: Path, cwd: Path) -> str:
     return (path.relative_to(cwd) if path.is_relative_to(cwd) else path).as_posix()
 
 
-class _StrictLoader(yaml.SafeLoader):
+class StrictLoader(yaml.SafeLoader):
     """A SafeLoader that rejects duplicate keys, which PyYAML would silently overwrite."""
 
 
-def _construct_mapping(loader: _StrictLoader, node: yaml.MappingNode) -> dict[Any, Any]:
+def _construct_mapping(loader: StrictLoader, node: yaml.MappingNode) -> dict[Any, Any]:
     seen: set[Hashable] = set()
     for key_node, _ in node.value:
         key = loader.construct_object(key_node)
@@ -493,30 +493,30 @@ def _construct_mapping(loader: _StrictLoader, node: yaml.MappingNode) -> dict[An
     return loader.construct_mapping(node)
 
 
-_StrictLoader.add_constructor(yaml.resolver.BaseResolver.DEFAULT_MAPPING_TAG, _construct_mapping)
+StrictLoader.add_constructor(yaml.resolver.BaseResolver.DEFAULT_MAPPING_TAG, _construct_mapping)
 
 
 # ---------------------------------------------------------------- small helpers
 
 
-def _is_number(value: object, integer: bool = False) -> bool:
+def is_number(value: object, integer: bool = False) -> bool:
     return isinstance(value, int if integer else (int, float)) and not isinstance(value, bool)
 
 
 def _is_core(value: object) -> bool:
-    return _is_number(value, integer=True) and value >= 0  # type: ignore[operator]
+    return is_number(value, integer=True) and value >= 0  # type: ignore[operator]
 
 
-def _got(value: object) -> str:
+def got(value: object) -> str:
     """How a wrong value is named in a message: `str 'fast'`, `null`, `a list`."""
     if value is None:
         return "null"
     if isinstance(value, dict | list):
         return "a mapping" if isinstance(value, dict) else "a list"
-    return f"{type(value).__name__} {_show(value)}"
+    return f"{type(value).__name__} {show(value)}"
 
 
-def _show(value: object) -> str:
+def show(value: object) -> str:
     return repr(value) if isinstance(value, str) else str(value)
 
 

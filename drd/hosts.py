@@ -1,0 +1,561 @@
+"""`hosts.yaml`: the single resource configuration file (ERSP), loaded strictly into the resource model.
+
+One file says which hosts form the cluster, what hardware each carries (RCs), how that hardware is
+grouped into robots (ARCs) and the static dependencies between robots (`carrier`). Moving from the
+simulator to real hardware changes `driver:` entries only, so everything a driver swap could break
+is checked here, before any daemon starts: every problem is collected and raised once, as a
+`HostsError`, so a broken file is fixed in one pass. `parse_hosts` is pure; `load_hosts` reads the
+file and `check_files` looks at the security files the daemon will need. See docs/hosts.md.
+"""
+
+from __future__ import annotations
+
+import os
+import re
+from collections.abc import Iterable, Iterator, Mapping, Sequence
+from dataclasses import dataclass, field, replace
+from enum import Enum, StrEnum
+from pathlib import Path
+from typing import Any, TypeVar
+
+import yaml
+
+from drd.manifests import StrictLoader, got, is_number, show  # one YAML dialect, one wording
+from drd.rcm.model import Aggregate, Unit
+from dsl.ast import parse_duration
+from dsl.catalog import Catalog, ComponentType, Kind
+from dsl.errors import did_you_mean
+
+DEFAULT_LEASE = 3.0
+_NAME = re.compile(r"[A-Za-z_][A-Za-z0-9_]*", re.ASCII)
+#: Device ids may be dotted (`scout1.wheels`): a robot's own devices are prefixed with its id.
+_DEVICE_ID = re.compile(r"[A-Za-z_]\w*(?:\.[A-Za-z_]\w*)*", re.ASCII)
+_ENDPOINT = re.compile(r"(tcp|udp)/(\[[0-9A-Fa-f:.]+\]|[A-Za-z0-9](?:[A-Za-z0-9.-]*[A-Za-z0-9])?):([0-9]+)", re.ASCII)
+_E = TypeVar("_E", bound=Enum)
+
+
+class Role(StrEnum):
+    CONTROLLER = "controller"
+    """Runs the Resource Controller Manager and the Mission Executive; exactly one host has it."""
+    WORKER = "worker"
+    """Runs components (behaviors and the drivers of its devices)."""
+    SIMULATOR = "simulator"
+    """Runs the simulator component that `sim` drivers talk to; at most one host has it."""
+
+
+class SecurityMode(StrEnum):
+    NONE = "none"
+    """An open cluster: for a laptop or an isolated test network only."""
+    PASSWORD = "password"
+    """zenoh user/password authentication with access control."""
+    TLS = "tls"
+    """zenoh TLS with mutual authentication from a CA, a certificate and a key."""
+
+
+#: The keys each security mode requires (and allows) besides `mode`: they name files, except `user`.
+SECURITY_KEYS: Mapping[SecurityMode, tuple[str, ...]] = {
+    SecurityMode.NONE: (),
+    SecurityMode.PASSWORD: ("user", "password_file"),
+    SecurityMode.TLS: ("ca", "cert", "key"),
+}
+_TOP_KEYS = ("cluster", "hosts")
+_CLUSTER_KEYS = ("name", "security", "lease", "placement")
+_HOST_KEYS = ("endpoint", "roles", "cores", "devices", "robots")
+_DEVICE_KEYS = ("type", "driver", "options", "capacity")
+_ROBOT_KEYS = ("type", "carrier", "parts", "properties")
+_SECURITY_ALLOWED = ("mode", *dict.fromkeys(k for keys in SECURITY_KEYS.values() for k in keys))
+_PLACEMENT_KEYS = ("cpu", "memory", "instances")
+_SCALARS: Mapping[str, Any] = {"int": int, "float": (int, float), "bool": bool, "str": str}
+
+
+@dataclass(frozen=True, slots=True)
+class Security:
+    """How peers authenticate. Only parsed and checked here; the daemon configures zenoh from it."""
+
+    mode: SecurityMode = SecurityMode.NONE
+    user: str | None = None
+    password_file: str | None = None
+    ca: str | None = None
+    cert: str | None = None
+    key: str | None = None
+
+    @property
+    def files(self) -> dict[str, str]:
+        """The files the mode needs, by key: what `check_files` looks at."""
+        named = {k: getattr(self, k) for k in SECURITY_KEYS[self.mode] if k != "user"}
+        return {k: v for k, v in named.items() if v}
+
+
+@dataclass(frozen=True, slots=True)
+class Placement:
+    """Weights of the Load Balancer's policy: a host's score is the weighted sum of its loads."""
+
+    cpu: float = 1.0
+    memory: float = 0.5
+    instances: float = 0.2
+
+
+@dataclass(frozen=True, slots=True)
+class Device:
+    """One RC on one host. `id` is qualified by the host (`ranger1.drive`), so it is unique in the cluster.
+
+    `capacity` is set exactly for sharable types (the manifest's capacity unless overridden).
+    """
+
+    id: str
+    host: str
+    type: str
+    driver: str
+    options: Mapping[str, object] = field(default_factory=dict, hash=False)
+    capacity: float | None = None
+
+    @property
+    def sharable(self) -> bool:
+        return self.capacity is not None
+
+
+@dataclass(frozen=True, slots=True)
+class Robot:
+    """One ARC instance. `parts` maps part names to qualified device ids; `properties` include `carrier`."""
+
+    id: str
+    host: str
+    type: str
+    parts: Mapping[str, str] = field(default_factory=dict, hash=False)
+    properties: Mapping[str, object] = field(default_factory=dict, hash=False)
+
+    @property
+    def carrier(self) -> str | None:
+        """The robot carrying this one (a Scout's Ranger), the usual static dependency."""
+        value = self.properties.get("carrier")
+        return value if isinstance(value, str) else None
+
+
+@dataclass(frozen=True, slots=True)
+class Host:
+    """A computer of the cluster: where its daemon listens, what it does, and its hardware."""
+
+    name: str
+    endpoint: str
+    roles: tuple[Role, ...]
+    cores: int | None = None
+    devices: tuple[Device, ...] = ()
+    robots: tuple[Robot, ...] = ()
+
+
+@dataclass(frozen=True, slots=True)
+class Cluster:
+    """The whole file, checked. `source` names the file in problems found later (`check_files`)."""
+
+    name: str
+    security: Security
+    lease: float
+    placement: Placement
+    hosts: tuple[Host, ...]
+    source: str = "hosts.yaml"
+
+    @property
+    def controller(self) -> Host:
+        """The host running the RCM and the Mission Executive (a parsed cluster has exactly one)."""
+        return next(h for h in self.hosts if Role.CONTROLLER in h.roles)
+
+    def host(self, name: str) -> Host:
+        """The host called `name`; KeyError names the known hosts."""
+        for h in self.hosts:
+            if h.name == name:
+                return h
+        raise KeyError(f"no host {name!r} in {self.source} (hosts: {', '.join(h.name for h in self.hosts)})")
+
+    @property
+    def devices(self) -> tuple[Device, ...]:
+        return tuple(d for h in self.hosts for d in h.devices)
+
+    @property
+    def robots(self) -> tuple[Robot, ...]:
+        return tuple(r for h in self.hosts for r in h.robots)
+
+    def resources(self) -> list[Unit | Aggregate]:
+        """Units then aggregates, as `drd.runtime.pool.ResourcePool.add` takes them.
+
+        A unit's properties are its device options plus `driver`, so `where` clauses can select
+        on them; an exclusive unit gets the manager's default capacity of 1.
+        """
+        units: list[Unit | Aggregate] = [
+            Unit(d.id, d.type, sharable=d.sharable, capacity=1.0 if d.capacity is None else d.capacity,
+                 properties={**d.options, "driver": d.driver}, host=d.host)
+            for d in self.devices
+        ]
+        return units + [Aggregate(r.id, r.type, r.parts, r.properties, r.host) for r in self.robots]
+
+
+@dataclass(frozen=True, slots=True)
+class HostsProblem:
+    """One problem in the file. `key` is a dotted path such as `hosts.ranger1.devices.camera.type`."""
+
+    file: str
+    key: str
+    message: str
+    line: int | None = None
+
+    def __str__(self) -> str:
+        where = f"{self.file}:{self.line}" if self.line else self.file
+        return ": ".join(part for part in (where, self.key, self.message) if part)
+
+
+class HostsError(Exception):
+    """The resource configuration has problems; carries all of them."""
+
+    def __init__(self, problems: Iterable[HostsProblem]) -> None:
+        self.problems = tuple(problems)
+        super().__init__("\n".join(map(str, self.problems)))
+
+    def __reduce__(self) -> tuple[type[HostsError], tuple[tuple[HostsProblem, ...]]]:
+        return type(self), (self.problems,)  # picklable, so it can cross a process boundary
+
+
+# ---------------------------------------------------------------- parsing (pure)
+
+
+def parse_hosts(data: object, source: str, catalog: Catalog) -> Cluster:
+    """Check the YAML data of a hosts file against the catalog and build the cluster.
+
+    Raises:
+        HostsError: with every problem found, once the whole file has been read.
+    """
+    parser = _Parser(source, catalog)
+    cluster = parser.cluster(data)
+    if parser.problems or cluster is None:
+        raise HostsError(parser.problems)
+    return cluster
+
+
+class _Parser:
+    """Collects problems; each reader reports what is wrong and returns a safe value to go on with."""
+
+    def __init__(self, source: str, catalog: Catalog) -> None:
+        self.source, self.catalog = source, catalog
+        self.problems: list[HostsProblem] = []
+        self.refs: list[tuple[str, str, str]] = []  # (key, type, id): checked once every resource is known
+
+    def fail(self, key: str, message: str) -> None:
+        self.problems.append(HostsProblem(self.source, key, message))
+
+    # -- the sections
+
+    def cluster(self, data: object) -> Cluster | None:
+        if not isinstance(data, dict):
+            self.fail("", f"expected a mapping with keys cluster and hosts, got {got(data)}")
+            return None
+        self.keys(data, "", _TOP_KEYS, required=_TOP_KEYS)
+        c = self.mapping(data.get("cluster", {}), "cluster")
+        self.keys(c, "cluster", _CLUSTER_KEYS, required=("name",) if c is data.get("cluster") else ())
+        name = self.name(c["name"], "cluster.name") if "name" in c else None
+        security = self.security(c.get("security", {"mode": "none"}), "cluster.security")
+        lease = self.duration(c["lease"], "cluster.lease") if "lease" in c else DEFAULT_LEASE
+        placement = self.placement(c.get("placement", {}), "cluster.placement")
+        hosts = tuple(self.host(n, h, p) for n, h, p in self.entries(data.get("hosts", {}), "hosts"))
+        if data.get("hosts") == {}:
+            self.fail("hosts", "expected at least one host")
+        self.check_cluster(hosts)
+        return Cluster(name or "", security, lease, placement, hosts, self.source)
+
+    def security(self, value: object, key: str) -> Security:
+        data = self.mapping(value, key)
+        self.keys(data, key, _SECURITY_ALLOWED, required=("mode",) if data is value else ())
+        mode = self.choice(data["mode"], f"{key}.mode", SecurityMode, "mode") if "mode" in data else None
+        if mode is None:
+            return Security()
+        for k in _SECURITY_ALLOWED[1:]:
+            if k in data and k not in SECURITY_KEYS[mode]:
+                self.fail(f"{key}.{k}", f"does not apply to mode {mode}")
+            elif k not in data and k in SECURITY_KEYS[mode]:
+                self.fail(f"{key}.{k}", f"required for mode {mode}")
+        return Security(mode, **{k: self.text(data[k], f"{key}.{k}") for k in SECURITY_KEYS[mode] if k in data})
+
+    def placement(self, value: object, key: str) -> Placement:
+        data = self.mapping(value, key)
+        self.keys(data, key, _PLACEMENT_KEYS)
+        weights = {k: self.number(data[k], f"{key}.{k}", zero=True) for k in _PLACEMENT_KEYS if k in data}
+        placement = Placement(**{k: v for k, v in weights.items() if v is not None})
+        if not any((placement.cpu, placement.memory, placement.instances)):
+            self.fail(key, "at least one weight must be positive")
+        return placement
+
+    def host(self, name: str, data: dict[Any, Any], key: str) -> Host:
+        self.keys(data, key, _HOST_KEYS, required=("endpoint", "roles"))
+        endpoint = self.endpoint(data["endpoint"], f"{key}.endpoint") if "endpoint" in data else ""
+        roles = self.roles(data["roles"], f"{key}.roles") if "roles" in data else ()
+        cores = self.number(data["cores"], f"{key}.cores", integer=True) if "cores" in data else None
+        raw = data.get("devices", {})
+        devices = [self.device(name, d, v, p) for d, v, p in self.entries(raw, f"{key}.devices", _DEVICE_ID)]
+        # Broken entries still count (typeless), so the parts naming them are not reported again;
+        # with no usable `devices` mapping at all (None), parts are not looked up.
+        local = {str(k): Device(f"{name}.{k}", name, "", "") for k in raw} if isinstance(raw, dict) else None
+        if local is not None:
+            local.update({d.id.removeprefix(f"{name}."): d for d in devices})
+        users: dict[str, str] = {}  # device -> the first `part of robot` using it
+        robots = [self.robot(name, r, v, p, local, users) for r, v, p in self.entries(data.get("robots", {}),
+                                                                                    f"{key}.robots")]
+        return Host(name, endpoint, roles, cores, tuple(devices), tuple(robots))
+
+    def device(self, host: str, local_id: str, data: dict[Any, Any], key: str) -> Device:
+        self.keys(data, key, _DEVICE_KEYS, required=("type", "driver"))
+        t = self.component(data["type"], f"{key}.type", Kind.RC) if "type" in data else None
+        driver = self.name(data["driver"], f"{key}.driver") if "driver" in data else None
+        options = self.values(t, data.get("options", {}), f"{key}.options") if t else {}
+        capacity = t.capacity if t and t.sharable else None
+        if t and "capacity" in data:
+            if not t.sharable:
+                self.fail(f"{key}.capacity", f"{t.name} is not sharable; only a sharable device has a capacity")
+            else:
+                capacity = self.number(data["capacity"], f"{key}.capacity") or capacity
+        # An empty type was reported already: parts using the device are then not checked again.
+        return Device(f"{host}.{local_id}", host, t.name if t else "", driver or "", options, capacity)
+
+    def robot(self, host: str, rid: str, data: dict[Any, Any], key: str, local: Mapping[str, Device] | None,
+              users: dict[str, str]) -> Robot:
+        self.keys(data, key, _ROBOT_KEYS, required=("type", "parts"))
+        t = self.component(data["type"], f"{key}.type", Kind.ARC) if "type" in data else None
+        if t is None:
+            return Robot(rid, host, "")
+        parts = self.parts(t, data["parts"], f"{key}.parts", rid, local, users) if "parts" in data else {}
+        properties = self.values(t, data.get("properties", {}), f"{key}.properties")
+        if "carrier" in data:  # the usual static dependency gets a key of its own
+            if "carrier" in properties:
+                self.fail(f"{key}.carrier", "given twice, also in properties")
+            properties.update(self.values(t, {"carrier": data["carrier"]}, key))
+        return Robot(rid, host, t.name, parts, properties)
+
+    def parts(self, t: ComponentType, value: object, key: str, rid: str, local: Mapping[str, Device] | None,
+              users: dict[str, str]) -> dict[str, str]:
+        """Part name -> qualified device id: every part of the type, each a device of this host of its type."""
+        data = self.mapping(value, key)
+        if data is not value:
+            return {}  # not a mapping: reported, and every part would be reported missing again
+        self.keys(data, key, tuple(t.parts))
+        out = {}
+        for part, wanted in t.parts.items():
+            path = f"{key}.{part}"
+            if part not in data:
+                self.fail(path, f"required part missing (a {wanted})")
+                continue
+            name = self.name(data[part], path, _DEVICE_ID)
+            device = local.get(name) if local is not None and name else None
+            if local is not None and name and device is None:
+                self.fail(path, f"unknown device {name!r} on this host{_hint(name, local, 'it has no devices')}")
+            if name is None or device is None or not device.type:
+                continue
+            out[part] = device.id
+            if device.type != wanted:
+                self.fail(path, f"{name} is a {device.type}, expected a {wanted}")
+            elif not device.sharable and name in users:
+                self.fail(path, f"{name} is already the {users[name]}; only a sharable device can serve several")
+            else:
+                users.setdefault(name, f"{part} of {rid}")
+        return out
+
+    def values(self, t: ComponentType, value: object, key: str) -> dict[str, object]:
+        """Property values as the manifest of `t` declares them (device options, robot properties)."""
+        out: dict[str, object] = {}
+        for name, v in self.mapping(value, key).items():
+            path, type_ = f"{key}.{name}", t.properties.get(str(name))
+            if type_ is None:
+                self.fail(path, f"unknown property of {t.name}{_hint(str(name), t.properties, 'it declares none')}")
+            elif type_ in _SCALARS:
+                if isinstance(v, bool) == (type_ == "bool") and isinstance(v, _SCALARS[type_]):
+                    out[name] = float(v) if type_ == "float" else v
+                else:
+                    self.fail(path, f"expected {type_}, got {got(v)}")
+            elif type_ == "duration":
+                out[name] = self.duration(v, path)
+            elif isinstance(v, str):
+                out[name] = v
+                self.refs.append((path, type_, v))
+            else:
+                self.fail(path, f"expected the id of a {type_}, got {got(v)}")
+        return out
+
+    def check_cluster(self, hosts: Sequence[Host]) -> None:
+        """Across hosts: one controller, at most one simulator, distinct endpoints and robot ids, references."""
+        for role, exactly in ((Role.CONTROLLER, True), (Role.SIMULATOR, False)):
+            having = [h.name for h in hosts if role in h.roles]
+            for other in having[1:]:
+                self.fail(f"hosts.{other}.roles", f"{role} is already a role of host {having[0]};"
+                          f" a cluster has {'exactly' if exactly else 'at most'} one {role}")
+            if exactly and not having and hosts:
+                self.fail("hosts", f"no host has the role {role}; exactly one must")
+        endpoints: dict[str, str] = {}
+        robots: dict[str, Robot] = {}
+        for h in hosts:
+            if h.endpoint and endpoints.setdefault(h.endpoint, h.name) != h.name:
+                self.fail(f"hosts.{h.name}.endpoint", f"{h.endpoint} is already the endpoint of host"
+                          f" {endpoints[h.endpoint]}")
+            for r in h.robots:
+                if robots.setdefault(r.id, r) is not r:
+                    self.fail(f"hosts.{h.name}.robots.{r.id}", f"duplicate robot id, also on host {robots[r.id].host}")
+        types = {d.id: d.type for h in hosts for d in h.devices} | {r.id: r.type for r in robots.values()}
+        for key, type_, value in self.refs:
+            target = self.catalog.get(type_)
+            if target is None or not target.is_resource:
+                self.fail(key, f"{type_} is not a resource type; it cannot be configured here")
+            elif types.get(value) == "":
+                continue  # a robot or device whose type is wrong, reported already
+            elif value not in types:
+                same = [i for i, ty in types.items() if ty == type_]
+                self.fail(key, f"no {type_} called {value!r}{_hint(value, same, '')}")
+            elif types[value] != type_:
+                self.fail(key, f"{value} is a {types[value]}, expected a {type_}")
+
+    # -- typed readers
+
+    def keys(self, data: Mapping[Any, Any], key: str, allowed: Sequence[str], required: Sequence[str] = ()) -> None:
+        for k in data:
+            if k not in allowed:
+                self.fail(_join(key, str(k)), f"unknown key{_hint(str(k), allowed, 'none allowed here')}")
+        for k in required:
+            if k not in data:
+                self.fail(_join(key, k), "required key missing")
+
+    def mapping(self, value: object, key: str) -> dict[Any, Any]:
+        if isinstance(value, dict):
+            return value
+        self.fail(key, f"expected a mapping, got {got(value)}")
+        return {}
+
+    def entries(self, value: object, key: str, pattern: re.Pattern[str] = _NAME,
+                ) -> Iterator[tuple[str, dict[Any, Any], str]]:
+        """The (name, mapping, key path) of each well-formed entry of a mapping of named sections."""
+        for k, v in self.mapping(value, key).items():
+            path = f"{key}.{k}"
+            if self.name(k, path, pattern) is not None and self.mapping(v, path) is v:
+                yield k, v, path
+
+    def text(self, value: object, key: str) -> str:
+        if isinstance(value, str) and value:
+            return value
+        self.fail(key, f"expected a non-empty string, got {got(value)}")
+        return ""
+
+    def name(self, value: object, key: str, pattern: re.Pattern[str] = _NAME) -> str | None:
+        text = self.text(value, key)
+        if text and not pattern.fullmatch(text):
+            dots = ", in parts joined by dots" if pattern is _DEVICE_ID else ""
+            self.fail(key, f"{text!r} is not a name (letters, digits and _, not starting with a digit{dots})")
+        return text if pattern.fullmatch(text) else None
+
+    def number(self, value: object, key: str, integer: bool = False, zero: bool = False) -> Any:
+        if is_number(value, integer) and (value > 0 or zero and value == 0):  # type: ignore[operator]
+            return value if integer else float(value)  # type: ignore[arg-type]
+        sign = "non-negative" if zero else "positive"
+        self.fail(key, f"expected a {sign} {'integer' if integer else 'number'}, got {got(value)}")
+        return None
+
+    def choice(self, value: object, key: str, enum: type[_E], what: str) -> _E | None:
+        options = [str(m.value) for m in enum]
+        if isinstance(value, str) and value in options:
+            return enum(value)
+        self.fail(key, f"unknown {what} {show(value)}{_hint(str(value), options, '')}")
+        return None
+
+    def roles(self, value: object, key: str) -> tuple[Role, ...]:
+        if not isinstance(value, list) or not value:
+            self.fail(key, f"expected a non-empty list of roles, got {'an empty list' if value == [] else got(value)}")
+            return ()
+        roles = [r for r in (self.choice(v, key, Role, "role") for v in value) if r]
+        for r in sorted({r for r in roles if roles.count(r) > 1}):
+            self.fail(key, f"{r} is listed twice")
+        return tuple(dict.fromkeys(roles))
+
+    def endpoint(self, value: object, key: str) -> str:
+        text = self.text(value, key)
+        m = _ENDPOINT.fullmatch(text)
+        if text and m is None:
+            self.fail(key, f"expected tcp/HOST:PORT or udp/HOST:PORT, got {text!r}")
+        elif m and not 0 < int(m.group(3)) < 65536:
+            self.fail(key, f"port {m.group(3)} is out of range (1 to 65535)")
+        return text if m else ""
+
+    def duration(self, value: object, key: str) -> float:
+        seconds = parse_duration(value) if isinstance(value, str) else None
+        if not seconds:
+            self.fail(key, f"expected a positive duration such as 3s or 500ms, got {got(value)}")
+        return seconds or DEFAULT_LEASE
+
+    def component(self, value: object, key: str, kind: Kind) -> ComponentType | None:
+        """The catalog type `value` names, if it is of `kind` (an rc for devices, an arc for robots)."""
+        name = self.text(value, key)
+        t = self.catalog.get(name)
+        if t is not None and t.kind is kind:
+            return t
+        if t is not None:
+            self.fail(key, f"{name} is {_A[t.kind]}, expected {_A[kind]}")
+        elif name:
+            self.fail(key, f"unknown type {name!r}{_hint(name, self.catalog.names(kind), '')}")
+        return None
+
+
+_A = {Kind.BEHAVIOR: "a behavior", Kind.RC: "an rc", Kind.ARC: "an arc", Kind.DATA: "a data type"}
+
+
+# ---------------------------------------------------------------- files (I/O)
+
+
+def load_hosts(path: str | os.PathLike[str], catalog: Catalog) -> Cluster:
+    """Read, check and convert a hosts file; relative security paths are taken from its folder.
+
+    Raises:
+        HostsError: the file is missing or unreadable, is not valid YAML (with the line), or has problems.
+    """
+    path = Path(path)
+    source = _display(path)
+    try:
+        text = path.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise HostsError([HostsProblem(source, "", "no such file")]) from None
+    except (OSError, UnicodeDecodeError) as e:
+        raise HostsError([HostsProblem(source, "", f"cannot read: {e}")]) from e
+    try:
+        data = yaml.load(text, Loader=StrictLoader)  # a SafeLoader that rejects duplicate keys
+    except yaml.YAMLError as e:
+        mark = getattr(e, "problem_mark", None) or getattr(e, "context_mark", None)
+        message = getattr(e, "problem", None) or getattr(e, "context", None) or str(e)
+        raise HostsError([HostsProblem(source, "", f"invalid YAML: {message}", mark and mark.line + 1)]) from e
+    cluster = parse_hosts(data, source, catalog)
+    folder = path.absolute().parent  # `/` keeps absolute paths as they are
+    files: dict[str, Any] = {k: str(folder / Path(v).expanduser()) for k, v in cluster.security.files.items()}
+    return replace(cluster, security=replace(cluster.security, **files))
+
+
+def check_files(cluster: Cluster) -> list[HostsProblem]:
+    """The security files that are missing or unreadable: a daemon needs them before it can join."""
+    problems = []
+    for key, name in cluster.security.files.items():
+        file = Path(name)
+        if not file.is_file():
+            problems.append(HostsProblem(cluster.source, f"cluster.security.{key}", f"no such file: {name}"))
+        elif not os.access(file, os.R_OK):
+            problems.append(HostsProblem(cluster.source, f"cluster.security.{key}", f"cannot read {name}"))
+    return problems
+
+
+def _display(path: Path) -> str:
+    """The path as the user sees it: relative to the working directory when inside it."""
+    absolute, cwd = path.absolute(), Path.cwd()
+    return (absolute.relative_to(cwd) if absolute.is_relative_to(cwd) else path).as_posix()
+
+
+# ---------------------------------------------------------------- small helpers
+
+
+def _join(prefix: str, key: str) -> str:
+    return f"{prefix}.{key}" if prefix else key
+
+
+def _hint(value: str, candidates: Iterable[str], empty: str) -> str:
+    """` (did you mean X?)`, else the choices when there are few, else `empty` in parentheses."""
+    options = sorted(candidates)
+    hint = did_you_mean(value, options)
+    if hint is None and 0 < len(options) <= 6:
+        hint = f"expected one of {', '.join(options)}"
+    hint = hint or empty
+    return f" ({hint})" if hint else ""
