@@ -30,6 +30,8 @@ from dsl.evaluate import EvalError, evaluate, format_value, truthy
 from dsl.export import trigger_label
 from dsl.statechart import ResourceNeed, State, Statechart, StateKind, Transition
 
+_FINAL_STATUS = {"success": Status.SUCCESS, "failure": Status.FAILURE}
+
 #: Transitions one macro step may take before the chart is declared livelocked.
 MAX_MICROSTEPS = 10_000
 
@@ -47,7 +49,7 @@ class Phase(StrEnum):
     """Exited (successfully, failed or stopped)."""
 
 
-@dataclass(eq=False)
+@dataclass(eq=False, slots=True)
 class Node:
     """One active instance of a state."""
 
@@ -99,6 +101,23 @@ class Interpreter:
         self.holders: dict[str, Node] = {}  # request holder path -> node
         self._finishing: list[tuple[Node, bool, str]] = []
         self.rcm.attach(self._apply)
+        # Indices kept in step with entry and exit, so a step never walks the whole tree.
+        self._running: dict[Node, None] = {}  # leaves with a component, in entry order
+        self._timed: dict[Node, None] = {}  # nodes with `after`/`when` transitions
+        self._listening: dict[str, dict[Node, None]] = {}  # event name -> nodes with `on` transitions
+        self._components: dict[str, tuple[Component, Context]] = {}  # reused per instance path
+        self._defaults: dict[str, dict[str, Any]] = {}
+        self._last_tick = -1.0
+        self._on_event: dict[str, dict[str, tuple[Transition, ...]]] = {}
+        self._has_timed: set[str] = set()
+        for st in chart.states.values():
+            by_event: dict[str, list[Transition]] = {}
+            for t in st.transitions:
+                if t.kind is ast.TriggerKind.EVENT and t.event:
+                    by_event.setdefault(t.event, []).append(t)
+                elif t.kind in (ast.TriggerKind.TIMEOUT, ast.TriggerKind.CHANGE):
+                    self._has_timed.add(st.id)
+            self._on_event[st.id] = {k: tuple(v) for k, v in by_event.items()}
 
     # ------------------------------------------------------------- public API
     def attach(self, listener: Listener) -> None:
@@ -117,19 +136,28 @@ class Interpreter:
         if self.outcome is not None:
             return
         now = self.clock.now()
-        self.rcm.tick(now)
-        self._renew(now)
-        for node in list(self._leaves()):
-            if node.phase is Phase.ACTIVE and node.component is not None:
-                status = self._guard_call(node, lambda c=node.component: c.step(now))
-                if status in (Status.SUCCESS, Status.FAILURE):
-                    self._finish(node, status is Status.SUCCESS, "" if status is Status.SUCCESS else "failed")
+        if now != self._last_tick:  # nothing can fall due without time passing
+            self._last_tick = now
+            self.rcm.tick(now)
+            self._renew(now)
+        for node in list(self._running):
+            comp = node.component
+            if node.phase is not Phase.ACTIVE or comp is None:
+                continue
+            try:
+                status = comp.step(now)
+            except Exception as e:  # component code is not ours to trust
+                self._component_failed(node, e)
+                continue
+            if status is Status.SUCCESS or status is Status.FAILURE:
+                self._finish(node, status is Status.SUCCESS, "" if status is Status.SUCCESS else "failed")
         self._settle()
 
     def emit(self, name: str, source: str = "operator", **fields: Any) -> None:
         """Queue an event (from a component, an action or the operator)."""
         record = rec.Event(self.clock.now(), source, name, dict(fields))
-        self._notify(record)
+        if self.listeners:
+            self._notify(record)
         self.events.append(record)
 
     def stop(self, reason: str = "stopped by operator") -> None:
@@ -184,7 +212,12 @@ class Interpreter:
             parent.children.append(node)
         else:
             self.root = node  # before anything can call stop()
-        self._notify(rec.Entered(node.entered, path, state.id))
+        if self.listeners:
+            self._notify(rec.Entered(node.entered, path, state.id))
+        if state.id in self._has_timed:
+            self._timed[node] = None
+        for event in self._on_event[state.id]:
+            self._listening.setdefault(event, {})[node] = None
         for name, _type in state.shared:
             node.scope[name] = {}
         try:
@@ -273,7 +306,9 @@ class Interpreter:
             self._notify(rec.Log(self.clock.now(), path, f"cannot enter: {e.message}"))
             self._finish(parent, False, e.message)
             return None
-        defaults = {a.name: evaluate(a.value, {}) for a in state.defaults}
+        defaults = self._defaults.get(state.id)
+        if defaults is None:
+            defaults = self._defaults[state.id] = {a.name: evaluate(a.value, {}) for a in state.defaults}
         return self._enter(state, path, parent, defaults | params)
 
     def _start_multi(self, node: Node) -> None:
@@ -324,31 +359,49 @@ class Interpreter:
                     self._grow_multi(node)
 
     def _start_component(self, node: Node) -> None:
-        name = node.state.component or ""
-        factory = self.registry.get(name)
-        if factory is None:
-            self._finish(node, False, f"no implementation of component {name} is available")
-            return
+        """Set a component up once per instance path (py_trees style); start it on every entry."""
         resources = {}
         for need in node.state.needs:
             rid = node.assignment.get(need.name) or self._bound(node, need)
             if rid:
                 resources[need.name] = rid
-        shared = {}
-        for anc in self._ancestors(node):
-            for k, _ in anc.state.shared:
-                shared.setdefault(k, anc.scope.get(k))
-        ctx = Context(node.path, dict(node.scope), resources,
-                      lambda ev, **f: self.emit(ev, node.path, **f),
-                      lambda text: self._notify(rec.Log(self.clock.now(), node.path, text)),
-                      self.clock.now, services={**self.services, "shared": shared})
-        node.context = ctx
-        comp = self._guard_call(node, factory)
-        if not isinstance(comp, Component):
+        cached = self._components.get(node.path)
+        if cached is not None:
+            comp, ctx = cached
+            ctx.params, ctx.resources, ctx.outputs = dict(node.scope), resources, {}
+        else:
+            name = node.state.component or ""
+            factory = self.registry.get(name)
+            if factory is None:
+                self._finish(node, False, f"no implementation of component {name} is available")
+                return
+            shared = {}
+            for anc in self._ancestors(node):
+                for k, _ in anc.state.shared:
+                    shared.setdefault(k, anc.scope.get(k))
+            path = node.path
+            ctx = Context(path, dict(node.scope), resources,
+                          lambda ev, **f: self.emit(ev, path, **f),
+                          lambda text: self._notify(rec.Log(self.clock.now(), path, text)),
+                          self.clock.now, services={**self.services, "shared": shared})
+            try:
+                comp = factory()
+                comp.setup(ctx)
+            except Exception as e:  # component code is not ours to trust
+                self._component_failed(node, e)
+                return
+            self._components[node.path] = (comp, ctx)
+        node.component, node.context = comp, ctx
+        try:
+            comp.start()
+        except Exception as e:
+            self._component_failed(node, e)
             return
-        node.component = comp
-        self._guard_call(node, lambda: comp.setup(ctx))
-        self._guard_call(node, comp.start)
+        self._running[node] = None
+
+    def _component_failed(self, node: Node, e: Exception) -> None:
+        self._notify(rec.Log(self.clock.now(), node.path, f"component raised {type(e).__name__}: {e}"))
+        self._finish(node, False, f"component raised {type(e).__name__}: {e}")
 
     def _bound(self, node: Node, need: ResourceNeed) -> str | None:
         if need.bound_to is None:
@@ -441,38 +494,42 @@ class Interpreter:
 
     def _fire_one(self) -> bool:
         """Take the first enabled change or timeout transition, if any."""
+        if not self._timed:
+            return False
         now = self.clock.now()
-        for node in self.active():
-            if node.parent is None:
+        for node in list(self._timed):
+            if node.parent is None or node.phase is Phase.DONE:
                 continue
+            domain = node.parent
             for t in node.state.transitions:
-                if t.kind is ast.TriggerKind.TIMEOUT and t.delay is not None and now - node.entered >= t.delay:
-                    pass
-                elif t.kind is ast.TriggerKind.CHANGE and t.condition is not None:
-                    if not self._truthy(parent_domain(node), t.condition, None):
+                if t.kind is ast.TriggerKind.TIMEOUT:
+                    if t.delay is None or now - node.entered < t.delay:
+                        continue
+                elif t.kind is ast.TriggerKind.CHANGE:
+                    if t.condition is None or not self._truthy(domain, t.condition, None):
                         continue
                 else:
                     continue
-                if self._enabled_guard(parent_domain(node), t, None):
+                if self._enabled_guard(domain, t, None):
                     self._take(node, t, None)
                     return True
         return False
 
     def _dispatch(self, event: rec.Event) -> None:
-        for node in self.active():
+        for node in list(self._listening.get(event.name, ())):
             if node.parent is None or node.phase is Phase.DONE:
                 continue
-            for t in node.state.transitions:
-                if t.kind is ast.TriggerKind.EVENT and t.event == event.name \
-                        and self._enabled_guard(parent_domain(node), t, event):
+            for t in self._on_event[node.state.id][event.name]:
+                if self._enabled_guard(node.parent, t, event):
                     self._take(node, t, event)
                     break
 
     def _take(self, node: Node, t: Transition, event: rec.Event | None) -> None:
         domain = parent_domain(node)
         target = self.chart[t.target]
-        self._notify(rec.Taken(self.clock.now(), node.path, _target_path(domain, target), t.kind.value,
-                               trigger_label(t)))
+        if self.listeners:
+            self._notify(rec.Taken(self.clock.now(), node.path, _target_path(domain, target), t.kind.value,
+                                   trigger_label(t)))
         if node.phase is not Phase.DONE:
             self._exit(node, "stopped")
         if target.kind is StateKind.FINAL and domain.state.kind is StateKind.PARALLEL:
@@ -513,14 +570,22 @@ class Interpreter:
     def _exit(self, node: Node, status: str) -> None:
         """Exit children first, terminate the component, give resources back."""
         if node.phase is Phase.DONE:
+            if node.parent is not None and node in node.parent.children:
+                node.parent.children.remove(node)
             return
-        for child in list(reversed(node.children)):
-            self._exit(child, "stopped" if status != "failure" else "stopped")
-        if node.component is not None:
-            final = {"success": Status.SUCCESS, "failure": Status.FAILURE}.get(status, Status.RUNNING)
-            comp = node.component
-            self._guard_call(node, lambda: comp.terminate(final), on_error=False)
+        while node.children:
+            self._exit(node.children[-1], "stopped")
+        comp = node.component
+        if comp is not None:
+            self._running.pop(node, None)
+            try:
+                comp.terminate(_FINAL_STATUS.get(status, Status.RUNNING))
+            except Exception as e:  # the node is leaving anyway: just say so
+                self._notify(rec.Log(self.clock.now(), node.path, f"component raised {type(e).__name__}: {e}"))
         node.phase = Phase.DONE
+        self._timed.pop(node, None)
+        for event in self._on_event[node.state.id]:
+            self._listening[event].pop(node, None)
         if node.requested:
             self.holders.pop(node.path, None)
             now = self.clock.now()
@@ -528,9 +593,13 @@ class Interpreter:
                 self.rcm.release(node.path, now)
             else:
                 self.rcm.cancel(node.path, now)
-        if node.parent is not None and node in node.parent.children:
-            node.parent.children.remove(node)
-        self._notify(rec.Exited(self.clock.now(), node.path, node.state.id, status))
+        parent = node.parent
+        if parent is not None and parent.children and parent.children[-1] is node:
+            parent.children.pop()
+        elif parent is not None and node in parent.children:
+            parent.children.remove(node)
+        if self.listeners:
+            self._notify(rec.Exited(self.clock.now(), node.path, node.state.id, status))
 
     def _end(self, outcome: str, reason: str) -> None:
         self.rcm.detach(self._apply)
@@ -627,9 +696,6 @@ class Interpreter:
 
     def _enabled_guard(self, domain: Node, t: Transition, event: rec.Event | None) -> bool:
         return t.guard is None or self._truthy(domain, t.guard, event)
-
-    def _leaves(self) -> list[Node]:
-        return [n for n in self.active() if n.state.kind is StateKind.LEAF]
 
     def _guard_call(self, node: Node, fn: Callable[[], Any], on_error: bool = True) -> Any:
         """Call component code; an exception fails the node, never the executive."""
