@@ -75,7 +75,10 @@ class Builder:
                                  defaults=defaults, needs=needs,
                                  shared=tuple((s.name, s.type.name) for s in body.shared),
                                  vars=tuple(body.vars), priority=prio, span=child.span)
-        inner = tuple(_Held(sid, n.name, n.type.name) for n in body.needs) + held
+        # A need bound to an ancestor's resource is that resource under a new name: it hides the old entry.
+        hidden = {(n.bound_to[0], n.bound_to[1]) for n in needs if n.bound_to and n.bound_to[2] is None}
+        inner = tuple(_Held(sid, n.name, n.type.name) for n in body.needs) + tuple(
+            h for h in held if (h.state, h.name) not in hidden)
         kids = {key: self._child(sid, c, depth + 1, prio, inner) for key, c in body.children.items()}
         self.states[sid] = self._body(self.states[sid], body, kids)
 
@@ -133,7 +136,8 @@ class Builder:
 
     # ------------------------------------------------------------- resources
     def _need(self, n: ast.Need, held: tuple[_Held, ...]) -> ResourceNeed:
-        bound = self._bind(n.name, n.type.name, (), held, n.span, parts=False)
+        # A `where` selects a particular resource: then only a same-named or same-typed one is reused.
+        bound = self._bind(n.name, n.type.name, (), held, n.span, parts=n.where is None)
         return ResourceNeed(n.name, n.type.name, n.where, n.quantity, n.slice.seconds if n.slice else None,
                             bound, span=n.span)
 

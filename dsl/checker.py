@@ -337,7 +337,8 @@ class Checker:
             return None
         known = [*self.behaviors, *self.catalog.names(Kind.BEHAVIOR)]
         if implicit_in is not None:  # named only in a transition or plan: the user meant a state
-            siblings = self.bodies[implicit_in].children
+            body = self.bodies[implicit_in]
+            siblings = [k for k in body.children if k not in body.implicit]  # not the typo itself
             self.report.error("unknown-state", f"unknown state {name}: no child of {implicit_in} and no behavior "
                               "has this name", span, did_you_mean(name, [*siblings, *known]))
             return None
@@ -371,8 +372,8 @@ class Checker:
             return
         if body.parallel is not None:
             par = body.parallel
-            outside = [c for c in body.children.values() if c not in par.children
-                       and c.key not in {x.key for x in par.children}]
+            inside = {c.key for c in par.children}
+            outside = [c for c in body.children.values() if c.key not in inside]
             for c in outside:
                 self.report.error("structure", f"{c.key} is outside the parallel block of {b.name}", c.span,
                                   "a body with a parallel block holds all of its children inside it")

@@ -50,9 +50,10 @@ def _read(path: Path, name: str, report: Reporter, at: Span | None) -> str | Non
             report.error("io", f"{name} is larger than {MAX_FILE_BYTES // 2**20} MiB", where)
             return None
         data = path.read_bytes()
-    except OSError as e:
+    except (OSError, ValueError) as e:  # ValueError: a NUL byte in the path
         what = "cannot read imported file" if at else "cannot read"
-        report.error("io", f"{what} {name}: {e.strerror or e}", where)
+        reason = e.strerror if isinstance(e, OSError) and e.strerror else str(e)
+        report.error("io", f"{what} {name!r}: {reason}" if "\x00" in name else f"{what} {name}: {reason}", where)
         return None
     return decode(data, name, report)
 

@@ -40,10 +40,10 @@ _ESCAPES = {"n": "\n", "t": "\t", '"': '"', "\\": "\\", "{": "{", "}": "}"}
 _TERMINAL_WORDS = {
     "NAME": "a name", "INT": "an integer", "FLOAT": "a number", "DURATION": "a duration (e.g. 30s)",
     "STRING": 'a string ("...")', "_SEP": "a newline or ;", "$END": "the end of the file",
-    "RBRACE": "}", "LBRACE": "{", "LPAR": "(", "RPAR": ")", "LSQB": "[", "RSQB": "]", "COMMA": ",",
-    "COLON": ":", "EQUAL": "=", "DOT": ".", "ARROW": "->", "CMP": "a comparison", "LT": "<",
-    "PLUS": "+", "MINUS": "-", "STAR": "*", "SLASH": "/", "PERCENT": "%", "ACTION_SLASH": "/",
-    "ACTION_SEMI": ";", "__ANON_0": "..",
+    "RBRACE": "`}`", "LBRACE": "`{`", "LPAR": "`(`", "RPAR": "`)`", "LSQB": "`[`", "RSQB": "`]`",
+    "COMMA": "`,`", "COLON": "`:`", "EQUAL": "`=`", "DOT": "`.`", "ARROW": "`->`", "CMP": "a comparison",
+    "LT": "`<`", "PLUS": "`+`", "MINUS": "`-`", "STAR": "`*`", "SLASH": "`/`", "PERCENT": "`%`",
+    "ACTION_SLASH": "`/`", "ACTION_SEMI": "`;`", "__ANON_0": "`..`",
 }
 
 # Messages keyed by the token before the error: what the user was in the middle of writing.
@@ -506,9 +506,10 @@ def syntax_diagnostic(e: UnexpectedInput, history: Sequence[Token], file: str) -
     if prev is not None and prev.type in AFTER_TOKEN and tok.type != "$END":
         return Diagnostic("syntax", f"syntax: {AFTER_TOKEN[prev.type]}", span, hint)
     if tok.type == "$END":
-        missing = "}" if "RBRACE" in e.expected else _describe(e.expected)
+        closing = "RBRACE" in e.expected
+        missing = "`}`" if closing else _describe(e.expected)
         return Diagnostic("syntax", f"syntax: the file ends too early: expected {missing}", span,
-                          "every { needs a matching }" if missing == "}" else None)
+                          "every { needs a matching }" if closing else None)
     if "_SEP" in e.expected and not (e.expected & ITEM_STARTS) and prev is not None and tok.type != "_SEP":
         return Diagnostic("syntax", f"syntax: expected a newline or ; after {_show(prev)}", _after(file, prev),
                           hint or f"{_show(tok)} starts a new item: put it on its own line")
@@ -549,7 +550,7 @@ def _keyword_hint(tok: Token, expected: set[str] | frozenset[str]) -> str | None
     """Explain the usual causes: a keyword where a name belongs, or glued to a name."""
     if tok.type in ("SET", "EMIT", "RELEASE", "LOG") and tok.type not in expected:
         return f"actions such as {tok.value} follow a / at the end of a transition: A -> B / {tok.value} ..."
-    if tok.type != "NAME" and tok.value in KEYWORDS:
+    if tok.type != "NAME" and tok.value in KEYWORDS and "NAME" in expected:
         return f"{tok.value} is a reserved word: choose another name"
     if tok.type == "NAME":
         for kw in sorted(KEYWORDS, key=len, reverse=True):

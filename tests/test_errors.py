@@ -31,15 +31,15 @@ ERRORS: list[tuple[str, str, str, str | None]] = [
      "event is a reserved word"),
     ("single-quotes", m("  Inspect(label: 'a')", "behavior Inspect(label: str) { Observe }"),
      "2:18 syntax: unexpected character \"'\"", "double quotes"),
-    ("unclosed-brace", "mission M {\n  Observe\n", "2:10 syntax: the file ends too early: expected }", "matching }"),
-    ("action-outside-transition", m("  log \"hi\""), "2:3 syntax: expected a name, needs, parallel, plan, shared, "
-     "start, var or }, got `log`", "follow a / at the end of a transition"),
+    ("unclosed-brace", "mission M {\n  Observe\n", "2:10 syntax: the file ends too early: expected `}`", "matching }"),
+    ("action-outside-transition", m("  log \"hi\""), "2:3 syntax: expected `}`, a name, needs, parallel, plan, "
+     "shared, start or var, got `log`", "follow a / at the end of a transition"),
     ("after-needs-duration", m("  Observe\n  Observe -> done after soon"),
      "3:25 syntax: expected a duration after after (e.g. 2min)", None),
     ("bad-escape", m('  Observe\n  Observe -> done / log "a\\qb"'), "3:27 unknown escape \\q in string", None),
     ("unclosed-interpolation", m('  Observe\n  Observe -> done / log "a{b"'), "3:27 unclosed { in string", None),
     ("bad-interpolation", m('  Observe\n  Observe -> done / log "a{1 +}"'),
-     "3:30 bad expression in string interpolation: expected (, -, a duration (e.g. 30s), a name, a number, "
+     "3:30 bad expression in string interpolation: expected `(`, `-`, a duration (e.g. 30s), a name, a number, "
      "a string (\"...\"), an integer, event, false or true, got the end of the expression", None),
     # ---- names
     ("unknown-behavior", m("  DetectDor(min_width: 0.7)"), "2:3 unknown behavior DetectDor",
