@@ -18,8 +18,8 @@ from importlib import resources
 from typing import TextIO
 
 from lark import Lark
-from rich.console import Console  # noqa: TID251 - rich is allowed in bench/
-from rich.table import Table  # noqa: TID251
+from rich.console import Console
+from rich.table import Table
 
 import dsl
 from drd.manifests import load_catalog

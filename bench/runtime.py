@@ -29,8 +29,8 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any, TextIO
 
-from rich.console import Console  # noqa: TID251 - rich is allowed in bench/
-from rich.table import Table  # noqa: TID251
+from rich.console import Console
+from rich.table import Table
 from sismic.interpreter import Interpreter as SismicInterpreter
 from sismic.io import import_from_yaml
 from transitions import Machine
