@@ -108,6 +108,7 @@ class Interpreter:
         self._components: dict[str, tuple[Component, Context]] = {}  # reused per instance path
         self._defaults: dict[str, dict[str, Any]] = {}
         self._last_tick = -1.0
+        self._settling = False
         self._on_event: dict[str, dict[str, tuple[Transition, ...]]] = {}
         self._has_timed: set[str] = set()
         for st in chart.states.values():
@@ -159,6 +160,8 @@ class Interpreter:
         if self.listeners:
             self._notify(record)
         self.events.append(record)
+        if not self._settling and self.root is not None:  # from outside a step: run to completion now
+            self._settle()
 
     def stop(self, reason: str = "stopped by operator") -> None:
         """Shut everything down, children first; idempotent."""
@@ -240,9 +243,9 @@ class Interpreter:
             self._finish(node, False, e.message)
             return
         node.requested = True
-        self.holders[node.path] = node
+        self.holders[self._holder(node)] = node
         self._notify(rec.Waiting(self.clock.now(), node.path, tuple(f"{n.name}: {n.type}" for n in needs)))
-        self.rcm.request(Request(node.path, node.state.priority, reqs, self.mission), self.clock.now())
+        self.rcm.request(Request(self._holder(node), node.state.priority, reqs, self.mission), self.clock.now())
 
     def _need_request(self, node: Node, need: ResourceNeed) -> NeedRequest:
         quantity = need.quantity
@@ -419,6 +422,15 @@ class Interpreter:
 
     def _settle(self) -> None:
         """Run to completion: finish nodes and take enabled transitions until quiet."""
+        if self._settling:
+            return
+        self._settling = True
+        try:
+            self._run_to_completion()
+        finally:
+            self._settling = False
+
+    def _run_to_completion(self) -> None:
         for _ in range(MAX_MICROSTEPS):
             if self.outcome is not None:
                 return
@@ -564,7 +576,7 @@ class Interpreter:
         holder = next((n for n in [domain, *self._ancestors(domain)] if name in n.assignment), None)
         if holder is None:
             return
-        self.rcm.release(holder.path, self.clock.now(), [name])  # by need name: exact even on shared units
+        self.rcm.release(self._holder(holder), self.clock.now(), [name])  # by need name: exact even on shared units
 
     # ------------------------------------------------------------- exiting
     def _exit(self, node: Node, status: str) -> None:
@@ -587,12 +599,12 @@ class Interpreter:
         for event in self._on_event[node.state.id]:
             self._listening[event].pop(node, None)
         if node.requested:
-            self.holders.pop(node.path, None)
+            self.holders.pop(self._holder(node), None)
             now = self.clock.now()
             if node.assignment:
-                self.rcm.release(node.path, now)
+                self.rcm.release(self._holder(node), now)
             else:
-                self.rcm.cancel(node.path, now)
+                self.rcm.cancel(self._holder(node), now)
         parent = node.parent
         if parent is not None and parent.children and parent.children[-1] is node:
             parent.children.pop()
@@ -666,6 +678,10 @@ class Interpreter:
                         node.lease_until = until
 
     # ------------------------------------------------------------- helpers
+    def _holder(self, node: Node) -> str:
+        """The manager's name for a node: unique across missions sharing it, prefixes kept."""
+        return f"{self.mission}/{node.path}"
+
     def _names(self, node: Node | None, event: rec.Event | None = None) -> dict[str, Any]:
         if node is None:
             return {}

@@ -1,0 +1,410 @@
+"""The one ``Bus`` interface every drd process talks through, shaped after zenoh 1.x.
+
+Two implementations: :class:`drd.bus.local.LocalBus` (in-process, deterministic: dry-runs
+and unit tests) and :class:`drd.bus.zenoh_bus.ZenohBus` (every multi-process run). Both pass
+``tests/test_bus_contract.py``. The receive-side rules live here, once, so they cannot
+drift: decode on receipt, reject/log/count malformed bytes, turn handler exceptions into
+error replies, never let a callback take the bus down.
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+from abc import ABC, abstractmethod
+from collections.abc import Callable
+from dataclasses import dataclass, fields
+from functools import lru_cache
+from types import TracebackType
+from typing import Self
+
+from .messages import ErrorReply, MalformedMessage, Message, decode, encode
+
+log = logging.getLogger("drd.bus")
+
+DEFAULT_TIMEOUT = 2.0
+
+
+class BusError(Exception):
+    """Base of the bus's own errors."""
+
+
+class BusClosed(BusError):
+    """The session was closed; declare a new one."""
+
+
+class BusTimeout(BusError):
+    """No reply arrived before the timeout (nobody serves the key, or it was too slow)."""
+
+
+class RemoteError(BusError):
+    """The queryable answered with an error (its handler raised, or it rejected the request)."""
+
+    def __init__(self, key: str, reason: str) -> None:
+        super().__init__(f"{key}: {reason}")
+        self.key, self.reason = key, reason
+
+
+# --- values handed to user code ---------------------------------------------------------------
+
+
+@dataclass(frozen=True, slots=True)
+class Sample:
+    """A publication as a subscriber sees it: the concrete key and the decoded message."""
+
+    key: str
+    payload: Message
+
+
+@dataclass(frozen=True, slots=True)
+class Reply:
+    """One answer to a request: ``payload`` on success, ``error`` (a reason) on failure.
+
+    A handler returns ``Reply(payload)`` (or just the message), ``Reply(error=...)`` to refuse,
+    or None to stay silent. ``key`` defaults to the query's key (or the queryable's, when the
+    query has wildcards); an explicit key must intersect the query's key expression.
+    """
+
+    payload: Message | None = None
+    key: str | None = None
+    error: str | None = None
+
+    @property
+    def ok(self) -> bool:
+        return self.error is None
+
+
+@dataclass(frozen=True, slots=True)
+class Query:
+    """A request as a queryable sees it; ``payload`` is None for a request without one."""
+
+    key: str
+    payload: Message | None
+    queryable: str
+
+    def reply(self, payload: Message, key: str | None = None) -> Reply:
+        return Reply(payload, key)
+
+    def error(self, reason: str) -> Reply:
+        return Reply(error=reason)
+
+
+Handler = Callable[[Query], "Reply | Message | None"]
+SampleCallback = Callable[[Sample], None]
+TokenCallback = Callable[[str, bool], None]
+
+
+class Declaration:
+    """Something declared on a bus (subscription, queryable, token); ``close()`` is idempotent."""
+
+    def __init__(self, key_expr: str, undeclare: Callable[[], None]) -> None:
+        self.key_expr = key_expr
+        self._undeclare: Callable[[], None] | None = undeclare
+        self._lock = threading.Lock()
+
+    @property
+    def closed(self) -> bool:
+        return self._undeclare is None
+
+    def close(self) -> None:
+        with self._lock:
+            undeclare, self._undeclare = self._undeclare, None
+        if undeclare is not None:
+            undeclare()
+
+    def __enter__(self) -> Self:
+        return self
+
+    def __exit__(self, *_exc: object) -> None:
+        self.close()
+
+    def __repr__(self) -> str:
+        return f"{type(self).__name__}({self.key_expr!r}{', closed' if self.closed else ''})"
+
+
+class Subscription(Declaration):
+    """A subscriber (to publications or to liveliness changes)."""
+
+
+class Queryable(Declaration):
+    """A served key expression."""
+
+
+class Token(Declaration):
+    """A liveliness token: alive while declared and while its session lives."""
+
+
+@dataclass
+class BusStats:
+    """Counters a daemon exposes in ``status``; updated from any thread."""
+
+    malformed: int = 0
+    handler_errors: int = 0
+    callback_errors: int = 0
+
+    def __post_init__(self) -> None:
+        self._lock = threading.Lock()
+
+    def bump(self, name: str) -> None:
+        with self._lock:
+            setattr(self, name, getattr(self, name) + 1)
+
+    def as_dict(self) -> dict[str, int]:
+        return {f.name: getattr(self, f.name) for f in fields(self)}
+
+
+# --- key expressions -------------------------------------------------------------------------
+
+
+def check_key_expr(key: str, *, concrete: bool = False) -> str:
+    """Refuse a key expression zenoh would refuse (or that LocalBus cannot match), with why.
+
+    Supported: chunks separated by ``/``, ``*`` (exactly one chunk) and ``**`` (any number of
+    chunks) as whole chunks. Not supported: ``$*`` sub-chunk wildcards and ``@`` verbatim chunks.
+    """
+    if not isinstance(key, str):
+        raise ValueError(f"key expression must be a non-empty string, not {key!r}")
+    return _check_key_expr(key, concrete)
+
+
+@lru_cache(maxsize=4096)  # a process uses few distinct keys, over and over
+def _check_key_expr(key: str, concrete: bool) -> str:
+    if not key:
+        raise ValueError(f"key expression must be a non-empty string, not {key!r}")
+    chunks = key.split("/")
+    for index, chunk in enumerate(chunks):
+        if not chunk:
+            raise ValueError(f"key expression {key!r}: empty chunk or leading/trailing '/'")
+        if any(c in chunk for c in "#?$") or chunk.startswith("@"):
+            raise ValueError(f"key expression {key!r}: '#', '?', '$' and a leading '@' are not allowed")
+        if "*" in chunk and chunk not in ("*", "**"):
+            raise ValueError(f"key expression {key!r}: '*' must be a whole chunk ('*' or '**')")
+        if concrete and "*" in chunk:
+            raise ValueError(f"key {key!r} must be concrete (no wildcards)")
+        if chunk == "**" and index + 1 < len(chunks) and chunks[index + 1] in ("*", "**"):
+            raise ValueError(f"key expression {key!r}: write '*/**' for '**/*' and '**' for '**/**' (canon form)")
+    return key
+
+
+def intersects(a: str, b: str) -> bool:
+    """True when some concrete key matches both expressions (zenoh's intersection rule)."""
+    return _intersects(tuple(a.split("/")), tuple(b.split("/")))
+
+
+@lru_cache(maxsize=4096)
+def _intersects(a: tuple[str, ...], b: tuple[str, ...]) -> bool:
+    if not a or not b:
+        return all(c == "**" for c in a + b)
+    if a[0] == "**":
+        return _intersects(a[1:], b) or _intersects(a, b[1:])
+    if b[0] == "**":
+        return _intersects(a, b[1:]) or _intersects(a[1:], b)
+    if a[0] == b[0] or a[0] == "*" or b[0] == "*":
+        return _intersects(a[1:], b[1:])
+    return False
+
+
+def is_concrete(key: str) -> bool:
+    return "*" not in key
+
+
+def join_key(*chunks: str) -> str:
+    """A key from names (host, component, instance...): refuses a name that would change its shape.
+
+    ``join_key("drd", cluster, "host", host, "load")``; a name holding '/', a wildcard or a
+    forbidden character raises ValueError instead of silently addressing something else.
+    """
+    for chunk in chunks:
+        if not isinstance(chunk, str) or not chunk or "/" in chunk or "*" in chunk:
+            raise ValueError(f"key chunk {chunk!r} must be a non-empty name without '/' or '*'")
+    return check_key_expr("/".join(chunks))
+
+
+# --- the interface -----------------------------------------------------------------------------
+
+
+class Bus(ABC):
+    """A session on the drd bus: publish/subscribe, query/reply, liveliness.
+
+    Payloads are :class:`~drd.bus.messages.Message` objects, encoded on send and decoded
+    (schema-checked) on receipt. Callbacks and handlers must be quick: hand long work to
+    a thread of your own. See docs/bus.md for threading and key layout.
+    """
+
+    def __init__(self, name: str = "") -> None:
+        self.name = name
+        self.stats = BusStats()
+        self._closed = False
+
+    # -- publish/subscribe
+    def put(self, key: str, payload: Message) -> None:
+        """Publish ``payload`` on ``key`` to every matching subscriber (fire and forget)."""
+        self.put_raw(key, encode(payload))
+
+    @abstractmethod
+    def put_raw(self, key: str, data: bytes) -> None:
+        """Publish bytes unchecked: for tools and fault-injection tests; receivers still check."""
+
+    @abstractmethod
+    def subscribe(self, key_expr: str, callback: SampleCallback) -> Subscription:
+        """Call ``callback(Sample)`` for every well-formed publication matching ``key_expr``."""
+
+    # -- query/reply
+    @abstractmethod
+    def serve(self, key_expr: str, handler: Handler) -> Queryable:
+        """Answer requests matching ``key_expr`` with ``handler(Query)``."""
+
+    def request(self, key: str, payload: Message | None = None, timeout: float = DEFAULT_TIMEOUT) -> list[Reply]:
+        """All replies from every matching queryable that arrive within ``timeout`` seconds."""
+        return self.request_raw(key, None if payload is None else encode(payload), timeout)
+
+    @abstractmethod
+    def request_raw(self, key: str, data: bytes | None, timeout: float = DEFAULT_TIMEOUT) -> list[Reply]:
+        """``request`` with unchecked bytes: for tools and fault-injection tests."""
+
+    def call(self, key: str, payload: Message | None = None, timeout: float = DEFAULT_TIMEOUT) -> Message:
+        """The one answer to a request: the first successful reply.
+
+        Raises RemoteError if a queryable answered with an error, BusTimeout if none answered.
+        """
+        replies = self.request(key, payload, timeout)
+        for reply in replies:
+            if reply.error is not None:
+                raise RemoteError(reply.key or key, reply.error)
+        for reply in replies:
+            if reply.payload is not None:
+                return reply.payload
+        raise BusTimeout(f"no reply on {key!r} within {timeout:g} s")
+
+    # -- liveliness
+    @abstractmethod
+    def declare_token(self, key: str) -> Token:
+        """Announce presence on ``key`` (concrete, unique in the cluster) until closed."""
+
+    @abstractmethod
+    def watch_tokens(self, key_expr: str, on_change: TokenCallback, history: bool = True) -> Subscription:
+        """Call ``on_change(key, alive)`` when tokens matching ``key_expr`` appear or vanish.
+
+        With ``history`` the tokens alive now are replayed first as ``alive=True``.
+        """
+
+    @abstractmethod
+    def alive(self, key_expr: str, timeout: float = 1.0) -> list[str]:
+        """The keys of the tokens alive now matching ``key_expr``, sorted."""
+
+    # -- lifetime
+    @abstractmethod
+    def close(self) -> None:
+        """Undeclare everything this session declared (its tokens vanish); idempotent."""
+
+    @property
+    def closed(self) -> bool:
+        return self._closed
+
+    def __enter__(self) -> Self:
+        return self
+
+    def __exit__(
+        self, exc_type: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None
+    ) -> None:
+        self.close()
+
+    def _check_open(self) -> None:
+        if self._closed:
+            raise BusClosed(f"bus session {self.name or id(self)} is closed")
+
+    # -- receive-side rules shared by the implementations
+    def _reject(self, where: str, key: str, reason: str) -> None:
+        self.stats.bump("malformed")
+        log.warning("bus %s: rejected malformed %s on %r: %s", self.name, where, key, reason)
+
+    def _on_sample(self, callback: SampleCallback, key: str, data: bytes) -> None:
+        """Decode a publication and hand it to the callback; never raises."""
+        try:
+            msg = decode(data)
+        except MalformedMessage as exc:
+            self._reject("publication", key, exc.reason)
+            return
+        try:
+            callback(Sample(key, msg))
+        except Exception:
+            self.stats.bump("callback_errors")
+            log.exception("bus %s: subscriber callback on %r raised", self.name, key)
+
+    def _on_token(self, callback: TokenCallback, key: str, alive: bool) -> None:
+        try:
+            callback(key, alive)
+        except Exception:
+            self.stats.bump("callback_errors")
+            log.exception("bus %s: token watcher on %r raised", self.name, key)
+
+    def _answer(self, handler: Handler, query_key: str, queryable: str, data: bytes | None) -> Answer | None:
+        """Run a handler on raw request bytes; the answer to send back, or None for silence.
+
+        Never raises: malformed requests and handler exceptions become error answers.
+        """
+        default_key = query_key if is_concrete(query_key) or not is_concrete(queryable) else queryable
+        try:
+            payload = None if data is None else decode(data)
+        except MalformedMessage as exc:
+            self._reject("request", query_key, exc.reason)
+            return Answer.failure(default_key, f"malformed request: {exc.reason}")
+        try:
+            result = handler(Query(query_key, payload, queryable))
+        except Exception as exc:
+            self.stats.bump("handler_errors")
+            log.exception("bus %s: handler for %r raised on %r", self.name, queryable, query_key)
+            return Answer.failure(default_key, f"{type(exc).__name__}: {exc}")
+        if result is None:
+            return None
+        key = default_key
+        if isinstance(result, Reply):
+            key = result.key or default_key
+            if result.error is not None:
+                return Answer.failure(key, result.error)
+            if result.key is not None and not (_valid(result.key) and intersects(result.key, query_key)):
+                return Answer.failure(key, f"reply key {result.key!r} does not match the query {query_key!r}")
+            result = result.payload
+        if not isinstance(result, Message):
+            self.stats.bump("handler_errors")
+            return Answer.failure(key, f"handler returned {type(result).__name__}, not a message")
+        try:
+            return Answer(key, encode(result), False)
+        except MalformedMessage as exc:
+            self.stats.bump("handler_errors")
+            return Answer.failure(key, f"handler returned a malformed reply: {exc.reason}")
+
+    def _received_reply(self, key: str, data: bytes, is_error: bool) -> Reply:
+        """Decode a reply's bytes into a Reply; malformed ones become error replies, counted."""
+        try:
+            msg = decode(data)
+        except MalformedMessage as exc:
+            self._reject("error reply" if is_error else "reply", key, exc.reason)
+            return Reply(key=key, error=f"malformed reply: {exc.reason}")
+        if is_error:
+            return Reply(key=key, error=msg.reason if isinstance(msg, ErrorReply) else repr(msg))
+        return Reply(msg, key)
+
+
+@dataclass(frozen=True, slots=True)
+class Answer:
+    """The wire form of a handler's reply: what the implementations send back."""
+
+    key: str
+    data: bytes
+    is_error: bool
+
+    @staticmethod
+    def failure(key: str, reason: str) -> Answer:
+        if len(reason) > 4096:
+            reason = reason[:4093] + "..."
+        return Answer(key, encode(ErrorReply(reason)), True)
+
+
+def _valid(key: str) -> bool:
+    try:
+        check_key_expr(key)
+    except ValueError:
+        return False
+    return True
+

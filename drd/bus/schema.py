@@ -1,0 +1,249 @@
+"""Compiled converters between JSON values and annotated Python values: the message schema.
+
+A *loader* checks a decoded JSON value against an annotation and builds the Python value; a
+*dumper* checks a Python value and builds its JSON form. Each is compiled once per annotation
+(message classes get generated straight-line code, as dataclasses does for ``__init__``),
+because decoding sits on every request's path: in a busy daemon the interpreter's caches are
+cold, and every bytecode saved shows in the latency. Both raise :class:`Mismatch`, which
+collects the path to the bad value on its way up, so the happy path formats no string.
+"""
+
+from __future__ import annotations
+
+import math
+import types
+import typing
+from collections.abc import Callable
+from typing import Any
+
+Convert = Callable[[Any], Any]
+
+SCALARS: dict[Any, str] = {str: "str", int: "int", float: "float", bool: "bool", type(None): "null"}
+SCHEMAS: dict[type, tuple[tuple[str, Any], ...]] = {}  # registered message class -> (field, annotation)
+_LOADERS: dict[Any, Convert] = {}
+_DUMPERS: dict[Any, Convert] = {}
+
+
+class Mismatch(Exception):
+    """A value that does not fit its annotation; ``describe`` gives the reason with its path."""
+
+    def __init__(self, problem: str) -> None:
+        self.problem, self.path = problem, list[str]()
+
+    def at(self, step: str) -> Mismatch:
+        self.path.append(step)
+        return self
+
+    def describe(self, root: str) -> str:
+        return f"{root}{''.join(reversed(self.path))}: {self.problem}"
+
+
+def check_annotation(tp: Any, where: str) -> None:
+    """Refuse, at class definition, an annotation the wire format cannot carry."""
+    origin, args = typing.get_origin(tp), typing.get_args(tp)
+    if tp is Any or tp in SCALARS or tp in (list, dict, tuple) or tp in SCHEMAS:
+        return
+    if origin in (typing.Union, types.UnionType) or origin is list:
+        for arg in args:
+            check_annotation(arg, where)
+        return
+    if origin is tuple and len(args) == 2 and args[1] is Ellipsis:
+        return check_annotation(args[0], where)
+    if origin is dict and args and args[0] is str:
+        return check_annotation(args[1], where)
+    if isinstance(tp, type) and origin is None:
+        raise TypeError(f"{where}: {tp.__name__} is not a registered message type (nor a supported annotation)")
+    raise TypeError(f"{where}: unsupported annotation {tp!r}")
+
+
+def loader(tp: Any) -> Convert:
+    fn = _LOADERS.get(tp)
+    if fn is None:
+        fn = _LOADERS[tp] = _compile(tp, load=True)
+    return fn
+
+
+def dumper(tp: Any) -> Convert:
+    fn = _DUMPERS.get(tp)
+    if fn is None:
+        fn = _DUMPERS[tp] = _compile(tp, load=False)
+    return fn
+
+
+def forget(cls: type) -> None:
+    """Drop cached converters of a (re-)registered class."""
+    _LOADERS.pop(cls, None)
+    _DUMPERS.pop(cls, None)
+
+
+def kind(value: Any) -> str:
+    """A JSON value's kind, as a peer would name it."""
+    if value is None:
+        return "null"
+    return {bool: "bool", int: "int", float: "float", str: "string", list: "list", dict: "object"}.get(
+        type(value), type(value).__name__
+    )
+
+
+def name(tp: Any) -> str:
+    if tp in SCALARS:
+        return SCALARS[tp]
+    args = typing.get_args(tp)
+    return " | ".join(name(a) for a in args) if args else getattr(tp, "__name__", str(tp))
+
+
+def _identity(v: Any) -> Any:
+    return v
+
+
+def _pyname(v: Any) -> str:
+    return type(v).__name__
+
+
+def _compile(tp: Any, *, load: bool) -> Convert:
+    """The converter for annotation ``tp`` (``load``: JSON -> Python, else Python -> JSON)."""
+    got = kind if load else _pyname
+    origin, args = typing.get_origin(tp), typing.get_args(tp)
+    sub = loader if load else dumper
+    if tp is Any:
+        return _identity  # on dump, the JSON encoder refuses what JSON cannot carry
+    if tp in (str, bool, int, type(None)):
+
+        def exact(v: Any) -> Any:
+            if type(v) is tp:
+                return v
+            raise Mismatch(f"expected {SCALARS[tp]}, got {got(v)}")
+
+        return exact
+    if tp is float:
+
+        def number(v: Any) -> float:
+            if type(v) is float:
+                if load or math.isfinite(v):
+                    return v
+                raise Mismatch(f"{v} is not a finite float")
+            if type(v) is int:
+                return float(v)
+            raise Mismatch(f"expected float, got {got(v)}")
+
+        return number
+    if origin in (typing.Union, types.UnionType):
+        arms, expected = [sub(a) for a in args], name(tp)
+
+        def union(v: Any) -> Any:
+            for arm in arms:
+                try:
+                    return arm(v)
+                except Mismatch:
+                    continue
+            raise Mismatch(f"expected {expected}, got {got(v)}")
+
+        return union
+    if tp in (list, tuple) or origin in (list, tuple):
+        item = sub(args[0]) if args else _identity
+        accepted = (list,) if load else (list, tuple)
+        as_tuple = load and tuple in (tp, origin)
+
+        def sequence(v: Any) -> Any:
+            if type(v) not in accepted:
+                raise Mismatch(f"expected list, got {got(v)}")
+            out = []
+            for i, x in enumerate(v):
+                try:
+                    out.append(item(x))
+                except Mismatch as exc:
+                    raise exc.at(f"[{i}]") from None
+            return tuple(out) if as_tuple else out
+
+        return sequence
+    if tp is dict or origin is dict:
+        value = sub(args[1]) if args else _identity
+
+        def mapping(v: Any) -> dict[str, Any]:
+            if type(v) is not dict:
+                raise Mismatch(f"expected {'object' if load else 'dict'}, got {got(v)}")
+            out = {}
+            for k, x in v.items():
+                if type(k) is not str:
+                    raise Mismatch(f"keys must be str, got {type(k).__name__}")
+                try:
+                    out[k] = value(x)
+                except Mismatch as exc:
+                    raise exc.at(f".{k}") from None
+            return out
+
+        return mapping
+    if tp in SCHEMAS:
+        return _message_converter(tp, load)
+    raise TypeError(f"unsupported annotation {tp!r}")  # pragma: no cover - refused at definition
+
+
+def _message_converter(cls: type, load: bool) -> Convert:
+    """Generated straight-line code for one message class: scalar fields checked inline."""
+    fields = SCHEMAS[cls]
+    ns: dict[str, Any] = {"cls": cls, "Mismatch": Mismatch, "kind": kind, "isfinite": math.isfinite}
+    if load:
+        ns["names"] = frozenset(n for n, _ in fields)
+        ns["fields_error"] = _fields_error(cls, fields)
+        lines = [
+            "def convert(v):",
+            "    if type(v) is not dict:",
+            f"        raise Mismatch('expected object ({cls.__name__}), got ' + kind(v))",
+            "    if v.keys() != names:",
+            "        fields_error(v)",
+        ]
+    else:
+        lines = [
+            "def convert(v):",
+            "    if not isinstance(v, cls):",
+            f"        raise Mismatch('expected {cls.__name__}, got ' + type(v).__name__)",
+        ]
+    for i, (field, tp) in enumerate(fields):
+        x, step = f"x{i}", repr(f".{field}")
+        lines.append(f"    {x} = v[{field!r}]" if load else f"    {x} = v.{field}")
+        kind_of = f"kind({x})" if load else f"type({x}).__name__"
+        if tp in (str, int, bool):
+            lines += [
+                f"    if type({x}) is not {tp.__name__}:",
+                f"        raise Mismatch('expected {SCALARS[tp]}, got ' + {kind_of}).at({step})",
+            ]
+        elif tp is float:
+            lines += [
+                f"    if type({x}) is not float:",
+                f"        if type({x}) is not int:",
+                f"            raise Mismatch('expected float, got ' + {kind_of}).at({step})",
+                f"        {x} = float({x})",
+            ]
+            if not load:
+                lines += [
+                    f"    elif not isfinite({x}):",
+                    f"        raise Mismatch(str({x}) + ' is not a finite float').at({step})",
+                ]
+        elif tp is not Any:
+            ns[f"c{i}"] = loader(tp) if load else dumper(tp)
+            lines += [
+                "    try:",
+                f"        {x} = c{i}({x})",
+                "    except Mismatch as exc:",
+                f"        raise exc.at({step}) from None",
+            ]
+    pairs = [(field, f"x{i}") for i, (field, _) in enumerate(fields)]
+    if load:
+        lines.append(f"    return cls({', '.join(f'{f}={x}' for f, x in pairs)})")
+    else:
+        lines.append(f"    return {{{', '.join(f'{f!r}: {x}' for f, x in pairs)}}}")
+    exec("\n".join(lines), ns)  # noqa: S102 - code built from a registered class's field names only
+    fn: Convert = ns["convert"]
+    return fn
+
+
+def _fields_error(cls: type, fields: tuple[tuple[str, Any], ...]) -> Callable[[dict[str, Any]], None]:
+    names = {n for n, _ in fields}
+    type_name = getattr(cls, "TYPE", cls.__name__)
+
+    def fields_error(v: dict[str, Any]) -> None:
+        if missing := [n for n, _ in fields if n not in v]:
+            raise Mismatch(f"missing field {missing[0]!r} of {type_name}")
+        raise Mismatch(f"unexpected field {sorted(v.keys() - names)[0]!r} for {type_name}")
+
+    return fields_error

@@ -1,0 +1,190 @@
+"""The Mission Executive: runs missions against one Resource Controller Manager, over a bus.
+
+The same executor serves the embedded dry-run (a `LocalBus`, a simulated clock, one
+process) and the controller daemon (a `ZenohBus`, real time). It owns the manager (behind
+a broker, so missions share it by priority) and the resource pool built from
+`hosts.yaml`; it publishes every record of every mission on
+`drd/<cluster>/mission/<id>/record` and answers operator commands on
+`drd/<cluster>/executive` (status, stop, emit). Components come from a registry: the
+default one imports a component's entry point, from its manifest, the first time it runs.
+"""
+
+from __future__ import annotations
+
+import importlib
+import itertools
+from collections.abc import Callable, Iterable, Mapping
+from typing import Any
+
+from drd.bus import Bus, Message, Query, Reply, message
+from drd.rcm import ResourceManager
+from drd.runtime import records as rec
+from drd.runtime.broker import ResourceBroker
+from drd.runtime.clock import Clock
+from drd.runtime.component import Component
+from drd.runtime.interpreter import Interpreter
+from drd.runtime.pool import ResourcePool
+from dsl.catalog import Catalog
+from dsl.statechart import Statechart
+
+
+@message("drd.mission.record", 1)
+class MissionRecord(Message):
+    """One runtime record (entry, exit, transition, grant, event...) of one mission."""
+
+    mission: str
+    kind: str
+    at: float
+    path: str
+    data: dict[str, Any]
+
+
+@message("drd.mission.command", 1)
+class MissionCommand(Message):
+    """An operator's command: `status`, `stop` (a mission, or all with mission ""), `emit`."""
+
+    op: str
+    mission: str = ""
+    event: str = ""
+    fields: dict[str, Any] | None = None
+
+
+@message("drd.mission.status", 1)
+class MissionStatus(Message):
+    """Every mission the executive knows, with its outcome and active state tree."""
+
+    time: float
+    missions: list[dict[str, Any]]
+
+
+class EntryPoints(Mapping[str, Callable[[], Component]]):
+    """A registry that imports `module:Class` from each manifest on first use."""
+
+    def __init__(self, catalog: Catalog, overrides: Mapping[str, Callable[[], Component]] | None = None):
+        self.catalog = catalog
+        self.overrides = dict(overrides or {})
+        self._cache: dict[str, Callable[[], Component]] = {}
+
+    def __getitem__(self, name: str) -> Callable[[], Component]:
+        if name in self.overrides:
+            return self.overrides[name]
+        if name not in self._cache:
+            ct = self.catalog.get(name)
+            if ct is None or not ct.entry_point:
+                raise KeyError(name)
+            module, _, cls = ct.entry_point.partition(":")
+            try:
+                self._cache[name] = getattr(importlib.import_module(module), cls)
+            except (ImportError, AttributeError) as e:
+                raise KeyError(name) from e
+        return self._cache[name]
+
+    def get(self, name: str, default: Any = None) -> Any:
+        try:
+            return self[name]
+        except KeyError:
+            return default
+
+    def __iter__(self) -> Any:
+        return iter(self.catalog.names())
+
+    def __len__(self) -> int:
+        return len(self.catalog.components)
+
+
+class Executive:
+    """Missions, one manager, one bus. Call `step()` whenever the clock moves."""
+
+    def __init__(self, bus: Bus, clock: Clock, registry: Mapping[str, Callable[[], Component]], *,
+                 cluster: str = "local", resources: Iterable[Any] = (), lease: float = 3.0,
+                 default_slice: float = 5.0, services: Mapping[str, Any] | None = None):
+        self.bus = bus
+        self.clock = clock
+        self.registry = registry
+        self.cluster = cluster
+        self.services = dict(services or {})
+        self.broker = ResourceBroker(ResourceManager(lease=lease, default_slice=default_slice))
+        self.pool = ResourcePool(self.broker)
+        self.pool.add(resources, clock.now())
+        self.missions: dict[str, Interpreter] = {}
+        self._ids = itertools.count(1)
+        self._queryable = bus.serve(f"drd/{cluster}/executive", self._command)
+
+    def submit(self, chart: Statechart, mission_id: str | None = None,
+               listeners: Iterable[Callable[[rec.Record], None]] = ()) -> str:
+        """Start a compiled mission; returns its id (`<name>-<n>`)."""
+        mid = mission_id or f"{chart.name}-{next(self._ids)}"
+        if mid in self.missions:
+            raise ValueError(f"a mission {mid} is already running")
+        interp = Interpreter(chart, self.registry, self.broker, self.clock, pool=self.pool, mission=mid,
+                             services=self.services)
+        key = f"drd/{self.cluster}/mission/{mid}/record"
+        interp.attach(lambda r: self.bus.put(key, _to_message(mid, r)))
+        for listener in listeners:
+            interp.attach(listener)
+        self.missions[mid] = interp
+        interp.start()
+        return mid
+
+    def step(self) -> None:
+        for interp in list(self.missions.values()):
+            interp.step()
+
+    def run(self, advance: Callable[[], None], until: float, *, done: Callable[[], bool] | None = None) -> None:
+        """Step until every mission finished (or `done()`), calling `advance` to move time."""
+        while self.clock.now() < until and not (done() if done else self.finished):
+            advance()
+            self.step()
+
+    @property
+    def finished(self) -> bool:
+        return all(m.finished for m in self.missions.values())
+
+    def stop(self, mission_id: str = "", reason: str = "stopped by operator") -> list[str]:
+        targets = [mission_id] if mission_id else list(self.missions)
+        for mid in targets:
+            self.missions[mid].stop(reason)
+        return targets
+
+    def status(self) -> MissionStatus:
+        return MissionStatus(self.clock.now(), [
+            {"id": mid, **_json_safe(m.snapshot())} for mid, m in self.missions.items()])
+
+    def close(self) -> None:
+        self.stop()
+        self._queryable.close()
+
+    def _command(self, query: Query) -> Message | Reply:
+        cmd = query.payload
+        if not isinstance(cmd, MissionCommand):
+            return query.error("expected a drd.mission.command")
+        if cmd.mission and cmd.mission not in self.missions:
+            return query.error(f"no mission {cmd.mission}; running: {', '.join(self.missions) or 'none'}")
+        match cmd.op:
+            case "status":
+                return self.status()
+            case "stop":
+                self.stop(cmd.mission)
+                return self.status()
+            case "emit" if cmd.event:
+                for mid in [cmd.mission] if cmd.mission else list(self.missions):
+                    self.missions[mid].emit(cmd.event, "operator", **(cmd.fields or {}))
+                return self.status()
+        return query.error(f"unknown command {cmd.op!r}: use status, stop or emit EVENT")
+
+
+def _to_message(mission: str, r: rec.Record) -> MissionRecord:
+    data = r.to_dict()
+    kind, at, path = data.pop("kind"), data.pop("at"), data.pop("path")
+    return MissionRecord(mission, kind, at, path, _json_safe(data))
+
+
+def _json_safe(value: Any) -> Any:
+    """Records carry resource views and tuples; the wire carries ids, lists and plain values."""
+    if isinstance(value, Mapping):
+        return {str(k): _json_safe(v) for k, v in value.items()}
+    if isinstance(value, list | tuple | set):
+        return [_json_safe(v) for v in value]
+    if value is None or isinstance(value, bool | int | float | str):
+        return value
+    return getattr(value, "id", None) or str(value)

@@ -1,0 +1,75 @@
+"""The embedded executor over the local bus: records published, operator commands served."""
+
+from __future__ import annotations
+
+import pytest
+
+from drd.bus import LocalNetwork, RemoteError
+from drd.executive import EntryPoints, Executive, MissionCommand, MissionRecord, MissionStatus
+from drd.hosts import load_hosts
+from drd.rcm import Unit
+from drd.runtime.clock import SimClock
+from dsl import compile_file, compile_text
+from dsl.catalog import Catalog
+from tests.conftest import ROOT, shared_examples
+from tests.runtime_support import Forever, Timed
+
+
+def test_shared_camera_over_the_local_bus(catalog: Catalog) -> None:
+    net = LocalNetwork()
+    controller, operator = net.session("controller"), net.session("operator")
+    seen: list[MissionRecord] = []
+    operator.subscribe("drd/local/mission/*/record", lambda s: seen.append(s.payload))  # type: ignore[arg-type]
+    clock = SimClock()
+    ex = Executive(controller, clock, {"Observe": Timed}, resources=[Unit("ranger1.camera", "Camera")])
+    chart = compile_file(shared_examples() / "shared_camera.mission", catalog).statechart
+    assert chart is not None
+    mid = ex.submit(chart)
+    ex.run(lambda: clock.advance(0.5), until=120)
+    assert ex.missions[mid].outcome == "success"
+    grants = [r.path.rsplit("/", 1)[-1] for r in seen if r.kind == "granted"]
+    assert grants[:4] == ["first", "second", "first", "second"] and grants[-1] == "third"
+    assert seen[-1].kind == "finished" and seen[-1].data["outcome"] == "success"
+    status = operator.call("drd/local/executive", MissionCommand("status"))
+    assert isinstance(status, MissionStatus) and status.missions[0]["outcome"] == "success"
+
+
+def test_operator_stops_and_emits_over_the_bus(catalog: Catalog) -> None:
+    net = LocalNetwork()
+    controller, operator = net.session("controller"), net.session("operator")
+    clock = SimClock()
+    ex = Executive(controller, clock, {"Calibrate": Forever}, resources=[Unit("r.ranges", "RangeSensor")])
+    text = "mission M {\n start -> Calibrate\n Calibrate -> done on MotionDetected [event.area > 0.5]\n}"
+    chart = compile_text(text, catalog, "m.mission").statechart
+    assert chart is not None
+    first, second = ex.submit(chart), ex.submit(chart)
+    clock.advance(1.0)
+    ex.step()
+    operator.call("drd/local/executive", MissionCommand("emit", first, "MotionDetected", {"area": 0.9}))
+    assert ex.missions[first].outcome == "success" and ex.missions[second].outcome is None
+    reply = operator.call("drd/local/executive", MissionCommand("stop", second))
+    assert isinstance(reply, MissionStatus)
+    assert {m["id"]: m["outcome"] for m in reply.missions} == {first: "success", second: "stopped"}
+    with pytest.raises(RemoteError, match="no mission nope"):
+        operator.call("drd/local/executive", MissionCommand("stop", "nope"))
+
+
+def test_resources_come_from_hosts_yaml(catalog: Catalog) -> None:
+    cluster = load_hosts(ROOT / "hosts.yaml", catalog)
+    net = LocalNetwork()
+    clock = SimClock()
+    ex = Executive(net.session(), clock, {}, resources=cluster.resources())
+    assert ex.pool.count("Scout", None) == 6
+    assert ex.pool.count("Scout", lambda s: s["carrier"] == "ranger1") == 6  # type: ignore[index]
+
+
+def test_missing_implementation_fails_the_state_clearly(catalog: Catalog) -> None:
+    net = LocalNetwork()
+    clock = SimClock()
+    ex = Executive(net.session(), clock, EntryPoints(catalog), resources=[Unit("r.ranges", "RangeSensor")])
+    chart = compile_text("mission M { Calibrate }", catalog, "m.mission").statechart
+    assert chart is not None
+    mid = ex.submit(chart)
+    ex.run(lambda: clock.advance(0.5), until=5)
+    assert ex.missions[mid].outcome == "failure"
+    assert "no implementation of component Calibrate" in ex.missions[mid].reason
