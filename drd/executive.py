@@ -97,12 +97,13 @@ class Executive:
 
     def __init__(self, bus: Bus, clock: Clock, registry: Mapping[str, Callable[[], Component]], *,
                  cluster: str = "local", resources: Iterable[Any] = (), lease: float = 3.0,
-                 default_slice: float = 5.0, services: Mapping[str, Any] | None = None):
+                 default_slice: float = 5.0, services: Mapping[str, Any] | None = None, preallocate: bool = False):
         self.bus = bus
         self.clock = clock
         self.registry = registry
         self.cluster = cluster
         self.services = dict(services or {})
+        self.preallocate = preallocate
         self.broker = ResourceBroker(ResourceManager(lease=lease, default_slice=default_slice))
         self.pool = ResourcePool(self.broker)
         self.pool.add(resources, clock.now())
@@ -117,7 +118,7 @@ class Executive:
         if mid in self.missions:
             raise ValueError(f"a mission {mid} is already running")
         interp = Interpreter(chart, self.registry, self.broker, self.clock, pool=self.pool, mission=mid,
-                             services=self.services)
+                             services=self.services, preallocate=self.preallocate)
         key = f"drd/{self.cluster}/mission/{mid}/record"
         interp.attach(lambda r: self.bus.put(key, _to_message(mid, r)))
         for listener in listeners:

@@ -295,3 +295,67 @@ mission M {
     h.interp.set_property("ranger1.scout2", "carrier", "")  # launched: it left the magazine
     h.run()
     assert h.interp.root is not None and h.interp.root.scope["aboard"] == 2
+
+
+PREALLOC = """
+mission M {
+    needs r: Ranger
+    start -> Calibrate
+    Calibrate -> Look
+}
+behavior Look { needs cam: Camera where cam.id == "cam"
+    Observe(duration: 1s) }"""
+
+
+@pytest.mark.parametrize("preallocate", [False, True])
+def test_preallocation_reserves_the_next_states_needs(catalog: Catalog, preallocate: bool) -> None:
+    from drd.rcm import ResourceManager
+    from drd.runtime.clock import SimClock
+    from drd.runtime.interpreter import Interpreter
+    from drd.runtime.pool import ResourcePool
+
+    clock, rcm = SimClock(), ResourceManager()
+    pool = ResourcePool(rcm)
+    pool.add([*ranger_world(1, 0), Unit("cam", "Camera")], 0.0)
+    log: list[rec.Record] = []
+    mine = Interpreter(compiled(PREALLOC, catalog), {"Calibrate": Timed, "Observe": Timed}, rcm, clock, pool=pool,
+                       preallocate=preallocate)
+    other = Interpreter(compiled("mission Other { needs c: Camera\n Observe(duration: 20s) }", catalog),
+                        {"Observe": Timed}, rcm, clock, pool=pool)
+    mine.attach(log.append)
+    mine.start()
+    clock.advance(0.5)
+    other.start()  # asks for the camera while Calibrate is running
+    while not mine.finished and clock.now() < 60:
+        clock.advance(0.5)
+        mine.step()
+        other.step()
+    assert mine.outcome == "success"
+    entered = next(r.at for r in log if isinstance(r, rec.Entered) and r.path == "M/Look")
+    granted = next(r.at for r in log if isinstance(r, rec.Granted) and r.path == "M/Look")
+    if preallocate:
+        assert granted < entered  # reserved while Calibrate ran: Look started at once
+        assert next(r.at for r in log if isinstance(r, rec.Entered) and r.path == "M/Look/Observe") == entered
+    else:
+        assert granted >= 5.0  # waited for the other mission's slice to end
+    assert rcm.holders("cam") != ("M/M/Look",)
+
+
+def test_preallocation_is_cancelled_when_the_mission_goes_elsewhere(catalog: Catalog) -> None:
+    text = PREALLOC.replace("    Calibrate -> Look\n", "    Calibrate -> Look\n    Calibrate -> fail on error\n")
+    from drd.rcm import ResourceManager
+    from drd.runtime.clock import SimClock
+    from drd.runtime.interpreter import Interpreter
+    from drd.runtime.pool import ResourcePool
+
+    clock, rcm = SimClock(), ResourceManager()
+    pool = ResourcePool(rcm)
+    pool.add([*ranger_world(1, 0), Unit("cam", "Camera")], 0.0)
+    mine = Interpreter(compiled(text, catalog), {"Calibrate": Fails, "Observe": Timed}, rcm, clock, pool=pool,
+                       preallocate=True)
+    mine.start()
+    assert rcm.holders("cam") == ("M/M/Look",)  # reserved and granted ahead of need
+    clock.advance(0.5)
+    mine.step()
+    assert mine.outcome == "failure"
+    assert rcm.holders("cam") == () and not rcm.queue()

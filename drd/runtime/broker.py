@@ -36,6 +36,9 @@ class ResourceBroker:
     def request(self, req: Request, now: float) -> tuple[Decision, ...]:
         return self._publish(self.rcm.request(req, now))
 
+    def reserve(self, req: Request, now: float, at: float) -> tuple[Decision, ...]:
+        return self._publish(self.rcm.reserve(req, now, at))
+
     def release(self, holder: str, now: float, units: Collection[str] | None = None) -> tuple[Decision, ...]:
         return self._publish(self.rcm.release(holder, now, units))
 
@@ -60,4 +63,9 @@ class ResourceBroker:
         return self._publish(self.rcm.add_aggregate(resource, now))
 
     def __getattr__(self, name: str) -> Any:
+        if name in _DECIDING:
+            raise AttributeError(f"{name} makes decisions: add it to ResourceBroker so they are published")
         return getattr(self.rcm, name)  # queries: holders, queue, snapshot
+
+
+_DECIDING = {"add_unit", "add_aggregate"}

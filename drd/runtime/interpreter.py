@@ -71,7 +71,7 @@ class Node:
     succeeded: int = 0
     failed: int = 0
     bounds: tuple[int, int] = (0, 0)
-    suspended_by: str = ""
+    reserved_by: str = ""  # a preallocation made when this (future) node's predecessor was entered
 
     def visible(self) -> dict[str, Any]:
         """What descendants may read: shared data and resources."""
@@ -84,7 +84,7 @@ class Interpreter:
 
     def __init__(self, chart: Statechart, registry: Registry, rcm: ResourceManager | ResourceBroker, clock: Clock, *,
                  pool: ResourcePool | None = None, mission: str = "", services: Mapping[str, Any] | None = None,
-                 lease: float = 3.0):
+                 lease: float = 3.0, preallocate: bool = False):
         self.chart = chart
         self.registry = registry
         self.clock = clock
@@ -93,6 +93,8 @@ class Interpreter:
         self.mission = mission or chart.name
         self.services = dict(services or {})
         self.lease = lease
+        self.preallocate = preallocate
+        self._reservations: dict[str, Node] = {}  # holder -> provisional node of a state not yet entered
         self.listeners: list[Listener] = []
         self.root: Node | None = None
         self.outcome: str | None = None
@@ -229,6 +231,8 @@ class Interpreter:
         except EvalError as e:
             self._finish(node, False, e.message)
             return node
+        if self.preallocate and parent is not None:
+            self._preallocate(node)
         requested = [n for n in state.needs if n.requested]
         if requested:
             self._request(node, requested)
@@ -243,7 +247,13 @@ class Interpreter:
             self._finish(node, False, e.message)
             return
         node.requested = True
-        self.holders[self._holder(node)] = node
+        holder = self._holder(node)
+        self.holders[holder] = node
+        early = self._reservations.pop(holder, None)
+        if early is not None:  # preallocated ahead of need: adopt what was granted (or keep waiting)
+            if early.assignment:
+                self._granted(node, early.assignment)
+            return
         self._notify(rec.Waiting(self.clock.now(), node.path, tuple(f"{n.name}: {n.type}" for n in needs)))
         self.rcm.request(Request(self._holder(node), node.state.priority, reqs, self.mission), self.clock.now())
 
@@ -265,6 +275,47 @@ class Interpreter:
                 except EvalError:
                     return False
         return NeedRequest(need.name, need.type, float(quantity or 1.0), need.slice, where)
+
+    def _granted(self, node: Node, assignment: Mapping[str, str]) -> None:
+        node.assignment = dict(assignment)
+        for need, rid in assignment.items():
+            node.scope[need] = self.pool.view(rid)
+        if node.phase is Phase.WAITING:
+            self._activate(node)
+
+    def _preallocate(self, node: Node) -> None:
+        """Reserve, now, what the state after `node` will need (paper 4.3 c): it starts without waiting."""
+        parent = node.parent
+        if parent is None or parent.state.kind is not StateKind.COMPOUND:
+            return
+        nxt = next((t for t in node.state.transitions
+                    if t.kind is ast.TriggerKind.COMPLETION and t.guard is None), None)
+        if nxt is None:
+            return
+        target = self.chart[nxt.target]
+        needs = [n for n in target.needs if n.requested]
+        if not needs or target.kind not in (StateKind.COMPOUND, StateKind.PARALLEL, StateKind.LEAF):
+            return
+        future = Node(target, f"{parent.path}/{target.name}", parent, self.clock.now(), reserved_by=node.path)
+        holder = self._holder(future)
+        if holder in self.holders or holder in self._reservations:
+            return
+        try:
+            future.scope.update({a.name: evaluate(a.value, self._names(parent), self.pool.count) for a in target.args})
+            reqs = tuple(self._need_request(future, n) for n in needs)
+        except EvalError:
+            return  # it will simply ask on entry
+        self._reservations[holder] = self.holders[holder] = future
+        now = self.clock.now()
+        self.rcm.reserve(Request(holder, target.priority, reqs, self.mission), now, now)
+
+    def _drop_reservations(self, made_by: str, keep: str = "") -> None:
+        """Cancel preallocations made for the successor of `made_by` (except the one being entered)."""
+        for holder, future in list(self._reservations.items()):
+            if (future.reserved_by == made_by or future.reserved_by.startswith(made_by + "/")) and holder != keep:
+                del self._reservations[holder]
+                self.holders.pop(holder, None)
+                self.rcm.cancel(holder, self.clock.now())
 
     def _activate(self, node: Node) -> None:
         if self.outcome is not None or node.phase is Phase.DONE:
@@ -544,6 +595,8 @@ class Interpreter:
                                    trigger_label(t)))
         if node.phase is not Phase.DONE:
             self._exit(node, "stopped")
+        if self._reservations:
+            self._drop_reservations(node.path, keep=f"{self.mission}/{domain.path}/{target.name}")
         if target.kind is StateKind.FINAL and domain.state.kind is StateKind.PARALLEL:
             for c in list(domain.children):
                 if c.phase is not Phase.DONE:
@@ -595,6 +648,8 @@ class Interpreter:
             except Exception as e:  # the node is leaving anyway: just say so
                 self._notify(rec.Log(self.clock.now(), node.path, f"component raised {type(e).__name__}: {e}"))
         node.phase = Phase.DONE
+        if self._reservations and node.state.children:
+            self._drop_reservations(node.path)  # reservations for states inside it
         self._timed.pop(node, None)
         for event in self._on_event[node.state.id]:
             self._listening[event].pop(node, None)
@@ -629,15 +684,15 @@ class Interpreter:
             now = self.clock.now()
             match d:
                 case Granted():
-                    node.assignment = dict(d.assignment)
                     node.lease_until = d.lease_until
-                    for need, rid in d.assignment.items():
-                        node.scope[need] = self.pool.view(rid)
                     self._notify(rec.Granted(now, node.path, dict(d.assignment), dict(d.epochs)))
-                    if node.phase is Phase.WAITING:
-                        self._activate(node)
+                    if node.reserved_by:
+                        node.assignment = dict(d.assignment)  # held for a state not entered yet
                     elif node.phase is Phase.SUSPENDED:
+                        node.assignment = dict(d.assignment)
                         self._suspend(node, False)
+                    else:
+                        self._granted(node, d.assignment)
                 case Revoked():
                     self._notify(rec.Revoked(now, node.path, d.units, f"preempted by {d.by}"))
                     self._suspend(node, True)
