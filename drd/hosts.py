@@ -20,6 +20,7 @@ from typing import Any, TypeVar
 
 import yaml
 
+from drd.config import ConfigError, ConfigProblem
 from drd.manifests import StrictLoader, got, is_number, show  # one YAML dialect, one wording
 from drd.rcm.model import Aggregate, Unit
 from dsl.ast import parse_duration
@@ -188,29 +189,11 @@ class Cluster:
         return units + [Aggregate(r.id, r.type, r.parts, r.properties, r.host) for r in self.robots]
 
 
-@dataclass(frozen=True, slots=True)
-class HostsProblem:
-    """One problem in the file. `key` is a dotted path such as `hosts.ranger1.devices.camera.type`."""
-
-    file: str
-    key: str
-    message: str
-    line: int | None = None
-
-    def __str__(self) -> str:
-        where = f"{self.file}:{self.line}" if self.line else self.file
-        return ": ".join(part for part in (where, self.key, self.message) if part)
+HostsProblem = ConfigProblem
 
 
-class HostsError(Exception):
+class HostsError(ConfigError):
     """The resource configuration has problems; carries all of them."""
-
-    def __init__(self, problems: Iterable[HostsProblem]) -> None:
-        self.problems = tuple(problems)
-        super().__init__("\n".join(map(str, self.problems)))
-
-    def __reduce__(self) -> tuple[type[HostsError], tuple[tuple[HostsProblem, ...]]]:
-        return type(self), (self.problems,)  # picklable, so it can cross a process boundary
 
 
 # ---------------------------------------------------------------- parsing (pure)

@@ -12,7 +12,6 @@ from __future__ import annotations
 import os
 import re
 from collections.abc import Callable, Hashable, Iterable, Iterator, Mapping, Sequence
-from dataclasses import dataclass
 from enum import Enum
 from functools import lru_cache
 from pathlib import Path
@@ -21,6 +20,7 @@ from typing import Any, TypeVar
 import yaml
 
 import components
+from drd.config import ConfigError, ConfigProblem
 from dsl.ast import KEYWORDS, parse_duration
 from dsl.catalog import (
     BUILTIN_PROPERTIES,
@@ -65,29 +65,11 @@ _PYTYPES: Mapping[str, Any] = {"int": int, "float": (int, float), "bool": bool, 
 _E = TypeVar("_E", bound=Enum)
 
 
-@dataclass(frozen=True, slots=True)
-class ManifestProblem:
-    """One problem in one manifest. `key` is a dotted path such as `params.speed.type`."""
-
-    file: str
-    key: str
-    message: str
-    line: int | None = None
-
-    def __str__(self) -> str:
-        where = f"{self.file}:{self.line}" if self.line else self.file
-        return ": ".join(part for part in (where, self.key, self.message) if part)
+ManifestProblem = ConfigProblem
 
 
-class ManifestError(Exception):
+class ManifestError(ConfigError):
     """The component manifests have problems; carries all of them, from every manifest."""
-
-    def __init__(self, problems: Iterable[ManifestProblem]) -> None:
-        self.problems = tuple(problems)
-        super().__init__("\n".join(map(str, self.problems)))
-
-    def __reduce__(self) -> tuple[type[ManifestError], tuple[tuple[ManifestProblem, ...]]]:
-        return type(self), (self.problems,)  # picklable, so it can cross a process boundary
 
 
 # ---------------------------------------------------------------- one manifest (pure)
