@@ -21,10 +21,8 @@ from .base import (
     Sample,
     Subscription,
     Token,
-    check_key_expr,
-    intersects,
-    join_key,
 )
+from .keys import check_key_expr, intersects, join_key
 from .local import LocalBus, LocalNetwork
 from .messages import ErrorReply, LoadReport, MalformedMessage, Message, Ping, Pong, decode, encode, message
 

@@ -36,9 +36,8 @@ from .base import (
     Subscription,
     Token,
     TokenCallback,
-    check_key_expr,
-    intersects,
 )
+from .keys import check_key_expr, intersects
 
 log = logging.getLogger("drd.bus")
 

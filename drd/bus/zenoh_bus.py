@@ -39,9 +39,9 @@ from .base import (
     Subscription,
     Token,
     TokenCallback,
-    check_key_expr,
     log,
 )
+from .keys import check_key_expr
 
 try:
     ZENOH_VERSION = version("eclipse-zenoh")  # zenoh-python 1.x has no zenoh.__version__
@@ -94,7 +94,10 @@ class ZenohBus(Bus):
             config = make_config(
                 listen, connect, multicast_scouting=multicast_scouting, lease_ms=lease_ms, options=options
             )
-        self.session = zenoh.open(config)
+        try:
+            self.session = zenoh.open(config)
+        except zenoh.ZError as exc:  # a bad endpoint, a port in use, a bad option
+            raise BusError(f"cannot open a zenoh session: {exc}") from exc
         super().__init__(name or str(self.session.zid()))
         self._lock = threading.Lock()
         self._declared: dict[int, Any] = {}  # keeps zenoh entities referenced (they undeclare when dropped)
