@@ -184,20 +184,29 @@ def to_mermaid(chart: Statechart) -> str:
             return
         out.append(f"{indent}state {ids[s.id]} {{")
         regions = [c for c in chart.children(s.id) if c.kind is not StateKind.FINAL]
-        for i, c in enumerate(chart.children(s.id)):
-            if s.kind is StateKind.PARALLEL and c.kind is not StateKind.FINAL and 0 < i < len(regions):
+        # Mermaid puts everything after the last `--` into the last region: a parallel state's
+        # finals are drawn beside it instead, and its transitions cross the border.
+        finals_outside = s.kind is StateKind.PARALLEL
+        for i, c in enumerate(regions if finals_outside else list(chart.children(s.id))):
+            if finals_outside and i > 0:
                 out.append(f"{indent}  --")
             emit(c, indent + "  ")
-        if s.initial:
-            out.append(f"{indent}  [*] --> {ids[s.initial]}")
+        edge_indent = indent if finals_outside else indent + "  "
+        edges = [f"{indent}  [*] --> {ids[s.initial]}"] if s.initial else []
         for c in chart.children(s.id):
             for t in c.transitions:
                 label = _mm_escape(trigger_label(t))
-                arrow = f"{indent}  {ids[t.source]} --> {ids[t.target]}"
-                out.append(arrow + (f" : {label}" if label else ""))
-            if c.kind is StateKind.FINAL and c.success:
-                out.append(f"{indent}  {ids[c.id]} --> [*]")
+                arrow = f"{edge_indent}{ids[t.source]} --> {ids[t.target]}"
+                edges.append(arrow + (f" : {label}" if label else ""))
+            if c.kind is StateKind.FINAL and c.success and not finals_outside:
+                edges.append(f"{edge_indent}{ids[c.id]} --> [*]")
+        if not finals_outside:
+            out.extend(edges)
         out.append(f"{indent}}}")
+        if finals_outside:
+            out.extend(f'{indent}state "{c.name}" as {ids[c.id]}' for c in chart.children(s.id)
+                       if c.kind is StateKind.FINAL)
+            out.extend(edges)
 
     emit(chart[chart.root], "  ")
     out.append(f"  [*] --> {ids[chart.root]}")

@@ -149,3 +149,15 @@ def test_guard_must_be_boolean() -> None:
     assert truthy(None, {}) is True
     with pytest.raises(EvalError, match="must be true or false"):
         truthy(Name("n"), {"n": 1})
+
+
+def test_mermaid_draws_a_parallel_states_finals_and_edges_outside_its_regions(catalog: Catalog) -> None:
+    from dsl.export import to_mermaid
+
+    c = chart("mission M {\n needs r: Ranger\n parallel until DetectDoor { FollowCorridor; DetectDoor }\n"
+              " FollowCorridor -> fail on error\n}", catalog)
+    lines = to_mermaid(c).splitlines()
+    close = lines.index("  }")
+    assert lines.index('  state "fail" as s3') > close
+    assert lines.index("  s1 --> s3 : on error") > close
+    assert lines[lines.index("    --") - 1].strip().startswith('state "FollowCorridor')
