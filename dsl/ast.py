@@ -259,7 +259,7 @@ class Transition:
     kind: TriggerKind = TriggerKind.COMPLETION
     event: str | None = None
     condition: Expr | None = None
-    delay: Duration | None = None
+    delay: Expr | None = None  # a duration: a literal, a parameter, an expression
     guard: Expr | None = None
     actions: tuple[Action, ...] = ()
     span: Span = field(default=NOWHERE, compare=False, repr=False, kw_only=True)

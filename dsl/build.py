@@ -131,8 +131,9 @@ class Builder:
 
     @staticmethod
     def _transition(t: ast.Transition, domain: str, source: str, target: str) -> Transition:
-        return Transition(source, target, domain, t.kind, t.event, t.condition,
-                          t.delay.seconds if t.delay else None, t.guard, t.actions, span=t.span)
+        delay = t.delay.seconds if isinstance(t.delay, ast.Duration) else t.delay
+        return Transition(source, target, domain, t.kind, t.event, t.condition, delay, t.guard, t.actions,
+                          span=t.span)
 
     # ------------------------------------------------------------- resources
     def _need(self, n: ast.Need, held: tuple[_Held, ...]) -> ResourceNeed:

@@ -444,6 +444,8 @@ class Checker:
             tscope = Scope(scope.names, scope.children, event, scope.open)
             if t.condition is not None:
                 self.typer.expect(t.condition, "bool", tscope, "when")
+            if t.delay is not None:
+                self.typer.expect(t.delay, "duration", tscope, "after")
             if t.guard is not None:
                 self.typer.expect(t.guard, "bool", tscope, "a guard")
             for a in t.actions:

@@ -24,7 +24,8 @@ def trigger_label(t: Transition) -> str:
         case ast.TriggerKind.ERROR:
             out = "on error"
         case ast.TriggerKind.TIMEOUT:
-            out = f"after {_seconds(t.delay or 0.0)}"
+            delay = t.delay
+            out = f"after {printer.expr(delay) if isinstance(delay, ast.Expr) else _seconds(delay or 0.0)}"
         case _:
             out = ""
     if t.guard is not None:
@@ -118,7 +119,8 @@ def _transition_dict(t: Transition) -> dict[str, Any]:
     return {
         "source": t.source, "target": t.target, "trigger": t.kind.value, "event": t.event,
         "condition": printer.expr(t.condition) if t.condition is not None else None,
-        "delay": t.delay, "guard": printer.expr(t.guard) if t.guard is not None else None,
+        "delay": printer.expr(t.delay) if isinstance(t.delay, ast.Expr) else t.delay,
+        "guard": printer.expr(t.guard) if t.guard is not None else None,
         "actions": [printer.action(a) for a in t.actions], "generated": t.generated,
     }
 

@@ -241,7 +241,7 @@ class _Builder(Transformer):  # type: ignore[type-arg]
         return ast.TriggerKind.EVENT, str(c[0]), None, None, c[0]
 
     def after(self, c: list[Any]) -> tuple[Any, ...]:
-        return ast.TriggerKind.TIMEOUT, None, None, self.duration([c[0]]), None
+        return ast.TriggerKind.TIMEOUT, None, None, c[0], None
 
     def guard(self, c: list[Any]) -> tuple[ast.Expr, Token]:
         return c[0], c[1]

@@ -114,7 +114,7 @@ def transition(t: ast.Transition) -> str:
         case ast.TriggerKind.ERROR:
             out += " on error"
         case ast.TriggerKind.TIMEOUT:
-            out += f" after {t.delay.text}"  # type: ignore[union-attr]
+            out += f" after {expr(t.delay)}"  # type: ignore[arg-type]
     if t.guard is not None:
         out += f" [{expr(t.guard)}]"
     if t.actions:

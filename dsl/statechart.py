@@ -64,7 +64,7 @@ class Transition:
     kind: ast.TriggerKind
     event: str | None = None
     condition: ast.Expr | None = None
-    delay: float | None = None
+    delay: float | ast.Expr | None = None  # seconds, or an expression in the declaring scope
     guard: ast.Expr | None = None
     actions: tuple[ast.Action, ...] = ()
     generated: bool = False  # made by the compiler (plans, implicit completion), not written

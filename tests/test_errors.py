@@ -34,8 +34,9 @@ ERRORS: list[tuple[str, str, str, str | None]] = [
     ("unclosed-brace", "mission M {\n  Observe\n", "2:10 syntax: the file ends too early: expected `}`", "matching }"),
     ("action-outside-transition", m("  log \"hi\""), "2:3 syntax: expected `}`, a name, needs, parallel, plan, "
      "shared, start or var, got `log`", "follow a / at the end of a transition"),
-    ("after-needs-duration", m("  Observe\n  Observe -> done after soon"),
-     "3:25 syntax: expected a duration after after (e.g. 2min)", None),
+    ("after-needs-duration", m("  Observe\n  Observe -> done after\n"),
+     "3:24 syntax: expected a duration after after (e.g. 2min)", None),
+    ("after-unit", m("  Observe\n  Observe -> done after 5"), "3:25 after expects duration, got int", "write a unit"),
     ("bad-escape", m('  Observe\n  Observe -> done / log "a\\qb"'), "3:27 unknown escape \\q in string", None),
     ("unclosed-interpolation", m('  Observe\n  Observe -> done / log "a{b"'), "3:27 unclosed { in string", None),
     ("bad-interpolation", m('  Observe\n  Observe -> done / log "a{1 +}"'),

@@ -359,3 +359,16 @@ def test_preallocation_is_cancelled_when_the_mission_goes_elsewhere(catalog: Cat
     mine.step()
     assert mine.outcome == "failure"
     assert rcm.holders("cam") == () and not rcm.queue()
+
+
+def test_a_timeout_can_be_a_parameter(catalog: Catalog) -> None:
+    text = """
+mission M { Patient(limit: 3s) }
+behavior Patient(limit: duration = 10s) {
+    needs r: Ranger
+    start -> Calibrate
+    Calibrate -> fail after limit * 2
+}"""
+    h = Harness(compiled(text, catalog), {"Calibrate": Forever}, ranger_world())
+    assert h.run(until=60) == "failure"
+    assert [(r.trigger, r.at) for r in h.of(rec.Taken)] == [("timeout", 6.0)]

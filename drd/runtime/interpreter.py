@@ -566,7 +566,8 @@ class Interpreter:
             domain = node.parent
             for t in node.state.transitions:
                 if t.kind is ast.TriggerKind.TIMEOUT:
-                    if t.delay is None or now - node.entered < t.delay:
+                    delay = self._delay(domain, t)
+                    if delay is None or now - node.entered < delay:
                         continue
                 elif t.kind is ast.TriggerKind.CHANGE:
                     if t.condition is None or not self._truthy(domain, t.condition, None):
@@ -577,6 +578,17 @@ class Interpreter:
                     self._take(node, t, None)
                     return True
         return False
+
+    def _delay(self, domain: Node, t: Transition) -> float | None:
+        """A timeout in seconds: a constant, or its expression in the scope that declares it."""
+        if not isinstance(t.delay, ast.Expr):
+            return t.delay
+        try:
+            value = evaluate(t.delay, self._names(domain), self.pool.count)
+        except EvalError as e:
+            self._notify(rec.Log(self.clock.now(), domain.path, f"timeout error: {e.message}"))
+            return None
+        return float(value) if isinstance(value, int | float) and not isinstance(value, bool) else None
 
     def _dispatch(self, event: rec.Event) -> None:
         for node in list(self._listening.get(event.name, ())):
