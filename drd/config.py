@@ -33,3 +33,19 @@ class ConfigError(Exception):
 
     def __reduce__(self) -> tuple[type[ConfigError], tuple[tuple[ConfigProblem, ...]]]:
         return type(self), (self.problems,)  # picklable, so it can cross a process boundary
+
+
+class ConfigReader:
+    """Base of the configuration readers: collects problems; each typed reader reports and goes on."""
+
+    def __init__(self, source: str) -> None:
+        self.source = source
+        self.problems: list[ConfigProblem] = []
+
+    def fail(self, key: str, message: str) -> None:
+        self.problems.append(ConfigProblem(self.source, key, message))
+
+
+def join_key(prefix: str, key: str) -> str:
+    """`params` + `speed` -> `params.speed`; an empty prefix adds nothing."""
+    return f"{prefix}.{key}" if prefix else key

@@ -20,7 +20,7 @@ from typing import Any, TypeVar
 
 import yaml
 
-from drd.config import ConfigError, ConfigProblem
+from drd.config import ConfigError, ConfigProblem, ConfigReader, join_key
 from drd.manifests import StrictLoader, got, is_number, show  # one YAML dialect, one wording
 from drd.rcm.model import Aggregate, Unit
 from dsl.ast import parse_duration
@@ -212,16 +212,13 @@ def parse_hosts(data: object, source: str, catalog: Catalog) -> Cluster:
     return cluster
 
 
-class _Parser:
+class _Parser(ConfigReader):
     """Collects problems; each reader reports what is wrong and returns a safe value to go on with."""
 
     def __init__(self, source: str, catalog: Catalog) -> None:
-        self.source, self.catalog = source, catalog
-        self.problems: list[HostsProblem] = []
+        super().__init__(source)
+        self.catalog = catalog
         self.refs: list[tuple[str, str, str]] = []  # (key, type, id): checked once every resource is known
-
-    def fail(self, key: str, message: str) -> None:
-        self.problems.append(HostsProblem(self.source, key, message))
 
     # -- the sections
 
@@ -394,10 +391,10 @@ class _Parser:
     def keys(self, data: Mapping[Any, Any], key: str, allowed: Sequence[str], required: Sequence[str] = ()) -> None:
         for k in data:
             if k not in allowed:
-                self.fail(_join(key, str(k)), f"unknown key{_hint(str(k), allowed, 'none allowed here')}")
+                self.fail(join_key(key, str(k)), f"unknown key{_hint(str(k), allowed, 'none allowed here')}")
         for k in required:
             if k not in data:
-                self.fail(_join(key, k), "required key missing")
+                self.fail(join_key(key, k), "required key missing")
 
     def mapping(self, value: object, key: str) -> dict[Any, Any]:
         if isinstance(value, dict):
@@ -528,10 +525,6 @@ def _display(path: Path) -> str:
 
 
 # ---------------------------------------------------------------- small helpers
-
-
-def _join(prefix: str, key: str) -> str:
-    return f"{prefix}.{key}" if prefix else key
 
 
 def _hint(value: str, candidates: Iterable[str], empty: str) -> str:

@@ -20,7 +20,7 @@ from typing import Any, TypeVar
 import yaml
 
 import components
-from drd.config import ConfigError, ConfigProblem
+from drd.config import ConfigError, ConfigProblem, ConfigReader
 from dsl.ast import KEYWORDS, parse_duration
 from dsl.catalog import (
     BUILTIN_PROPERTIES,
@@ -118,15 +118,8 @@ def _check_rules(c: _Checker, kind: Kind, data: Mapping[str, Any], fields: Mappi
         c.fail(f"properties.{clash}", "also the name of a part")
 
 
-class _Checker:
+class _Checker(ConfigReader):
     """Collects the problems of one manifest; typed readers report and return a safe value."""
-
-    def __init__(self, source: str) -> None:
-        self.source = source
-        self.problems: list[ManifestProblem] = []
-
-    def fail(self, key: str, message: str) -> None:
-        self.problems.append(ManifestProblem(self.source, key, message))
 
     def keys(self, data: Mapping[Any, Any], key: str, allowed: Sequence[str], required: str = "") -> None:
         for k in data:

@@ -1,0 +1,208 @@
+"""The world the simulator runs: frozen records built once from a `worlds/*.yaml` file.
+
+Pure data plus the two functions of time and place the file defines (where an intruder is at
+time t, how much light there is at a point), so the renderer, the simulator and the tests all
+agree on them. Angles are radians here; world files write headings in degrees for people.
+"""
+
+from __future__ import annotations
+
+import bisect
+import math
+from dataclasses import dataclass
+from enum import StrEnum
+
+from drd.config import ConfigError, ConfigProblem
+from drd.sim.geometry import Point
+
+#: Body sizes, shared by the loader (a robot may not start inside a wall) and the simulator.
+RANGER_RADIUS = 0.3
+SCOUT_RADIUS = 0.08
+INTRUDER_RADIUS = 0.25
+
+
+class DoorState(StrEnum):
+    OPEN = "open"
+    """A gap in its wall: rays, robots and launched Scouts pass."""
+    CLOSED = "closed"
+    """A solid segment across the gap; it can be opened at run time."""
+    BLOCKED = "blocked"
+    """Open but obstructed (furniture, a jammed leaf): as solid as closed, and not openable."""
+
+
+@dataclass(frozen=True, slots=True)
+class Wall:
+    """A solid wall segment. Walls of a loaded world are merged and already have their door gaps cut."""
+
+    a: Point
+    b: Point
+
+
+@dataclass(frozen=True, slots=True)
+class Door:
+    """A doorway in a wall, from `a` to `b` along the wall. `room` is the room it opens into, if any."""
+
+    id: str
+    a: Point
+    b: Point
+    width: float
+    state: DoorState
+    room: str | None = None
+
+    @property
+    def center(self) -> Point:
+        return ((self.a[0] + self.b[0]) / 2, (self.a[1] + self.b[1]) / 2)
+
+
+@dataclass(frozen=True, slots=True)
+class Room:
+    """An axis-aligned room: its area sets the ambient light; its walls were generated unless `walls: false`."""
+
+    id: str
+    x0: float
+    y0: float
+    x1: float
+    y1: float
+    light: float
+
+    def contains(self, x: float, y: float) -> bool:
+        return self.x0 <= x <= self.x1 and self.y0 <= y <= self.y1
+
+    @property
+    def center(self) -> Point:
+        return ((self.x0 + self.x1) / 2, (self.y0 + self.y1) / 2)
+
+
+@dataclass(frozen=True, slots=True)
+class LightZone:
+    """A dark corner: `level` at its centre, rising smoothly (quadratically) to the ambient light at `radius`."""
+
+    x: float
+    y: float
+    radius: float
+    level: float
+
+
+@dataclass(frozen=True, slots=True)
+class Obstacle:
+    """A low box on the floor: it blocks rolling; a Scout jumps over it if it is no higher than its foot reaches."""
+
+    x0: float
+    y0: float
+    x1: float
+    y1: float
+    height: float
+
+
+@dataclass(frozen=True, slots=True)
+class Waypoint:
+    t: float
+    x: float
+    y: float
+
+
+@dataclass(frozen=True, slots=True)
+class Intruder:
+    """A person walking a timed path, straight between waypoints; a looping path ends where it starts."""
+
+    id: str
+    path: tuple[Waypoint, ...]
+    loop: bool = False
+    radius: float = INTRUDER_RADIUS
+
+    def position(self, t: float) -> Point:
+        """Where the intruder is at sim time `t`: at its first waypoint before it, its last after (unless looping)."""
+        first, last = self.path[0], self.path[-1]
+        if t <= first.t or len(self.path) == 1:
+            return (first.x, first.y)
+        if t >= last.t:
+            if not self.loop:
+                return (last.x, last.y)
+            t = first.t + math.fmod(t - first.t, last.t - first.t)
+        i = bisect.bisect_right([w.t for w in self.path], t)
+        w0, w1 = self.path[i - 1], self.path[min(i, len(self.path) - 1)]
+        f = 0.0 if w1.t == w0.t else (t - w0.t) / (w1.t - w0.t)
+        return (w0.x + (w1.x - w0.x) * f, w0.y + (w1.y - w0.y) * f)
+
+
+@dataclass(frozen=True, slots=True)
+class RangerSpawn:
+    """A Ranger's start pose (heading in radians) and the Scouts in its magazine, first launched first."""
+
+    id: str
+    x: float
+    y: float
+    heading: float
+    magazine: tuple[str, ...] = ()
+
+
+@dataclass(frozen=True, slots=True)
+class ScoutSpawn:
+    """A Scout that starts on the floor rather than in a magazine."""
+
+    id: str
+    x: float
+    y: float
+    heading: float
+
+
+@dataclass(frozen=True, slots=True)
+class World:
+    """A loaded world. `source` names the file, so later problems (hosts matching) can point at it."""
+
+    name: str
+    walls: tuple[Wall, ...]
+    doors: tuple[Door, ...] = ()
+    rooms: tuple[Room, ...] = ()
+    ambient: float = 1.0
+    dark: tuple[LightZone, ...] = ()
+    obstacles: tuple[Obstacle, ...] = ()
+    intruders: tuple[Intruder, ...] = ()
+    rangers: tuple[RangerSpawn, ...] = ()
+    scouts: tuple[ScoutSpawn, ...] = ()
+    description: str = ""
+    source: str = "<world>"
+
+    def light(self, x: float, y: float) -> float:
+        """The light level (0 dark .. 1 bright) at a point: the room's ambient light, dimmed by dark corners."""
+        base = next((r.light for r in self.rooms if r.contains(x, y)), self.ambient)
+        level = base
+        for z in self.dark:
+            d = math.hypot(x - z.x, y - z.y)
+            if d < z.radius and z.level < base:
+                level = min(level, z.level + (base - z.level) * (d / z.radius) ** 2)
+        return level
+
+    def room_at(self, x: float, y: float) -> Room | None:
+        return next((r for r in self.rooms if r.contains(x, y)), None)
+
+    def door(self, door_id: str) -> Door:
+        for d in self.doors:
+            if d.id == door_id:
+                return d
+        raise KeyError(f"no door {door_id!r} in {self.source}")
+
+    @property
+    def scout_ids(self) -> tuple[str, ...]:
+        """Every Scout: those in magazines (in order), then those on the floor."""
+        return tuple(s for r in self.rangers for s in r.magazine) + tuple(s.id for s in self.scouts)
+
+    def carrier(self, scout_id: str) -> str | None:
+        """The Ranger whose magazine holds the Scout at the start, or None."""
+        return next((r.id for r in self.rangers if scout_id in r.magazine), None)
+
+    @property
+    def bounds(self) -> tuple[float, float, float, float]:
+        """(x0, y0, x1, y1) around every wall, room and spawn: what a picture of the world must show."""
+        xs = [p[0] for w in self.walls for p in (w.a, w.b)] + [v for r in self.rooms for v in (r.x0, r.x1)]
+        ys = [p[1] for w in self.walls for p in (w.a, w.b)] + [v for r in self.rooms for v in (r.y0, r.y1)]
+        xs += [r.x for r in self.rangers] + [s.x for s in self.scouts]
+        ys += [r.y for r in self.rangers] + [s.y for s in self.scouts]
+        return (min(xs, default=0.0), min(ys, default=0.0), max(xs, default=0.0), max(ys, default=0.0))
+
+
+WorldProblem = ConfigProblem
+
+
+class WorldError(ConfigError):
+    """A world file has problems; carries all of them, so a broken file is fixed in one pass."""

@@ -1,0 +1,180 @@
+"""What the simulated sensors measure, from geometry alone: ray casts in the pymunk space, plus seeded noise.
+
+Kept apart from the physics so the rule "a sensor reports only what it could see" lives in one
+short file: every reading here is a ray cast from the robot (range, line of sight, the surface a
+camera region looks at) or a distance, never a lookup of where things really are beyond that.
+"""
+
+from __future__ import annotations
+
+import math
+import random
+from dataclasses import dataclass
+from typing import Any
+
+import pymunk
+
+from drd.sim.geometry import Point
+from drd.sim.model import World
+
+# Collision categories: which shapes a query or a contact considers.
+WALL, DOOR, OBSTACLE, RANGER, SCOUT, INTRUDER = 1, 2, 4, 8, 16, 32
+#: What blocks sight, radio and flight: walls and closed doors (obstacles are low, people are not opaque walls).
+TALL = WALL | DOOR
+EVERYTHING = 0xFFFFFFFF
+_SIGHT = pymunk.ShapeFilter(mask=TALL)
+
+
+@dataclass(frozen=True, slots=True)
+class Noise:
+    """Standard deviations of the Gaussian noise added to readings and actions (all seeded).
+
+    The defaults are those of a cheap lidar, camera and wheel encoders; `NOISELESS` is for
+    looking at geometry alone.
+    """
+
+    range: float = 0.01
+    """Range beams, metres."""
+    bearing: float = 0.005
+    """Camera detections' bearing, radians."""
+    distance: float = 0.03
+    """Camera detections' distance, as a fraction of the distance."""
+    light: float = 0.02
+    """Measured light level (0..1)."""
+    odometry: float = 0.01
+    """Wheel odometry, as a fraction of the distance travelled (and of the angle turned)."""
+    launch_heading: float = 0.01
+    """Launch direction, radians."""
+    launch_distance: float = 0.02
+    """Launch distance, as a fraction of the distance."""
+
+
+NOISELESS = Noise(0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
+
+
+@dataclass(frozen=True, slots=True)
+class Detection:
+    """An intruder in a camera's view: where it appears relative to the camera, and how bright it is there.
+
+    `label` is the track label a person detector would give (the intruder's id); `bearing` is in
+    radians relative to the camera's heading, positive to the left (counter-clockwise).
+    """
+
+    label: str
+    bearing: float
+    distance: float
+    light: float
+
+
+def beam_angles(heading: float, n: int, fov: float) -> list[float]:
+    """`n` beams spread evenly over `fov`, from right (heading - fov/2) to left, as a laser scan is ordered."""
+    if n == 1:
+        return [heading]
+    step = fov / (n - 1)
+    return [heading - fov / 2 + i * step for i in range(n)]
+
+
+class RayCaster:
+    """The fraction along a segment at which it first hits a shape: pymunk's `segment_query_first`, lean.
+
+    A scan is ~181 casts, ten times a second, per Ranger, and pymunk's wrapper (a SegmentQueryInfo
+    and two Vec2d per cast) costs three times the query itself. So when pymunk's cffi layer is
+    there, chipmunk's own function is called directly with one reused result buffer: the same
+    query, the same numbers (tests/test_sim_physics.py checks both paths agree); else the public API.
+    """
+
+    def __init__(self, space: pymunk.Space, fast: bool = True) -> None:
+        self.space = space
+        self._query: Any = None
+        if fast:
+            try:
+                from pymunk._chipmunk_cffi import ffi, lib
+
+                self._query, self._handle = lib.cpSpaceSegmentQueryFirst, space._space
+                self._info, self._null = ffi.new("cpSegmentQueryInfo *"), ffi.NULL
+            except (ImportError, AttributeError):  # another pymunk layout: the public API gives the same answers
+                self._query = None
+
+    def first(self, a: Point, b: Point, radius: float, flt: pymunk.ShapeFilter) -> float | None:
+        """The fraction (0..1) of `ab` at which the first matching shape is hit, or None."""
+        if self._query is None:
+            info = self.space.segment_query_first(a, b, radius, flt)
+            return None if info is None else info.alpha
+        if self._query(self._handle, a, b, radius, flt, self._info) == self._null:
+            return None
+        alpha: float = self._info.alpha
+        return alpha
+
+
+def scan(rays: RayCaster, origin: Point, heading: float, n: int, max_range: float, fov: float,
+         group: int, rng: random.Random, sigma: float) -> list[float]:
+    """Distances along `n` beams to the first shape of any kind; `max_range` exactly when nothing is hit."""
+    first = rays.first
+    flt = pymunk.ShapeFilter(group=group)
+    ox, oy = origin
+    out = []
+    for a in beam_angles(heading, n, fov):
+        alpha = first(origin, (ox + max_range * math.cos(a), oy + max_range * math.sin(a)), 0.0, flt)
+        if alpha is None:
+            out.append(max_range)
+        else:
+            d = alpha * max_range + (rng.gauss(0.0, sigma) if sigma else 0.0)
+            out.append(min(max(d, 0.0), max_range))
+    return out
+
+
+def clear(rays: RayCaster, a: Point, b: Point) -> bool:
+    """True when no wall or closed door lies between `a` and `b` (line of sight)."""
+    return rays.first(a, b, 0.0, _SIGHT) is None
+
+
+def detect(rays: RayCaster, world: World, origin: Point, heading: float, fov: float, max_range: float,
+           min_light: float, targets: dict[str, Point], rng: random.Random, noise: Noise) -> list[Detection]:
+    """The targets in the field of view, in range, in line of sight and lit at least `min_light`, in label order."""
+    out = []
+    for label, (x, y) in targets.items():
+        dx, dy = x - origin[0], y - origin[1]
+        d = math.hypot(dx, dy)
+        bearing = wrap(math.atan2(dy, dx) - heading)
+        if d > max_range or abs(bearing) > fov / 2:
+            continue
+        lit = world.light(x, y)
+        if lit < min_light or not clear(rays, origin, (x, y)):
+            continue
+        out.append(Detection(label, bearing + rng.gauss(0.0, noise.bearing),
+                             max(0.0, d * (1 + rng.gauss(0.0, noise.distance))),
+                             _unit(lit + rng.gauss(0.0, noise.light))))
+    return out
+
+
+def brightness(rays: RayCaster, world: World, origin: Point, heading: float, fov: float, n: int,
+               max_range: float, rng: random.Random, sigma: float) -> list[float]:
+    """Mean light of `n` image regions, right to left: the light on the surface each region's centre looks at.
+
+    A camera sees lit surfaces, so this samples the light map where the central ray of each region
+    meets a wall, door or obstacle (or at `max_range`), which is how a dark corner shows up in an image.
+    """
+    flt = pymunk.ShapeFilter(mask=TALL | OBSTACLE)
+    out = []
+    for a in beam_angles(heading, n, fov - fov / n if n > 1 else 0.0):
+        dx, dy = max_range * math.cos(a), max_range * math.sin(a)
+        alpha = rays.first(origin, (origin[0] + dx, origin[1] + dy), 0.0, flt)
+        k = 1.0 if alpha is None else alpha
+        lit = world.light(origin[0] + k * dx, origin[1] + k * dy)
+        out.append(_unit(lit + (rng.gauss(0.0, sigma) if sigma else 0.0)))
+    return out
+
+
+def walls_between(space: pymunk.Space, a: Point, b: Point) -> int:
+    """How many walls or closed doors the straight line from `a` to `b` crosses (a corner counts once)."""
+    hits = space.segment_query(a, b, 0.0, pymunk.ShapeFilter(mask=TALL))
+    return len({(round(h.point.x, 2), round(h.point.y, 2)) for h in hits})
+
+
+def wrap(angle: float) -> float:
+    """The same angle in [-pi, pi)."""
+    return (angle + math.pi) % (2 * math.pi) - math.pi
+
+
+def _unit(value: float) -> float:
+    return min(max(value, 0.0), 1.0)
