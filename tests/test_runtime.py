@@ -372,3 +372,12 @@ behavior Patient(limit: duration = 10s) {
     h = Harness(compiled(text, catalog), {"Calibrate": Forever}, ranger_world())
     assert h.run(until=60) == "failure"
     assert [(r.trigger, r.at) for r in h.of(rec.Taken)] == [("timeout", 6.0)]
+
+
+def test_a_livelock_fails_the_mission_instead_of_hanging(catalog: Catalog) -> None:
+    text = "mission M {\n needs r: Ranger\n start -> Calibrate\n Calibrate -> Calibrate when true\n}"
+    h = Harness(compiled(text, catalog), {"Calibrate": Forever}, ranger_world())
+    assert h.run(until=5) == "failure"
+    assert "livelock" in h.interp.reason
+    assert [r.outcome for r in h.of(rec.Finished)] == ["failure"]
+    assert h.interp.active() == [] and h.rcm.holders("ranger1.drive") == ()

@@ -496,8 +496,9 @@ class Interpreter:
                 self._dispatch(self.events.popleft())
                 continue
             return
-        self.stop("livelock: transitions keep firing without time passing")
-        self.outcome, self.reason = "failure", "livelock: transitions keep firing without time passing"
+        if self.root is not None:
+            self._exit(self.root, "failure")
+        self._end("failure", f"livelock: more than {MAX_MICROSTEPS} transitions without time passing")
 
     def _complete(self, node: Node, ok: bool, why: str) -> None:
         parent = node.parent
