@@ -158,3 +158,13 @@ def test_drd_components_lists_the_catalog() -> None:
     assert {"Ranger", "Scout", "FollowCorridor", "Watch", "DoorLog"} <= set(names)
     assert names["FollowCorridor"]["params"][0] == {"name": "speed", "type": "float", "default": 0.4,
                                                      "required": False}
+
+
+def test_unexpected_errors_are_one_line_unless_debugging(tmp_path: Path) -> None:
+    target = tmp_path / "out.json"
+    target.mkdir()  # writing the plan there fails in an unplanned way
+    r = run("missionctl", "plan", str(CORRIDOR), "-o", str(target))
+    assert r.returncode == 2 and "Traceback" not in r.stderr
+    assert "IsADirectoryError" in r.stderr and "DRD_DEBUG=1" in r.stderr
+    r = run("missionctl", "plan", str(CORRIDOR), "-o", str(target), env={**os.environ, "DRD_DEBUG": "1"})
+    assert r.returncode == 2 and "Traceback (most recent call last)" in r.stderr
