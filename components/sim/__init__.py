@@ -1,0 +1,40 @@
+"""The `sim` drivers: one module per RC type, each implementing its `drd.hw.interfaces` protocol on a
+`drd.sim.Simulation`. Imported lazily by `drd.hw.drivers.load_driver`, one module at a time, so this
+package imports no driver module itself; only the shared `SimDriver` base lives here."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
+
+from drd.hosts import Device
+from drd.hw.interfaces import Fence, HardwareError
+from drd.sim import SimError, Simulation
+
+
+class SimDriver:
+    """Base of every sim driver: the device, the robot it belongs to, the simulator and the epoch fence."""
+
+    def __init__(self, device: Device, robot_id: str, sim: Simulation) -> None:
+        self.device, self.robot_id, self.sim = device, robot_id, sim
+        self.fence = Fence(f"{device.id} ({robot_id})")
+
+    def option(self, key: str, default: float, check: Callable[[float], bool] = lambda x: x > 0) -> float:
+        """A numeric device option (hosts.yaml `options:`), or `default`; a bad value names device and key."""
+        value = self.device.options.get(key, default)
+        if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value) \
+                or not check(float(value)):
+            raise HardwareError(f"{self.device.id}: option {key} has a bad value {value!r}")
+        return float(value)
+
+    @contextmanager
+    def sim_errors(self) -> Iterator[None]:
+        """Turn the simulator's `SimError` into the interfaces' `HardwareError`, naming the device."""
+        try:
+            yield
+        except SimError as e:
+            raise HardwareError(f"{self.device.id}: {e}") from e
+
+    def __repr__(self) -> str:
+        return f"{type(self).__name__}({self.device.id!r}, robot={self.robot_id!r})"

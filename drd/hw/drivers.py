@@ -1,0 +1,141 @@
+"""Driver loading: `hosts.yaml`'s `driver:` entries choose each device's implementation, imported lazily.
+
+A device of RC type `T` with `driver: X` is implemented by the class at:
+
+- `sim`: the entry point of `T`'s manifest (`components/T/manifest.yaml`, e.g.
+  `components.sim.range_sensor:SimRangeSensor`), which must lie under `components.sim`;
+- any other `X`: `components.X.<t>:<Xcap>T`, where `<t>` is `T` in snake_case and `<Xcap>` is `X` in
+  CamelCase: `driver: serial` for a `Drive` is `components.serial.drive:SerialDrive`.
+
+The class is constructed as `cls(device, robot_id, backend)`, where `backend` is `services[X]`: the
+`Simulation` for `sim`, whatever the host provides under that name otherwise (None if nothing). A
+module is imported on first use only (importlib), so a host imports just the drivers its hosts.yaml
+names.
+"""
+
+from __future__ import annotations
+
+import importlib
+import re
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any
+
+from drd.hosts import Cluster, Device
+from dsl.catalog import Catalog
+
+if TYPE_CHECKING:  # the simulator (pymunk) is imported only by hosts that run sim drivers
+    from drd.sim import Simulation
+
+__all__ = ["SIM", "DriverError", "HostDrivers", "driver_entry_point", "drivers_for", "load_driver"]
+
+SIM = "sim"
+_SIM_PACKAGE = "components.sim"
+
+
+class DriverError(Exception):
+    """A device's driver cannot be found or built; the message names device, driver and module."""
+
+
+def _snake(name: str) -> str:
+    return re.sub(r"(?<=[a-z0-9])(?=[A-Z])", "_", name).lower()
+
+
+def _camel(name: str) -> str:
+    return "".join(part[:1].upper() + part[1:] for part in re.split(r"[_\-]", name) if part)
+
+
+def driver_entry_point(device: Device, catalog: Catalog | None = None) -> str:
+    """`module:Class` implementing `device` (see the module docstring); reads the catalog for `sim` only."""
+    if device.driver != SIM:
+        return f"components.{device.driver}.{_snake(device.type)}:{_camel(device.driver)}{device.type}"
+    if catalog is None:
+        from drd.manifests import load_catalog
+        catalog = load_catalog()
+    t = catalog.get(device.type)
+    entry = t.entry_point if t is not None else None
+    if entry is None or not entry.startswith(_SIM_PACKAGE + "."):
+        raise DriverError(f"device {device.id}: driver {SIM!r} needs the {device.type} manifest's entry_point"
+                          f" under {_SIM_PACKAGE}, got {entry!r}")
+    return entry
+
+
+def load_driver(device: Device, robot_id: str, services: Mapping[str, Any]) -> object:
+    """Import (first use only) and build the driver of `device` for robot `robot_id`.
+
+    `services` holds the backends by driver name (`"sim"`: the Simulation) and optionally `"catalog"`.
+
+    Raises:
+        DriverError: the module or class is missing, the backend is missing, or construction failed.
+    """
+    entry = driver_entry_point(device, services.get("catalog"))
+    module_name, _, class_name = entry.partition(":")
+    where = f"device {device.id} (type {device.type}, driver {device.driver!r})"
+    try:
+        module = importlib.import_module(module_name)
+    except ModuleNotFoundError as e:
+        if e.name is not None and module_name.startswith(e.name):  # the driver module itself, not its imports
+            raise DriverError(f"{where}: no module {module_name} (looked for {entry});"
+                              f" see docs/drivers.md to add a driver") from e
+        raise DriverError(f"{where}: module {module_name} failed to import: {e}") from e
+    cls = getattr(module, class_name, None)
+    if not callable(cls):
+        raise DriverError(f"{where}: module {module_name} has no class {class_name}")
+    backend = services.get(device.driver)
+    if device.driver == SIM and backend is None:
+        raise DriverError(f"{where}: the sim driver needs a Simulation in services['sim'], got {backend!r}")
+    try:
+        return cls(device, robot_id, backend)
+    except DriverError:
+        raise
+    except Exception as e:
+        raise DriverError(f"{where}: {entry} could not be built for {robot_id}: {e}") from e
+
+
+@dataclass
+class HostDrivers:
+    """One host's drivers: by device id, and for each robot its parts (part name -> driver)."""
+
+    devices: dict[str, object] = field(default_factory=dict)
+    robots: dict[str, dict[str, object]] = field(default_factory=dict)
+
+
+def drivers_for(cluster: Cluster, host_name: str, sim: Simulation | None = None,
+                services: Mapping[str, Any] | None = None, catalog: Catalog | None = None) -> HostDrivers:
+    """Build the drivers of host `host_name`'s devices.
+
+    Each device is driven for the robot that uses it; a device several robots share (the radio) is
+    keyed under their common carrier if they have one, and each robot gets a driver of its own for
+    its part. A device no robot names is driven for the host itself.
+    """
+    host = cluster.host(host_name)
+    backends: dict[str, Any] = dict(services or {})
+    if sim is not None:
+        backends[SIM] = sim
+    if catalog is not None:
+        backends["catalog"] = catalog
+    elif "catalog" not in backends and any(d.driver == SIM for d in host.devices):
+        from drd.manifests import load_catalog
+        backends["catalog"] = load_catalog()
+    users: dict[str, list[str]] = {}
+    for robot in host.robots:
+        for device_id in robot.parts.values():
+            users.setdefault(device_id, []).append(robot.id)
+    carriers = {r.id: r.carrier for r in host.robots}
+    out = HostDrivers()
+    for device in host.devices:
+        ids = users.get(device.id, [])
+        common = {carriers[r] for r in ids}
+        carrier = next(iter(common)) if len(common) == 1 else None
+        owner = ids[0] if len(ids) == 1 else carrier if carrier is not None else ids[0] if ids else host.name
+        out.devices[device.id] = load_driver(device, owner, backends)
+    devices = {d.id: d for d in host.devices}
+    for robot in host.robots:
+        parts: dict[str, object] = {}
+        for part, device_id in robot.parts.items():
+            if device_id not in devices:  # a part on another host: that host drives it
+                continue
+            shared = len(users[device_id]) > 1
+            parts[part] = load_driver(devices[device_id], robot.id, backends) if shared else out.devices[device_id]
+        out.robots[robot.id] = parts
+    return out
