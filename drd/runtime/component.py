@@ -35,7 +35,8 @@ class Context:
     log: Callable[[str], None]
     now: Callable[[], float]
     outputs: dict[str, Any] = field(default_factory=dict)
-    services: Mapping[str, Any] = field(default_factory=dict)  # drivers, simulator handles
+    services: Mapping[str, Any] = field(default_factory=dict)  # shared data, simulator handles
+    devices: Mapping[str, Any] = field(default_factory=dict)  # need name -> driver (fenced by epoch)
 
 
 class Component:
@@ -47,6 +48,20 @@ class Component:
     def setup(self, ctx: Context) -> None:
         """Once, before start: keep the context, open drivers."""
         self.ctx = ctx
+
+    def device(self, need: str) -> Any:
+        """The driver behind one of this component's needs, through its interface (drd.hw)."""
+        assert self.ctx is not None, "device() before setup()"
+        try:
+            return self.ctx.devices[need]
+        except KeyError:
+            raise LookupError(f"{self.ctx.path}: no device for need {need!r} "
+                              f"(have: {', '.join(self.ctx.devices) or 'none'})") from None
+
+    def shared(self, name: str) -> Any:
+        """Shared data declared by an ancestor (`shared visited: DoorLog`), or None."""
+        assert self.ctx is not None
+        return self.ctx.services.get("shared", {}).get(name)
 
     def start(self) -> None:
         """On entry, just in time."""

@@ -24,6 +24,7 @@ from drd.runtime import records as rec
 from drd.runtime.broker import ResourceBroker
 from drd.runtime.clock import Clock
 from drd.runtime.component import Component, Context, Registry, Status
+from drd.runtime.fence import Fenced
 from drd.runtime.pool import ResourcePool, ResourceView
 from dsl import ast
 from dsl.evaluate import EvalError, evaluate, format_value, truthy
@@ -65,6 +66,7 @@ class Node:
     component: Component | None = None
     context: Context | None = None
     assignment: dict[str, str] = field(default_factory=dict)  # requested need -> resource id
+    epochs: dict[str, int] = field(default_factory=dict)  # unit id -> fencing epoch of its grant
     requested: bool = False
     lease_until: float = 0.0
     instances: int = 0  # multi: created so far
@@ -414,15 +416,11 @@ class Interpreter:
 
     def _start_component(self, node: Node) -> None:
         """Set a component up once per instance path (py_trees style); start it on every entry."""
-        resources = {}
-        for need in node.state.needs:
-            rid = node.assignment.get(need.name) or self._bound(node, need)
-            if rid:
-                resources[need.name] = rid
+        resources, devices = self._devices(node)
         cached = self._components.get(node.path)
         if cached is not None:
             comp, ctx = cached
-            ctx.params, ctx.resources, ctx.outputs = dict(node.scope), resources, {}
+            ctx.params, ctx.resources, ctx.devices, ctx.outputs = dict(node.scope), resources, devices, {}
         else:
             name = node.state.component or ""
             factory = self.registry.get(name)
@@ -437,7 +435,7 @@ class Interpreter:
             ctx = Context(path, dict(node.scope), resources,
                           lambda ev, **f: self.emit(ev, path, **f),
                           lambda text: self._notify(rec.Log(self.clock.now(), path, text)),
-                          self.clock.now, services={**self.services, "shared": shared})
+                          self.clock.now, services={**self.services, "shared": shared}, devices=devices)
             try:
                 comp = factory()
                 comp.setup(ctx)
@@ -457,14 +455,27 @@ class Interpreter:
         self._notify(rec.Log(self.clock.now(), node.path, f"component raised {type(e).__name__}: {e}"))
         self._finish(node, False, f"component raised {type(e).__name__}: {e}")
 
-    def _bound(self, node: Node, need: ResourceNeed) -> str | None:
-        if need.bound_to is None:
-            return None
-        state_id, name, part = need.bound_to
-        for anc in self._ancestors(node):
-            if anc.state.id == state_id and name in anc.assignment:
-                return self.pool.part(anc.assignment[name], part)
-        return None
+    def _devices(self, node: Node) -> tuple[dict[str, str], dict[str, Any]]:
+        """Each need's resource id, and its driver (a robot's own part driver when bound through a part)."""
+        drivers = self.services.get("drivers")
+        resources: dict[str, str] = {}
+        devices: dict[str, Any] = {}
+        for need in node.state.needs:
+            holder, rid, robot, part = node, node.assignment.get(need.name), None, None
+            if rid is None and need.bound_to is not None:
+                state_id, name, part = need.bound_to
+                holder = next((a for a in self._ancestors(node) if a.state.id == state_id), node)
+                robot = holder.assignment.get(name)
+                rid = self.pool.part(robot, part) if robot else None
+            if not rid:
+                continue
+            resources[need.name] = rid
+            if drivers is not None:
+                by_robot = getattr(drivers, "robots", {}).get(robot, {}) if robot and part else {}
+                driver = by_robot.get(part) or getattr(drivers, "devices", {}).get(rid)
+                if driver is not None:
+                    devices[need.name] = Fenced(driver, holder.epochs.get(rid))
+        return resources, devices
 
     # ------------------------------------------------------------- finishing and transitions
     def _finish(self, node: Node, success: bool, reason: str = "") -> None:
@@ -698,6 +709,7 @@ class Interpreter:
             match d:
                 case Granted():
                     node.lease_until = d.lease_until
+                    node.epochs = dict(d.epochs)
                     self._notify(rec.Granted(now, node.path, dict(d.assignment), dict(d.epochs)))
                     if node.reserved_by:
                         node.assignment = dict(d.assignment)  # held for a state not entered yet
