@@ -381,3 +381,54 @@ def test_a_livelock_fails_the_mission_instead_of_hanging(catalog: Catalog) -> No
     assert "livelock" in h.interp.reason
     assert [r.outcome for r in h.of(rec.Finished)] == ["failure"]
     assert h.interp.active() == [] and h.rcm.holders("ranger1.drive") == ()
+
+
+class RecordingDrive:
+    """A driver that records what reaches the hardware."""
+
+    def __init__(self) -> None:
+        self.calls: list[tuple[float, float, int | None]] = []
+
+    def set_velocity(self, v: float, omega: float, epoch: int | None = None) -> None:
+        self.calls.append((v, omega, epoch))
+
+    def odometry(self) -> tuple[float, float, float]:
+        return (0.0, 0.0, 0.0)
+
+
+def _commands(v: float) -> type:
+    class Commands(Forever):
+        def step(self, now: float) -> Any:
+            self.device("drive").set_velocity(v, 0.0)
+            self.device("drive").odometry()  # a query goes straight through
+            return super().step(now)
+    return Commands
+
+
+@pytest.mark.parametrize(("layers", "winner"), [
+    ("FollowCorridor; AvoidObstacles", 2.0),  # equal priorities: the one declared last wins
+    ("AvoidObstacles; FollowCorridor", 1.0),
+    ("FollowCorridor priority 1; AvoidObstacles priority 2", 1.0),  # a higher priority beats the later layer
+])
+def test_commands_to_one_actuator_are_multiplexed(catalog: Catalog, layers: str, winner: float) -> None:
+    from types import SimpleNamespace
+
+    from drd.rcm import ResourceManager
+    from drd.runtime.clock import SimClock
+    from drd.runtime.interpreter import Interpreter
+    from drd.runtime.pool import ResourcePool
+
+    drive = RecordingDrive()
+    drivers = SimpleNamespace(devices={"ranger1.drive": drive}, robots={"ranger1": {"drive": drive}})
+    clock, rcm = SimClock(), ResourceManager()
+    pool = ResourcePool(rcm)
+    pool.add(ranger_world(1, 0), 0.0)
+    chart = compiled(f"mission M {{\n needs ranger: Ranger\n parallel {{ {layers} }}\n}}", catalog)
+    interp = Interpreter(chart, {"FollowCorridor": _commands(1.0), "AvoidObstacles": _commands(2.0)}, rcm, clock,
+                         pool=pool, services={"drivers": drivers})
+    interp.start()
+    for _ in range(3):
+        clock.advance(0.1)
+        interp.step()
+    assert [v for v, _, _ in drive.calls] == [winner] * 3  # one command per cycle reached the drive
+    assert {e for _, _, e in drive.calls} == {1}  # fenced with the grant's epoch

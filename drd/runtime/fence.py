@@ -1,31 +1,80 @@
-"""Drivers seen through a grant: every command carries the grant's fencing epoch.
+"""Drivers seen through a grant: fenced by epoch, and multiplexed between behaviors.
 
 The Resource Controller Manager gives each grant of a unit a strictly larger epoch; a driver
 refuses commands with an older one (`drd.hw.StaleCommand`). A component never handles epochs:
 the runtime hands it its devices wrapped here.
+
+A command is a driver method that takes an `epoch`. When several active behaviors command one
+actuator (FollowCorridor and AvoidObstacles both drive the Ranger), the reference says that in
+each control cycle the command of the highest priority wins and, among equals, the behavior
+declared last (a later layer subsumes an earlier one). With an `Arbiter`, commands are proposed
+during the cycle and only the winner per driver is executed at its end; queries (scans,
+odometry, detections) always go straight through.
 """
 
 from __future__ import annotations
 
 import functools
 import inspect
+from collections.abc import Callable
+from dataclasses import dataclass
 from typing import Any
 
 
+@dataclass(slots=True)
+class Proposal:
+    rank: tuple[int, int]  # (-priority, declaration order): the larger wins
+    call: Callable[[], Any]
+    owner: Any  # who proposed it (the runtime's node), for error reports
+
+
+class Arbiter:
+    """Collects the commands of one control cycle; `flush` runs the winner per driver."""
+
+    def __init__(self) -> None:
+        self._best: dict[int, Proposal] = {}
+
+    def propose(self, driver: Any, proposal: Proposal) -> None:
+        best = self._best.get(id(driver))
+        if best is None or proposal.rank >= best.rank:
+            self._best[id(driver)] = proposal
+
+    def flush(self, on_error: Callable[[Any, Exception], None]) -> int:
+        """Execute the winning commands; returns how many ran."""
+        winners, self._best = list(self._best.values()), {}
+        for p in winners:
+            try:
+                p.call()
+            except Exception as e:  # a driver refusing a command fails its proposer, not the cycle
+                on_error(p.owner, e)
+        return len(winners)
+
+
 class Fenced:
-    """`driver` with `epoch=` filled in on every method that takes one."""
+    """`driver` with `epoch=` filled in on commands, which go through `arbiter` when there is one."""
 
-    __slots__ = ("_driver", "_epoch")
+    __slots__ = ("_driver", "_epoch", "_arbiter", "_rank", "_owner")
 
-    def __init__(self, driver: Any, epoch: int | None):
+    def __init__(self, driver: Any, epoch: int | None, arbiter: Arbiter | None = None,
+                 rank: tuple[int, int] = (0, 0), owner: Any = None):
         self._driver = driver
         self._epoch = epoch
+        self._arbiter = arbiter
+        self._rank = rank
+        self._owner = owner
 
     def __getattr__(self, name: str) -> Any:
         value = getattr(self._driver, name)
-        if self._epoch is not None and callable(value) and _takes_epoch(value):
-            return functools.partial(value, epoch=self._epoch)
-        return value
+        if not (callable(value) and _takes_epoch(value)):
+            return value
+        command = functools.partial(value, epoch=self._epoch) if self._epoch is not None else value
+        if self._arbiter is None:
+            return command
+        arbiter, driver, rank, owner = self._arbiter, self._driver, self._rank, self._owner
+
+        def propose(*args: Any, **kwargs: Any) -> None:
+            arbiter.propose(driver, Proposal(rank, functools.partial(command, *args, **kwargs), owner))
+        return propose
 
     def __repr__(self) -> str:
         return f"Fenced({self._driver!r}, epoch={self._epoch})"

@@ -24,7 +24,7 @@ from drd.runtime import records as rec
 from drd.runtime.broker import ResourceBroker
 from drd.runtime.clock import Clock
 from drd.runtime.component import Component, Context, Registry, Status
-from drd.runtime.fence import Fenced
+from drd.runtime.fence import Arbiter, Fenced
 from drd.runtime.pool import ResourcePool, ResourceView
 from dsl import ast
 from dsl.evaluate import EvalError, evaluate, format_value, truthy
@@ -113,6 +113,8 @@ class Interpreter:
         self._defaults: dict[str, dict[str, Any]] = {}
         self._last_tick = -1.0
         self._settling = False
+        self._arbiter = Arbiter()  # one control cycle's actuator commands, multiplexed by priority
+        self._rank = {sid: i for i, sid in enumerate(s.id for s in chart.walk())}  # declaration order
         self._on_event: dict[str, dict[str, tuple[Transition, ...]]] = {}
         self._has_timed: set[str] = set()
         for st in chart.states.values():
@@ -135,6 +137,7 @@ class Interpreter:
         root_state = self.chart[self.chart.root]
         self._enter(root_state, root_state.id, None, {})
         self._settle()
+        self._flush()
 
     def step(self) -> None:
         """One macro step at `clock.now()`."""
@@ -156,7 +159,9 @@ class Interpreter:
                 continue
             if status is Status.SUCCESS or status is Status.FAILURE:
                 self._finish(node, status is Status.SUCCESS, "" if status is Status.SUCCESS else "failed")
+        self._flush()
         self._settle()
+        self._flush()  # what exits and entries commanded (a terminate's stop, a start's first move)
 
     def emit(self, name: str, source: str = "operator", **fields: Any) -> None:
         """Queue an event (from a component, an action or the operator)."""
@@ -171,6 +176,7 @@ class Interpreter:
         """Shut everything down, children first; idempotent."""
         if self.root is not None and self.root.phase is not Phase.DONE:
             self._exit(self.root, "stopped")
+            self._flush()  # the terminates' last commands (stop the drive) still reach the hardware
         if self.outcome is None:
             self._end("stopped", reason)
 
@@ -451,6 +457,9 @@ class Interpreter:
             return
         self._running[node] = None
 
+    def _flush(self) -> None:
+        self._arbiter.flush(lambda node, e: self._component_failed(node, e) if isinstance(node, Node) else None)
+
     def _component_failed(self, node: Node, e: Exception) -> None:
         self._notify(rec.Log(self.clock.now(), node.path, f"component raised {type(e).__name__}: {e}"))
         self._finish(node, False, f"component raised {type(e).__name__}: {e}")
@@ -474,7 +483,8 @@ class Interpreter:
                 by_robot = getattr(drivers, "robots", {}).get(robot, {}) if robot and part else {}
                 driver = by_robot.get(part) or getattr(drivers, "devices", {}).get(rid)
                 if driver is not None:
-                    devices[need.name] = Fenced(driver, holder.epochs.get(rid))
+                    rank = (-node.state.priority, self._rank.get(node.state.id, 0))
+                    devices[need.name] = Fenced(driver, holder.epochs.get(rid), self._arbiter, rank, node)
         return resources, devices
 
     # ------------------------------------------------------------- finishing and transitions
