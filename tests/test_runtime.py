@@ -432,3 +432,21 @@ def test_commands_to_one_actuator_are_multiplexed(catalog: Catalog, layers: str,
         interp.step()
     assert [v for v, _, _ in drive.calls] == [winner] * 3  # one command per cycle reached the drive
     assert {e for _, _, e in drive.calls} == {1}  # fenced with the grant's epoch
+
+
+def test_a_component_updates_the_static_dependency_database(catalog: Catalog) -> None:
+    class Launches(Timed):
+        def start(self) -> None:
+            super().start()
+            self.update_dependency("ranger1.scout1", "carrier", "")  # the Scout left the magazine
+
+    text = """
+mission M {
+    needs r: Ranger
+    var aboard: int = 0
+    start -> LaunchScout
+    LaunchScout -> done / set aboard = count(Scout where scout.carrier == r)
+}"""
+    h = Harness(compiled(text, catalog), {"LaunchScout": Launches}, ranger_world(1, 3))
+    assert h.run() == "success"
+    assert h.interp.root is not None and h.interp.root.scope["aboard"] == 2

@@ -58,6 +58,14 @@ class Component:
             raise LookupError(f"{self.ctx.path}: no device for need {need!r} "
                               f"(have: {', '.join(self.ctx.devices) or 'none'})") from None
 
+    def update_dependency(self, resource: str, key: str, value: object) -> None:
+        """Change the Static Dependency Database (a launched Scout: `carrier` becomes "")."""
+        assert self.ctx is not None
+        update = self.ctx.services.get("dependencies")
+        if update is None:
+            raise LookupError(f"{self.ctx.path}: no dependency database in this context")
+        update(resource, key, value)
+
     def shared(self, name: str) -> Any:
         """Shared data declared by an ancestor (`shared visited: DoorLog`), or None."""
         assert self.ctx is not None

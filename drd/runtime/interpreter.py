@@ -191,6 +191,10 @@ class Interpreter:
         self.pool.remove_host(host, self.clock.now())
         self._settle()
 
+    def _dependency(self, rid: str, key: str, value: object) -> None:
+        """From a component, mid-cycle: record it now; the step settles its consequences."""
+        self.pool.set_property(rid, key, value, self.clock.now())
+
     def set_property(self, rid: str, key: str, value: object) -> None:
         """Change a static dependency at run time (constraints and counts see it)."""
         self.pool.set_property(rid, key, value, self.clock.now())
@@ -441,7 +445,8 @@ class Interpreter:
             ctx = Context(path, dict(node.scope), resources,
                           lambda ev, **f: self.emit(ev, path, **f),
                           lambda text: self._notify(rec.Log(self.clock.now(), path, text)),
-                          self.clock.now, services={**self.services, "shared": shared}, devices=devices)
+                          self.clock.now, devices=devices,
+                          services={**self.services, "shared": shared, "dependencies": self._dependency})
             try:
                 comp = factory()
                 comp.setup(ctx)
