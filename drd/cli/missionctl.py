@@ -12,7 +12,18 @@ import typer
 from rich.text import Text
 from rich.tree import Tree
 
-from drd.cli.common import INVALID, OK, ComponentsOption, catalog, err, fail, out, render_diagnostic, run_app
+from drd.cli.common import (
+    INVALID,
+    MISSION_FAILED,
+    OK,
+    ComponentsOption,
+    catalog,
+    err,
+    fail,
+    out,
+    render_diagnostic,
+    run_app,
+)
 from dsl import Compiled, compile_file
 from dsl.export import need_label, state_label, to_dict, to_dot, to_mermaid, trigger_label
 from dsl.statechart import State, Statechart, StateKind
@@ -174,3 +185,96 @@ def _label(s: State, initial: bool = False) -> Text:
 
 def main() -> None:
     run_app(app, "missionctl")
+
+
+@app.command("dry-run")
+def dry_run(
+    mission: Path = typer.Argument(..., help="The mission file.", show_default=False),
+    world: str = typer.Option("corridor", "--world", "-w", help="A world name (worlds/NAME.yaml) or a path."),
+    hosts: Path = typer.Option(Path("hosts.yaml"), "--hosts", help="The cluster's resource configuration."),
+    seed: int = typer.Option(0, "--seed", help="Seed of the simulation (same seed, same run)."),
+    speed: float = typer.Option(None, "--speed", help="Run at this multiple of real time (default: as fast "
+                                                      "as the CPU allows).", show_default=False),
+    until: float = typer.Option(1800.0, "--until", help="Stop after this much sim time, in seconds."),
+    trace: Path = typer.Option(None, "--trace", help="Write every record as JSON lines to this file.",
+                               show_default=False),
+    as_json: bool = typer.Option(False, "--json", help="Print the report as JSON."),
+    components: list[Path] = ComponentsOption,
+) -> int:
+    """Run a mission against the 2D simulation in this process: exit 0 if it succeeds, 1 if it fails."""
+    from rich.live import Live
+
+    from drd.dryrun import run as run_dry
+    from drd.dryrun import world_path
+    from drd.hosts import HostsError, load_hosts
+    from drd.sim.world import WorldError, load_world
+
+    cat = catalog(components)
+    result = compile_file(mission, cat)
+    for d in result.diagnostics:
+        render_diagnostic(d, result.sources)
+    if not result.ok or result.statechart is None:
+        return INVALID if not result.ok else fail(f"{mission} declares no mission to run")
+    try:
+        cluster = load_hosts(hosts, cat)
+        sim_world = load_world(world_path(world, Path.cwd()))
+    except (HostsError, WorldError) as e:
+        for p in e.problems:
+            err.print(Text.assemble(("error: ", "bold red"), str(p)))
+        return INVALID
+    live = Live(Text("starting…"), console=err, transient=True) if err.is_terminal and not as_json else None
+
+    def progress(sim: object, executive: object) -> None:
+        if live is not None:
+            live.update(_progress_view(sim, executive))
+
+    fh = trace.open("w", encoding="utf-8") if trace else None
+    try:
+        if live is not None:
+            live.start()
+        try:
+            report = run_dry(result.statechart, cluster, sim_world, cat, seed=seed, until=until, speed=speed,
+                             trace=fh, progress=progress)
+        except ValueError as e:
+            fail(str(e))
+    finally:
+        if live is not None:
+            live.stop()
+        if fh is not None:
+            fh.close()
+    if as_json:
+        out.print_json(json.dumps(report.to_dict(), default=str))
+    else:
+        _print_report(report)
+    return OK if report.outcome == "success" else MISSION_FAILED
+
+
+def _progress_view(sim: object, executive: object) -> Text:
+    missions = getattr(executive, "missions", {})
+    active = [n.path for m in missions.values() for n in m.active() if n.state.kind is StateKind.LEAF]
+    return Text.assemble(("sim ", "dim"), f"{getattr(sim, 'time', 0.0):7.1f} s  ", ("active ", "dim"),
+                         ", ".join(p.rsplit("/", 1)[-1] for p in active[:6]) or "—")
+
+
+def _print_report(report: object) -> None:
+    from rich.table import Table
+
+    r = report
+    outcome = getattr(r, "outcome", None)
+    colour = "green" if outcome == "success" else "red"
+    out.print(Text.assemble(("mission ", "bold"), getattr(r, "mission", ""), "  ", (f"{outcome}", f"bold {colour}"),
+                            f"  {getattr(r, 'reason', '')}".rstrip()))
+    out.print(f"sim time {r.sim_time:.1f} s · wall time {r.wall_time:.2f} s · "  # type: ignore[attr-defined]
+              f"{r.real_time_factor:.0f}x real time")  # type: ignore[attr-defined]
+    table = Table(title="timeline", title_justify="left")
+    for col in ("behavior", "entered", "exited", "status"):
+        table.add_column(col)
+    for row in r.timeline():  # type: ignore[attr-defined]
+        exited = "" if row["exited"] is None else f"{row['exited']:.1f}"
+        table.add_row(row["path"], f"{row['entered']:.1f}", exited, row["status"])
+    out.print(table)
+    for title, rows in (("doors found", r.doors), ("Scouts placed", r.scouts),  # type: ignore[attr-defined]
+                        ("intruders detected", r.detections)):  # type: ignore[attr-defined]
+        out.print(Text(f"{title}: {len(rows)}", style="bold"))
+        for row in rows[:20]:
+            out.print("  " + ", ".join(f"{k}={v:.2f}" if isinstance(v, float) else f"{k}={v}" for k, v in row.items()))

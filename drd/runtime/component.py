@@ -66,6 +66,11 @@ class Component:
             raise LookupError(f"{self.ctx.path}: no dependency database in this context")
         update(resource, key, value)
 
+    def sibling_output(self, sibling: str, name: str) -> Any:
+        """An output of a finished sibling (`LocateDarkCorner`'s `goal`), or None."""
+        assert self.ctx is not None
+        return self.ctx.services.get("siblings", {}).get(sibling, {}).get(name)
+
     def shared(self, name: str) -> Any:
         """Shared data declared by an ancestor (`shared visited: DoorLog`), or None."""
         assert self.ctx is not None

@@ -74,6 +74,7 @@ class Node:
     failed: int = 0
     bounds: tuple[int, int] = (0, 0)
     reserved_by: str = ""  # a preallocation made when this (future) node's predecessor was entered
+    last_failure: str = ""  # multi: why the most recent instance failed, for the report
 
     def visible(self) -> dict[str, Any]:
         """What descendants may read: shared data and resources."""
@@ -356,11 +357,11 @@ class Interpreter:
                 return self.chart[t.target]
         return self.chart[node.state.initial] if node.state.initial else None
 
-    def _enter_child(self, parent: Node, state: State, index: int | None = None) -> Node | None:
+    def _enter_child(self, parent: Node, state: State, index: int | None = None, why: str = "") -> Node | None:
         if self.outcome is not None or parent.phase is Phase.DONE:  # stopped meanwhile (e.g. by a listener)
             return None
         if state.kind is StateKind.FINAL:
-            self._finish(parent, bool(state.success), "" if state.success else "reached fail")
+            self._finish(parent, bool(state.success), "" if state.success else (why or "reached fail"))
             return None
         base = parent.path if parent.state.kind is not StateKind.MULTI else parent.path
         path = f"{base}[{index}]" if index is not None else f"{base}/{state.name}"
@@ -446,7 +447,8 @@ class Interpreter:
                           lambda ev, **f: self.emit(ev, path, **f),
                           lambda text: self._notify(rec.Log(self.clock.now(), path, text)),
                           self.clock.now, devices=devices,
-                          services={**self.services, "shared": shared, "dependencies": self._dependency})
+                          services={**self.services, "shared": shared, "dependencies": self._dependency,
+                                    "siblings": node.parent.outputs if node.parent else {}})
             try:
                 comp = factory()
                 comp.setup(ctx)
@@ -539,7 +541,7 @@ class Interpreter:
         kind = ast.TriggerKind.COMPLETION if ok else ast.TriggerKind.ERROR
         for t in node.state.transitions:
             if t.kind is kind and self._enabled_guard(parent_domain(node), t, None):
-                self._take(node, t, None)
+                self._take(node, t, None, why)
                 return
         pk = parent.state.kind
         if pk is StateKind.MULTI:
@@ -573,12 +575,14 @@ class Interpreter:
             multi.succeeded += 1
         else:
             multi.failed += 1
+            multi.last_failure = why
             self._notify(rec.Log(self.clock.now(), multi.path, f"an instance failed: {why}"))
         low, _ = multi.bounds
         running = [c for c in multi.children if c.phase is not Phase.DONE]
         if multi.succeeded + len(running) < low:
+            last = f" (last failure: {multi.last_failure})" if multi.last_failure else ""
             self._finish(multi, False, f"only {multi.succeeded} of at least {low} instances of "
-                         f"{multi.state.name} can succeed")
+                         f"{multi.state.name} can succeed{last}")
         elif not running:
             self._finish(multi, True)
 
@@ -626,7 +630,7 @@ class Interpreter:
                     self._take(node, t, event)
                     break
 
-    def _take(self, node: Node, t: Transition, event: rec.Event | None) -> None:
+    def _take(self, node: Node, t: Transition, event: rec.Event | None, why: str = "") -> None:
         domain = parent_domain(node)
         target = self.chart[t.target]
         if self.listeners:
@@ -642,7 +646,8 @@ class Interpreter:
                     self._exit(c, "stopped")
         self._take_actions(domain, t, event)
         if domain.phase is not Phase.DONE:
-            self._enter_child(domain, target)
+            self._enter_child(domain, target, why=why or (f"{node.state.name}: {trigger_label(t)}"
+                                                          if t.kind is not ast.TriggerKind.COMPLETION else ""))
 
     def _take_actions(self, domain: Node, t: Transition, event: rec.Event | None) -> None:
         for a in t.actions:

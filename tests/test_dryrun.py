@@ -1,0 +1,38 @@
+"""The embedded dry-run: real executive, manager, drivers and simulator in one process."""
+
+from __future__ import annotations
+
+import io
+import json
+
+from drd.dryrun import run
+from drd.hosts import load_hosts
+from drd.sim.world import load_world
+from dsl import compile_file
+from dsl.catalog import Catalog
+from tests.conftest import ROOT, shared_examples
+from tests.runtime_support import Timed
+
+
+def test_shared_camera_dry_run_shows_fig8_in_report_and_trace(catalog: Catalog) -> None:
+    chart = compile_file(shared_examples() / "shared_camera.mission", catalog).statechart
+    assert chart is not None
+    trace = io.StringIO()
+    report = run(chart, load_hosts(ROOT / "hosts.yaml", catalog), load_world(ROOT / "worlds" / "corridor.yaml"),
+                 catalog, registry={"Observe": Timed}, trace=trace)
+    assert report.outcome == "success", report.reason
+    holders = [h["path"].rsplit("/", 1)[-1] for h in report.holds()]
+    assert holders[:4] == ["first", "second", "first", "second"] and holders[-1] == "third"
+    assert all(h["resources"] == {"cam": "ranger1.camera"} for h in report.holds())
+    lines = [json.loads(x) for x in trace.getvalue().splitlines()]
+    assert [x["path"] for x in lines if x["kind"] == "granted"][:2] == ["SharedCamera/first", "SharedCamera/second"]
+    assert report.sim_time > 36 and report.real_time_factor > 1
+    assert json.loads(json.dumps(report.to_dict()))["outcome"] == "success"
+
+
+def test_same_seed_same_run(catalog: Catalog) -> None:
+    chart = compile_file(shared_examples() / "shared_camera.mission", catalog).statechart
+    assert chart is not None
+    cluster, world = load_hosts(ROOT / "hosts.yaml", catalog), load_world(ROOT / "worlds" / "corridor.yaml")
+    runs = [run(chart, cluster, world, catalog, registry={"Observe": Timed}, seed=7) for _ in range(2)]
+    assert [r.to_dict()["timeline"] for r in runs][0] == runs[1].to_dict()["timeline"]
