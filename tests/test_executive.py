@@ -66,7 +66,11 @@ def test_resources_come_from_hosts_yaml(catalog: Catalog) -> None:
 def test_missing_implementation_fails_the_state_clearly(catalog: Catalog) -> None:
     net = LocalNetwork()
     clock = SimClock()
-    ex = Executive(net.session(), clock, EntryPoints(catalog), resources=[Unit("r.ranges", "RangeSensor")])
+    import dataclasses
+
+    broken = Catalog({**catalog.components, "Calibrate": dataclasses.replace(
+        catalog.components["Calibrate"], entry_point="components.nowhere:Calibrate")})
+    ex = Executive(net.session(), clock, EntryPoints(broken), resources=[Unit("r.ranges", "RangeSensor")])
     chart = compile_text("mission M { Calibrate }", catalog, "m.mission").statechart
     assert chart is not None
     mid = ex.submit(chart)
