@@ -90,7 +90,13 @@ def test_the_agreed_needs_and_records(standard: Catalog) -> None:
 
 
 def test_loading_never_imports_an_entry_point(standard: Catalog) -> None:
-    assert not [m for m in sys.modules if m.startswith(("components.behaviors", "components.sim"))]
+    """In a fresh interpreter: loading the catalog must not import any component's implementation."""
+    import subprocess
+
+    code = ("import sys; from drd.manifests import load_catalog; load_catalog(); "
+            "print([m for m in sys.modules if m.startswith(('components.behaviors', 'components.sim'))])")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60, check=True)
+    assert out.stdout.strip() == "[]"
 
 
 def test_docs_list_every_standard_component_and_manifest_key(standard: Catalog) -> None:

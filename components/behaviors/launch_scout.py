@@ -1,0 +1,46 @@
+"""LaunchScout: throw the next Scout of the magazine straight ahead, through the door the Ranger faces.
+
+The Scout is the `scout` resource if the runtime bound one that is in the magazine, else the first of
+`loaded()`. The distance is `min(max_range, launcher.max_range, front - CLEARANCE)` where `front` is the
+front range beam (the room's far wall seen through the doorway): the Scout lands well inside the room,
+short of its back wall. Clearing the Scout's `carrier` in the Static Dependency Database is the runtime's job
+(on ScoutLaunched). Without a range sensor (the manifest gives this component the launcher only), the
+distance is the cap alone.
+"""
+
+from __future__ import annotations
+
+from drd.runtime.component import Component, Status
+
+#: How far short of what the front beam sees (m) the Scout should land.
+CLEARANCE = 1.0
+#: Shortest throw worth making (m): anything less means a wall or closed door straight ahead.
+MIN_THROW = 1.5
+
+
+class LaunchScout(Component):
+    def step(self, now: float) -> Status:
+        launcher = self.device("launcher")
+        loaded = tuple(launcher.loaded())
+        if not loaded:
+            self.ctx.log("LaunchScout: the magazine is empty")
+            return Status.FAILURE
+        bound = self.ctx.resources.get("scout")
+        scout = bound if bound in loaded else loaded[0]
+        distance = min(float(self.ctx.params.get("max_range", 30.0)), float(launcher.max_range))
+        if "ranges" in self.ctx.devices:
+            scan = self.device("ranges").scan()
+            front = min(r for i, r in enumerate(scan.ranges) if abs(scan.angle(i)) <= 0.03 + scan.angle_step / 2)
+            distance = min(distance, front - CLEARANCE)
+        if distance < MIN_THROW:
+            self.ctx.log(f"LaunchScout: target out of range ({distance:.2f} m)")
+            return Status.FAILURE
+        landing = launcher.launch(scout, 0.0, distance)
+        self.ctx.outputs["scout"] = scout
+        try:  # it left the magazine: the Static Dependency Database must say so
+            self.update_dependency(scout, "carrier", "")
+        except LookupError:
+            pass  # run outside an executive (a test rig): nobody keeps the database
+        self.ctx.outputs["landing"] = (landing.x, landing.y)
+        self.ctx.emit("ScoutLaunched", scout=scout, distance=round(distance, 3))
+        return Status.SUCCESS

@@ -1,0 +1,99 @@
+"""LocateDarkCorner: turn on the spot, sampling the camera's region brightness, and pick the darkest bearing.
+
+Works from the sensors only: `Camera.brightness(n)` while the wheels turn the robot through a full turn,
+and the wheels' odometry for the bearing of each region. The camera has no depth, and a Scout has no
+range finder, so the distance to the corner is an estimate: a fixed `step` (param, default 3 m, about
+the distance from a Scout landed in a room to its back wall) along the darkest bearing. The goal is in
+odometry coordinates (the Ranger's odometry frame, which is the world frame at start).
+
+Needs: `camera` (manifest) and, to turn and locate itself, a `drive`. Without a `drive` device it samples the
+current view only and gives the goal in the robot's own frame (x ahead, y to the left).
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+from drd.runtime.component import Component, Status
+
+
+def wrap(angle: float) -> float:
+    """The same angle in [-pi, pi)."""
+    return (angle + math.pi) % (2 * math.pi) - math.pi
+
+
+def region_bearings(fov: float, n: int) -> list[float]:
+    """Bearing (rad, left positive) of the centre of each of `n` brightness regions, right to left."""
+    if n == 1:
+        return [0.0]
+    return [-fov / 2 + fov / (2 * n) + i * fov / n for i in range(n)]
+
+
+def optional_device(comp: Component, need: str) -> Any:
+    """The device of `need`, or None when the component was given none."""
+    try:
+        return comp.device(need)
+    except LookupError:
+        return None
+
+
+def circular_mean(angles: list[float]) -> float:
+    return math.atan2(sum(math.sin(a) for a in angles), sum(math.cos(a) for a in angles))
+
+
+class LocateDarkCorner(Component):
+    """Params: `max_light` (0.2), `n_regions` (16), `step` (3 m), `turn_rate` (0.6 rad/s).
+    Output `goal` {x, y, light}; SUCCESS, or FAILURE when no bearing is as dark as `max_light` after a full turn."""
+
+    def start(self) -> None:
+        p = self.ctx.params
+        self.max_light = float(p.get("max_light", 0.2))
+        self.n_regions = int(p.get("n_regions", 16))
+        self.step_m = float(p.get("step", 3.0))
+        self.turn_rate = float(p.get("turn_rate", 0.6))
+        self.camera = self.device("camera")
+        self.drive = optional_device(self, "drive")
+        self.samples: list[tuple[float, float, float, float]] = []  # light, absolute bearing, x, y
+        self.turned = 0.0
+        self.last_heading: float | None = None
+
+    def _sample(self) -> None:
+        x, y, h = self.drive.odometry() if self.drive is not None else (0.0, 0.0, 0.0)
+        if self.last_heading is not None:
+            self.turned += abs(wrap(h - self.last_heading))
+        self.last_heading = h
+        lights = self.camera.brightness(self.n_regions)
+        for light, b in zip(lights, region_bearings(self.camera.fov, self.n_regions), strict=True):
+            self.samples.append((light, wrap(h + b), x, y))
+
+    def step(self, now: float) -> Status:
+        self._sample()
+        if self.drive is not None and self.turned < 2 * math.pi:
+            self.drive.set_velocity(0.0, self.turn_rate)
+            return Status.RUNNING
+        if self.drive is not None:
+            self.drive.stop()
+        return self._choose()
+
+    def _choose(self) -> Status:
+        darkest = min(s[0] for s in self.samples)
+        if darkest > self.max_light:
+            self.ctx.log(f"no bearing darker than {self.max_light} (darkest {darkest:.2f})")
+            return Status.FAILURE
+        near = [s for s in self.samples if s[0] <= darkest + 0.03]  # smooth the noise over the dark spot
+        bearing = circular_mean([s[1] for s in near])
+        x, y = self.samples[-1][2], self.samples[-1][3]
+        goal = {"x": x + self.step_m * math.cos(bearing), "y": y + self.step_m * math.sin(bearing),
+                "light": sum(s[0] for s in near) / len(near)}
+        self.ctx.outputs["goal"] = goal
+        self.ctx.log(f"dark corner at bearing {math.degrees(bearing):.0f} deg, light {goal['light']:.2f}")
+        return Status.SUCCESS
+
+    def suspend(self) -> None:
+        if self.drive is not None:
+            self.drive.stop()
+
+    def terminate(self, status: Status) -> None:
+        if self.drive is not None and status is Status.RUNNING:
+            self.drive.stop()
