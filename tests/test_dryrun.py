@@ -36,3 +36,19 @@ def test_same_seed_same_run(catalog: Catalog) -> None:
     cluster, world = load_hosts(ROOT / "hosts.yaml", catalog), load_world(ROOT / "worlds" / "corridor.yaml")
     runs = [run(chart, cluster, world, catalog, registry={"Observe": Timed}, seed=7) for _ in range(2)]
     assert [r.to_dict()["timeline"] for r in runs][0] == runs[1].to_dict()["timeline"]
+
+
+def test_corridor_dry_run_from_the_command_line() -> None:
+    """The main job: every open door found (never a closed one), a Scout launched through each."""
+    import subprocess
+
+    r = subprocess.run(["missionctl", "dry-run", str(ROOT / "missions" / "corridor_surveillance.mission"),
+                        "--json", "--until", "900"], cwd=ROOT, capture_output=True, text=True, timeout=300,
+                       check=False)
+    report = json.loads(r.stdout)
+    assert r.returncode == (0 if report["outcome"] == "success" else 1)
+    world = load_world(ROOT / "worlds" / "corridor.yaml")
+    open_doors = sorted(((d.a[0] + d.b[0]) / 2, (d.a[1] + d.b[1]) / 2) for d in world.doors if d.state.value == "open")
+    found = sorted((round(d["x"]), round(d["y"])) for d in report["doors"])
+    assert found == [(round(x), round(y)) for x, y in open_doors]
+    assert sorted(s["scout"] for s in report["scouts"]) == [f"scout{i}" for i in range(1, 7)]

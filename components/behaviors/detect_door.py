@@ -26,13 +26,17 @@ def door_key(x: float, side: str) -> tuple[float, str]:
 
 
 def known(log: Any, x: float, y: float, side: str, width: float) -> bool:
-    """Whether the DoorLog already has this door (same side, centre within a door width)."""
+    """Whether the DoorLog already has this door: its centre within a door width of a logged one.
+
+    Positions are in odometry coordinates, so the side (relative to the robot) does not matter: a
+    Ranger that turned around sees the same door on its other side.
+    """
     if not isinstance(log, dict):
         return False
     if door_key(x, side) in log:
         return True
     for rec in log.values():
-        if isinstance(rec, dict) and rec.get("side") == side and math.hypot(rec["x"] - x, rec["y"] - y) < width:
+        if isinstance(rec, dict) and math.hypot(rec["x"] - x, rec["y"] - y) < width:
             return True
     return False
 

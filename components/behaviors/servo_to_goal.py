@@ -6,7 +6,7 @@ and the steering is computed only while `radio.link_ok()`; when the link is down
 (RUNNING) until it comes back. Steering: the bearing to the goal from odometry and the goal.
 
 Where the goal comes from: the `goal` param ({x, y} or {x, y, light}, odometry coordinates) when given,
-else `ctx.outputs["goal"]`, where the runtime puts a finished sibling's (LocateDarkCorner's) outputs.
+else the `goal` output of a finished sibling LocateDarkCorner (`Component.sibling_output`).
 Params: `speed` (0.3 m/s), `tolerance` (0.3 m), `turn_gain` (1.5 /s), `max_turn` (1.0 rad/s).
 """
 
@@ -28,7 +28,7 @@ class ServoToGoal(Component):
         self.drive = self.device("drive")
         self.camera = self.device("camera")
         self.radio = self.device("radio")
-        self.goal = p.get("goal") or self.ctx.outputs.get("goal")
+        self.goal = p.get("goal") or self.sibling_output("LocateDarkCorner", "goal") or self.ctx.outputs.get("goal")
         self.frames_sent = 0
         self.link_was_ok = True
 

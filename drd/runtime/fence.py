@@ -4,12 +4,13 @@ The Resource Controller Manager gives each grant of a unit a strictly larger epo
 refuses commands with an older one (`drd.hw.StaleCommand`). A component never handles epochs:
 the runtime hands it its devices wrapped here.
 
-A command is a driver method that takes an `epoch`. When several active behaviors command one
+A command is a driver method that takes an `epoch`. When several active behaviors set one
 actuator (FollowCorridor and AvoidObstacles both drive the Ranger), the reference says that in
 each control cycle the command of the highest priority wins and, among equals, the behavior
 declared last (a later layer subsumes an earlier one). With an `Arbiter`, commands are proposed
-during the cycle and only the winner per driver is executed at its end; queries (scans,
-odometry, detections) always go straight through.
+during the cycle and only the winner per driver is executed at its end. Only setpoint commands
+(those returning None: `set_velocity`, `stop`) are multiplexed; an action with a result (a
+launch) runs at once, and queries (scans, odometry, detections) always go straight through.
 """
 
 from __future__ import annotations
@@ -51,11 +52,14 @@ class Arbiter:
 
 
 class Fenced:
-    """`driver` with `epoch=` filled in on commands, which go through `arbiter` when there is one."""
+    """`driver` with `epoch=` filled in on commands, which go through `arbiter` when there is one.
+
+    `epoch` may be a callable: a behavior suspended and resumed gets a new grant, and so a new epoch.
+    """
 
     __slots__ = ("_driver", "_epoch", "_arbiter", "_rank", "_owner")
 
-    def __init__(self, driver: Any, epoch: int | None, arbiter: Arbiter | None = None,
+    def __init__(self, driver: Any, epoch: int | None | Callable[[], int | None], arbiter: Arbiter | None = None,
                  rank: tuple[int, int] = (0, 0), owner: Any = None):
         self._driver = driver
         self._epoch = epoch
@@ -67,9 +71,10 @@ class Fenced:
         value = getattr(self._driver, name)
         if not (callable(value) and _takes_epoch(value)):
             return value
-        command = functools.partial(value, epoch=self._epoch) if self._epoch is not None else value
-        if self._arbiter is None:
-            return command
+        epoch = self._epoch() if callable(self._epoch) else self._epoch  # the grant's current epoch
+        command = functools.partial(value, epoch=epoch) if epoch is not None else value
+        if self._arbiter is None or not _returns_nothing(value):
+            return command  # an action with a result (a launch) runs at once, still fenced
         arbiter, driver, rank, owner = self._arbiter, self._driver, self._rank, self._owner
 
         def propose(*args: Any, **kwargs: Any) -> None:
@@ -90,3 +95,16 @@ def _signature_has_epoch(func: Any) -> bool:
 
 def _takes_epoch(method: Any) -> bool:
     return _signature_has_epoch(getattr(method, "__func__", method))
+
+
+@functools.cache
+def _signature_returns_nothing(func: Any) -> bool:
+    try:
+        return inspect.signature(func).return_annotation in (None, "None")
+    except (TypeError, ValueError):
+        return False
+
+
+def _returns_nothing(method: Any) -> bool:
+    """Setpoint commands (`set_velocity`, `stop`) return None: those are multiplexed per cycle."""
+    return _signature_returns_nothing(getattr(method, "__func__", method))

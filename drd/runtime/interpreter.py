@@ -491,7 +491,9 @@ class Interpreter:
                 driver = by_robot.get(part) or getattr(drivers, "devices", {}).get(rid)
                 if driver is not None:
                     rank = (-node.state.priority, self._rank.get(node.state.id, 0))
-                    devices[need.name] = Fenced(driver, holder.epochs.get(rid), self._arbiter, rank, node)
+                    unit = rid
+                    devices[need.name] = Fenced(driver, lambda h=holder, u=unit: h.epochs.get(u), self._arbiter,
+                                                rank, node)
         return resources, devices
 
     # ------------------------------------------------------------- finishing and transitions
