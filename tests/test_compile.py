@@ -62,7 +62,8 @@ def test_multiplicity_wraps_a_template(catalog: Catalog) -> None:
     multi = c["M/Room"]
     assert multi.kind is StateKind.MULTI and multi.children == ("M/Room[*]",)
     assert c["M/Room[*]"].needs[0].requested
-    assert c["M/Room[*]/Watch"].needs[0].bound_to == ("M/Room[*]", "s", "camera")
+    camera = next(n for n in c["M/Room[*]/Watch"].needs if n.name == "camera")
+    assert camera.bound_to == ("M/Room[*]", "s", "camera")
 
 
 def test_binding_by_name_by_type_by_part_or_own_request(catalog: Catalog) -> None:
