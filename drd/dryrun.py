@@ -30,8 +30,8 @@ from dsl.statechart import Statechart
 CONTROL_PERIOD = 0.1
 
 
-class SimClock:
-    """The executive's clock is the simulator's."""
+class SimulationClock:
+    """The executive's clock is the simulator's (unlike `drd.runtime.clock.SimClock`, it is never advanced by hand)."""
 
     def __init__(self, sim: Simulation):
         self.sim = sim
@@ -99,7 +99,7 @@ def run(chart: Statechart, cluster: Cluster, world: World, catalog: Catalog, *, 
     if problems:
         raise ValueError("\n".join(map(str, problems)))
     sim = Simulation(world, seed=seed)
-    clock = SimClock(sim)
+    clock = SimulationClock(sim)
     drivers = merged_drivers(cluster, sim, catalog)
     bus = LocalNetwork().session("controller")
     executive = Executive(bus, clock, registry or EntryPoints(catalog), cluster=cluster.name,

@@ -7,6 +7,7 @@ import shutil
 import subprocess
 from enum import StrEnum
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import typer
 from rich.text import Text
@@ -27,6 +28,11 @@ from drd.cli.common import (
 from dsl import Compiled, compile_file
 from dsl.export import need_label, state_label, to_dict, to_dot, to_mermaid, trigger_label
 from dsl.statechart import State, Statechart, StateKind
+
+if TYPE_CHECKING:
+    from drd.dryrun import DryRun
+    from drd.executive import Executive
+    from drd.sim.physics import Simulation
 
 app = typer.Typer(
     help="Write, check and run robot-team missions.",
@@ -224,7 +230,7 @@ def dry_run(
         return INVALID
     live = Live(Text("starting…"), console=err, transient=True) if err.is_terminal and not as_json else None
 
-    def progress(sim: object, executive: object) -> None:
+    def progress(sim: Simulation, executive: Executive) -> None:
         if live is not None:
             live.update(_progress_view(sim, executive))
 
@@ -249,32 +255,27 @@ def dry_run(
     return OK if report.outcome == "success" else MISSION_FAILED
 
 
-def _progress_view(sim: object, executive: object) -> Text:
-    missions = getattr(executive, "missions", {})
-    active = [n.path for m in missions.values() for n in m.active() if n.state.kind is StateKind.LEAF]
-    return Text.assemble(("sim ", "dim"), f"{getattr(sim, 'time', 0.0):7.1f} s  ", ("active ", "dim"),
+def _progress_view(sim: Simulation, executive: Executive) -> Text:
+    active = [n.path for m in executive.missions.values() for n in m.active() if n.state.kind is StateKind.LEAF]
+    return Text.assemble(("sim ", "dim"), f"{sim.time:7.1f} s  ", ("active ", "dim"),
                          ", ".join(p.rsplit("/", 1)[-1] for p in active[:6]) or "—")
 
 
-def _print_report(report: object) -> None:
+def _print_report(r: DryRun) -> None:
     from rich.table import Table
 
-    r = report
-    outcome = getattr(r, "outcome", None)
-    colour = "green" if outcome == "success" else "red"
-    out.print(Text.assemble(("mission ", "bold"), getattr(r, "mission", ""), "  ", (f"{outcome}", f"bold {colour}"),
-                            f"  {getattr(r, 'reason', '')}".rstrip()))
-    out.print(f"sim time {r.sim_time:.1f} s · wall time {r.wall_time:.2f} s · "  # type: ignore[attr-defined]
-              f"{r.real_time_factor:.0f}x real time")  # type: ignore[attr-defined]
+    colour = "green" if r.outcome == "success" else "red"
+    out.print(Text.assemble(("mission ", "bold"), r.mission, "  ", (f"{r.outcome}", f"bold {colour}"),
+                            f"  {r.reason}".rstrip()))
+    out.print(f"sim time {r.sim_time:.1f} s · wall time {r.wall_time:.2f} s · {r.real_time_factor:.0f}x real time")
     table = Table(title="timeline", title_justify="left")
     for col in ("behavior", "entered", "exited", "status"):
         table.add_column(col)
-    for row in r.timeline():  # type: ignore[attr-defined]
+    for row in r.timeline():
         exited = "" if row["exited"] is None else f"{row['exited']:.1f}"
         table.add_row(row["path"], f"{row['entered']:.1f}", exited, row["status"])
     out.print(table)
-    for title, rows in (("doors found", r.doors), ("Scouts placed", r.scouts),  # type: ignore[attr-defined]
-                        ("intruders detected", r.detections)):  # type: ignore[attr-defined]
+    for title, rows in (("doors found", r.doors), ("Scouts placed", r.scouts), ("intruders detected", r.detections)):
         out.print(Text(f"{title}: {len(rows)}", style="bold"))
         for row in rows[:20]:
             out.print("  " + ", ".join(f"{k}={v:.2f}" if isinstance(v, float) else f"{k}={v}" for k, v in row.items()))

@@ -42,6 +42,8 @@ class Arbiter:
 
     def flush(self, on_error: Callable[[Any, Exception], None]) -> int:
         """Execute the winning commands; returns how many ran."""
+        if not self._best:
+            return 0
         winners, self._best = list(self._best.values()), {}
         for p in winners:
             try:

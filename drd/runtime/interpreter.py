@@ -13,7 +13,7 @@ interpreter never sleeps and never reads the wall clock; it reports through list
 from __future__ import annotations
 
 import collections
-from collections.abc import Callable, Iterable, Mapping
+from collections.abc import Callable, Iterable, Iterator, Mapping
 from dataclasses import dataclass, field
 from enum import StrEnum
 from typing import Any
@@ -76,10 +76,6 @@ class Node:
     reserved_by: str = ""  # a preallocation made when this (future) node's predecessor was entered
     last_failure: str = ""  # multi: why the most recent instance failed, for the report
 
-    def visible(self) -> dict[str, Any]:
-        """What descendants may read: shared data and resources."""
-        names = {n for n, _ in self.state.shared} | {n.name for n in self.state.needs}
-        return {k: v for k, v in self.scope.items() if k in names}
 
 
 class Interpreter:
@@ -110,7 +106,7 @@ class Interpreter:
         self._running: dict[Node, None] = {}  # leaves with a component, in entry order
         self._timed: dict[Node, None] = {}  # nodes with `after`/`when` transitions
         self._listening: dict[str, dict[Node, None]] = {}  # event name -> nodes with `on` transitions
-        self._components: dict[str, tuple[Component, Context]] = {}  # reused per instance path
+        self._components: dict[str, tuple[Component, Context, _Resolved]] = {}  # reused per instance path
         self._defaults: dict[str, dict[str, Any]] = {}
         self._last_tick = -1.0
         self._settling = False
@@ -118,6 +114,9 @@ class Interpreter:
         self._rank = {sid: i for i, sid in enumerate(s.id for s in chart.walk())}  # declaration order
         self._on_event: dict[str, dict[str, tuple[Transition, ...]]] = {}
         self._has_timed: set[str] = set()
+        # What a state's descendants may read of it: its shared data and resources.
+        self._visible = {sid: frozenset(n for n, _ in st.shared) | frozenset(n.name for n in st.needs)
+                         for sid, st in chart.states.items()}
         for st in chart.states.values():
             by_event: dict[str, list[Transition]] = {}
             for t in st.transitions:
@@ -427,18 +426,20 @@ class Interpreter:
 
     def _start_component(self, node: Node) -> None:
         """Set a component up once per instance path (py_trees style); start it on every entry."""
-        resources, devices = self._devices(node)
         cached = self._components.get(node.path)
         if cached is not None:
-            comp, ctx = cached
-            ctx.params, ctx.resources, ctx.devices, ctx.outputs = dict(node.scope), resources, devices, {}
+            comp, ctx, resolved = cached
+            resolved.reset(lambda: self._devices(node))  # the same views, resolved again for this entry
+            ctx.params, ctx.outputs = dict(node.scope), {}
         else:
+            resolved = _Resolved(lambda: self._devices(node))  # most components never ask: resolve on first use
+            resources, devices = resolved.view(0), resolved.view(1)
             name = node.state.component or ""
             factory = self.registry.get(name)
             if factory is None:
                 self._finish(node, False, f"no implementation of component {name} is available")
                 return
-            shared = {}
+            shared: dict[str, Any] = {}
             for anc in self._ancestors(node):
                 for k, _ in anc.state.shared:
                     shared.setdefault(k, anc.scope.get(k))
@@ -455,7 +456,7 @@ class Interpreter:
             except Exception as e:  # component code is not ours to trust
                 self._component_failed(node, e)
                 return
-            self._components[node.path] = (comp, ctx)
+            self._components[node.path] = (comp, ctx, resolved)
         node.component, node.context = comp, ctx
         try:
             comp.start()
@@ -491,9 +492,7 @@ class Interpreter:
                 driver = by_robot.get(part) or getattr(drivers, "devices", {}).get(rid)
                 if driver is not None:
                     rank = (-node.state.priority, self._rank.get(node.state.id, 0))
-                    unit = rid
-                    devices[need.name] = Fenced(driver, lambda h=holder, u=unit: h.epochs.get(u), self._arbiter,
-                                                rank, node)
+                    devices[need.name] = Fenced(driver, _current_epoch(holder, rid), self._arbiter, rank, node)
         return resources, devices
 
     # ------------------------------------------------------------- finishing and transitions
@@ -648,8 +647,10 @@ class Interpreter:
                     self._exit(c, "stopped")
         self._take_actions(domain, t, event)
         if domain.phase is not Phase.DONE:
-            self._enter_child(domain, target, why=why or (f"{node.state.name}: {trigger_label(t)}"
-                                                          if t.kind is not ast.TriggerKind.COMPLETION else ""))
+            if not why and target.kind is StateKind.FINAL and not target.success \
+                    and t.kind is not ast.TriggerKind.COMPLETION:
+                why = f"{node.state.name}: {trigger_label(t)}"  # say why the behavior failed
+            self._enter_child(domain, target, why=why)
 
     def _take_actions(self, domain: Node, t: Transition, event: rec.Event | None) -> None:
         for a in t.actions:
@@ -789,7 +790,8 @@ class Interpreter:
             return {}
         names: dict[str, Any] = {}
         for anc in reversed(self._ancestors(node)):
-            names.update(anc.visible())
+            shown = self._visible[anc.state.id]
+            names.update((k, v) for k, v in anc.scope.items() if k in shown)
         names.update(node.scope)
         names.update(node.outputs)
         if event is not None:
@@ -828,6 +830,48 @@ class Interpreter:
     def _notify(self, record: rec.Record) -> None:
         for listener in self.listeners:
             listener(record)
+
+
+class _Resolved:
+    """A component's resources and devices, worked out the first time it asks for either."""
+
+    __slots__ = ("_resolve", "_value")
+
+    def __init__(self, resolve: Callable[[], tuple[dict[str, str], dict[str, Any]]]):
+        self._resolve = resolve
+        self._value: tuple[dict[str, str], dict[str, Any]] | None = None
+
+    def reset(self, resolve: Callable[[], tuple[dict[str, str], dict[str, Any]]]) -> None:
+        self._resolve, self._value = resolve, None
+
+    def get(self, which: int) -> dict[str, Any]:
+        if self._value is None:
+            self._value = self._resolve()
+        return self._value[which]
+
+    def view(self, which: int) -> _LazyMap:
+        return _LazyMap(self, which)
+
+
+class _LazyMap(Mapping[str, Any]):
+    __slots__ = ("_resolved", "_which")
+
+    def __init__(self, resolved: _Resolved, which: int):
+        self._resolved, self._which = resolved, which
+
+    def __getitem__(self, key: str) -> Any:
+        return self._resolved.get(self._which)[key]
+
+    def __iter__(self) -> Iterator[str]:
+        return iter(self._resolved.get(self._which))
+
+    def __len__(self) -> int:
+        return len(self._resolved.get(self._which))
+
+
+def _current_epoch(holder: Node, unit: str) -> Callable[[], int | None]:
+    """Read at each command: a resumed grant replaces `holder.epochs`, so never bind the dict itself."""
+    return lambda: holder.epochs.get(unit)
 
 
 def parent_domain(node: Node) -> Node:

@@ -35,7 +35,14 @@ class ResourceView(Mapping[str, object]):
         return data
 
     def __getitem__(self, key: str) -> object:
-        return self._data()[key]
+        c = self._cand
+        if key == "id":
+            return c.id
+        if key == "host":
+            return c.host
+        if isinstance(c, Aggregate) and key in c.parts:
+            return self._pool.view(c.parts[key])
+        return self._pool.properties(c.id)[key]  # KeyError for an unknown property, as a mapping should
 
     def __iter__(self) -> Iterator[str]:
         return iter(self._data())
