@@ -53,6 +53,8 @@ class DryRun:
     doors: list[dict[str, Any]] = field(default_factory=list)
     scouts: list[dict[str, Any]] = field(default_factory=list)
     detections: list[dict[str, Any]] = field(default_factory=list)
+    #: Ground-truth (t, x, y) trails of every robot and intruder, for the picture.
+    tracks: dict[str, list[tuple[float, float, float]]] = field(default_factory=dict)
 
     @property
     def real_time_factor(self) -> float:
@@ -130,6 +132,7 @@ def run(chart: Statechart, cluster: Cluster, world: World, catalog: Catalog, *, 
     for scout in result.scouts:
         pose = sim.pose(scout["scout"])
         scout.update(x=round(pose.x, 2), y=round(pose.y, 2))
+    result.tracks = {rid: sim.trajectory(rid) for rid in (*sim.robots, *sim.intruders())}
     executive.close()
     return result
 
