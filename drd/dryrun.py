@@ -10,7 +10,7 @@ CLI renders it.
 from __future__ import annotations
 
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import IO, Any
@@ -19,8 +19,10 @@ from drd.bus import LocalNetwork
 from drd.executive import EntryPoints, Executive
 from drd.hosts import Cluster
 from drd.hw.drivers import HostDrivers, drivers_for
+from drd.inject import Action, Injection
 from drd.runtime import records as rec
 from drd.runtime.trace import TraceWriter
+from drd.sim.model import DoorState
 from drd.sim.physics import Simulation
 from drd.sim.world import World, check_hosts
 from dsl.catalog import Catalog
@@ -53,6 +55,7 @@ class DryRun:
     doors: list[dict[str, Any]] = field(default_factory=list)
     scouts: list[dict[str, Any]] = field(default_factory=list)
     detections: list[dict[str, Any]] = field(default_factory=list)
+    injections: list[dict[str, Any]] = field(default_factory=list)
     #: Ground-truth (t, x, y) trails of every robot and intruder, for the picture.
     tracks: dict[str, list[tuple[float, float, float]]] = field(default_factory=dict)
 
@@ -71,13 +74,59 @@ class DryRun:
         return list(rows.values())
 
     def holds(self) -> list[dict[str, Any]]:
-        return [{"at": r.at, "path": r.path, "resources": r.resources} for r in self.records
-                if isinstance(r, rec.Granted)]
+        """Who held what, when: one row per grant interval, ended by a revoke at a slice boundary, a release,
+        the holder's exit or the end of the run. Fig. 8 shows up here as alternating rows."""
+        rows: list[dict[str, Any]] = []
+        open_: dict[str, dict[str, Any]] = {}
+
+        def close(path: str, at: float, units: tuple[str, ...] | None, how: str) -> None:
+            row = open_.get(path)
+            if row is None:
+                return
+            gone = set(row["units"]) if units is None else set(units) & set(row["units"])
+            if not gone:
+                return
+            del open_[path]
+            rows.append({**row, "units": sorted(gone), "to": at, "ended": how})
+            rest = sorted(set(row["units"]) - gone)
+            if rest:
+                open_[path] = {**row, "units": rest, "from": at}
+
+        for r in self.records:
+            if isinstance(r, rec.Granted):
+                close(r.path, r.at, None, "regranted")
+                open_[r.path] = {"path": r.path, "resources": dict(r.resources), "units": sorted(r.epochs),
+                                 "from": r.at}
+            elif isinstance(r, rec.Revoked):
+                close(r.path, r.at, tuple(r.resources), "revoked")
+            elif isinstance(r, rec.Released):
+                close(r.path, r.at, tuple(r.resources), r.reason or "released")
+            elif isinstance(r, rec.Exited):
+                close(r.path, r.at, None, "exited")
+        for path in list(open_):
+            close(path, self.sim_time, None, "held at the end")
+        return sorted(rows, key=lambda h: (h["from"], h["to"]))
+
+    def waits(self) -> list[dict[str, Any]]:
+        """Who waited for resources, from when until the grant (or until it gave up by exiting)."""
+        rows: list[dict[str, Any]] = []
+        since: dict[str, rec.Waiting] = {}
+        for r in self.records:
+            if isinstance(r, rec.Waiting):
+                since.setdefault(r.path, r)
+            elif isinstance(r, rec.Granted | rec.Exited) and r.path in since:
+                w = since.pop(r.path)
+                rows.append({"path": r.path, "from": w.at, "to": r.at, "needs": list(w.needs),
+                             "ended": "granted" if isinstance(r, rec.Granted) else "exited"})
+        rows += [{"path": p, "from": w.at, "to": self.sim_time, "needs": list(w.needs), "ended": "still waiting"}
+                 for p, w in since.items()]
+        return sorted(rows, key=lambda w: (w["from"], w["path"]))
 
     def to_dict(self) -> dict[str, Any]:
         return {"mission": self.mission, "outcome": self.outcome, "reason": self.reason,
                 "sim_time": self.sim_time, "wall_time": self.wall_time,
                 "real_time_factor": self.real_time_factor, "timeline": self.timeline(), "holds": self.holds(),
+                "waits": self.waits(), "injections": self.injections,
                 "doors": self.doors, "scouts": self.scouts, "detections": self.detections}
 
 
@@ -95,8 +144,8 @@ def merged_drivers(cluster: Cluster, sim: Simulation, catalog: Catalog) -> HostD
 def run(chart: Statechart, cluster: Cluster, world: World, catalog: Catalog, *, seed: int = 0,
         until: float = 1800.0, speed: float | None = None, trace: IO[str] | None = None,
         registry: Any = None, progress: Callable[[Simulation, Executive], None] | None = None,
-        progress_every: float = 1.0) -> DryRun:
-    """Run `chart` to its end (or `until` seconds of sim time) and report."""
+        progress_every: float = 1.0, injections: Sequence[Injection] = ()) -> DryRun:
+    """Run `chart` to its end (or `until` seconds of sim time) and report; `injections` happen on the way."""
     problems = check_hosts(world, cluster)
     if problems:
         raise ValueError("\n".join(map(str, problems)))
@@ -115,8 +164,11 @@ def run(chart: Statechart, cluster: Cluster, world: World, catalog: Catalog, *, 
     mid = executive.submit(chart, listeners=listeners)
     mission = executive.missions[mid]
     next_progress = 0.0
+    pending = sorted(injections)
     while not mission.finished and sim.time < until:
         sim.step(CONTROL_PERIOD)
+        while pending and pending[0].at <= sim.time + 1e-9:
+            result.injections.append(_inject(pending.pop(0), sim, executive, cluster))
         executive.step()
         if speed:
             lag = sim.time / speed - (time.perf_counter() - start)
@@ -135,6 +187,36 @@ def run(chart: Statechart, cluster: Cluster, world: World, catalog: Catalog, *, 
     result.tracks = {rid: sim.trajectory(rid) for rid in (*sim.robots, *sim.intruders())}
     executive.close()
     return result
+
+
+def _inject(inj: Injection, sim: Simulation, executive: Executive, cluster: Cluster) -> dict[str, Any]:
+    """Apply one injected failure now; the record says what it did."""
+    what = str(inj)
+    if inj.action is Action.KILL:
+        robots = [r.id for r in cluster.host(inj.target).robots if r.id in sim.robots]
+        for rid in robots:
+            sim.lose(rid)  # nothing drives them any more
+        executive.remove_host(inj.target)
+        what += f": its resources left the manager; {', '.join(robots) or 'no robot'} stopped"
+    elif inj.action is Action.LOSE:
+        sim.lose(inj.target)
+        executive.remove_resources(_robot_resources(cluster, inj.target), f"{inj.target} lost")
+        what += ": the robot and its resources are gone"
+    elif inj.action is Action.OPEN and sim.door(inj.target) is DoorState.BLOCKED:
+        what += ": nothing happens, a blocked door cannot be opened"
+    else:
+        state = {Action.BLOCK: DoorState.BLOCKED, Action.CLOSE: DoorState.CLOSED, Action.OPEN: DoorState.OPEN}
+        sim.set_door(inj.target, state[inj.action])
+        what += f": the door is now {state[inj.action].value}"
+    return {"at": round(sim.time, 3), "injection": str(inj), "effect": what}
+
+
+def _robot_resources(cluster: Cluster, robot: str) -> list[str]:
+    """A lost robot takes its aggregate and the parts only it uses (not a radio channel shared with others)."""
+    robots = cluster.robots
+    mine = next(r for r in robots if r.id == robot)
+    others = {u for r in robots if r.id != robot for u in r.parts.values()}
+    return [robot, *(u for u in mine.parts.values() if u not in others)]
 
 
 def _facts(result: DryRun, r: rec.Record, sim: Simulation) -> None:

@@ -137,6 +137,17 @@ class Executive:
             advance()
             self.step()
 
+    def remove_host(self, host: str) -> None:
+        """A host is gone: its resources leave the shared manager; every mission settles the consequences."""
+        for m in self.missions.values():
+            m.remove_host(host)
+
+    def remove_resources(self, resource_ids: Iterable[str], reason: str = "resource lost") -> None:
+        """Resources are gone (a lost robot): the same as a lost host, for just these."""
+        ids = tuple(resource_ids)
+        for m in self.missions.values():
+            m.remove_resources(ids, reason)
+
     @property
     def finished(self) -> bool:
         return all(m.finished for m in self.missions.values())

@@ -1,4 +1,7 @@
-"""Observe: record camera frames for `duration` seconds, then succeed with the number of frames taken.
+"""Observe: record camera frames for `duration` seconds of camera time, then succeed with the frames taken.
+
+Camera time is time holding the camera: while suspended (the camera taken away at a slice boundary, as in
+Fig. 8) no frame is taken and the clock does not count, so `Observe(duration: 12s)` always observes 12 s.
 
 One frame per control cycle: the region brightness (the image, coarsely) and the people in it are read
 and kept in memory (`self.frames`, `self.detections`: the number of detections over all frames).
@@ -15,16 +18,26 @@ class Observe(Component):
         self.duration = float(self.ctx.params.get("duration", 10.0))
         self.n_regions = int(self.ctx.params.get("n_regions", 16))
         self.camera = self.device("camera")
-        self.t0 = self.ctx.now()
+        self.observed = 0.0
+        self.last: float | None = self.ctx.now()
         self.frames = 0
         self.detections = 0
 
     def step(self, now: float) -> Status:
+        if self.last is not None:
+            self.observed += now - self.last
+        self.last = now
         self.camera.brightness(self.n_regions)
         self.detections += len(self.camera.detections())
         self.frames += 1
         self.ctx.outputs["observation"] = {"frames": self.frames}
-        if now - self.t0 >= self.duration - 1e-6:
+        if self.observed >= self.duration - 1e-6:
             self.ctx.log(f"observed {self.frames} frames, {self.detections} detections")
             return Status.SUCCESS
         return Status.RUNNING
+
+    def suspend(self) -> None:
+        self.last = None
+
+    def resume(self) -> None:
+        self.last = self.ctx.now()

@@ -30,6 +30,8 @@ from dsl.export import need_label, state_label, to_dict, to_dot, to_mermaid, tri
 from dsl.statechart import State, Statechart, StateKind
 
 if TYPE_CHECKING:
+    from rich.table import Table
+
     from drd.dryrun import DryRun
     from drd.executive import Executive
     from drd.sim.physics import Simulation
@@ -204,6 +206,11 @@ def dry_run(
     until: float = typer.Option(1800.0, "--until", help="Stop after this much sim time, in seconds."),
     trace: Path = typer.Option(None, "--trace", help="Write every record as JSON lines to this file.",
                                show_default=False),
+    render: Path = typer.Option(None, "--render", help="Draw the world, trajectories, placed Scouts and detections "
+                                                       "to this image (.png, .svg or .pdf).", show_default=False),
+    inject: list[str] = typer.Option([], "--inject", help="A failure at a sim time, e.g. 'kill ranger1 at 90s', "
+                                                          "'lose scout3 at 2min', 'block door_n3 at 60s' "
+                                                          "(also close/open DOOR). Repeatable.", show_default=False),
     as_json: bool = typer.Option(False, "--json", help="Print the report as JSON."),
     components: list[Path] = ComponentsOption,
 ) -> int:
@@ -213,6 +220,8 @@ def dry_run(
     from drd.dryrun import run as run_dry
     from drd.dryrun import world_path
     from drd.hosts import HostsError, load_hosts
+    from drd.inject import InjectionError
+    from drd.inject import parse_all as parse_injections
     from drd.sim.world import WorldError, load_world
 
     cat = catalog(components)
@@ -228,6 +237,16 @@ def dry_run(
         for p in e.problems:
             err.print(Text.assemble(("error: ", "bold red"), str(p)))
         return INVALID
+    if render is not None and render.suffix.lower() not in IMAGE_SUFFIXES:
+        fail(f"cannot draw {render.name}: --render writes .png, .svg or .pdf")
+    try:
+        injections = parse_injections(inject, hosts={h.name for h in cluster.hosts},
+                                      robots={r.id for r in sim_world.rangers} | set(sim_world.scout_ids),
+                                      doors={d.id for d in sim_world.doors})
+    except InjectionError as e:
+        for line in str(e).splitlines():
+            err.print(Text.assemble(("error: ", "bold red"), line))
+        return INVALID
     live = Live(Text("starting…"), console=err, transient=True) if err.is_terminal and not as_json else None
 
     def progress(sim: Simulation, executive: Executive) -> None:
@@ -240,7 +259,7 @@ def dry_run(
             live.start()
         try:
             report = run_dry(result.statechart, cluster, sim_world, cat, seed=seed, until=until, speed=speed,
-                             trace=fh, progress=progress)
+                             trace=fh, progress=progress, injections=injections)
         except ValueError as e:
             fail(str(e))
     finally:
@@ -248,6 +267,11 @@ def dry_run(
             live.stop()
         if fh is not None:
             fh.close()
+    if render is not None:
+        from drd.render import render as draw
+
+        draw(sim_world, report, render)
+        err.print(Text.assemble(("✓ ", "bold green"), f"drew {render}"))
     if as_json:
         out.print_json(json.dumps(report.to_dict(), default=str))
     else:
@@ -262,20 +286,39 @@ def _progress_view(sim: Simulation, executive: Executive) -> Text:
 
 
 def _print_report(r: DryRun) -> None:
-    from rich.table import Table
-
     colour = "green" if r.outcome == "success" else "red"
     out.print(Text.assemble(("mission ", "bold"), r.mission, "  ", (f"{r.outcome}", f"bold {colour}"),
                             f"  {r.reason}".rstrip()))
     out.print(f"sim time {r.sim_time:.1f} s · wall time {r.wall_time:.2f} s · {r.real_time_factor:.0f}x real time")
-    table = Table(title="timeline", title_justify="left")
-    for col in ("behavior", "entered", "exited", "status"):
-        table.add_column(col)
-    for row in r.timeline():
-        exited = "" if row["exited"] is None else f"{row['exited']:.1f}"
-        table.add_row(row["path"], f"{row['entered']:.1f}", exited, row["status"])
-    out.print(table)
+    for row in r.injections:
+        out.print(Text.assemble(("injected ", "bold yellow"), f"at {row['at']:.1f} s: {row['effect']}"))
+    out.print(_table("timeline", ("behavior", "entered", "exited", "status"),
+                     [(row["path"], f"{row['entered']:.1f}", _t(row["exited"]), row["status"])
+                      for row in r.timeline()]))
+    out.print(_table("resource holds", ("holder", "resources", "from", "to", "ended"),
+                     [(h["path"], ", ".join(f"{k}={v}" for k, v in h["resources"].items()), f"{h['from']:.1f}",
+                       _t(h["to"]), h["ended"]) for h in r.holds()]))
+    waits = [w for w in r.waits() if w["to"] - w["from"] >= 0.05]
+    if waits:
+        out.print(_table("waits", ("waiter", "needs", "from", "to", "ended"),
+                         [(w["path"], ", ".join(w["needs"]), f"{w['from']:.1f}", _t(w["to"]), w["ended"])
+                          for w in waits]))
     for title, rows in (("doors found", r.doors), ("Scouts placed", r.scouts), ("intruders detected", r.detections)):
         out.print(Text(f"{title}: {len(rows)}", style="bold"))
         for row in rows[:20]:
             out.print("  " + ", ".join(f"{k}={v:.2f}" if isinstance(v, float) else f"{k}={v}" for k, v in row.items()))
+
+
+def _t(at: float | None) -> str:
+    return "" if at is None else f"{at:.1f}"
+
+
+def _table(title: str, columns: tuple[str, ...], rows: list[tuple[str, ...]]) -> Table:
+    from rich.table import Table
+
+    table = Table(title=title, title_justify="left")
+    for col in columns:
+        table.add_column(col)
+    for row in rows:
+        table.add_row(*row)
+    return table

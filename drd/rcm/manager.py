@@ -114,10 +114,20 @@ class ResourceManager:
         Every holder of a lost unit or aggregate loses its whole grant (`Released("host lost")`),
         waiters that can no longer ever be met get `Unsatisfiable`, the rest keep waiting.
         """
+        reg = self._reg
+        ids = [u for u, unit in reg.units.items() if unit.host == host]
+        ids += [a for a, agg in reg.aggregates.items() if agg.host == host]
+        return self.remove(ids, now, "host lost")
+
+    def remove(self, resource_ids: Iterable[str], now: float, reason: str = "resource lost") -> tuple[Decision, ...]:
+        """Resources are gone (a robot lost, a host down): units and aggregates by id, plus every aggregate
+        using a removed unit. Holders of any of them lose their whole grant (`Released(reason)`); waiters
+        that can no longer be met get `Unsatisfiable`; unknown ids are ignored (it may be gone already)."""
         out = self._begin(now)
         reg = self._reg
-        units = {u for u, unit in reg.units.items() if unit.host == host}
-        aggs = {a for a, agg in reg.aggregates.items() if agg.host == host or not units.isdisjoint(agg.units)}
+        wanted = set(resource_ids)
+        units = {u for u in reg.units if u in wanted}
+        aggs = {a for a, agg in reg.aggregates.items() if a in wanted or not units.isdisjoint(agg.units)}
         touched = units.union(*(reg.aggregates[a].units for a in aggs))
         lost = {
             h
@@ -130,7 +140,7 @@ class ResourceManager:
         freed: set[str] = set()
         for holder in sorted(lost):
             released = self._end_hold(holder)
-            out.append(Released(holder, released, "host lost"))
+            out.append(Released(holder, released, reason))
             freed.update(released)
         for cid in sorted(aggs | units):
             reg.remove(cid)

@@ -54,6 +54,9 @@ class ResourceBroker:
     def remove_host(self, host: str, now: float) -> tuple[Decision, ...]:
         return self._publish(self.rcm.remove_host(host, now))
 
+    def remove(self, resource_ids: Iterable[str], now: float, reason: str = "resource lost") -> tuple[Decision, ...]:
+        return self._publish(self.rcm.remove(resource_ids, now, reason))
+
     def set_property(self, rid: str, key: str, value: object, now: float) -> tuple[Decision, ...]:
         return self._publish(self.rcm.set_property(rid, key, value, now))
 

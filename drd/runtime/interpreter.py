@@ -191,6 +191,11 @@ class Interpreter:
         self.pool.remove_host(host, self.clock.now())
         self._settle()
 
+    def remove_resources(self, resource_ids: Iterable[str], reason: str = "resource lost") -> None:
+        """Resources vanished (a lost robot): as for a host, only for these."""
+        self.pool.remove(resource_ids, self.clock.now(), reason)
+        self._settle()
+
     def _dependency(self, rid: str, key: str, value: object) -> None:
         """From a component, mid-cycle: record it now; the step settles its consequences."""
         self.pool.set_property(rid, key, value, self.clock.now())

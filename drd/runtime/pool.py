@@ -88,6 +88,13 @@ class ResourcePool:
             del self.candidates[rid]
         self.broker.remove_host(host, now)
 
+    def remove(self, resource_ids: Iterable[str], now: float, reason: str = "resource lost") -> None:
+        """Forget resources that vanished (a lost robot); the manager frees their grants."""
+        ids = set(resource_ids)
+        for rid in ids & self.candidates.keys():
+            del self.candidates[rid]
+        self.broker.remove(ids, now, reason)
+
     def set_property(self, rid: str, key: str, value: object, now: float) -> None:
         """Change the Static Dependency Database (a launched Scout leaves its magazine)."""
         self._props.setdefault(rid, {})[key] = value

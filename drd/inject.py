@@ -1,0 +1,92 @@
+"""Failures injected into a dry-run at a sim time: `kill ranger1 at 90s`, `lose scout3 at 2min`.
+
+Pure: parsing and checking against the cluster and the world; `drd.dryrun` applies them. What each does:
+
+- `kill HOST`: the host's daemon dies. The manager drops its resources (grants freed, the behaviors
+  holding them fail or degrade as the language says) and the robots it drives stop where they are.
+- `lose ROBOT`: one robot is gone (a Scout falls down the stairs): its resources leave the manager, the
+  instance that held it fails, the rest of the mission goes on.
+- `block DOOR`: an open door is obstructed (as solid as closed, and not openable).
+- `close DOOR` / `open DOOR`: a door changes state.
+"""
+
+from __future__ import annotations
+
+import re
+from collections.abc import Iterable
+from dataclasses import dataclass
+from enum import StrEnum
+
+from dsl.ast import parse_duration
+from dsl.errors import did_you_mean
+
+
+class Action(StrEnum):
+    KILL = "kill"
+    LOSE = "lose"
+    BLOCK = "block"
+    CLOSE = "close"
+    OPEN = "open"
+
+
+#: What each action applies to, for messages.
+TARGET = {Action.KILL: "host", Action.LOSE: "robot", Action.BLOCK: "door", Action.CLOSE: "door",
+          Action.OPEN: "door"}
+
+_FORM = re.compile(r"^\s*(?P<action>\w+)\s+(?P<target>[\w.\-]+)\s+at\s+(?P<at>\S+)\s*$")
+USAGE = "write ACTION TARGET at TIME, e.g. 'kill ranger1 at 90s', 'lose scout3 at 2min', 'block door_n3 at 60s'"
+
+
+class InjectionError(ValueError):
+    """An injection that cannot be understood or names nothing that exists; the message says which and why."""
+
+
+@dataclass(frozen=True, slots=True, order=True)
+class Injection:
+    at: float
+    action: Action
+    target: str
+
+    def __str__(self) -> str:
+        return f"{self.action.value} {self.target} at {self.at:g}s"
+
+
+def parse(text: str, *, hosts: set[str], robots: set[str], doors: set[str]) -> Injection:
+    """One `--inject` value, checked against what exists (`hosts` from hosts.yaml, the world's robots and doors)."""
+    m = _FORM.match(text)
+    if m is None:
+        raise InjectionError(f"cannot read injection {text!r}: {USAGE}")
+    word = m["action"].lower()
+    try:
+        action = Action(word)
+    except ValueError:
+        names = [a.value for a in Action]
+        raise InjectionError(f"unknown injection {word!r} in {text!r}: use one of {', '.join(names)}"
+                             f"{_suggest(word, names)}") from None
+    at = parse_duration(m["at"])
+    if at is None:
+        raise InjectionError(f"bad time {m['at']!r} in {text!r}: write a duration such as 90s, 2min or 1.5h")
+    known = {"host": hosts, "robot": robots, "door": doors}[TARGET[action]]
+    if m["target"] not in known:
+        raise InjectionError(f"no {TARGET[action]} {m['target']!r} to {word} in {text!r}: known "
+                             f"{TARGET[action]}s are {', '.join(sorted(known)) or 'none'}"
+                             f"{_suggest(m['target'], known)}")
+    return Injection(at, action, m["target"])
+
+
+def parse_all(texts: list[str], *, hosts: set[str], robots: set[str], doors: set[str]) -> list[Injection]:
+    """Every `--inject`, in time order; all problems reported together."""
+    out, problems = [], []
+    for t in texts:
+        try:
+            out.append(parse(t, hosts=hosts, robots=robots, doors=doors))
+        except InjectionError as e:
+            problems.append(str(e))
+    if problems:
+        raise InjectionError("\n".join(problems))
+    return sorted(out)
+
+
+def _suggest(name: str, candidates: Iterable[str]) -> str:
+    hint = did_you_mean(name, candidates)
+    return f" ({hint})" if hint else ""
