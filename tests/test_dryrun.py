@@ -52,3 +52,22 @@ def test_corridor_dry_run_from_the_command_line() -> None:
     found = sorted((round(d["x"]), round(d["y"])) for d in report["doors"])
     assert found == [(round(x), round(y)) for x, y in open_doors]
     assert sorted(s["scout"] for s in report["scouts"]) == [f"scout{i}" for i in range(1, 7)]
+
+
+def test_shared_camera_from_the_command_line_alternates_with_the_real_observe() -> None:
+    """Fig. 8 end to end: the standard Observe counts camera time only, so each 12 s observation takes three
+    slices; the report's holds alternate first/second, then third gets the camera after both are done."""
+    import subprocess
+
+    r = subprocess.run(["missionctl", "dry-run", str(shared_examples() / "shared_camera.mission"), "--json"],
+                       cwd=ROOT, capture_output=True, text=True, timeout=300, check=False)
+    assert r.returncode == 0, r.stderr
+    report = json.loads(r.stdout)
+    holds = [(h["path"].rsplit("/", 1)[-1], h["ended"]) for h in report["holds"]]
+    assert holds == [("first", "revoked"), ("second", "revoked"), ("first", "revoked"), ("second", "revoked"),
+                     ("first", "exited"), ("second", "exited"), ("third", "exited")]
+    done = {h["path"].rsplit("/", 1)[-1]: h["to"] for h in report["holds"] if h["ended"] == "exited"}
+    third_from = next(h["from"] for h in report["holds"] if h["path"].endswith("third"))
+    assert third_from >= max(done["first"], done["second"]) and 35.0 < report["sim_time"] < 38.0
+    waits = {w["path"].rsplit("/", 1)[-1]: w for w in report["waits"]}
+    assert waits["third"]["from"] == 0.0 and waits["third"]["to"] == third_from

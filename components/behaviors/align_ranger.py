@@ -1,9 +1,14 @@
-"""AlignRanger: turn on the spot to face the door just found.
+"""AlignRanger: go back to where the door was seen, then turn on the spot to face it.
 
-Which door: the `door` parameter if the mission passes one ({x, y} in odometry coordinates, e.g. DetectDoor's
-output), else the most recent entry of the shared DoorLog (`visited`, a dict: insertion order is detection
-order). The bearing comes from odometry; once roughly facing the door, the front beams refine it: the gap
-between the jambs is the run of long beams straight ahead, and its middle is aimed at.
+Which door: the `door` parameter if the mission passes one ({x, y} in odometry coordinates), else the door
+its own behavior instance found (the output `door` of a finished sibling FindNewDoor or DetectDoor), else
+the most recent entry of the shared DoorLog (`visited`, a dict: insertion order is detection order).
+
+Why it may have to drive first: with one Ranger and several RoomSurveillance instances of equal priority,
+the Ranger is shared round-robin, so between the slice in which this instance found its door and the one in
+which it aligns, other instances may have driven the Ranger further down the corridor. DetectDoor records
+where the Ranger stood (`from`, odometry); AlignRanger drives back there (turn towards it, then drive,
+correcting the heading) before facing the door, so the Scout is launched square through the doorway.
 """
 
 from __future__ import annotations
@@ -17,13 +22,21 @@ from drd.runtime.component import Component, Status
 K_TURN = 1.5
 MAX_OMEGA = 1.0
 MIN_OMEGA = 0.08
+#: Drive back when farther than this (m) from where the door was seen; stop within ARRIVED of it.
+AWAY = 0.3
+ARRIVED = 0.1
+SPEED = 0.4
 
 
-def last_door(comp: Component) -> dict[str, Any] | None:
-    """The door to face: `params["door"]`, else the DoorLog's most recent record."""
+def own_door(comp: Component) -> dict[str, Any] | None:
+    """The door to face: `params["door"]`, else this instance's own door, else the DoorLog's latest record."""
     door = comp.ctx.params.get("door")
     if isinstance(door, dict) and "x" in door:
         return door
+    for sibling in ("FindNewDoor", "DetectDoor"):
+        door = comp.sibling_output(sibling, "door")
+        if isinstance(door, dict) and "x" in door:
+            return door
     log = comp.shared("visited")
     if isinstance(log, dict) and log:
         rec = list(log.values())[-1]
@@ -32,30 +45,43 @@ def last_door(comp: Component) -> dict[str, Any] | None:
     return None
 
 
+def turn_rate(err: float) -> float:
+    """Proportional, saturated, and never so slow that friction wins."""
+    omega = max(-MAX_OMEGA, min(MAX_OMEGA, K_TURN * err))
+    return math.copysign(MIN_OMEGA, err) if abs(omega) < MIN_OMEGA else omega
+
+
 class AlignRanger(Component):
-    """Turn until the heading error to the door is below `tolerance` radians; FAILURE if there is no door."""
+    """Drive back to the door's viewpoint if the Ranger moved away, then turn until the heading error to the door
+    is below `tolerance` radians; FAILURE if there is no door."""
 
     def start(self) -> None:
-        self.door = last_door(self)
-
-    def error(self) -> float:
-        x, y, a = self.device("drive").odometry()
-        return wrap(math.atan2(self.door["y"] - y, self.door["x"] - x) - a)
+        self.door = own_door(self)
+        seen = self.door.get("from") if self.door else None
+        self.goal: tuple[float, float] | None = (float(seen["x"]), float(seen["y"])) if isinstance(seen, dict) else None
+        self.driving = False
 
     def step(self, now: float) -> Status:
         if self.door is None:
-            self.ctx.log("AlignRanger: no door to face (no door param, empty DoorLog)")
+            self.ctx.log("AlignRanger: no door to face (no door param, no door found, empty DoorLog)")
             return Status.FAILURE
-        tol = float(self.ctx.params.get("tolerance", 0.05))
-        err = self.error()
         drive = self.device("drive")
-        if abs(err) < tol:
+        x, y, a = drive.odometry()
+        if self.goal is not None:
+            gx, gy = self.goal
+            dist = math.hypot(gx - x, gy - y)
+            if dist > (ARRIVED if self.driving else AWAY):
+                self.driving = True
+                err = wrap(math.atan2(gy - y, gx - x) - a)
+                v = min(SPEED, dist) * math.cos(err) if abs(err) < math.pi / 4 else 0.0
+                drive.set_velocity(v, turn_rate(err))
+                return Status.RUNNING
+            self.goal = None
+        err = wrap(math.atan2(self.door["y"] - y, self.door["x"] - x) - a)
+        if abs(err) < float(self.ctx.params.get("tolerance", 0.05)):
             drive.stop()
             return Status.SUCCESS
-        omega = max(-MAX_OMEGA, min(MAX_OMEGA, K_TURN * err))
-        if abs(omega) < MIN_OMEGA:
-            omega = math.copysign(MIN_OMEGA, err)
-        drive.set_velocity(0.0, omega)
+        drive.set_velocity(0.0, turn_rate(err))
         return Status.RUNNING
 
     def suspend(self) -> None:

@@ -1,0 +1,82 @@
+"""`--inject`: reading failures to inject, and what each does to a dry-run."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+
+import pytest
+
+from drd.inject import Action, Injection, InjectionError, parse, parse_all
+from tests.conftest import ROOT, shared_examples
+
+KNOWN = {"hosts": {"controller", "ranger1"}, "robots": {"ranger1", "scout1", "scout2"},
+         "doors": {"door_n1", "door_s2"}}
+
+
+@pytest.mark.parametrize(("text", "expected"), [
+    ("kill ranger1 at 90s", Injection(90.0, Action.KILL, "ranger1")),
+    ("lose scout2 at 2min", Injection(120.0, Action.LOSE, "scout2")),
+    ("  BLOCK door_n1 at 1.5s ", Injection(1.5, Action.BLOCK, "door_n1")),
+    ("close door_s2 at 500ms", Injection(0.5, Action.CLOSE, "door_s2")),
+    ("open door_s2 at 1h", Injection(3600.0, Action.OPEN, "door_s2")),
+])
+def test_injections_are_read_with_the_languages_durations(text: str, expected: Injection) -> None:
+    assert parse(text, **KNOWN) == expected
+
+
+@pytest.mark.parametrize(("text", "message"), [
+    ("kil ranger1 at 90s", "unknown injection 'kil' in 'kil ranger1 at 90s': use one of kill, lose, block, close, "
+                           "open (did you mean kill?)"),
+    ("kill scout1 at 90s", "no host 'scout1' to kill"),
+    ("lose scout3 at 1s", "known robots are ranger1, scout1, scout2 (did you mean scout1?)"),
+    ("block door_n9 at 1s", "no door 'door_n9' to block"),
+    ("kill ranger1 at soon", "bad time 'soon'"),
+    ("kill ranger1", "cannot read injection 'kill ranger1': write ACTION TARGET at TIME"),
+])
+def test_a_bad_injection_says_what_is_wrong(text: str, message: str) -> None:
+    with pytest.raises(InjectionError, match=None) as e:
+        parse(text, **KNOWN)
+    assert message in str(e.value)
+
+
+def test_all_problems_are_reported_together_and_good_ones_come_in_time_order() -> None:
+    assert [i.at for i in parse_all(["open door_s2 at 9s", "kill ranger1 at 3s"], **KNOWN)] == [3.0, 9.0]
+    with pytest.raises(InjectionError) as e:
+        parse_all(["kill nobody at 1s", "lose ranger1 at 2s", "open nothing at 3s"], **KNOWN)
+    assert len(str(e.value).splitlines()) == 2
+
+
+def dry_run(mission: str, *args: str) -> tuple[int, dict[str, object], str]:
+    r = subprocess.run(["missionctl", "dry-run", mission, "--json", *args], cwd=ROOT, capture_output=True,
+                       text=True, timeout=300, check=False)
+    return r.returncode, (json.loads(r.stdout) if r.stdout.strip() else {}), r.stderr
+
+
+def test_killing_the_host_of_the_camera_fails_the_mission_at_that_time() -> None:
+    code, report, _ = dry_run(str(shared_examples() / "shared_camera.mission"), "--inject", "kill ranger1 at 12s")
+    assert code == 1 and report["outcome"] == "failure"
+    assert report["injections"][0]["at"] == pytest.approx(12.0, abs=0.11)
+    ends = {h["ended"] for h in report["holds"]}  # type: ignore[union-attr]
+    assert "host lost" in ends and report["sim_time"] == pytest.approx(12.0, abs=0.11)
+
+
+def test_a_lost_scout_fails_its_own_instance_not_the_mission() -> None:
+    code, report, err = dry_run("missions/corridor_surveillance.mission", "--inject", "lose scout1 at 30s",
+                                "--until", "60")
+    assert code == 1 and report["outcome"] == "stopped", err  # the time limit, not the loss, ended it
+    rows = {t["path"]: t for t in report["timeline"]}  # type: ignore[union-attr]
+    lost = [h for h in report["holds"] if h["ended"] == "scout1 lost"]  # type: ignore[union-attr]
+    assert len(lost) == 1 and lost[0]["to"] == pytest.approx(30.0, abs=0.11)
+    holder = rows[lost[0]["path"]]
+    assert holder["status"] == "failure" and holder["exited"] == pytest.approx(30.0, abs=0.11)
+    assert rows["CorridorSurveillance"]["status"] == "stopped"
+    survivors = [t for p, t in rows.items() if p.count("/") == 2 and p != lost[0]["path"]]
+    assert survivors and all(t["status"] != "failure" for t in survivors)
+
+
+def test_bad_injections_are_invalid_input() -> None:
+    code, _, err = dry_run(str(shared_examples() / "shared_camera.mission"), "--inject", "kill ranger9 at 1s",
+                           "--inject", "explode door_n1 at 2s")
+    assert code == 2 and "no host 'ranger9' to kill" in err and "unknown injection 'explode'" in err
+    assert "Traceback" not in err
