@@ -200,7 +200,7 @@ def _inject(inj: Injection, sim: Simulation, executive: Executive, cluster: Clus
         what += f": its resources left the manager; {', '.join(robots) or 'no robot'} stopped"
     elif inj.action is Action.LOSE:
         sim.lose(inj.target)
-        executive.remove_resources(_robot_resources(cluster, inj.target), f"{inj.target} lost")
+        executive.remove_resources(_robot_resources(cluster, inj.target))
         what += ": the robot and its resources are gone"
     elif inj.action is Action.OPEN and sim.door(inj.target) is DoorState.BLOCKED:
         what += ": nothing happens, a blocked door cannot be opened"
@@ -208,7 +208,8 @@ def _inject(inj: Injection, sim: Simulation, executive: Executive, cluster: Clus
         state = {Action.BLOCK: DoorState.BLOCKED, Action.CLOSE: DoorState.CLOSED, Action.OPEN: DoorState.OPEN}
         sim.set_door(inj.target, state[inj.action])
         what += f": the door is now {state[inj.action].value}"
-    return {"at": round(sim.time, 3), "injection": str(inj), "effect": what}
+    return {"at": round(sim.time, 3), "action": inj.action.value, "target": inj.target, "injection": str(inj),
+            "effect": what}
 
 
 def _robot_resources(cluster: Cluster, robot: str) -> list[str]:

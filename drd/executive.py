@@ -17,7 +17,7 @@ from collections.abc import Callable, Iterable, Mapping
 from typing import Any
 
 from drd.bus import Bus, Message, Query, Reply, message
-from drd.rcm import ResourceManager
+from drd.rcm import ReleaseReason, ResourceManager
 from drd.runtime import records as rec
 from drd.runtime.broker import ResourceBroker
 from drd.runtime.clock import Clock
@@ -142,7 +142,7 @@ class Executive:
         for m in self.missions.values():
             m.remove_host(host)
 
-    def remove_resources(self, resource_ids: Iterable[str], reason: str = "resource lost") -> None:
+    def remove_resources(self, resource_ids: Iterable[str], reason: ReleaseReason = "resource lost") -> None:
         """Resources are gone (a lost robot): the same as a lost host, for just these."""
         ids = tuple(resource_ids)
         for m in self.missions.values():

@@ -66,7 +66,7 @@ def test_a_lost_scout_fails_its_own_instance_not_the_mission() -> None:
                                 "--until", "60")
     assert code == 1 and report["outcome"] == "stopped", err  # the time limit, not the loss, ended it
     rows = {t["path"]: t for t in report["timeline"]}  # type: ignore[union-attr]
-    lost = [h for h in report["holds"] if h["ended"] == "scout1 lost"]  # type: ignore[union-attr]
+    lost = [h for h in report["holds"] if h["ended"] == "resource lost"]  # type: ignore[union-attr]
     assert len(lost) == 1 and lost[0]["to"] == pytest.approx(30.0, abs=0.11)
     holder = rows[lost[0]["path"]]
     assert holder["status"] == "failure" and holder["exited"] == pytest.approx(30.0, abs=0.11)

@@ -323,8 +323,8 @@ def test_a_lost_robot_fails_only_its_holder_and_the_next_waiter_gets_another() -
     rm.request(Request("WithS1", 1, scout), 0.0)
     rm.request(Request("WithS2", 1, scout), 0.0)
     rm.request(Request("Third", 1, scout), 0.0)
-    decisions = rm.remove(["s1", "s1.wheels", "not-there"], 1.0, "robot lost")
-    assert decisions[0] == Released("WithS1", ("s1.wheels",), "robot lost")
+    decisions = rm.remove(["s1", "s1.wheels", "not-there"], 1.0)
+    assert decisions[0] == Released("WithS1", ("s1.wheels",), "resource lost")
     assert "s1" not in rm.snapshot()["aggregates"] and rm.holders("s2.wheels") == ("WithS2",)
     assert rm.queue() == ("Third",)  # s2 is still held; Third waits for it, not for the lost s1
     assert granted(rm.release("WithS2", 2.0))["Third"].assignment == {"scout": "s2"}

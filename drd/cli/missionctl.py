@@ -221,6 +221,7 @@ def dry_run(
     from drd.dryrun import world_path
     from drd.hosts import HostsError, load_hosts
     from drd.inject import InjectionError
+    from drd.render import SUPPORTED_SUFFIXES
     from drd.inject import parse_all as parse_injections
     from drd.sim.world import WorldError, load_world
 
@@ -237,8 +238,8 @@ def dry_run(
         for p in e.problems:
             err.print(Text.assemble(("error: ", "bold red"), str(p)))
         return INVALID
-    if render is not None and render.suffix.lower() not in IMAGE_SUFFIXES:
-        fail(f"cannot draw {render.name}: --render writes .png, .svg or .pdf")
+    if render is not None and render.suffix.lower() not in SUPPORTED_SUFFIXES:
+        fail(f"cannot draw {render.name}: --render writes {', '.join(SUPPORTED_SUFFIXES)}")
     try:
         injections = parse_injections(inject, hosts={h.name for h in cluster.hosts},
                                       robots={r.id for r in sim_world.rangers} | set(sim_world.scout_ids),
@@ -322,3 +323,8 @@ def _table(title: str, columns: tuple[str, ...], rows: list[tuple[str, ...]]) ->
     for row in rows:
         table.add_row(*row)
     return table
+
+
+from drd.cli import cluster  # noqa: E402  # the commands that look at a running cluster
+
+cluster.register(app)

@@ -119,7 +119,8 @@ class ResourceManager:
         ids += [a for a, agg in reg.aggregates.items() if agg.host == host]
         return self.remove(ids, now, "host lost")
 
-    def remove(self, resource_ids: Iterable[str], now: float, reason: str = "resource lost") -> tuple[Decision, ...]:
+    def remove(self, resource_ids: Iterable[str], now: float,
+               reason: ReleaseReason = "resource lost") -> tuple[Decision, ...]:
         """Resources are gone (a robot lost, a host down): units and aggregates by id, plus every aggregate
         using a removed unit. Holders of any of them lose their whole grant (`Released(reason)`); waiters
         that can no longer be met get `Unsatisfiable`; unknown ids are ignored (it may be gone already)."""

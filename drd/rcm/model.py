@@ -121,7 +121,7 @@ class Request:
             raise ValueError(f"request of {self.holder}: duplicate need names {', '.join(duplicates)}")
 
 
-ReleaseReason: TypeAlias = Literal["release", "expired", "host lost", "cancelled"]
+ReleaseReason: TypeAlias = Literal["release", "expired", "host lost", "resource lost", "cancelled"]
 
 
 @dataclass(frozen=True, slots=True)
@@ -159,7 +159,7 @@ class Revoked:
 
 @dataclass(frozen=True, slots=True)
 class Released:
-    """Units left `holder` for good: released, lease expired, host lost or cancelled.
+    """Units left `holder` for good: released, lease expired, host or resource lost, or cancelled.
 
     `units` is empty when a request that was still waiting is withdrawn.
     """

@@ -11,7 +11,7 @@ from __future__ import annotations
 from collections.abc import Callable, Collection, Iterable
 from typing import Any
 
-from drd.rcm import Aggregate, Decision, Request, ResourceManager, Unit
+from drd.rcm import Aggregate, Decision, ReleaseReason, Request, ResourceManager, Unit
 
 DecisionListener = Callable[[Iterable[Decision]], None]
 
@@ -54,7 +54,8 @@ class ResourceBroker:
     def remove_host(self, host: str, now: float) -> tuple[Decision, ...]:
         return self._publish(self.rcm.remove_host(host, now))
 
-    def remove(self, resource_ids: Iterable[str], now: float, reason: str = "resource lost") -> tuple[Decision, ...]:
+    def remove(self, resource_ids: Iterable[str], now: float,
+               reason: ReleaseReason = "resource lost") -> tuple[Decision, ...]:
         return self._publish(self.rcm.remove(resource_ids, now, reason))
 
     def set_property(self, rid: str, key: str, value: object, now: float) -> tuple[Decision, ...]:

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Iterable, Iterator, Mapping
 
-from drd.rcm import Aggregate, Candidate, ResourceManager
+from drd.rcm import Aggregate, Candidate, ReleaseReason, ResourceManager
 from drd.runtime.broker import ResourceBroker
 
 
@@ -88,7 +88,7 @@ class ResourcePool:
             del self.candidates[rid]
         self.broker.remove_host(host, now)
 
-    def remove(self, resource_ids: Iterable[str], now: float, reason: str = "resource lost") -> None:
+    def remove(self, resource_ids: Iterable[str], now: float, reason: ReleaseReason = "resource lost") -> None:
         """Forget resources that vanished (a lost robot); the manager frees their grants."""
         ids = set(resource_ids)
         for rid in ids & self.candidates.keys():

@@ -1,0 +1,520 @@
+"""A dry-run as a picture: the world, who went where, where the Scouts ended up and what they saw.
+
+`render(world, report, path)` draws one `DryRun` over its `World`, to scale, and writes a PNG, SVG or
+PDF chosen by the file's suffix. The world comes from the same frozen records the simulator runs
+(`drd.sim.model`), and the light map is sampled through `World.light`, so the picture cannot disagree
+with the simulation about where it is dark. Trajectories are the report's ground-truth tracks; doors
+found and detections are the behaviors' own estimates, drawn where the robots believed them to be.
+
+matplotlib is imported inside `render` (Agg, through a bare `Figure`, never pyplot), so importing drd
+stays fast and no global figure state is touched. The same input gives the same bytes: SVG ids are
+salted with a constant and no file carries a date. Every artist a test may look for has a `gid`
+(`door-open-door_n1`, `scout-scout1-placed`, ...), which the SVG writes as its element id.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterator, Sequence
+from dataclasses import dataclass, field
+from itertools import pairwise
+from pathlib import Path
+from typing import TYPE_CHECKING, Any, Literal, Protocol
+
+from drd.sim.model import RANGER_RADIUS, DoorState, Room, World
+
+if TYPE_CHECKING:
+    from matplotlib.axes import Axes
+    from matplotlib.figure import Figure
+    from matplotlib.text import Annotation
+    from matplotlib.transforms import Bbox
+
+__all__ = ["SUPPORTED_SUFFIXES", "RunReport", "render"]
+
+#: The formats `render` writes, by file suffix.
+SUPPORTED_SUFFIXES = (".png", ".svg", ".pdf")
+#: No dates (nor versions) in any file, so the same run renders to the same bytes.
+_METADATA: dict[str, dict[str, Any]] = {
+    "png": {"Software": None}, "svg": {"Date": None, "Creator": None},
+    "pdf": {"CreationDate": None, "ModDate": None, "Creator": None, "Producer": None},
+}
+
+#: Faster than this (m/s) between two trail points, a Scout is in the air: it rolls at 0.3 m/s at most,
+#: and a launch or a jump moves it at several m/s. The trail does not record the phase, so speed tells it.
+AIRBORNE_SPEED = 1.0
+
+_Track = Sequence[tuple[float, float, float]]
+
+# One palette for the whole picture: each kind of thing has its own hue, and red/green mean doors only.
+WALL = "#1d2330"
+OPEN_DOOR = "#2e9e44"
+CLOSED_DOOR = "#d32f2f"
+BLOCKED_DOOR = "#8e3b00"
+OBSTACLE = "#8d6e63"
+ROOM_FILL = "#dfe7f2"
+RANGERS = ("#1f4e9c", "#4aa3df", "#3f2f9e", "#2a7f9e")  # shades of blue: Rangers are one kind of thing
+INTRUDER = "#c2185b"
+DETECTION = "#ffc107"
+DOOR_FOUND = "#00a0b0"
+#: One colour per Scout, none of them a hue used above (blue Ranger, red/green doors, magenta people...).
+SCOUTS = ("#f28e2b", "#7b4fc4", "#1a9e77", "#a0522d", "#9aa51c", "#79706e", "#e15f99", "#4e79a7")
+SUCCESS, FAILURE = "#2e7d32", "#c62828"
+#: The light map's colours: dark corners a deep slate, rooms (0.6-0.7) a light grey, lit corridors white.
+LIGHT_COLOURS = ((0.0, "#262a40"), (0.3, "#6e7490"), (0.6, "#d3d6e0"), (1.0, "#ffffff"))
+
+Z_LIGHT, Z_ROOM, Z_OBSTACLE, Z_INTRUDER, Z_RANGER, Z_SCOUT, Z_WALL, Z_DOOR, Z_MARK, Z_LABEL = range(10)
+
+
+class RunReport(Protocol):
+    """What the picture reads of a `drd.dryrun.DryRun`, which satisfies this as it is.
+
+    A protocol rather than the class, so this module depends on the world model only: type-checking it
+    does not pull in the executive and the runtime.
+    """
+
+    @property
+    def mission(self) -> str: ...
+    @property
+    def outcome(self) -> str | None: ...
+    @property
+    def reason(self) -> str: ...
+    @property
+    def sim_time(self) -> float: ...
+    @property
+    def doors(self) -> list[dict[str, Any]]: ...
+    @property
+    def scouts(self) -> list[dict[str, Any]]: ...
+    @property
+    def detections(self) -> list[dict[str, Any]]: ...
+    @property
+    def tracks(self) -> dict[str, list[tuple[float, float, float]]]: ...
+    @property
+    def injections(self) -> list[dict[str, Any]]: ...
+
+
+def render(world: World, report: RunReport, path: Path, *, title: str | None = None) -> None:
+    """Draw `report` (a `DryRun`) over `world` and write it to `path` (PNG, SVG or PDF, by suffix).
+
+    Raises:
+        ValueError: the suffix is not one of `SUPPORTED_SUFFIXES` (checked before anything is drawn).
+        OSError: the file cannot be written.
+    """
+    path = Path(path)
+    fmt = _format(path)
+    import matplotlib
+
+    # Text stays text in SVG (searchable, selectable, small); ids are salted with a constant, not at random.
+    with matplotlib.rc_context({"svg.fonttype": "none", "svg.hashsalt": "drd-render", "font.family": "DejaVu Sans",
+                                "font.size": 9}):
+        fig = _figure(world)
+        ax = fig.add_subplot()
+        labels = _Labels()
+        doors = door_states(world, report)
+        _draw_world(ax, world, doors)
+        _note_injected_doors(ax, world, report, labels)
+        _draw_tracks(ax, world, report, labels)
+        _draw_findings(ax, report, labels)
+        _frame(fig, ax, world)
+        _legend(fig, world, report, doors)
+        _title(ax, world, report, title)
+        _place_labels(fig, ax, labels)
+        fig.savefig(path, format=fmt, dpi=150, metadata=_METADATA[fmt])
+
+
+def _format(path: Path) -> str:
+    """The output format named by the suffix; fail early, with the choices, on anything else."""
+    suffix = path.suffix.lower()
+    if suffix not in SUPPORTED_SUFFIXES:
+        raise ValueError(f"cannot render to {path.name!r}: unsupported suffix {suffix or '(none)'!r}; "
+                         f"use one of {', '.join(SUPPORTED_SUFFIXES)}")
+    return suffix[1:]
+
+
+
+# ----------------------------------------------------------------------------------------- the frame
+
+
+def _figure(world: World) -> Figure:
+    """A figure shaped like the world, so equal aspect leaves no wide empty bands; the plot fits 12 x 9 in."""
+    from matplotlib.figure import Figure
+
+    x0, y0, x1, y1 = _extent(world)
+    w, h = x1 - x0, y1 - y0
+    scale = 12.0 / max(w, h * 12.0 / 9.0, 1e-9)
+    return Figure(figsize=(max(7.0, w * scale + 1.6), h * scale + 2.0), layout="constrained")
+
+
+def _extent(world: World) -> tuple[float, float, float, float]:
+    """The world's bounds with a margin, so walls on the edge are not cut in half."""
+    x0, y0, x1, y1 = world.bounds
+    m = max(0.6, 0.02 * max(x1 - x0, y1 - y0))
+    return (x0 - m, y0 - m, x1 + m, y1 + m)
+
+
+def _frame(fig: Figure, ax: Axes, world: World) -> None:
+    """Metres on both axes at the same scale, quiet grey axes, and a slim light-level bar as tall as the plot."""
+    x0, y0, x1, y1 = _extent(world)
+    ax.set_xlim(x0, x1)
+    ax.set_ylim(y0, y1)
+    ax.set_aspect("equal")
+    ax.set_xlabel("x (m)", color="#555555")
+    ax.set_ylabel("y (m)", color="#555555")
+    ax.tick_params(colors="#555555", labelsize=8)
+    for spine in ax.spines.values():
+        spine.set_color("#bbbbbb")
+    if ax.images:
+        bar = fig.colorbar(ax.images[0], cax=ax.inset_axes((1.01, 0.0, 0.012, 1.0)))
+        bar.set_label("light (0 dark, 1 bright)", color="#555555")
+        bar.ax.tick_params(labelsize=8, colors="#555555")
+        bar.outline.set_visible(False)
+
+
+def _title(ax: Axes, world: World, report: RunReport, title: str | None) -> None:
+    """One line naming the mission and its outcome (green or red), one with the time and the counts."""
+    stats = (f"sim time {report.sim_time:.1f} s  ·  {_n(len(report.doors), 'door')} found  ·  "
+             f"{_n(len(report.scouts), 'Scout')} placed  ·  {_n(len(report.detections), 'detection')}")
+    sub = ax.set_title(stats, loc="left", fontsize=10, color="#444444", pad=8)
+    head = ax.annotate(f"{title or report.mission} in {world.name}", xy=(0, 1), xycoords=sub,
+                       xytext=(0, 4), textcoords="offset points", va="bottom", fontsize=14, fontweight="bold",
+                       color=WALL)
+    outcome = report.outcome or "unfinished"
+    mark = ax.annotate(f"  {outcome}", xy=(1, 0), xycoords=head, va="bottom", fontsize=14, fontweight="bold",
+                       color=SUCCESS if outcome == "success" else FAILURE, gid="outcome")
+    if report.reason:
+        ax.annotate(f"  {report.reason}", xy=(1, 0), xycoords=mark, va="bottom", fontsize=10, color="#666666",
+                    gid="reason")
+
+
+def _n(count: int, noun: str) -> str:
+    return f"{count} {noun}{'' if count == 1 else 's'}"
+
+
+# ----------------------------------------------------------------------------------------- the building
+
+
+#: The door state each door injection leaves behind (`open` leaves a blocked door blocked).
+_INJECTED_STATE = {"block": DoorState.BLOCKED, "close": DoorState.CLOSED, "open": DoorState.OPEN}
+
+
+def door_states(world: World, report: RunReport) -> dict[str, DoorState]:
+    """Each door as the run left it: the world's state, changed by `--inject` block/close/open in time order."""
+    states = {d.id: d.state for d in world.doors}
+    for _, target, new in _door_changes(world, report):
+        states[target] = new
+    return states
+
+
+def _door_changes(world: World, report: RunReport) -> list[tuple[float, str, DoorState]]:
+    """(time, door, new state) of every injection that changed a door (opening a blocked door does not)."""
+    states = {d.id: d.state for d in world.doors}
+    out = []
+    for inj in report.injections:
+        new, target = _INJECTED_STATE.get(str(inj.get("action"))), str(inj.get("target"))
+        if new is not None and target in states and states[target] is not DoorState.BLOCKED and states[target] != new:
+            states[target] = new
+            out.append((float(inj["at"]), target, new))
+    return out
+
+
+def _note_injected_doors(ax: Axes, world: World, report: RunReport, labels: _Labels) -> None:
+    """A label at each door an injection changed: what and when (`blocked at 60 s`)."""
+    centres = {d.id: d.center for d in world.doors}
+    for i, (at, target, new) in enumerate(_door_changes(world, report)):
+        x, y = centres[target]
+        verb = {DoorState.BLOCKED: "blocked", DoorState.CLOSED: "closed", DoorState.OPEN: "opened"}[new]
+        labels.add(ax, x, y, f"{verb} at {at:.0f} s", CLOSED_DOOR, gid=f"injection-{i}")
+
+
+def _draw_world(ax: Axes, world: World, doors: dict[str, DoorState]) -> None:
+    """The building, back to front: light, rooms, obstacles, walls, then doors on top of their gaps."""
+    from matplotlib.patches import Rectangle
+
+    _draw_light(ax, world)
+    for room in world.rooms:
+        _draw_room(ax, world, room)
+    for i, o in enumerate(world.obstacles):
+        ax.add_patch(Rectangle((o.x0, o.y0), o.x1 - o.x0, o.y1 - o.y0, facecolor=OBSTACLE, edgecolor="#4e342e",
+                               hatch="////", linewidth=0.8, alpha=0.85, zorder=Z_OBSTACLE, gid=f"obstacle-{i}"))
+    for i, wall in enumerate(world.walls):
+        ax.plot([wall.a[0], wall.b[0]], [wall.a[1], wall.b[1]], color=WALL, linewidth=3.2,
+                solid_capstyle="projecting", zorder=Z_WALL, gid=f"wall-{i}")
+    for door in world.doors:
+        _draw_door(ax, door.id, door.a, door.b, doors[door.id])
+
+
+def _draw_light(ax: Axes, world: World) -> None:
+    """The light map as a shaded background, sampled from `World.light` on a grid of at most 240 cells a side
+    (smoothed when drawn: the light has no sharp edges but room walls, which are drawn over it)."""
+    import numpy as np
+    from matplotlib.colors import LinearSegmentedColormap
+
+    x0, y0, x1, y1 = _extent(world)
+    step = max(x1 - x0, y1 - y0) / 240
+    nx, ny = max(2, round((x1 - x0) / step)), max(2, round((y1 - y0) / step))
+    xs = [x0 + (i + 0.5) * (x1 - x0) / nx for i in range(nx)]
+    ys = [y0 + (j + 0.5) * (y1 - y0) / ny for j in range(ny)]
+    grid = np.array([[world.light(x, y) for x in xs] for y in ys])
+    cmap = LinearSegmentedColormap.from_list("drd-light", list(LIGHT_COLOURS))
+    ax.imshow(grid, origin="lower", extent=(x0, x1, y0, y1), cmap=cmap, vmin=0.0, vmax=1.0,
+              interpolation="bilinear", zorder=Z_LIGHT, gid="light")
+
+
+def _draw_room(ax: Axes, world: World, room: Room) -> None:
+    """A light tint over the room and its id in its brightest corner, away from dark corners and doors."""
+    from matplotlib.patches import Rectangle
+
+    ax.add_patch(Rectangle((room.x0, room.y0), room.x1 - room.x0, room.y1 - room.y0, facecolor=ROOM_FILL,
+                           edgecolor="none", alpha=0.35, zorder=Z_ROOM, gid=f"room-{room.id}"))
+    x, y, ha, va = _label_corner(world, room)
+    ax.text(x, y, room.id, ha=ha, va=va, fontsize=11, fontweight="bold", color="#3a4256", zorder=Z_LABEL,
+            gid=f"room-label-{room.id}")
+
+
+def _label_corner(world: World, room: Room) -> tuple[float, float, str, str]:
+    """The inner corner to write a room's name in: the brightest, then the farthest from the room's doors."""
+    inset = min(0.3, (room.x1 - room.x0) / 4, (room.y1 - room.y0) / 4)
+    doors = [d.center for d in world.doors if d.room == room.id]
+    corners = [(room.x0 + inset, room.y1 - inset, "left", "top"), (room.x1 - inset, room.y1 - inset, "right", "top"),
+               (room.x0 + inset, room.y0 + inset, "left", "bottom"),
+               (room.x1 - inset, room.y0 + inset, "right", "bottom")]
+
+    def score(c: tuple[float, float, str, str]) -> tuple[float, float]:
+        near = min((math.dist((c[0], c[1]), d) for d in doors), default=0.0)
+        return (round(world.light(c[0], c[1]), 2), near)
+
+    return max(corners, key=score)  # max keeps the first of equals: deterministic
+
+
+def _draw_door(ax: Axes, door_id: str, a: tuple[float, float], b: tuple[float, float], state: DoorState) -> None:
+    """An open door is its wall's gap with a thin green bar; a closed door a thick red bar, a blocked one brown."""
+    xs, ys = [a[0], b[0]], [a[1], b[1]]
+    if state is DoorState.OPEN:
+        ax.plot(xs, ys, color=OPEN_DOOR, linewidth=2.0, linestyle=(0, (2, 1.2)), solid_capstyle="butt",
+                zorder=Z_DOOR, gid=f"door-open-{door_id}")
+        ax.plot(xs, ys, linestyle="none", marker="|", markersize=9, markeredgewidth=2.2, color=OPEN_DOOR,
+                zorder=Z_DOOR, gid=f"door-open-jambs-{door_id}")
+    else:
+        colour = CLOSED_DOOR if state is DoorState.CLOSED else BLOCKED_DOOR
+        ax.plot(xs, ys, color=colour, linewidth=5.0, solid_capstyle="butt", zorder=Z_DOOR,
+                gid=f"door-{state.value}-{door_id}")
+
+
+# ----------------------------------------------------------------------------------------- who went where
+
+
+def _draw_tracks(ax: Axes, world: World, report: RunReport, labels: _Labels) -> None:
+    """Intruders first (dotted, under everything), then each Ranger, then each Scout, each in its own colour."""
+    for intruder in world.intruders:
+        seen = report.tracks.get(intruder.id)
+        track = seen or [(w.t, w.x, w.y) for w in intruder.path]  # no track: the path the world file plans
+        end = seen[-1] if seen else (report.sim_time, *intruder.position(report.sim_time))
+        lap = [p for p in track if p[0] <= intruder.path[-1].t] if intruder.loop else track
+        _draw_intruder(ax, intruder.id, lap or track, end, labels)
+    for i, ranger in enumerate(world.rangers):
+        track = report.tracks.get(ranger.id) or [(0.0, ranger.x, ranger.y)]
+        _draw_ranger(ax, ranger.id, track, RANGERS[i % len(RANGERS)], labels)
+    on_floor = {s.id: [(0.0, s.x, s.y)] for s in world.scouts}
+    for i, scout_id in enumerate(world.scout_ids):
+        trail = report.tracks.get(scout_id) or on_floor.get(scout_id)  # neither: still in its magazine
+        if trail:
+            _draw_scout(ax, scout_id, trail, SCOUTS[i % len(SCOUTS)], labels)
+
+
+def _draw_intruder(ax: Axes, intruder_id: str, path: _Track, end: tuple[float, float, float],
+                   labels: _Labels) -> None:
+    """A dotted path (one lap of a looping one), and the person where the run left them, labelled with their id."""
+    ax.plot([p[1] for p in path], [p[2] for p in path], color=INTRUDER, linewidth=1.4, linestyle=(0, (1, 2)),
+            alpha=0.8, zorder=Z_INTRUDER, gid=f"intruder-{intruder_id}")
+    ax.plot([end[1]], [end[2]], marker="o", markersize=7, markerfacecolor="white", markeredgecolor=INTRUDER,
+            markeredgewidth=1.8, linestyle="none", zorder=Z_MARK, gid=f"intruder-{intruder_id}-end")
+    labels.add(ax, end[1], end[2], intruder_id, INTRUDER, gid=f"intruder-label-{intruder_id}")
+
+
+def _draw_ranger(ax: Axes, ranger_id: str, track: _Track, colour: str, labels: _Labels) -> None:
+    """A solid line from a hollow start marker to the Ranger's body (to scale) with an arrow for its heading."""
+    from matplotlib.patches import Circle
+
+    xs, ys = [p[1] for p in track], [p[2] for p in track]
+    ax.plot(xs, ys, color=colour, linewidth=1.8, alpha=0.9, solid_joinstyle="round", zorder=Z_RANGER,
+            gid=f"ranger-{ranger_id}")
+    ax.plot(xs[:1], ys[:1], marker="o", markersize=8, markerfacecolor="white", markeredgecolor=colour,
+            markeredgewidth=2, linestyle="none", zorder=Z_MARK, gid=f"ranger-{ranger_id}-start")
+    ax.add_patch(Circle((xs[-1], ys[-1]), RANGER_RADIUS, facecolor=colour, edgecolor="white", linewidth=1.2,
+                        zorder=Z_MARK, gid=f"ranger-{ranger_id}-end"))
+    heading = _final_heading(track)
+    if heading is not None:
+        dx, dy = math.cos(heading), math.sin(heading)
+        ax.annotate("", xy=(xs[-1] + 0.8 * dx, ys[-1] + 0.8 * dy), xytext=(xs[-1], ys[-1]),
+                    arrowprops={"arrowstyle": "-|>", "color": colour, "linewidth": 1.8, "mutation_scale": 14,
+                                "shrinkA": 0, "shrinkB": 0}, zorder=Z_MARK, gid=f"ranger-{ranger_id}-heading")
+    labels.add(ax, xs[-1], ys[-1], ranger_id, colour, gid=f"ranger-label-{ranger_id}")
+
+
+def _final_heading(track: _Track, back: float = 0.25) -> float | None:
+    """The direction of the last `back` metres of a track (None for a robot that never moved)."""
+    x, y = track[-1][1], track[-1][2]
+    for _, px, py in reversed(track):
+        if math.hypot(x - px, y - py) >= back:
+            return math.atan2(y - py, x - px)
+    return None
+
+
+def _draw_scout(ax: Axes, scout_id: str, track: _Track, colour: str, labels: _Labels) -> None:
+    """Flights dashed, rolling solid, and a filled hexagon where the Scout ended up, labelled with its id."""
+    for k, (airborne, part) in enumerate(_phases(track)):
+        ax.plot([p[1] for p in part], [p[2] for p in part], color=colour, linewidth=1.6 if airborne else 2.0,
+                linestyle=(0, (4, 2.5)) if airborne else "solid", zorder=Z_SCOUT,
+                gid=f"scout-{scout_id}-{'flight' if airborne else 'roll'}-{k}")
+    x, y = track[-1][1], track[-1][2]
+    ax.plot([x], [y], marker="h", markersize=11, markerfacecolor=colour, markeredgecolor="white",
+            markeredgewidth=1.5, linestyle="none", zorder=Z_MARK, gid=f"scout-{scout_id}-placed")
+    labels.add(ax, x, y, scout_id, colour, gid=f"scout-label-{scout_id}")
+
+
+def _phases(track: _Track) -> Iterator[tuple[bool, list[tuple[float, float, float]]]]:
+    """Split a trail into runs of airborne and rolling segments (by speed), each run sharing its end points."""
+    run: list[tuple[float, float, float]] = list(track[:1])
+    airborne: bool | None = None
+    for p, q in pairwise(track):
+        dist, dt = math.hypot(q[1] - p[1], q[2] - p[2]), q[0] - p[0]
+        up = dist > 0 and (dt <= 0 or dist / dt > AIRBORNE_SPEED)
+        if airborne is not None and up != airborne:
+            yield airborne, run
+            run = [p]
+        airborne = up
+        run.append(q)
+    if airborne is not None:
+        yield airborne, run
+
+
+# ----------------------------------------------------------------------------------------- what they found
+
+
+def _draw_findings(ax: Axes, report: RunReport, labels: _Labels) -> None:
+    """Doors DetectDoor reported and MotionDetected events, where the robots estimated them."""
+    for i, door in enumerate(report.doors):
+        ax.plot([door["x"]], [door["y"]], marker="D", markersize=10, markerfacecolor="none",
+                markeredgecolor=DOOR_FOUND, markeredgewidth=2.0, linestyle="none", zorder=Z_DOOR,
+                gid=f"door-found-{i}")
+        labels.markers.append((float(door["x"]), float(door["y"])))
+    labelled: list[tuple[float, float]] = []
+    for i, d in enumerate(report.detections):
+        x, y = float(d["x"]), float(d["y"])
+        ax.plot([x], [y], marker="*", markersize=14, markerfacecolor=DETECTION, markeredgecolor="#5d4037",
+                markeredgewidth=0.9, linestyle="none", zorder=Z_MARK + 1, gid=f"detection-{i}")
+        if all(math.hypot(x - lx, y - ly) > 0.8 for lx, ly in labelled):  # one label per cluster stays legible
+            labelled.append((x, y))
+            labels.add(ax, x, y, f"{d['at']:.0f} s", "#5d4037", gid=f"detection-label-{i}")
+        else:
+            labels.markers.append((x, y))
+
+
+_Spot = tuple[float, float, Literal["left", "center", "right"], Literal["bottom", "center", "top"]]
+#: Where a label may sit beside its marker, in order of preference: (dx, dy) points, alignment.
+_SPOTS: tuple[_Spot, ...] = (
+    (8, 5, "left", "bottom"), (8, -5, "left", "top"), (-8, 5, "right", "bottom"), (-8, -5, "right", "top"),
+    (0, 10, "center", "bottom"), (0, -10, "center", "top"), (12, 0, "left", "center"), (-12, 0, "right", "center"),
+    (16, 14, "left", "bottom"), (-16, -14, "right", "top"))
+#: Half the size, in points, of the square a marker is taken to cover when placing labels.
+_MARKER_HALF = 6.0
+
+
+@dataclass
+class _Labels:
+    """The labels beside markers, placed once the layout is known so they avoid each other and the markers."""
+
+    movable: list[Annotation] = field(default_factory=list)
+    markers: list[tuple[float, float]] = field(default_factory=list)
+
+    def add(self, ax: Axes, x: float, y: float, text: str, colour: str, *, gid: str) -> None:
+        """A small label beside the marker at (x, y), on a translucent white box so it reads over any background."""
+        self.movable.append(ax.annotate(
+            text, xy=(x, y), xytext=_SPOTS[0][:2], textcoords="offset points", fontsize=8.5, fontweight="bold",
+            color=colour, ha=_SPOTS[0][2], va=_SPOTS[0][3], zorder=Z_LABEL, gid=gid,
+            bbox={"boxstyle": "round,pad=0.15", "facecolor": "white", "edgecolor": "none", "alpha": 0.75}))
+        self.markers.append((x, y))
+
+
+def _place_labels(fig: Figure, ax: Axes, labels: _Labels) -> None:
+    """Move each label to the first spot where it covers no other label, room name or marker (else the least bad).
+
+    Greedy, in drawing order, on the laid-out figure: deterministic and good enough for tens of labels.
+    """
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.transforms import Bbox
+
+    FigureCanvasAgg(fig)  # measures text as the PNG will; the SVG and PDF writers use the same font metrics
+    fig.draw_without_rendering()  # runs the layout, so data-to-pixel transforms are final
+    half = _MARKER_HALF * fig.dpi / 72
+    taken = [t.get_window_extent() for t in ax.texts if t not in labels.movable and t.get_text()]
+    for x, y in labels.markers:
+        px, py = ax.transData.transform((x, y))
+        taken.append(Bbox.from_bounds(px - half, py - half, 2 * half, 2 * half))
+    frame = ax.get_window_extent()
+    for label in labels.movable:
+        best: tuple[float, int] | None = None
+        for i, spot in enumerate(_SPOTS):
+            cost = _spot_cost(label, spot, taken, frame)
+            if best is None or cost < best[0]:
+                best = (cost, i)
+            if cost == 0:
+                break
+        assert best is not None
+        _move(label, _SPOTS[best[1]])
+        taken.append(label.get_window_extent().padded(2))
+
+
+def _spot_cost(label: Annotation, spot: _Spot, taken: list[Bbox], frame: Bbox) -> float:
+    """How much of the label, put at `spot`, covers what is already there or leaves the plot (in pixels²)."""
+    _move(label, spot)
+    box = label.get_window_extent().padded(2)
+    covered = sum(_area(box, other) for other in taken)
+    outside = box.width * box.height - _area(box, frame)
+    return covered + 4 * outside
+
+
+def _move(label: Annotation, spot: _Spot) -> None:
+    label.xyann = spot[:2]
+    label.set_horizontalalignment(spot[2])
+    label.set_verticalalignment(spot[3])
+
+
+def _area(a: Bbox, b: Bbox) -> float:
+    from matplotlib.transforms import Bbox
+
+    both = Bbox.intersection(a, b)
+    return 0.0 if both is None else both.width * both.height
+
+
+def _legend(fig: Figure, world: World, report: RunReport, doors: dict[str, DoorState]) -> None:
+    """One entry per kind of thing (not per robot), below the plot, listing only kinds the picture shows."""
+    from matplotlib.lines import Line2D
+    from matplotlib.patches import Patch
+
+    def line(colour: str, **kw: Any) -> Line2D:
+        return Line2D([], [], color=colour, **kw)
+
+    states = set(doors.values())
+    scout = SCOUTS[0]
+    entries: list[tuple[Any, str, bool]] = [
+        (line(WALL, linewidth=3.2), "wall", bool(world.walls)),
+        (line(OPEN_DOOR, linewidth=2.0, linestyle=(0, (2, 1.2))), "open door", DoorState.OPEN in states),
+        (line(CLOSED_DOOR, linewidth=5.0), "closed door", DoorState.CLOSED in states),
+        (line(BLOCKED_DOOR, linewidth=5.0), "blocked door", DoorState.BLOCKED in states),
+        (Patch(facecolor=OBSTACLE, edgecolor="#4e342e", hatch="////"), "obstacle", bool(world.obstacles)),
+        (line(RANGERS[0], linewidth=1.8, marker="o", markevery=[0], markerfacecolor="white"), "Ranger path (start ○)",
+         bool(world.rangers)),
+        (line(scout, linewidth=1.6, linestyle=(0, (4, 2.5))), "Scout flight", bool(world.scout_ids)),
+        (line(scout, linewidth=2.0, marker="h", markevery=[-1], markersize=9, markeredgecolor="white"),
+         "Scout rolling, placed", bool(world.scout_ids)),
+        (line(INTRUDER, linewidth=1.4, linestyle=(0, (1, 2)), marker="o", markevery=[-1], markerfacecolor="white"),
+         "intruder path (end ○)", bool(world.intruders)),
+        (line(DOOR_FOUND, linestyle="none", marker="D", markerfacecolor="none", markeredgewidth=2.0),
+         "door found", bool(report.doors)),
+        (line(DETECTION, linestyle="none", marker="*", markersize=13, markeredgecolor="#5d4037"),
+         "detection (time)", bool(report.detections)),
+    ]
+    shown = [(h, label) for h, label, present in entries if present]
+    legend = fig.legend([h for h, _ in shown], [label for _, label in shown], loc="outside lower center",
+                        ncols=max(1, math.ceil(len(shown) / 2)), frameon=False, fontsize=9, handlelength=2.6)
+    legend.set_gid("legend")
