@@ -59,6 +59,31 @@ mission M {
     assert h.of(rec.Released)[0].resources  # release(ranger) gave the units back before the exit
 
 
+def test_a_composites_outputs_are_its_childrens_for_the_siblings_after_it(catalog: Catalog) -> None:
+    """AlignRanger reads the door its own FindNewDoor found: a composite passes its children's outputs up."""
+    seen: list[Any] = []
+
+    class Finds(Timed):
+        def step(self, now: float) -> Any:
+            self.ctx.outputs["door"] = {"x": 4.0}
+            return super().step(now)
+
+    class Reads(Timed):
+        def start(self) -> None:
+            super().start()
+            seen.append(self.sibling_output("Find", "door"))
+
+    text = """
+mission M {
+    needs r: Ranger
+    start -> Find
+    Find -> AlignRanger
+}
+behavior Find { DetectDoor(min_width: 0.5) }"""
+    h = Harness(compiled(text, catalog), {"DetectDoor": Finds, "AlignRanger": Reads}, ranger_world())
+    assert h.run() == "success" and seen == [{"x": 4.0}]
+
+
 def test_error_propagates_unless_handled(catalog: Catalog) -> None:
     unhandled = "mission M {\n needs r: Ranger\n start -> Calibrate\n Calibrate -> ReturnToStart\n ReturnToStart\n}"
     h = Harness(compiled(unhandled, catalog), {"Calibrate": Fails, "ReturnToStart": Timed}, ranger_world())

@@ -221,8 +221,8 @@ def dry_run(
     from drd.dryrun import world_path
     from drd.hosts import HostsError, load_hosts
     from drd.inject import InjectionError
-    from drd.render import SUPPORTED_SUFFIXES
     from drd.inject import parse_all as parse_injections
+    from drd.render import SUPPORTED_SUFFIXES
     from drd.sim.world import WorldError, load_world
 
     cat = catalog(components)

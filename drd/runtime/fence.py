@@ -33,18 +33,20 @@ class Arbiter:
     """Collects the commands of one control cycle; `flush` runs the winner per driver."""
 
     def __init__(self) -> None:
-        self._best: dict[int, Proposal] = {}
+        # The best proposal so far per driver (by id). Public so that the runtime can skip calling
+        # `flush` in the usual cycle that commanded nothing: a dict test instead of two calls.
+        self.best: dict[int, Proposal] = {}
 
     def propose(self, driver: Any, proposal: Proposal) -> None:
-        best = self._best.get(id(driver))
+        best = self.best.get(id(driver))
         if best is None or proposal.rank >= best.rank:
-            self._best[id(driver)] = proposal
+            self.best[id(driver)] = proposal
 
     def flush(self, on_error: Callable[[Any, Exception], None]) -> int:
         """Execute the winning commands; returns how many ran."""
-        if not self._best:
+        if not self.best:
             return 0
-        winners, self._best = list(self._best.values()), {}
+        winners, self.best = list(self.best.values()), {}
         for p in winners:
             try:
                 p.call()

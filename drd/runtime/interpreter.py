@@ -14,11 +14,21 @@ from __future__ import annotations
 
 import collections
 from collections.abc import Callable, Iterable, Iterator, Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from enum import StrEnum
 from typing import Any
 
-from drd.rcm import Deadlock, Granted, NeedRequest, Released, Request, ResourceManager, Revoked, Unsatisfiable
+from drd.rcm import (
+    Deadlock,
+    Granted,
+    NeedRequest,
+    Released,
+    ReleaseReason,
+    Request,
+    ResourceManager,
+    Revoked,
+    Unsatisfiable,
+)
 from drd.rcm import Waiting as WaitingDecision
 from drd.runtime import records as rec
 from drd.runtime.broker import ResourceBroker
@@ -50,7 +60,31 @@ class Phase(StrEnum):
     """Exited (successfully, failed or stopped)."""
 
 
-@dataclass(eq=False, slots=True)
+# Enum members as module constants, which this module compares against: on CPython 3.11 each
+# `Phase.DONE` or `StateKind.LEAF` is a metaclass attribute lookup (~0.1 µs), and a transition made a dozen.
+_WAITING, _ACTIVE, _SUSPENDED, _DONE = Phase.WAITING, Phase.ACTIVE, Phase.SUSPENDED, Phase.DONE
+_LEAF, _COMPOUND, _PARALLEL, _MULTI, _FINAL = (StateKind.LEAF, StateKind.COMPOUND, StateKind.PARALLEL,
+                                                StateKind.MULTI, StateKind.FINAL)
+_RUNNING, _SUCCESS, _FAILURE = Status.RUNNING, Status.SUCCESS, Status.FAILURE
+
+
+class _Plan:
+    """What entering and exiting a state needs to know, worked out once per chart, not per entry."""
+
+    __slots__ = ("requested", "on_event", "timed", "defaults")
+
+    def __init__(self, state: State):
+        self.requested = tuple(n for n in state.needs if n.requested)  # asked of the manager on entry
+        by_event: dict[str, list[Transition]] = {}
+        for t in state.transitions:
+            if t.kind is ast.TriggerKind.EVENT and t.event:
+                by_event.setdefault(t.event, []).append(t)
+        self.on_event = {k: tuple(v) for k, v in by_event.items()}  # event name -> its `on` transitions
+        self.timed = any(t.kind in (ast.TriggerKind.TIMEOUT, ast.TriggerKind.CHANGE) for t in state.transitions)
+        self.defaults: dict[str, Any] | None = None  # parameter defaults, evaluated at the first entry
+
+
+@dataclass(eq=False, slots=True, init=False)
 class Node:
     """One active instance of a state."""
 
@@ -58,24 +92,39 @@ class Node:
     path: str
     parent: Node | None
     entered: float
-    phase: Phase = Phase.WAITING
-    scope: dict[str, Any] = field(default_factory=dict)  # params, vars, shared, resources
-    outputs: dict[str, Any] = field(default_factory=dict)  # finished children's outputs by name
-    children: list[Node] = field(default_factory=list)
-    finished: set[str] = field(default_factory=set)  # ids of children that succeeded (parallel)
-    component: Component | None = None
-    context: Context | None = None
-    assignment: dict[str, str] = field(default_factory=dict)  # requested need -> resource id
-    epochs: dict[str, int] = field(default_factory=dict)  # unit id -> fencing epoch of its grant
-    requested: bool = False
-    lease_until: float = 0.0
-    instances: int = 0  # multi: created so far
-    succeeded: int = 0
-    failed: int = 0
-    bounds: tuple[int, int] = (0, 0)
-    reserved_by: str = ""  # a preallocation made when this (future) node's predecessor was entered
-    last_failure: str = ""  # multi: why the most recent instance failed, for the report
+    plan: _Plan
+    phase: Phase
+    scope: dict[str, Any]  # params, vars, shared, resources
+    outputs: dict[str, Any]  # finished children's outputs by name
+    children: list[Node]
+    finished: set[str]  # ids of children that succeeded (parallel)
+    component: Component | None
+    context: Context | None
+    assignment: dict[str, str]  # requested need -> resource id
+    epochs: dict[str, int]  # unit id -> fencing epoch of its grant
+    requested: bool
+    lease_until: float
+    instances: int  # multi: created so far
+    succeeded: int
+    failed: int
+    bounds: tuple[int, int]
+    reserved_by: str  # a preallocation made when this (future) node's predecessor was entered
+    last_failure: str  # multi: why the most recent instance failed, for the report
 
+    def __init__(self, state: State, path: str, parent: Node | None, entered: float, plan: _Plan,
+                 scope: dict[str, Any], reserved_by: str = ""):
+        # Written out: a node is made on every entry, and the generated __init__ (six default
+        # factories, defaults checked one by one) cost twice as much. `scope` is taken, not copied.
+        self.state, self.path, self.parent, self.entered, self.plan = state, path, parent, entered, plan
+        self.phase = _WAITING
+        self.scope = scope
+        self.outputs, self.children, self.finished = {}, [], set()
+        self.component, self.context = None, None
+        self.assignment, self.epochs = {}, {}
+        self.requested, self.lease_until = False, 0.0
+        self.instances = self.succeeded = self.failed = 0
+        self.bounds = (0, 0)
+        self.reserved_by, self.last_failure = reserved_by, ""
 
 
 class Interpreter:
@@ -102,29 +151,21 @@ class Interpreter:
         self.holders: dict[str, Node] = {}  # request holder path -> node
         self._finishing: list[tuple[Node, bool, str]] = []
         self.rcm.attach(self._apply)
+        self._states = chart.states
+        self._plans = {sid: _Plan(st) for sid, st in chart.states.items()}  # per state, not per entry
         # Indices kept in step with entry and exit, so a step never walks the whole tree.
         self._running: dict[Node, None] = {}  # leaves with a component, in entry order
         self._timed: dict[Node, None] = {}  # nodes with `after`/`when` transitions
-        self._listening: dict[str, dict[Node, None]] = {}  # event name -> nodes with `on` transitions
+        self._listening: dict[str, dict[Node, None]] = {  # event name -> nodes with `on` transitions
+            event: {} for plan in self._plans.values() for event in plan.on_event}
         self._components: dict[str, tuple[Component, Context, _Resolved]] = {}  # reused per instance path
-        self._defaults: dict[str, dict[str, Any]] = {}
         self._last_tick = -1.0
         self._settling = False
         self._arbiter = Arbiter()  # one control cycle's actuator commands, multiplexed by priority
         self._rank = {sid: i for i, sid in enumerate(s.id for s in chart.walk())}  # declaration order
-        self._on_event: dict[str, dict[str, tuple[Transition, ...]]] = {}
-        self._has_timed: set[str] = set()
         # What a state's descendants may read of it: its shared data and resources.
         self._visible = {sid: frozenset(n for n, _ in st.shared) | frozenset(n.name for n in st.needs)
                          for sid, st in chart.states.items()}
-        for st in chart.states.values():
-            by_event: dict[str, list[Transition]] = {}
-            for t in st.transitions:
-                if t.kind is ast.TriggerKind.EVENT and t.event:
-                    by_event.setdefault(t.event, []).append(t)
-                elif t.kind in (ast.TriggerKind.TIMEOUT, ast.TriggerKind.CHANGE):
-                    self._has_timed.add(st.id)
-            self._on_event[st.id] = {k: tuple(v) for k, v in by_event.items()}
 
     # ------------------------------------------------------------- public API
     def attach(self, listener: Listener) -> None:
@@ -134,7 +175,7 @@ class Interpreter:
         """Enter the root state (and, through grants, everything below it)."""
         if self.root is not None:
             raise RuntimeError("this interpreter has already started")
-        root_state = self.chart[self.chart.root]
+        root_state = self._states[self.chart.root]
         self._enter(root_state, root_state.id, None, {})
         self._settle()
         self._flush()
@@ -150,22 +191,24 @@ class Interpreter:
             self._renew(now)
         for node in list(self._running):
             comp = node.component
-            if node.phase is not Phase.ACTIVE or comp is None:
+            if node.phase is not _ACTIVE or comp is None:
                 continue
             try:
                 status = comp.step(now)
             except Exception as e:  # component code is not ours to trust
                 self._component_failed(node, e)
                 continue
-            if status is Status.SUCCESS or status is Status.FAILURE:
-                self._finish(node, status is Status.SUCCESS, "" if status is Status.SUCCESS else "failed")
-        self._flush()
+            if status is _SUCCESS or status is _FAILURE:
+                self._finish(node, status is _SUCCESS, "" if status is _SUCCESS else "failed")
+        if self._arbiter.best:  # most cycles of most charts command nothing: no call then
+            self._flush()
         self._settle()
-        self._flush()  # what exits and entries commanded (a terminate's stop, a start's first move)
+        if self._arbiter.best:  # what exits and entries commanded (a terminate's stop, a start's first move)
+            self._flush()
 
     def emit(self, name: str, source: str = "operator", **fields: Any) -> None:
         """Queue an event (from a component, an action or the operator)."""
-        record = rec.Event(self.clock.now(), source, name, dict(fields))
+        record = rec.Event(self.clock.now(), source, name, fields)  # `**fields` is already a fresh dict
         if self.listeners:
             self._notify(record)
         self.events.append(record)
@@ -174,7 +217,7 @@ class Interpreter:
 
     def stop(self, reason: str = "stopped by operator") -> None:
         """Shut everything down, children first; idempotent."""
-        if self.root is not None and self.root.phase is not Phase.DONE:
+        if self.root is not None and self.root.phase is not _DONE:
             self._exit(self.root, "stopped")
             self._flush()  # the terminates' last commands (stop the drive) still reach the hardware
         if self.outcome is None:
@@ -191,7 +234,7 @@ class Interpreter:
         self.pool.remove_host(host, self.clock.now())
         self._settle()
 
-    def remove_resources(self, resource_ids: Iterable[str], reason: str = "resource lost") -> None:
+    def remove_resources(self, resource_ids: Iterable[str], reason: ReleaseReason = "resource lost") -> None:
         """Resources vanished (a lost robot): as for a host, only for these."""
         self.pool.remove(resource_ids, self.clock.now(), reason)
         self._settle()
@@ -212,7 +255,7 @@ class Interpreter:
     def active(self) -> list[Node]:
         """Every live node, parents first."""
         out: list[Node] = []
-        stack = [self.root] if self.root is not None and self.root.phase is not Phase.DONE else []
+        stack = [self.root] if self.root is not None and self.root.phase is not _DONE else []
         while stack:
             n = stack.pop()
             out.append(n)
@@ -228,18 +271,20 @@ class Interpreter:
                 "time": self.clock.now(), "tree": tree(self.root) if self.root else None}
 
     # ------------------------------------------------------------- entering
-    def _enter(self, state: State, path: str, parent: Node | None, params: dict[str, Any]) -> Node:
-        node = Node(state, path, parent, self.clock.now(), scope=dict(params))
+    def _enter(self, state: State, path: str, parent: Node | None, scope: dict[str, Any]) -> Node:
+        """Enter `state` at `path`; `scope` (its parameters) becomes the node's own, not a copy."""
+        plan = self._plans[state.id]
+        node = Node(state, path, parent, self.clock.now(), plan, scope)
         if parent is not None:
             parent.children.append(node)
         else:
             self.root = node  # before anything can call stop()
         if self.listeners:
             self._notify(rec.Entered(node.entered, path, state.id))
-        if state.id in self._has_timed:
+        if plan.timed:
             self._timed[node] = None
-        for event in self._on_event[state.id]:
-            self._listening.setdefault(event, {})[node] = None
+        for event in plan.on_event:
+            self._listening[event][node] = None
         for name, _type in state.shared:
             node.scope[name] = {}
         try:
@@ -250,14 +295,13 @@ class Interpreter:
             return node
         if self.preallocate and parent is not None:
             self._preallocate(node)
-        requested = [n for n in state.needs if n.requested]
-        if requested:
-            self._request(node, requested)
+        if plan.requested:  # a state whose needs are all bound above never talks to the manager
+            self._request(node, plan.requested)
         else:
             self._activate(node)
         return node
 
-    def _request(self, node: Node, needs: list[ResourceNeed]) -> None:
+    def _request(self, node: Node, needs: tuple[ResourceNeed, ...]) -> None:
         try:
             reqs = tuple(self._need_request(node, n) for n in needs)
         except EvalError as e:
@@ -271,7 +315,8 @@ class Interpreter:
             if early.assignment:
                 self._granted(node, early.assignment)
             return
-        self._notify(rec.Waiting(self.clock.now(), node.path, tuple(f"{n.name}: {n.type}" for n in needs)))
+        if self.listeners:
+            self._notify(rec.Waiting(self.clock.now(), node.path, tuple(f"{n.name}: {n.type}" for n in needs)))
         self.rcm.request(Request(self._holder(node), node.state.priority, reqs, self.mission), self.clock.now())
 
     def _need_request(self, node: Node, need: ResourceNeed) -> NeedRequest:
@@ -297,23 +342,24 @@ class Interpreter:
         node.assignment = dict(assignment)
         for need, rid in assignment.items():
             node.scope[need] = self.pool.view(rid)
-        if node.phase is Phase.WAITING:
+        if node.phase is _WAITING:
             self._activate(node)
 
     def _preallocate(self, node: Node) -> None:
         """Reserve, now, what the state after `node` will need (paper 4.3 c): it starts without waiting."""
         parent = node.parent
-        if parent is None or parent.state.kind is not StateKind.COMPOUND:
+        if parent is None or parent.state.kind is not _COMPOUND:
             return
         nxt = next((t for t in node.state.transitions
                     if t.kind is ast.TriggerKind.COMPLETION and t.guard is None), None)
         if nxt is None:
             return
-        target = self.chart[nxt.target]
+        target = self._states[nxt.target]
         needs = [n for n in target.needs if n.requested]
-        if not needs or target.kind not in (StateKind.COMPOUND, StateKind.PARALLEL, StateKind.LEAF):
+        if not needs or target.kind not in (_COMPOUND, _PARALLEL, _LEAF):
             return
-        future = Node(target, f"{parent.path}/{target.name}", parent, self.clock.now(), reserved_by=node.path)
+        future = Node(target, f"{parent.path}/{target.name}", parent, self.clock.now(), self._plans[target.id], {},
+                      reserved_by=node.path)
         holder = self._holder(future)
         if holder in self.holders or holder in self._reservations:
             return
@@ -335,52 +381,54 @@ class Interpreter:
                 self.rcm.cancel(holder, self.clock.now())
 
     def _activate(self, node: Node) -> None:
-        if self.outcome is not None or node.phase is Phase.DONE:
+        if self.outcome is not None or node.phase is _DONE:
             return
-        node.phase = Phase.ACTIVE
+        node.phase = _ACTIVE
         state = node.state
-        match state.kind:
-            case StateKind.LEAF:
-                self._start_component(node)
-            case StateKind.COMPOUND:
-                target = self._initial(node)
-                if target is not None:
-                    self._enter_child(node, target)
-            case StateKind.PARALLEL:
-                for cid in state.children:
-                    child = self.chart[cid]
-                    if child.kind is not StateKind.FINAL and not child.after:
-                        self._enter_child(node, child)
-            case StateKind.MULTI:
-                self._start_multi(node)
+        kind = state.kind
+        if kind is _LEAF:
+            self._start_component(node)
+        elif kind is _COMPOUND:
+            target = self._initial(node)
+            if target is not None:
+                self._enter_child(node, target)
+        elif kind is _PARALLEL:
+            for cid in state.children:
+                child = self._states[cid]
+                if child.kind is not _FINAL and not child.after:
+                    self._enter_child(node, child)
+        elif kind is _MULTI:
+            self._start_multi(node)
 
     def _initial(self, node: Node) -> State | None:
         for t in node.state.starts:
             if self._enabled_guard(node, t, None):
                 self._take_actions(node, t, None)
-                return self.chart[t.target]
-        return self.chart[node.state.initial] if node.state.initial else None
+                return self._states[t.target]
+        return self._states[node.state.initial] if node.state.initial else None
 
     def _enter_child(self, parent: Node, state: State, index: int | None = None, why: str = "") -> Node | None:
-        if self.outcome is not None or parent.phase is Phase.DONE:  # stopped meanwhile (e.g. by a listener)
+        if self.outcome is not None or parent.phase is _DONE:  # stopped meanwhile (e.g. by a listener)
             return None
-        if state.kind is StateKind.FINAL:
+        if state.kind is _FINAL:
             self._finish(parent, bool(state.success), "" if state.success else (why or "reached fail"))
             return None
-        base = parent.path if parent.state.kind is not StateKind.MULTI else parent.path
-        path = f"{base}[{index}]" if index is not None else f"{base}/{state.name}"
-        domain = parent.parent if parent.state.kind is StateKind.MULTI else parent
-        try:
-            params = {a.name: evaluate(a.value, self._names(domain), self.pool.count) for a in state.args} \
-                if domain is not None else {}
-        except EvalError as e:
-            self._notify(rec.Log(self.clock.now(), path, f"cannot enter: {e.message}"))
-            self._finish(parent, False, e.message)
-            return None
-        defaults = self._defaults.get(state.id)
+        path = f"{parent.path}[{index}]" if index is not None else f"{parent.path}/{state.name}"
+        params: dict[str, Any] = {}
+        if state.args:
+            domain = parent.parent if parent.state.kind is _MULTI else parent
+            try:
+                params = {a.name: evaluate(a.value, self._names(domain), self.pool.count) for a in state.args} \
+                    if domain is not None else {}
+            except EvalError as e:
+                self._notify(rec.Log(self.clock.now(), path, f"cannot enter: {e.message}"))
+                self._finish(parent, False, e.message)
+                return None
+        plan = self._plans[state.id]
+        defaults = plan.defaults
         if defaults is None:
-            defaults = self._defaults[state.id] = {a.name: evaluate(a.value, {}) for a in state.defaults}
-        return self._enter(state, path, parent, defaults | params)
+            defaults = plan.defaults = {a.name: evaluate(a.value, {}) for a in state.defaults}
+        return self._enter(state, path, parent, defaults | params)  # a new dict: the node's scope
 
     def _start_multi(self, node: Node) -> None:
         m = node.state.multiplicity
@@ -405,13 +453,13 @@ class Interpreter:
 
     def _capacity(self, node: Node) -> int:
         """For `[a..*]`: as many instances as the template's first requested resource type allows."""
-        template = self.chart[node.state.children[0]]
+        template = self._states[node.state.children[0]]
         need = next((n for n in template.needs if n.requested), None)
         return self.pool.count(need.type, None) if need else 0
 
     def _grow_multi(self, node: Node) -> None:
-        template = self.chart[node.state.children[0]]
-        while node.instances < node.bounds[1] and node.phase is Phase.ACTIVE:
+        template = self._states[node.state.children[0]]
+        while node.instances < node.bounds[1] and node.phase is _ACTIVE:
             index = node.instances
             node.instances += 1
             self._enter_child(node, template, index)
@@ -419,7 +467,7 @@ class Interpreter:
     def _grow_multis(self) -> None:
         for node in self.active():
             m = node.state.multiplicity
-            if node.state.kind is StateKind.MULTI and m is not None and m.high is not None and not m.exact:
+            if node.state.kind is _MULTI and m is not None and m.high is not None and not m.exact:
                 try:
                     high = int(evaluate(m.high, self._names(node.parent) if node.parent else {},  # type: ignore[call-overload]
                                         self.pool.count))
@@ -434,10 +482,10 @@ class Interpreter:
         cached = self._components.get(node.path)
         if cached is not None:
             comp, ctx, resolved = cached
-            resolved.reset(lambda: self._devices(node))  # the same views, resolved again for this entry
+            resolved.reset(node)  # the same views, resolved again for this entry
             ctx.params, ctx.outputs = dict(node.scope), {}
         else:
-            resolved = _Resolved(lambda: self._devices(node))  # most components never ask: resolve on first use
+            resolved = _Resolved(self._devices, node)  # most components never ask: resolve on first use
             resources, devices = resolved.view(0), resolved.view(1)
             name = node.state.component or ""
             factory = self.registry.get(name)
@@ -471,7 +519,12 @@ class Interpreter:
         self._running[node] = None
 
     def _flush(self) -> None:
-        self._arbiter.flush(lambda node, e: self._component_failed(node, e) if isinstance(node, Node) else None)
+        self._arbiter.flush(self._command_failed)
+
+    def _command_failed(self, owner: object, e: Exception) -> None:
+        """A driver refused the winning command of a cycle: its proposer (a node) fails."""
+        if isinstance(owner, Node):
+            self._component_failed(owner, e)
 
     def _component_failed(self, node: Node, e: Exception) -> None:
         self._notify(rec.Log(self.clock.now(), node.path, f"component raised {type(e).__name__}: {e}"))
@@ -509,6 +562,8 @@ class Interpreter:
         """Run to completion: finish nodes and take enabled transitions until quiet."""
         if self._settling:
             return
+        if not (self._finishing or self._timed or self.events):
+            return  # nothing to finish, no change or timeout to check, no event: quiet already
         self._settling = True
         try:
             self._run_to_completion()
@@ -521,10 +576,10 @@ class Interpreter:
                 return
             if self._finishing:
                 node, ok, why = self._finishing.pop(0)
-                if node.phase is not Phase.DONE or node is self.root:
+                if node.phase is not _DONE or node is self.root:
                     self._complete(node, ok, why)
                 continue
-            if self._fire_one():
+            if self._timed and self._fire_one():
                 continue
             if self.events:
                 self._dispatch(self.events.popleft())
@@ -540,38 +595,40 @@ class Interpreter:
             self._exit(node, "success" if ok else "failure")
             self._end("success" if ok else "failure", why)
             return
-        if node.phase is not Phase.DONE:
+        if node.phase is not _DONE:
             self._exit(node, "success" if ok else "failure")
-        if node.state.kind is StateKind.LEAF and node.context is not None:
+        if node.state.kind is _LEAF and node.context is not None:
             parent.outputs[node.state.name] = dict(node.context.outputs)
+        elif node.outputs:  # a composite's outputs are its finished children's, merged (FindNewDoor.door)
+            parent.outputs[node.state.name] = {k: v for child in node.outputs.values() for k, v in child.items()}
         kind = ast.TriggerKind.COMPLETION if ok else ast.TriggerKind.ERROR
         for t in node.state.transitions:
-            if t.kind is kind and self._enabled_guard(parent_domain(node), t, None):
+            if t.kind is kind and self._enabled_guard(parent, t, None):
                 self._take(node, t, None, why)
                 return
         pk = parent.state.kind
-        if pk is StateKind.MULTI:
+        if pk is _MULTI:
             self._instance_done(parent, ok, why)
         elif not ok:
             self._finish(parent, False, why or f"{node.path} failed")
-        elif pk is StateKind.PARALLEL:
+        elif pk is _PARALLEL:
             parent.finished.add(node.state.id)
             self._region_done(parent, node)
-        elif pk is StateKind.COMPOUND:
+        elif pk is _COMPOUND:
             self._finish(parent, True)
 
     def _region_done(self, parent: Node, node: Node) -> None:
         state = parent.state
-        regions = [c for c in state.children if self.chart[c].kind is not StateKind.FINAL]
+        regions = [c for c in state.children if self._states[c].kind is not _FINAL]
         if state.policy is ast.Policy.ANY or (state.policy is ast.Policy.UNTIL and node.state.id == state.until):
             self._finish(parent, True)
             return
         if all(r in parent.finished for r in regions):
             self._finish(parent, True)
             return
-        running = {c.state.id for c in parent.children if c.phase is not Phase.DONE}
+        running = {c.state.id for c in parent.children if c.phase is not _DONE}
         for rid in regions:
-            child = self.chart[rid]
+            child = self._states[rid]
             if child.after and rid not in running and rid not in parent.finished \
                     and all(a in parent.finished for a in child.after):
                 self._enter_child(parent, child)
@@ -584,7 +641,7 @@ class Interpreter:
             multi.last_failure = why
             self._notify(rec.Log(self.clock.now(), multi.path, f"an instance failed: {why}"))
         low, _ = multi.bounds
-        running = [c for c in multi.children if c.phase is not Phase.DONE]
+        running = [c for c in multi.children if c.phase is not _DONE]
         if multi.succeeded + len(running) < low:
             last = f" (last failure: {multi.last_failure})" if multi.last_failure else ""
             self._finish(multi, False, f"only {multi.succeeded} of at least {low} instances of "
@@ -598,7 +655,7 @@ class Interpreter:
             return False
         now = self.clock.now()
         for node in list(self._timed):
-            if node.parent is None or node.phase is Phase.DONE:
+            if node.parent is None or node.phase is _DONE:
                 continue
             domain = node.parent
             for t in node.state.transitions:
@@ -628,32 +685,38 @@ class Interpreter:
         return float(value) if isinstance(value, int | float) and not isinstance(value, bool) else None
 
     def _dispatch(self, event: rec.Event) -> None:
-        for node in list(self._listening.get(event.name, ())):
-            if node.parent is None or node.phase is Phase.DONE:
+        listening = self._listening.get(event.name)
+        if not listening:
+            return
+        for node in list(listening):  # a copy: taking a transition changes who listens
+            domain = node.parent
+            if domain is None or node.phase is _DONE:
                 continue
-            for t in self._on_event[node.state.id][event.name]:
-                if self._enabled_guard(node.parent, t, event):
+            for t in node.plan.on_event[event.name]:
+                if t.guard is None or self._truthy(domain, t.guard, event):
                     self._take(node, t, event)
                     break
 
     def _take(self, node: Node, t: Transition, event: rec.Event | None, why: str = "") -> None:
-        domain = parent_domain(node)
-        target = self.chart[t.target]
+        domain = node.parent  # the node whose body declares the transition (a multi's parent for instances)
+        assert domain is not None
+        target = self._states[t.target]
         if self.listeners:
             self._notify(rec.Taken(self.clock.now(), node.path, _target_path(domain, target), t.kind.value,
                                    trigger_label(t)))
-        if node.phase is not Phase.DONE:
+        if node.phase is not _DONE:
             self._exit(node, "stopped")
         if self._reservations:
             self._drop_reservations(node.path, keep=f"{self.mission}/{domain.path}/{target.name}")
-        if target.kind is StateKind.FINAL and domain.state.kind is StateKind.PARALLEL:
+        final = target.kind is _FINAL
+        if final and domain.state.kind is _PARALLEL:
             for c in list(domain.children):
-                if c.phase is not Phase.DONE:
+                if c.phase is not _DONE:
                     self._exit(c, "stopped")
-        self._take_actions(domain, t, event)
-        if domain.phase is not Phase.DONE:
-            if not why and target.kind is StateKind.FINAL and not target.success \
-                    and t.kind is not ast.TriggerKind.COMPLETION:
+        if t.actions:
+            self._take_actions(domain, t, event)
+        if domain.phase is not _DONE:
+            if not why and final and not target.success and t.kind is not ast.TriggerKind.COMPLETION:
                 why = f"{node.state.name}: {trigger_label(t)}"  # say why the behavior failed
             self._enter_child(domain, target, why=why)
 
@@ -686,7 +749,7 @@ class Interpreter:
     # ------------------------------------------------------------- exiting
     def _exit(self, node: Node, status: str) -> None:
         """Exit children first, terminate the component, give resources back."""
-        if node.phase is Phase.DONE:
+        if node.phase is _DONE:
             if node.parent is not None and node in node.parent.children:
                 node.parent.children.remove(node)
             return
@@ -696,14 +759,16 @@ class Interpreter:
         if comp is not None:
             self._running.pop(node, None)
             try:
-                comp.terminate(_FINAL_STATUS.get(status, Status.RUNNING))
+                comp.terminate(_FINAL_STATUS.get(status, _RUNNING))
             except Exception as e:  # the node is leaving anyway: just say so
                 self._notify(rec.Log(self.clock.now(), node.path, f"component raised {type(e).__name__}: {e}"))
-        node.phase = Phase.DONE
+        node.phase = _DONE
         if self._reservations and node.state.children:
             self._drop_reservations(node.path)  # reservations for states inside it
-        self._timed.pop(node, None)
-        for event in self._on_event[node.state.id]:
+        plan = node.plan
+        if plan.timed:
+            self._timed.pop(node, None)
+        for event in plan.on_event:
             self._listening[event].pop(node, None)
         if node.requested:
             self.holders.pop(self._holder(node), None)
@@ -738,10 +803,11 @@ class Interpreter:
                 case Granted():
                     node.lease_until = d.lease_until
                     node.epochs = dict(d.epochs)
-                    self._notify(rec.Granted(now, node.path, dict(d.assignment), dict(d.epochs)))
+                    if self.listeners:
+                        self._notify(rec.Granted(now, node.path, dict(d.assignment), dict(d.epochs)))
                     if node.reserved_by:
                         node.assignment = dict(d.assignment)  # held for a state not entered yet
-                    elif node.phase is Phase.SUSPENDED:
+                    elif node.phase is _SUSPENDED:
                         node.assignment = dict(d.assignment)
                         self._suspend(node, False)
                     else:
@@ -753,7 +819,7 @@ class Interpreter:
                     self._notify(rec.Released(now, node.path, d.units, "release"))
                 case Released():
                     self._notify(rec.Released(now, node.path, d.units, d.reason))
-                    if node.phase is not Phase.DONE:
+                    if node.phase is not _DONE:
                         self._finish(node, False, f"lost its resources ({d.reason})")
                 case Unsatisfiable():
                     self._finish(node, False, f"resource need {d.need} can never be satisfied: {d.reason}")
@@ -763,16 +829,16 @@ class Interpreter:
                     self._notify(rec.Waiting(now, node.path, (), d.blocked_by))
 
     def _suspend(self, node: Node, suspend: bool) -> None:
-        node.phase = Phase.SUSPENDED if suspend else Phase.ACTIVE
+        node.phase = _SUSPENDED if suspend else _ACTIVE
         self._notify((rec.Suspended if suspend else rec.Resumed)(self.clock.now(), node.path))
         stack = list(node.children)
         while stack:
             n = stack.pop()
             stack.extend(n.children)
-            if n.component is not None and n.phase is not Phase.DONE:
+            if n.component is not None and n.phase is not _DONE:
                 comp = n.component
                 self._guard_call(n, comp.suspend if suspend else comp.resume)
-                n.phase = Phase.SUSPENDED if suspend else Phase.ACTIVE
+                n.phase = _SUSPENDED if suspend else _ACTIVE
         if node.component is not None:
             comp = node.component
             self._guard_call(node, comp.suspend if suspend else comp.resume)
@@ -840,18 +906,20 @@ class Interpreter:
 class _Resolved:
     """A component's resources and devices, worked out the first time it asks for either."""
 
-    __slots__ = ("_resolve", "_value")
+    __slots__ = ("_resolve", "_node", "_value")
 
-    def __init__(self, resolve: Callable[[], tuple[dict[str, str], dict[str, Any]]]):
+    def __init__(self, resolve: Callable[[Node], tuple[dict[str, str], dict[str, Any]]], node: Node):
         self._resolve = resolve
+        self._node = node
         self._value: tuple[dict[str, str], dict[str, Any]] | None = None
 
-    def reset(self, resolve: Callable[[], tuple[dict[str, str], dict[str, Any]]]) -> None:
-        self._resolve, self._value = resolve, None
+    def reset(self, node: Node) -> None:
+        """A new entry of the same path: resolve again, for `node`, when next asked."""
+        self._node, self._value = node, None
 
     def get(self, which: int) -> dict[str, Any]:
         if self._value is None:
-            self._value = self._resolve()
+            self._value = self._resolve(self._node)
         return self._value[which]
 
     def view(self, which: int) -> _LazyMap:
@@ -877,12 +945,6 @@ class _LazyMap(Mapping[str, Any]):
 def _current_epoch(holder: Node, unit: str) -> Callable[[], int | None]:
     """Read at each command: a resumed grant replaces `holder.epochs`, so never bind the dict itself."""
     return lambda: holder.epochs.get(unit)
-
-
-def parent_domain(node: Node) -> Node:
-    """The node whose body declares `node`'s transitions (a multi's parent for instances)."""
-    assert node.parent is not None
-    return node.parent
 
 
 def _target_path(domain: Node, target: State) -> str:
