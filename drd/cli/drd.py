@@ -1,20 +1,35 @@
 """`drd`: the Distributed Robotics Daemon's command line (one daemon per host).
 
-The daemon itself (`drd start`) arrives with the cluster work; what a host can already
-answer without it lives here.
+`drd start --host NAME` runs this host's daemon (in the foreground, logging to stderr, or with
+`--detach`); `drd stop` stops daemons by their pidfiles; `drd status` lists those of this machine.
+See docs/daemon.md.
 """
 
 from __future__ import annotations
 
 import json
+import logging
+import signal
+import subprocess
+import sys
+import threading
+import time
 from pathlib import Path
+from types import FrameType
+from typing import TYPE_CHECKING
 
 import typer
 from rich.table import Table
+from rich.text import Text
 
 from drd import __version__
-from drd.cli.common import OK, ComponentsOption, catalog, out, run_app
+from drd.cli.common import INVALID, OK, ComponentsOption, catalog, err, fail, out, run_app
 from dsl.catalog import Kind
+
+if TYPE_CHECKING:
+    from drd.daemon.security import Transport
+    from drd.hosts import Cluster
+    from dsl.catalog import Catalog
 
 app = typer.Typer(help="The Distributed Robotics Daemon: one per host.", no_args_is_help=True,
                   add_completion=False, rich_markup_mode=None)
@@ -57,5 +72,220 @@ def version() -> int:
     return OK
 
 
+RunDirOption = typer.Option(None, "--run-dir", show_default=False,
+                            help="Where pidfiles live (default: $DRD_RUN_DIR, else ~/.drd/run).")
+READY_TIMEOUT = 30.0  # how long `drd start --detach` waits for the daemon to declare its services
+
+
+@app.command()
+def start(
+    host: str = typer.Option(..., "--host", help="This host's name in the hosts file.", show_default=False),
+    config: Path = typer.Option(Path("hosts.yaml"), "--config", "-c", help="The cluster's hosts file."),
+    detach: bool = typer.Option(False, "--detach", "-d", help="Run in the background; log to --log-file."),
+    log_file: Path = typer.Option(None, "--log-file", show_default=False,
+                                  help="Log here instead of stderr (default with --detach: RUN_DIR/HOST.log)."),
+    run_dir_opt: Path = RunDirOption,
+    load_period: float = typer.Option(1.0, "--load-period", min=0.01,
+                                      help="Seconds between load reports (at most a third of the lease is used)."),
+    peer_grace: float = typer.Option(3.0, "--peer-grace", min=0.0,
+                                     help="Seconds to wait for the peers before naming the unreachable ones."),
+    log_level: str = typer.Option("info", "--log-level", help="debug, info, warning or error."),
+    extra: list[Path] = ComponentsOption,
+) -> int:
+    """Start this host's daemon: join the cluster, report load, serve the Component Database (and, on
+    the controller, the Resource Controller Manager and the Mission Executive). Stops on SIGTERM/SIGINT."""
+    from drd.daemon import runfiles
+    from drd.daemon.security import SecurityError, transport
+
+    level = getattr(logging, log_level.upper(), None)
+    if not isinstance(level, int):
+        fail(f"--log-level {log_level}: expected debug, info, warning or error")
+    cat = catalog(extra)
+    cluster = _load_cluster(config, cat)
+    try:
+        cluster.host(host)
+    except KeyError:
+        fail(f"no host {host!r} in {config} (hosts: {', '.join(h.name for h in cluster.hosts)})")
+    try:
+        tr = transport(cluster)
+    except SecurityError as e:
+        for p in e.problems:
+            err.print(Text.assemble(("error: ", "bold red"), str(p)))
+        err.print(Text.assemble(("  hint: ", "cyan"), "security is configured, so drd will not start without it"))
+        return INVALID
+    rd = runfiles.run_dir(run_dir_opt)
+    running = runfiles.read(runfiles.path_of(rd, host))
+    if running is not None and running.running():
+        fail(f"drd for host {host} is already running (pid {running.pid})", hint=f"drd stop --host {host}")
+    if detach:
+        return _detach(host, config, rd, log_file or rd / f"{host}.log", load_period, peer_grace, log_level, extra)
+    _configure_logging(host, log_file, level)
+    return _serve(cluster, host, cat, tr, rd, config, log_file, load_period, peer_grace)
+
+
+def _load_cluster(config: Path, cat: Catalog) -> Cluster:
+    from drd.hosts import HostsError, load_hosts
+
+    try:
+        return load_hosts(config, cat)
+    except HostsError as e:
+        for p in e.problems:
+            err.print(Text.assemble(("error: ", "bold red"), str(p)))
+        raise typer.Exit(INVALID) from None
+
+
+def _serve(cluster: Cluster, host: str, cat: Catalog, tr: Transport, rd: Path, config: Path, log_file: Path | None,
+           load_period: float, peer_grace: float) -> int:
+    from drd.bus import BusError
+    from drd.daemon import runfiles
+    from drd.daemon.daemon import Daemon, DaemonConfig
+
+    daemon = Daemon(DaemonConfig(cluster, host, cat, tr, load_period=load_period, peer_grace=peer_grace))
+    try:
+        info = runfiles.claim(rd, host, cluster.name, str(config.absolute()), str(log_file or ""))
+    except runfiles.AlreadyRunning as e:
+        fail(str(e), hint=f"drd stop --host {host}")
+    stop = threading.Event()
+
+    def on_signal(signum: int, _frame: FrameType | None) -> None:
+        name = signal.Signals(signum).name
+        logging.getLogger("drd.daemon").info("received %s, stopping", name)
+        daemon.stop_reason = name
+        stop.set()
+
+    signal.signal(signal.SIGTERM, on_signal)
+    signal.signal(signal.SIGINT, on_signal)
+    try:
+        import zenoh
+
+        zenoh.try_init_log_from_env()  # type: ignore[no-untyped-call]  # RUST_LOG=zenoh=debug: zenoh's own logs
+        daemon.run(stop, ready=lambda: runfiles.mark(rd, info, "running"))
+    except BusError as e:
+        fail(f"drd {host} cannot join the bus on {cluster.host(host).endpoint}: {e}",
+             hint="is another process listening on that port?")
+    finally:
+        runfiles.release(rd, info)
+    return OK
+
+
+def _configure_logging(host: str, log_file: Path | None, level: int) -> None:
+    """This process's logging: one handler, and rate limits on what peers can make us log."""
+    from drd.daemon import logs
+
+    logs.install("drd.bus", "drd.daemon.rejects")
+    handler: logging.Handler
+    if log_file is not None:
+        log_file.parent.mkdir(parents=True, exist_ok=True)
+        handler = logging.FileHandler(log_file, encoding="utf-8")
+    else:
+        handler = logging.StreamHandler(sys.stderr)
+    handler.setFormatter(logging.Formatter(f"%(asctime)s {host} %(levelname)s %(name)s: %(message)s"))
+    root = logging.getLogger()
+    root.handlers[:] = [handler]
+    root.setLevel(level)
+
+
+def _detach(host: str, config: Path, rd: Path, log_file: Path, load_period: float, peer_grace: float,
+            log_level: str, extra: list[Path]) -> int:
+    """Start the daemon as a new session in the background and wait until it serves (bounded)."""
+    from drd.daemon import runfiles
+
+    log_file = log_file.absolute()
+    log_file.parent.mkdir(parents=True, exist_ok=True)
+    args = [sys.executable, "-m", "drd.cli.drd", "start", "--host", host, "--config", str(config.absolute()),
+            "--run-dir", str(rd.absolute()), "--log-file", str(log_file), "--load-period", str(load_period),
+            "--peer-grace", str(peer_grace), "--log-level", log_level]
+    for folder in extra or ():
+        args += ["--components", str(Path(folder).absolute())]
+    with log_file.open("ab") as fh:
+        proc = subprocess.Popen(args, stdin=subprocess.DEVNULL, stdout=fh, stderr=fh, start_new_session=True)
+    deadline = time.monotonic() + READY_TIMEOUT
+    while time.monotonic() < deadline:
+        info = runfiles.read(runfiles.path_of(rd, host))
+        if info is not None and info.pid == proc.pid and info.state == "running":
+            out.print(f"drd {host} started (pid {proc.pid}); log: {log_file}")
+            return OK
+        if proc.poll() is not None:
+            tail = log_file.read_text(encoding="utf-8", errors="replace").strip().splitlines()[-5:]
+            for line in tail:
+                err.print(Text(line, style="dim"))
+            fail(f"drd {host} exited with code {proc.returncode} while starting; log: {log_file}")
+        time.sleep(0.05)
+    proc.kill()
+    proc.wait(timeout=5)
+    fail(f"drd {host} did not start serving within {READY_TIMEOUT:g} s; log: {log_file}")
+
+
+@app.command()
+def stop(
+    host: str = typer.Option(None, "--host", help="Stop this host's daemon.", show_default=False),
+    all_: bool = typer.Option(False, "--all", help="Stop every daemon of the run dir."),
+    run_dir_opt: Path = RunDirOption,
+    timeout: float = typer.Option(10.0, "--timeout", min=0.0, help="Seconds to wait before SIGKILL."),
+) -> int:
+    """Stop daemons started on this machine: SIGTERM, wait (bounded), then SIGKILL."""
+    from drd.daemon import runfiles
+
+    if (host is None) == (not all_):
+        fail("give either --host NAME or --all")
+    rd = runfiles.run_dir(run_dir_opt)
+    found = runfiles.pidfiles(rd)
+    if host is not None:
+        path = runfiles.path_of(rd, host)
+        found = [(p, i) for p, i in found if p == path]
+        if not found:
+            others = ", ".join(i.host for _, i in runfiles.pidfiles(rd) if i is not None) or "none"
+            fail(f"no drd for host {host} in {rd} (daemons there: {others})")
+    if not found:
+        out.print(f"no drd running in {rd}")
+        return OK
+    infos = [i for _, i in found if i is not None]
+    outcome = runfiles.stop(infos, timeout)
+    for path, info in found:
+        if info is None:
+            path.unlink(missing_ok=True)
+            out.print(f"removed unreadable pidfile {path}")
+            continue
+        what = outcome[info.pid]
+        if what != "stopped" or path.exists():
+            runfiles.release(rd, info)  # the daemon removes its own on a clean stop
+        text = {"stopped": f"stopped {info.host} (pid {info.pid})",
+                "killed": f"killed {info.host} (pid {info.pid}): it did not stop within {timeout:g} s",
+                "not running": f"{info.host} was not running (stale pidfile removed)"}[what]
+        out.print(text)
+    return OK
+
+
+@app.command()
+def status(
+    run_dir_opt: Path = RunDirOption,
+    as_json: bool = typer.Option(False, "--json", help="Print as JSON."),
+) -> int:
+    """List the daemons started on this machine (from their pidfiles). `missionctl status` shows the cluster."""
+    from dataclasses import asdict
+
+    from drd.daemon import runfiles
+
+    rd = runfiles.run_dir(run_dir_opt)
+    rows = [(i, i.running()) for _, i in runfiles.pidfiles(rd) if i is not None]
+    if as_json:
+        out.print_json(json.dumps([{**asdict(i), "alive": alive} for i, alive in rows]))
+        return OK
+    if not rows:
+        out.print(f"no drd in {rd}")
+        return OK
+    table = Table(title=f"daemons in {rd}", title_justify="left")
+    for col in ("host", "cluster", "pid", "state", "config", "log"):
+        table.add_column(col)
+    for i, alive in rows:
+        table.add_row(i.host, i.cluster, str(i.pid), i.state if alive else "dead (stale pidfile)", i.config, i.log)
+    out.print(table)
+    return OK
+
+
 def main() -> None:
     run_app(app, "drd")
+
+
+if __name__ == "__main__":
+    main()

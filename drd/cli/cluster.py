@@ -1,0 +1,313 @@
+"""`missionctl` commands that look at a running cluster: hosts, status, components, resources, query.
+
+Each joins the cluster's bus through `drd.daemon.client.ClusterClient`: with `--config hosts.yaml`
+(the default) it connects to every host's endpoint with the cluster's security settings; with
+`--connect ENDPOINT` to the endpoints given. When no daemon answers within `--timeout`, the command
+fails with exit code 2 and one line naming the endpoints it tried.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
+from dataclasses import asdict
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import typer
+from rich.console import Group, RenderableType
+from rich.table import Table
+from rich.text import Text
+
+from drd.cli.common import INVALID, OK, catalog, err, fail, out
+
+if TYPE_CHECKING:
+    from drd.daemon.client import ClusterClient
+
+ConfigOption = typer.Option(Path("hosts.yaml"), "--config", "-c",
+                            help="The cluster's hosts file: connect to every host, with its security settings.")
+ConnectOption = typer.Option(None, "--connect", show_default=False,
+                             help="Connect to this endpoint instead (tcp/HOST:PORT; repeatable).")
+JsonOption = typer.Option(False, "--json", help="Print JSON.")
+TimeoutOption = typer.Option(2.0, "--timeout", min=0.05, help="Seconds to wait for a daemon to answer.")
+
+
+def register(app: typer.Typer) -> None:
+    """Add the cluster commands to `missionctl`."""
+    app.command("hosts")(hosts)
+    app.command("status")(status)
+    app.command("components")(components)
+    app.command("resources")(resources)
+    app.command("query")(query)
+
+
+@contextmanager
+def _cluster(config: Path, connect: list[str] | None, timeout: float) -> Iterator[ClusterClient]:
+    """A client of the cluster, or a clean exit 2; request errors become one-line errors too."""
+    from drd.bus import BusError, RemoteError
+    from drd.daemon.client import ClientError, ClusterClient
+
+    endpoints, options, name, prefer = _endpoints(config, connect)
+    try:
+        client = ClusterClient.connect(endpoints, cluster=name, options=options, timeout=timeout, prefer=prefer)
+    except ClientError as e:
+        hint = ("is a drd listening there? A cluster with security needs --config (for its credentials)" if connect
+                else f"start the daemons with `drd start --host NAME --config {config}`")
+        fail(str(e), hint=hint)
+    try:
+        yield client
+    except RemoteError as e:
+        fail(e.reason)
+    except (ClientError, BusError) as e:
+        fail(str(e))
+    finally:
+        client.close()
+
+
+def _endpoints(config: Path, connect: list[str] | None) -> tuple[list[str], dict[str, Any], str | None, list[str]]:
+    """(endpoints, zenoh options, cluster name, preferred daemons) from --connect or the hosts file."""
+    if connect:
+        return list(connect), {}, None, []
+    from drd.daemon.security import SecurityError, transport
+    from drd.hosts import HostsError, load_hosts
+
+    if not config.exists():
+        fail(f"{config}: no such file", hint="pass --config FILE, or --connect tcp/HOST:PORT")
+    try:
+        cluster = load_hosts(config, catalog(None))
+        tr = transport(cluster)
+    except (HostsError, SecurityError) as e:
+        for p in e.problems:
+            err.print(Text.assemble(("error: ", "bold red"), str(p)))
+        raise typer.Exit(INVALID) from None
+    prefer = [cluster.controller.name] + [h.name for h in cluster.hosts if h.name != cluster.controller.name]
+    return list(tr.endpoints.values()), dict(tr.options), cluster.name, prefer
+
+
+# --- commands --------------------------------------------------------------------------------------
+
+
+def hosts(config: Path = ConfigOption, connect: list[str] = ConnectOption, as_json: bool = JsonOption,
+          timeout: float = TimeoutOption) -> int:
+    """The cluster's hosts: up or down, since when and why, with their load."""
+    with _cluster(config, connect, timeout) as client:
+        reply = client.hosts()
+    data = [asdict(h) for h in reply.hosts]
+    if as_json:
+        out.print_json(json.dumps({"cluster": reply.cluster, "answered_by": reply.answered_by, "hosts": data}))
+    else:
+        out.print(_hosts_table(data, reply.at))
+    return OK
+
+
+def status(config: Path = ConfigOption, connect: list[str] = ConnectOption, as_json: bool = JsonOption,
+           timeout: float = TimeoutOption,
+           watch: bool = typer.Option(False, "--watch", "-w", help="Refresh until Ctrl-C (JSON: one line each)."),
+           interval: float = typer.Option(1.0, "--interval", min=0.1, help="Seconds between refreshes with --watch."),
+           events: int = typer.Option(20, "--events", min=0, help="How many recent events to show.")) -> int:
+    """One view of the cluster: hosts, instances, resources, missions and recent events."""
+    with _cluster(config, connect, timeout) as client:
+        if not watch:
+            data = client.status(events)
+            if as_json:
+                out.print_json(json.dumps(data))
+            else:
+                out.print(_status_view(data))
+            return OK
+        _watch(lambda: client.status(events), as_json, interval)
+    return OK
+
+
+def components(config: Path = ConfigOption, connect: list[str] = ConnectOption, as_json: bool = JsonOption,
+               timeout: float = TimeoutOption) -> int:
+    """Component types with the hosts that can run them, running instances and the daemons' services."""
+    with _cluster(config, connect, timeout) as client:
+        reply = client.components()
+    if as_json:
+        out.print_json(json.dumps({"types": reply.types, "instances": [asdict(i) for i in reply.instances],
+                                   "services": [asdict(s) for s in reply.services]}))
+        return OK
+    table = Table(title="component types (hosts up that can run them)", title_justify="left")
+    table.add_column("type")
+    table.add_column("hosts")
+    for name, where in reply.types.items():
+        table.add_row(name, ", ".join(where))
+    out.print(table)
+    for title, rows in (("instances", reply.instances), ("services", reply.services)):
+        t = Table(title=title, title_justify="left")
+        for col in ("name", "component", "host", "state", "key"):
+            t.add_column(col)
+        for i in rows:
+            t.add_row(i.name, i.component, i.host, i.state, i.key)
+        out.print(t if rows else Text(f"{title}: none", style="dim"))
+    return OK
+
+
+def resources(config: Path = ConfigOption, connect: list[str] = ConnectOption, as_json: bool = JsonOption,
+              timeout: float = TimeoutOption) -> int:
+    """The Resource Controller Manager: each resource with its holders, queue and fencing epoch."""
+    with _cluster(config, connect, timeout) as client:
+        reply = client.resources()
+    data = {"units": [asdict(u) for u in reply.units], "robots": [asdict(r) for r in reply.robots],
+            "queue": [asdict(w) for w in reply.queue], "removing": reply.removing}
+    if as_json:
+        out.print_json(json.dumps(data))
+    else:
+        out.print(Group(*_resources_view(data)))
+    return OK
+
+
+def query(text: str = typer.Argument(..., metavar="QUERY", show_default=False,
+                                     help="TYPE [where EXPR] [prefer min(EXPR)|max(EXPR)|random|first]"),
+          config: Path = ConfigOption, connect: list[str] = ConnectOption, as_json: bool = JsonOption,
+          timeout: float = TimeoutOption,
+          seed: int = typer.Option(0, "--seed", help="Seed of `prefer random`.")) -> int:
+    """Ask the trader: `Camera where resolution >= 640 prefer min(host.load)`."""
+    from drd.bus import RemoteError
+
+    with _cluster(config, connect, timeout) as client:
+        try:
+            reply = client.query(text, seed)
+        except RemoteError as e:
+            err.print(Text.assemble(("error: ", "bold red"), "invalid query"))
+            err.print(Text(e.reason))
+            raise typer.Exit(INVALID) from None
+    if as_json:
+        out.print_json(json.dumps(reply.offers))
+        return OK
+    table = Table(title=f"{len(reply.offers)} offers for {text}", title_justify="left")
+    for col in ("id", "type", "host", "load", "properties"):
+        table.add_column(col)
+    for o in reply.offers:
+        props = ", ".join(f"{k}={v}" for k, v in o["properties"].items())
+        table.add_row(o["id"], o["type"], str(o["host"]), _pct(o["load"] * 100 if o["load"] is not None else None),
+                      props)
+    out.print(table)
+    return OK
+
+
+# --- rendering -------------------------------------------------------------------------------------
+
+
+def _watch(fetch: Callable[[], dict[str, Any]], as_json: bool, interval: float) -> None:
+    """Refresh until Ctrl-C: a live view on a terminal, one JSON line per refresh with --json."""
+    from rich.live import Live
+
+    try:
+        if as_json:
+            while True:
+                out.out(json.dumps(fetch()), highlight=False)
+                time.sleep(interval)
+        with Live(_status_view(fetch()), console=out, auto_refresh=False) as live:
+            while True:
+                time.sleep(interval)
+                live.update(_status_view(fetch()), refresh=True)
+    except KeyboardInterrupt:
+        return
+
+
+def _status_view(data: dict[str, Any]) -> RenderableType:
+    parts: list[RenderableType] = [
+        Text.assemble(("cluster ", "bold"), data["cluster"], (f"  (answered by {data['answered_by']})", "dim")),
+        _hosts_table(data["hosts"], data["at"]),
+    ]
+    if data["instances"]:
+        t = Table(title="instances", title_justify="left")
+        for col in ("name", "component", "host", "state"):
+            t.add_column(col)
+        for i in data["instances"]:
+            t.add_row(i["name"], i["component"], i["host"], i["state"])
+        parts.append(t)
+    else:
+        parts.append(Text("instances: none", style="dim"))
+    if data["resources"] is not None:
+        parts += _resources_view(data["resources"], with_parts=False)
+    daemon = data.get("daemon") or {}
+    for host, why in daemon.get("unreachable", {}).items():
+        parts.append(Text.assemble((f"{host} unreachable from {daemon['host']}: ", "bold yellow"), why))
+    for what, message in data["errors"].items():
+        parts.append(Text.assemble((f"{what}: ", "bold yellow"), message))
+    if data["missions"] is not None:
+        parts.append(_missions_view(data["missions"]))
+    if data["events"]:
+        t = Table(title="recent events", title_justify="left")
+        for col in ("at", "host", "event", "detail"):
+            t.add_column(col)
+        for e in data["events"]:
+            t.add_row(time.strftime("%H:%M:%S", time.localtime(e["at"])) + f".{int(e['at'] % 1 * 1000):03d}",
+                      e["host"], e["kind"], e["detail"])
+        parts.append(t)
+    return Group(*parts)
+
+
+def _hosts_table(rows: list[dict[str, Any]], now: float) -> Table:
+    table = Table(title="hosts", title_justify="left")
+    for col in ("host", "state", "cpu", "mem", "load1", "inst", "since", "why"):
+        table.add_column(col, no_wrap=col != "why")
+    for h in rows:
+        up = h["state"] == "up"
+        since = "—" if h["since"] is None else _ago(now - h["since"])
+        load1 = "—" if h["load1"] is None or not up else f"{h['load1']:.2f}"
+        table.add_row(h["name"] + ("*" if "controller" in h["roles"] else ""),
+                      Text(h["state"], style="green" if up else "bold red"), _pct(h["cpu"] if up else None),
+                      _pct(h["memory"] if up else None), load1, str(h["instances"]) if up else "—", since, h["reason"])
+    table.caption = "* controller"
+    table.caption_justify = "left"
+    return table
+
+
+def _ago(seconds: float) -> str:
+    seconds = max(0.0, seconds)
+    if seconds < 120:
+        return f"{seconds:.1f}s ago"
+    return f"{seconds / 60:.0f}min ago" if seconds < 7200 else f"{seconds / 3600:.0f}h ago"
+
+
+def _resources_view(data: dict[str, Any], with_parts: bool = True) -> list[RenderableType]:
+    units = Table(title="resources", title_justify="left")
+    for col in ("id", "type", "host", "holders", "queue", "epoch", "use"):
+        units.add_column(col)
+    for u in data["units"]:
+        use = f"{u['load']:g}/{u['capacity']:g}"
+        units.add_row(u["id"], u["type"], u["host"], ", ".join(u["holders"]) or "—", ", ".join(u["queue"]) or "—",
+                      str(u["epoch"]), use)
+    parts: list[RenderableType] = [units]
+    if data["robots"]:
+        robots = Table(title="robots", title_justify="left")
+        for col in ("id", "type", "host", "holders", *(["parts"] if with_parts else [])):
+            robots.add_column(col)
+        for r in data["robots"]:
+            row = [r["id"], r["type"], r["host"], ", ".join(r["holders"]) or "—"]
+            robots.add_row(*row, *([", ".join(f"{k}={v}" for k, v in r["parts"].items())] if with_parts else []))
+        parts.append(robots)
+    if data["queue"]:
+        parts.append(Text("waiting: " + ", ".join(f"{w['holder']} (priority {w['priority']})" for w in data["queue"])))
+    for host, left in data["removing"].items():
+        parts.append(Text(f"{host} is down: its resources leave the manager in {left:.1f} s", style="yellow"))
+    return parts
+
+
+def _missions_view(missions: list[dict[str, Any]]) -> RenderableType:
+    if not missions:
+        return Text("missions: none", style="dim")
+    t = Table(title="missions", title_justify="left")
+    for col in ("id", "outcome", "active"):
+        t.add_column(col)
+    for m in missions:
+        t.add_row(str(m.get("id")), str(m.get("outcome") or "running"), ", ".join(_active_leaves(m.get("tree"))) or "—")
+    return t
+
+
+def _active_leaves(tree: dict[str, Any] | None) -> list[str]:
+    if not tree:
+        return []
+    children = tree.get("children") or []
+    if not children:
+        return [str(tree.get("path", "")).rsplit("/", 1)[-1]]
+    return [leaf for c in children for leaf in _active_leaves(c)]
+
+
+def _pct(value: float | None) -> str:
+    return "—" if value is None else f"{value:.0f}%"

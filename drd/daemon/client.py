@@ -1,0 +1,209 @@
+"""What `missionctl` uses to look at a running cluster: a bus session and the daemons' queryables.
+
+`ClusterClient.connect(endpoints)` opens a zenoh peer session that connects to the given endpoints
+(every host of `hosts.yaml`, or one `--connect ENDPOINT`) and waits, bounded by `timeout`, until
+it sees a daemon's token; otherwise `NoDaemon` names the endpoints tried. Requests go to one
+daemon at a time, preferred ones first (the controller), so a frozen daemon costs one short
+timeout instead of stalling every answer.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import asdict
+from typing import Any, Self, TypeVar
+
+from drd.bus import Bus, BusError, BusTimeout, Message, Ping, Pong
+from drd.daemon.keys import ClusterKeys, cluster_of
+from drd.daemon.messages import (
+    ComponentsReply,
+    DaemonStatus,
+    HostsReply,
+    Location,
+    Lookup,
+    ResourcesReply,
+    TraderReply,
+    TraderRequest,
+    ViewRequest,
+)
+
+M = TypeVar("M", bound=Message)
+PREFER_WAIT = 0.5  # seconds to wait for the preferred daemon (the controller) once another one answered
+
+
+class ClientError(Exception):
+    """The cluster cannot answer (no daemon, no controller, several clusters): one line for the user."""
+
+
+class NoDaemon(ClientError):
+    """No daemon answered at the endpoints tried."""
+
+    def __init__(self, endpoints: Sequence[str], timeout: float, detail: str = "") -> None:
+        where = ", ".join(endpoints) or "no endpoint"
+        super().__init__(f"no drd daemon answered at {where} within {timeout:g} s" + (f" ({detail})" if detail else ""))
+        self.endpoints = list(endpoints)
+
+
+class ClusterClient:
+    """Requests to the daemons of one cluster over a bus session this client owns."""
+
+    def __init__(self, bus: Bus, cluster: str, *, timeout: float = 2.0, prefer: Sequence[str] = (),
+                 endpoints: Sequence[str] = ()) -> None:
+        self.bus = bus
+        self.cluster = cluster
+        self.keys = ClusterKeys(cluster)
+        self.timeout = timeout
+        self.prefer = list(prefer)
+        self.endpoints = list(endpoints)
+
+    @classmethod
+    def connect(cls, endpoints: Sequence[str], *, cluster: str | None = None, options: Mapping[str, Any] | None = None,
+                timeout: float = 2.0, prefer: Sequence[str] = ()) -> Self:
+        """Join the cluster's bus (listening nowhere) and wait for a daemon's token.
+
+        Raises:
+            NoDaemon: nobody answered within `timeout`.
+            ClientError: the daemons seen belong to several clusters (pass `cluster`).
+        """
+        from drd.bus.zenoh_bus import ZenohBus
+
+        if timeout <= 0:
+            raise ValueError(f"timeout must be positive, not {timeout!r}")
+        try:
+            bus = ZenohBus(connect=list(endpoints), options={"scouting/delay": 0, **dict(options or {})},
+                           name="missionctl")
+        except BusError as e:
+            raise NoDaemon(endpoints, timeout, str(e)) from e
+        try:
+            deadline = time.monotonic() + timeout
+            found = _wait_for_tokens(bus, f"drd/{cluster or '*'}/host/*", deadline)
+            if not found:
+                raise NoDaemon(endpoints, timeout)
+            if prefer and prefer[0] not in {h for _, h in found}:  # links come up one by one: give the
+                found = _wait_for_tokens(bus, f"drd/{cluster or '*'}/host/{prefer[0]}",  # preferred one a moment
+                                         min(deadline, time.monotonic() + PREFER_WAIT)) or found
+            clusters = sorted({c for c, _ in found})
+            if len(clusters) > 1:
+                raise ClientError(f"daemons of several clusters answer ({', '.join(clusters)}): pass --config"
+                                  " with the cluster's hosts file")
+        except BaseException:
+            bus.close()
+            raise
+        return cls(bus, clusters[0], timeout=timeout, prefer=prefer, endpoints=endpoints)
+
+    def close(self) -> None:
+        self.bus.close()
+
+    def __enter__(self) -> Self:
+        return self
+
+    def __exit__(self, *_exc: object) -> None:
+        self.close()
+
+    # -- what the daemons answer ---------------------------------------------------------------------
+
+    def daemons(self) -> list[str]:
+        """The hosts whose daemon token is alive now, preferred ones first."""
+        hosts = [h for c, h in _tokens(self.bus, f"{self.keys.root}/host/*", 0.5) if c == self.cluster]
+        rank = {h: i for i, h in enumerate(self.prefer)}
+        return sorted(hosts, key=lambda h: (rank.get(h, len(rank)), h))
+
+    def hosts(self, events: int = 50) -> HostsReply:
+        return self._ask(lambda h: self.keys.db(h, "hosts"), ViewRequest(events), HostsReply)
+
+    def components(self) -> ComponentsReply:
+        return self._ask(lambda h: self.keys.db(h, "components"), ViewRequest(), ComponentsReply)
+
+    def lookup(self, name: str) -> Location:
+        return self._ask(lambda h: self.keys.db(h, "lookup"), Lookup(name), Location)
+
+    def query(self, text: str, seed: int = 0) -> TraderReply:
+        return self._ask(lambda h: self.keys.db(h, "query"), TraderRequest(text, seed), TraderReply)
+
+    def daemon_status(self, host: str) -> DaemonStatus:
+        return _expect(self.bus.call(self.keys.status(host), ViewRequest(), timeout=self.timeout), DaemonStatus)
+
+    def ping(self, host: str) -> Pong:
+        return _expect(self.bus.call(self.keys.ping(host), Ping(1, time.time()), timeout=self.timeout), Pong)
+
+    def resources(self) -> ResourcesReply:
+        """The controller's manager. Raises ClientError when the controller does not answer."""
+        try:
+            return _expect(self.bus.call(self.keys.resources, ViewRequest(), timeout=self.timeout), ResourcesReply)
+        except BusTimeout:
+            raise ClientError(f"the controller does not answer on {self.keys.resources}"
+                              f" within {self.timeout:g} s (is its drd up?)") from None
+
+    def missions(self) -> list[dict[str, Any]]:
+        """The controller's missions (`MissionStatus.missions`). Raises ClientError when it does not answer."""
+        from drd.executive import MissionCommand, MissionStatus  # registers the executive's messages
+
+        try:
+            reply = self.bus.call(self.keys.executive, MissionCommand("status"), timeout=self.timeout)
+        except BusTimeout:
+            raise ClientError(f"the executive does not answer on {self.keys.executive}"
+                              f" within {self.timeout:g} s (is the controller's drd up?)") from None
+        return list(_expect(reply, MissionStatus).missions)
+
+    def status(self, events: int = 50) -> dict[str, Any]:
+        """One view of the cluster: hosts, instances, resources, missions and recent events (plain JSON)."""
+        hosts = self.hosts(events)
+        components = self.components()
+        out: dict[str, Any] = {
+            "cluster": self.cluster, "answered_by": hosts.answered_by, "at": hosts.at,
+            "hosts": [asdict(h) for h in hosts.hosts],
+            "instances": [asdict(i) for i in components.instances],
+            "services": [asdict(s) for s in components.services],
+            "resources": None, "missions": None, "daemon": None, "errors": {},
+            "events": [asdict(e) for e in hosts.events],
+        }
+        try:
+            out["daemon"] = asdict(self.daemon_status(hosts.answered_by))
+        except BusError as e:
+            out["errors"]["daemon"] = f"{hosts.answered_by} did not say how it is: {e}"
+        try:
+            res = self.resources()
+            out["resources"] = {"units": [asdict(u) for u in res.units], "robots": [asdict(r) for r in res.robots],
+                                "queue": [asdict(w) for w in res.queue], "removing": res.removing}
+        except ClientError as e:
+            out["errors"]["resources"] = str(e)
+        try:
+            out["missions"] = self.missions()
+        except ClientError as e:
+            out["errors"]["missions"] = str(e)
+        return out
+
+    def _ask(self, key_of: Callable[[str], str], payload: Message, want: type[M]) -> M:
+        """Ask the daemons one at a time, preferred first, until one answers within the timeout."""
+        deadline = time.monotonic() + self.timeout
+        per_try = max(0.5, self.timeout / 2)
+        tried: list[str] = []
+        for host in self.daemons():
+            remaining = deadline - time.monotonic()
+            if remaining <= 0:
+                break
+            try:
+                return _expect(self.bus.call(key_of(host), payload, timeout=min(remaining, per_try)), want)
+            except BusTimeout:
+                tried.append(host)
+        detail = f"daemons {', '.join(tried)} did not answer" if tried else "no daemon token is alive any more"
+        raise NoDaemon(self.endpoints, self.timeout, detail)
+
+
+def _expect(msg: Message, want: type[M]) -> M:
+    if not isinstance(msg, want):
+        raise ClientError(f"expected a {want.TYPE} reply, got a {type(msg).TYPE}")
+    return msg
+
+
+def _tokens(bus: Bus, key_expr: str, timeout: float) -> list[tuple[str, str]]:
+    return [found for key in bus.alive(key_expr, timeout=timeout) if (found := cluster_of(key)) is not None]
+
+
+def _wait_for_tokens(bus: Bus, key_expr: str, deadline: float) -> list[tuple[str, str]]:
+    while True:
+        found = _tokens(bus, key_expr, max(0.05, min(0.25, deadline - time.monotonic())))
+        if found or time.monotonic() >= deadline:
+            return found
+        time.sleep(0.02)

@@ -1,0 +1,232 @@
+"""The controller role: the Resource Controller Manager and the Mission Executive, fed by the cluster view.
+
+`Membership` is the pure rule for hot-plug: a host's resources enter the manager when it comes up
+and leave it one lease after it went down (if it has not come back meanwhile), which frees its
+grants. `Controller` is the thin shell around `drd.executive.Executive` that applies it and answers
+`drd/<cluster>/rcm/resources`. Everything that touches the executive runs under the daemon's lock:
+the executive is single-threaded, and bus handlers run on zenoh's threads (`SerializedBus`).
+"""
+
+from __future__ import annotations
+
+import threading
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass
+from typing import Any
+
+from drd.bus import Bus, Handler, Message, Query, Queryable, Reply, Subscription, Token
+from drd.bus.base import SampleCallback, TokenCallback
+from drd.daemon.keys import ClusterKeys
+from drd.daemon.messages import ResourcesReply, RobotInfo, UnitInfo, ViewRequest, WaiterInfo
+from drd.hosts import Cluster
+from drd.rcm import Aggregate, Unit
+from drd.runtime.clock import Clock, WallClock
+from dsl.catalog import Catalog
+
+
+@dataclass(frozen=True, slots=True)
+class Action:
+    """What the shell must do to the manager: `add` or `remove` the resources of `host`."""
+
+    kind: str
+    host: str
+
+
+class Membership:
+    """Which hosts' resources the manager holds. Pure: time is passed in."""
+
+    def __init__(self, lease: float, present: set[str] | None = None) -> None:
+        self.lease = lease
+        self.present: set[str] = set(present or ())
+        self.removal: dict[str, float] = {}
+
+    def up(self, host: str, now: float) -> list[Action]:
+        """A host came up: cancel a pending removal, add its resources if they are not there."""
+        self.removal.pop(host, None)
+        if host in self.present:
+            return []
+        self.present.add(host)
+        return [Action("add", host)]
+
+    def down(self, host: str, now: float) -> list[Action]:
+        """A host went down: its resources leave one lease from now (unless it comes back)."""
+        if host in self.present and host not in self.removal:
+            self.removal[host] = now + self.lease
+        return []
+
+    def due(self, now: float) -> list[Action]:
+        """Removals whose lease ran out, in time order."""
+        out = []
+        for host, at in sorted(self.removal.items(), key=lambda item: (item[1], item[0])):
+            if at <= now:
+                del self.removal[host]
+                self.present.discard(host)
+                out.append(Action("remove", host))
+        return out
+
+    def pending(self, now: float) -> dict[str, float]:
+        """Host -> seconds left before its resources are removed."""
+        return {h: max(0.0, at - now) for h, at in sorted(self.removal.items())}
+
+
+def host_resources(cluster: Cluster, host: str) -> list[Unit | Aggregate]:
+    """The units and aggregates of one host, as `ResourcePool.add` takes them."""
+    return [c for c in cluster.resources() if c.host == host]
+
+
+def resources_reply(snapshot: Mapping[str, Any], cluster: str, answered_by: str,
+                    removing: Mapping[str, float]) -> ResourcesReply:
+    """`ResourceManager.snapshot()` as the wire's view: each unit with holders, queue and epoch.
+
+    A unit's queue lists the waiting holders that need its type, or the type of a robot using it,
+    in service order (the manager serves in that order, though it may pick another unit of the type).
+    """
+    aggregates: Mapping[str, Mapping[str, Any]] = snapshot.get("aggregates", {})
+    holds: Mapping[str, Mapping[str, Any]] = snapshot.get("holds", {})
+    queue = [WaiterInfo(str(w["holder"]), int(w["priority"]), str(w.get("mission") or ""),
+                        {str(k): str(v) for k, v in dict(w.get("needs", {})).items()})
+             for w in snapshot.get("queue", [])]
+    robot_of: dict[str, set[str]] = {}
+    for agg in aggregates.values():
+        for unit in dict(agg.get("parts", {})).values():
+            robot_of.setdefault(str(unit), set()).add(str(agg["type"]))
+    units = []
+    for uid, u in dict(snapshot.get("units", {})).items():
+        types = {str(u["type"])} | robot_of.get(uid, set())
+        waiting = [w.holder for w in queue if types & set(w.needs.values())]
+        units.append(UnitInfo(uid, str(u["type"]), str(u["host"] or ""), bool(u["sharable"]), float(u["capacity"]),
+                              float(u["load"]), int(u["epoch"]), sorted(map(str, dict(u["holders"]))), waiting,
+                              {str(k): v for k, v in dict(u.get("properties", {})).items()}))
+    robots = [RobotInfo(aid, str(a["type"]), str(a["host"] or ""),
+                        {str(k): str(v) for k, v in dict(a["parts"]).items()},
+                        sorted(h for h, hold in holds.items() if aid in dict(hold.get("assignment", {})).values()))
+              for aid, a in aggregates.items()]
+    return ResourcesReply(cluster, answered_by, units, robots, queue, dict(removing))
+
+
+class SerializedBus(Bus):
+    """A bus whose handlers run under a lock: hands a single-threaded object (the executive) a bus.
+
+    Everything else is delegated to `inner`; closing it does not close `inner` (the daemon owns it).
+    `expect` maps served keys to the payload types their handler takes (`type(None)`: no payload):
+    anything else is refused before the handler runs, and reported through `on_reject(key, reason)`.
+    """
+
+    def __init__(self, inner: Bus, lock: threading.RLock | threading.Lock, *,
+                 expect: Mapping[str, tuple[type, ...]] | None = None,
+                 on_reject: Callable[[str, str], None] | None = None) -> None:
+        super().__init__(inner.name)
+        self.inner = inner
+        self.stats = inner.stats
+        self._lock = lock
+        self._expect = dict(expect or {})
+        self._on_reject = on_reject
+
+    def put_raw(self, key: str, data: bytes) -> None:
+        self.inner.put_raw(key, data)
+
+    def subscribe(self, key_expr: str, callback: SampleCallback) -> Subscription:
+        return self.inner.subscribe(key_expr, callback)
+
+    def serve(self, key_expr: str, handler: Handler) -> Queryable:
+        wanted = self._expect.get(key_expr)
+
+        def locked(query: Query) -> Reply | Message | None:
+            if wanted is not None and not isinstance(query.payload, wanted):
+                reason = f"expected {_expected(wanted)}, got {_type_name(query.payload)}"
+                if self._on_reject is not None:
+                    self._on_reject(query.key, reason)
+                return query.error(reason)
+            with self._lock:
+                return handler(query)
+
+        return self.inner.serve(key_expr, locked)
+
+    def request_raw(self, key: str, data: bytes | None, timeout: float = 2.0) -> list[Reply]:
+        return self.inner.request_raw(key, data, timeout)
+
+    def declare_token(self, key: str) -> Token:
+        return self.inner.declare_token(key)
+
+    def watch_tokens(self, key_expr: str, on_change: TokenCallback, history: bool = True) -> Subscription:
+        return self.inner.watch_tokens(key_expr, on_change, history)
+
+    def alive(self, key_expr: str, timeout: float = 1.0) -> list[str]:
+        return self.inner.alive(key_expr, timeout)
+
+    def close(self) -> None:
+        self._closed = True
+
+
+def _type_name(payload: Message | None) -> str:
+    return "no payload" if payload is None else f"a {type(payload).TYPE}"
+
+
+def _expected(types: tuple[type, ...]) -> str:
+    return " or ".join("no payload" if t is type(None) else f"a {getattr(t, 'TYPE', t.__name__)}" for t in types)
+
+
+class Controller:
+    """The controller host's services: the manager and the executive, kept in step with the view.
+
+    Every method must be called with `lock` held (the daemon's); the executive's own queryable and
+    `rcm/resources` take it themselves.
+    """
+
+    def __init__(self, bus: Bus, cluster: Cluster, catalog: Catalog, me: str, lock: threading.RLock, *,
+                 on_reject: Callable[[str, str], None] | None = None,
+                 on_change: Callable[[str, str, str], None] | None = None, clock: Clock | None = None) -> None:
+        from drd.executive import EntryPoints, Executive, MissionCommand  # the runtime: only on the controller
+
+        self.cluster = cluster
+        self.me = me
+        self.keys = ClusterKeys(cluster.name)
+        self.clock: Clock = clock or WallClock()
+        self._lock = lock
+        self._on_change = on_change
+        expect = {self.keys.executive: (MissionCommand,), self.keys.resources: (ViewRequest, type(None))}
+        serialized = SerializedBus(bus, lock, expect=expect, on_reject=on_reject)
+        self.executive = Executive(serialized, self.clock, EntryPoints(catalog), cluster=cluster.name,
+                                   resources=host_resources(cluster, me), lease=cluster.lease)
+        self.membership = Membership(cluster.lease, {me})
+        self._queryable = serialized.serve(self.keys.resources, self._resources)
+
+    def host_up(self, host: str) -> None:
+        self._apply(self.membership.up(host, self.clock.now()))
+
+    def host_down(self, host: str) -> None:
+        now = self.clock.now()
+        self.membership.down(host, now)
+        if host in self.membership.removal and self._on_change is not None:
+            self._on_change("resources-pending", host,
+                            f"its resources leave the manager in {self.membership.removal[host] - now:.2f} s"
+                            " unless it comes back")
+
+    def step(self) -> None:
+        """Apply removals that fell due, then step the missions."""
+        self._apply(self.membership.due(self.clock.now()))
+        self.executive.step()
+
+    def resources(self) -> ResourcesReply:
+        snapshot = self.executive.broker.rcm.snapshot()
+        return resources_reply(snapshot, self.cluster.name, self.me, self.membership.pending(self.clock.now()))
+
+    def close(self) -> None:
+        self._queryable.close()
+        self.executive.close()
+
+    def _resources(self, query: Query) -> Message:
+        return self.resources()
+
+    def _apply(self, actions: list[Action]) -> None:
+        pool, now = self.executive.pool, self.clock.now()
+        for action in actions:
+            if action.kind == "add":
+                found = host_resources(self.cluster, action.host)
+                pool.add(found, now)
+                detail = f"{len(found)} resources added to the manager"
+            else:
+                pool.remove_host(action.host, now)
+                detail = "its resources left the manager; their grants are freed"
+            if self._on_change is not None:
+                self._on_change(f"resources-{'added' if action.kind == 'add' else 'removed'}", action.host, detail)

@@ -1,0 +1,420 @@
+"""The Distributed Robotics Daemon: one per host, a thin shell around the cluster view.
+
+Services of every daemon (keys in `drd.daemon.keys`, docs/daemon.md):
+
+- **presence**: a liveliness token `drd/<cluster>/host/<host>`;
+- **Load Reporter**: a `LoadReport` every `load_period` seconds;
+- **Component Database**: the full `ClusterView`, fed by every host's token, load reports and
+  announcements; answers `hosts`, `components`, `query` (the trader) and `lookup` (the name
+  service) under `host/<host>/db/`, and `status` about the daemon itself;
+- **peer check**: `zenoh.open()` succeeds even when every peer refused us, so after a grace period
+  the daemon names each configured peer it cannot see, and why (`drd.daemon.peers`);
+- on the `controller` host, the **Resource Controller Manager** and the **Mission Executive**
+  (`drd.daemon.controller`): a host's resources join the manager when it comes up and leave it a
+  lease after it went down.
+
+Threading: bus callbacks run on zenoh's threads and the periodic work on the thread calling
+`run()`; all of them go through one lock around the view and the controller. Callbacks only
+update state; publishing happens in `step()`. Input from peers is never trusted: anything of the
+wrong type, from an unknown host or under the wrong key is refused, counted and logged (on
+`drd.bus` and `drd.daemon.rejects`: `drd start` rate-limits both with `drd.daemon.logs.install`).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import logging
+import os
+import threading
+import time
+from collections import Counter, deque
+from collections.abc import Callable
+from dataclasses import asdict, dataclass
+from typing import Any
+
+from drd.bus import Bus, LoadReport, Message, Ping, Pong, Query, Reply, Sample
+from drd.bus.base import Declaration
+from drd.daemon.controller import Controller
+from drd.daemon.keys import ClusterKeys, cluster_of
+from drd.daemon.load import LoadSampler
+from drd.daemon.messages import (
+    Announcement,
+    ClusterEvent,
+    ComponentsReply,
+    DaemonStatus,
+    HostInfo,
+    HostsReply,
+    InstanceInfo,
+    Leaving,
+    Lookup,
+    TraderReply,
+    TraderRequest,
+    ViewRequest,
+)
+from drd.daemon.peers import diagnose
+from drd.daemon.security import Transport, describe, transport
+from drd.daemon.view import Change, ClusterView, HostState, runnable_components
+from drd.hosts import Cluster, Role
+from drd.runtime.clock import Clock
+from drd.trader import TraderError, compile_query
+from dsl.catalog import Catalog
+
+log = logging.getLogger("drd.daemon")
+rejects = logging.getLogger("drd.daemon.rejects")
+
+MAX_EVENTS = 1000
+
+
+@dataclass(frozen=True, slots=True)
+class DaemonConfig:
+    """Everything a daemon needs; `transport` defaults to the one `hosts.yaml` security asks for."""
+
+    cluster: Cluster
+    host: str
+    catalog: Catalog
+    transport: Transport | None = None
+    load_period: float = 1.0
+    tick: float = 0.05
+    peer_grace: float = 3.0
+    peer_recheck: float = 5.0
+
+    def __post_init__(self) -> None:
+        self.cluster.host(self.host)  # KeyError naming the known hosts
+        if not (self.load_period > 0 and self.tick > 0):
+            raise ValueError("load_period and tick must be positive")
+
+    @property
+    def period(self) -> float:
+        """The load period actually used: at most a third of the lease, or live hosts would look silent."""
+        return min(self.load_period, self.cluster.lease / 3)
+
+
+def config_digest(cluster: Cluster) -> str:
+    """A digest of what the hosts file says (not of its text), to spot a host started with another file."""
+    data = {"name": cluster.name, "lease": cluster.lease, "security": cluster.security.mode.value,
+            "hosts": [asdict(h) for h in cluster.hosts]}
+    return hashlib.sha256(json.dumps(data, sort_keys=True, default=str).encode()).hexdigest()
+
+
+def open_bus(config: DaemonConfig, tr: Transport) -> Bus:
+    """A zenoh peer session listening on this host's endpoint and connecting to every other one."""
+    from drd.bus.zenoh_bus import ZenohBus  # zenoh only when a real cluster is joined
+
+    lease_ms = max(1000, int(config.cluster.lease * 2000))  # zenoh drops a silent link after twice our lease
+    return ZenohBus(listen=[tr.endpoints[config.host]], connect=list(tr.others(config.host).values()),
+                    lease_ms=lease_ms, options=dict(tr.options), name=config.host)
+
+
+class Daemon:
+    """One host's daemon. `run(stop)` serves until `stop` is set; `start`/`step`/`close` for tests."""
+
+    def __init__(self, config: DaemonConfig, bus: Bus | None = None, *,
+                 clock: Callable[[], float] = time.monotonic, wall: Callable[[], float] = time.time,
+                 controller_clock: Clock | None = None) -> None:
+        self.config = config
+        self.cluster = config.cluster
+        self.host = config.host
+        self.keys = ClusterKeys(config.cluster.name)
+        self.transport = config.transport or transport(config.cluster)
+        self.clock, self.wall = clock, wall
+        self.digest = config_digest(config.cluster)
+        self.started = wall()
+        self.view = ClusterView(config.cluster, config.host, digest=self.digest, now=clock())
+        self.events: deque[ClusterEvent] = deque(maxlen=MAX_EVENTS)
+        self.rejected: Counter[str] = Counter()
+        self.unreachable: dict[str, str] = {}
+        self.controller: Controller | None = None
+        self._bus = bus
+        self._lock = threading.RLock()
+        self._declared: list[Declaration] = []
+        self._token: Declaration | None = None
+        self._sampler = LoadSampler(config.host)
+        self._announce_due = True
+        self._next_load = 0.0
+        self._next_peer_check = 0.0
+        self._checking = False
+        self._closed = False
+        self._controller_clock = controller_clock
+        self.stop_reason = "stopped"
+
+    @property
+    def bus(self) -> Bus:
+        if self._bus is None:
+            raise RuntimeError("the daemon is not started")
+        return self._bus
+
+    @property
+    def roles(self) -> list[str]:
+        return [str(r) for r in self.cluster.host(self.host).roles]
+
+    # -- lifetime --------------------------------------------------------------------------------
+
+    def start(self) -> None:
+        """Open the bus (unless given one) and declare every service; the token comes last."""
+        if self._bus is None:
+            self._bus = open_bus(self.config, self.transport)
+        bus, keys, me = self.bus, self.keys, self.host
+        self._declared += [bus.subscribe(keys.loads, self._on_load), bus.subscribe(keys.announces, self._on_announce)]
+        self._serve(keys.ping(me), self._ping, Ping)
+        self._serve(keys.status(me), self._status, ViewRequest, type(None))
+        self._serve(keys.db(me, "hosts"), self._hosts, ViewRequest, type(None))
+        self._serve(keys.db(me, "components"), self._components, ViewRequest, type(None))
+        self._serve(keys.db(me, "lookup"), self._lookup, Lookup)
+        self._serve(keys.db(me, "query"), self._query, TraderRequest)
+        if Role.CONTROLLER in self.cluster.host(me).roles:
+            with self._lock:
+                self.controller = Controller(bus, self.cluster, self.config.catalog, me, self._lock,
+                                             on_reject=self._reject, on_change=self._record,
+                                             clock=self._controller_clock)
+        self._declared.append(bus.watch_tokens(keys.hosts, self._on_token, history=True))
+        self._token = bus.declare_token(keys.host(me))
+        now = self.clock()
+        self._next_peer_check = now + self.config.peer_grace
+        log.info("drd %s started in cluster %s (roles %s, pid %d); load every %g s, lease %g s",
+                 me, self.cluster.name, ", ".join(self.roles), os.getpid(), self.config.period, self.cluster.lease)
+        log.info("bus: %s", describe(self.transport.mode, [self.transport.endpoints[me]]))
+        self.step()
+
+    def run(self, stop: threading.Event, ready: Callable[[], object] | None = None) -> None:
+        """Start, call `ready()`, then serve until `stop` is set; always closes."""
+        try:
+            self.start()
+            if ready is not None:
+                ready()
+            while not stop.wait(self.config.tick):
+                self.step()
+        finally:
+            self.close()
+
+    def step(self) -> None:
+        """The periodic work: silent hosts, the controller, load reports, announcements, peer checks."""
+        now = self.clock()
+        with self._lock:
+            self._handle(self.view.tick(now))
+            if self.controller is not None:
+                self.controller.step()
+            announce, self._announce_due = self._announce_due, False
+        if announce:
+            self.bus.put(self.keys.announce(self.host), self.announcement())
+        if now >= self._next_load:
+            self._next_load = now + self.config.period
+            self.bus.put(self.keys.load(self.host), self._sampler.sample(len(self._instances()), self.wall()))
+        if now >= self._next_peer_check and not self._checking:
+            self._next_peer_check = now + self.config.peer_recheck
+            self._check_peers()
+
+    def close(self, reason: str | None = None) -> None:
+        """Say goodbye, drop the token (peers see us leave at once), undeclare everything, close the bus."""
+        if self._closed or self._bus is None:
+            return
+        self._closed = True
+        try:
+            self.bus.put(self.keys.announce(self.host), Leaving(self.host, reason or self.stop_reason))
+        except Exception:  # the bus may already be gone; leaving must go on
+            log.debug("could not say goodbye", exc_info=True)
+        if self._token is not None:
+            self._token.close()
+        with self._lock:
+            if self.controller is not None:
+                self.controller.close()
+        for declaration in reversed(self._declared):
+            declaration.close()
+        self.bus.close()
+        log.info("drd %s stopped", self.host)
+
+    # -- what the daemon says about itself --------------------------------------------------------
+
+    def announcement(self) -> Announcement:
+        me, keys = self.host, self.keys
+        services = {f"{me}.db": f"{keys.host(me)}/db", f"{me}.status": keys.status(me)}
+        if self.controller is not None:
+            services |= {"rcm": f"{keys.root}/rcm", "executive": keys.executive}
+        return Announcement(me, self.cluster.name, os.getpid(), self.started, self.roles,
+                            runnable_components(self.cluster.host(me), self.config.catalog),
+                            self._instances(), services, self.digest)
+
+    def status(self) -> DaemonStatus:
+        return DaemonStatus(self.host, self.cluster.name, os.getpid(), self.started, self.wall() - self.started,
+                            self.roles, self._sampler.rss(), self.config.period, self.cluster.lease,
+                            self.bus.stats.as_dict(), dict(self.rejected), dict(self.unreachable))
+
+    def hosts(self, events: int = 50) -> HostsReply:
+        now = self.clock()
+        infos = []
+        with self._lock:
+            for rec in self.view.records.values():
+                report, ann = rec.report, rec.announcement
+                infos.append(HostInfo(
+                    rec.name, rec.state.value, None if rec.since is None else self._to_wall(rec.since), rec.reason,
+                    self.transport.endpoints.get(rec.name, rec.config.endpoint), [str(r) for r in rec.config.roles],
+                    report.cpu if report else None, report.memory if report else None,
+                    report.load1 if report else None, report.instances if report else 0,
+                    None if rec.heard is None else now - rec.heard,
+                    [d.id for d in rec.config.devices], [r.id for r in rec.config.robots],
+                    ann.pid if ann else None))
+            recent = list(self.events)[-events:] if events > 0 else []
+        return HostsReply(self.cluster.name, self.host, self.wall(), infos, recent)
+
+    def components(self) -> ComponentsReply:
+        with self._lock:
+            return ComponentsReply(self.cluster.name, self.host, self.view.runnable(self.config.catalog),
+                                   self.view.instances(), self.view.services())
+
+    # -- bus callbacks (zenoh threads) -----------------------------------------------------------
+
+    def _on_token(self, key: str, alive: bool) -> None:
+        found = cluster_of(key)
+        if found is None or found[0] != self.cluster.name:
+            self._reject(key, "not a host token of this cluster")
+            return
+        self._apply(lambda now: self.view.token(found[1], alive, now))
+
+    def _on_load(self, sample: Sample) -> None:
+        report = sample.payload
+        if not isinstance(report, LoadReport):
+            self._reject(sample.key, f"expected a drd.load, got a {type(report).TYPE}")
+            return
+        self._apply(lambda now: self.view.load(report, now, _host_of(sample.key)))
+
+    def _on_announce(self, sample: Sample) -> None:
+        msg, host = sample.payload, _host_of(sample.key)
+        if isinstance(msg, Announcement):
+            if msg.host == self.host and (msg.pid, msg.started) != (os.getpid(), self.started):
+                with self._lock:  # two daemons claim this host: say so, keep our own view of it
+                    self._record("conflict", self.host, f"another drd (pid {msg.pid}) runs as host {self.host};"
+                                 " host names must be unique in the cluster")
+                return
+            self._apply(lambda now: self.view.announce(msg, now, host))
+        elif isinstance(msg, Leaving) and msg.host == host:
+            self._apply(lambda now: self.view.leaving(msg.host, msg.reason, now))
+        else:
+            self._reject(sample.key, f"expected a drd.daemon.announce or a matching goodbye, got a {type(msg).TYPE}")
+
+    def _apply(self, update: Callable[[float], list[Change]]) -> None:
+        with self._lock:
+            self._handle(update(self.clock()))
+
+    def _handle(self, changes: list[Change]) -> None:
+        """Record, log and act on what the view reports (called with the lock held)."""
+        for change in changes:
+            if change.kind == "rejected":
+                self._reject(change.host, change.detail)
+                continue
+            self._record(change.kind, change.host, change.detail, change.at)
+            if change.kind == HostState.UP:
+                self.unreachable.pop(change.host, None)
+                self._announce_due = True  # a newcomer learns about us (and whoever came back)
+                if self.controller is not None:
+                    self.controller.host_up(change.host)
+            elif change.kind == HostState.DOWN and self.controller is not None:
+                self.controller.host_down(change.host)
+
+    def _record(self, kind: str, host: str, detail: str, at: float | None = None) -> None:
+        wall = self.wall() if at is None else self._to_wall(at)
+        self.events.append(ClusterEvent(wall, kind, host, detail))
+        level = logging.WARNING if kind in ("down", "config-mismatch", "conflict") else logging.INFO
+        log.log(level, "host %s %s: %s", host, kind, detail)
+
+    def _reject(self, where: str, reason: str) -> None:
+        with self._lock:
+            self.rejected[reason.split(":", 1)[0][:80]] += 1
+        rejects.warning("rejected a message on %s: %s", where, reason)
+
+    # -- queryables ------------------------------------------------------------------------------
+
+    def _serve(self, key: str, handler: Callable[[Query], Message | Reply], *accepts: type) -> None:
+        """Serve `key`; a payload that is not one of `accepts` is refused, counted and logged."""
+        names = " or ".join("no payload" if t is type(None) else getattr(t, "TYPE", t.__name__) for t in accepts)
+
+        def guarded(query: Query) -> Message | Reply:
+            if not isinstance(query.payload, accepts):
+                got = "no payload" if query.payload is None else type(query.payload).TYPE
+                reason = f"expected {names}, got {got}"
+                self._reject(query.key, reason)
+                return query.error(reason)
+            return handler(query)
+
+        self._declared.append(self.bus.serve(key, guarded))
+
+    def _ping(self, query: Query) -> Message:
+        assert isinstance(query.payload, Ping)
+        return Pong(query.payload.nonce, self.host)
+
+    def _status(self, query: Query) -> Message:
+        return self.status()
+
+    def _hosts(self, query: Query) -> Message:
+        events = query.payload.events if isinstance(query.payload, ViewRequest) else 50
+        return self.hosts(max(0, min(events, MAX_EVENTS)))
+
+    def _components(self, query: Query) -> Message:
+        return self.components()
+
+    def _lookup(self, query: Query) -> Message | Reply:
+        assert isinstance(query.payload, Lookup)
+        name = query.payload.name
+        with self._lock:
+            found = self.view.lookup(name)
+            known = sorted({i.name for i in self.view.instances() + self.view.services()})
+        if found is None:
+            return query.error(f"no instance or service called {name!r} (known: {', '.join(known) or 'none'})")
+        return found
+
+    def _query(self, query: Query) -> Message | Reply:
+        assert isinstance(query.payload, TraderRequest)
+        text = query.payload.query
+        try:
+            compiled = compile_query(text, self.config.catalog)
+        except TraderError as e:
+            return query.error(e.render(text))
+        with self._lock:
+            offers = self.view.offers()
+        found = compiled.run(offers, query.payload.seed)
+        return TraderReply(text, [_offer_dict(o.id, o.type, o.host, o.properties) for o in found])
+
+    # -- helpers ---------------------------------------------------------------------------------
+
+    def _instances(self) -> list[InstanceInfo]:
+        return []  # the Component Creator (next) registers its instances here
+
+    def _to_wall(self, at: float) -> float:
+        return self.wall() - (self.clock() - at)
+
+    def _check_peers(self) -> None:
+        """In a thread of its own (a probe may take a while): name the peers we cannot see, and why."""
+        with self._lock:
+            down = {h.name: h.endpoint for h in self.cluster.hosts
+                    if h.name != self.host and self.view.state(h.name) is HostState.DOWN}
+        if not down:
+            if not self.unreachable:
+                log.info("all %d peers reachable", len(self.cluster.hosts) - 1)
+            return
+        down = {h: self.transport.endpoints.get(h, e) for h, e in down.items()}
+        self._checking = True
+
+        def check() -> None:
+            try:
+                found = diagnose(down)
+                with self._lock:
+                    for host, why in found.items():
+                        if self.view.state(host) is HostState.DOWN and self.unreachable.get(host) != why:
+                            self.unreachable[host] = why
+                            log.warning("peer %s unreachable: %s", host, why)
+            finally:
+                self._checking = False
+
+        threading.Thread(target=check, name="drd-peer-check", daemon=True).start()
+
+
+def _host_of(key: str) -> str | None:
+    parts = key.split("/")
+    return parts[3] if len(parts) > 3 else None
+
+
+def _offer_dict(oid: str, type_: str, host: Any, properties: Any) -> dict[str, Any]:
+    facts = dict(host)
+    load = facts.get("load")
+    return {"id": oid, "type": type_, "host": facts.get("name"),
+            "load": load if isinstance(load, float) and load == load else None,
+            "properties": dict(properties)}

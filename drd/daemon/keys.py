@@ -1,0 +1,82 @@
+"""The daemon's key layout on the bus, in one place (docs/daemon.md lists it).
+
+Everything lives under `drd/<cluster>/` so two clusters can share a network. Per-host keys carry
+the host's name, so a client can ask one daemon (and skip one that does not answer) instead of
+waiting for every daemon on a wildcard.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from drd.bus import join_key
+
+#: Component Database operations every daemon answers under `host/<name>/db/<op>`.
+DB_OPS = ("hosts", "components", "lookup", "query")
+
+
+@dataclass(frozen=True, slots=True)
+class ClusterKeys:
+    """Key builders for one cluster. Host names are checked to be single chunks."""
+
+    cluster: str
+
+    @property
+    def root(self) -> str:
+        return join_key("drd", self.cluster)
+
+    def host(self, host: str) -> str:
+        """The host's liveliness token: present while its daemon runs."""
+        return join_key("drd", self.cluster, "host", host)
+
+    @property
+    def hosts(self) -> str:
+        """Every host token."""
+        return f"{self.root}/host/*"
+
+    def load(self, host: str) -> str:
+        """The Load Reporter's publications (`LoadReport`)."""
+        return f"{self.host(host)}/load"
+
+    @property
+    def loads(self) -> str:
+        return f"{self.root}/host/*/load"
+
+    def announce(self, host: str) -> str:
+        """`Announcement` and `Leaving` publications."""
+        return f"{self.host(host)}/announce"
+
+    @property
+    def announces(self) -> str:
+        return f"{self.root}/host/*/announce"
+
+    def ping(self, host: str) -> str:
+        return f"{self.host(host)}/ping"
+
+    def status(self, host: str) -> str:
+        """The daemon's own status (`DaemonStatus`)."""
+        return f"{self.host(host)}/status"
+
+    def db(self, host: str, op: str) -> str:
+        """A Component Database operation answered by the daemon of `host` (see `DB_OPS`)."""
+        if op not in DB_OPS:
+            raise ValueError(f"unknown database operation {op!r} (expected one of {', '.join(DB_OPS)})")
+        return f"{self.host(host)}/db/{op}"
+
+    @property
+    def resources(self) -> str:
+        """The controller's Resource Controller Manager view (`ResourcesReply`)."""
+        return f"{self.root}/rcm/resources"
+
+    @property
+    def executive(self) -> str:
+        """The controller's Mission Executive (`MissionCommand`), served by `drd.executive`."""
+        return f"{self.root}/executive"
+
+
+def cluster_of(token_key: str) -> tuple[str, str] | None:
+    """(cluster, host) of a host token key `drd/<cluster>/host/<host>`, or None for any other key."""
+    parts = token_key.split("/")
+    if len(parts) == 4 and parts[0] == "drd" and parts[2] == "host":
+        return parts[1], parts[3]
+    return None

@@ -1,0 +1,213 @@
+"""The daemon's bus messages: announcements, views of the cluster, the trader and the name service.
+
+Every message is versioned and schema-checked on receipt (`drd.bus.message`); a change to a field
+bumps its version (docs/bus.md). Times called `at`, `since` or `started` are wall-clock seconds
+since the epoch, so that an operator can compare them with their own clock; ages and delays are
+seconds. `None` means "not known yet" (no load report received, for example).
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+from drd.bus import Message, message
+
+
+@message("drd.daemon.instance", 1)
+class InstanceInfo(Message):
+    """A running component instance (or a daemon service) and where it answers."""
+
+    name: str
+    component: str
+    host: str
+    state: str = "running"
+    key: str = ""
+
+
+@message("drd.daemon.announce", 1)
+class Announcement(Message):
+    """What a daemon tells the others about itself: published when it starts, when it changes, and
+    again whenever another daemon joins (so a newcomer learns everything without a request).
+
+    `components` are the component types its host can run (its devices cover their needs);
+    `services` maps the names of the daemon services it hosts to their keys (the name service);
+    `config` is a digest of its hosts file, so a host started with a different file is noticed.
+    """
+
+    host: str
+    cluster: str
+    pid: int
+    started: float
+    roles: list[str]
+    components: list[str]
+    instances: list[InstanceInfo]
+    services: dict[str, str]
+    config: str
+
+
+@message("drd.daemon.leaving", 1)
+class Leaving(Message):
+    """Published by a daemon that stops cleanly, just before its token goes: "stopped", not "lost"."""
+
+    host: str
+    reason: str
+
+
+@message("drd.daemon.view-request", 1)
+class ViewRequest(Message):
+    """Asks a daemon for part of its view; `events` bounds how many recent events come back."""
+
+    events: int = 50
+
+
+@message("drd.daemon.host", 1)
+class HostInfo(Message):
+    """One host as the answering daemon sees it. `state` is `up` or `down`."""
+
+    name: str
+    state: str
+    since: float | None
+    reason: str
+    endpoint: str
+    roles: list[str]
+    cpu: float | None
+    memory: float | None
+    load1: float | None
+    instances: int
+    report_age: float | None
+    devices: list[str]
+    robots: list[str]
+    pid: int | None
+
+
+@message("drd.daemon.event", 1)
+class ClusterEvent(Message):
+    """Something the answering daemon noticed: `up`, `down`, `config-mismatch`, `resources-added`..."""
+
+    at: float
+    kind: str
+    host: str
+    detail: str
+
+
+@message("drd.daemon.hosts", 1)
+class HostsReply(Message):
+    """The hosts of the cluster (every configured one, up or down) and the recent events."""
+
+    cluster: str
+    answered_by: str
+    at: float
+    hosts: list[HostInfo]
+    events: list[ClusterEvent]
+
+
+@message("drd.daemon.components", 1)
+class ComponentsReply(Message):
+    """Component types with the hosts (up) that can run them, running instances, and daemon services."""
+
+    cluster: str
+    answered_by: str
+    types: dict[str, list[str]]
+    instances: list[InstanceInfo]
+    services: list[InstanceInfo]
+
+
+@message("drd.daemon.lookup", 1)
+class Lookup(Message):
+    """Name service: where does the instance or service called `name` answer?"""
+
+    name: str
+
+
+@message("drd.daemon.location", 1)
+class Location(Message):
+    """The name service's answer: the host and the key prefix of `name`."""
+
+    name: str
+    kind: str
+    host: str
+    key: str
+
+
+@message("drd.daemon.trader-request", 1)
+class TraderRequest(Message):
+    """A trader query (`Camera where resolution >= 640 prefer min(host.load)`), `seed` for `prefer random`."""
+
+    query: str
+    seed: int = 0
+
+
+@message("drd.daemon.trader-reply", 1)
+class TraderReply(Message):
+    """The matching offers, best first: each `{id, type, host, load, properties}`."""
+
+    query: str
+    offers: list[dict[str, Any]]
+
+
+@message("drd.daemon.status", 1)
+class DaemonStatus(Message):
+    """One daemon about itself: process, bus counters, rejected messages and unreachable peers."""
+
+    host: str
+    cluster: str
+    pid: int
+    started: float
+    uptime: float
+    roles: list[str]
+    rss: int
+    load_period: float
+    lease: float
+    bus: dict[str, int]
+    rejected: dict[str, int]
+    unreachable: dict[str, str]
+
+
+@message("drd.rcm.unit", 1)
+class UnitInfo(Message):
+    """A Resource Controller in the manager: who holds it, who waits for its type, its fencing epoch."""
+
+    id: str
+    type: str
+    host: str
+    sharable: bool
+    capacity: float
+    load: float
+    epoch: int
+    holders: list[str]
+    queue: list[str]
+    properties: dict[str, Any]
+
+
+@message("drd.rcm.robot", 1)
+class RobotInfo(Message):
+    """An Aggregate Resource Controller (a robot) in the manager and who holds it."""
+
+    id: str
+    type: str
+    host: str
+    parts: dict[str, str]
+    holders: list[str]
+
+
+@message("drd.rcm.waiter", 1)
+class WaiterInfo(Message):
+    """A request waiting in the manager's queue, in service order."""
+
+    holder: str
+    priority: int
+    mission: str
+    needs: dict[str, str]
+
+
+@message("drd.rcm.resources", 1)
+class ResourcesReply(Message):
+    """The controller's Resource Controller Manager: units, robots, the queue, and hosts whose
+    resources will be removed (`removing`: host -> seconds left of the lease) unless they come back."""
+
+    cluster: str
+    answered_by: str
+    units: list[UnitInfo]
+    robots: list[RobotInfo]
+    queue: list[WaiterInfo]
+    removing: dict[str, float]

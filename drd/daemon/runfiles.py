@@ -1,0 +1,151 @@
+"""Pidfiles of the daemons running on this machine: `<run dir>/<host>.pid`, JSON.
+
+The run dir is `--run-dir`, else `$DRD_RUN_DIR`, else `~/.drd/run`. A pidfile records the pid and
+the process's creation time, so a stale file whose pid was reused by another program is never
+taken for a running daemon (and never signalled). `drd stop` sends SIGTERM, waits (bounded), then
+SIGKILL.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import time
+from collections.abc import Sequence
+from dataclasses import asdict, dataclass, replace
+from pathlib import Path
+
+import psutil
+
+ENV = "DRD_RUN_DIR"
+
+
+def run_dir(explicit: Path | None = None) -> Path:
+    """Where pidfiles (and detached daemons' logs) go."""
+    if explicit is not None:
+        return explicit
+    env = os.environ.get(ENV)
+    return Path(env) if env else Path.home() / ".drd" / "run"
+
+
+@dataclass(frozen=True, slots=True)
+class PidFile:
+    """One daemon's pidfile; `state` is `starting` until its services are declared, then `running`."""
+
+    pid: int
+    host: str
+    cluster: str
+    config: str
+    started: float
+    create_time: float
+    state: str = "starting"
+    log: str = ""
+
+    def running(self) -> bool:
+        """The process is alive (not a zombie) and is the one that wrote the file."""
+        try:
+            proc = psutil.Process(self.pid)
+            return abs(proc.create_time() - self.create_time) < 0.05 and proc.status() != psutil.STATUS_ZOMBIE
+        except psutil.Error:
+            return False
+
+
+class AlreadyRunning(Exception):
+    """A daemon for this host already runs from this run dir."""
+
+    def __init__(self, info: PidFile, path: Path) -> None:
+        super().__init__(f"drd for host {info.host} is already running (pid {info.pid}, pidfile {path})")
+        self.info, self.path = info, path
+
+
+def path_of(directory: Path, host: str) -> Path:
+    return directory / f"{host}.pid"
+
+
+def read(path: Path) -> PidFile | None:
+    """The pidfile at `path`, or None when it is missing or not a pidfile."""
+    try:
+        data = json.loads(path.read_text(encoding="utf-8"))
+        return PidFile(**data)
+    except (OSError, ValueError, TypeError):
+        return None
+
+
+def write(path: Path, info: PidFile) -> None:
+    """Write atomically (a reader never sees half a file)."""
+    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+    tmp.write_text(json.dumps(asdict(info)), encoding="utf-8")
+    os.replace(tmp, path)
+
+
+def claim(directory: Path, host: str, cluster: str, config: str, log: str = "") -> PidFile:
+    """Write this process's pidfile for `host`; a stale one is replaced.
+
+    Raises:
+        AlreadyRunning: a live daemon holds the pidfile.
+    """
+    directory.mkdir(parents=True, exist_ok=True)
+    path = path_of(directory, host)
+    old = read(path)
+    if old is not None and old.pid != os.getpid() and old.running():
+        raise AlreadyRunning(old, path)
+    me = psutil.Process(os.getpid())
+    info = PidFile(os.getpid(), host, cluster, config, time.time(), me.create_time(), "starting", log)
+    write(path, info)
+    return info
+
+
+def mark(directory: Path, info: PidFile, state: str) -> PidFile:
+    new = replace(info, state=state)
+    write(path_of(directory, info.host), new)
+    return new
+
+
+def release(directory: Path, info: PidFile) -> None:
+    """Remove our pidfile (only if it is still ours)."""
+    path = path_of(directory, info.host)
+    current = read(path)
+    if current is not None and current.pid == info.pid:
+        path.unlink(missing_ok=True)
+
+
+def pidfiles(directory: Path) -> list[tuple[Path, PidFile | None]]:
+    """Every pidfile in the run dir, sorted by host; None for one that cannot be read."""
+    if not directory.is_dir():
+        return []
+    return [(p, read(p)) for p in sorted(directory.glob("*.pid"))]
+
+
+def stop(infos: Sequence[PidFile], timeout: float = 10.0, poll: float = 0.05) -> dict[int, str]:
+    """Stop daemons: SIGTERM to all, wait up to `timeout` for each, then SIGKILL the stragglers.
+
+    Returns pid -> `stopped`, `killed` or `not running`.
+    """
+    out: dict[int, str] = {}
+    for info in infos:
+        try:
+            if info.running():
+                os.kill(info.pid, signal.SIGTERM)
+                continue
+        except ProcessLookupError:
+            pass
+        out[info.pid] = "not running"
+    waiting = [i for i in infos if i.pid not in out]
+    deadline = time.monotonic() + timeout
+    while waiting and time.monotonic() < deadline:
+        for info in [i for i in waiting if not i.running()]:
+            out[info.pid] = "stopped"
+            waiting.remove(info)
+        if waiting:
+            time.sleep(poll)
+    for info in waiting:
+        try:
+            os.kill(info.pid, signal.SIGKILL)
+            out[info.pid] = "killed"
+        except ProcessLookupError:
+            out[info.pid] = "stopped"
+    kill_deadline = time.monotonic() + 5.0
+    while any(i.running() for i in waiting) and time.monotonic() < kill_deadline:
+        time.sleep(poll)
+    return out

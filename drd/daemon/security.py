@@ -1,0 +1,118 @@
+"""From `cluster.security` in hosts.yaml to zenoh's transport configuration; never a silent plaintext.
+
+- `none`: nothing; an open cluster (a laptop, an isolated test network). Endpoints as written.
+- `password`: zenoh user/password authentication (`transport/auth/usrpwd`). A peer that does not
+  present a user and password listed in `password_file` is refused, and so are we by it. Links are
+  authenticated, not encrypted.
+- `tls`: mutual TLS (`transport/link/tls`, `enable_mtls`); both sides present a certificate signed
+  by `ca`. `tcp/H:P` endpoints become `tls/H:P`, and only `tls` links are allowed.
+
+`password_file` is zenoh's dictionary format, one `user:password` per line (the password is
+everything after the first colon; blank lines are allowed): it lists who may join, and the line
+of `security.user` is what this process presents. Every problem with a file (missing, unreadable,
+badly formed, no line for the user) raises `SecurityError` naming the file and the key: a daemon
+with security configured never starts without it.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from drd.config import ConfigError, ConfigProblem
+from drd.hosts import Cluster, SecurityMode, check_files
+
+
+class SecurityError(ConfigError):
+    """The security settings cannot be applied: each problem names the file and its key."""
+
+
+@dataclass(frozen=True, slots=True)
+class Transport:
+    """How one process joins the cluster's bus: endpoints by host, and zenoh options."""
+
+    mode: SecurityMode
+    endpoints: Mapping[str, str]
+    options: Mapping[str, Any] = field(default_factory=dict)
+
+    def others(self, me: str) -> dict[str, str]:
+        """Endpoints of every host but `me`: what a daemon connects to."""
+        return {h: e for h, e in self.endpoints.items() if h != me}
+
+
+def transport(cluster: Cluster) -> Transport:
+    """The cluster's endpoints and zenoh options for its security mode.
+
+    Raises:
+        SecurityError: a file is missing, unreadable or badly formed, or an endpoint cannot carry TLS.
+    """
+    sec = cluster.security
+    problems = list(check_files(cluster))
+    if problems:
+        raise SecurityError(problems)
+    endpoints = {h.name: h.endpoint for h in cluster.hosts}
+    if sec.mode is SecurityMode.NONE:
+        return Transport(sec.mode, endpoints)
+    if sec.mode is SecurityMode.PASSWORD:
+        assert sec.user is not None and sec.password_file is not None  # parse_hosts requires both
+        password = read_password(cluster.source, sec.password_file, sec.user)
+        return Transport(sec.mode, endpoints, {
+            "transport/auth/usrpwd/user": sec.user,
+            "transport/auth/usrpwd/password": password,
+            "transport/auth/usrpwd/dictionary_file": sec.password_file,
+        })
+    assert sec.ca is not None and sec.cert is not None and sec.key is not None  # parse_hosts requires all three
+    tls = {}
+    for name, endpoint in endpoints.items():
+        proto, _, address = endpoint.partition("/")
+        if proto != "tcp":
+            problems.append(ConfigProblem(cluster.source, f"hosts.{name}.endpoint",
+                                          f"security mode tls needs a tcp endpoint (it becomes tls/...),"
+                                          f" got {endpoint}"))
+        tls[name] = f"tls/{address}"
+    if problems:
+        raise SecurityError(problems)
+    return Transport(sec.mode, tls, {
+        "transport/link/protocols": ["tls"],
+        "transport/link/tls/root_ca_certificate": sec.ca,
+        "transport/link/tls/listen_certificate": sec.cert,
+        "transport/link/tls/listen_private_key": sec.key,
+        "transport/link/tls/connect_certificate": sec.cert,
+        "transport/link/tls/connect_private_key": sec.key,
+        "transport/link/tls/enable_mtls": True,
+    })
+
+
+def read_password(source: str, path: str, user: str) -> str:
+    """The password of `user` in a zenoh dictionary file (`user:password` lines).
+
+    Raises:
+        SecurityError: the file cannot be read, has a line without `:`, or has no line for `user`.
+    """
+    key = "cluster.security.password_file"
+    try:
+        text = Path(path).read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError) as e:
+        raise SecurityError([ConfigProblem(source, key, f"cannot read {path}: {e}")]) from e
+    found = None
+    for number, line in enumerate(text.splitlines(), 1):
+        if not line.strip():
+            continue
+        name, colon, password = line.partition(":")
+        if not colon or not name:
+            raise SecurityError([ConfigProblem(source, key, f"{path}:{number}: expected user:password")])
+        if name == user and found is None:
+            found = password
+    if not found:
+        raise SecurityError([ConfigProblem(source, key, f"{path}: no line {user}:PASSWORD for user {user!r}")])
+    return found
+
+
+def describe(mode: SecurityMode, endpoints: Sequence[str]) -> str:
+    """One line for the logs: how this process talks to the others."""
+    what = {SecurityMode.NONE: "no authentication (open cluster)",
+            SecurityMode.PASSWORD: "user/password authentication",
+            SecurityMode.TLS: "mutual TLS"}[mode]
+    return f"{what}; listening on {', '.join(endpoints) or 'nothing'}"

@@ -1,0 +1,256 @@
+"""The Component Database's cluster view: every host's presence, load and announcement. Pure.
+
+Each daemon holds the full view, fed by what the bus delivers: host liveliness tokens, load
+reports and announcements. The view reads no clock: every call takes `now`, monotonic seconds,
+and returns the `Change`s it caused, which the daemon logs, records and acts on (the controller
+adds and removes resources). The rules:
+
+- A host is **up** while its liveliness token is present and it keeps reporting its load: a
+  report at most `lease` seconds old, or a token younger than `lease` (its first report is on its
+  way).
+- It goes **down** at once when its token vanishes (a clean stop, a crash, a closed socket), and
+  when its reports stop for longer than `lease` while the token stays (a frozen or SIGSTOPped
+  process, a host whose link is silent but not yet expired).
+- A down host comes back **up** when its token is present and a report arrives.
+- The view's own host is always up: it is the process answering.
+
+Hosts are those of `hosts.yaml`; anything about another host is refused (`Change("rejected")`).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterable
+from dataclasses import dataclass
+from enum import StrEnum
+
+from drd.bus import LoadReport
+from drd.daemon.messages import Announcement, InstanceInfo, Location
+from drd.hosts import Cluster, Host
+from drd.placement import HostView, required_devices, view_of
+from drd.trader import Offer
+from dsl.catalog import Catalog
+
+
+class HostState(StrEnum):
+    UP = "up"
+    """Its token is present and its load reports are fresh."""
+    DOWN = "down"
+    """Never seen, gone (token vanished) or silent for longer than the lease."""
+
+
+@dataclass(frozen=True, slots=True)
+class Change:
+    """What one input changed: `kind` is `up`, `down`, `config-mismatch` or `rejected`; `at` is monotonic."""
+
+    at: float
+    kind: str
+    host: str
+    detail: str
+
+
+@dataclass(slots=True)
+class HostRecord:
+    """What the view knows of one configured host (mutable, owned by the view)."""
+
+    config: Host
+    state: HostState = HostState.DOWN
+    since: float | None = None
+    reason: str = "never seen"
+    token: bool = False
+    token_since: float | None = None
+    heard: float | None = None
+    report: LoadReport | None = None
+    announcement: Announcement | None = None
+    leaving: str = ""
+    mismatch: str = ""
+
+    @property
+    def name(self) -> str:
+        return self.config.name
+
+    @property
+    def instances(self) -> list[InstanceInfo]:
+        return list(self.announcement.instances) if self.announcement else []
+
+
+class ClusterView:
+    """The full view of one cluster, as seen from host `me` (see the module docstring)."""
+
+    def __init__(self, cluster: Cluster, me: str, *, lease: float | None = None, digest: str = "",
+                 now: float = 0.0) -> None:
+        self.cluster = cluster
+        self.me = cluster.host(me).name
+        self.lease = cluster.lease if lease is None else lease
+        if not self.lease > 0:
+            raise ValueError(f"lease must be positive, not {self.lease!r}")
+        self.digest = digest
+        self.records: dict[str, HostRecord] = {h.name: HostRecord(h) for h in cluster.hosts}
+        mine = self.records[self.me]
+        mine.state, mine.since, mine.reason = HostState.UP, now, "this host"
+
+    # -- inputs ----------------------------------------------------------------------------------
+
+    def token(self, host: str, alive: bool, now: float) -> list[Change]:
+        """A host's liveliness token appeared (`alive`) or vanished."""
+        rec = self.records.get(host)
+        if rec is None:
+            return [Change(now, "rejected", host, "a host token from a host not in the hosts file")]
+        if host == self.me:
+            rec.token = alive
+            return []
+        if alive:
+            if not rec.token:
+                rec.token, rec.token_since, rec.leaving = True, now, ""
+            if rec.state is HostState.DOWN and self._fresh(rec, now):
+                return [self._set(rec, HostState.UP, now, "joined")]
+            return []
+        rec.token, rec.token_since = False, None
+        if rec.state is HostState.UP:
+            return [self._set(rec, HostState.DOWN, now, rec.leaving or "lost: its liveliness token vanished")]
+        return []
+
+    def load(self, report: LoadReport, now: float, key_host: str | None = None) -> list[Change]:
+        """A load report; `key_host` is the host named by the key it came on (must match the report)."""
+        host = report.host
+        rec = self.records.get(host)
+        if rec is None:
+            return [Change(now, "rejected", host, "a load report from a host not in the hosts file")]
+        if key_host is not None and key_host != host:
+            return [Change(now, "rejected", key_host, f"a load report for {host} published under {key_host}")]
+        if not _sane(report):
+            return [Change(now, "rejected", host, "a load report with out-of-range values")]
+        rec.heard, rec.report = now, report
+        if host != self.me and rec.state is HostState.DOWN and rec.token:
+            return [self._set(rec, HostState.UP, now, "reporting again" if rec.since is not None else "joined")]
+        return []
+
+    def announce(self, ann: Announcement, now: float, key_host: str | None = None) -> list[Change]:
+        """A daemon's announcement: its runnable components, instances and services."""
+        rec = self.records.get(ann.host)
+        if rec is None:
+            return [Change(now, "rejected", ann.host, "an announcement from a host not in the hosts file")]
+        if key_host is not None and key_host != ann.host:
+            return [Change(now, "rejected", key_host, f"an announcement for {ann.host} published under {key_host}")]
+        if ann.cluster != self.cluster.name:
+            return [Change(now, "rejected", ann.host, f"an announcement for cluster {ann.cluster!r}")]
+        rec.announcement = ann
+        if self.digest and ann.config and ann.config != self.digest and rec.mismatch != ann.config:
+            rec.mismatch = ann.config
+            return [Change(now, "config-mismatch", ann.host,
+                           f"runs with a different hosts file (digest {ann.config[:12]}, ours {self.digest[:12]})")]
+        return []
+
+    def leaving(self, host: str, reason: str, now: float) -> list[Change]:
+        """A daemon said it is stopping: its token is about to go; remember why."""
+        rec = self.records.get(host)
+        if rec is None:
+            return [Change(now, "rejected", host, "a goodbye from a host not in the hosts file")]
+        if host != self.me:
+            rec.leaving = f"stopped: {reason}" if reason else "stopped"
+        return []
+
+    def tick(self, now: float) -> list[Change]:
+        """Hosts whose reports stopped for longer than the lease go down."""
+        out = []
+        for rec in self.records.values():
+            if rec.name != self.me and rec.state is HostState.UP and not self._fresh(rec, now):
+                last = max(t for t in (rec.heard, rec.token_since) if t is not None)
+                out.append(self._set(rec, HostState.DOWN, now,
+                                     f"silent: no load report for {now - last:.2f} s (lease {self.lease:g} s)"))
+        return out
+
+    # -- queries ---------------------------------------------------------------------------------
+
+    def state(self, host: str) -> HostState:
+        return self.records[host].state
+
+    def up(self) -> list[str]:
+        """The hosts that are up, in hosts-file order."""
+        return [r.name for r in self.records.values() if r.state is HostState.UP]
+
+    def instances(self) -> list[InstanceInfo]:
+        """Component instances of the hosts that are up (those of a host that went down are gone)."""
+        return [i for r in self._up_records() for i in r.instances]
+
+    def services(self) -> list[InstanceInfo]:
+        """Daemon services (`rcm`, `executive`, `<host>.db`...) of the hosts that are up."""
+        return [InstanceInfo(name, "drd." + name.rsplit(".", 1)[-1], r.name, "running", key)
+                for r in self._up_records() if r.announcement for name, key in r.announcement.services.items()]
+
+    def runnable(self, catalog: Catalog | None = None) -> dict[str, list[str]]:
+        """Component type -> the hosts that are up and can run it (their announcements, else the catalog)."""
+        out: dict[str, list[str]] = {}
+        for r in self._up_records():
+            names: Iterable[str] = (r.announcement.components if r.announcement
+                                    else runnable_components(r.config, catalog) if catalog else ())
+            for name in names:
+                out.setdefault(name, []).append(r.name)
+        return dict(sorted(out.items()))
+
+    def lookup(self, name: str) -> Location | None:
+        """The name service: an instance first, then a daemon service."""
+        for inst in self.instances():
+            if inst.name == name:
+                return Location(name, "instance", inst.host, inst.key)
+        for svc in self.services():
+            if svc.name == name:
+                return Location(name, "service", svc.host, svc.key)
+        return None
+
+    def host_facts(self, host: str) -> dict[str, object]:
+        """What a trader expression sees as `host`: name, load (cpu / 100), cpu, memory, up."""
+        rec = self.records[host]
+        cpu = rec.report.cpu if rec.report else math.nan
+        memory = rec.report.memory if rec.report else math.nan
+        return {"name": host, "load": cpu / 100.0, "cpu": cpu, "memory": memory,
+                "up": rec.state is HostState.UP}
+
+    def offers(self) -> list[Offer]:
+        """Trader offers: the devices, robots and instances of the hosts that are up, in hosts-file order."""
+        out: list[Offer] = []
+        for r in self._up_records():
+            facts = self.host_facts(r.name)
+            out += [Offer(d.id, d.type, {**d.options, "driver": d.driver}, facts) for d in r.config.devices]
+            out += [Offer(b.id, b.type, {**b.properties, **b.parts}, facts) for b in r.config.robots]
+            out += [Offer(i.name, i.component, {"state": i.state}, facts) for i in r.instances]
+        return out
+
+    def host_views(self) -> list[HostView]:
+        """What the Load Balancer needs of every configured host (down ones included, refused as `down`)."""
+        out = []
+        for r in self.records.values():
+            running: dict[str, int] = {}
+            for inst in r.instances:
+                running[inst.component] = running.get(inst.component, 0) + 1
+            cpu, memory = (r.report.cpu, r.report.memory) if r.report else (0.0, 0.0)
+            out.append(view_of(r.config, cpu=cpu, memory=memory, up=r.state is HostState.UP, running=running))
+        return out
+
+    # -- internals -------------------------------------------------------------------------------
+
+    def _up_records(self) -> list[HostRecord]:
+        return [r for r in self.records.values() if r.state is HostState.UP]
+
+    def _fresh(self, rec: HostRecord, now: float) -> bool:
+        """Token present and a report (or the token's arrival) within the lease."""
+        if not rec.token:
+            return False
+        last = max((t for t in (rec.heard, rec.token_since) if t is not None), default=None)
+        return last is not None and now - last <= self.lease
+
+    @staticmethod
+    def _set(rec: HostRecord, state: HostState, now: float, reason: str) -> Change:
+        rec.state, rec.since, rec.reason = state, now, reason
+        return Change(now, state.value, rec.name, reason)
+
+
+def runnable_components(host: Host, catalog: Catalog) -> list[str]:
+    """The component types whose device needs this host's devices cover (behaviors and data need none)."""
+    types = {d.type for d in host.devices}
+    return sorted(t.name for t in catalog.components.values() if required_devices(t) <= types)
+
+
+def _sane(report: LoadReport) -> bool:
+    numbers = (report.cpu, report.memory, report.load1)
+    return all(math.isfinite(v) and v >= 0 for v in numbers) and report.instances >= 0

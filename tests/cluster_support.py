@@ -1,0 +1,183 @@
+"""Real `drd start` processes on loopback for the daemon tests: a hosts file on free ports, started
+daemons, a client, bounded waits, and a teardown that kills every process it started by pid.
+
+    with running_cluster(tmp_path, ["controller", "ranger1", "ranger2"]) as c:
+        c.start_all()
+        c.wait_up()
+        c.client().hosts()
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import socket
+import subprocess
+import sys
+import time
+from collections.abc import Callable, Iterator, Sequence
+from contextlib import contextmanager
+from pathlib import Path
+
+import pytest
+
+from drd.daemon.client import ClusterClient
+
+ROOT = Path(__file__).resolve().parents[1]
+DRD = [sys.executable, "-m", "drd.cli.drd"]
+MISSIONCTL = [sys.executable, "-c", "from drd.cli.missionctl import main; main()"]
+LEASE = 1.0  # seconds: short, so the SIGSTOP test is short
+LOAD_PERIOD = 0.2
+START_TIMEOUT = 45.0  # a loaded 2-core machine imports three daemons at once
+
+
+def eventually(predicate: Callable[[], object], what: str, timeout: float = 10.0, poll: float = 0.02) -> None:
+    """Wait (bounded) until `predicate()` is true; fail naming `what`."""
+    deadline = time.monotonic() + timeout
+    while not predicate():
+        if time.monotonic() > deadline:
+            pytest.fail(f"timed out after {timeout:g} s waiting for {what}")
+        time.sleep(poll)
+
+
+def free_ports(n: int) -> list[int]:
+    """`n` distinct free ports on 127.0.0.1 (held open together, so they differ)."""
+    socks = [socket.socket() for _ in range(n)]
+    try:
+        for s in socks:
+            s.bind(("127.0.0.1", 0))
+        return [s.getsockname()[1] for s in socks]
+    finally:
+        for s in socks:
+            s.close()
+
+
+RANGER = """\
+    devices:
+      drive: {{type: Drive, driver: sim, options: {{max_speed: 0.8}}}}
+      ranges: {{type: RangeSensor, driver: sim, options: {{beams: 181, max_range: 8.0}}}}
+      camera: {{type: Camera, driver: sim, options: {{resolution: {resolution}, fov: 60.0}}}}
+      launcher: {{type: Launcher, driver: sim, options: {{max_range: 6.0}}}}
+      radio: {{type: RadioChannel, driver: sim, capacity: 10, options: {{range: 30.0}}}}
+    robots:
+      {name}:
+        type: Ranger
+        parts: {{drive: drive, ranges: ranges, camera: camera, launcher: launcher}}
+        properties: {{battery: 1.0, magazine: 0}}
+"""
+
+
+def hosts_yaml(cluster: str, names: Sequence[str], ports: Sequence[int], *, lease: float = LEASE,
+               security: str = "{mode: none}") -> str:
+    """A hosts file: the first name is the controller, the others are workers with a Ranger each
+    (cameras of resolution 640, 800, 960...)."""
+    lines = ["cluster:", f"  name: {cluster}", f"  security: {security}", f"  lease: {int(lease * 1000)}ms",
+             "hosts:"]
+    for i, (name, port) in enumerate(zip(names, ports, strict=True)):
+        lines += [f"  {name}:", f"    endpoint: tcp/127.0.0.1:{port}",
+                  f"    roles: [{'controller' if i == 0 else 'worker'}]"]
+        if i:
+            lines.append(RANGER.format(name=name, resolution=480 + 160 * i).rstrip())
+    return "\n".join(lines) + "\n"
+
+
+class DaemonCluster:
+    """Daemons of one hosts file, each a `drd start` process of ours; `close()` kills what is left."""
+
+    def __init__(self, folder: Path, names: Sequence[str], *, lease: float = LEASE,
+                 security: str = "{mode: none}") -> None:
+        self.folder = folder
+        self.names = list(names)
+        self.ports = free_ports(len(names))
+        self.name = f"t{os.getpid()}_{self.ports[0]}"
+        self.hosts_file = folder / "hosts.yaml"
+        self.hosts_file.write_text(hosts_yaml(self.name, names, self.ports, lease=lease, security=security))
+        self.run_dir = folder / "run"
+        self.procs: dict[str, subprocess.Popen[bytes]] = {}
+        self.endpoints = [f"tcp/127.0.0.1:{p}" for p in self.ports]
+        self._clients: list[ClusterClient] = []
+
+    def start(self, name: str, *, hosts_file: Path | None = None, extra: Sequence[str] = ()) -> subprocess.Popen[bytes]:
+        log = (self.folder / f"{name}.log").open("ab")
+        cmd = [*DRD, "start", "--host", name, "--config", str(hosts_file or self.hosts_file),
+               "--run-dir", str(self.run_dir), "--load-period", str(LOAD_PERIOD), "--peer-grace", "1", *extra]
+        with log:
+            proc = subprocess.Popen(cmd, cwd=ROOT, stdin=subprocess.DEVNULL, stdout=log, stderr=log)
+        self.procs[name] = proc
+        return proc
+
+    def start_all(self) -> None:
+        for name in self.names:
+            self.start(name)
+
+    def pid(self, name: str) -> int:
+        return self.procs[name].pid
+
+    def log(self, name: str) -> str:
+        path = self.folder / f"{name}.log"
+        return path.read_text(errors="replace") if path.exists() else ""
+
+    def pidfile(self, name: str) -> dict[str, object] | None:
+        try:
+            data: dict[str, object] = json.loads((self.run_dir / f"{name}.pid").read_text())
+        except (OSError, ValueError):
+            return None
+        return data
+
+    def wait_ready(self, names: Sequence[str] | None = None) -> None:
+        """Every daemon has declared its services (its pidfile says `running`)."""
+        for name in names or self.names:
+            def ready(name: str = name) -> bool:
+                proc = self.procs[name]
+                if proc.poll() is not None:
+                    pytest.fail(f"drd {name} exited with {proc.returncode}:\n{self.log(name)}")
+                info = self.pidfile(name)
+                return info is not None and info.get("state") == "running"
+
+            eventually(ready, f"drd {name} to start", START_TIMEOUT, poll=0.05)
+
+    def client(self, timeout: float = 2.0) -> ClusterClient:
+        client = ClusterClient.connect(self.endpoints, cluster=self.name, timeout=timeout, prefer=self.names)
+        self._clients.append(client)
+        return client
+
+    def states(self, client: ClusterClient) -> dict[str, str]:
+        return {h.name: h.state for h in client.hosts().hosts}
+
+    def wait_up(self, client: ClusterClient | None = None, names: Sequence[str] | None = None,
+                timeout: float = 20.0) -> None:
+        """The controller sees every named host up."""
+        client = client or self.client()
+        wanted = set(names or self.names)
+        eventually(lambda: {h for h, s in self.states(client).items() if s == "up"} >= wanted,
+                   f"hosts {sorted(wanted)} to be up", timeout, poll=0.05)
+
+    def missionctl(self, *args: str, timeout: float = 60.0) -> subprocess.CompletedProcess[str]:
+        return subprocess.run([*MISSIONCTL, *args], cwd=ROOT, capture_output=True, text=True, timeout=timeout,
+                              check=False)
+
+    def drd(self, *args: str, timeout: float = 60.0) -> subprocess.CompletedProcess[str]:
+        return subprocess.run([*DRD, *args], cwd=ROOT, capture_output=True, text=True, timeout=timeout, check=False)
+
+    def close(self) -> None:
+        for client in self._clients:
+            client.close()
+        for proc in self.procs.values():
+            if proc.poll() is None:
+                try:
+                    os.kill(proc.pid, signal.SIGCONT)  # a SIGSTOPped process must not survive the test
+                    os.kill(proc.pid, signal.SIGKILL)
+                except ProcessLookupError:
+                    pass
+            proc.wait(timeout=10)
+
+
+@contextmanager
+def running_cluster(folder: Path, names: Sequence[str], *, lease: float = LEASE,
+                    security: str = "{mode: none}") -> Iterator[DaemonCluster]:
+    cluster = DaemonCluster(folder, names, lease=lease, security=security)
+    try:
+        yield cluster
+    finally:
+        cluster.close()
