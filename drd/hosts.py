@@ -62,7 +62,7 @@ SECURITY_KEYS: Mapping[SecurityMode, tuple[str, ...]] = {
 _TOP_KEYS = ("cluster", "hosts")
 _CLUSTER_KEYS = ("name", "security", "lease", "placement")
 _HOST_KEYS = ("endpoint", "roles", "cores", "devices", "robots")
-_DEVICE_KEYS = ("type", "driver", "options", "capacity")
+_DEVICE_KEYS = ("type", "driver", "options", "capacity", "slice")
 _ROBOT_KEYS = ("type", "carrier", "parts", "properties")
 _SECURITY_ALLOWED = ("mode", *dict.fromkeys(k for keys in SECURITY_KEYS.values() for k in keys))
 _PLACEMENT_KEYS = ("cpu", "memory", "instances")
@@ -109,6 +109,7 @@ class Device:
     driver: str
     options: Mapping[str, object] = field(default_factory=dict, hash=False)
     capacity: float | None = None
+    slice: float | None = None  # minimum time slice when a need sets none (exclusive devices only)
 
     @property
     def sharable(self) -> bool:
@@ -183,7 +184,7 @@ class Cluster:
         """
         units: list[Unit | Aggregate] = [
             Unit(d.id, d.type, sharable=d.sharable, capacity=1.0 if d.capacity is None else d.capacity,
-                 properties={**d.options, "driver": d.driver}, host=d.host)
+                 properties={**d.options, "driver": d.driver}, host=d.host, slice=d.slice)
             for d in self.devices
         ]
         return units + [Aggregate(r.id, r.type, r.parts, r.properties, r.host) for r in self.robots]
@@ -289,8 +290,14 @@ class _Parser(ConfigReader):
                 self.fail(f"{key}.capacity", f"{t.name} is not sharable; only a sharable device has a capacity")
             else:
                 capacity = self.number(data["capacity"], f"{key}.capacity") or capacity
+        slice_ = None
+        if "slice" in data:
+            if t and t.sharable:
+                self.fail(f"{key}.slice", f"{t.name} is sharable: it is never taken away, so it has no time slice")
+            else:
+                slice_ = self.duration(data["slice"], f"{key}.slice")
         # An empty type was reported already: parts using the device are then not checked again.
-        return Device(f"{host}.{local_id}", host, t.name if t else "", driver or "", options, capacity)
+        return Device(f"{host}.{local_id}", host, t.name if t else "", driver or "", options, capacity, slice_)
 
     def robot(self, host: str, rid: str, data: dict[Any, Any], key: str, local: Mapping[str, Device] | None,
               users: dict[str, str]) -> Robot:

@@ -63,7 +63,7 @@ def test_resources_are_units_then_aggregates(catalog: Catalog) -> None:
     assert units["ranger1.radio"] == Unit("ranger1.radio", "RadioChannel", sharable=True, capacity=10.0,
                                           properties={"range": 30.0, "driver": "sim"}, host="ranger1")
     assert units["ranger1.drive"] == Unit("ranger1.drive", "Drive", properties={"max_speed": 0.8, "driver": "sim"},
-                                          host="ranger1")
+                                          host="ranger1", slice=60.0)
     assert aggregates["ranger1"].parts == {"drive": "ranger1.drive", "ranges": "ranger1.ranges",
                                            "camera": "ranger1.camera", "launcher": "ranger1.launcher"}
     assert aggregates["ranger1"].properties == {"battery": 1.0, "magazine": 6}
@@ -228,6 +228,10 @@ BAD: list[tuple[str, Callable[[dict[str, Any]], object], list[str]]] = [
       "hosts.r1.devices.camera.options.fov: expected float, got bool True"]),
     ("capacity-exclusive", edit(**{"hosts/r1/devices/drive/capacity": 2}),
      ["hosts.r1.devices.drive.capacity: Drive is not sharable; only a sharable device has a capacity"]),
+    ("slice-sharable", edit(**{"hosts/r1/devices/radio/slice": "10s"}),
+     ["hosts.r1.devices.radio.slice: RadioChannel is sharable: it is never taken away, so it has no time slice"]),
+    ("slice-not-a-duration", edit(**{"hosts/r1/devices/drive/slice": 60}),
+     ["hosts.r1.devices.drive.slice: expected a positive duration such as 3s or 500ms, got int 60"]),
     ("capacity-zero", edit(**{"hosts/r1/devices/radio/capacity": 0}),
      ["hosts.r1.devices.radio.capacity: expected a positive number, got int 0"]),
     ("robot-id-bad", edit(**{"hosts/r1/robots/scout 2": {}}), [f"hosts.r1.robots.scout 2: 'scout 2' {NOT_A_NAME}"]),

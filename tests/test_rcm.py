@@ -96,6 +96,19 @@ def test_higher_priority_takes_the_unit_at_the_holders_slice_boundary() -> None:
     assert resumed.resumed and resumed.units == ("cam1",)
 
 
+def test_a_units_own_slice_applies_when_the_need_sets_none() -> None:
+    """hosts.yaml `slice: 60s` on a Ranger's drive: a mobile base is not handed over every 5 s."""
+    rm = manager(Unit("drive", "Drive", slice=60.0), Unit("cam1", "Camera"))
+    drive = NeedRequest("drive", "Drive")
+    assert granted(rm.request(Request("A", 1, (drive, CAMERA)), 0.0))["A"].slice_until == 60.0
+    rm.request(Request("B", 1, (drive,)), 1.0)
+    assert rm.tick(59.0) == ()  # the default 5 s slice would have preempted A long ago
+    assert isinstance(rm.tick(60.0)[0], Revoked)
+    rm2 = manager(Unit("drive", "Drive", slice=60.0))
+    short = NeedRequest("drive", "Drive", slice=2.0)  # `for 2s` in the mission wins over the unit's slice
+    assert granted(rm2.request(Request("C", 1, (short,)), 0.0))["C"].slice_until == 2.0
+
+
 def test_a_holder_in_overtime_is_preempted_as_soon_as_a_contender_arrives() -> None:
     rm = manager(Unit("cam1", "Camera"))
     rm.request(Request("A", 1, (CAMERA,)), 0.0)

@@ -70,13 +70,13 @@ class AlignRanger(Component):
         if self.goal is not None:
             gx, gy = self.goal
             dist = math.hypot(gx - x, gy - y)
-            if dist > (ARRIVED if self.driving else AWAY):
-                self.driving = True
+            # checked every cycle, not once: a slice boundary may hand the Ranger to another instance mid-way
+            self.driving = dist > (ARRIVED if self.driving else AWAY)
+            if self.driving:
                 err = wrap(math.atan2(gy - y, gx - x) - a)
                 v = min(SPEED, dist) * math.cos(err) if abs(err) < math.pi / 4 else 0.0
                 drive.set_velocity(v, turn_rate(err))
                 return Status.RUNNING
-            self.goal = None
         err = wrap(math.atan2(self.door["y"] - y, self.door["x"] - x) - a)
         if abs(err) < float(self.ctx.params.get("tolerance", 0.05)):
             drive.stop()

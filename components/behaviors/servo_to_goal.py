@@ -7,7 +7,11 @@ and the steering is computed only while `radio.link_ok()`; when the link is down
 
 Where the goal comes from: the `goal` param ({x, y} or {x, y, light}, odometry coordinates) when given,
 else the `goal` output of a finished sibling LocateDarkCorner (`Component.sibling_output`).
-Params: `speed` (0.3 m/s), `tolerance` (0.3 m), `turn_gain` (1.5 /s), `max_turn` (1.0 rad/s).
+When the Scout is stopped short of the goal by a wall or an obstacle (driving forward but, by odometry, not
+moving for `stall` seconds), it is as close as it can get: it stops and succeeds. The goal of a dark corner
+is only an estimate along a bearing (LocateDarkCorner has no depth), so it often lies beyond the corner's
+walls: driving into the corner until blocked is the point.
+Params: `speed` (0.3 m/s), `tolerance` (0.3 m), `turn_gain` (1.5 /s), `max_turn` (1.0 rad/s), `stall` (1.5 s).
 """
 
 from __future__ import annotations
@@ -29,8 +33,10 @@ class ServoToGoal(Component):
         self.camera = self.device("camera")
         self.radio = self.device("radio")
         self.goal = p.get("goal") or self.sibling_output("LocateDarkCorner", "goal") or self.ctx.outputs.get("goal")
+        self.stall = float(p.get("stall", 1.5))
         self.frames_sent = 0
         self.link_was_ok = True
+        self.anchor: tuple[float, float, float] | None = None  # (t, x, y) of the last real progress
 
     def step(self, now: float) -> Status:
         if not self.goal:
@@ -44,6 +50,7 @@ class ServoToGoal(Component):
             return Status.RUNNING
         if not self.link_was_ok:
             self.ctx.log("radio link back: servoing again")
+            self.anchor = None  # waiting was not stalling
         self.link_was_ok = True
         self.camera.brightness(8)  # the frame sent to the Ranger for processing
         self.frames_sent += 1
@@ -55,6 +62,12 @@ class ServoToGoal(Component):
         err = wrap(math.atan2(dy, dx) - h)
         omega = max(-self.max_turn, min(self.max_turn, self.turn_gain * err))
         v = self.speed * math.cos(err) if abs(err) < math.pi / 3 else 0.0  # turn on the spot first
+        if v <= 0.05 or self.anchor is None or math.hypot(x - self.anchor[1], y - self.anchor[2]) > 0.05:
+            self.anchor = (now, x, y)
+        elif now - self.anchor[0] >= self.stall:
+            self.drive.stop()
+            self.ctx.log(f"blocked {math.hypot(dx, dy):.1f} m short of the goal: as close as it gets")
+            return Status.SUCCESS
         self.drive.set_velocity(v, omega)
         return Status.RUNNING
 

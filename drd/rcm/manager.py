@@ -12,8 +12,9 @@ Policy:
   so a lower priority waits while a higher one waits for or holds any unit it needs, and equal
   priorities queue FIFO (by request order). Claims are indexed per unit in heaps, so a request or a
   freed unit only looks at the head waiter of the units involved: O(log n) in the queue length.
-- Slices: a holder keeps its exclusive units for at least its slice (`NeedRequest.slice`, else
-  `default_slice`; the longest of its exclusive needs). From that slice boundary on it is in
+- Slices: a holder keeps its exclusive units for at least its slice (`NeedRequest.slice`, else the
+  longest `Unit.slice` among the need's exclusive units, else `default_slice`; the longest of its
+  exclusive needs). From that slice boundary on it is in
   overtime: an equal- or higher-priority waiter that can then be granted takes its units at once,
   and the holder is `Revoked` (suspended) and queued again at the back of its priority; it is
   resumed later by a `Granted(resumed=True)` (resuming is that flag, not a record of its own; it
@@ -420,11 +421,12 @@ class ResourceManager:
         epochs = {unit: self._reg.next_epoch(unit) for unit in units}
         for unit, quantity in solution.totals.items():
             self._reg.set_use(unit, holder, quantity)
-        slices = [
-            need.slice or self.default_slice
-            for need in wait.request.needs
-            if any(not self._reg.units[u].sharable for u in solution.demand[need.name])
-        ]
+        slices = []
+        for need in wait.request.needs:
+            exclusive = [self._reg.units[u] for u in solution.demand[need.name] if not self._reg.units[u].sharable]
+            if exclusive:
+                own = [u.slice for u in exclusive if u.slice is not None]
+                slices.append(need.slice or (max(own) if own else self.default_slice))
         slice_until = now + max(slices) if slices else now
         hold = Hold(
             request=wait.request,

@@ -16,7 +16,8 @@ from typing import Literal, TypeAlias
 class Unit:
     """A Resource Controller (RC): one drive, camera, launcher or radio channel.
 
-    An exclusive unit (the default) has one holder at a time. A sharable one is split by quantity:
+    An exclusive unit (the default) has one holder at a time, for at least its `slice` (else the
+    manager's default) once others wait. A sharable one is split by quantity:
     the quantities granted on it never add up to more than `capacity`. `properties` carry the
     static dependencies (`mounted_on`, `carrier`) that `where` constraints look at.
     """
@@ -27,12 +28,16 @@ class Unit:
     capacity: float = 1.0
     properties: Mapping[str, object] = field(default_factory=dict, hash=False)
     host: str = ""
+    #: Minimum time slice on this exclusive unit when a need sets none (a Ranger's drive: travel takes time).
+    slice: float | None = None
 
     def __post_init__(self) -> None:
         if not self.id or not self.type:
             raise ValueError(f"a unit needs an id and a type, got id={self.id!r} type={self.type!r}")
         if not self.capacity > 0:
             raise ValueError(f"unit {self.id}: capacity must be > 0, got {self.capacity}")
+        if self.slice is not None and not self.slice > 0:
+            raise ValueError(f"unit {self.id}: slice must be > 0, got {self.slice}")
         object.__setattr__(self, "properties", dict(self.properties))
 
 
