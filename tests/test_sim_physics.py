@@ -195,11 +195,12 @@ def test_a_jump_into_a_wall_stops_short() -> None:
 # ---------------------------------------------------------------- radio, loss, intruders, time
 
 
-def test_radio_range_is_halved_by_each_wall() -> None:
+def test_radio_range_is_shortened_3db_by_each_wall() -> None:
     sim = Simulation(world_with((ranger_at(5.0, 0, 0.0, ("s1", "s2", "s3")),), scouts=(ScoutSpawn("x", 5.0, 5.0, 0),)),
                      seed=8)
     assert sim.radio_ok("s1", "ranger1", 0.1)  # in the magazine
-    assert sim.radio_ok("x", "ranger1", 10.0) and not sim.radio_ok("x", "ranger1", 9.9)  # 5 m, one wall
+    one_wall = 5.0 / 10 ** (-3 / 20)  # 5 m through one wall needs 7.06 m in the open
+    assert sim.radio_ok("x", "ranger1", one_wall + 0.01) and not sim.radio_ok("x", "ranger1", one_wall - 0.01)
     sim.lose("ranger1")
     assert not sim.radio_ok("x", "ranger1", 100.0) and sim.magazine("ranger1") == ()
     assert {sim.state(s) for s in ("s1", "s2", "s3")} == {RobotState.LOST}

@@ -27,9 +27,11 @@ DEFAULT_DT = 0.05
 MAX_LAUNCH = 30.0
 GRAVITY = 9.81
 JUMP_TIME = 0.4
-#: A wall or closed door between a Scout and its Ranger costs ~6 dB, which halves a radio's range
-#: (free-space path loss grows by 20 log10 d). See `Simulation.radio_ok`.
-WALL_RANGE_FACTOR = 0.5
+#: An interior wall or closed door between a Scout and its Ranger costs ~3 dB (drywall at 2.4 GHz), which
+#: shortens a radio's range by 10^(-3/20), about 0.71 (free-space path loss grows by 20 log10 d).
+#: See `Simulation.radio_ok`.
+WALL_LOSS_DB = 3.0
+WALL_RANGE_FACTOR = 10 ** (-WALL_LOSS_DB / 20)
 _TRAIL_STEP = 0.02  # metres moved before a trajectory records another point
 _CLEARANCE = 0.01  # how far short of what it hit a flying Scout lands
 
@@ -394,8 +396,8 @@ class Simulation:
                                   self._rng(robot_id, "brightness"), self.noise.light)
 
     def radio_ok(self, scout_id: str, ranger_id: str, range: float) -> bool:
-        """Whether a Scout and a Ranger can talk: a radio of `range` metres in the open, halved by every wall
-        or closed door on the straight line between them (about 6 dB each). A Scout in the Ranger's
+        """Whether a Scout and a Ranger can talk: a radio of `range` metres in the open, shortened by every wall
+        or closed door on the straight line between them (about 3 dB, a factor 0.71, each). A Scout in the Ranger's
         magazine always can; a lost robot never can."""
         s, r = self._robot(scout_id, alive=False), self._robot(ranger_id, alive=False)
         if RobotState.LOST in (s.state, r.state):
