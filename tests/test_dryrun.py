@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import io
 import json
+from pathlib import Path
+from typing import Any
 
 from drd.dryrun import run
 from drd.hosts import load_hosts
@@ -52,6 +54,49 @@ def test_corridor_dry_run_from_the_command_line() -> None:
     found = sorted((round(d["x"]), round(d["y"])) for d in report["doors"])
     assert found == [(round(x), round(y)) for x, y in open_doors]
     assert sorted(s["scout"] for s in report["scouts"]) == [f"scout{i}" for i in range(1, 7)]
+    assert_every_open_room_watched(report, world)
+
+
+def assert_every_open_room_watched(report: dict[str, Any], world: Any) -> None:
+    """Every instance succeeded, one Scout ended in each room behind an open door, and intruders were seen."""
+    instances = [t for t in report["timeline"] if t["path"].count("/") == 1 and t["path"].endswith("]")]
+    assert len(instances) == 6 and all(t["status"] == "success" for t in instances), instances
+    open_rooms = sorted(d.room for d in world.doors if d.state.value == "open")
+    rooms = sorted(next(r.id for r in world.rooms if r.contains(s["x"], s["y"])) for s in report["scouts"])
+    assert rooms == open_rooms
+    assert report["detections"]  # intruder1 walks through n3 and n4, which get Scouts
+
+
+def dry_run_cli(mission: Path, *args: str) -> dict[str, Any]:
+    import subprocess
+
+    r = subprocess.run(["missionctl", "dry-run", str(mission), "--json", *args], cwd=ROOT, capture_output=True,
+                       text=True, timeout=300, check=False)
+    report: dict[str, Any] = json.loads(r.stdout)
+    assert r.returncode == (0 if report["outcome"] == "success" else 1), r.stderr
+    return report
+
+
+def test_two_rangers_watch_every_open_room_sooner_than_one() -> None:
+    """The example's promise: with more Rangers the instances proceed in parallel, with no change to the file."""
+    mission = ROOT / "missions" / "corridor_surveillance.mission"
+    one = dry_run_cli(mission)
+    two = dry_run_cli(mission, "--world", "two_rangers", "--hosts", "hosts.two_rangers.yaml")
+    assert one["outcome"] == two["outcome"] == "success"
+    assert_every_open_room_watched(two, load_world(ROOT / "worlds" / "two_rangers.yaml"))
+    assert two["sim_time"] < one["sim_time"] - 20
+    assert {h["resources"]["ranger"] for h in two["holds"] if "ranger" in h["resources"]} == {"ranger1", "ranger2"}
+
+
+def test_sweep_example_maps_sweeps_and_comes_home() -> None:
+    """Calibrate and MapCorridor in any order, then SweepCorridor (back along the corridor), then ReturnToStart."""
+    report = dry_run_cli(shared_examples() / "sweep.mission")
+    assert report["outcome"] == "success", report["reason"]
+    ended = {t["path"]: t for t in report["timeline"]}
+    assert ended["Sweep/MapCorridor"]["status"] == ended["Sweep/Calibrate"]["status"] == "success"
+    assert ended["Sweep/SweepCorridor"]["entered"] >= max(ended["Sweep/MapCorridor"]["exited"],
+                                                         ended["Sweep/Calibrate"]["exited"])
+    assert ended["Sweep/ReturnToStart"]["status"] == "success"  # home, not the `after 5min` escape
 
 
 def test_shared_camera_from_the_command_line_alternates_with_the_real_observe() -> None:

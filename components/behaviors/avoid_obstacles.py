@@ -7,6 +7,7 @@ radius) is subtracted. Only points inside the swept path (|lateral| < BODY) coun
 
 from __future__ import annotations
 
+import bisect
 import math
 
 from drd.runtime.component import Component, Status
@@ -19,18 +20,13 @@ class AvoidObstacles(Component):
     def step(self, now: float) -> Status:
         margin = float(self.ctx.params.get("margin", 0.3))
         scan = self.device("ranges").scan()
-        ahead = []
-        left = right = 0.0
-        for i, r in enumerate(scan.ranges):
-            a = scan.angle(i)
-            x, y = r * math.cos(a), r * math.sin(a)
-            if x > 0 and abs(y) < BODY:
-                ahead.append(x - BODY)
-            if 0.2 < a < 1.4:
-                left += r
-            elif -1.4 < a < -0.2:
-                right += r
-        near = min(ahead, default=math.inf) < margin
+        b, ranges = scan.beams(), scan.ranges
+        # the nearest hit ahead inside the swept path (x > 0, |y| < BODY), and how open each side is
+        ahead = min([x for r, c, s in zip(ranges, b.cos, b.sin, strict=True)
+                     if (x := r * c) > 0 and -BODY < r * s < BODY], default=math.inf)
+        left = sum(ranges[bisect.bisect_right(b.angles, 0.2):bisect.bisect_left(b.angles, 1.4)])  # 0.2 < a < 1.4
+        right = sum(ranges[bisect.bisect_right(b.angles, -1.4):bisect.bisect_left(b.angles, -0.2)])
+        near = ahead - BODY < margin
         if near:
             self.device("drive").set_velocity(0.0, TURN if left >= right else -TURN)
         self.ctx.outputs["avoiding"] = near

@@ -3,21 +3,27 @@
 A door is a run of beams on one side that reach well past the fitted corridor wall (into a room), with
 wall hits on both sides of the run; its width is measured along the wall line. A closed door is a wall
 segment to the laser, so it never shows up as a gap. The door's centre is given in odometry coordinates.
-Doors already in the shared DoorLog (`visited`: a dict keyed by (rounded x, side)) are skipped.
+Doors already in the shared DoorLog (`visited`: a dict keyed by (rounded x, side)) are skipped. At the end of
+the corridor (a wall across the way, as FollowCorridor sees it) it fails: there is no new door left ahead, so
+`FindNewDoor -> fail on error` ends that RoomSurveillance instance and the mission degrades gracefully.
 """
 
 from __future__ import annotations
 
 import math
+import re
 from typing import Any
 
-from components.behaviors.follow_corridor import corridor
+from components.behaviors.follow_corridor import corridor, wall_across
 from drd.runtime.component import Component, Status
 
 #: How far past the wall line (m) a beam must reach to count as looking through a gap.
 BEYOND = 0.5
 #: Only doors whose centre is within this angle of abeam are reported (the geometry is best there).
 ABEAM = math.radians(30)
+_FAR = math.pi - 0.15  # beams closer than 0.15 rad to the wall's direction cross it too far away to tell
+#: A maximal run of beams through the wall with a beam at the wall on both sides.
+_GAP = re.compile(r"(?<=w)b+(?=w)")
 
 
 def door_key(x: float, side: str) -> tuple[float, str]:
@@ -44,46 +50,42 @@ def known(log: Any, x: float, y: float, side: str, width: float) -> bool:
 def find_gaps(scan: Any, min_width: float, expect=(None, None)) -> list[dict[str, float | str]]:
     """Door gaps in one scan, in the robot frame: {width, x, y, side, bearing}."""
     walls = corridor(scan, expect)
+    b = scan.beams()
     out: list[dict[str, float | str]] = []
     for wall, sgn, side in ((walls[0], 1, "left"), (walls[1], -1, "right")):
         if wall is None:
             continue
         d, tilt = wall.distance, wall.angle * sgn  # the wall line in the side's frame: y' = d / cos + x' tan
-        rel = []  # per beam: (+1 beyond the wall, 0 at the wall, -1 short of it / nothing) and the wall crossing x
-        for i, r in enumerate(scan.ranges):
-            a = scan.angle(i) * sgn - tilt  # beam angle measured from the wall direction, on this side
-            if not 0.15 < a < math.pi - 0.15:
-                rel.append((-1, 0.0))
-                continue
-            cross = d / math.sin(a)  # range at which the beam crosses the wall line
-            xw = cross * math.cos(a)  # along the wall
-            if r >= cross + BEYOND:
-                rel.append((1, xw))
-            elif abs(r - cross) < 0.15:
-                rel.append((0, xw))
-            else:
-                rel.append((-1, xw))
-        i = 0
-        while i < len(rel):
-            if rel[i][0] != 1:
-                i += 1
-                continue
-            j = i
-            while j + 1 < len(rel) and rel[j + 1][0] == 1:
-                j += 1
-            if i > 0 and j + 1 < len(rel) and rel[i - 1][0] == 0 and rel[j + 1][0] == 0:
-                # the jambs lie between the last wall hit and the first beam through, on either side
-                e1 = (rel[i - 1][1] + rel[i][1]) / 2
-                e2 = (rel[j][1] + rel[j + 1][1]) / 2
-                width = abs(e1 - e2)
-                xc = (e1 + e2) / 2
-                bearing = math.atan2(d, xc)
-                if width >= min_width and abs(bearing - math.pi / 2) <= ABEAM:
-                    # back to the robot frame: rotate the wall frame by tilt, mirror for the right side
-                    c, s = math.cos(tilt), math.sin(tilt)
-                    rx, ry = xc * c - d * s, sgn * (xc * s + d * c)
-                    out.append({"width": width, "x": rx, "y": ry, "side": side})
-            i = j + 1
+        ct, st = math.cos(tilt), math.sin(tilt)
+        # A beam's angle from the wall direction, on this side, is a = sgn * angle - tilt; only beams with
+        # 0.15 < a < pi - 0.15 can be told apart (the others count as short). `b.span` finds them, with a margin
+        # for rounding: the test on `a` itself below decides.
+        lo, hi = (0.15 + tilt - 1e-9, _FAR + tilt + 1e-9) if sgn > 0 else (-_FAR - tilt - 1e-9, -0.15 - tilt + 1e-9)
+        i0, i1 = b.span(lo, hi)
+        # per beam of the span: the range at which it crosses the wall line (None where it runs too close to the
+        # wall's direction to tell), with the sine of a from the beam tables; then whether it reaches well beyond
+        # the wall ("b"), stops at the wall ("w") or short of it / nothing ("s")
+        ranges, angles, cos, sin = scan.ranges[i0:i1], b.angles[i0:i1], b.cos[i0:i1], b.sin[i0:i1]
+        crossing = [d / (sgn * s * ct - c * st) if 0.15 < t * sgn - tilt < _FAR else None
+                    for t, c, s in zip(angles, cos, sin, strict=True)]
+        kinds = "".join(["s" if x is None else "b" if r >= x + BEYOND else "w" if -0.15 < r - x < 0.15 else "s"
+                         for r, x in zip(ranges, crossing, strict=True)])
+
+        # a door: a run of beams through the wall between two beams at it (beams out of the span are short)
+        for run in _GAP.finditer(kinds):
+            i, j = run.start(), run.end() - 1
+            # where the beams on either side of each jamb cross the wall line, along the wall
+            w0, b0, b1, w1 = [x * (cos[k] * ct + sgn * sin[k] * st) for k in (i - 1, i, j, j + 1)
+                              if (x := crossing[k]) is not None]
+            # the jambs lie between the last wall hit and the first beam through, on either side
+            e1, e2 = (w0 + b0) / 2, (b1 + w1) / 2
+            width = abs(e1 - e2)
+            xc = (e1 + e2) / 2
+            bearing = math.atan2(d, xc)
+            if width >= min_width and abs(bearing - math.pi / 2) <= ABEAM:
+                # back to the robot frame: rotate the wall frame by tilt, mirror for the right side
+                rx, ry = xc * ct - d * st, sgn * (xc * st + d * ct)
+                out.append({"width": width, "x": rx, "y": ry, "side": side})
     return out
 
 
@@ -104,6 +106,9 @@ class DetectDoor(Component):
     def step(self, now: float) -> Status:
         min_width = float(self.ctx.params.get("min_width", 0.7))
         scan = self.device("ranges").scan()
+        if wall_across(scan):  # a wall across the way: no new door between here and the end
+            self.ctx.log("the corridor ends here, with no new door")
+            return Status.FAILURE
         left, right = corridor(scan, self.expect)
         self.expect = (left.distance if left else self.expect[0], right.distance if right else self.expect[1])
         pose = self._pose() or (0.0, 0.0, 0.0)
@@ -115,7 +120,8 @@ class DetectDoor(Component):
             width, side = float(gap["width"]), str(gap["side"])
             if known(log, x, y, side, max(width, 1.0)):
                 continue
-            door = {"width": round(width, 3), "x": round(x, 3), "y": round(y, 3), "side": side}
+            door = {"width": round(width, 3), "x": round(x, 3), "y": round(y, 3), "side": side,
+                    "from": {"x": round(px, 3), "y": round(py, 3)}}  # where the Ranger stood: AlignRanger returns
             if isinstance(log, dict):
                 log[door_key(x, side)] = dict(door)
             self.ctx.outputs["door"] = door

@@ -3,17 +3,19 @@
 Home is, in order: the `home` parameter ((x, y) in odometry coordinates), the pose this robot's first
 Ranger behavior recorded in the shared data (`home[<drive resource>]`, see `remember_home`), else the
 odometry origin (0, 0). It turns toward home, drives, slows down for what the front beams show, and
-succeeds within ARRIVED metres.
+succeeds within ARRIVED metres, or when blocked within NEAR metres of home (odometry drift).
 """
 
 from __future__ import annotations
 
 import math
 
-from components.behaviors.follow_corridor import remember_home, wrap
+from components.behaviors.follow_corridor import clearance_ahead, remember_home, wrap
 from drd.runtime.component import Component, Status
 
 ARRIVED = 0.3
+#: Blocked this close to home (m) counts as arrived: after a long drive, odometry drifts by that much.
+NEAR = 1.5
 K_TURN = 1.5
 #: Body clearance kept ahead (m): the Ranger's radius plus a margin.
 BODY = 0.45
@@ -41,10 +43,11 @@ class ReturnToStart(Component):
         omega = max(-1.0, min(1.0, K_TURN * err))
         v = 0.0 if abs(err) > 0.6 else min(speed, 0.8 * dist) * math.cos(err)
         if v > 0 and "ranges" in self.ctx.devices:
-            scan = self.device("ranges").scan()
-            ahead = [r * math.cos(scan.angle(i)) for i, r in enumerate(scan.ranges)
-                     if abs(scan.angle(i)) < math.pi / 2 and abs(r * math.sin(scan.angle(i))) < BODY - 0.1]
-            free = min(ahead, default=scan.max_range) - BODY
+            free = clearance_ahead(self.device("ranges").scan(), BODY - 0.1) - BODY
+            if free <= 0.02 and dist < NEAR:  # odometry drift put home behind the wall: this is home
+                drive.stop()
+                self.ctx.log(f"home is {dist:.2f} m on, behind what is in the way: stopping here")
+                return Status.SUCCESS
             v = max(0.0, min(v, free))
         drive.set_velocity(v, omega)
         return Status.RUNNING

@@ -5,12 +5,29 @@ package imports no driver module itself; only the shared `SimDriver` base lives 
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Iterator
-from contextlib import contextmanager
+from collections.abc import Callable
+from types import TracebackType
 
 from drd.hosts import Device
 from drd.hw.interfaces import Fence, HardwareError
 from drd.sim import SimError, Simulation
+
+
+class _SimErrors:
+    """The context manager of `SimDriver.sim_errors`: one per driver, reused by every call (a `contextmanager`
+    generator would cost more than most of the simulator's readings)."""
+
+    __slots__ = ("device_id",)
+
+    def __init__(self, device_id: str) -> None:
+        self.device_id = device_id
+
+    def __enter__(self) -> None:
+        return None
+
+    def __exit__(self, kind: type[BaseException] | None, e: BaseException | None, tb: TracebackType | None) -> None:
+        if isinstance(e, SimError):
+            raise HardwareError(f"{self.device_id}: {e}") from e
 
 
 class SimDriver:
@@ -19,6 +36,7 @@ class SimDriver:
     def __init__(self, device: Device, robot_id: str, sim: Simulation) -> None:
         self.device, self.robot_id, self.sim = device, robot_id, sim
         self.fence = Fence(f"{device.id} ({robot_id})")
+        self._sim_errors = _SimErrors(device.id)
 
     def option(self, key: str, default: float, check: Callable[[float], bool] = lambda x: x > 0) -> float:
         """A numeric device option (hosts.yaml `options:`), or `default`; a bad value names device and key."""
@@ -28,13 +46,9 @@ class SimDriver:
             raise HardwareError(f"{self.device.id}: option {key} has a bad value {value!r}")
         return float(value)
 
-    @contextmanager
-    def sim_errors(self) -> Iterator[None]:
-        """Turn the simulator's `SimError` into the interfaces' `HardwareError`, naming the device."""
-        try:
-            yield
-        except SimError as e:
-            raise HardwareError(f"{self.device.id}: {e}") from e
+    def sim_errors(self) -> _SimErrors:
+        """Turn the simulator's `SimError` into the interfaces' `HardwareError`, naming the device (`with`)."""
+        return self._sim_errors
 
     def __repr__(self) -> str:
         return f"{type(self).__name__}({self.device.id!r}, robot={self.robot_id!r})"

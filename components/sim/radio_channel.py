@@ -1,4 +1,4 @@
-"""The `sim` RadioChannel: whether a Scout and its Ranger are within radio reach (walls halve it)."""
+"""The `sim` RadioChannel: whether a Scout and its Ranger are within radio reach (each wall shortens it)."""
 
 from __future__ import annotations
 
@@ -16,13 +16,13 @@ class SimRadioChannel(SimDriver):
         self.range = self.option("range", 30.0)
         self.peer = peer if peer is not None else next(
             (r.id for r in sim.world.rangers if robot_id in r.magazine), None)
+        self._rangers = frozenset(r.id for r in sim.world.rangers)
 
     def link_ok(self, peer: str | None = None) -> bool:
         """Whether this robot and `peer` (default: its Ranger) can talk now."""
         other = peer if peer is not None else self.peer
         if other is None:
             raise ValueError(f"{self.device.id}: {self.robot_id} has no default peer; name one")
-        scout, ranger = (self.robot_id, other) if any(r.id == other for r in self.sim.world.rangers) \
-            else (other, self.robot_id)
+        scout, ranger = (self.robot_id, other) if other in self._rangers else (other, self.robot_id)
         with self.sim_errors():
             return self.sim.radio_ok(scout, ranger, self.range)

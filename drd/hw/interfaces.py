@@ -11,11 +11,14 @@ the caller holds. A driver remembers the highest epoch it has seen and refuses o
 
 from __future__ import annotations
 
+import bisect
+import functools
+import math
 from dataclasses import dataclass
 from typing import Protocol, runtime_checkable
 
 __all__ = [
-    "INTERFACES", "Camera", "DetectionLike", "Drive", "Fence", "HardwareError", "Jump", "Landing", "Launcher",
+    "INTERFACES", "Beams", "Camera", "DetectionLike", "Drive", "Fence", "HardwareError", "Jump", "Landing", "Launcher",
     "RadioChannel", "RangeSensor", "Scan", "StaleCommand",
 ]
 
@@ -57,6 +60,33 @@ class Scan:
     def angle(self, i: int) -> float:
         """The bearing of beam `i` in radians, relative to the robot's heading."""
         return self.angle_min + i * self.angle_step
+
+    def beams(self) -> Beams:
+        """Every beam's bearing (exactly `angle(i)`), cosine and sine: computed once per laser, not per scan."""
+        return _beams(len(self.ranges), self.angle_min, self.angle_step)
+
+
+@dataclass(frozen=True, slots=True)
+class Beams:
+    """The directions of the beams of a scan, in the robot frame: what does not change from one scan to the next.
+
+    `angles[i]` is `Scan.angle(i)`, and `cos[i]`, `sin[i]` its cosine and sine, so a beam's hit point is
+    `(r * cos[i], r * sin[i])` with no trigonometry per scan.
+    """
+
+    angles: tuple[float, ...]
+    cos: tuple[float, ...]
+    sin: tuple[float, ...]
+
+    def span(self, lo: float, hi: float) -> tuple[int, int]:
+        """The beams `i0 <= i < i1` whose angle lies in `[lo, hi]` (a scan's angles increase, right to left)."""
+        return bisect.bisect_left(self.angles, lo), bisect.bisect_right(self.angles, hi)
+
+
+@functools.lru_cache(maxsize=32)
+def _beams(n: int, angle_min: float, angle_step: float) -> Beams:
+    angles = tuple(angle_min + i * angle_step for i in range(n))
+    return Beams(angles, tuple(math.cos(a) for a in angles), tuple(math.sin(a) for a in angles))
 
 
 @dataclass(frozen=True, slots=True)

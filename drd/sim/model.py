@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import bisect
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from enum import StrEnum
 
 from drd.config import ConfigError, ConfigProblem
@@ -109,6 +109,10 @@ class Intruder:
     path: tuple[Waypoint, ...]
     loop: bool = False
     radius: float = INTRUDER_RADIUS
+    _times: tuple[float, ...] = field(init=False, repr=False, compare=False)
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "_times", tuple(w.t for w in self.path))  # for bisect, once
 
     def position(self, t: float) -> Point:
         """Where the intruder is at sim time `t`: at its first waypoint before it, its last after (unless looping)."""
@@ -119,7 +123,7 @@ class Intruder:
             if not self.loop:
                 return (last.x, last.y)
             t = first.t + math.fmod(t - first.t, last.t - first.t)
-        i = bisect.bisect_right([w.t for w in self.path], t)
+        i = bisect.bisect_right(self._times, t)
         w0, w1 = self.path[i - 1], self.path[min(i, len(self.path) - 1)]
         f = 0.0 if w1.t == w0.t else (t - w0.t) / (w1.t - w0.t)
         return (w0.x + (w1.x - w0.x) * f, w0.y + (w1.y - w0.y) * f)
@@ -162,16 +166,47 @@ class World:
     scouts: tuple[ScoutSpawn, ...] = ()
     description: str = ""
     source: str = "<world>"
+    _light_cells: dict[tuple[int, int], tuple[tuple[Room, ...], tuple[LightZone, ...]]] | None = field(
+        default=None, init=False, repr=False, compare=False)
 
     def light(self, x: float, y: float) -> float:
         """The light level (0 dark .. 1 bright) at a point: the room's ambient light, dimmed by dark corners."""
-        base = next((r.light for r in self.rooms if r.contains(x, y)), self.ambient)
+        cells = self._light_cells
+        if cells is None:
+            cells = self._index_light()
+        try:
+            rooms, dark = cells.get((math.floor(x), math.floor(y)), (self.rooms, self.dark))
+        except (ValueError, OverflowError):  # not a finite point: look at everything, as for one outside
+            rooms, dark = self.rooms, self.dark
+        base = self.ambient
+        for r in rooms:
+            if r.x0 <= x <= r.x1 and r.y0 <= y <= r.y1:
+                base = r.light
+                break
         level = base
-        for z in self.dark:
+        for z in dark:
             d = math.hypot(x - z.x, y - z.y)
             if d < z.radius and z.level < base:
                 level = min(level, z.level + (base - z.level) * (d / z.radius) ** 2)
         return level
+
+    def _index_light(self) -> dict[tuple[int, int], tuple[tuple[Room, ...], tuple[LightZone, ...]]]:
+        """For each 1 m cell of the world, the rooms and dark corners that may cover a point of it (in file order,
+        so the first room containing a point is still the one that sets its light): `light` looks at those only.
+        Points outside every cell look at everything."""
+        x0, y0, x1, y1 = self.bounds
+        for z in self.dark:
+            x0, y0, x1, y1 = min(x0, z.x - z.radius), min(y0, z.y - z.radius), max(x1, z.x + z.radius), \
+                max(y1, z.y + z.radius)
+        cells = {}
+        for i in range(math.floor(x0), math.floor(x1) + 1):
+            for j in range(math.floor(y0), math.floor(y1) + 1):
+                rooms = tuple(r for r in self.rooms if r.x0 <= i + 1 and r.x1 >= i and r.y0 <= j + 1 and r.y1 >= j)
+                dark = tuple(z for z in self.dark if z.x - z.radius <= i + 1 and z.x + z.radius >= i
+                             and z.y - z.radius <= j + 1 and z.y + z.radius >= j)
+                cells[i, j] = (rooms, dark)
+        object.__setattr__(self, "_light_cells", cells)  # a cache: frozen for everything else
+        return cells
 
     def room_at(self, x: float, y: float) -> Room | None:
         return next((r for r in self.rooms if r.contains(x, y)), None)

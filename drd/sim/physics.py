@@ -19,7 +19,7 @@ import pymunk
 from drd.sim import sensors
 from drd.sim.geometry import Point
 from drd.sim.model import RANGER_RADIUS, SCOUT_RADIUS, DoorState, World
-from drd.sim.robots import Flight, Pose, RobotBody, RobotState, SimError
+from drd.sim.robots import Flight, Pose, RobotBody, RobotState, SimError, placement, set_position, set_velocity
 from drd.sim.sensors import DOOR, EVERYTHING, INTRUDER, OBSTACLE, RANGER, SCOUT, TALL, WALL, Detection, Noise
 
 DEFAULT_DT = 0.05
@@ -49,18 +49,25 @@ class Simulation:
         self.jump_height, self.max_jump = jump_height, max_jump
         self.time = 0.0
         self.steps = 0
+        # Changes whenever anything a sensor could measure may have changed (a step, a door, a launch, a
+        # landing, a loss): a driver may keep a reading for as long as it stays the same (one scan per instant).
+        self.version = 0
         self.space = pymunk.Space()
         self.space.collision_slop = 0.002  # metres: the default (0.1) is meant for pixels
+        # No damping: a robot standing still has chipmunk's own velocity update, which then zeroes its velocity
+        # every step (`RobotBody.wheels_changed`); robots driving set theirs, intruders are kinematic.
+        self.space.damping = 0.0
         self._rays = sensors.RayCaster(self.space)
         self._rngs: dict[tuple[str, str], random.Random] = {}
         self._heights: dict[pymunk.Shape, float] = {}
         self._doors: dict[str, tuple[DoorState, pymunk.Segment]] = {}
         self._build_static()
         self._intruders: dict[str, pymunk.Body] = {}
+        self._walking: dict[str, Point] = {}  # where each intruder's body is (exactly its path's point)
         self._intruder_trails: dict[str, list[tuple[float, float, float]]] = {}
         for intruder in world.intruders:
             body = pymunk.Body(body_type=pymunk.Body.KINEMATIC)
-            body.position = intruder.position(0.0)
+            body.position = self._walking[intruder.id] = intruder.position(0.0)
             shape = pymunk.Circle(body, intruder.radius)
             shape.filter = pymunk.ShapeFilter(categories=INTRUDER, mask=RANGER | SCOUT)
             self.space.add(body, shape)
@@ -104,7 +111,7 @@ class Simulation:
         group = len(self._robots) + 1
         shape.filter = pymunk.ShapeFilter(group=group, categories=RANGER if kind == "ranger" else SCOUT)
         robot = RobotBody(rid, kind, body, shape, group, speed, base, state, odom=(x, y, heading), last=(x, y, heading))
-        body.velocity_func = robot.drive
+        robot.wheels_changed()
         if state is RobotState.FLOOR:
             self.space.add(body, shape)
             robot.trail.append((0.0, x, y))
@@ -129,29 +136,37 @@ class Simulation:
 
     def _substep(self, h: float) -> None:
         t1 = self.time + h
+        walks = []
         for intruder in self.world.intruders:  # kinematic: they push robots, nothing pushes them
-            (x0, y0), (x1, y1) = intruder.position(self.time), intruder.position(t1)
             body = self._intruders[intruder.id]
-            body.position, body.velocity = (x0, y0), ((x1 - x0) / h, (y1 - y0) / h)
+            (x0, y0), (x1, y1) = self._walking[intruder.id], intruder.position(t1)  # it stands at x0, y0
+            set_velocity(body, (x1 - x0) / h, (y1 - y0) / h)
+            walks.append((intruder.id, body, x1, y1))
         self.space.step(h)  # robots' wheels act in `RobotBody.drive`, before contacts are solved
-        self.time, self.steps = t1, self.steps + 1
-        for intruder in self.world.intruders:
-            body = self._intruders[intruder.id]
-            body.position = intruder.position(t1)  # exact, whatever the integrator's rounding
-            self._record(self._intruder_trails[intruder.id], body.position.x, body.position.y)
+        self.time, self.steps, self.version = t1, self.steps + 1, self.version + 1
+        for iid, body, x1, y1 in walks:
+            set_position(body, x1, y1)  # exact, whatever the integrator's rounding
+            self._walking[iid] = (x1, y1)
+            self._record(self._intruder_trails[iid], x1, y1)
         for r in self._robots.values():
-            if r.state is RobotState.FLYING and r.flight is not None:
+            if r.state is RobotState.FLOOR:
+                x, y, a = placement(r.body)
+                r.integrate_odometry(x, y, a, self._rng, self.noise.odometry)
+                self._record(r.trail, x, y)
+            elif r.state is RobotState.FLYING and r.flight is not None:
                 if t1 >= r.flight.t1 - 1e-9:
                     self._land(r)
                 else:
                     self._record(r.trail, *self._flight_point(r.flight))
-            elif r.state is RobotState.FLOOR:
-                r.integrate_odometry(self._rng(r.id, "odometry"), self.noise.odometry)
-                self._record(r.trail, r.body.position.x, r.body.position.y)
 
     def _record(self, trail: list[tuple[float, float, float]], x: float, y: float, force: bool = False) -> None:
-        if force or not trail or math.hypot(x - trail[-1][1], y - trail[-1][2]) >= _TRAIL_STEP:
+        if force or not trail:
             trail.append((self.time, x, y))
+            return
+        _, lx, ly = trail[-1]
+        if x != lx or y != ly:  # a robot standing still (most of a Scout's watch) moved 0 m
+            if math.hypot(x - lx, y - ly) >= _TRAIL_STEP:
+                trail.append((self.time, x, y))
 
     # ---------------------------------------------------------------- robots
 
@@ -164,13 +179,16 @@ class Simulation:
 
     def pose(self, robot_id: str) -> Pose:
         """Ground truth, for the report and the picture; behaviors get `odometry` through their drivers."""
-        r = self._robot(robot_id, alive=False)
+        return Pose(*self._where(self._robot(robot_id, alive=False)))
+
+    def _where(self, r: RobotBody) -> tuple[float, float, float]:
+        """`pose` as a plain tuple (what the sensors start from, many times a cycle)."""
         if r.state is RobotState.MAGAZINE and r.carrier:
-            return self.pose(r.carrier)
+            return self._where(self._robot(r.carrier, alive=False))
         if r.state is RobotState.FLYING and r.flight:
             x, y = self._flight_point(r.flight)
-            return Pose(x, y, r.flight.heading)
-        return Pose(r.body.position.x, r.body.position.y, r.body.angle)
+            return x, y, r.flight.heading
+        return placement(r.body)
 
     def odometry(self, robot_id: str) -> Pose:
         """What the robot believes its pose is: its start pose plus noisy wheel odometry (a launched Scout
@@ -197,6 +215,7 @@ class Simulation:
         if top > r.max_speed:
             v_left, v_right = v_left * r.max_speed / top, v_right * r.max_speed / top
         r.v, r.omega = (v_left + v_right) / 2, (v_right - v_left) / r.wheel_base
+        r.wheels_changed()
         if r.state is RobotState.FLOOR:
             r.drive(r.body, (0.0, 0.0), 1.0, self.dt)  # from the next step on, not one step later
 
@@ -279,6 +298,8 @@ class Simulation:
         end = (start[0] + travel * math.cos(a), start[1] + travel * math.sin(a))
         s.flight = Flight(s.id, kind, start, end, self.time, self.time + duration, a, blocked)
         s.state, s.v, s.omega = RobotState.FLYING, 0.0, 0.0
+        s.wheels_changed()
+        self.version += 1
         self._record(s.trail, *start, force=True)
         if duration <= 0:
             self._land(s)
@@ -290,6 +311,7 @@ class Simulation:
         s.body.velocity, s.body.angular_velocity = (0.0, 0.0), 0.0
         self.space.add(s.body, s.shape)
         s.state, s.last = RobotState.FLOOR, (*s.flight.end, s.flight.heading)
+        self.version += 1
         if s.flight.kind == "jump":  # the foot knows how far it pushed, roughly
             self._odometry_jump(s)
         self._record(s.trail, *s.flight.end, force=True)
@@ -313,6 +335,7 @@ class Simulation:
         if r.state is RobotState.FLOOR:
             self.space.remove(r.body, r.shape)
         r.state, r.v, r.omega, r.flight = RobotState.LOST, 0.0, 0.0, None
+        self.version += 1
         for sid in list(r.magazine):  # each one leaves the magazine as it goes
             self.lose(sid)
         if r.carrier and robot_id in (carrier := self._robots[r.carrier]).magazine:
@@ -347,6 +370,7 @@ class Simulation:
         elif solid_before and not solid_after:
             self.space.remove(shape)
         self._doors[door_id] = (DoorState(state), shape)
+        self.version += 1
 
     def _door(self, door_id: str) -> tuple[DoorState, pymunk.Segment]:
         if door_id not in self._doors:
@@ -359,7 +383,7 @@ class Simulation:
 
     def intruders(self) -> dict[str, Point]:
         """Where every intruder is now: ground truth, for the report and the picture."""
-        return {iid: (b.position.x, b.position.y) for iid, b in self._intruders.items()}
+        return dict(self._walking)  # exactly where their bodies are (set there every sub-step)
 
     def trajectory(self, robot_id: str) -> list[tuple[float, float, float]]:
         """(t, x, y) points of a robot or intruder, one every 2 cm of motion (plus launches and landings)."""
@@ -376,23 +400,23 @@ class Simulation:
         """
         if n_beams < 1 or max_range <= 0:
             raise ValueError(f"need n_beams >= 1 and max_range > 0, got {n_beams} and {max_range}")
-        p, group = self._sensor_pose(robot_id)
-        return sensors.scan(self._rays, (p.x, p.y), p.heading, n_beams, max_range, fov, group,
+        x, y, heading, group = self._sensor_pose(robot_id)
+        return sensors.scan(self._rays, (x, y), heading, n_beams, max_range, fov, group,
                             self._rng(robot_id, "ranges"), self.noise.range)
 
     def camera(self, robot_id: str, fov: float, max_range: float, min_light: float = 0.2) -> list[Detection]:
         """Intruders the robot's camera sees: within `fov` radians and `max_range`, no wall or closed door
         in between, and standing in light of at least `min_light` (a person in a dark corner is not seen)."""
-        p, _ = self._sensor_pose(robot_id)
-        return sensors.detect(self._rays, self.world, (p.x, p.y), p.heading, fov, max_range, min_light,
+        x, y, heading, _ = self._sensor_pose(robot_id)
+        return sensors.detect(self._rays, self.world, (x, y), heading, fov, max_range, min_light,
                               self.intruders(), self._rng(robot_id, "camera"), self.noise)
 
     def brightness(self, robot_id: str, fov: float, n_regions: int, max_range: float = 10.0) -> list[float]:
         """Mean light of `n_regions` vertical strips of the camera image, right to left (dark corners show here)."""
         if n_regions < 1:
             raise ValueError(f"need n_regions >= 1, got {n_regions}")
-        p, _ = self._sensor_pose(robot_id)
-        return sensors.brightness(self._rays, self.world, (p.x, p.y), p.heading, fov, n_regions, max_range,
+        x, y, heading, _ = self._sensor_pose(robot_id)
+        return sensors.brightness(self._rays, self.world, (x, y), heading, fov, n_regions, max_range,
                                   self._rng(robot_id, "brightness"), self.noise.light)
 
     def radio_ok(self, scout_id: str, ranger_id: str, range: float) -> bool:
@@ -404,12 +428,12 @@ class Simulation:
             return False
         if s.state is RobotState.MAGAZINE and s.carrier == ranger_id:
             return True
-        a, b = self.pose(scout_id), self.pose(ranger_id)
-        d = math.hypot(a.x - b.x, a.y - b.y)
-        return d <= range * WALL_RANGE_FACTOR ** sensors.walls_between(self.space, (a.x, a.y), (b.x, b.y))
+        (ax, ay, _), (bx, by, _) = self._where(s), self._where(r)
+        d = math.hypot(ax - bx, ay - by)
+        return d <= range * WALL_RANGE_FACTOR ** self._rays.crossings((ax, ay), (bx, by), sensors.SIGHT)
 
-    def _sensor_pose(self, robot_id: str) -> tuple[Pose, int]:
-        """Where a robot's sensors are, and the group whose shapes they must not see (their own body)."""
+    def _sensor_pose(self, robot_id: str) -> tuple[float, float, float, int]:
+        """Where a robot's sensors are (x, y, heading), and the group whose shapes they must not see (its body)."""
         r = self._robot(robot_id)
         group = self._robots[r.carrier].group if r.state is RobotState.MAGAZINE and r.carrier else r.group
-        return self.pose(robot_id), group
+        return (*self._where(r), group)

@@ -8,12 +8,56 @@ from __future__ import annotations
 
 import math
 import random
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from enum import StrEnum
+from typing import Any
 
 import pymunk
 
 from drd.sim.geometry import Point
+
+
+def _chipmunk() -> Any:
+    """pymunk's cffi library when it has the body accessors the hot paths use, else None (the public API)."""
+    try:
+        from pymunk._chipmunk_cffi import lib
+    except ImportError:
+        return None
+    names = ("cpBodyGetPosition", "cpBodyGetAngle", "cpBodySetVelocity", "cpBodySetAngularVelocity",
+             "cpBodySetPosition")
+    return lib if all(hasattr(lib, n) for n in names) and hasattr(pymunk.Body(), "_body") else None
+
+
+#: pymunk's attribute setters go through a Python `__setattr__` and a property each, which costs three times
+#: chipmunk's own setter; the sub-step loop (every robot's wheels, every intruder) calls chipmunk directly.
+_CP = _chipmunk()
+
+
+def placement(body: pymunk.Body) -> tuple[float, float, float]:
+    """`(*body.position, body.angle)`, lean."""
+    if _CP is None:
+        x, y = body.position
+        return x, y, body.angle
+    cp = body._body
+    p = _CP.cpBodyGetPosition(cp)
+    return p.x, p.y, _CP.cpBodyGetAngle(cp)
+
+
+def set_velocity(body: pymunk.Body, vx: float, vy: float) -> None:
+    """`body.velocity = (vx, vy)`, lean."""
+    if _CP is None:
+        body.velocity = (vx, vy)
+    else:
+        _CP.cpBodySetVelocity(body._body, (vx, vy))
+
+
+def set_position(body: pymunk.Body, x: float, y: float) -> None:
+    """`body.position = (x, y)`, lean."""
+    if _CP is None:
+        body.position = (x, y)
+    else:
+        _CP.cpBodySetPosition(body._body, (x, y))
 
 
 class RobotState(StrEnum):
@@ -72,24 +116,45 @@ class RobotBody:
     flight: Flight | None = None
     magazine: list[str] = field(default_factory=list)
     trail: list[tuple[float, float, float]] = field(default_factory=list)
+    _still: bool | None = field(default=None, init=False, repr=False, compare=False)
+
+    def wheels_changed(self) -> None:
+        """Give chipmunk the velocity update that fits the command (call after changing `v` or `omega`): `drive`
+        while the wheels turn; while they stand still, chipmunk's own update, which in a space without damping
+        sets the velocity to zero every step, as `drive` would, without a call into Python per body per step
+        (a watching Scout stands still for most of a mission)."""
+        still = self.v == 0.0 and self.omega == 0.0
+        if still is not self._still:
+            self.body.velocity_func = pymunk.Body.update_velocity if still else self.drive
+            self._still = still
 
     def drive(self, body: pymunk.Body, gravity: tuple[float, float], damping: float, dt: float) -> None:
         """pymunk's velocity callback: the wheels set the velocity after positions are integrated and contacts
         found, and before they are solved, so a robot pushing at a wall is held at its surface."""
-        a = body.angle
-        body.velocity = (self.v * math.cos(a), self.v * math.sin(a))
-        body.angular_velocity = self.omega
+        if _CP is None:
+            a = body.angle
+            body.velocity = (self.v * math.cos(a), self.v * math.sin(a))
+            body.angular_velocity = self.omega
+            return
+        cp = body._body  # every robot, every sub-step: chipmunk's setters directly (see `set_velocity`)
+        a = _CP.cpBodyGetAngle(cp)
+        _CP.cpBodySetVelocity(cp, (self.v * math.cos(a), self.v * math.sin(a)))
+        _CP.cpBodySetAngularVelocity(cp, self.omega)
 
-    def integrate_odometry(self, rng: random.Random, sigma: float) -> None:
-        """Integrate the wheels' view of the motion since the last step: forward distance and turn, with noise."""
-        x, y, a = self.body.position.x, self.body.position.y, self.body.angle
+    def integrate_odometry(self, x: float, y: float, a: float, rngs: Callable[[str, str], random.Random],
+                           sigma: float) -> None:
+        """Integrate the wheels' view of the motion since the last step (the body is now at `x, y`, heading `a`):
+        forward distance and turn, with noise from `rngs(robot id, "odometry")`, asked only when it moved."""
         lx, ly, la = self.last
+        if x == lx and y == ly and a == la:
+            return
         self.last = (x, y, a)
         ds = (x - lx) * math.cos(la) + (y - ly) * math.sin(la)  # wheels do not feel sideways pushes
         da = a - la
         if ds == 0.0 and da == 0.0:
             return
         if sigma:
+            rng = rngs(self.id, "odometry")
             ds *= 1 + rng.gauss(0.0, sigma)
             da += rng.gauss(0.0, sigma * (abs(da) + abs(ds)))
         ox, oy, oa = self.odom

@@ -22,7 +22,13 @@ WALL, DOOR, OBSTACLE, RANGER, SCOUT, INTRUDER = 1, 2, 4, 8, 16, 32
 #: What blocks sight, radio and flight: walls and closed doors (obstacles are low, people are not opaque walls).
 TALL = WALL | DOOR
 EVERYTHING = 0xFFFFFFFF
-_SIGHT = pymunk.ShapeFilter(mask=TALL)
+#: What line of sight and radio look for: walls and closed doors.
+SIGHT = pymunk.ShapeFilter(mask=TALL)
+#: What a camera's image shows: walls, closed doors and obstacles.
+_SEEN = pymunk.ShapeFilter(mask=TALL | OBSTACLE)
+_TAU = 2 * math.pi
+#: `RayCaster.crossings`: how far past a hit (m) the next query starts, and how many hits it walks at most.
+_PAST, _MAX_CROSSINGS = 1e-6, 64
 
 
 @dataclass(frozen=True, slots=True)
@@ -81,17 +87,22 @@ class RayCaster:
     and two Vec2d per cast) costs three times the query itself. So when pymunk's cffi layer is
     there, chipmunk's own function is called directly with one reused result buffer: the same
     query, the same numbers (tests/test_sim_physics.py checks both paths agree); else the public API.
+    `fan` casts a whole scan in one loop (the filter converted to C once), and `crossings` counts the
+    walls on a line by walking its first hits instead of building pymunk's list of every hit.
     """
 
     def __init__(self, space: pymunk.Space, fast: bool = True) -> None:
         self.space = space
         self._query: Any = None
+        self._filters: dict[pymunk.ShapeFilter, tuple[Any, Any]] = {}
         if fast:
             try:
                 from pymunk._chipmunk_cffi import ffi, lib
 
                 self._query, self._handle = lib.cpSpaceSegmentQueryFirst, space._space
-                self._info, self._null = ffi.new("cpSegmentQueryInfo *"), ffi.NULL
+                self._info, self._null, self._ffi = ffi.new("cpSegmentQueryInfo *"), ffi.NULL, ffi
+                self._ends = ffi.new("cpVect[2]")  # `fan`'s ray, reused (the array owns the memory of both views)
+                self._start, self._end = self._ends[0], self._ends[1]
             except (ImportError, AttributeError):  # another pymunk layout: the public API gives the same answers
                 self._query = None
 
@@ -105,27 +116,90 @@ class RayCaster:
         alpha: float = self._info.alpha
         return alpha
 
+    def fan(self, origin: Point, angles: list[float], length: float, flt: pymunk.ShapeFilter) -> list[float | None]:
+        """`first` along rays of `length` from `origin` at each of `angles` (absolute, radians): one call per
+        scan, so the per-ray work is a tight loop (the filter is converted to C once, not per ray)."""
+        ox, oy = origin
+        cos, sin = math.cos, math.sin
+        if self._query is None:
+            first = self.first
+            return [first(origin, (ox + length * cos(a), oy + length * sin(a)), 0.0, flt) for a in angles]
+        query, handle, info = self._query, self._handle, self._info
+        cflt = self._filter(flt)
+        start, end = self._start, self._end  # C structs filled in place: cheaper than a tuple converted per call
+        start.x, start.y = ox, oy
+        out: list[float | None] = []
+        append = out.append
+        for a in angles:
+            end.x = ox + length * cos(a)
+            end.y = oy + length * sin(a)
+            if query(handle, start, end, 0.0, cflt, info):
+                append(info.alpha)
+            else:  # a NULL shape pointer is false: nothing hit
+                append(None)
+        return out
+
+    def crossings(self, a: Point, b: Point, flt: pymunk.ShapeFilter) -> int:
+        """`walls_between` for any filter: how many distinct points (to the centimetre) of `ab` lie on a matching
+        shape. Walked as first hits, each a lean query, rather than pymunk's list of every hit (Python objects
+        and a callback per hit): past each hit by a micrometre, until nothing is hit."""
+        (ax, ay), (bx, by) = a, b
+        length = math.hypot(bx - ax, by - ay)
+        if self._query is None or length == 0:
+            return _distinct_hits(self.space, a, b, flt)
+        ux, uy = (bx - ax) / length, (by - ay) / length
+        query, handle, info, cflt = self._query, self._handle, self._info, self._filter(flt)
+        seen: set[tuple[float, float]] = set()
+        start, t = a, 0.0
+        for _ in range(_MAX_CROSSINGS):
+            if not query(handle, start, b, 0.0, cflt, info):
+                return len(seen)
+            t += info.alpha * (length - t)
+            seen.add((round(ax + t * ux, 2), round(ay + t * uy, 2)))
+            t += _PAST
+            if t >= length:
+                return len(seen)
+            start = (ax + t * ux, ay + t * uy)
+        return _distinct_hits(self.space, a, b, flt)  # a wall along `ab` itself: let pymunk list the hits
+
+    def _filter(self, flt: pymunk.ShapeFilter) -> Any:
+        """`flt` as a C struct, made once per distinct filter (cffi would convert the tuple on every call)."""
+        c = self._filters.get(flt)
+        if c is None:
+            owner = self._ffi.new("cpShapeFilter *", tuple(flt))
+            c = self._filters[flt] = (owner, owner[0])  # the struct view does not keep its memory alive
+        return c[1]
+
 
 def scan(rays: RayCaster, origin: Point, heading: float, n: int, max_range: float, fov: float,
          group: int, rng: random.Random, sigma: float) -> list[float]:
     """Distances along `n` beams to the first shape of any kind; `max_range` exactly when nothing is hit."""
-    first = rays.first
-    flt = pymunk.ShapeFilter(group=group)
-    ox, oy = origin
-    out = []
-    for a in beam_angles(heading, n, fov):
-        alpha = first(origin, (ox + max_range * math.cos(a), oy + max_range * math.sin(a)), 0.0, flt)
-        if alpha is None:
-            out.append(max_range)
-        else:
-            d = alpha * max_range + (rng.gauss(0.0, sigma) if sigma else 0.0)
-            out.append(min(max(d, 0.0), max_range))
+    alphas = rays.fan(origin, beam_angles(heading, n, fov), max_range, pymunk.ShapeFilter(group=group))
+    if not sigma:
+        return [max_range if a is None else min(a * max_range, max_range) for a in alphas]
+    noise = iter(gaussians(rng, len(alphas) - alphas.count(None), sigma)).__next__  # one sample per hit, in order
+    return [max_range if a is None else 0.0 if (d := a * max_range + noise()) < 0.0 else max_range if d > max_range
+            else d for a in alphas]
+
+
+def gaussians(rng: random.Random, n: int, sigma: float) -> list[float]:
+    """`n` independent samples of N(0, sigma^2) from `rng`: Box-Muller on pairs of uniforms, two samples per
+    pair, so one scan's noise costs a loop of `rng.random()` instead of a `rng.gauss()` call per beam."""
+    out: list[float] = []
+    uniform, log, sqrt, cos, sin = rng.random, math.log, math.sqrt, math.cos, math.sin
+    for _ in range((n + 1) // 2):
+        r = sigma * sqrt(-2.0 * log(1.0 - uniform()))  # 1 - u is in (0, 1]: log never sees 0
+        t = _TAU * uniform()
+        out.append(r * cos(t))
+        out.append(r * sin(t))
+    if len(out) > n:
+        out.pop()
     return out
 
 
 def clear(rays: RayCaster, a: Point, b: Point) -> bool:
     """True when no wall or closed door lies between `a` and `b` (line of sight)."""
-    return rays.first(a, b, 0.0, _SIGHT) is None
+    return rays.first(a, b, 0.0, SIGHT) is None
 
 
 def detect(rays: RayCaster, world: World, origin: Point, heading: float, fov: float, max_range: float,
@@ -154,11 +228,11 @@ def brightness(rays: RayCaster, world: World, origin: Point, heading: float, fov
     A camera sees lit surfaces, so this samples the light map where the central ray of each region
     meets a wall, door or obstacle (or at `max_range`), which is how a dark corner shows up in an image.
     """
-    flt = pymunk.ShapeFilter(mask=TALL | OBSTACLE)
+    angles = beam_angles(heading, n, fov - fov / n if n > 1 else 0.0)
+    alphas = rays.fan(origin, angles, max_range, _SEEN)
     out = []
-    for a in beam_angles(heading, n, fov - fov / n if n > 1 else 0.0):
+    for a, alpha in zip(angles, alphas, strict=True):
         dx, dy = max_range * math.cos(a), max_range * math.sin(a)
-        alpha = rays.first(origin, (origin[0] + dx, origin[1] + dy), 0.0, flt)
         k = 1.0 if alpha is None else alpha
         lit = world.light(origin[0] + k * dx, origin[1] + k * dy)
         out.append(_unit(lit + (rng.gauss(0.0, sigma) if sigma else 0.0)))
@@ -166,8 +240,14 @@ def brightness(rays: RayCaster, world: World, origin: Point, heading: float, fov
 
 
 def walls_between(space: pymunk.Space, a: Point, b: Point) -> int:
-    """How many walls or closed doors the straight line from `a` to `b` crosses (a corner counts once)."""
-    hits = space.segment_query(a, b, 0.0, pymunk.ShapeFilter(mask=TALL))
+    """How many walls or closed doors the straight line from `a` to `b` crosses (a corner counts once).
+
+    `RayCaster.crossings(a, b, TALL filter)` gives the same count faster (the simulator's radio uses it)."""
+    return _distinct_hits(space, a, b, SIGHT)
+
+
+def _distinct_hits(space: pymunk.Space, a: Point, b: Point, flt: pymunk.ShapeFilter) -> int:
+    hits = space.segment_query(a, b, 0.0, flt)
     return len({(round(h.point.x, 2), round(h.point.y, 2)) for h in hits})
 
 

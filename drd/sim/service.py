@@ -1,0 +1,279 @@
+"""The simulator as a cluster component: `SimulationService` on the `simulator` host, `RemoteSimulation` elsewhere.
+
+The host with role `simulator` owns one `drd.sim.physics.Simulation` (the world of the running mission) and
+serves it on one queryable, `drd/<cluster>/sim`, with `SimRequest` messages:
+
+- `reset` (world name, seed): a fresh simulation for a new mission;
+- `step` (dt): advance the physics; the controller calls it once per control cycle (lockstep);
+- `call` (method, args): one of the `Simulation` methods the `sim` drivers use (`ranges`, `camera`,
+  `set_velocity`, `launch`...), checked against `ALLOWED_METHODS`: nothing else is ever called, and the
+  arguments are plain JSON values (never code);
+- `attr` (name): one of `ALLOWED_ATTRS` (`jump_height`, `max_jump`).
+
+Every `SimReply` carries the simulation's `time` and `version`, so that a `RemoteSimulation` keeps them
+current without asking. On the other hosts the `sim` drivers get a `RemoteSimulation`: duck-typed to the
+`Simulation` methods they call, each a bus request; it raises `SimError` when the simulator refused a call,
+so the drivers report a `HardwareError` exactly as they do in the dry-run.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import re
+import threading
+import time
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+from drd.bus import Bus, Message, Query, Reply, message
+
+#: The Simulation methods a remote driver may call (what components/sim/* use), and their arity bounds.
+ALLOWED_METHODS: dict[str, tuple[int, int]] = {
+    "ranges": (2, 4), "camera": (3, 4), "brightness": (3, 4), "odometry": (1, 1), "magazine": (1, 1),
+    "set_max_speed": (2, 2), "set_velocity": (3, 3), "stop": (1, 1), "launch": (3, 3), "jump": (2, 2),
+    "radio_ok": (3, 3), "pose": (1, 1), "command": (1, 1), "set_wheels": (3, 3), "light": (2, 2),
+}
+#: Plain attributes a remote driver may read once (at construction).
+ALLOWED_ATTRS = frozenset({"jump_height", "max_jump", "time", "version"})
+#: Only world names, resolved under `worlds/` of the simulator host: never a path from the wire.
+WORLD_NAME = re.compile(r"^[A-Za-z0-9_][A-Za-z0-9_.-]{0,63}$")
+ROOT = Path(__file__).resolve().parents[2]
+
+
+@message("drd.sim.request", 1)
+class SimRequest(Message):
+    """`op` is reset, step, call or attr; see the module docstring."""
+
+    op: str
+    method: str = ""
+    args: list[Any] | None = None
+    world: str = ""
+    seed: int = 0
+    dt: float = 0.0
+
+
+@message("drd.sim.reply", 1)
+class SimReply(Message):
+    """The value of a call (encoded by `encode_value`), and the simulation's time and version after it.
+
+    `error` is set (and `value` None) when the simulator refused the call (a `SimError`: an unknown robot,
+    a Scout that cannot jump now...)."""
+
+    value: Any
+    time: float
+    version: int
+    world: str = ""
+    error: str = ""
+
+
+def key(cluster: str) -> str:
+    return f"drd/{cluster}/sim"
+
+
+def world_file(name: str, root: Path = ROOT) -> Path:
+    """`corridor` or `corridor.yaml` -> `worlds/corridor.yaml` of this installation; ValueError otherwise."""
+    stem = name[:-5] if name.endswith(".yaml") else name
+    stem = Path(stem).name if "/" in stem and Path(stem).parent.name == "worlds" else stem
+    if not WORLD_NAME.match(stem):
+        raise ValueError(f"bad world name {name!r}: give a name under worlds/ (like corridor)")
+    path = root / "worlds" / f"{stem}.yaml"
+    if not path.exists():
+        known = sorted(p.stem for p in (root / "worlds").glob("*.yaml"))
+        raise ValueError(f"no world {stem!r} (known: {', '.join(known)})")
+    return path
+
+
+# -- values on the wire ------------------------------------------------------------------------------
+
+def encode_value(value: Any) -> Any:
+    """Simulator results as JSON: dataclasses (Pose, Flight, Detection) as tagged dicts, tuples as lists."""
+    if dataclasses.is_dataclass(value) and not isinstance(value, type):
+        return {"__type": type(value).__name__,
+                **{f.name: encode_value(getattr(value, f.name)) for f in dataclasses.fields(value)}}
+    if isinstance(value, tuple | list):
+        return [encode_value(v) for v in value]
+    if isinstance(value, dict):
+        return {str(k): encode_value(v) for k, v in value.items()}
+    if isinstance(value, float) and not math.isfinite(value):
+        return {"__float": repr(value)}
+    if hasattr(value, "value") and type(value).__module__.startswith("drd."):  # an enum (DoorState)
+        return value.value
+    return value
+
+
+def _decoders() -> dict[str, Callable[..., Any]]:
+    from drd.sim import Detection, Flight, Pose
+
+    return {"Pose": Pose, "Flight": Flight, "Detection": Detection}
+
+
+def decode_value(value: Any, types: dict[str, Callable[..., Any]] | None = None) -> Any:
+    """The inverse of `encode_value`, for the allow-listed result types only (anything else stays a dict)."""
+    types = types if types is not None else _decoders()
+    if isinstance(value, list):
+        return [decode_value(v, types) for v in value]
+    if isinstance(value, dict):
+        if "__float" in value:
+            return float(value["__float"])
+        kind = value.get("__type")
+        fields = {k: decode_value(v, types) for k, v in value.items() if k != "__type"}
+        if isinstance(kind, str) and kind in types:
+            if kind == "Flight":
+                fields["start"], fields["end"] = tuple(fields["start"]), tuple(fields["end"])
+            return types[kind](**fields)
+        return fields
+    return value
+
+
+# -- the service -------------------------------------------------------------------------------------
+
+class SimulationService:
+    """Owns the simulation of the running mission and answers `SimRequest`s (one lock: calls are serialized)."""
+
+    def __init__(self, bus: Bus | None, cluster: str, *, root: Path = ROOT) -> None:
+        self.cluster = cluster
+        self.root = root
+        self.sim: Any = None
+        self.world_name = ""
+        self.calls = 0
+        self._lock = threading.Lock()
+        self._queryable = bus.serve(key(cluster), self._serve) if bus is not None else None
+
+    def reset(self, world: str, seed: int = 0) -> SimReply:
+        from drd.sim import Simulation, load_world
+
+        path = world_file(world, self.root)
+        sim = Simulation(load_world(path), seed=seed)
+        with self._lock:
+            self.sim, self.world_name = sim, path.stem
+            return SimReply(None, sim.time, sim.version, path.stem)
+
+    def handle(self, req: SimRequest) -> SimReply:
+        """Answer one request; raises ValueError for a request that is refused outright."""
+        if req.op == "reset":
+            return self.reset(req.world, req.seed)
+        from drd.sim import SimError
+
+        with self._lock:
+            sim = self.sim
+            if sim is None:
+                raise ValueError("no simulation is running (the controller resets it when a mission starts)")
+            self.calls += 1
+            if req.op == "step":
+                if not (0 < req.dt <= 1.0):
+                    raise ValueError(f"step dt must be in (0, 1] s, got {req.dt}")
+                sim.step(req.dt)
+                return SimReply(None, sim.time, sim.version, self.world_name)
+            if req.op == "attr":
+                if req.method not in ALLOWED_ATTRS:
+                    raise ValueError(f"attribute {req.method!r} is not served (allowed: {sorted(ALLOWED_ATTRS)})")
+                return SimReply(encode_value(getattr(sim, req.method)), sim.time, sim.version, self.world_name)
+            if req.op != "call":
+                raise ValueError(f"unknown op {req.op!r}: use reset, step, call or attr")
+            bounds = ALLOWED_METHODS.get(req.method)
+            if bounds is None:
+                raise ValueError(f"method {req.method!r} is not served (allowed: {', '.join(sorted(ALLOWED_METHODS))})")
+            args = list(req.args or [])
+            if not bounds[0] <= len(args) <= bounds[1]:
+                raise ValueError(f"{req.method} takes {bounds[0]}..{bounds[1]} arguments, got {len(args)}")
+            if any(isinstance(a, dict | list) for a in args):
+                raise ValueError(f"{req.method}: arguments must be plain values")
+            try:
+                value = getattr(sim, req.method)(*args)
+            except SimError as e:
+                return SimReply(None, sim.time, sim.version, self.world_name, error=str(e) or type(e).__name__)
+            except (TypeError, ValueError) as e:
+                raise ValueError(f"{req.method}: {e}") from None
+            return SimReply(encode_value(value), sim.time, sim.version, self.world_name)
+
+    def close(self) -> None:
+        if self._queryable is not None:
+            self._queryable.close()
+
+    def _serve(self, query: Query) -> Message | Reply:
+        if not isinstance(query.payload, SimRequest):
+            return query.error("expected a drd.sim.request")
+        try:
+            return self.handle(query.payload)
+        except ValueError as e:
+            return query.error(str(e))
+
+
+# -- the proxy ---------------------------------------------------------------------------------------
+
+class RemoteSimulation:
+    """A `Simulation` seen over the bus: what the `sim` drivers call, each a request to the simulator host.
+
+    `time` and `version` are those of the last reply (the Creator also sets them from each step request,
+    so a driver's per-instant cache works without a request). `world` is loaded locally from the same
+    world name (every host has the same `worlds/`)."""
+
+    def __init__(self, call: Callable[[SimRequest], SimReply], world: str, *, root: Path = ROOT) -> None:
+        self._call = call
+        self._world_name = world
+        self._root = root
+        self._world: Any = None
+        self._attrs: dict[str, Any] = {}
+        self.time = 0.0
+        self.version = 0
+        self.calls = 0
+        self.seconds = 0.0
+
+    @classmethod
+    def over(cls, bus: Bus, cluster: str, world: str, timeout: float = 1.0) -> RemoteSimulation:
+        k = key(cluster)
+
+        def call(req: SimRequest) -> SimReply:
+            reply = bus.call(k, req, timeout=timeout)
+            if not isinstance(reply, SimReply):
+                raise TypeError(f"expected a drd.sim.reply, got a {type(reply).TYPE}")
+            return reply
+        return cls(call, world)
+
+    def sync(self, time_: float, version: int) -> None:
+        self.time, self.version = time_, version
+
+    @property
+    def world(self) -> Any:
+        if self._world is None:
+            from drd.sim import load_world
+
+            self._world = load_world(world_file(self._world_name, self._root))
+        return self._world
+
+    def _request(self, req: SimRequest) -> Any:
+        from drd.sim import SimError
+
+        t0 = time.perf_counter()
+        reply = self._call(req)
+        self.calls += 1
+        self.seconds += time.perf_counter() - t0
+        self.time, self.version = reply.time, reply.version
+        if reply.error:
+            raise SimError(reply.error)
+        return decode_value(reply.value)
+
+    def _attr(self, name: str) -> Any:
+        if name not in self._attrs:
+            self._attrs[name] = self._request(SimRequest("attr", name))
+        return self._attrs[name]
+
+    @property
+    def jump_height(self) -> float:
+        return float(self._attr("jump_height"))
+
+    @property
+    def max_jump(self) -> float:
+        return float(self._attr("max_jump"))
+
+    def __getattr__(self, name: str) -> Any:
+        if name.startswith("_") or name not in ALLOWED_METHODS:
+            raise AttributeError(f"RemoteSimulation has no {name!r} (served: {', '.join(sorted(ALLOWED_METHODS))})")
+
+        def method(*args: Any) -> Any:
+            value = self._request(SimRequest("call", name, list(args)))
+            return tuple(value) if name == "magazine" else value
+        method.__name__ = name
+        return method
