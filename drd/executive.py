@@ -112,12 +112,16 @@ class Executive:
         self._queryable = bus.serve(f"drd/{cluster}/executive", self._command)
 
     def submit(self, chart: Statechart, mission_id: str | None = None,
-               listeners: Iterable[Callable[[rec.Record], None]] = ()) -> str:
-        """Start a compiled mission; returns its id (`<name>-<n>`)."""
+               listeners: Iterable[Callable[[rec.Record], None]] = (),
+               registry: Mapping[str, Callable[[], Component]] | None = None) -> str:
+        """Start a compiled mission; returns its id (`<name>-<n>`).
+
+        `registry` replaces the executive's own for this mission (a cluster mission's `RemoteRegistry`)."""
         mid = mission_id or f"{chart.name}-{next(self._ids)}"
         if mid in self.missions:
             raise ValueError(f"a mission {mid} is already running")
-        interp = Interpreter(chart, self.registry, self.broker, self.clock, pool=self.pool, mission=mid,
+        interp = Interpreter(chart, registry if registry is not None else self.registry, self.broker, self.clock,
+                             pool=self.pool, mission=mid,
                              services=self.services, preallocate=self.preallocate)
         key = f"drd/{self.cluster}/mission/{mid}/record"
         interp.attach(lambda r: self.bus.put(key, _to_message(mid, r)))

@@ -1,4 +1,4 @@
-"""`missionctl` commands that look at a running cluster: hosts, status, components, resources, query.
+"""`missionctl` commands against a running cluster: run, stop, hosts, status, components, resources, query.
 
 Each joins the cluster's bus through `drd.daemon.client.ClusterClient`: with `--config hosts.yaml`
 (the default) it connects to every host's endpoint with the cluster's security settings; with
@@ -41,6 +41,8 @@ def register(app: typer.Typer) -> None:
     app.command("components")(components)
     app.command("resources")(resources)
     app.command("query")(query)
+    app.command("run")(run)
+    app.command("stop")(stop)
 
 
 @contextmanager
@@ -186,6 +188,156 @@ def query(text: str = typer.Argument(..., metavar="QUERY", show_default=False,
                       props)
     out.print(table)
     return OK
+
+
+def run(mission: Path = typer.Argument(..., help="The mission file.", show_default=False),
+        config: Path = ConfigOption, connect: list[str] = ConnectOption,
+        world: str = typer.Option("corridor", "--world", "-w", help="The simulator's world (a name under worlds/)."),
+        speed: float = typer.Option(1.0, "--speed", min=0.01, help="Run at most this multiple of real time."),
+        until: float = typer.Option(1800.0, "--until", help="Stop after this much sim time, in seconds."),
+        seed: int = typer.Option(0, "--seed", help="Seed of the simulation."),
+        detach: bool = typer.Option(False, "--detach", "-d", help="Print the mission id and return at once."),
+        as_json: bool = typer.Option(False, "--json", help="Print the report as JSON."),
+        timeout: float = TimeoutOption) -> int:
+    """Run a mission on the cluster: the controller compiles and runs it; exit 0 if it succeeds, 1 if it fails,
+    2 if it is invalid."""
+    from drd.cli.common import MISSION_FAILED
+    from drd.daemon.missions import RunMission, RunReply, run_key
+
+    if not mission.is_file():
+        fail(f"{mission}: no such file")
+    try:
+        source = mission.read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError) as e:
+        fail(f"{mission}: cannot read it: {e}")
+    with _cluster(config, connect, timeout) as client:
+        watch = _RecordWatch(client)
+        try:
+            request = RunMission(source, str(mission), world, speed, until, seed)
+            reply = client.bus.call(run_key(client.cluster), request, timeout=max(timeout, 15.0))
+            if not isinstance(reply, RunReply):
+                fail(f"the controller answered a {type(reply).TYPE}")
+            if not reply.ok:
+                for text in reply.diagnostics:
+                    err.print(Text(text))
+                err.print(Text.assemble(("✗ ", "bold red"), f"{mission}: invalid, not run"))
+                raise typer.Exit(INVALID)
+            if detach:
+                out.print(reply.mission)
+                return OK
+            err.print(Text.assemble(("▶ ", "bold green"), f"mission {reply.mission} started on the cluster "
+                                    f"(world {reply.world}, {reply.speed:g}x real time)"))
+            report = watch.follow(reply.mission, until / speed + 120.0, reply.base)
+        finally:
+            watch.close()
+    if as_json:
+        out.print_json(json.dumps(report.to_dict(), default=str))
+    else:
+        from drd.cli.missionctl import _print_report
+
+        _print_report(report)
+    return OK if report.outcome == "success" else MISSION_FAILED
+
+
+def stop(mission: str = typer.Argument("", help="The mission id (default: every mission).", show_default=False),
+         config: Path = ConfigOption, connect: list[str] = ConnectOption, timeout: float = TimeoutOption) -> int:
+    """Stop a running mission (its behaviors are terminated, its resources released)."""
+    from drd.executive import MissionCommand, MissionStatus
+
+    with _cluster(config, connect, timeout) as client:
+        reply = client.bus.call(client.keys.executive, MissionCommand("stop", mission), timeout=max(timeout, 5.0))
+    if isinstance(reply, MissionStatus):
+        for m in reply.missions:
+            if not mission or m.get("id") == mission:
+                out.print(f"{m.get('id')}: {m.get('outcome') or 'running'} {m.get('reason') or ''}".rstrip())
+    return OK
+
+
+class _RecordWatch:
+    """The records of the cluster's missions, from the moment `missionctl run` subscribed; then a report."""
+
+    def __init__(self, client: ClusterClient) -> None:
+        import queue
+
+        from drd.executive import MissionRecord
+
+        self.client = client
+        self.queue: queue.Queue[object] = queue.Queue()
+
+        def on_record(sample: Any) -> None:
+            if isinstance(sample.payload, MissionRecord):
+                self.queue.put(sample.payload)
+        self.sub = client.bus.subscribe(f"drd/{client.cluster}/mission/*/record", on_record)
+
+    def close(self) -> None:
+        self.sub.close()
+
+    def follow(self, mission: str, limit: float, base: float = 0.0) -> Any:
+        """Print progress until the mission's `finished` record (or its outcome in the status); the report."""
+        import queue
+
+        from drd.dryrun import DryRun, _facts
+        from drd.runtime import records as rec
+
+        result = DryRun(mission, None, "", 0.0, 0.0)
+        start = time.monotonic()
+        next_print = next_poll = start + 1.0
+        active: dict[str, None] = {}
+        finished = None
+        while finished is None:
+            now = time.monotonic()
+            if now - start > limit:
+                fail(f"mission {mission} did not finish within {limit:.0f} s", code=1)
+            try:
+                msg: Any = self.queue.get(timeout=0.2)
+            except queue.Empty:
+                msg = None
+            if msg is not None and msg.mission == mission:
+                r = _record(msg, rec, base)
+                if r is not None:
+                    result.records.append(r)
+                    _facts(result, r, None)
+                    result.sim_time = max(result.sim_time, r.at)
+                    if isinstance(r, rec.Entered):
+                        active[r.path] = None
+                    elif isinstance(r, rec.Exited):
+                        active.pop(r.path, None)
+                    elif isinstance(r, rec.Finished):
+                        finished = (r.outcome, r.reason)
+            now = time.monotonic()
+            if now >= next_print and finished is None:
+                next_print = now + 1.0
+                leaves = [p for p in active if not any(q.startswith(p + "/") or q.startswith(p + "[") for q in active)]
+                err.print(Text.assemble(("sim ", "dim"), f"{result.sim_time:7.1f} s  ", ("active ", "dim"),
+                                        ", ".join(p.rsplit("/", 1)[-1] for p in leaves[:6]) or "—"))
+            if now >= next_poll and finished is None:  # a missed record must not hang us: ask the executive
+                next_poll = now + 2.0
+                for m in self.client.missions():
+                    if m.get("id") == mission and m.get("outcome"):
+                        time.sleep(0.5)  # the records in flight come first
+                        while not self.queue.empty():
+                            extra: Any = self.queue.get()
+                            if extra.mission == mission and (r := _record(extra, rec, base)) is not None:
+                                result.records.append(r)
+                                _facts(result, r, None)
+                        finished = (m["outcome"], m.get("reason") or "")
+        result.outcome, result.reason = finished
+        result.wall_time = time.monotonic() - start
+        return result
+
+
+def _record(msg: Any, rec: Any, base: float = 0.0) -> Any:
+    """A `MissionRecord` from the wire as the runtime's record (what the dry-run's report reads)."""
+    kinds = {cls.__name__.lower(): cls for cls in vars(rec).values()
+             if isinstance(cls, type) and issubclass(cls, rec.Record) and cls is not rec.Record}
+    cls = kinds.get(msg.kind)
+    if cls is None:
+        return None
+    data = {k: tuple(v) if isinstance(v, list) else v for k, v in msg.data.items()}
+    try:
+        return cls(at=round(msg.at - base, 6), path=msg.path, **data)
+    except TypeError:
+        return None
 
 
 # --- rendering -------------------------------------------------------------------------------------

@@ -186,7 +186,11 @@ class Controller:
         self._on_change = on_change
         expect = {self.keys.executive: (MissionCommand,), self.keys.resources: (ViewRequest, type(None))}
         serialized = SerializedBus(bus, lock, expect=expect, on_reject=on_reject)
-        self.executive = Executive(serialized, self.clock, EntryPoints(catalog), cluster=cluster.name,
+        # The executive runs on the simulator's time (`drd.daemon.missions`); membership on this clock.
+        from drd.daemon.missions import SimTimeClock
+
+        self.mission_clock = SimTimeClock()
+        self.executive = Executive(serialized, clock or self.mission_clock, EntryPoints(catalog), cluster=cluster.name,
                                    resources=host_resources(cluster, me), lease=cluster.lease)
         self.membership = Membership(cluster.lease, {me})
         self._queryable = serialized.serve(self.keys.resources, self._resources)
@@ -203,9 +207,9 @@ class Controller:
                             " unless it comes back")
 
     def step(self) -> None:
-        """Apply removals that fell due, then step the missions."""
+        """Apply removals that fell due. Missions are stepped in lockstep with the simulator by their own
+        loop (`drd.daemon.missions.MissionRun`), not here."""
         self._apply(self.membership.due(self.clock.now()))
-        self.executive.step()
 
     def resources(self) -> ResourcesReply:
         snapshot = self.executive.broker.rcm.snapshot()
@@ -219,14 +223,22 @@ class Controller:
         return self.resources()
 
     def _apply(self, actions: list[Action]) -> None:
-        pool, now = self.executive.pool, self.clock.now()
+        pool, now = self.executive.pool, self.executive.clock.now()
         for action in actions:
             if action.kind == "add":
                 found = host_resources(self.cluster, action.host)
-                pool.add(found, now)
+                running = [m for m in self.executive.missions.values() if not m.finished]
+                if running:
+                    for m in running:
+                        m.add_resources(found)  # hot-plug: a running multiplicity may grow
+                        break  # the pool is shared: added once, the other missions see it in their next step
+                else:
+                    pool.add(found, now)
                 detail = f"{len(found)} resources added to the manager"
             else:
-                pool.remove_host(action.host, now)
+                if any(not m.finished for m in self.executive.missions.values()):
+                    self.executive.remove_host(action.host)  # every mission settles the consequences now
+                pool.remove_host(action.host, now)  # (again: a no-op when a mission did it)
                 detail = "its resources left the manager; their grants are freed"
             if self._on_change is not None:
                 self._on_change(f"resources-{'added' if action.kind == 'add' else 'removed'}", action.host, detail)

@@ -125,6 +125,9 @@ class Daemon:
         self.rejected: Counter[str] = Counter()
         self.unreachable: dict[str, str] = {}
         self.controller: Controller | None = None
+        self.runner: Any = None  # drd.daemon.missions.MissionRunner, on the controller
+        self.creator: Any = None  # drd.daemon.creator.Creator
+        self.sim_service: Any = None  # drd.sim.service.SimulationService, on the simulator host
         self._bus = bus
         self._lock = threading.RLock()
         self._declared: list[Declaration] = []
@@ -162,11 +165,25 @@ class Daemon:
         self._serve(keys.db(me, "components"), self._components, ViewRequest, type(None))
         self._serve(keys.db(me, "lookup"), self._lookup, Lookup)
         self._serve(keys.db(me, "query"), self._query, TraderRequest)
-        if Role.CONTROLLER in self.cluster.host(me).roles:
+        roles = self.cluster.host(me).roles
+        if Role.SIMULATOR in roles:
+            from drd.sim.service import SimulationService
+
+            self.sim_service = SimulationService(bus, self.cluster.name)
+        from drd.daemon.creator import Creator
+
+        self.creator = Creator(bus, self.cluster, me, self.config.catalog,
+                               sim_call=self.sim_service.handle if self.sim_service is not None else None)
+        if Role.CONTROLLER in roles:
+            from drd.daemon.missions import MissionRunner
+
             with self._lock:
                 self.controller = Controller(bus, self.cluster, self.config.catalog, me, self._lock,
                                              on_reject=self._reject, on_change=self._record,
                                              clock=self._controller_clock)
+                self.runner = MissionRunner(bus, self.cluster, self.config.catalog, me, self._lock, self.controller,
+                                            self.controller.mission_clock, sim_service=self.sim_service,
+                                            host_down=lambda h: self.view.state(h) is HostState.DOWN)
         self._declared.append(bus.watch_tokens(keys.hosts, self._on_token, history=True))
         self._token = bus.declare_token(keys.host(me))
         now = self.clock()
@@ -215,9 +232,14 @@ class Daemon:
             log.debug("could not say goodbye", exc_info=True)
         if self._token is not None:
             self._token.close()
+        if self.runner is not None:
+            self.runner.close()  # joins the mission loop, which takes the lock
         with self._lock:
             if self.controller is not None:
                 self.controller.close()
+        for service in (self.creator, self.sim_service):
+            if service is not None:
+                service.close()
         for declaration in reversed(self._declared):
             declaration.close()
         self.bus.close()
@@ -229,7 +251,11 @@ class Daemon:
         me, keys = self.host, self.keys
         services = {f"{me}.db": f"{keys.host(me)}/db", f"{me}.status": keys.status(me)}
         if self.controller is not None:
-            services |= {"rcm": f"{keys.root}/rcm", "executive": keys.executive}
+            services |= {"rcm": f"{keys.root}/rcm", "executive": keys.executive,
+                         "missions": f"{keys.root}/missions/run"}
+        if self.sim_service is not None:
+            services |= {"simulator": f"{keys.root}/sim"}
+        services |= {f"{me}.creator": f"{keys.host(me)}/creator"}
         return Announcement(me, self.cluster.name, os.getpid(), self.started, self.roles,
                             runnable_components(self.cluster.host(me), self.config.catalog),
                             self._instances(), services, self.digest)

@@ -1,0 +1,283 @@
+"""Running a mission on the cluster: the controller's side of `missionctl run`.
+
+`missionctl run` sends a `RunMission` with the mission's SOURCE text and file name to
+`drd/<cluster>/missions/run`. The controller compiles it with its own catalog (a compiled object or code
+from the wire is never trusted) and answers a `RunReply`: the mission id, or the located diagnostics
+(rendered as `missionctl validate` prints them) when the mission is invalid.
+
+A valid mission runs in lockstep with the simulator, on a thread of its own (`MissionRun`): each control
+cycle (0.1 s of sim time) it asks the simulator host to step (`drd.sim.service`), sets the executive's clock
+to the simulation's time from the reply, then steps the executive under the daemon's lock; components on
+other hosts are stepped through their Creators (`drd.runtime.remote`). `speed` caps the pace at that multiple
+of real time. Records go out on `drd/<cluster>/mission/<id>/record` as for every mission of the executive.
+One cluster mission runs at a time: the simulator holds one world.
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+import time
+from collections.abc import Callable
+from typing import Any
+
+from drd.bus import Bus, Message, Query, Reply, message
+from drd.hosts import Cluster, Role
+from drd.runtime.remote import ComponentRouter
+from drd.sim.service import SimReply, SimRequest, SimulationService
+from drd.sim.service import key as sim_key
+from dsl.catalog import Catalog
+
+log = logging.getLogger("drd.daemon.missions")
+
+#: Sim seconds per control cycle, as in the dry-run.
+CONTROL_PERIOD = 0.1
+#: Seconds a Creator or the simulator may take to answer one call before its host counts as lost.
+CALL_TIMEOUT = 1.0
+
+
+@message("drd.mission.run", 1)
+class RunMission(Message):
+    """Run this mission source (`file` names it in diagnostics) in world `world` at `speed` x real time."""
+
+    source: str
+    file: str
+    world: str = "corridor"
+    speed: float = 1.0
+    until: float = 1800.0
+    seed: int = 0
+
+
+@message("drd.mission.run-reply", 1)
+class RunReply(Message):
+    """`mission` is the id of the started mission; when `ok` is false, `diagnostics` say why (rendered)."""
+
+    mission: str
+    ok: bool
+    diagnostics: list[str]
+    world: str = ""
+    speed: float = 0.0
+    started: float = 0.0
+    base: float = 0.0  # the executive's time at sim time 0 (records' `at` minus this is sim time)
+
+
+class SimTimeClock:
+    """The executive's clock: the simulator's time plus an offset that keeps it monotonic across missions."""
+
+    def __init__(self) -> None:
+        self.base = 0.0
+        self.t = 0.0
+
+    def now(self) -> float:
+        return self.t
+
+    def start_mission(self) -> None:
+        self.base = self.t
+
+    def set_sim(self, sim_time: float) -> None:
+        self.t = self.base + sim_time
+
+
+def run_key(cluster: str) -> str:
+    return f"drd/{cluster}/missions/run"
+
+
+def render(diagnostics: list[Any], sources: dict[str, str]) -> list[str]:
+    """Diagnostics as `missionctl validate` prints them (file:line:col, message, source line, caret), plain text."""
+    from dsl.errors import caret, source_line
+
+    out = []
+    for d in diagnostics:
+        lines = [f"{d.span}: {d.severity.value}: {d.message}"]
+        line = source_line(d.span, sources)
+        if line is not None:
+            line = "".join(ch if ch.isprintable() else "\ufffd" for ch in line.expandtabs(1))
+            start, width = caret(d.span, line)
+            gutter = f"{d.span.line:>5} | "
+            lines += [gutter + line, " " * (len(gutter) - 2) + "| " + " " * start + "^" * width]
+        lines += [f"  note: {where}: {text}" for text, where in d.notes]
+        if d.hint:
+            lines.append(f"  hint: {d.hint}")
+        out.append("\n".join(lines))
+    return out
+
+
+class MissionRunner:
+    """Serves `missions/run` on the controller and runs each accepted mission in lockstep (see module doc)."""
+
+    def __init__(self, bus: Bus, cluster: Cluster, catalog: Catalog, me: str, lock: threading.RLock,
+                 controller: Any, clock: SimTimeClock, *, sim_service: SimulationService | None = None,
+                 host_down: Callable[[str], bool] = lambda h: False) -> None:
+        self.bus = bus
+        self.cluster = cluster
+        self.catalog = catalog
+        self.me = me
+        self.lock = lock
+        self.controller = controller
+        self.clock = clock
+        self.sim_service = sim_service
+        self.host_down = host_down
+        self.resource_hosts = {r.id: r.host for r in cluster.resources() if r.host}
+        self.simulator = next((h.name for h in cluster.hosts if Role.SIMULATOR in h.roles), None)
+        self.current: MissionRun | None = None
+        self._queryable = bus.serve(run_key(cluster.name), self._serve)
+
+    def close(self) -> None:
+        self._queryable.close()
+        run = self.current
+        if run is not None:
+            run.stopping.set()
+            run.thread.join(timeout=5)
+
+    def sim(self, req: SimRequest) -> SimReply:
+        if self.sim_service is not None:
+            return self.sim_service.handle(req)
+        reply = self.bus.call(sim_key(self.cluster.name), req, timeout=CALL_TIMEOUT)
+        if not isinstance(reply, SimReply):
+            raise ValueError(f"the simulator answered a {type(reply).TYPE}")
+        return reply
+
+    def _serve(self, query: Query) -> Message | Reply:
+        req = query.payload
+        if not isinstance(req, RunMission):
+            return query.error("expected a drd.mission.run")
+        try:
+            return self.start(req)
+        except ValueError as e:
+            return query.error(str(e))
+
+    def start(self, req: RunMission) -> RunReply:
+        from dsl import compile_text
+
+        if not (req.speed > 0) or not (req.until > 0):
+            raise ValueError("speed and until must be positive")
+        if len(req.source) > 1_000_000:
+            raise ValueError("mission source larger than 1 MB")
+        compiled = compile_text(req.source, self.catalog, req.file or "<mission>")
+        if not compiled.ok or compiled.statechart is None:
+            diags = render(list(compiled.diagnostics), dict(compiled.sources))
+            return RunReply("", False, diags or [f"{req.file}: declares no mission to run"])
+        if self.current is not None and self.current.thread.is_alive():
+            raise ValueError(f"mission {self.current.mission} is running: one mission at a time on a cluster"
+                             f" (missionctl stop {self.current.mission})")
+        if self.simulator is None:
+            raise ValueError("no host has the role simulator in hosts.yaml: the sim drivers need one")
+        from drd.sim import load_world
+        from drd.sim.service import world_file
+        from drd.sim.world import check_hosts
+
+        path = world_file(req.world)
+        problems = check_hosts(load_world(path), self.cluster)
+        if problems:
+            raise ValueError("; ".join(map(str, problems)))
+        try:
+            reset = self.sim(SimRequest("reset", world=path.stem, seed=req.seed))
+        except Exception as e:
+            raise ValueError(f"the simulator on {self.simulator} did not start the world: {e}") from None
+        chart = compiled.statechart
+        with self.lock:
+            executive = self.controller.executive
+            self.clock.start_mission()
+            self.clock.set_sim(reset.time)
+            self._reset_dependencies(executive)
+            mid = f"{chart.name}-{int(time.time() * 1000) % 10_000_000}"
+            router = ComponentRouter(self.bus, self.cluster.name, self.resource_hosts, self.me,
+                                     node=lambda path: _find(executive, mid, path), local=executive.registry,
+                                     mission=mid, world=path.stem, timeout=CALL_TIMEOUT, dead=self.host_down,
+                                     catalog=self.catalog)
+            router.sim_time, router.sim_version = reset.time, reset.version
+            run = MissionRun(self, mid, router, req)
+            self.current = run
+            executive.submit(chart, mid, registry=router.registry())
+        run.thread.start()
+        log.info("mission %s started (%s, world %s, speed %gx)", mid, req.file, path.stem, req.speed)
+        return RunReply(mid, True, [], path.stem, req.speed, time.time(), self.clock.base)
+
+
+    def _reset_dependencies(self, executive: Any) -> None:
+        """A new world puts every Scout back in its magazine: the Static Dependency Database starts again from
+        hosts.yaml (a previous mission's launches set `carrier` to "")."""
+        if any(not m.finished for m in executive.missions.values()):
+            return
+        for r in self.cluster.resources():
+            if type(r).__name__ != "Aggregate" or executive.pool.view(r.id) is None:
+                continue
+            for k, v in dict(r.properties).items():
+                try:
+                    executive.pool.set_property(r.id, k, v, self.clock.now())
+                except Exception:  # a property the manager does not track: leave it
+                    log.debug("could not reset %s.%s", r.id, k, exc_info=True)
+
+
+class MissionRun:
+    """One mission's lockstep loop (a thread)."""
+
+    def __init__(self, runner: MissionRunner, mission: str, router: ComponentRouter, req: RunMission) -> None:
+        self.runner = runner
+        self.mission = mission
+        self.router = router
+        self.req = req
+        self.stopping = threading.Event()
+        self.cycles = 0
+        self.sim_seconds = 0.0
+        self.thread = threading.Thread(target=self._loop, name=f"drd-mission-{mission}", daemon=True)
+
+    def _loop(self) -> None:
+        runner, req = self.runner, self.req
+        start = time.perf_counter()
+        sim_time = 0.0
+        try:
+            while not self.stopping.is_set():
+                with runner.lock:
+                    interp = runner.controller.executive.missions.get(self.mission)
+                    if interp is None or interp.finished:
+                        break
+                t0 = time.perf_counter()
+                try:
+                    reply = runner.sim(SimRequest("step", dt=CONTROL_PERIOD))
+                except Exception as e:
+                    with runner.lock:
+                        interp.stop(f"the simulator on {runner.simulator} stopped answering: {e}")
+                    break
+                self.sim_seconds += time.perf_counter() - t0
+                sim_time = reply.time
+                with runner.lock:
+                    self.router.sim_time, self.router.sim_version = reply.time, reply.version
+                    runner.clock.set_sim(reply.time)
+                    runner.controller.executive.step()
+                    if not interp.finished and sim_time >= req.until:
+                        interp.stop(f"sim time limit of {req.until:g} s reached")
+                self.cycles += 1
+                lag = sim_time / req.speed - (time.perf_counter() - start)
+                if lag > 0:
+                    self.stopping.wait(lag)
+            else:
+                with runner.lock:
+                    interp = runner.controller.executive.missions.get(self.mission)
+                    if interp is not None and not interp.finished:
+                        interp.stop("the controller's daemon is stopping")
+        except Exception:  # never leave a mission hanging silently
+            log.exception("mission %s: the run loop failed", self.mission)
+            with runner.lock:
+                interp = runner.controller.executive.missions.get(self.mission)
+                if interp is not None and not interp.finished:
+                    interp.stop("internal error in the controller's run loop (see its log)")
+        wall = time.perf_counter() - start
+        stats = self.router.stats.as_dict()
+        with runner.lock:
+            interp = runner.controller.executive.missions.get(self.mission)
+            outcome = (interp.outcome, interp.reason) if interp is not None else (None, "")
+        log.info("mission %s ended %s (%s)", self.mission, *outcome)
+        log.info("mission %s ended: %.1f s sim in %.2f s wall (%.1fx), %d cycles, sim step %.2f ms, "
+                 "component calls %s", self.mission, sim_time, wall, sim_time / wall if wall else 0.0, self.cycles,
+                 1000 * self.sim_seconds / max(1, self.cycles), stats)
+
+
+def _find(executive: Any, mission: str, path: str) -> tuple[Any, Any] | None:
+    interp = executive.missions.get(mission)
+    if interp is None:
+        return None
+    for node in interp.active():
+        if node.path == path:
+            return node, interp
+    return None

@@ -1,0 +1,317 @@
+"""Components that run on another host: `RemoteComponent`, the executive's proxy, and its wire messages.
+
+The executive steps a `RemoteComponent` exactly like a local one. It works out, at each `start`, which host
+owns the devices its needs resolved to (`ranger1.drive` -> `ranger1`) and sends each lifecycle call
+(`start`, `step`, `suspend`, `resume`, `terminate`) to that host's Creator (`drd.daemon.creator`) as a
+`ComponentCall`. A call carries what the component may read of the mission: its parameters, the resource
+bound to each need with the fencing epoch of the grant, the shared data (`shared visited: DoorLog`) and its
+finished siblings' outputs. The `ComponentReply` brings back its status, outputs, the events it emitted,
+its log lines, the shared data as it left it and its changes to the Static Dependency Database; the proxy
+applies them to the local context, so the interpreter sees what a local component would have done.
+
+A component with no device needs runs right here, in the controller (`local`): there is nothing to gain
+from a round trip. A host that does not answer within `timeout` (or that the daemon already saw go down)
+makes the call raise at once: the interpreter fails just that state.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable, Iterator, Mapping
+from dataclasses import dataclass, field
+from typing import Any
+
+from drd.bus import Bus, BusError, Message, RemoteError, message
+from drd.runtime.component import Component, Context, Status
+
+
+@message("drd.component.call", 1)
+class ComponentCall(Message):
+    """One lifecycle call for the instance `path` of mission `mission` (see the module docstring).
+
+    `bindings`: need -> [resource id, robot, part] (robot and part "" unless bound through a robot's part);
+    `epochs`: need -> fencing epoch of its grant; `rank`: [-priority, declaration order], for the host's
+    per-cycle arbitration of actuator commands; `sim_time`/`sim_version`: the simulation's clock."""
+
+    op: str
+    mission: str
+    path: str
+    component: str = ""
+    world: str = ""
+    params: dict[str, Any] | None = None
+    bindings: dict[str, list[str]] | None = None
+    epochs: dict[str, int | None] | None = None
+    rank: list[int] | None = None
+    now: float = 0.0
+    sim_time: float = -1.0
+    sim_version: int = -1
+    shared: dict[str, Any] | None = None
+    siblings: dict[str, Any] | None = None
+    status: str = ""
+
+
+@message("drd.component.reply", 1)
+class ComponentReply(Message):
+    """What the call did: `status` (after a step), outputs, events `[name, fields]`, log lines, shared data,
+    dependency changes `[resource, key, value]`, and `error` if the component raised (the state fails)."""
+
+    status: str = ""
+    outputs: dict[str, Any] | None = None
+    events: list[list[Any]] | None = None
+    logs: list[str] | None = None
+    shared: dict[str, Any] | None = None
+    dependencies: list[list[Any]] | None = None
+    error: str = ""
+
+
+class ComponentError(Exception):
+    """The remote component raised, or its host did not answer: the state fails with this message."""
+
+
+@dataclass
+class RouterStats:
+    calls: int = 0
+    seconds: float = 0.0
+    by_host: dict[str, int] = field(default_factory=dict)
+    slowest: float = 0.0
+
+    def add(self, host: str, seconds: float) -> None:
+        self.calls += 1
+        self.seconds += seconds
+        self.slowest = max(self.slowest, seconds)
+        self.by_host[host] = self.by_host.get(host, 0) + 1
+
+    def as_dict(self) -> dict[str, Any]:
+        mean = self.seconds / self.calls if self.calls else 0.0
+        return {"calls": self.calls, "mean_ms": round(mean * 1000, 3), "slowest_ms": round(self.slowest * 1000, 3),
+                "by_host": dict(self.by_host)}
+
+
+class ComponentRouter:
+    """What every `RemoteComponent` of one mission shares: where resources live, the bus, the sim clock.
+
+    `node(path)` finds the interpreter's node of an instance and the interpreter, as a pair (for its needs,
+    grants and epochs);
+    `local` builds components that run in this process (those with no device needs)."""
+
+    def __init__(self, bus: Bus, cluster: str, resource_hosts: Mapping[str, str], me: str, *,
+                 node: Callable[[str], Any], local: Mapping[str, Callable[[], Component]],
+                 mission: str, world: str, timeout: float = 1.0, dead: Callable[[str], bool] = lambda h: False,
+                 catalog: Any = None):
+        self.bus = bus
+        self.cluster = cluster
+        self.resource_hosts = dict(resource_hosts)
+        self.me = me
+        self.node = node
+        self.local = local
+        self.mission = mission
+        self.world = world
+        self.timeout = timeout
+        self.dead = dead
+        self.catalog = catalog
+        self.gone: set[str] = set()
+        self.sim_time = -1.0
+        self.sim_version = -1
+        self.stats = RouterStats()
+
+    def param_names(self, component: str) -> set[str] | None:
+        """The parameters the manifest declares (what a call may carry), or None if unknown."""
+        ct = self.catalog.get(component) if self.catalog is not None else None
+        return None if ct is None else {p.name for p in ct.params}
+
+    def creator_key(self, host: str) -> str:
+        return f"drd/{self.cluster}/host/{host}/creator"
+
+    def call(self, host: str, msg: ComponentCall) -> ComponentReply:
+        if host in self.gone or self.dead(host):
+            raise ComponentError(f"host {host} is down: the component cannot run there")
+        t0 = time.perf_counter()
+        try:
+            reply = self.bus.call(self.creator_key(host), msg, timeout=self.timeout)
+        except RemoteError as e:
+            raise ComponentError(f"{host}'s Creator refused {msg.op} of {msg.path}: {e.reason}") from None
+        except BusError as e:
+            self.gone.add(host)  # fail fast from now on: the daemon removes the host at lease expiry
+            raise ComponentError(f"host {host} did not answer {msg.op} within {self.timeout:g} s ({e})") from None
+        self.stats.add(host, time.perf_counter() - t0)
+        if not isinstance(reply, ComponentReply):
+            raise ComponentError(f"{host} answered {msg.op} with a {type(reply).TYPE}")
+        return reply
+
+    def registry(self, names: Iterator[str] | None = None) -> RemoteRegistry:
+        return RemoteRegistry(self)
+
+
+class RemoteRegistry(Mapping[str, Callable[[], Component]]):
+    """The executive's registry for a cluster mission: every component type becomes a `RemoteComponent`."""
+
+    def __init__(self, router: ComponentRouter):
+        self.router = router
+
+    def __getitem__(self, name: str) -> Callable[[], Component]:
+        if name not in self.router.local:  # the catalog knows it (the Creator checks again on its side)
+            raise KeyError(name)
+        return lambda: RemoteComponent(name, self.router)
+
+    def get(self, name: str, default: Any = None) -> Any:
+        try:
+            return self[name]
+        except KeyError:
+            return default
+
+    def __iter__(self) -> Iterator[str]:
+        return iter(self.router.local)
+
+    def __len__(self) -> int:
+        return len(self.router.local)
+
+
+class RemoteComponent(Component):
+    """A component whose code runs in the Creator of the host owning its devices (see the module docstring)."""
+
+    def __init__(self, name: str, router: ComponentRouter) -> None:
+        super().__init__()
+        self.name = name
+        self.router = router
+        self.host: str | None = None
+        self.local: Component | None = None
+        self._bindings: dict[str, list[str]] = {}
+        self._holders: dict[str, tuple[Any, str]] = {}  # need -> (node holding the grant, unit id)
+        self._rank: list[int] = [0, 0]
+
+    # -- lifecycle ------------------------------------------------------------------------------------
+
+    def setup(self, ctx: Context) -> None:
+        self.ctx = ctx  # the remote instance is set up at its first start, once its host is known
+
+    def start(self) -> None:
+        self._resolve()
+        if self.host is None:
+            if self.local is None:
+                self.local = self.router.local[self.name]()
+                self.local.setup(self._ctx)
+            self.local.start()
+            return
+        names = self.router.param_names(self.name)
+        params = {k: _plain(v) for k, v in self._ctx.params.items() if names is None or k in names}
+        self._call("start", params=params, bindings=self._bindings, rank=self._rank)
+
+    def step(self, now: float) -> Status:
+        if self.local is not None and self.host is None:
+            return self.local.step(now)
+        reply = self._call("step", now=now)
+        return Status(reply.status) if reply.status else Status.RUNNING
+
+    def suspend(self) -> None:
+        self._lifecycle("suspend")
+
+    def resume(self) -> None:
+        self._lifecycle("resume")
+
+    def terminate(self, status: Status) -> None:
+        if self.local is not None and self.host is None:
+            self.local.terminate(status)
+            return
+        if self.host is not None:
+            self._call("terminate", status=str(status))
+
+    # -- helpers --------------------------------------------------------------------------------------
+
+    @property
+    def _ctx(self) -> Context:
+        assert self.ctx is not None, "start() before setup()"
+        return self.ctx
+
+    def _lifecycle(self, op: str) -> None:
+        if self.local is not None and self.host is None:
+            getattr(self.local, op)()
+        elif self.host is not None:
+            self._call(op)
+
+    def _resolve(self) -> None:
+        """Which resource (and robot part) each need is bound to, the grants' holders, and so the host."""
+        found = self.router.node(self._ctx.path)
+        self._bindings, self._holders = {}, {}
+        hosts: set[str] = set()
+        if found is not None:
+            node, interp = found
+            self._rank = [-node.state.priority, interp._rank.get(node.state.id, 0) if interp else 0]
+            for need in node.state.needs:
+                holder, rid, robot, part = node, node.assignment.get(need.name), "", ""
+                if rid is None and need.bound_to is not None:
+                    state_id, name, part = need.bound_to
+                    holder = next((a for a in _ancestors(node) if a.state.id == state_id), node)
+                    robot = holder.assignment.get(name) or ""
+                    rid = interp.pool.part(robot, part) if robot and interp else None
+                if not rid:
+                    continue
+                self._bindings[need.name] = [rid, robot or "", part or ""]
+                self._holders[need.name] = (holder, rid)
+                where = self.router.resource_hosts.get(rid)
+                if where:
+                    hosts.add(where)
+        if len(hosts) > 1:
+            raise ComponentError(f"{self._ctx.path}: its devices are on several hosts ({', '.join(sorted(hosts))})")
+        self.host = next(iter(hosts)) if hosts else None
+
+    def _epochs(self) -> dict[str, int | None]:
+        return {need: holder.epochs.get(rid) for need, (holder, rid) in self._holders.items()}
+
+    def _call(self, op: str, **fields: Any) -> ComponentReply:
+        assert self.host is not None
+        ctx, router = self._ctx, self.router
+        shared = ctx.services.get("shared")
+        siblings = ctx.services.get("siblings")
+        msg = ComponentCall(op, router.mission, ctx.path, self.name, router.world,
+                            epochs=self._epochs(), sim_time=router.sim_time, sim_version=router.sim_version,
+                            shared=_plain(shared) if isinstance(shared, dict) else None,
+                            siblings=_plain(siblings) if isinstance(siblings, Mapping) else None,
+                            now=fields.pop("now", ctx.now()), **fields)
+        reply = router.call(self.host, msg)
+        self._apply(reply)
+        if reply.error:
+            raise ComponentError(reply.error)
+        return reply
+
+    def _apply(self, reply: ComponentReply) -> None:
+        ctx = self._ctx
+        if reply.outputs is not None:
+            ctx.outputs.clear()
+            ctx.outputs.update(reply.outputs)
+        shared = ctx.services.get("shared")
+        if isinstance(shared, dict) and reply.shared is not None:
+            for name, value in reply.shared.items():
+                old = shared.get(name)
+                if isinstance(old, dict) and isinstance(value, dict):
+                    old.clear()
+                    old.update(value)  # the ancestor's own dict: every component sharing it sees the change
+                else:
+                    shared[name] = value
+        for line in reply.logs or ():
+            ctx.log(str(line))
+        update = ctx.services.get("dependencies")
+        for dep in reply.dependencies or ():
+            if callable(update) and len(dep) == 3:
+                update(str(dep[0]), str(dep[1]), dep[2])
+        for event in reply.events or ():
+            if len(event) == 2 and isinstance(event[1], dict):
+                ctx.emit(str(event[0]), **event[1])
+
+
+def _ancestors(node: Any) -> list[Any]:
+    out, p = [], node.parent
+    while p is not None:
+        out.append(p)
+        p = p.parent
+    return out
+
+
+def _plain(value: Any) -> Any:
+    """Shared data as JSON values (tuples become lists; anything else becomes its string)."""
+    if isinstance(value, Mapping):
+        return {str(k): _plain(v) for k, v in value.items()}
+    if isinstance(value, list | tuple | set):
+        return [_plain(v) for v in value]
+    if value is None or isinstance(value, bool | int | float | str):
+        return value
+    return str(value)

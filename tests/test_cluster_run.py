@@ -1,0 +1,145 @@
+"""`missionctl run` on a real 3-daemon cluster (controller + simulator, ranger1, a spare worker) on loopback.
+
+One cluster serves the module's tests, in file order: an invalid mission (exit 2, located error), a detached
+run seen by `status --json` and stopped, the corridor mission to its end (compared with the embedded dry-run
+of the same files), and last a kill -9 of ranger1 mid-mission (exit 1 with the reason, within lease + a few
+seconds). Every process is ours and killed by pid (`tests/cluster_support.py`).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import time
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+from cluster_support import MISSIONCTL, ROOT, DaemonCluster, eventually, running_cluster
+
+NAMES = ["controller", "ranger1", "spare"]
+MISSION = "missions/corridor_surveillance.mission"
+SPEED = "50"
+UNTIL = "300"
+
+
+def corridor_hosts(cluster: DaemonCluster) -> str:
+    """The repository's hosts.yaml (controller + simulator, ranger1 with six Scouts) on our free ports, plus a
+    spare worker, with the test lease."""
+    text = (ROOT / "hosts.yaml").read_text()
+    ports = dict(zip(NAMES, cluster.ports, strict=True))
+    text = text.replace("name: corridor", f"name: {cluster.name}").replace("lease: 3s", "lease: 1000ms")
+    text = text.replace("127.0.0.1:7447", f"127.0.0.1:{ports['controller']}")
+    text = text.replace("127.0.0.1:7448", f"127.0.0.1:{ports['ranger1']}")
+    return text.replace("  ranger1:\n", f"  spare:\n    endpoint: tcp/127.0.0.1:{ports['spare']}\n"
+                        "    roles: [worker]\n\n  ranger1:\n", 1)
+
+
+@pytest.fixture(scope="module")
+def cluster(tmp_path_factory: pytest.TempPathFactory) -> Iterator[DaemonCluster]:
+    folder = tmp_path_factory.mktemp("cluster_run")
+    with running_cluster(folder, NAMES) as c:
+        c.hosts_file.write_text(corridor_hosts(c))
+        c.start_all()
+        c.wait_ready()
+        c.wait_up()
+        yield c
+
+
+def missionctl(c: DaemonCluster, *args: str, timeout: float = 90.0) -> subprocess.CompletedProcess[str]:
+    return c.missionctl(*args, "--config", str(c.hosts_file), timeout=timeout)
+
+
+def test_an_invalid_mission_is_refused_by_the_controller_with_a_located_error(cluster: DaemonCluster,
+                                                                              tmp_path: Path) -> None:
+    bad = tmp_path / "bad.mission"
+    bad.write_text("mission Bad {\n    FollowCorridor(sped: 0.5)\n}\n")
+    r = missionctl(cluster, "run", str(bad))
+    assert r.returncode == 2, r.stderr
+    assert "bad.mission:2:" in r.stderr and "sped" in r.stderr  # file:line:col, the message, the caret
+    assert "not run" in r.stderr
+
+
+def test_detach_then_status_shows_the_active_states_then_stop(cluster: DaemonCluster) -> None:
+    r = missionctl(cluster, "run", MISSION, "--detach", "--speed", "5")
+    assert r.returncode == 0, r.stderr
+    mid = r.stdout.strip()
+    assert mid.startswith("CorridorSurveillance-")
+
+    def active() -> list[str]:
+        s = missionctl(cluster, "status", "--json")
+        assert s.returncode == 0, s.stderr
+        missions = {m["id"]: m for m in json.loads(s.stdout)["missions"]}
+        tree = missions[mid]["tree"]
+        out, stack = [], [tree] if tree else []
+        while stack:
+            n = stack.pop()
+            out.append(f"{n['path']}:{n['phase']}")
+            stack.extend(n["children"])
+        return out
+
+    eventually(lambda: any("FollowCorridor:active" in p for p in active()), "FollowCorridor to be active", 20)
+    r = missionctl(cluster, "stop", mid)
+    assert r.returncode == 0, r.stderr
+    assert "stopped" in r.stdout
+    s = json.loads(missionctl(cluster, "status", "--json").stdout)
+    assert {m["id"]: m["outcome"] for m in s["missions"]}[mid] == "stopped"
+
+
+def test_the_corridor_mission_runs_on_the_cluster_as_in_the_dry_run(cluster: DaemonCluster) -> None:
+    from drd.dryrun import run as dry_run
+    from drd.hosts import load_hosts
+    from drd.manifests import load_catalog
+    from drd.sim.world import load_world
+    from dsl import compile_file
+
+    cat = load_catalog()
+    expected = dry_run(compile_file(ROOT / MISSION, cat).statechart, load_hosts(ROOT / "hosts.yaml", cat),
+                       load_world(ROOT / "worlds" / "corridor.yaml"), cat, until=float(UNTIL))
+    t0 = time.monotonic()
+    r = missionctl(cluster, "run", MISSION, "--speed", SPEED, "--until", UNTIL, "--json", timeout=150)
+    wall = time.monotonic() - t0
+    assert r.returncode == (0 if expected.outcome == "success" else 1), r.stdout[:300] + r.stderr[-3000:]
+    report = json.loads(r.stdout)
+    assert report["outcome"] == (expected.outcome or "stopped")
+    # Same behaviors, same world: the open doors are found and Scouts launched (the order in which the
+    # RoomSurveillance instances take turns on the Ranger may differ, so the counts are compared loosely).
+    assert report["doors"] and report["doors"][0]["at"] < 30
+    assert {round(d["x"]) for d in report["doors"]} <= {round(d["x"]) for d in expected.doors} | {None}
+    if expected.scouts:
+        assert report["scouts"], "Scouts launched"
+    assert report["sim_time"] > 0 and wall < 140
+
+
+def test_kill_9_of_the_ranger_host_mid_mission_fails_the_mission(cluster: DaemonCluster) -> None:
+    cmd = [*MISSIONCTL, "run", MISSION, "--config", str(cluster.hosts_file), "--speed", "10"]
+    proc = subprocess.Popen(cmd, cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        client = cluster.client()
+
+        def running() -> bool:
+            assert proc.poll() is None, proc.communicate()
+            for m in client.missions():
+                stack = [m["tree"]] if m.get("outcome") is None and m.get("tree") else []
+                while stack:
+                    n = stack.pop()
+                    if n["path"].endswith("FollowCorridor") and n["phase"] == "active":
+                        return True
+                    stack.extend(n["children"])
+            return False
+
+        eventually(running, "the mission's Ranger to follow the corridor", 30, poll=0.1)
+        time.sleep(1.0)
+        os.kill(cluster.pid("ranger1"), signal.SIGKILL)
+        killed = time.monotonic()
+        out, err = proc.communicate(timeout=1.0 + 10.0)  # lease + a few seconds
+        assert time.monotonic() - killed < 11.0
+        assert proc.returncode == 1, err[-3000:]
+        assert "failure" in out
+        assert "ranger1" in out or "host" in out
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+        proc.communicate(timeout=10)
