@@ -110,7 +110,7 @@ def test_the_corridor_mission_runs_on_the_cluster_as_in_the_dry_run(cluster: Dae
     assert {round(d["x"]) for d in report["doors"]} <= {round(d["x"]) for d in expected.doors} | {None}
     if expected.scouts:
         assert report["scouts"], "Scouts launched"
-    assert report["sim_time"] > 0 and wall < 140
+    assert report["sim_time"] > 0 and wall < 100
 
 
 def test_kill_9_of_the_ranger_host_mid_mission_fails_the_mission(cluster: DaemonCluster) -> None:

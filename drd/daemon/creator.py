@@ -32,7 +32,7 @@ from drd.bus import Bus, Message, Query, Reply
 from drd.hosts import Cluster
 from drd.runtime.component import Component, Context, Status
 from drd.runtime.fence import Arbiter, Fenced, Proposal
-from drd.runtime.remote import ComponentCall, ComponentReply
+from drd.runtime.remote import ComponentBatch, ComponentBatchReply, ComponentCall, ComponentReply
 from dsl.catalog import Catalog, Kind
 
 log = logging.getLogger("drd.daemon.creator")
@@ -107,47 +107,108 @@ class Creator:
 
     def handle(self, call: ComponentCall) -> ComponentReply:
         with self._lock:
-            self.calls += 1
-            if call.op not in OPS:
-                raise CreatorError(f"unknown op {call.op!r}: use {', '.join(OPS)}")
-            if call.mission != self.mission:
-                self._new_mission(call.mission)
-            if self._sim is not None and call.sim_version >= 0:
-                self._sim.sync(call.sim_time, call.sim_version)
-            inst = self.instances.get(call.path)
-            if call.op == "start":
-                inst = self._start_instance(call, inst)
-            elif inst is None:
-                raise CreatorError(f"no instance {call.path} of mission {call.mission} on {self.host}")
-            inst.now = call.now
-            if call.epochs is not None:
-                inst.epochs.update(call.epochs)
-            services = inst.ctx.services
-            assert isinstance(services, dict)
-            services["shared"] = call.shared if call.shared is not None else {}
-            services["siblings"] = call.siblings if call.siblings is not None else {}
-            self.arbiter.round = (call.now, call.op == "step")
-            status = ""
-            error = ""
+            if self._sim is not None:
+                self._sim.owner = call.path
             try:
-                match call.op:
-                    case "start":
-                        inst.component.start()
-                    case "step":
-                        status = str(inst.component.step(call.now))
-                    case "suspend":
-                        inst.component.suspend()
-                    case "resume":
-                        inst.component.resume()
-                    case "terminate":
-                        inst.component.terminate(Status(call.status) if call.status in Status.__members__.values()
-                                                 else Status.RUNNING)
-            except Exception as e:  # component code is not ours to trust: the state fails, the daemon goes on
-                error = f"component raised {type(e).__name__}: {e}"
-            reply = ComponentReply(status, _plain(inst.ctx.outputs), inst.events, inst.logs,
-                                   _plain(services["shared"]), inst.dependencies, error)
-            inst.events, inst.logs, inst.dependencies = [], [], []
+                reply = self._handle(call, call.shared)
+            finally:
+                refused = self._flush_sim()
+            if refused and not reply.error:
+                reply = ComponentReply(reply.status, reply.outputs, reply.events, reply.logs, reply.shared,
+                                       reply.dependencies, f"component raised HardwareError: {refused[0][1]}")
             return reply
+
+    def handle_batch(self, batch: ComponentBatch) -> ComponentBatchReply:
+        """The steps of one cycle in order, up to the first the controller must see first (`ComponentBatch`)."""
+        replies: list[ComponentReply] = []
+        latest: dict[str, Any] = {}  # shared dict id on the controller -> its value after the last step
+        with self._lock:
+            owners: dict[str, int] = {}
+            try:
+                for call in batch.calls:
+                    if call.op != "step":
+                        raise CreatorError(f"a batch holds steps only, not {call.op!r}")
+                    shared = dict(call.shared) if call.shared is not None else None
+                    ids = call.shared_ids or {}
+                    if shared is not None:
+                        for name, ref in ids.items():
+                            if ref in latest and name in shared:
+                                shared[name] = _plain(latest[ref])  # a copy: the earlier reply keeps its own
+                    if self._sim is not None:
+                        self._sim.owner = call.path
+                    owners[call.path] = len(replies)
+                    try:
+                        reply = self._handle(call, shared)
+                    except CreatorError as e:
+                        replies.append(ComponentReply(error=f"{self.host}'s Creator refused step of {call.path}: {e}"))
+                        break
+                    replies.append(reply)
+                    if reply.shared is not None:
+                        for name, ref in ids.items():
+                            if name in reply.shared:
+                                latest[ref] = reply.shared[name]
+                    if reply.events or reply.dependencies or reply.error:
+                        break  # the controller reacts to this before the next step
+            finally:
+                for path, error in self._flush_sim():
+                    i = owners.get(path)
+                    if i is not None and not replies[i].error:
+                        r = replies[i]
+                        replies[i] = ComponentReply(r.status, r.outputs, r.events, r.logs, r.shared, r.dependencies,
+                                                    f"component raised HardwareError: {error}")
+        return ComponentBatchReply(replies)
+
+    def _flush_sim(self) -> list[tuple[str, str]]:
+        """Send the actuator commands the drivers queued (one request): [(instance path, error)] of refusals."""
+        sim = self._sim
+        if sim is None or not hasattr(sim, "flush"):
+            return []
+        sim.owner = ""
+        refused: list[tuple[str, str]] = sim.flush()
+        return refused
+
+    def _handle(self, call: ComponentCall, shared: dict[str, Any] | None) -> ComponentReply:
+        self.calls += 1
+        if call.op not in OPS:
+            raise CreatorError(f"unknown op {call.op!r}: use {', '.join(OPS)}")
+        if call.mission != self.mission:
+            self._new_mission(call.mission)
+        if self._sim is not None and call.sim_version >= 0:
+            self._sim.sync(call.sim_time, call.sim_version)
+        inst = self.instances.get(call.path)
+        if call.op == "start":
+            inst = self._start_instance(call, inst)
+        elif inst is None:
+            raise CreatorError(f"no instance {call.path} of mission {call.mission} on {self.host}")
+        inst.now = call.now
+        if call.epochs is not None:
+            inst.epochs.update(call.epochs)
+        services = inst.ctx.services
+        assert isinstance(services, dict)
+        services["shared"] = shared if shared is not None else {}
+        services["siblings"] = call.siblings if call.siblings is not None else {}
+        self.arbiter.round = (call.now, call.op == "step")
+        status = ""
+        error = ""
+        try:
+            match call.op:
+                case "start":
+                    inst.component.start()
+                case "step":
+                    status = str(inst.component.step(call.now))
+                case "suspend":
+                    inst.component.suspend()
+                case "resume":
+                    inst.component.resume()
+                case "terminate":
+                    inst.component.terminate(Status(call.status) if call.status in Status.__members__.values()
+                                             else Status.RUNNING)
+        except Exception as e:  # component code is not ours to trust: the state fails, the daemon goes on
+            error = f"component raised {type(e).__name__}: {e}"
+        reply = ComponentReply(status, _plain(inst.ctx.outputs), inst.events, inst.logs,
+                               _plain(services["shared"]), inst.dependencies, error)
+        inst.events, inst.logs, inst.dependencies = [], [], []
+        return reply
 
     # -- helpers ----------------------------------------------------------------------------------------
 
@@ -216,6 +277,14 @@ class Creator:
         return new
 
     def _serve(self, query: Query) -> Message | Reply:
+        if isinstance(query.payload, ComponentBatch):
+            if not query.payload.calls:
+                return query.error("an empty batch")
+            try:
+                return self.handle_batch(query.payload)
+            except Exception as e:
+                log.warning("creator %s: a step batch failed: %s", self.host, e)
+                return ComponentBatchReply([ComponentReply(error=f"{type(e).__name__}: {e}")])
         if not isinstance(query.payload, ComponentCall):
             return query.error("expected a drd.component.call")
         try:

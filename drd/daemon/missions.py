@@ -268,9 +268,11 @@ class MissionRun:
             interp = runner.controller.executive.missions.get(self.mission)
             outcome = (interp.outcome, interp.reason) if interp is not None else (None, "")
         log.info("mission %s ended %s (%s)", self.mission, *outcome)
-        log.info("mission %s ended: %.1f s sim in %.2f s wall (%.1fx), %d cycles, sim step %.2f ms, "
-                 "component calls %s", self.mission, sim_time, wall, sim_time / wall if wall else 0.0, self.cycles,
-                 1000 * self.sim_seconds / max(1, self.cycles), stats)
+        log.info("mission %s ended: %.1f s sim in %.2f s wall (%.1fx), %d cycles (%.2f ms each), sim step %.2f ms, "
+                 "component steps %s, step batches %s, other lifecycle calls %s", self.mission, sim_time, wall,
+                 sim_time / wall if wall else 0.0, self.cycles, 1000 * wall / max(1, self.cycles),
+                 1000 * self.sim_seconds / max(1, self.cycles), stats, self.router.batches.as_dict(),
+                 self.router.stats.seconds and round(self.router.stats.seconds * 1000 / max(1, self.cycles), 3))
 
 
 def _find(executive: Any, mission: str, path: str) -> tuple[Any, Any] | None:

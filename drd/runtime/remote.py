@@ -48,6 +48,7 @@ class ComponentCall(Message):
     shared: dict[str, Any] | None = None
     siblings: dict[str, Any] | None = None
     status: str = ""
+    shared_ids: dict[str, str] | None = None
 
 
 @message("drd.component.reply", 1)
@@ -62,6 +63,26 @@ class ComponentReply(Message):
     shared: dict[str, Any] | None = None
     dependencies: list[list[Any]] | None = None
     error: str = ""
+
+
+@message("drd.component.batch", 1)
+class ComponentBatch(Message):
+    """The `step` calls of one control cycle for one host, in the interpreter's order (see `ComponentRouter.step`).
+
+    The Creator runs them in turn and stops after a step that emitted an event, changed the Static
+    Dependency Database or failed to run: the controller must react to that before the next step (an event
+    may exit the components that come later), so those are stepped again by a later call. `shared_ids` of
+    each call name the shared dicts that are one object on the controller, so a later step of the batch
+    sees what an earlier one left in them, as it would over single calls."""
+
+    calls: list[ComponentCall]
+
+
+@message("drd.component.batch-reply", 1)
+class ComponentBatchReply(Message):
+    """One reply per call that ran, in order (a prefix of the batch's calls)."""
+
+    replies: list[ComponentReply]
 
 
 class ComponentError(Exception):
@@ -113,6 +134,8 @@ class ComponentRouter:
         self.sim_time = -1.0
         self.sim_version = -1
         self.stats = RouterStats()
+        self.batches = RouterStats()  # one per host per cycle when nothing interrupts the cycle
+        self._ready: dict[int, tuple[float, ComponentReply]] = {}  # id(component) -> (now, its step's reply)
 
     def param_names(self, component: str) -> set[str] | None:
         """The parameters the manifest declares (what a call may carry), or None if unknown."""
@@ -137,6 +160,45 @@ class ComponentRouter:
         if not isinstance(reply, ComponentReply):
             raise ComponentError(f"{host} answered {msg.op} with a {type(reply).TYPE}")
         return reply
+
+    def step(self, comp: RemoteComponent, now: float) -> ComponentReply:
+        """`comp`'s step reply: received with an earlier batch of this cycle, or by a batch starting at it.
+
+        A batch holds `comp` and the components the interpreter steps right after it in this cycle on the same
+        host (active, remote, in `_running` order), up to the first one that runs elsewhere or here: nothing
+        the controller does between those steps can change them (the Creator stops at the first step whose
+        reply the controller must react to first, see `ComponentBatch`)."""
+        ready = self._ready.pop(id(comp), None)
+        if ready is not None and ready[0] == now:
+            return ready[1]
+        group = comp.followers()
+        msg = ComponentBatch([c.message("step", now=now) for c in group])
+        assert comp.host is not None
+        replies = self.call_batch(comp.host, msg)
+        for c, reply in zip(group[1:], replies[1:], strict=False):
+            self._ready[id(c)] = (now, reply)
+        return replies[0]
+
+    def call_batch(self, host: str, msg: ComponentBatch) -> list[ComponentReply]:
+        if host in self.gone or self.dead(host):
+            raise ComponentError(f"host {host} is down: the component cannot run there")
+        first = msg.calls[0]
+        t0 = time.perf_counter()
+        try:
+            reply = self.bus.call(self.creator_key(host), msg, timeout=self.timeout)
+        except RemoteError as e:
+            raise ComponentError(f"{host}'s Creator refused step of {first.path}: {e.reason}") from None
+        except BusError as e:
+            self.gone.add(host)
+            raise ComponentError(f"host {host} did not answer step within {self.timeout:g} s ({e})") from None
+        seconds = time.perf_counter() - t0
+        self.batches.add(host, seconds)
+        if not isinstance(reply, ComponentBatchReply) or not reply.replies:
+            raise ComponentError(f"{host} answered a step batch with a {type(reply).TYPE}")
+        for _ in reply.replies:
+            self.stats.calls += 1  # component steps, for the figures (one round trip carried them all)
+            self.stats.by_host[host] = self.stats.by_host.get(host, 0) + 1
+        return list(reply.replies)
 
     def registry(self, names: Iterator[str] | None = None) -> RemoteRegistry:
         return RemoteRegistry(self)
@@ -178,6 +240,8 @@ class RemoteComponent(Component):
         self._bindings: dict[str, list[str]] = {}
         self._holders: dict[str, tuple[Any, str]] = {}  # need -> (node holding the grant, unit id)
         self._rank: list[int] = [0, 0]
+        self._node: Any = None  # the interpreter's node of this entry and the interpreter (for batching)
+        self._interp: Any = None
 
     # -- lifecycle ------------------------------------------------------------------------------------
 
@@ -199,7 +263,10 @@ class RemoteComponent(Component):
     def step(self, now: float) -> Status:
         if self.local is not None and self.host is None:
             return self.local.step(now)
-        reply = self._call("step", now=now)
+        reply = self.router.step(self, now)
+        self._apply(reply)
+        if reply.error:
+            raise ComponentError(reply.error)
         return Status(reply.status) if reply.status else Status.RUNNING
 
     def suspend(self) -> None:
@@ -232,6 +299,7 @@ class RemoteComponent(Component):
         """Which resource (and robot part) each need is bound to, the grants' holders, and so the host."""
         found = self.router.node(self._ctx.path)
         self._bindings, self._holders = {}, {}
+        self._node, self._interp = found if found is not None else (None, None)
         hosts: set[str] = set()
         if found is not None:
             node, interp = found
@@ -257,17 +325,46 @@ class RemoteComponent(Component):
     def _epochs(self) -> dict[str, int | None]:
         return {need: holder.epochs.get(rid) for need, (holder, rid) in self._holders.items()}
 
-    def _call(self, op: str, **fields: Any) -> ComponentReply:
-        assert self.host is not None
+    def followers(self) -> list[RemoteComponent]:
+        """This component, then those the interpreter steps after it in this cycle on the same host, up to the
+        first active component that runs anywhere else (inactive ones are skipped, as the interpreter does)."""
+        group: list[RemoteComponent] = [self]
+
+        node, interp = self._node, self._interp
+        running = getattr(interp, "_running", None)
+        if node is None or running is None or node not in running:
+            return group
+        active = node.phase  # ours is active: the interpreter is stepping us
+        seen = False
+        for other in list(running):
+            if not seen:
+                seen = other is node
+                continue
+            comp = other.component
+            if other.phase is not active or comp is None:
+                continue
+            if (not isinstance(comp, RemoteComponent) or comp.router is not self.router or comp.host != self.host
+                    or comp._node is not other):
+                break
+            group.append(comp)
+        return group
+
+    def message(self, op: str, **fields: Any) -> ComponentCall:
         ctx, router = self._ctx, self.router
         shared = ctx.services.get("shared")
         siblings = ctx.services.get("siblings")
-        msg = ComponentCall(op, router.mission, ctx.path, self.name, router.world,
-                            epochs=self._epochs(), sim_time=router.sim_time, sim_version=router.sim_version,
-                            shared=_plain(shared) if isinstance(shared, dict) else None,
-                            siblings=_plain(siblings) if isinstance(siblings, Mapping) else None,
-                            now=fields.pop("now", ctx.now()), **fields)
-        reply = router.call(self.host, msg)
+        ids = ({k: str(id(v)) for k, v in shared.items() if isinstance(v, dict)}
+               if isinstance(shared, dict) else None)
+        return ComponentCall(op, router.mission, ctx.path, self.name, router.world,
+                             epochs=self._epochs(), sim_time=router.sim_time, sim_version=router.sim_version,
+                             shared=_plain(shared) if isinstance(shared, dict) else None,
+                             siblings=_plain(siblings) if isinstance(siblings, Mapping) else None,
+                             now=fields.pop("now", ctx.now()), shared_ids=ids or None, **fields)
+
+    def _call(self, op: str, **fields: Any) -> ComponentReply:
+        assert self.host is not None
+        msg = self.message(op, **fields)
+        reply = self.router.call(self.host, msg)
         self._apply(reply)
         if reply.error:
             raise ComponentError(reply.error)

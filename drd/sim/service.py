@@ -8,7 +8,9 @@ serves it on one queryable, `drd/<cluster>/sim`, with `SimRequest` messages:
 - `call` (method, args): one of the `Simulation` methods the `sim` drivers use (`ranges`, `camera`,
   `set_velocity`, `launch`...), checked against `ALLOWED_METHODS`: nothing else is ever called, and the
   arguments are plain JSON values (never code);
-- `attr` (name): one of `ALLOWED_ATTRS` (`jump_height`, `max_jump`).
+- `attr` (name): one of `ALLOWED_ATTRS` (`jump_height`, `max_jump`);
+- `multi` (args: `[[method, [args...]], ...]`): several `call`s in order in one request; the value is one
+  `[value, error]` pair per call (a refused call does not stop the others).
 
 Every `SimReply` carries the simulation's `time` and `version`, so that a `RemoteSimulation` keeps them
 current without asking. On the other hosts the `sim` drivers get a `RemoteSimulation`: duck-typed to the
@@ -35,6 +37,13 @@ ALLOWED_METHODS: dict[str, tuple[int, int]] = {
     "set_max_speed": (2, 2), "set_velocity": (3, 3), "stop": (1, 1), "launch": (3, 3), "jump": (2, 2),
     "radio_ok": (3, 3), "pose": (1, 1), "command": (1, 1), "set_wheels": (3, 3), "light": (2, 2),
 }
+#: Commands that return nothing and change no reading before the next step: a `RemoteSimulation` queues them
+#: and sends them together (`multi`) at the end of the Creator's call, before the controller steps the physics.
+DEFERRED = frozenset({"set_velocity", "stop", "set_wheels"})
+#: Readings that change only with `Simulation.version` (no noise drawn): a `RemoteSimulation` keeps them per version.
+PER_VERSION = frozenset({"odometry", "magazine", "pose"})
+#: At most this many calls in one `multi` request.
+MAX_MULTI = 64
 #: Plain attributes a remote driver may read once (at construction).
 ALLOWED_ATTRS = frozenset({"jump_height", "max_jump", "time", "version"})
 #: Only world names, resolved under `worlds/` of the simulator host: never a path from the wire.
@@ -44,7 +53,7 @@ ROOT = Path(__file__).resolve().parents[2]
 
 @message("drd.sim.request", 1)
 class SimRequest(Message):
-    """`op` is reset, step, call or attr; see the module docstring."""
+    """`op` is reset, step, call, multi or attr; see the module docstring."""
 
     op: str
     method: str = ""
@@ -170,23 +179,44 @@ class SimulationService:
                 if req.method not in ALLOWED_ATTRS:
                     raise ValueError(f"attribute {req.method!r} is not served (allowed: {sorted(ALLOWED_ATTRS)})")
                 return SimReply(encode_value(getattr(sim, req.method)), sim.time, sim.version, self.world_name)
+            if req.op == "multi":
+                calls = list(req.args or [])
+                if len(calls) > MAX_MULTI or not all(isinstance(c, list) and len(c) == 2 and isinstance(c[0], str)
+                                                     and isinstance(c[1], list) for c in calls):
+                    raise ValueError(f"multi takes up to {MAX_MULTI} [method, [args]] pairs")
+                out = []
+                for method, args in calls:
+                    try:
+                        out.append([encode_value(self._call(sim, method, args)), ""])
+                    except SimError as e:
+                        out.append([None, str(e) or type(e).__name__])
+                return SimReply(out, sim.time, sim.version, self.world_name)
             if req.op != "call":
-                raise ValueError(f"unknown op {req.op!r}: use reset, step, call or attr")
-            bounds = ALLOWED_METHODS.get(req.method)
-            if bounds is None:
-                raise ValueError(f"method {req.method!r} is not served (allowed: {', '.join(sorted(ALLOWED_METHODS))})")
-            args = list(req.args or [])
-            if not bounds[0] <= len(args) <= bounds[1]:
-                raise ValueError(f"{req.method} takes {bounds[0]}..{bounds[1]} arguments, got {len(args)}")
-            if any(isinstance(a, dict | list) for a in args):
-                raise ValueError(f"{req.method}: arguments must be plain values")
+                raise ValueError(f"unknown op {req.op!r}: use reset, step, call, multi or attr")
             try:
-                value = getattr(sim, req.method)(*args)
+                value = self._call(sim, req.method, list(req.args or []))
             except SimError as e:
                 return SimReply(None, sim.time, sim.version, self.world_name, error=str(e) or type(e).__name__)
-            except (TypeError, ValueError) as e:
-                raise ValueError(f"{req.method}: {e}") from None
             return SimReply(encode_value(value), sim.time, sim.version, self.world_name)
+
+    @staticmethod
+    def _call(sim: Any, method: str, args: list[Any]) -> Any:
+        """One allow-listed method with plain arguments (SimError passes through; ValueError if refused)."""
+        bounds = ALLOWED_METHODS.get(method)
+        if bounds is None:
+            raise ValueError(f"method {method!r} is not served (allowed: {', '.join(sorted(ALLOWED_METHODS))})")
+        if not bounds[0] <= len(args) <= bounds[1]:
+            raise ValueError(f"{method} takes {bounds[0]}..{bounds[1]} arguments, got {len(args)}")
+        if any(isinstance(a, dict | list) for a in args):
+            raise ValueError(f"{method}: arguments must be plain values")
+        from drd.sim import SimError
+
+        try:
+            return getattr(sim, method)(*args)
+        except SimError:
+            raise
+        except (TypeError, ValueError) as e:
+            raise ValueError(f"{method}: {e}") from None
 
     def close(self) -> None:
         if self._queryable is not None:
@@ -208,7 +238,13 @@ class RemoteSimulation:
 
     `time` and `version` are those of the last reply (the Creator also sets them from each step request,
     so a driver's per-instant cache works without a request). `world` is loaded locally from the same
-    world name (every host has the same `worlds/`)."""
+    world name (every host has the same `worlds/`).
+
+    Fewer round trips, same results: the commands of `DEFERRED` are queued (with the `owner`, the instance
+    path the Creator is running) and sent by `flush()` in one `multi` request, which the Creator makes at the
+    end of each call or batch, so before the controller steps the physics; any other call flushes them
+    first, so the simulator sees every call in the order made. The readings of `PER_VERSION` are kept per
+    sim version, and a `ranges` request fetches the robot's odometry along (a noiseless reading)."""
 
     def __init__(self, call: Callable[[SimRequest], SimReply], world: str, *, root: Path = ROOT) -> None:
         self._call = call
@@ -220,6 +256,10 @@ class RemoteSimulation:
         self.version = 0
         self.calls = 0
         self.seconds = 0.0
+        self.owner = ""
+        self._queued: list[tuple[str, str, list[Any]]] = []  # (owner, method, args)
+        self._cached: dict[tuple[Any, ...], Any] = {}  # (method, *args) -> value at self._cached_version
+        self._cached_version = -1
 
     @classmethod
     def over(cls, bus: Bus, cluster: str, world: str, timeout: float = 1.0) -> RemoteSimulation:
@@ -234,6 +274,51 @@ class RemoteSimulation:
 
     def sync(self, time_: float, version: int) -> None:
         self.time, self.version = time_, version
+
+    def flush(self) -> list[tuple[str, str]]:
+        """Send the queued commands; [(owner, error)] for those the simulator refused."""
+        if not self._queued:
+            return []
+        queued, self._queued = self._queued, []
+        results = self._request(SimRequest("multi", args=[[m, a] for _, m, a in queued]))
+        return [(owner, str(err)) for (owner, _, _), (_, err) in zip(queued, results, strict=False) if err]
+
+    def _fresh(self) -> dict[tuple[Any, ...], Any]:
+        if self._cached_version != self.version:
+            self._cached.clear()
+            self._cached_version = self.version
+        return self._cached
+
+    def _method(self, name: str, args: list[Any]) -> Any:
+        if name in DEFERRED:
+            self._queued.append((self.owner, name, args))
+            return None
+        cached = self._fresh()
+        key_ = (name, *args)
+        if name in PER_VERSION and key_ in cached:
+            return cached[key_]
+        if self._queued:
+            refused = self.flush()
+            mine = [err for owner, err in refused if owner == self.owner]
+            if mine:
+                from drd.sim import SimError
+
+                raise SimError(mine[0])
+            cached = self._fresh()
+        if name == "ranges" and args:  # the odometry of this instant comes along
+            results = self._request(SimRequest("multi", args=[["ranges", args], ["odometry", [args[0]]]]))
+            (value, error), (odometry, refused) = results[0], results[1]
+            if not refused:
+                self._fresh()[("odometry", args[0])] = decode_value(odometry)
+            if error:
+                from drd.sim import SimError
+
+                raise SimError(error)
+            return decode_value(value)
+        value = self._request(SimRequest("call", name, args))
+        if name in PER_VERSION:
+            self._fresh()[key_] = value
+        return value
 
     @property
     def world(self) -> Any:
@@ -253,6 +338,8 @@ class RemoteSimulation:
         self.time, self.version = reply.time, reply.version
         if reply.error:
             raise SimError(reply.error)
+        if req.op == "multi":
+            return list(reply.value or [])
         return decode_value(reply.value)
 
     def _attr(self, name: str) -> Any:
@@ -273,7 +360,7 @@ class RemoteSimulation:
             raise AttributeError(f"RemoteSimulation has no {name!r} (served: {', '.join(sorted(ALLOWED_METHODS))})")
 
         def method(*args: Any) -> Any:
-            value = self._request(SimRequest("call", name, list(args)))
+            value = self._method(name, list(args))
             return tuple(value) if name == "magazine" else value
         method.__name__ = name
         return method
