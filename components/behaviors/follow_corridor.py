@@ -170,12 +170,23 @@ TURN_RATE, TURNED = 0.8, 0.15
 def clearance_ahead(scan: Scan, half_width: float = BODY) -> float:
     """Free distance straight ahead (m) in a swath `2 * half_width` wide: the nearest hit in front of the robot
     within that lateral distance of its axis, or the laser's range when nothing is there."""
-    free = scan.max_range
-    for i, r in enumerate(scan.ranges):
-        a = scan.angle(i)
-        if abs(a) < math.pi / 2 and r < scan.max_range and abs(r * math.sin(a)) < half_width:
-            free = min(free, r * math.cos(a))
+    memo = derived(scan)
+    key = ("clearance", half_width)
+    if memo is not None and key in memo:
+        free: float = memo[key]
+        return free
+    far = scan.max_range
+    free = min([r * c for r, c, s in _ahead(scan) if r < far and -half_width < r * s < half_width], default=far)
+    if memo is not None:
+        memo[key] = free
     return free
+
+
+def _ahead(scan: Scan) -> zip[tuple[float, float, float]]:
+    """(range, cos, sin) of the beams in front of the robot (bearing strictly within 90 degrees of the heading)."""
+    b = scan.beams()
+    i0, i1 = bisect.bisect_right(b.angles, -math.pi / 2), bisect.bisect_left(b.angles, math.pi / 2)
+    return zip(scan.ranges[i0:i1], b.cos[i0:i1], b.sin[i0:i1], strict=True)
 
 
 def wall_across(scan: Scan, within: float = END) -> bool:
@@ -184,9 +195,8 @@ def wall_across(scan: Scan, within: float = END) -> bool:
     corridor's side walls), so an intruder walking by is not taken for the end."""
     if clearance_ahead(scan) >= within:
         return False
-    across = [r * math.sin(a) for i, r in enumerate(scan.ranges)
-              if abs(a := scan.angle(i)) < math.pi / 2 and r < scan.max_range and 0 < r * math.cos(a) < within + 0.25
-              and abs(r * math.sin(a)) < ACROSS]
+    far, depth = scan.max_range, within + 0.25
+    across = [y for r, c, s in _ahead(scan) if r < far and 0 < r * c < depth and -ACROSS < (y := r * s) < ACROSS]
     return bool(across) and max(across) - min(across) >= WIDER
 
 
