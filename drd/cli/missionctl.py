@@ -281,9 +281,20 @@ def dry_run(
 
 
 def _progress_view(sim: Simulation, executive: Executive) -> Text:
+    """One live line: sim time, the active behaviors, who holds what and who waits."""
     active = [n.path for m in executive.missions.values() for n in m.active() if n.state.kind is StateKind.LEAF]
+    snap = executive.broker.snapshot()
+    holds = [f"{_short(h)}→{'+'.join(d['assignment'].values())}" for h, d in snap["holds"].items() if d["assignment"]]
+    waiting = [_short(w["holder"]) for w in snap["queue"]]
     return Text.assemble(("sim ", "dim"), f"{sim.time:7.1f} s  ", ("active ", "dim"),
-                         ", ".join(p.rsplit("/", 1)[-1] for p in active[:6]) or "—")
+                         ", ".join(p.rsplit("/", 1)[-1] for p in active[:6]) or "—",
+                         ("  holds ", "dim"), "; ".join(holds[:4]) or "—",
+                         ("  waiting ", "dim"), f"{len(waiting)}" + (f" ({', '.join(waiting[:3])})" if waiting else ""))
+
+
+def _short(holder: str) -> str:
+    """`CorridorSurveillance-1/CorridorSurveillance/RoomSurveillance[2]` -> `RoomSurveillance[2]`."""
+    return holder.rsplit("/", 1)[-1]
 
 
 def _print_report(r: DryRun) -> None:
