@@ -263,3 +263,56 @@ def test_the_lean_ray_caster_agrees_with_pymunks_public_query() -> None:
     for _ in range(500):
         a, b = (rng.uniform(0, 40), rng.uniform(-7, 7)), (rng.uniform(0, 40), rng.uniform(-7, 7))
         assert lean.first(a, b, 0.0, flt) == public.first(a, b, 0.0, flt)
+
+
+# ---------------------------------------------------------------- fast paths agree with the plain ones
+
+
+def test_the_fast_ray_caster_agrees_with_pymunks_public_api() -> None:
+    """`fan` and `crossings` call chipmunk directly; the public API must give the same answers, corners included."""
+    sim = Simulation(CORRIDOR, seed=3)
+    fast, plain = sensors.RayCaster(sim.space), sensors.RayCaster(sim.space, fast=False)
+    rng = random.Random(11)
+    x0, y0, x1, y1 = CORRIDOR.bounds
+    for _ in range(300):
+        a = (rng.uniform(x0, x1), rng.uniform(y0, y1))
+        b = (rng.choice([2.0, 8.0, 14.0, rng.uniform(x0, x1)]), rng.choice([1.25, -1.25, 6.25, rng.uniform(y0, y1)]))
+        assert fast.crossings(a, b, sensors.SIGHT) == sensors.walls_between(sim.space, a, b), (a, b)
+        angles = [rng.uniform(-math.pi, math.pi) for _ in range(7)]
+        assert fast.fan(a, angles, 8.0, sensors.SIGHT) == pytest.approx(plain.fan(a, angles, 8.0, sensors.SIGHT))
+
+
+def test_the_light_index_gives_the_plain_formula() -> None:
+    """`World.light` looks only at the rooms and dark corners near the point; the answer must not change."""
+    def plain(x: float, y: float) -> float:
+        base = next((r.light for r in CORRIDOR.rooms if r.x0 <= x <= r.x1 and r.y0 <= y <= r.y1), CORRIDOR.ambient)
+        level = base
+        for z in CORRIDOR.dark:
+            d = math.hypot(x - z.x, y - z.y)
+            if d < z.radius and z.level < base:
+                level = min(level, z.level + (base - z.level) * (d / z.radius) ** 2)
+        return level
+
+    rng = random.Random(5)
+    for _ in range(5000):
+        x, y = rng.uniform(-2, 42), rng.uniform(-8, 8)
+        assert CORRIDOR.light(x, y) == plain(x, y), (x, y)
+
+
+def test_one_scan_per_sim_instant_is_shared_by_its_readers() -> None:
+    """Behaviors reading the laser in one control cycle get the same Scan; the next instant brings a new one."""
+    from drd.hosts import load_hosts
+    from drd.hw.drivers import drivers_for
+    from drd.manifests import load_catalog
+
+    catalog = load_catalog()
+    sim = Simulation(CORRIDOR, seed=1)
+    drivers = drivers_for(load_hosts(ROOT / "hosts.yaml", catalog), "ranger1", sim, catalog=catalog)
+    laser = drivers.robots["ranger1"]["ranges"]
+    first = laser.scan()
+    assert laser.scan() is first
+    sim.step(0.1)
+    second = laser.scan()
+    assert second is not first and laser.scan() is second
+    sim.set_door("door_n1", DoorState.CLOSED)
+    assert laser.scan() is not second
