@@ -22,7 +22,9 @@ world the call names (on the simulator host itself it calls the service in-proce
 
 from __future__ import annotations
 
+import cProfile
 import logging
+import os
 import threading
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -93,6 +95,10 @@ class Creator:
         mine = cluster.host(host)
         self._devices = {d.id for d in mine.devices} | {r.id for r in mine.robots}  # what a need may be bound to
         self._lock = threading.Lock()
+        # DRD_PROFILE=path: profile the step batches (cProfile), dumped to path.<host> every 200 batches
+        self._profile_path = os.environ.get("DRD_PROFILE", "")
+        self._profile = cProfile.Profile() if self._profile_path else None
+        self._profiled = 0
         self._queryable = bus.serve(f"drd/{cluster.name}/host/{host}/creator", self._serve) if bus else None
 
     def close(self) -> None:
@@ -120,6 +126,19 @@ class Creator:
 
     def handle_batch(self, batch: ComponentBatch) -> ComponentBatchReply:
         """The steps of one cycle in order, up to the first the controller must see first (`ComponentBatch`)."""
+        prof = self._profile
+        if prof is None:
+            return self._handle_batch(batch)
+        prof.enable()
+        try:
+            return self._handle_batch(batch)
+        finally:
+            prof.disable()
+            self._profiled += 1
+            if self._profiled % 200 == 0:
+                prof.dump_stats(f"{self._profile_path}.{self.host}")
+
+    def _handle_batch(self, batch: ComponentBatch) -> ComponentBatchReply:
         replies: list[ComponentReply] = []
         latest: dict[str, Any] = {}  # shared dict id on the controller -> its value after the last step
         with self._lock:

@@ -15,7 +15,9 @@ One cluster mission runs at a time: the simulator holds one world.
 
 from __future__ import annotations
 
+import cProfile
 import logging
+import os
 import threading
 import time
 from collections.abc import Callable
@@ -226,6 +228,10 @@ class MissionRun:
         runner, req = self.runner, self.req
         start = time.perf_counter()
         sim_time = 0.0
+        profile_path = os.environ.get("DRD_PROFILE", "")  # cProfile of this loop, dumped to path.controller
+        prof = cProfile.Profile() if profile_path else None
+        if prof is not None:
+            prof.enable()
         try:
             while not self.stopping.is_set():
                 with runner.lock:
@@ -263,6 +269,9 @@ class MissionRun:
                 if interp is not None and not interp.finished:
                     interp.stop("internal error in the controller's run loop (see its log)")
         wall = time.perf_counter() - start
+        if prof is not None:
+            prof.disable()
+            prof.dump_stats(f"{profile_path}.controller")
         stats = self.router.stats.as_dict()
         with runner.lock:
             interp = runner.controller.executive.missions.get(self.mission)

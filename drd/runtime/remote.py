@@ -405,6 +405,13 @@ def _ancestors(node: Any) -> list[Any]:
 
 def _plain(value: Any) -> Any:
     """Shared data as JSON values (tuples become lists; anything else becomes its string)."""
+    t = type(value)  # exact types first: the shared data is mostly plain already (no ABC checks per value)
+    if t is str or t is float or t is int or t is bool or value is None:
+        return value
+    if t is dict:
+        return {k if type(k) is str else str(k): _plain(v) for k, v in value.items()}
+    if t is list or t is tuple:
+        return [_plain(v) for v in value]
     if isinstance(value, Mapping):
         return {str(k): _plain(v) for k, v in value.items()}
     if isinstance(value, list | tuple | set):

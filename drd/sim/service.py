@@ -20,8 +20,10 @@ so the drivers report a `HardwareError` exactly as they do in the dry-run.
 
 from __future__ import annotations
 
+import cProfile
 import dataclasses
 import math
+import os
 import re
 import threading
 import time
@@ -44,6 +46,8 @@ DEFERRED = frozenset({"set_velocity", "stop", "set_wheels"})
 PER_VERSION = frozenset({"odometry", "magazine", "pose"})
 #: At most this many calls in one `multi` request.
 MAX_MULTI = 64
+#: The error of a `multi` call not made because a guarded call before it (`[method, [args], true]`) was refused.
+SKIPPED = "skipped: a guarded call before it was refused"  # (later DEFERRED commands are still made)
 #: Plain attributes a remote driver may read once (at construction).
 ALLOWED_ATTRS = frozenset({"jump_height", "max_jump", "time", "version"})
 #: Only world names, resolved under `worlds/` of the simulator host: never a path from the wire.
@@ -148,6 +152,8 @@ class SimulationService:
         self.world_name = ""
         self.calls = 0
         self._lock = threading.Lock()
+        self._profile = cProfile.Profile() if os.environ.get("DRD_PROFILE") else None  # see drd.daemon.creator
+        self._profiled = 0
         self._queryable = bus.serve(key(cluster), self._serve) if bus is not None else None
 
     def reset(self, world: str, seed: int = 0) -> SimReply:
@@ -181,15 +187,21 @@ class SimulationService:
                 return SimReply(encode_value(getattr(sim, req.method)), sim.time, sim.version, self.world_name)
             if req.op == "multi":
                 calls = list(req.args or [])
-                if len(calls) > MAX_MULTI or not all(isinstance(c, list) and len(c) == 2 and isinstance(c[0], str)
-                                                     and isinstance(c[1], list) for c in calls):
-                    raise ValueError(f"multi takes up to {MAX_MULTI} [method, [args]] pairs")
-                out = []
-                for method, args in calls:
+                if len(calls) > MAX_MULTI or not all(isinstance(c, list) and len(c) in (2, 3) and isinstance(c[0], str)
+                                                     and isinstance(c[1], list) and (len(c) == 2 or c[2] is True)
+                                                     for c in calls):
+                    raise ValueError(f"multi takes up to {MAX_MULTI} [method, [args]] (or [method, [args], true])")
+                out: list[list[Any]] = []
+                guard_refused = False  # a guarded call was refused: the later calls not in DEFERRED are not made
+                for call in calls:
+                    if guard_refused and call[0] not in DEFERRED:
+                        out.append([None, SKIPPED])
+                        continue
                     try:
-                        out.append([encode_value(self._call(sim, method, args)), ""])
+                        out.append([encode_value(self._call(sim, call[0], call[1])), ""])
                     except SimError as e:
                         out.append([None, str(e) or type(e).__name__])
+                        guard_refused = guard_refused or len(call) == 3
                 return SimReply(out, sim.time, sim.version, self.world_name)
             if req.op != "call":
                 raise ValueError(f"unknown op {req.op!r}: use reset, step, call, multi or attr")
@@ -225,10 +237,19 @@ class SimulationService:
     def _serve(self, query: Query) -> Message | Reply:
         if not isinstance(query.payload, SimRequest):
             return query.error("expected a drd.sim.request")
+        prof = self._profile  # requests from other hosts only (the controller's own run in its profile)
+        if prof is not None:
+            prof.enable()
         try:
             return self.handle(query.payload)
         except ValueError as e:
             return query.error(str(e))
+        finally:
+            if prof is not None:
+                prof.disable()
+                self._profiled += 1
+                if self._profiled % 500 == 0:
+                    prof.dump_stats(f"{os.environ.get('DRD_PROFILE')}.sim")
 
 
 # -- the proxy ---------------------------------------------------------------------------------------
@@ -244,7 +265,8 @@ class RemoteSimulation:
     path the Creator is running) and sent by `flush()` in one `multi` request, which the Creator makes at the
     end of each call or batch, so before the controller steps the physics; any other call flushes them
     first, so the simulator sees every call in the order made. The readings of `PER_VERSION` are kept per
-    sim version, and a `ranges` request fetches the robot's odometry along (a noiseless reading)."""
+    sim version, and every reading request carries the queued commands before it and fetches along the
+    odometry of the robots read so far (noiseless readings): one round trip per reading (see `_method`)."""
 
     def __init__(self, call: Callable[[SimRequest], SimReply], world: str, *, root: Path = ROOT) -> None:
         self._call = call
@@ -260,6 +282,8 @@ class RemoteSimulation:
         self._queued: list[tuple[str, str, list[Any]]] = []  # (owner, method, args)
         self._cached: dict[tuple[Any, ...], Any] = {}  # (method, *args) -> value at self._cached_version
         self._cached_version = -1
+        self._robots: dict[str, None] = {}  # robots whose odometry was read: fetched along each reading
+        self._refused: list[tuple[str, str]] = []  # refused commands of other owners, for the next flush()
 
     @classmethod
     def over(cls, bus: Bus, cluster: str, world: str, timeout: float = 1.0) -> RemoteSimulation:
@@ -276,12 +300,14 @@ class RemoteSimulation:
         self.time, self.version = time_, version
 
     def flush(self) -> list[tuple[str, str]]:
-        """Send the queued commands; [(owner, error)] for those the simulator refused."""
+        """Send the queued commands; [(owner, error)] for those the simulator refused (and for commands sent
+        along an earlier reading whose refusal was not their owner's to see then)."""
+        refused, self._refused = self._refused, []
         if not self._queued:
-            return []
+            return refused
         queued, self._queued = self._queued, []
         results = self._request(SimRequest("multi", args=[[m, a] for _, m, a in queued]))
-        return [(owner, str(err)) for (owner, _, _), (_, err) in zip(queued, results, strict=False) if err]
+        return refused + [(owner, str(err)) for (owner, _, _), (_, err) in zip(queued, results, strict=False) if err]
 
     def _fresh(self) -> dict[tuple[Any, ...], Any]:
         if self._cached_version != self.version:
@@ -290,6 +316,10 @@ class RemoteSimulation:
         return self._cached
 
     def _method(self, name: str, args: list[Any]) -> Any:
+        """One reading (or a command, queued): a single `multi` request carries the queued commands first (each
+        of the caller's guarded: if one is refused the reading is not made and the caller gets the refusal, as
+        if they had been flushed before), then the reading, then the odometry of every robot read before and
+        not yet known at this version (noiseless readings, so fetching them early changes no result)."""
         if name in DEFERRED:
             self._queued.append((self.owner, name, args))
             return None
@@ -297,27 +327,33 @@ class RemoteSimulation:
         key_ = (name, *args)
         if name in PER_VERSION and key_ in cached:
             return cached[key_]
-        if self._queued:
-            refused = self.flush()
-            mine = [err for owner, err in refused if owner == self.owner]
-            if mine:
-                from drd.sim import SimError
+        if name == "odometry" and len(args) == 1 and isinstance(args[0], str):
+            self._robots.setdefault(args[0], None)
+        if len(self._queued) >= MAX_MULTI:
+            self._refused += self.flush()
+        queued, self._queued = self._queued, []
+        calls: list[list[Any]] = [[m, a, True] if owner == self.owner else [m, a] for owner, m, a in queued]
+        calls.append([name, args])
+        along = [r for r in self._robots if ("odometry", r) not in cached and key_ != ("odometry", r)]
+        along = along[:MAX_MULTI - len(calls)]
+        calls += [["odometry", [r]] for r in along]
+        results = self._request(SimRequest("multi", args=calls))
+        n = len(queued)
+        refused = [(owner, str(err)) for (owner, _, _), (_, err) in zip(queued, results[:n], strict=False) if err]
+        self._refused += [(owner, err) for owner, err in refused if owner != self.owner]
+        fresh = self._fresh()
+        for robot, (odometry, error) in zip(along, results[n + 1:], strict=False):
+            if not error:
+                fresh[("odometry", robot)] = decode_value(odometry)
+        mine = [err for owner, err in refused if owner == self.owner]
+        value, error = results[n] if len(results) > n else (None, "no reply")
+        if mine or error:
+            from drd.sim import SimError
 
-                raise SimError(mine[0])
-            cached = self._fresh()
-        if name == "ranges" and args:  # the odometry of this instant comes along
-            results = self._request(SimRequest("multi", args=[["ranges", args], ["odometry", [args[0]]]]))
-            (value, error), (odometry, refused) = results[0], results[1]
-            if not refused:
-                self._fresh()[("odometry", args[0])] = decode_value(odometry)
-            if error:
-                from drd.sim import SimError
-
-                raise SimError(error)
-            return decode_value(value)
-        value = self._request(SimRequest("call", name, args))
+            raise SimError(mine[0] if mine else error)
+        value = decode_value(value)
         if name in PER_VERSION:
-            self._fresh()[key_] = value
+            fresh[key_] = value
         return value
 
     @property
