@@ -24,6 +24,7 @@ from drd.runtime.clock import Clock
 from drd.runtime.component import Component
 from drd.runtime.interpreter import Interpreter
 from drd.runtime.pool import ResourcePool
+from drd.runtime.records import plain
 from dsl.catalog import Catalog
 from dsl.statechart import Statechart
 
@@ -164,7 +165,7 @@ class Executive:
 
     def status(self) -> MissionStatus:
         return MissionStatus(self.clock.now(), [
-            {"id": mid, **_json_safe(m.snapshot())} for mid, m in self.missions.items()])
+            {"id": mid, **plain(m.snapshot())} for mid, m in self.missions.items()])
 
     def close(self) -> None:
         self.stop()
@@ -192,15 +193,6 @@ class Executive:
 def _to_message(mission: str, r: rec.Record) -> MissionRecord:
     data = r.to_dict()
     kind, at, path = data.pop("kind"), data.pop("at"), data.pop("path")
-    return MissionRecord(mission, kind, at, path, _json_safe(data))
+    return MissionRecord(mission, kind, at, path, plain(data))
 
 
-def _json_safe(value: Any) -> Any:
-    """Records carry resource views and tuples; the wire carries ids, lists and plain values."""
-    if isinstance(value, Mapping):
-        return {str(k): _json_safe(v) for k, v in value.items()}
-    if isinstance(value, list | tuple | set):
-        return [_json_safe(v) for v in value]
-    if value is None or isinstance(value, bool | int | float | str):
-        return value
-    return getattr(value, "id", None) or str(value)

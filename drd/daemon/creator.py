@@ -34,6 +34,7 @@ from drd.bus import Bus, Message, Query, Reply
 from drd.hosts import Cluster
 from drd.runtime.component import Component, Context, Status
 from drd.runtime.fence import Arbiter, Fenced, Proposal
+from drd.runtime.records import plain
 from drd.runtime.remote import ComponentBatch, ComponentBatchReply, ComponentCall, ComponentReply
 from dsl.catalog import Catalog, Kind
 
@@ -152,7 +153,7 @@ class Creator:
                     if shared is not None:
                         for name, ref in ids.items():
                             if ref in latest and name in shared:
-                                shared[name] = _plain(latest[ref])  # a copy: the earlier reply keeps its own
+                                shared[name] = plain(latest[ref])  # a copy: the earlier reply keeps its own
                     if self._sim is not None:
                         self._sim.owner = call.path
                     owners[call.path] = len(replies)
@@ -224,8 +225,8 @@ class Creator:
                                              else Status.RUNNING)
         except Exception as e:  # component code is not ours to trust: the state fails, the daemon goes on
             error = f"component raised {type(e).__name__}: {e}"
-        reply = ComponentReply(status, _plain(inst.ctx.outputs), inst.events, inst.logs,
-                               _plain(services["shared"]), inst.dependencies, error)
+        reply = ComponentReply(status, plain(inst.ctx.outputs), inst.events, inst.logs,
+                               plain(services["shared"]), inst.dependencies, error)
         inst.events, inst.logs, inst.dependencies = [], [], []
         return reply
 
@@ -284,7 +285,7 @@ class Creator:
         new = Instance(call.component, None, None, bindings)  # type: ignore[arg-type]
         holder["it"] = new
         ctx = Context(path, dict(call.params or {}), {n: b[0] for n, b in bindings.items()},
-                      lambda ev, **f: new.events.append([ev, _plain(f)]),
+                      lambda ev, **f: new.events.append([ev, plain(f)]),
                       lambda text: new.logs.append(str(text)),
                       lambda: new.now, devices=devices,
                       services={"shared": {}, "siblings": {},
@@ -329,9 +330,3 @@ def _type_ok(kind: str, value: Any) -> bool:
     if kind in ("string", "str"):
         return isinstance(value, str)
     return isinstance(value, str | int | float | bool | dict | list) or value is None
-
-
-def _plain(value: Any) -> Any:
-    from drd.runtime.remote import _plain as plain
-
-    return plain(value)

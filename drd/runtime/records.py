@@ -7,6 +7,7 @@ and the sim or wall time it happened at. `to_dict` gives the JSON-lines trace fo
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import asdict, dataclass, field
 from typing import Any
 
@@ -97,3 +98,22 @@ class Finished(Record):
 
     outcome: str
     reason: str = ""
+
+
+def plain(value: Any) -> Any:
+    """A value as JSON can carry it: mappings with string keys, lists for tuples and sets, resources by their
+    id, anything else by its string. Exact types are tried first: what is sent is mostly plain already."""
+    t = type(value)
+    if t is str or t is float or t is int or t is bool or value is None:
+        return value
+    if t is dict:
+        return {k if type(k) is str else str(k): plain(v) for k, v in value.items()}
+    if t is list or t is tuple:
+        return [plain(v) for v in value]
+    if isinstance(value, Mapping):
+        return {str(k): plain(v) for k, v in value.items()}
+    if isinstance(value, list | tuple | set):
+        return [plain(v) for v in value]
+    if isinstance(value, bool | int | float | str):
+        return value
+    return getattr(value, "id", None) or str(value)

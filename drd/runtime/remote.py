@@ -23,6 +23,7 @@ from typing import Any
 
 from drd.bus import Bus, BusError, Message, RemoteError, message
 from drd.runtime.component import Component, Context, Status
+from drd.runtime.records import plain
 
 
 @message("drd.component.call", 1)
@@ -257,7 +258,7 @@ class RemoteComponent(Component):
             self.local.start()
             return
         names = self.router.param_names(self.name)
-        params = {k: _plain(v) for k, v in self._ctx.params.items() if names is None or k in names}
+        params = {k: plain(v) for k, v in self._ctx.params.items() if names is None or k in names}
         self._call("start", params=params, bindings=self._bindings, rank=self._rank)
 
     def step(self, now: float) -> Status:
@@ -357,8 +358,8 @@ class RemoteComponent(Component):
                if isinstance(shared, dict) else None)
         return ComponentCall(op, router.mission, ctx.path, self.name, router.world,
                              epochs=self._epochs(), sim_time=router.sim_time, sim_version=router.sim_version,
-                             shared=_plain(shared) if isinstance(shared, dict) else None,
-                             siblings=_plain(siblings) if isinstance(siblings, Mapping) else None,
+                             shared=plain(shared) if isinstance(shared, dict) else None,
+                             siblings=plain(siblings) if isinstance(siblings, Mapping) else None,
                              now=fields.pop("now", ctx.now()), shared_ids=ids or None, **fields)
 
     def _call(self, op: str, **fields: Any) -> ComponentReply:
@@ -403,19 +404,3 @@ def _ancestors(node: Any) -> list[Any]:
     return out
 
 
-def _plain(value: Any) -> Any:
-    """Shared data as JSON values (tuples become lists; anything else becomes its string)."""
-    t = type(value)  # exact types first: the shared data is mostly plain already (no ABC checks per value)
-    if t is str or t is float or t is int or t is bool or value is None:
-        return value
-    if t is dict:
-        return {k if type(k) is str else str(k): _plain(v) for k, v in value.items()}
-    if t is list or t is tuple:
-        return [_plain(v) for v in value]
-    if isinstance(value, Mapping):
-        return {str(k): _plain(v) for k, v in value.items()}
-    if isinstance(value, list | tuple | set):
-        return [_plain(v) for v in value]
-    if value is None or isinstance(value, bool | int | float | str):
-        return value
-    return str(value)
