@@ -18,16 +18,13 @@ import threading
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from enum import StrEnum
-from typing import NoReturn
-
-from lark.exceptions import UnexpectedCharacters, UnexpectedInput, UnexpectedToken
+from typing import TYPE_CHECKING, NoReturn
 
 from dsl import ast
 from dsl.catalog import SCALAR_TYPES, Catalog, Kind, RecordSpec
 from dsl.errors import Reporter, did_you_mean
 from dsl.evaluate import EvalError, evaluate, truthy
 from dsl.exprtypes import ANY, NUMBERS, Scope, Type, Typer, show
-from dsl.parser import Parser
 
 #: What `host` is inside an expression: the offer's host, as the Load Reporter last saw it.
 HOST_FIELDS: Mapping[str, str] = {"name": "str", "load": "float", "cpu": "float", "memory": "float", "up": "bool"}
@@ -199,12 +196,21 @@ def _clause(text: str, at: int, keyword: str, end: int, wanted: str) -> ast.Expr
     return _parse_expr(" " * start + body, f"the {'condition' if keyword == 'where' else 'preference'} after {keyword}")
 
 
+if TYPE_CHECKING:  # the parser (lark) is loaded by the first query, not by importing the trader
+    from lark.exceptions import UnexpectedInput
+
+    from dsl.parser import Parser
+
 _lock = threading.Lock()
 _parser: Parser | None = None
 
 
 def _parse_expr(padded: str, what: str) -> ast.Expr:
     """dsl's `expr` rule on a space-padded text (so columns are the query's); errors as TraderError."""
+    from lark.exceptions import UnexpectedInput
+
+    from dsl.parser import Parser
+
     global _parser
     with _lock:
         p = _parser = _parser or Parser()  # our own instance: its builder state is ours while locked
@@ -226,6 +232,8 @@ def _parse_expr(padded: str, what: str) -> ast.Expr:
 
 
 def _syntax_error(e: UnexpectedInput, text: str, last: Sequence[object], what: str) -> TraderError:
+    from lark.exceptions import UnexpectedCharacters, UnexpectedToken
+
     if isinstance(e, UnexpectedCharacters):
         ch = e.char
         hint = " (strings use double quotes)" if ch == "'" else ""

@@ -8,13 +8,18 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TYPE_CHECKING
 
-from dsl.build import Builder
 from dsl.catalog import Catalog
-from dsl.checker import Checker, Program
 from dsl.errors import Diagnostic, MissionError, Reporter, Severity
-from dsl.loader import load_file, load_text
 from dsl.statechart import Statechart
+
+if TYPE_CHECKING:
+    from dsl.checker import Program
+
+# The parser (lark), the checker and builder (networkx) are imported when a mission is compiled, not when
+# `dsl` is: a command that only reads manifests or talks to a cluster (`missionctl status`) starts in half
+# the time.
 
 __all__ = ["Compiled", "compile_file", "compile_text", "compile_program", "Diagnostic", "MissionError",
            "Statechart"]
@@ -42,6 +47,9 @@ class Compiled:
 
 def compile_program(program: Program, catalog: Catalog, report: Reporter) -> Statechart | None:
     """Check a parsed program and, if it has no errors and a mission, build its statechart."""
+    from dsl.build import Builder
+    from dsl.checker import Checker
+
     if report.failed:  # syntax errors: semantic checks would only echo them
         return None
     checked = Checker(program, catalog, report).run()
@@ -60,10 +68,14 @@ def _finish(program: Program, catalog: Catalog, report: Reporter) -> Compiled:
 
 
 def compile_file(path: str | Path, catalog: Catalog) -> Compiled:
+    from dsl.loader import load_file
+
     report = Reporter()
     return _finish(load_file(path, report), catalog, report)
 
 
 def compile_text(text: str, catalog: Catalog, file: str = "<string>") -> Compiled:
+    from dsl.loader import load_text
+
     report = Reporter()
     return _finish(load_text(text, file, report), catalog, report)

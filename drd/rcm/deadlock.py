@@ -10,8 +10,10 @@ has a waiting descendant.
 from __future__ import annotations
 
 from collections.abc import Callable, Iterable
+from typing import TYPE_CHECKING
 
-import networkx as nx
+if TYPE_CHECKING:
+    import networkx as nx
 
 
 def ancestors(path: str) -> Iterable[str]:
@@ -28,6 +30,8 @@ def same_owner(a: str, b: str) -> bool:
 
 def find_cycle(starts: Iterable[str], successors: Callable[[str], Iterable[str]]) -> tuple[str, ...] | None:
     """A wait-for cycle reachable from `starts`, rotated to begin at its smallest node; or None."""
+    import networkx as nx  # here, not at the top: only a wait that may deadlock needs it (fast CLI start-up)
+
     sources = sorted(set(starts))
     graph: nx.DiGraph[str] = nx.DiGraph()
     graph.add_nodes_from(sources)
