@@ -202,8 +202,8 @@ def _inject(inj: Injection, sim: Simulation, executive: Executive, cluster: Clus
         sim.lose(inj.target)
         executive.remove_resources(_robot_resources(cluster, inj.target))
         what += ": the robot and its resources are gone"
-    elif inj.action is Action.OPEN and sim.door(inj.target) is DoorState.BLOCKED:
-        what += ": nothing happens, a blocked door cannot be opened"
+    elif sim.door(inj.target) is DoorState.BLOCKED:
+        what += ": nothing happens, a blocked door stays blocked"
     else:
         state = {Action.BLOCK: DoorState.BLOCKED, Action.CLOSE: DoorState.CLOSED, Action.OPEN: DoorState.OPEN}
         sim.set_door(inj.target, state[inj.action])
@@ -215,7 +215,9 @@ def _inject(inj: Injection, sim: Simulation, executive: Executive, cluster: Clus
 def _robot_resources(cluster: Cluster, robot: str) -> list[str]:
     """A lost robot takes its aggregate and the parts only it uses (not a radio channel shared with others)."""
     robots = cluster.robots
-    mine = next(r for r in robots if r.id == robot)
+    mine = next((r for r in robots if r.id == robot), None)
+    if mine is None:  # in the world but not in hosts.yaml: the manager never had it
+        return []
     others = {u for r in robots if r.id != robot for u in r.parts.values()}
     return [robot, *(u for u in mine.parts.values() if u not in others)]
 
