@@ -14,7 +14,7 @@ from components.behaviors.align_ranger import AlignRanger
 from components.behaviors.avoid_obstacles import AvoidObstacles
 from components.behaviors.calibrate import Calibrate
 from components.behaviors.detect_door import DetectDoor
-from components.behaviors.follow_corridor import FollowCorridor
+from components.behaviors.follow_corridor import FollowCorridor, wrap
 from components.behaviors.launch_scout import LaunchScout
 from components.behaviors.return_to_start import ReturnToStart
 from drd.runtime.component import Status
@@ -183,3 +183,46 @@ def test_avoid_obstacles_stops_short_of_a_wall():
         p = rig.sim.pose("ranger1")
         assert p.y < 1.25 - 0.3 - 0.05, p
     assert turned
+
+
+def test_follow_corridor_ends_at_the_end_wall_and_turns_round_when_it_starts_there():
+    rig = Rig()
+    comp = rig.start(FollowCorridor, needs=RANGER, params={"speed": 0.8})
+    assert rig.run(comp, until=80.0) is Status.SUCCESS
+    p = rig.sim.pose("ranger1")
+    assert p.x > 38.0 and abs(p.y) < 0.4, p  # the east end wall is at x = 40
+    assert any("end of the corridor" in line for line in rig.logs)
+    back = rig.start(FollowCorridor, needs=RANGER, params={"speed": 0.8})
+    rig.run(back, until=rig.sim.time + 12.0)
+    q = rig.sim.pose("ranger1")
+    assert q.x < p.x - 3.0 and abs(math.cos(q.heading) + 1) < 0.1, q  # turned round, heading west
+
+
+def test_detect_door_fails_at_the_end_of_the_corridor_when_every_door_is_known():
+    rig = Rig()
+    rig.shared["visited"] = {(round(x), "any"): {"x": x, "y": y, "width": 1.0} for x, y in
+                             ((4.0, 1.25), (11.0, -1.25), (17.0, 1.25), (23.0, 1.25), (29.0, -1.25), (35.0, -1.25))}
+    follow = rig.start(FollowCorridor, needs=RANGER, params={"speed": 0.8})
+    det = rig.start(DetectDoor, needs=RANGER)
+    statuses: list[Status] = []
+    run_all(rig, [follow, det], 80.0, stop=lambda s: statuses.append(s[1]) or s[1] is not Status.RUNNING)
+    assert statuses[-1] is Status.FAILURE and "door" not in det.ctx.outputs
+    assert rig.sim.pose("ranger1").x > 38.0
+    assert any("the corridor ends here, with no new door" in line for line in rig.logs)
+
+
+def test_align_ranger_drives_back_to_where_its_door_was_seen():
+    rig = Rig()
+    rig.shared["visited"] = {}
+    status, det = detect(rig)
+    assert status is Status.SUCCESS
+    door = det.ctx.outputs["door"]
+    follow = rig.start(FollowCorridor, needs=RANGER)  # another instance drives the Ranger on, 3 m
+    rig.run(follow, until=rig.sim.time + 7.0)
+    follow.terminate(Status.SUCCESS)
+    assert rig.sim.pose("ranger1").x > door["from"]["x"] + 2.0
+    align = rig.start(AlignRanger, needs=RANGER, params={"door": door})
+    assert rig.run(align, until=rig.sim.time + 30.0) is Status.SUCCESS
+    p = rig.sim.pose("ranger1")
+    assert math.hypot(p.x - door["from"]["x"], p.y - door["from"]["y"]) < 0.35, p
+    assert abs(wrap(math.atan2(door["y"] - p.y, door["x"] - p.x) - p.heading)) < 0.1

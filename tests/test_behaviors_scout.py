@@ -153,3 +153,13 @@ def test_observe_counts_frames(rig):
     comp = rig.start(Observe, needs={"camera": SCOUT["camera"]}, params={"duration": 5.0})
     assert rig.run(comp, until=rig.sim.time + 10) is Status.SUCCESS
     assert comp.ctx.outputs["observation"] == {"frames": 50}
+
+
+def test_servo_to_goal_succeeds_when_a_wall_stops_it_short_of_the_goal(rig):
+    """A dark corner's goal is a guess along a bearing, often beyond the walls: pressed into them is arrived."""
+    servo = rig.start(ServoToGoal, needs=SCOUT, params={"goal": {"x": 22.5, "y": 9.0}})  # behind n4's back wall
+    assert rig.run(servo, until=rig.sim.time + 40) is Status.SUCCESS
+    p = rig.sim.pose("scout1")
+    assert p.y > 5.8, p  # at the back wall (y = 6.25), not in the middle of the room
+    assert rig.sim.command("scout1") == (0.0, 0.0)
+    assert any("short of the goal: as close as it gets" in line for line in rig.logs)
