@@ -20,7 +20,7 @@ from typing import Any, TypeVar
 
 import yaml
 
-from drd.config import ConfigError, ConfigProblem, ConfigReader, join_key
+from drd.config import ConfigError, ConfigProblem, ConfigReader
 from drd.manifests import StrictLoader, got, is_number, show  # one YAML dialect, one wording
 from drd.rcm.model import Aggregate, Unit
 from dsl.ast import parse_duration
@@ -395,19 +395,11 @@ class _Parser(ConfigReader):
 
     # -- typed readers
 
-    def keys(self, data: Mapping[Any, Any], key: str, allowed: Sequence[str], required: Sequence[str] = ()) -> None:
-        for k in data:
-            if k not in allowed:
-                self.fail(join_key(key, str(k)), f"unknown key{_hint(str(k), allowed, 'none allowed here')}")
-        for k in required:
-            if k not in data:
-                self.fail(join_key(key, k), "required key missing")
+    def describe(self, value: object) -> str:
+        return got(value)
 
-    def mapping(self, value: object, key: str) -> dict[Any, Any]:
-        if isinstance(value, dict):
-            return value
-        self.fail(key, f"expected a mapping, got {got(value)}")
-        return {}
+    def key_hint(self, key: str, allowed: Sequence[str]) -> str:
+        return _hint(key, allowed, "none allowed here")
 
     def entries(self, value: object, key: str, pattern: re.Pattern[str] = _NAME,
                 ) -> Iterator[tuple[str, dict[Any, Any], str]]:
@@ -416,12 +408,6 @@ class _Parser(ConfigReader):
             path = f"{key}.{k}"
             if self.name(k, path, pattern) is not None and self.mapping(v, path) is v:
                 yield k, v, path
-
-    def text(self, value: object, key: str) -> str:
-        if isinstance(value, str) and value:
-            return value
-        self.fail(key, f"expected a non-empty string, got {got(value)}")
-        return ""
 
     def name(self, value: object, key: str, pattern: re.Pattern[str] = _NAME) -> str | None:
         text = self.text(value, key)

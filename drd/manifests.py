@@ -121,13 +121,6 @@ def _check_rules(c: _Checker, kind: Kind, data: Mapping[str, Any], fields: Mappi
 class _Checker(ConfigReader):
     """Collects the problems of one manifest; typed readers report and return a safe value."""
 
-    def keys(self, data: Mapping[Any, Any], key: str, allowed: Sequence[str], required: str = "") -> None:
-        for k in data:
-            if k not in allowed:
-                self.fail(f"{key}.{k}", f"unknown key{_hint(str(k), allowed)}")
-        if required and required not in data:
-            self.fail(f"{key}.{required}", "required key missing")
-
     def text(self, value: object, key: str) -> str:
         if isinstance(value, str):
             return value
@@ -212,7 +205,7 @@ def _scheduling(c: _Checker, value: object, key: str) -> Scheduling:
 def _params(c: _Checker, value: object, key: str) -> tuple[ParamSpec, ...]:
     out = []
     for name, spec, path in c.entries(value, key, dict):
-        c.keys(spec, path, ("type", "default", "description"), required="type")
+        c.keys(spec, path, ("type", "default", "description"), required=("type",))
         type_ = c.text(spec.get("type", ""), f"{path}.type")
         default = spec.get("default")
         if "default" in spec and type_ in SCALAR_TYPES:
@@ -238,7 +231,7 @@ def _default(c: _Checker, value: object, type_: str, key: str) -> object:
 def _needs(c: _Checker, value: object, key: str) -> tuple[NeedSpec, ...]:
     out = []
     for name, spec, path in c.entries(value, key, dict):
-        c.keys(spec, path, ("type", "of", "quantity", "description"), required="type")
+        c.keys(spec, path, ("type", "of", "quantity", "description"), required=("type",))
         quantity = spec.get("quantity")
         out.append(NeedSpec(
             name,

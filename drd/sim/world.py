@@ -301,20 +301,8 @@ class _Reader(ConfigReader):
 
     # -- typed readers
 
-    def keys(self, data: Mapping[Any, Any], key: str, allowed: Sequence[str], required: Sequence[str] = ()) -> None:
-        for k in data:
-            if k not in allowed:
-                hint = did_you_mean(str(k), allowed)
-                self.fail(join_key(key, str(k)), f"unknown key{f' ({hint})' if hint else ''}")
-        for k in required:
-            if k not in data:
-                self.fail(join_key(key, k), "required key missing")
-
-    def mapping(self, value: object, key: str) -> dict[Any, Any]:
-        if isinstance(value, dict):
-            return value
-        self.fail(key, f"expected a mapping, got {_got(value)}")
-        return {}
+    def describe(self, value: object) -> str:
+        return _got(value)
 
     def entries(self, data: Mapping[Any, Any], name: str, prefix: str = "",
                 ) -> Iterator[tuple[int, dict[Any, Any], str]]:
@@ -329,12 +317,6 @@ class _Reader(ConfigReader):
                 yield i, item, f"{key}[{i}]"
             else:
                 self.fail(f"{key}[{i}]", f"expected a mapping, got {_got(item)}")
-
-    def text(self, value: object, key: str) -> str:
-        if isinstance(value, str) and value:
-            return value
-        self.fail(key, f"expected a non-empty string, got {_got(value)}")
-        return ""
 
     def ident(self, value: object, key: str) -> str | None:
         text = self.text(value, key)
