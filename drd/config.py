@@ -6,9 +6,12 @@ raised once, so a broken configuration is fixed in one pass.
 
 from __future__ import annotations
 
-from collections.abc import Iterable, Mapping, Sequence
+from collections.abc import Hashable, Iterable, Mapping, Sequence
 from dataclasses import dataclass
-from typing import Any
+from pathlib import Path
+from typing import Any, TypeVar
+
+import yaml
 
 from dsl.errors import did_you_mean
 
@@ -86,3 +89,48 @@ class ConfigReader:
 def join_key(prefix: str, key: str) -> str:
     """`params` + `speed` -> `params.speed`; an empty prefix adds nothing."""
     return f"{prefix}.{key}" if prefix else key
+
+
+class StrictLoader(yaml.SafeLoader):
+    """A SafeLoader that rejects duplicate keys, which PyYAML would silently overwrite: one YAML dialect for
+    every configuration file."""
+
+
+def _construct_mapping(loader: StrictLoader, node: yaml.MappingNode) -> dict[Any, Any]:
+    seen: set[Hashable] = set()
+    for key_node, _ in node.value:
+        key = loader.construct_object(key_node)
+        if not isinstance(key, Hashable):
+            continue  # SafeLoader reports unhashable keys itself
+        if key in seen:
+            raise yaml.constructor.ConstructorError(None, None, f"duplicate key {key!r}", key_node.start_mark)
+        seen.add(key)
+    return loader.construct_mapping(node)
+
+
+StrictLoader.add_constructor(yaml.resolver.BaseResolver.DEFAULT_MAPPING_TAG, _construct_mapping)
+
+
+def display_path(path: Path, cwd: Path | None = None) -> str:
+    """The path as the user sees it: relative to the working directory when inside it."""
+    absolute, cwd = path.absolute(), cwd or Path.cwd()
+    return (absolute.relative_to(cwd) if absolute.is_relative_to(cwd) else path).as_posix()
+
+
+E = TypeVar("E", bound=ConfigError)
+
+
+def read_yaml(path: Path, source: str, error: type[E]) -> object:
+    """A configuration file's YAML, or `error` naming the file: missing, unreadable, or invalid (with the line)."""
+    try:
+        text = path.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise error([ConfigProblem(source, "", "no such file")]) from None
+    except (OSError, UnicodeDecodeError) as e:
+        raise error([ConfigProblem(source, "", f"cannot read: {e}")]) from e
+    try:
+        return yaml.load(text, Loader=StrictLoader)
+    except yaml.YAMLError as e:
+        mark = getattr(e, "problem_mark", None) or getattr(e, "context_mark", None)
+        message = getattr(e, "problem", None) or getattr(e, "context", None) or str(e)
+        raise error([ConfigProblem(source, "", f"invalid YAML: {message}", mark and mark.line + 1)]) from e

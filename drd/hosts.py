@@ -18,10 +18,8 @@ from enum import Enum, StrEnum
 from pathlib import Path
 from typing import Any, TypeVar
 
-import yaml
-
-from drd.config import ConfigError, ConfigProblem, ConfigReader
-from drd.manifests import StrictLoader, got, is_number, show  # one YAML dialect, one wording
+from drd.config import ConfigError, ConfigProblem, ConfigReader, display_path, read_yaml
+from drd.manifests import got, is_number, show  # one YAML dialect, one wording
 from drd.rcm.model import Aggregate, Unit
 from dsl.ast import parse_duration
 from dsl.catalog import Catalog, ComponentType, Kind
@@ -480,19 +478,8 @@ def load_hosts(path: str | os.PathLike[str], catalog: Catalog) -> Cluster:
         HostsError: the file is missing or unreadable, is not valid YAML (with the line), or has problems.
     """
     path = Path(path)
-    source = _display(path)
-    try:
-        text = path.read_text(encoding="utf-8")
-    except FileNotFoundError:
-        raise HostsError([HostsProblem(source, "", "no such file")]) from None
-    except (OSError, UnicodeDecodeError) as e:
-        raise HostsError([HostsProblem(source, "", f"cannot read: {e}")]) from e
-    try:
-        data = yaml.load(text, Loader=StrictLoader)  # a SafeLoader that rejects duplicate keys
-    except yaml.YAMLError as e:
-        mark = getattr(e, "problem_mark", None) or getattr(e, "context_mark", None)
-        message = getattr(e, "problem", None) or getattr(e, "context", None) or str(e)
-        raise HostsError([HostsProblem(source, "", f"invalid YAML: {message}", mark and mark.line + 1)]) from e
+    source = display_path(path)
+    data = read_yaml(path, source, HostsError)
     cluster = parse_hosts(data, source, catalog)
     folder = path.absolute().parent  # `/` keeps absolute paths as they are
     files: dict[str, Any] = {k: str(folder / Path(v).expanduser()) for k, v in cluster.security.files.items()}
@@ -509,12 +496,6 @@ def check_files(cluster: Cluster) -> list[HostsProblem]:
         elif not os.access(file, os.R_OK):
             problems.append(HostsProblem(cluster.source, f"cluster.security.{key}", f"cannot read {name}"))
     return problems
-
-
-def _display(path: Path) -> str:
-    """The path as the user sees it: relative to the working directory when inside it."""
-    absolute, cwd = path.absolute(), Path.cwd()
-    return (absolute.relative_to(cwd) if absolute.is_relative_to(cwd) else path).as_posix()
 
 
 # ---------------------------------------------------------------- small helpers

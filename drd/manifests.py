@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import os
 import re
-from collections.abc import Callable, Hashable, Iterable, Iterator, Mapping, Sequence
+from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from enum import Enum
 from functools import lru_cache
 from pathlib import Path
@@ -20,7 +20,7 @@ from typing import Any, TypeVar
 import yaml
 
 import components
-from drd.config import ConfigError, ConfigProblem, ConfigReader
+from drd.config import ConfigError, ConfigProblem, ConfigReader, StrictLoader, display_path
 from dsl.ast import KEYWORDS, parse_duration
 from dsl.catalog import (
     BUILTIN_PROPERTIES,
@@ -393,11 +393,11 @@ def load_catalog(dirs: Sequence[Path] | None = None) -> Catalog:
     merged: dict[str, ComponentType] = {}
     for root in dict.fromkeys(Path(d).resolve() for d in (default_dirs() if dirs is None else dirs)):
         if not root.is_dir():
-            problems.append(ManifestProblem(_display(root, cwd), "", "no such component directory"))
+            problems.append(ManifestProblem(display_path(root, cwd), "", "no such component directory"))
             continue
         here: dict[str, ComponentType] = {}
         for path in sorted(root.glob(f"*/{MANIFEST}")):
-            t, found = _read(path, _display(path, cwd))
+            t, found = _read(path, display_path(path, cwd))
             problems += found
             if t is None:
                 continue
@@ -440,28 +440,8 @@ def _read_stamped(path: Path, source: str, mtime_ns: int, size: int,
     return t, tuple(problems)
 
 
-def _display(path: Path, cwd: Path) -> str:
-    """The path as the user sees it: relative to the working directory when inside it."""
-    return (path.relative_to(cwd) if path.is_relative_to(cwd) else path).as_posix()
 
 
-class StrictLoader(yaml.SafeLoader):
-    """A SafeLoader that rejects duplicate keys, which PyYAML would silently overwrite."""
-
-
-def _construct_mapping(loader: StrictLoader, node: yaml.MappingNode) -> dict[Any, Any]:
-    seen: set[Hashable] = set()
-    for key_node, _ in node.value:
-        key = loader.construct_object(key_node)
-        if not isinstance(key, Hashable):
-            continue  # SafeLoader reports unhashable keys itself
-        if key in seen:
-            raise yaml.constructor.ConstructorError(None, None, f"duplicate key {key!r}", key_node.start_mark)
-        seen.add(key)
-    return loader.construct_mapping(node)
-
-
-StrictLoader.add_constructor(yaml.resolver.BaseResolver.DEFAULT_MAPPING_TAG, _construct_mapping)
 
 
 # ---------------------------------------------------------------- small helpers

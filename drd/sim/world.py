@@ -16,10 +16,7 @@ from collections.abc import Iterator, Mapping, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-import yaml
-
-from drd.config import ConfigReader, join_key
-from drd.manifests import StrictLoader  # one YAML dialect in the project: duplicate keys are errors
+from drd.config import ConfigReader, display_path, join_key, read_yaml
 from drd.sim import geometry
 from drd.sim.geometry import Point, Segment
 from drd.sim.model import (
@@ -86,20 +83,8 @@ def load_world(path: str | os.PathLike[str]) -> World:
         WorldError: the file is missing or unreadable, is not valid YAML (with the line), or has problems.
     """
     path = Path(path)
-    absolute, cwd = path.absolute(), Path.cwd()
-    source = (absolute.relative_to(cwd) if absolute.is_relative_to(cwd) else path).as_posix()
-    try:
-        text = path.read_text(encoding="utf-8")
-    except FileNotFoundError:
-        raise WorldError([WorldProblem(source, "", "no such file")]) from None
-    except (OSError, UnicodeDecodeError) as e:
-        raise WorldError([WorldProblem(source, "", f"cannot read: {e}")]) from e
-    try:
-        data = yaml.load(text, Loader=StrictLoader)
-    except yaml.YAMLError as e:
-        mark = getattr(e, "problem_mark", None) or getattr(e, "context_mark", None)
-        message = getattr(e, "problem", None) or getattr(e, "context", None) or str(e)
-        raise WorldError([WorldProblem(source, "", f"invalid YAML: {message}", mark and mark.line + 1)]) from e
+    source = display_path(path)
+    data = read_yaml(path, source, WorldError)
     return parse_world(data, source)
 
 
