@@ -146,18 +146,24 @@ class ComponentRouter:
     def creator_key(self, host: str) -> str:
         return f"drd/{self.cluster}/host/{host}/creator"
 
-    def call(self, host: str, msg: ComponentCall) -> ComponentReply:
+    def _request(self, host: str, msg: ComponentCall | ComponentBatch, op: str, path: str) -> tuple[Any, float]:
+        """One round trip to `host`'s Creator: the reply and its duration, or ComponentError. A host that does not
+        answer is marked gone, so later calls fail at once (the daemon removes it at lease expiry)."""
         if host in self.gone or self.dead(host):
             raise ComponentError(f"host {host} is down: the component cannot run there")
         t0 = time.perf_counter()
         try:
             reply = self.bus.call(self.creator_key(host), msg, timeout=self.timeout)
         except RemoteError as e:
-            raise ComponentError(f"{host}'s Creator refused {msg.op} of {msg.path}: {e.reason}") from None
+            raise ComponentError(f"{host}'s Creator refused {op} of {path}: {e.reason}") from None
         except BusError as e:
-            self.gone.add(host)  # fail fast from now on: the daemon removes the host at lease expiry
-            raise ComponentError(f"host {host} did not answer {msg.op} within {self.timeout:g} s ({e})") from None
-        self.stats.add(host, time.perf_counter() - t0)
+            self.gone.add(host)
+            raise ComponentError(f"host {host} did not answer {op} within {self.timeout:g} s ({e})") from None
+        return reply, time.perf_counter() - t0
+
+    def call(self, host: str, msg: ComponentCall) -> ComponentReply:
+        reply, seconds = self._request(host, msg, msg.op, msg.path)
+        self.stats.add(host, seconds)
         if not isinstance(reply, ComponentReply):
             raise ComponentError(f"{host} answered {msg.op} with a {type(reply).TYPE}")
         return reply
@@ -181,18 +187,7 @@ class ComponentRouter:
         return replies[0]
 
     def call_batch(self, host: str, msg: ComponentBatch) -> list[ComponentReply]:
-        if host in self.gone or self.dead(host):
-            raise ComponentError(f"host {host} is down: the component cannot run there")
-        first = msg.calls[0]
-        t0 = time.perf_counter()
-        try:
-            reply = self.bus.call(self.creator_key(host), msg, timeout=self.timeout)
-        except RemoteError as e:
-            raise ComponentError(f"{host}'s Creator refused step of {first.path}: {e.reason}") from None
-        except BusError as e:
-            self.gone.add(host)
-            raise ComponentError(f"host {host} did not answer step within {self.timeout:g} s ({e})") from None
-        seconds = time.perf_counter() - t0
+        reply, seconds = self._request(host, msg, "step", msg.calls[0].path)
         self.batches.add(host, seconds)
         if not isinstance(reply, ComponentBatchReply) or not reply.replies:
             raise ComponentError(f"{host} answered a step batch with a {type(reply).TYPE}")
