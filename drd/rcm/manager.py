@@ -50,6 +50,7 @@ from drd.rcm.model import (
     Deadlock,
     Decision,
     Granted,
+    NeedRequest,
     Released,
     ReleaseReason,
     Renewed,
@@ -324,8 +325,7 @@ class ResourceManager:
             out.append(Unsatisfiable(request.holder, *(diagnose(request.needs, self._reg) or ("", ""))))
             return
         demand = self._enqueue(wait, alts, capped)
-        blockers = set().union(*(self._blockers(wait, unit, quantity) for unit, quantity in demand.items()))
-        out.append(Waiting(request.holder, tuple(sorted(blockers))))
+        out.append(Waiting(request.holder, tuple(sorted(self._blockers(wait, demand.items())))))
 
     def _enqueue(self, wait: Wait, alts: list[Solution] | None = None, capped: bool = False) -> dict[str, float]:
         """Queue a request with the units it claims; returns the most it may take of each."""
@@ -394,6 +394,8 @@ class ResourceManager:
     def _try_grant(self, wait: Wait, now: float, out: list[Decision]) -> set[str] | None:
         """Grant `wait` if it can be, revoking overtime holders if needed; the units to re-dispatch."""
         needs, given = wait.request.needs, wait.given
+        if not self._overtime and self._some_need_full(needs):
+            return None  # nothing to search: every candidate of some need is full
         solution = first_solution(needs, self._reg, lambda u: self._room(u, wait, False), given)
         if solution is None and self._overtime:
             # Preempt as few holders as possible: free units first, then overtime holders.
@@ -409,6 +411,21 @@ class ResourceManager:
             touched.update(self._revoke(victim, out, by=wait.holder))
         self._grant(wait, solution, now, out)
         return touched
+
+    def _some_need_full(self, needs: tuple[NeedRequest, ...]) -> bool:
+        """Whether some need has no candidate with room left on all of its units.
+
+        The common case of a request that must wait (every camera held), answered without building the
+        search's demands: `first_solution` would find nothing either, since a full unit has no room."""
+        reg = self._reg
+        full = reg.full
+        for need in needs:
+            for candidate in reg.candidates(need.type):
+                if full.isdisjoint(units_of(candidate)):
+                    break
+            else:
+                return True
+        return False
 
     def _victims(self, solution: Solution) -> list[str]:
         """The holders a solution takes exclusive units from (all preemptible by construction)."""
@@ -521,12 +538,12 @@ class ResourceManager:
 
     def _may_open(self, unit_id: str) -> bool:
         """Whether a unit has room, or an exclusive holder in overtime that could be preempted."""
-        unit = self._reg.units.get(unit_id)
-        if unit is None:
-            return False
-        if self._reg.free(unit_id) > EPS:
-            return True
-        return not unit.sharable and any(h in self._overtime for h in self._reg.used.get(unit_id, ()))
+        reg = self._reg
+        if unit_id not in reg.full:
+            return unit_id in reg.units
+        overtime = self._overtime
+        return (bool(overtime) and not reg.units[unit_id].sharable
+                and any(h in overtime for h in reg.used.get(unit_id, ())))
 
     # -- deadlocks -----------------------------------------------------------------------------
 
@@ -547,16 +564,21 @@ class ResourceManager:
         """
         common: set[str] | None = None
         for solution in alts:
-            blockers = set().union(*(self._blockers(wait, u, q) for u, q in solution.totals.items()))
+            blockers = self._blockers(wait, solution.totals.items())
             common = blockers if common is None else common & blockers
         return () if capped or common is None else tuple(sorted(common))
 
-    def _blockers(self, wait: Wait, unit: str, quantity: float) -> set[str]:
-        """Who keeps `quantity` of `unit` from `wait`: its holders if full, a better claimant."""
-        found = set(self._reg.used.get(unit, ())) if self._reg.free(unit) < quantity - EPS else set()
-        head = self._queue.head(unit)
-        if head is not None and head[0] < wait.key:
-            found.add(head[1])
+    def _blockers(self, wait: Wait, demand: Iterable[tuple[str, float]]) -> set[str]:
+        """Who keeps `wait` from its demand (unit, quantity): the holders of each unit too full, a better claimant."""
+        reg, head = self._reg, self._queue.head
+        units, load, used = reg.units, reg.load, reg.used
+        found: set[str] = set()
+        for unit, quantity in demand:
+            if units[unit].capacity - load.get(unit, 0.0) < quantity - EPS:
+                found.update(used.get(unit, ()))
+            best = head(unit)
+            if best is not None and best[0] < wait.key:
+                found.add(best[1])
         return found
 
     def _rank(self, holder: str) -> tuple[int, int]:

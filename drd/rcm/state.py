@@ -15,7 +15,7 @@ from typing import Any
 
 from drd.rcm.deadlock import ancestors
 from drd.rcm.model import Aggregate, Candidate, NeedRequest, Request, Unit
-from drd.rcm.solver import Solution, alternatives, demand_of
+from drd.rcm.solver import EPS, Solution, alternatives, demand_of
 
 #: Queue order: (priority, 0 for a due reservation else 1, reservation time, request order).
 Key = tuple[int, int, float, int]
@@ -120,6 +120,7 @@ class Registry:
         self.epochs: dict[str, int] = {}
         self.used: dict[str, dict[str, float]] = {}  # unit -> holder -> quantity
         self.load: dict[str, float] = {}
+        self.full: set[str] = set()  # units with no room left (capacity - load <= EPS)
         self._by_type: dict[str, list[str]] = {}
         self._demands: dict[tuple[str, float], dict[str, float]] = {}
         self._typed: dict[str, tuple[Candidate, ...]] = {}
@@ -200,6 +201,7 @@ class Registry:
         self.aggregates.pop(cid, None)
         self.units.pop(cid, None)
         self.load.pop(cid, None)
+        self.full.discard(cid)
         self._demands.clear()
         self._typed.pop(candidate.type, None)
         self._alternatives.clear()
@@ -241,10 +243,14 @@ class Registry:
         else:
             used.pop(holder, None)
         if used:
-            self.load[unit_id] = sum(used.values())
+            load = self.load[unit_id] = sum(used.values())
         else:
             del self.used[unit_id]
-            self.load[unit_id] = 0.0
+            load = self.load[unit_id] = 0.0
+        if self.units[unit_id].capacity - load <= EPS:
+            self.full.add(unit_id)
+        else:
+            self.full.discard(unit_id)
 
     def next_epoch(self, unit_id: str) -> int:
         self.epochs[unit_id] += 1
