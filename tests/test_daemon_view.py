@@ -256,8 +256,8 @@ def test_missing_security_files_are_named(tmp_path: Path, catalog: Catalog) -> N
 
 
 def test_tls_mode_moves_every_endpoint_to_tls(tmp_path: Path, catalog: Catalog) -> None:
-    for name in ("ca.pem", "host.pem", "host.key"):
-        (tmp_path / name).write_text("x")
+    for name, label in (("ca.pem", "CERTIFICATE"), ("host.pem", "CERTIFICATE"), ("host.key", "PRIVATE KEY")):
+        (tmp_path / name).write_text(f"-----BEGIN {label}-----\nAA==\n-----END {label}-----\n")
     tr = transport(secured(tmp_path, catalog, "{mode: tls, ca: ca.pem, cert: host.pem, key: host.key}"))
     assert tr.endpoints == {"controller": "tls/127.0.0.1:7447", "ranger1": "tls/127.0.0.1:7448"}
     assert tr.options["transport/link/protocols"] == ["tls"] and tr.options["transport/link/tls/enable_mtls"]

@@ -161,8 +161,11 @@ def _serve(cluster: Cluster, host: str, cat: Catalog, tr: Transport, rd: Path, c
         zenoh.try_init_log_from_env()  # type: ignore[no-untyped-call]  # RUST_LOG=zenoh=debug: zenoh's own logs
         daemon.run(stop, ready=lambda: runfiles.mark(rd, info, "running"))
     except BusError as e:
-        fail(f"drd {host} cannot join the bus on {cluster.host(host).endpoint}: {e}",
-             hint="is another process listening on that port?")
+        endpoint = tr.endpoints.get(host, cluster.host(host).endpoint)
+        in_use = "already in use" in str(e).lower()
+        fail(f"drd {host} cannot join the bus on {endpoint}: {e}",
+             hint="is another process listening on that port?" if in_use else
+             "check the endpoint in hosts.yaml and, with security, its files")
     finally:
         runfiles.release(rd, info)
     return OK

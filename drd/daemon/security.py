@@ -16,6 +16,8 @@ with security configured never starts without it.
 
 from __future__ import annotations
 
+import binascii
+import re
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -72,6 +74,8 @@ def transport(cluster: Cluster) -> Transport:
                                           f"security mode tls needs a tcp endpoint (it becomes tls/...),"
                                           f" got {endpoint}"))
         tls[name] = f"tls/{address}"
+    problems += [p for key, wanted in TLS_PEM.items() if (p := check_pem(cluster.source, key, getattr(sec, key),
+                                                                          wanted)) is not None]
     if problems:
         raise SecurityError(problems)
     return Transport(sec.mode, tls, {
@@ -83,6 +87,41 @@ def transport(cluster: Cluster) -> Transport:
         "transport/link/tls/connect_private_key": sec.key,
         "transport/link/tls/enable_mtls": True,
     })
+
+
+#: The PEM blocks zenoh looks for in each TLS file (rustls_pemfile): certificates, or an unencrypted key.
+TLS_PEM: Mapping[str, tuple[str, ...]] = {
+    "ca": ("CERTIFICATE",),
+    "cert": ("CERTIFICATE",),
+    "key": ("PRIVATE KEY", "RSA PRIVATE KEY", "EC PRIVATE KEY"),
+}
+_PEM = re.compile(r"-----BEGIN ([A-Z0-9 ]+)-----([A-Za-z0-9+/=\s]*?)-----END \1-----")
+
+
+def check_pem(source: str, key: str, path: str, wanted: Sequence[str]) -> ConfigProblem | None:
+    """Why the file at `path` has no well-formed PEM block labelled one of `wanted`, or None.
+
+    zenoh reads the TLS files only when the session opens, and its errors name neither the file nor
+    the key ("peer sent no certificates" for a certificate file without a certificate).
+    """
+    where = f"cluster.security.{key}"
+    try:
+        text = Path(path).read_text(encoding="ascii")
+    except (OSError, UnicodeDecodeError) as e:
+        return ConfigProblem(source, where, f"{path}: not a PEM file ({e})")
+    labels = []
+    for label, body in _PEM.findall(text):
+        try:
+            binascii.a2b_base64("".join(body.split()), strict_mode=True)
+        except binascii.Error:
+            return ConfigProblem(source, where, f"{path}: the {label} block is not valid base64")
+        if label in wanted:
+            return None
+        labels.append(label)
+    if "ENCRYPTED PRIVATE KEY" in labels:
+        return ConfigProblem(source, where, f"{path}: the key is encrypted; zenoh needs an unencrypted key")
+    found = f"found only {', '.join(dict.fromkeys(labels))}" if labels else "found none"
+    return ConfigProblem(source, where, f"{path}: expected a PEM {' or '.join(wanted)} block, {found}")
 
 
 def read_password(source: str, path: str, user: str) -> str:
@@ -105,8 +144,10 @@ def read_password(source: str, path: str, user: str) -> str:
             raise SecurityError([ConfigProblem(source, key, f"{path}:{number}: expected user:password")])
         if name == user and found is None:
             found = password
-    if not found:
+    if found is None:
         raise SecurityError([ConfigProblem(source, key, f"{path}: no line {user}:PASSWORD for user {user!r}")])
+    if not found:
+        raise SecurityError([ConfigProblem(source, key, f"{path}: the password of user {user!r} is empty")])
     return found
 
 
