@@ -33,7 +33,7 @@ KINDS = {
     Kind.DATA: ["OccupancyMap", "DoorLog"],
     Kind.BEHAVIOR: [
         "FollowCorridor", "AvoidObstacles", "DetectDoor", "AlignRanger", "LaunchScout", "LocateDarkCorner",
-        "ServoToGoal", "TurnToWatch", "Watch", "Observe", "Calibrate", "ReturnToStart",
+        "ServoToGoal", "TurnToWatch", "Watch", "Observe", "Calibrate", "ReturnToStart", "Wait",
     ],
 }
 

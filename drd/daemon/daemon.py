@@ -183,7 +183,8 @@ class Daemon:
                                              clock=self._controller_clock)
                 self.runner = MissionRunner(bus, self.cluster, self.config.catalog, me, self._lock, self.controller,
                                             self.controller.mission_clock, sim_service=self.sim_service,
-                                            host_down=lambda h: self.view.state(h) is HostState.DOWN)
+                                            host_down=lambda h: self.view.state(h) is HostState.DOWN,
+                                            host_views=self.view.host_views)
         self._declared.append(bus.watch_tokens(keys.hosts, self._on_token, history=True))
         self._token = bus.declare_token(keys.host(me))
         now = self.clock()

@@ -20,12 +20,13 @@ import logging
 import os
 import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from typing import Any
 
 from drd.bus import Bus, Message, Query, Reply, message
 from drd.hosts import Cluster, Role
-from drd.runtime.remote import ComponentRouter
+from drd.placement import HostView
+from drd.runtime.remote import ComponentError, ComponentRouter
 from drd.sim.service import SimReply, SimRequest, SimulationService
 from drd.sim.service import key as sim_key
 from dsl.catalog import Catalog
@@ -109,7 +110,8 @@ class MissionRunner:
 
     def __init__(self, bus: Bus, cluster: Cluster, catalog: Catalog, me: str, lock: threading.RLock,
                  controller: Any, clock: SimTimeClock, *, sim_service: SimulationService | None = None,
-                 host_down: Callable[[str], bool] = lambda h: False) -> None:
+                 host_down: Callable[[str], bool] = lambda h: False,
+                 host_views: Callable[[], list[HostView]] | None = None) -> None:
         self.bus = bus
         self.cluster = cluster
         self.catalog = catalog
@@ -119,6 +121,7 @@ class MissionRunner:
         self.clock = clock
         self.sim_service = sim_service
         self.host_down = host_down
+        self.host_views = host_views
         self.resource_hosts = {r.id: r.host for r in cluster.resources() if r.host}
         self.simulator = next((h.name for h in cluster.hosts if Role.SIMULATOR in h.roles), None)
         self.current: MissionRun | None = None
@@ -186,7 +189,7 @@ class MissionRunner:
             router = ComponentRouter(self.bus, self.cluster.name, self.resource_hosts, self.me,
                                      node=lambda path: _find(executive, mid, path), local=executive.registry,
                                      mission=mid, world=path.stem, timeout=CALL_TIMEOUT, dead=self.host_down,
-                                     catalog=self.catalog)
+                                     catalog=self.catalog, place=self.place if self.host_views else None)
             router.sim_time, router.sim_version = reset.time, reset.version
             run = MissionRun(self, mid, router, req)
             self.current = run
@@ -195,6 +198,23 @@ class MissionRunner:
         log.info("mission %s started (%s, world %s, speed %gx)", mid, req.file, path.stem, req.speed)
         return RunReply(mid, True, [], path.stem, req.speed, time.time(), self.clock.base)
 
+
+    def place(self, component: str, params: Mapping[str, Any], exclude: frozenset[str]) -> str:
+        """The host for one more instance of a movable component (`drd.placement.place` over the Component
+        Database's view of the hosts), or ComponentError naming every refused host and why. The hosts with the
+        `worker` role take them (every host when none has it): the controller keeps its cycles for the mission."""
+        from drd.placement import Placed, place
+
+        ct = self.catalog.get(component)
+        if ct is None or self.host_views is None:
+            raise ComponentError(f"{component} is not in the controller's catalog")
+        workers = [h.name for h in self.cluster.hosts if Role.WORKER in h.roles]
+        decision = place(ct, self.host_views(), self.cluster.placement, params=params, exclude=exclude,
+                         affinity=workers or None)
+        if not isinstance(decision, Placed):
+            raise ComponentError(decision.reason)
+        log.info("placement: %s on %s (%s)", component, decision.host, "; ".join(decision.reasons))
+        return decision.host
 
     def _reset_dependencies(self, executive: Any) -> None:
         """A new world puts every Scout back in its magazine: the Static Dependency Database starts again from
@@ -273,6 +293,8 @@ class MissionRun:
             prof.disable()
             prof.dump_stats(f"{profile_path}.controller")
         stats = self.router.stats.as_dict()
+        for path, host, how in self.router.placed:
+            log.info("mission %s: %s %s on %s", self.mission, path, how, host)
         with runner.lock:
             interp = runner.controller.executive.missions.get(self.mission)
             outcome = (interp.outcome, interp.reason) if interp is not None else (None, "")

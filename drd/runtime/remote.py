@@ -9,14 +9,23 @@ finished siblings' outputs. The `ComponentReply` brings back its status, outputs
 its log lines, the shared data as it left it and its changes to the Static Dependency Database; the proxy
 applies them to the local context, so the interpreter sees what a local component would have done.
 
-A component with no device needs runs right here, in the controller (`local`): there is nothing to gain
-from a round trip. A host that does not answer within `timeout` (or that the daemon already saw go down)
-makes the call raise at once: the interpreter fails just that state.
+A component with no device needs is *movable*. With a placer (`ComponentRouter.place`, the Load Balancer's
+policy over the hosts that are up, `drd.placement`), its `start` goes to the host the policy picks; a host that
+does not answer within `timeout` is excluded and the next best is tried (`PLACE_TRIES` hosts in all). When its
+host is lost later, the instance is started again on another host before its next call: its code state is lost,
+but the mission sees the same component go on (it gets its parameters, shared data and siblings' outputs again
+with every call). Without a placer (the router of a test), a movable component runs right here, in the
+controller (`local`).
+
+A component bound to devices runs on the host that owns them, and only there: when that host does not answer
+within `timeout` (or the daemon already saw it go down), the call raises at once and the interpreter fails just
+that state.
 """
 
 from __future__ import annotations
 
 import time
+from collections import deque
 from collections.abc import Callable, Iterator, Mapping
 from dataclasses import dataclass, field
 from typing import Any
@@ -90,6 +99,14 @@ class ComponentError(Exception):
     """The remote component raised, or its host did not answer: the state fails with this message."""
 
 
+class HostDown(ComponentError):
+    """The host of the call is down or did not answer: a movable component is placed again elsewhere."""
+
+
+#: How many hosts a movable component's start is tried on before its state fails.
+PLACE_TRIES = 3
+
+
 @dataclass
 class RouterStats:
     calls: int = 0
@@ -119,7 +136,8 @@ class ComponentRouter:
     def __init__(self, bus: Bus, cluster: str, resource_hosts: Mapping[str, str], me: str, *,
                  node: Callable[[str], Any], local: Mapping[str, Callable[[], Component]],
                  mission: str, world: str, timeout: float = 1.0, dead: Callable[[str], bool] = lambda h: False,
-                 catalog: Any = None):
+                 catalog: Any = None,
+                 place: Callable[[str, Mapping[str, Any], frozenset[str]], str] | None = None):
         self.bus = bus
         self.cluster = cluster
         self.resource_hosts = dict(resource_hosts)
@@ -131,12 +149,17 @@ class ComponentRouter:
         self.timeout = timeout
         self.dead = dead
         self.catalog = catalog
+        self.place = place  # (component, params, hosts to avoid) -> host, or ComponentError saying why none
+        self.placed: deque[tuple[str, str, str]] = deque(maxlen=200)  # (path, host, "placed" or "re-placed")
         self.gone: set[str] = set()
         self.sim_time = -1.0
         self.sim_version = -1
         self.stats = RouterStats()
         self.batches = RouterStats()  # one per host per cycle when nothing interrupts the cycle
         self._ready: dict[int, tuple[float, ComponentReply]] = {}  # id(component) -> (now, its step's reply)
+
+    def is_down(self, host: str) -> bool:
+        return host in self.gone or self.dead(host)
 
     def param_names(self, component: str) -> set[str] | None:
         """The parameters the manifest declares (what a call may carry), or None if unknown."""
@@ -149,8 +172,8 @@ class ComponentRouter:
     def _request(self, host: str, msg: ComponentCall | ComponentBatch, op: str, path: str) -> tuple[Any, float]:
         """One round trip to `host`'s Creator: the reply and its duration, or ComponentError. A host that does not
         answer is marked gone, so later calls fail at once (the daemon removes it at lease expiry)."""
-        if host in self.gone or self.dead(host):
-            raise ComponentError(f"host {host} is down: the component cannot run there")
+        if self.is_down(host):
+            raise HostDown(f"host {host} is down: the component cannot run there")
         t0 = time.perf_counter()
         try:
             reply = self.bus.call(self.creator_key(host), msg, timeout=self.timeout)
@@ -158,7 +181,7 @@ class ComponentRouter:
             raise ComponentError(f"{host}'s Creator refused {op} of {path}: {e.reason}") from None
         except BusError as e:
             self.gone.add(host)
-            raise ComponentError(f"host {host} did not answer {op} within {self.timeout:g} s ({e})") from None
+            raise HostDown(f"host {host} did not answer {op} within {self.timeout:g} s ({e})") from None
         return reply, time.perf_counter() - t0
 
     def call(self, host: str, msg: ComponentCall) -> ComponentReply:
@@ -233,6 +256,8 @@ class RemoteComponent(Component):
         self.router = router
         self.host: str | None = None
         self.local: Component | None = None
+        self.movable = False  # no device needs and a placer: the policy picks its host (module docstring)
+        self._params: dict[str, Any] = {}
         self._bindings: dict[str, list[str]] = {}
         self._holders: dict[str, tuple[Any, str]] = {}  # need -> (node holding the grant, unit id)
         self._rank: list[int] = [0, 0]
@@ -246,20 +271,31 @@ class RemoteComponent(Component):
 
     def start(self) -> None:
         self._resolve()
-        if self.host is None:
+        if self.host is None and not self.movable:
             if self.local is None:
                 self.local = self.router.local[self.name]()
                 self.local.setup(self._ctx)
             self.local.start()
             return
         names = self.router.param_names(self.name)
-        params = {k: plain(v) for k, v in self._ctx.params.items() if names is None or k in names}
-        self._call("start", params=params, bindings=self._bindings, rank=self._rank)
+        self._params = {k: plain(v) for k, v in self._ctx.params.items() if names is None or k in names}
+        if self.movable:
+            self._place("placed", set())
+        else:
+            self._call("start", params=self._params, bindings=self._bindings, rank=self._rank)
 
     def step(self, now: float) -> Status:
         if self.local is not None and self.host is None:
             return self.local.step(now)
-        reply = self.router.step(self, now)
+        try:
+            if self.movable and self.host is not None and self.router.is_down(self.host):
+                raise HostDown(f"host {self.host} is down")
+            reply = self.router.step(self, now)
+        except HostDown:
+            if not self.movable:
+                raise
+            self._replace()
+            reply = self.router.step(self, now)
         self._apply(reply)
         if reply.error:
             raise ComponentError(reply.error)
@@ -275,8 +311,8 @@ class RemoteComponent(Component):
         if self.local is not None and self.host is None:
             self.local.terminate(status)
             return
-        if self.host is not None:
-            self._call("terminate", status=str(status))
+        if self.host is not None and not (self.movable and self.router.is_down(self.host)):
+            self._call("terminate", status=str(status))  # a movable one on a lost host went with it
 
     # -- helpers --------------------------------------------------------------------------------------
 
@@ -289,7 +325,41 @@ class RemoteComponent(Component):
         if self.local is not None and self.host is None:
             getattr(self.local, op)()
         elif self.host is not None:
-            self._call(op)
+            try:
+                if self.movable and self.router.is_down(self.host):
+                    raise HostDown(f"host {self.host} is down")
+                self._call(op)
+            except HostDown:
+                if not self.movable:
+                    raise
+                self._replace()  # started afresh elsewhere: a resume needs nothing more, a suspend is sent
+                if op == "suspend":
+                    self._call(op)
+
+    def _place(self, how: str, avoid: set[str]) -> None:
+        """Start on the host the policy picks, excluding each host that does not answer (`PLACE_TRIES`)."""
+        place = self.router.place
+        assert place is not None
+        path, tried = self._ctx.path, set(avoid)
+        last: HostDown | None = None
+        for _ in range(PLACE_TRIES):
+            self.host = place(self.name, self._params, frozenset(tried))  # ComponentError when no host can
+            try:
+                self._call("start", params=self._params, bindings={}, rank=self._rank)
+            except HostDown as e:
+                tried.add(self.host)
+                last = e
+                continue
+            self.router.placed.append((path, self.host, how))
+            return
+        self.host = None
+        raise ComponentError(f"{path}: {self.name} could not be started on {', '.join(sorted(tried))}: {last}")
+
+    def _replace(self) -> None:
+        """Its host is lost: start the instance again on another host (its code state went with the host)."""
+        lost = self.host or ""
+        self._place("re-placed", {lost})
+        self._ctx.log(f"{self.name} placed again on {self.host}: its host {lost} was lost")
 
     def _resolve(self) -> None:
         """Which resource (and robot part) each need is bound to, the grants' holders, and so the host."""
@@ -317,6 +387,7 @@ class RemoteComponent(Component):
         if len(hosts) > 1:
             raise ComponentError(f"{self._ctx.path}: its devices are on several hosts ({', '.join(sorted(hosts))})")
         self.host = next(iter(hosts)) if hosts else None
+        self.movable = not hosts and not self._bindings and self.router.place is not None
 
     def _epochs(self) -> dict[str, int | None]:
         return {need: holder.epochs.get(rid) for need, (holder, rid) in self._holders.items()}

@@ -1,0 +1,66 @@
+"""Movable components on a real cluster: placed by the Load Balancer's policy, placed again when their host dies.
+
+A `Wait` holds no device, so the controller's placer puts it on a `worker` host (ranger1 or spare, whichever
+scores best). Killing that host with SIGKILL mid-mission must not fail the mission: the instance is started
+again on the other worker and the mission succeeds. Real `drd start` processes on loopback, killed by pid.
+"""
+
+from __future__ import annotations
+
+import re
+import signal
+import subprocess
+import time
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+from cluster_support import MISSIONCTL, ROOT, DaemonCluster, eventually, running_cluster
+from test_cluster_run import NAMES, corridor_hosts
+
+PLACED = re.compile(r"placement: Wait on (\w+)")
+STARTED = re.compile(r"mission Pause-\d+ started")
+
+
+@pytest.fixture(scope="module")
+def cluster(tmp_path_factory: pytest.TempPathFactory) -> Iterator[DaemonCluster]:
+    folder = tmp_path_factory.mktemp("cluster_placement")
+    with running_cluster(folder, NAMES) as c:
+        c.hosts_file.write_text(corridor_hosts(c))
+        c.start_all()
+        c.wait_ready()
+        c.wait_up()
+        yield c
+
+
+def placements(c: DaemonCluster) -> list[str]:
+    return PLACED.findall(c.log("controller"))
+
+
+def test_a_movable_component_goes_to_a_worker_and_moves_when_its_host_is_killed(cluster: DaemonCluster,
+                                                                               tmp_path: Path) -> None:
+    mission = tmp_path / "pause.mission"
+    mission.write_text("mission Pause {\n    Wait(duration: 40s)\n}\n")
+    cmd = [*MISSIONCTL, "run", str(mission), "--config", str(cluster.hosts_file), "--speed", "8", "--json"]
+    proc = subprocess.Popen(cmd, cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        def running() -> bool:
+            assert proc.poll() is None, proc.communicate()
+            return STARTED.search(cluster.log("controller")) is not None
+
+        eventually(running, "the mission to start", 30, poll=0.05)
+        time.sleep(0.5)  # a few cycles of steps on the first host
+        first = placements(cluster)[0]
+        assert first in ("ranger1", "spare"), "a worker takes it, never the controller"
+        cluster.procs[first].send_signal(signal.SIGKILL)
+        out, err = proc.communicate(timeout=60)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.communicate(timeout=10)
+    assert proc.returncode == 0, (out[-2000:], err[-2000:], cluster.log("controller")[-3000:])
+    moved = placements(cluster)
+    other = ({"ranger1", "spare"} - {first}).pop()
+    assert moved[-1] == other, moved
+    log = cluster.log("controller")
+    assert f"re-placed on {other}" in log, log[-3000:]

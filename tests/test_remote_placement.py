@@ -1,0 +1,141 @@
+"""`RemoteComponent` placement on the in-process bus: where a movable component starts, the retry on another
+host when one does not answer, and the new start after its host is lost. Hosts are queryables on a `LocalBus`
+that answer as a Creator does (the Creator itself is tested across real processes in test_cluster_*.py)."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import Any
+
+import pytest
+
+from drd.bus import Message, Query, Reply
+from drd.bus.local import LocalBus
+from drd.runtime.component import Context, Status
+from drd.runtime.remote import (
+    PLACE_TRIES,
+    ComponentBatch,
+    ComponentBatchReply,
+    ComponentCall,
+    ComponentError,
+    ComponentReply,
+    ComponentRouter,
+    HostDown,
+    RemoteComponent,
+)
+
+
+class Hosts:
+    """Creators on named hosts, recording (host, op) of every call; `order` is the placer's preference."""
+
+    def __init__(self, bus: LocalBus, serving: list[str], order: list[str]) -> None:
+        self.bus, self.order = bus, order
+        self.calls: list[tuple[str, str]] = []
+        self.dead: set[str] = set()
+        self.asked: list[frozenset[str]] = []
+        self.queryables = {host: bus.serve(f"drd/t/host/{host}/creator", self._creator(host)) for host in serving}
+
+    def _creator(self, host: str) -> Any:
+        def serve(query: Query) -> Message | Reply:
+            msg = query.payload
+            calls = msg.calls if isinstance(msg, ComponentBatch) else [msg]
+            assert all(isinstance(c, ComponentCall) for c in calls)
+            self.calls += [(host, c.op) for c in calls if isinstance(c, ComponentCall)]
+            replies = [ComponentReply(status="running" if c.op == "step" else "") for c in calls]
+            return ComponentBatchReply(replies) if isinstance(msg, ComponentBatch) else replies[0]
+        return serve
+
+    def place(self, component: str, params: Mapping[str, Any], exclude: frozenset[str]) -> str:
+        self.asked.append(exclude)
+        for host in self.order:
+            if host not in exclude and host not in self.dead:
+                return host
+        raise ComponentError(f"no host can run {component}: all excluded")
+
+
+def movable(hosts: Hosts, **kw: Any) -> tuple[RemoteComponent, list[str]]:
+    router = ComponentRouter(hosts.bus, "t", {}, "controller", node=lambda path: None, local={}, mission="m",
+                             world="corridor", timeout=0.05, dead=lambda h: h in hosts.dead, place=hosts.place, **kw)
+    comp = RemoteComponent("Wait", router)
+    logs: list[str] = []
+    comp.setup(Context("M/Wait", {"duration": 5.0}, {}, lambda ev, **f: None, logs.append, lambda: 0.0))
+    return comp, logs
+
+
+def test_a_movable_component_starts_where_the_policy_says() -> None:
+    hosts = Hosts(LocalBus(), ["a", "b"], ["b", "a"])
+    comp, _ = movable(hosts)
+    comp.start()
+    assert comp.movable and comp.host == "b"
+    assert comp.step(0.1) is Status.RUNNING
+    assert hosts.calls == [("b", "start"), ("b", "step")]
+    assert list(comp.router.placed) == [("M/Wait", "b", "placed")]
+
+
+def test_a_host_that_does_not_answer_the_start_is_excluded_and_the_next_one_tried() -> None:
+    hosts = Hosts(LocalBus(), ["b"], ["a", "b"])  # a has no Creator: its start times out
+    comp, _ = movable(hosts)
+    comp.start()
+    assert comp.host == "b"
+    assert hosts.asked == [frozenset(), frozenset({"a"})]
+    assert hosts.calls == [("b", "start")]
+
+
+def test_the_start_fails_the_state_after_as_many_hosts_as_it_may_try() -> None:
+    names = [f"h{i}" for i in range(PLACE_TRIES + 1)]
+    hosts = Hosts(LocalBus(), [], names)  # nobody answers
+    comp, _ = movable(hosts)
+    with pytest.raises(ComponentError) as err:
+        comp.start()
+    assert not isinstance(err.value, HostDown), "the state fails: no further placement"
+    assert all(name in str(err.value) for name in names[:PLACE_TRIES])
+    assert len(hosts.asked) == PLACE_TRIES
+
+
+def test_when_no_host_can_run_it_the_placers_reason_fails_the_state() -> None:
+    hosts = Hosts(LocalBus(), ["a"], [])
+    comp, _ = movable(hosts)
+    with pytest.raises(ComponentError, match="all excluded"):
+        comp.start()
+
+
+def test_after_its_host_is_lost_the_next_call_starts_it_again_elsewhere() -> None:
+    hosts = Hosts(LocalBus(), ["a", "b"], ["a", "b"])
+    comp, logs = movable(hosts)
+    comp.start()
+    comp.step(0.1)
+    hosts.dead.add("a")
+    assert comp.step(0.2) is Status.RUNNING
+    assert comp.host == "b"
+    assert hosts.calls == [("a", "start"), ("a", "step"), ("b", "start"), ("b", "step")]
+    assert list(comp.router.placed)[-1] == ("M/Wait", "b", "re-placed")
+    assert any("placed again on b" in line and "a was lost" in line for line in logs)
+    hosts.dead = {"b"}  # a came back, b is lost: a suspend now starts it again on a, then suspends it
+    comp.suspend()
+    assert hosts.calls[-2:] == [("a", "start"), ("a", "suspend")]
+    comp.terminate(Status.SUCCESS)
+    assert hosts.calls[-1] == ("a", "terminate")
+
+
+def test_a_host_that_stops_answering_mid_mission_also_moves_it() -> None:
+    hosts = Hosts(LocalBus(), ["a", "b"], ["a", "b"])
+    comp, _ = movable(hosts)
+    comp.start()
+    hosts.queryables["a"].close()  # a's Creator is gone before the daemon saw the host go down
+    assert comp.step(0.1) is Status.RUNNING
+    assert comp.host == "b" and "a" in comp.router.gone
+    assert hosts.calls == [("a", "start"), ("b", "start"), ("b", "step")]
+
+
+def test_a_component_bound_to_devices_is_never_moved() -> None:
+    hosts = Hosts(LocalBus(), ["a", "b"], ["a", "b"])
+    router = ComponentRouter(hosts.bus, "t", {"a.drive": "a"}, "controller", node=lambda path: None, local={},
+                             mission="m", world="corridor", timeout=0.05, dead=lambda h: h in hosts.dead,
+                             place=hosts.place)
+    comp = RemoteComponent("FollowCorridor", router)
+    comp.setup(Context("M/F", {}, {}, lambda ev, **f: None, lambda s: None, lambda: 0.0))
+    comp.host = "a"  # as `_resolve` finds it from the grant of a.drive
+    hosts.dead.add("a")
+    with pytest.raises(HostDown):
+        comp.step(0.1)
+    assert hosts.calls == []
