@@ -336,6 +336,8 @@ class Daemon:
                     self.controller.host_up(change.host)
             elif change.kind == HostState.DOWN and self.controller is not None:
                 self.controller.host_down(change.host)
+                if self.runner is not None:
+                    self.runner.host_lost(change.host)  # its robots stop in the simulation
 
     def _record(self, kind: str, host: str, detail: str, at: float | None = None) -> None:
         wall = self.wall() if at is None else self._to_wall(at)

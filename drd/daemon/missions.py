@@ -125,6 +125,7 @@ class MissionRunner:
         self.resource_hosts = {r.id: r.host for r in cluster.resources() if r.host}
         self.simulator = next((h.name for h in cluster.hosts if Role.SIMULATOR in h.roles), None)
         self.current: MissionRun | None = None
+        self.lost: list[str] = []  # hosts seen down whose robots the running mission's loop stops in the simulator
         self._queryable = bus.serve(run_key(cluster.name), self._serve)
 
     def close(self) -> None:
@@ -133,6 +134,27 @@ class MissionRunner:
         if run is not None:
             run.stopping.set()
             run.thread.join(timeout=5)
+
+    def host_lost(self, host: str) -> None:
+        """A host went down (called with the daemon's lock held, on a bus thread): its robots stop in the
+        simulation at the next control cycle, when the mission loop talks to the simulator anyway."""
+        if self.current is not None and self.current.thread.is_alive():
+            self.lost.append(host)
+
+    def _lose_robots(self) -> None:
+        with self.lock:
+            hosts, self.lost = self.lost, []
+        for host in hosts:
+            robots = [r.id for r in self.cluster.host(host).robots]
+            if not robots:
+                continue
+            try:
+                gone = self.sim(SimRequest("lose", args=robots)).value or []
+            except Exception as e:  # the simulator's own loss is reported by the next step
+                log.warning("could not stop %s's robots in the simulator: %s", host, e)
+                continue
+            log.info("host %s lost: its robots %s left the simulation (nothing drives them)", host,
+                     ", ".join(gone) or "(none were there)")
 
     def sim(self, req: SimRequest) -> SimReply:
         if self.sim_service is not None:
@@ -192,7 +214,7 @@ class MissionRunner:
                                      catalog=self.catalog, place=self.place if self.host_views else None)
             router.sim_time, router.sim_version = reset.time, reset.version
             run = MissionRun(self, mid, router, req)
-            self.current = run
+            self.current, self.lost = run, []
             executive.submit(chart, mid, registry=router.registry())
         run.thread.start()
         log.info("mission %s started (%s, world %s, speed %gx)", mid, req.file, path.stem, req.speed)
@@ -258,6 +280,8 @@ class MissionRun:
                     interp = runner.controller.executive.missions.get(self.mission)
                     if interp is None or interp.finished:
                         break
+                if runner.lost:
+                    runner._lose_robots()
                 t0 = time.perf_counter()
                 try:
                     reply = runner.sim(SimRequest("step", dt=CONTROL_PERIOD))

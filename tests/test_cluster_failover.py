@@ -1,0 +1,74 @@
+"""Losing a Ranger's host mid-mission on a real cluster: the mission goes on as the language says.
+
+A controller (and simulator), ranger1 and ranger2, as real `drd start` processes on loopback, run the corridor
+mission in the two-Ranger world. When ranger2 is killed with SIGKILL while it works, the controller sees it
+down at once, its robots leave the simulation (nothing drives them any more), the RoomSurveillance instances
+bound to its Ranger or its Scouts fail, the others go on with ranger1, and the mission succeeds, as the
+embedded dry-run does with `--inject 'kill ranger2 at 30s'`.
+"""
+
+from __future__ import annotations
+
+import json
+import re
+import signal
+import subprocess
+import time
+from collections.abc import Iterator
+
+import pytest
+from cluster_support import MISSIONCTL, ROOT, DaemonCluster, eventually, running_cluster
+
+NAMES = ["controller", "ranger1", "ranger2"]
+MISSION = "missions/corridor_surveillance.mission"
+
+
+def two_ranger_hosts(cluster: DaemonCluster) -> str:
+    """The repository's hosts.two_rangers.yaml on our free ports, with the test lease."""
+    text = (ROOT / "hosts.two_rangers.yaml").read_text()
+    text = text.replace("name: corridor_two_rangers", f"name: {cluster.name}").replace("lease: 3s", "lease: 1000ms")
+    for default, port in zip((7447, 7448, 7449), cluster.ports, strict=True):
+        text = text.replace(f"127.0.0.1:{default}", f"127.0.0.1:{port}")
+    return text
+
+
+@pytest.fixture(scope="module")
+def cluster(tmp_path_factory: pytest.TempPathFactory) -> Iterator[DaemonCluster]:
+    folder = tmp_path_factory.mktemp("cluster_failover")
+    with running_cluster(folder, NAMES) as c:
+        c.hosts_file.write_text(two_ranger_hosts(c))
+        c.start_all()
+        c.wait_ready()
+        c.wait_up()
+        yield c
+
+
+def test_killing_one_rangers_host_fails_its_instances_and_the_mission_goes_on(cluster: DaemonCluster) -> None:
+    cmd = [*MISSIONCTL, "run", MISSION, "--config", str(cluster.hosts_file), "--world", "two_rangers",
+           "--speed", "40", "--until", "400", "--json"]
+    proc = subprocess.Popen(cmd, cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        client = cluster.client()
+
+        def ranger2_works() -> bool:
+            assert proc.poll() is None, proc.communicate()
+            return any(u.id == "ranger2.drive" and u.holders for u in client.resources().units)
+
+        eventually(ranger2_works, "ranger2's drive to be granted", 40, poll=0.05)
+        time.sleep(0.5)
+        cluster.procs["ranger2"].send_signal(signal.SIGKILL)
+        out, err = proc.communicate(timeout=120)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.communicate(timeout=10)
+    log = cluster.log("controller")
+    assert proc.returncode == 0, (out[-2000:], err[-2000:], log[-3000:])
+    report = json.loads(out)
+    assert report["outcome"] == "success"
+    lost = re.search(r"host ranger2 lost: its robots (.*) left the simulation", log)
+    assert lost is not None and "ranger2" in lost.group(1), log[-3000:]
+    assert "host ranger2 down" in log
+    # ranger1 carried on: Scouts launched after the loss, and none of them from ranger2's magazine
+    scouts = {s["scout"] for s in report["scouts"]}
+    assert scouts and scouts <= {"scout1", "scout2", "scout3", "scout4", "scout5", "scout6"}
