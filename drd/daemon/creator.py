@@ -9,9 +9,17 @@ executive (through `RemoteComponent` proxies) and answers each with a `Component
 - a need's resource must be a device of this host; its driver is this host's (`drd.hw.drivers`), fenced by
   the grant's epoch as in the dry-run (`drd.runtime.fence.Fenced`).
 
-Component code runs in the daemon process for now, in the thread answering the call (one call at a time:
-the executive makes them in turn). The seam for the worker-process pool is `Creator.handle`: it takes a call
-and returns a reply, so a pool can run it in a container process instead. Actuator commands of one control
+Component code runs in worker processes (`drd.daemon.workers`): a pre-started container shared by the
+instances whose manifest says `process: container` (and the same `scheduling`), or a process of its own for
+`process: dedicated`. What stays here, on the trusted side: the checks above, the drivers and their fencing,
+the arbitration below and the simulator. Inside the worker a component's devices are proxies: each method
+call comes back over the pipe and runs here on the `Fenced` driver, so one call costs one pipe round trip plus
+one per driver call, and a batch one round trip per run of consecutive steps in the same process. A worker
+that dies fails the calls of its instances (`component process of X died (exit code -9)`) and nothing else;
+the pool replaces it. A new mission retires the processes of the previous one. `Tune` (on the Creator's key)
+changes the CPU affinity and nice of the process running an instance at run time.
+
+Actuator commands of one control
 cycle are arbitrated per driver as the dry-run's `Arbiter` does (highest priority, then the behavior
 declared last), but executed at once: a lower-ranked command that comes after a higher-ranked one in the
 same round is dropped, and one that comes before is overwritten, so the last setpoint is the same.
@@ -25,18 +33,31 @@ from __future__ import annotations
 import cProfile
 import logging
 import os
+import pickle
 import threading
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
+import psutil
+
 from drd.bus import Bus, Message, Query, Reply
+from drd.daemon.messages import InstanceInfo
+from drd.daemon.workers import (
+    DEFAULT_SIZE,
+    Tune,
+    Tuned,
+    Worker,
+    WorkerDied,
+    WorkerPool,
+    apply_scheduling,
+    device_methods,
+    scheduling_of,
+)
 from drd.hosts import Cluster
-from drd.runtime.component import Component, Context, Status
 from drd.runtime.fence import Arbiter, Fenced, Proposal
-from drd.runtime.records import plain
 from drd.runtime.remote import ComponentBatch, ComponentBatchReply, ComponentCall, ComponentReply
-from dsl.catalog import Catalog, Kind
+from dsl.catalog import Catalog, ComponentType, Kind, Process
 
 log = logging.getLogger("drd.daemon.creator")
 
@@ -59,17 +80,24 @@ class CycleArbiter(Arbiter):
         proposal.call()
 
 
+#: Instance states, as announced to the Component Database.
+RUNNING, SUSPENDED, TERMINATED, FAILED = "running", "suspended", "terminated", "failed"
+_STATE_AFTER = {"start": RUNNING, "resume": RUNNING, "suspend": SUSPENDED, "terminate": TERMINATED}
+
+
 @dataclass
 class Instance:
+    """A component instance as the Creator keeps it: the process running its code, and its fenced devices."""
+
     name: str
-    component: Component
-    ctx: Context
     bindings: dict[str, list[str]]
+    worker: Worker
+    devices: dict[str, Fenced] = field(default_factory=dict)
     epochs: dict[str, int | None] = field(default_factory=dict)
-    events: list[list[Any]] = field(default_factory=list)
-    logs: list[str] = field(default_factory=list)
-    dependencies: list[list[Any]] = field(default_factory=list)
-    now: float = 0.0
+    setup: tuple[Any, ...] | None = None  # sent with its first call (entry point, resources, device methods)
+    state: str = "starting"
+    dead: str = ""  # how its process went, once it has
+    notes: list[str] = field(default_factory=list)  # scheduling not applied: told in the start reply's logs
 
 
 class CreatorError(ValueError):
@@ -78,13 +106,13 @@ class CreatorError(ValueError):
 
 class Creator:
     def __init__(self, bus: Bus | None, cluster: Cluster, host: str, catalog: Catalog, *,
-                 sim_call: Callable[[Any], Any] | None = None) -> None:
-        from drd.executive import EntryPoints
-
+                 sim_call: Callable[[Any], Any] | None = None, pool: WorkerPool | None = None,
+                 workers: int | None = None, on_change: Callable[[], None] | None = None) -> None:
+        """`pool`: the worker processes to use (default: a pool of `workers` idle ones, else `$DRD_WORKERS`, else
+        2, owned and closed by this Creator); `on_change` is called when the announced instances change."""
         self.cluster = cluster
         self.host = host
         self.catalog = catalog
-        self.entry_points = EntryPoints(catalog)
         self.instances: dict[str, Instance] = {}
         self.mission = ""
         self.calls = 0
@@ -96,19 +124,38 @@ class Creator:
         mine = cluster.host(host)
         self._devices = {d.id for d in mine.devices} | {r.id for r in mine.robots}  # what a need may be bound to
         self._lock = threading.Lock()
+        self._own_pool = pool is None
+        self.pool = pool if pool is not None else WorkerPool(_pool_size(workers), preload=behavior_modules(catalog))
+        self._workers: dict[int, Worker] = {}  # the processes taken from the pool for this mission, by pid
+        self._on_change = on_change
+        self._dirty = False
+        self._infos: list[InstanceInfo] = []
+        self.key = f"drd/{cluster.name}/host/{host}/creator"
         # DRD_PROFILE=path: profile the step batches (cProfile), dumped to path.<host> every 200 batches
         self._profile_path = os.environ.get("DRD_PROFILE", "")
         self._profile = cProfile.Profile() if self._profile_path else None
         self._profiled = 0
-        self._queryable = bus.serve(f"drd/{cluster.name}/host/{host}/creator", self._serve) if bus else None
+        self._queryable = bus.serve(self.key, self._serve) if bus else None
 
     def close(self) -> None:
+        """Stop serving and kill every worker process (the pool's too, if this Creator owns it)."""
         if self._queryable is not None:
             self._queryable.close()
+        with self._lock:
+            self._retire_all()
+            self.instances.clear()
+            self._dirty = False
+            self._infos = []
+        if self._own_pool:
+            self.pool.close()
 
     def names(self) -> list[tuple[str, str]]:
         """(instance path, component) of the instances of the current mission."""
         return [(path, inst.name) for path, inst in self.instances.items()]
+
+    def instance_infos(self) -> list[InstanceInfo]:
+        """The instances to announce: those of the current mission not terminated (`failed` if their process died)."""
+        return list(self._infos)
 
     # -- the seam: one call in, one reply out ---------------------------------------------------------
 
@@ -117,9 +164,11 @@ class Creator:
             if self._sim is not None:
                 self._sim.owner = call.path
             try:
-                reply = self._handle(call, call.shared)
+                inst = self._prepare(call)
+                reply = self._run(inst.worker, [(call, inst)], {})[0]
             finally:
                 refused = self._flush_sim()
+                self._publish()
             if refused and not reply.error:
                 reply = ComponentReply(reply.status, reply.outputs, reply.events, reply.logs, reply.shared,
                                        reply.dependencies, f"component raised HardwareError: {refused[0][1]}")
@@ -140,42 +189,49 @@ class Creator:
                 prof.dump_stats(f"{self._profile_path}.{self.host}")
 
     def _handle_batch(self, batch: ComponentBatch) -> ComponentBatchReply:
+        """Consecutive steps whose instances share a process go to it in one round trip (a run); the worker
+        stops a run where this loop would have stopped, and `latest` chains shared dicts across runs."""
         replies: list[ComponentReply] = []
         latest: dict[str, Any] = {}  # shared dict id on the controller -> its value after the last step
         with self._lock:
             owners: dict[str, int] = {}
             try:
-                for call in batch.calls:
-                    if call.op != "step":
-                        raise CreatorError(f"a batch holds steps only, not {call.op!r}")
-                    shared = dict(call.shared) if call.shared is not None else None
-                    ids = call.shared_ids or {}
-                    if shared is not None:
-                        for name, ref in ids.items():
-                            if ref in latest and name in shared:
-                                shared[name] = plain(latest[ref])  # a copy: the earlier reply keeps its own
-                    if self._sim is not None:
-                        self._sim.owner = call.path
-                    owners[call.path] = len(replies)
-                    try:
-                        reply = self._handle(call, shared)
-                    except CreatorError as e:
-                        replies.append(ComponentReply(error=f"{self.host}'s Creator refused step of {call.path}: {e}"))
+                calls, i = batch.calls, 0
+                while i < len(calls):
+                    run: list[tuple[ComponentCall, Instance]] = []
+                    refused = ""
+                    while i < len(calls):
+                        call = calls[i]
+                        if call.op != "step":
+                            raise CreatorError(f"a batch holds steps only, not {call.op!r}")
+                        try:
+                            inst = self._prepare(call)
+                        except CreatorError as e:
+                            refused = f"{self.host}'s Creator refused step of {call.path}: {e}"
+                            break
+                        if run and inst.worker is not run[0][1].worker:
+                            break
+                        run.append((call, inst))
+                        i += 1
+                    if run:
+                        for k, (call, _) in enumerate(run):
+                            owners[call.path] = len(replies) + k
+                        got = self._run(run[0][1].worker, run, latest)
+                        replies += got
+                        last = got[-1]
+                        if len(got) < len(run) or last.events or last.dependencies or last.error:
+                            break  # the controller reacts to this before the next step
+                    if refused:
+                        replies.append(ComponentReply(error=refused))
                         break
-                    replies.append(reply)
-                    if reply.shared is not None:
-                        for name, ref in ids.items():
-                            if name in reply.shared:
-                                latest[ref] = reply.shared[name]
-                    if reply.events or reply.dependencies or reply.error:
-                        break  # the controller reacts to this before the next step
             finally:
                 for path, error in self._flush_sim():
-                    i = owners.get(path)
-                    if i is not None and not replies[i].error:
-                        r = replies[i]
-                        replies[i] = ComponentReply(r.status, r.outputs, r.events, r.logs, r.shared, r.dependencies,
+                    at = owners.get(path)
+                    if at is not None and at < len(replies) and not replies[at].error:
+                        r = replies[at]
+                        replies[at] = ComponentReply(r.status, r.outputs, r.events, r.logs, r.shared, r.dependencies,
                                                     f"component raised HardwareError: {error}")
+                self._publish()
         return ComponentBatchReply(replies)
 
     def _flush_sim(self) -> list[tuple[str, str]]:
@@ -187,8 +243,8 @@ class Creator:
         refused: list[tuple[str, str]] = sim.flush()
         return refused
 
-    def _handle(self, call: ComponentCall, shared: dict[str, Any] | None) -> ComponentReply:
-        self.calls += 1
+    def _prepare(self, call: ComponentCall) -> Instance:
+        """Everything before the call goes to the worker: checks, mission, sim clock, placement, epochs."""
         if call.op not in OPS:
             raise CreatorError(f"unknown op {call.op!r}: use {', '.join(OPS)}")
         if call.mission != self.mission:
@@ -200,42 +256,224 @@ class Creator:
             inst = self._start_instance(call, inst)
         elif inst is None:
             raise CreatorError(f"no instance {call.path} of mission {call.mission} on {self.host}")
-        inst.now = call.now
         if call.epochs is not None:
             inst.epochs.update(call.epochs)
-        services = inst.ctx.services
-        assert isinstance(services, dict)
-        services["shared"] = shared if shared is not None else {}
-        services["siblings"] = call.siblings if call.siblings is not None else {}
         self.arbiter.round = (call.now, call.op == "step")
-        status = ""
-        error = ""
+        return inst
+
+    def _run(self, worker: Worker, run: list[tuple[ComponentCall, Instance]],
+             latest: dict[str, Any]) -> list[ComponentReply]:
+        """Calls of instances of one worker, in one round trip (plus one per driver request); a prefix of replies."""
+        first, inst0 = run[0]
+        if inst0.dead:
+            return [ComponentReply(error=f"component process of {first.path} {inst0.dead}")]
+        msgs = []
+        for call, inst in run:
+            self.calls += 1
+            msgs.append((call.path, call.op, call.now, call.status, call.shared, call.shared_ids, call.siblings,
+                         call.params if call.op == "start" else None, inst.setup))
+            inst.setup = None
         try:
-            match call.op:
-                case "start":
-                    inst.component.start()
-                case "step":
-                    status = str(inst.component.step(call.now))
-                case "suspend":
-                    inst.component.suspend()
-                case "resume":
-                    inst.component.resume()
-                case "terminate":
-                    inst.component.terminate(Status(call.status) if call.status in Status.__members__.values()
-                                             else Status.RUNNING)
-        except Exception as e:  # component code is not ours to trust: the state fails, the daemon goes on
-            error = f"component raised {type(e).__name__}: {e}"
-        reply = ComponentReply(status, plain(inst.ctx.outputs), inst.events, inst.logs,
-                               plain(services["shared"]), inst.dependencies, error)
-        inst.events, inst.logs, inst.dependencies = [], [], []
-        return reply
+            raw = self._exchange(worker, ("run", msgs, latest))
+        except WorkerDied as e:
+            self._worker_died(worker, str(e))
+            return [ComponentReply(error=f"component process of {first.path} {e}")]
+        replies = []
+        for (call, inst), (status, outputs, events, logs, shared, deps, error, setup_failed) in zip(run, raw,
+                                                                                                      strict=False):
+            if setup_failed:  # setup raised: the start fails and the instance is forgotten
+                self._forget(call.path)
+                replies.append(ComponentReply(error=error))
+                continue
+            if inst.notes:
+                logs, inst.notes = [*inst.notes, *logs], []
+            state = _STATE_AFTER.get(call.op)
+            if state is not None and state != inst.state:
+                inst.state = state
+                self._dirty = True
+            replies.append(ComponentReply(status, outputs, events, logs, shared, deps, error))
+            if shared is not None and call.shared_ids:
+                for name, ref in call.shared_ids.items():
+                    if name in shared:
+                        latest[ref] = shared[name]
+        return replies
+
+    def _exchange(self, worker: Worker, msg: tuple[Any, ...]) -> Any:
+        """Send `msg`, serve the worker's driver requests until its final `done`; WorkerDied if it goes."""
+        worker.send(msg)
+        while True:
+            got = worker.recv(self.pool.call_timeout)
+            kind = got[0] if isinstance(got, tuple) and got else None
+            if kind == "done":
+                return got[1]
+            if kind in ("dev", "attr") and len(got) >= 4:
+                self._device_request(worker, got)
+                continue
+            worker.kill()
+            raise WorkerDied(f"sent an unexpected message ({str(kind)[:40]}): killed")
+
+    def _device_request(self, worker: Worker, req: tuple[Any, ...]) -> None:
+        """Run one driver call (or attribute read) of a component in `worker` on its fenced driver; answer it."""
+        kind, path, need, name = req[:4]
+        try:
+            inst = self.instances.get(path) if isinstance(path, str) else None
+            if inst is None or inst.worker is not worker:
+                raise LookupError(f"no instance {path!r} in this process")
+            fenced = inst.devices.get(need) if isinstance(need, str) else None
+            if fenced is None:
+                raise LookupError(f"{path}: no device for need {need!r} (have: {', '.join(inst.devices) or 'none'})")
+            if not isinstance(name, str) or name.startswith("_"):
+                raise AttributeError(f"{need}: no public attribute {name!r}")
+            if self._sim is not None:
+                self._sim.owner = path
+            target = getattr(fenced, name)
+            if kind == "dev":
+                args, kwargs = (req[4], req[5]) if len(req) >= 6 else ((), {})
+                answer: tuple[str, Any] = ("ok", target(*args, **kwargs))
+            elif callable(target):
+                raise TypeError(f"{need}.{name} is a method: call it")
+            else:
+                answer = ("ok", target)
+        except Exception as e:  # the component sees the driver's exception, as it would in process
+            answer = ("raise", e)
+        try:
+            worker.send(answer)
+        except (pickle.PicklingError, TypeError, AttributeError) as e:
+            what = f"{type(answer[1]).__name__}: {answer[1]}" if answer[0] == "raise" else "its result"
+            worker.send(("raise", RuntimeError(f"{need}.{name}: {what} cannot be sent to the component process"
+                                               f" ({e})")))
+
+    # -- processes ----------------------------------------------------------------------------------------
+
+    def _place(self, ct: ComponentType) -> tuple[Worker, list[str]]:
+        """The process for a new instance of `ct`: the mission's container with the same scheduling (not tuned
+        since), else a pre-started worker from the pool (always, for `process: dedicated`)."""
+        sched = ct.scheduling
+        key = (tuple(sched.cores) if sched.cores is not None else None, sched.nice)
+        if ct.process is not Process.DEDICATED:
+            for w in self._workers.values():
+                if w.kind == "container" and w.key == key and not w.tuned and w.alive:
+                    return w, []
+        w = self.pool.take()
+        w.kind = "dedicated" if ct.process is Process.DEDICATED else "container"
+        w.key = key
+        self._workers[w.pid] = w
+        return w, self._apply_manifest(w, ct)
+
+    def _apply_manifest(self, w: Worker, ct: ComponentType) -> list[str]:
+        """The manifest's `scheduling` on a process just taken for it; nice 0 means "as the daemon". A setting
+        the OS refuses (raising priority needs privileges) is logged and told, never fatal."""
+        cores, nice = ct.scheduling.cores, ct.scheduling.nice
+        try:
+            want_nice = nice if nice != 0 and nice != psutil.Process(w.pid).nice() else None
+            if cores is None and want_nice is None:
+                return []
+            apply_scheduling(w.pid, cores, want_nice)
+        except (psutil.Error, OSError, ValueError) as e:
+            note = (f"scheduling of {ct.name} (cores {list(cores) if cores is not None else 'any'}, nice {nice})"
+                    f" not applied to its process {w.pid}: {_os_reason(e)}")
+            log.warning("creator %s: %s", self.host, note)
+            return [note]
+        return []
+
+    def _worker_died(self, worker: Worker, reason: str) -> None:
+        worker.died = worker.died or reason
+        names = sorted(worker.instances)
+        for path in names:
+            inst = self.instances.get(path)
+            if inst is not None and inst.worker is worker:
+                inst.dead, inst.state = reason, FAILED
+        log.warning("creator %s: component process %d (%s) %s", self.host, worker.pid, ", ".join(names) or "idle",
+                    reason)
+        self._workers.pop(worker.pid, None)
+        self.pool.release(worker)
+        self._dirty = True
+
+    def _forget(self, path: str) -> None:
+        """Drop an instance: from its container (which goes on), or with its dedicated process."""
+        inst = self.instances.pop(path, None)
+        if inst is None:
+            return
+        self._dirty = True
+        w = inst.worker
+        w.instances.discard(path)
+        if w.died:
+            return
+        if w.kind == "dedicated" or not w.alive:
+            self._workers.pop(w.pid, None)
+            self.pool.release(w)
+            return
+        try:
+            w.send(("drop", [path]))
+        except WorkerDied:
+            self._worker_died(w, w.died)
+
+    def _retire_all(self) -> None:
+        for w in self._workers.values():
+            self.pool.release(w)
+        self._workers.clear()
+
+    def _publish(self) -> None:
+        """Refresh what `instance_infos` says, and tell the daemon (to announce it) when it changed."""
+        if not self._dirty:
+            return
+        self._dirty = False
+        infos = [InstanceInfo(path, inst.name, self.host, inst.state, self.key)
+                 for path, inst in self.instances.items() if inst.state not in (TERMINATED, "starting")]
+        if infos != self._infos:
+            self._infos = infos
+            if self._on_change is not None:
+                self._on_change()
+
+    # -- run-time scheduling ------------------------------------------------------------------------------
+
+    def tune(self, req: Tune) -> Tuned:
+        """Set cores and/or nice of the process running `req.instance`; what it runs with now and who shares it.
+
+        Raises CreatorError: unknown instance, cores or nice out of range, or the OS refused (privileges)."""
+        with self._lock:
+            inst = self.instances.get(req.instance)
+            if inst is None or inst.state in (TERMINATED, "starting"):
+                running = sorted(p for p, i in self.instances.items() if i.state not in (TERMINATED, "starting"))
+                raise CreatorError(f"no instance {req.instance!r} runs on {self.host}"
+                                   f" (running: {', '.join(running) or 'none'})")
+            if inst.dead:
+                raise CreatorError(f"{req.instance}: its component process {inst.dead}")
+            count = psutil.cpu_count() or 1
+            cores = sorted(set(req.cores)) if req.cores is not None else None
+            if cores is not None:
+                if not cores:
+                    raise CreatorError("cores: give at least one core")
+                bad = [c for c in cores if not 0 <= c < count]
+                if bad:
+                    raise CreatorError(f"core {bad[0]} does not exist: {self.host} has {count} cores (0-{count - 1})")
+            if req.nice is not None and not -20 <= req.nice <= 19:
+                raise CreatorError(f"nice must be in -20..19, not {req.nice}")
+            w = inst.worker
+            try:
+                apply_scheduling(w.pid, cores, req.nice)
+            except (psutil.Error, OSError, ValueError) as e:
+                what = " and ".join(x for x, v in (("nice", req.nice), ("cores", cores)) if v is not None)
+                raise CreatorError(f"cannot set {what} of process {w.pid} running {req.instance}:"
+                                   f" {_os_reason(e)}") from None
+            if cores is not None or req.nice is not None:
+                w.tuned = True  # a state no manifest asked for: new instances go elsewhere
+            try:
+                now_cores, now_nice = scheduling_of(w.pid)
+            except (psutil.Error, OSError) as e:
+                raise CreatorError(f"process {w.pid} running {req.instance}: {_os_reason(e)}") from None
+            return Tuned(req.instance, self.host, w.pid, w.kind, now_cores, now_nice,
+                         sorted(w.instances - {req.instance}))
 
     # -- helpers ----------------------------------------------------------------------------------------
 
     def _new_mission(self, mission: str) -> None:
+        """A new mission: the previous one's processes are retired (killed; the pool has fresh ones ready)."""
+        self._retire_all()
         self.instances.clear()
         self.mission = mission
         self._drivers = self._sim = None
+        self._dirty = True
 
     def _drivers_for(self, world: str) -> Any:
         if self._drivers is None:
@@ -249,7 +487,7 @@ class Creator:
             self._drivers = drivers_for(self.cluster, self.host, self._sim, catalog=self.catalog)
         return self._drivers
 
-    def _check(self, call: ComponentCall) -> None:
+    def _check(self, call: ComponentCall) -> ComponentType:
         ct = self.catalog.get(call.component)
         if ct is None or not ct.entry_point or ct.kind is not Kind.BEHAVIOR:
             raise CreatorError(f"{call.component!r} is not an elementary behavior declared by a manifest")
@@ -265,15 +503,18 @@ class Creator:
             if len(binding) != 3 or binding[0] not in self._devices:
                 raise CreatorError(f"{call.path}: need {need} is bound to {binding[0] if binding else '?'},"
                                    f" not a device of {self.host}")
+        return ct
 
     def _start_instance(self, call: ComponentCall, inst: Instance | None) -> Instance:
-        self._check(call)
+        ct = self._check(call)
         bindings = dict(call.bindings or {})
-        if inst is not None and inst.name == call.component and inst.bindings == bindings:
-            inst.ctx.params, inst.ctx.outputs = dict(call.params or {}), {}
-            return inst
+        if inst is not None and not inst.dead and inst.name == call.component and inst.bindings == bindings:
+            return inst  # the worker resets its params and outputs on start
+        if inst is not None:
+            self._forget(call.path)
         drivers = self._drivers_for(call.world)
-        devices: dict[str, Any] = {}
+        devices: dict[str, Fenced] = {}
+        methods: dict[str, list[str]] = {}
         rank = (int((call.rank or [0, 0])[0]), int((call.rank or [0, 0])[1]))
         holder: dict[str, Instance] = {}
         for need, (rid, robot, part) in bindings.items():
@@ -281,19 +522,14 @@ class Creator:
             driver = by_robot.get(part) or drivers.devices.get(rid)
             if driver is not None:
                 devices[need] = Fenced(driver, _epoch_of(holder, need), self.arbiter, rank, call.path)
-        path = call.path
-        new = Instance(call.component, None, None, bindings)  # type: ignore[arg-type]
+                methods[need] = device_methods(driver)
+        worker, notes = self._place(ct)
+        assert ct.entry_point is not None
+        new = Instance(call.component, bindings, worker, devices,
+                       setup=(ct.entry_point, {n: b[0] for n, b in bindings.items()}, methods), notes=notes)
         holder["it"] = new
-        ctx = Context(path, dict(call.params or {}), {n: b[0] for n, b in bindings.items()},
-                      lambda ev, **f: new.events.append([ev, plain(f)]),
-                      lambda text: new.logs.append(str(text)),
-                      lambda: new.now, devices=devices,
-                      services={"shared": {}, "siblings": {},
-                                "dependencies": lambda rid, k, v: new.dependencies.append([rid, k, v])})
-        comp = self.entry_points[call.component]()
-        new.component, new.ctx = comp, ctx
-        comp.setup(ctx)  # may raise: handle() turns it into a failed start
-        self.instances[path] = new
+        self.instances[call.path] = new
+        worker.instances.add(call.path)
         return new
 
     def _serve(self, query: Query) -> Message | Reply:
@@ -305,15 +541,46 @@ class Creator:
             except Exception as e:
                 log.warning("creator %s: a step batch failed: %s", self.host, e)
                 return ComponentBatchReply([ComponentReply(error=f"{type(e).__name__}: {e}")])
+        if isinstance(query.payload, Tune):
+            try:
+                return self.tune(query.payload)
+            except CreatorError as e:
+                return query.error(str(e))
         if not isinstance(query.payload, ComponentCall):
             return query.error("expected a drd.component.call")
         try:
             return self.handle(query.payload)
         except CreatorError as e:
             return query.error(str(e))
-        except Exception as e:  # setup raised, a driver could not be built: this call fails, we go on
+        except Exception as e:  # a driver could not be built, no worker could start: this call fails, we go on
             log.warning("creator %s: %s of %s failed: %s", self.host, query.payload.op, query.payload.path, e)
             return ComponentReply(error=f"{type(e).__name__}: {e}")
+
+
+def behavior_modules(catalog: Catalog) -> list[str]:
+    """The modules of the catalog's elementary behaviors: the fork server imports them once for every worker."""
+    return sorted({ct.entry_point.partition(":")[0] for ct in catalog.components.values()
+                   if ct.kind is Kind.BEHAVIOR and ct.entry_point})
+
+
+def _pool_size(workers: int | None) -> int:
+    if workers is not None:
+        return workers
+    text = os.environ.get("DRD_WORKERS", "")
+    try:
+        return int(text) if text else DEFAULT_SIZE
+    except ValueError:
+        log.warning("DRD_WORKERS=%r is not a number: using %d idle workers", text, DEFAULT_SIZE)
+        return DEFAULT_SIZE
+
+
+def _os_reason(e: BaseException) -> str:
+    if isinstance(e, psutil.AccessDenied | PermissionError):
+        return ("permission denied (raising a process's priority, a lower nice, needs root or CAP_SYS_NICE;"
+                " some cores may be outside this daemon's cgroup)")
+    if isinstance(e, psutil.NoSuchProcess):
+        return "the process is gone"
+    return f"{type(e).__name__}: {e}"
 
 
 def _epoch_of(holder: dict[str, Instance], need: str) -> Callable[[], int | None]:

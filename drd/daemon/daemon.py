@@ -173,7 +173,8 @@ class Daemon:
         from drd.daemon.creator import Creator
 
         self.creator = Creator(bus, self.cluster, me, self.config.catalog,
-                               sim_call=self.sim_service.handle if self.sim_service is not None else None)
+                               sim_call=self.sim_service.handle if self.sim_service is not None else None,
+                               on_change=self._instances_changed)
         if Role.CONTROLLER in roles:
             from drd.daemon.missions import MissionRunner
 
@@ -186,6 +187,8 @@ class Daemon:
                                             host_down=lambda h: self.view.state(h) is HostState.DOWN,
                                             host_views=self.view.host_views)
         self._declared.append(bus.watch_tokens(keys.hosts, self._on_token, history=True))
+        if not self.creator.pool.wait_ready():  # up only once a component can be placed here in milliseconds
+            log.warning("the Creator's worker processes are not all ready yet: the first starts here may be slow")
         self._token = bus.declare_token(keys.host(me))
         now = self.clock()
         self._next_peer_check = now + self.config.peer_grace
@@ -405,7 +408,13 @@ class Daemon:
     # -- helpers ---------------------------------------------------------------------------------
 
     def _instances(self) -> list[InstanceInfo]:
-        return []  # the Component Creator (next) registers its instances here
+        """The Creator's instances of the current mission (not terminated), as the Component Database lists them."""
+        return self.creator.instance_infos() if self.creator is not None else []
+
+    def _instances_changed(self) -> None:
+        """The Creator's hook (its thread, its lock held): announce at the next tick. No daemon lock here: the
+        mission loop holds it while it waits for this very Creator over the bus."""
+        self._announce_due = True
 
     def _to_wall(self, at: float) -> float:
         return self.wall() - (self.clock() - at)

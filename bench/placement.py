@@ -1,0 +1,130 @@
+"""Placement benchmark: starting a component instance in a warm container, in a dedicated process, and a warm
+forkserver spawn of a process as the peer, in the same run.
+
+Run `python bench/placement.py [--repeat 200] [--json]` (never by pytest). It builds a Component Creator
+(`drd.daemon.creator.Creator`, no bus) for host ranger1 of a generated hosts file, with its own pool of
+pre-started worker processes (fork server warm, behavior modules preloaded), and times with
+`time.perf_counter`, `--repeat` times each (median and p90):
+
+- **container**: `Creator.handle(start)` of a new instance whose manifest says `process: container`, placed
+  in the mission's container that already runs (start -> first reply: placement, setup and `start` in the
+  worker, the reply back);
+- **dedicated**: the same for `process: dedicated`: a pre-started worker is taken from the pool (the pool is
+  refilled between samples, so it is warm, as in a daemon that is not placing in a burst);
+- **forkserver spawn** (the peer): starting a fresh worker process from the warm fork server until it says
+  hello over its pipe, what placing would cost without pre-started workers;
+- **step round trip**: one `step` call of a placed instance (one pipe round trip), for scale.
+
+Goal: container placement <= 10 ms median. The component is `Calibrate` with no device bound (its `start`
+only sets fields): what is measured is the placement machinery, not a component. Every worker started is
+killed (by pid, reaped) in a `finally`.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import statistics
+import sys
+import tempfile
+import time
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+GOAL_MS = 10.0
+
+
+def figures(samples: list[float]) -> dict[str, float]:
+    ordered = sorted(samples)
+    return {"median_ms": statistics.median(ordered) * 1000, "p90_ms": ordered[int(0.9 * (len(ordered) - 1))] * 1000,
+            "min_ms": ordered[0] * 1000, "n": len(ordered)}
+
+
+def timed(fn: Callable[[], Any]) -> float:
+    t0 = time.perf_counter()
+    fn()
+    return time.perf_counter() - t0
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--repeat", type=int, default=200, help="timed placements of each kind")
+    parser.add_argument("--json", action="store_true", help="print the figures as JSON")
+    args = parser.parse_args()
+
+    from drd.daemon.creator import Creator, behavior_modules
+    from drd.daemon.workers import WorkerPool
+    from drd.hosts import load_hosts
+    from drd.hw.drivers import HostDrivers
+    from drd.manifests import load_catalog
+    from drd.runtime.remote import ComponentCall
+    from dsl.catalog import Catalog, ComponentType, Kind, Process
+    from tests.cluster_support import hosts_yaml
+
+    base = load_catalog()
+    entry = base.components["Calibrate"].entry_point
+    cat = Catalog.of([*base.components.values(),
+                      ComponentType("BenchContainer", Kind.BEHAVIOR, entry_point=entry),
+                      ComponentType("BenchDedicated", Kind.BEHAVIOR, entry_point=entry, process=Process.DEDICATED)])
+    with tempfile.TemporaryDirectory() as tmp:
+        hosts = Path(tmp) / "hosts.yaml"
+        hosts.write_text(hosts_yaml("bench", ["controller", "ranger1"], [7001, 7002]))
+        cluster = load_hosts(hosts, cat)
+    pool = WorkerPool(2, preload=behavior_modules(cat))
+    creator = Creator(None, cluster, "ranger1", cat, pool=pool)
+    creator._drivers_for = lambda world: HostDrivers()  # type: ignore[method-assign]  # no device bound
+    out: dict[str, Any] = {}
+    try:
+        if not pool.wait_ready(60.0):
+            sys.exit("the worker pool did not start")
+
+        def start(path: str, component: str) -> None:
+            reply = creator.handle(ComponentCall("start", "bench", path, component=component))
+            if reply.error:
+                sys.exit(f"start of {path} failed: {reply.error}")
+
+        start("warm/first", "BenchContainer")  # the mission's container now runs
+        container = [timed(lambda i=i: start(f"c/{i}", "BenchContainer")) for i in range(args.repeat)]
+        steps = [timed(lambda: creator.handle(ComponentCall("step", "bench", "c/0", now=1.0)))
+                 for _ in range(args.repeat)]
+
+        dedicated = []
+        for i in range(args.repeat):
+            pool.wait_ready(30.0)
+            dedicated.append(timed(lambda i=i: start(f"d/{i}", "BenchDedicated")))
+            with creator._lock:
+                creator._forget(f"d/{i}")  # its process goes: the next sample takes a pre-started one again
+
+        spawns = []
+        for _ in range(args.repeat):
+            t0 = time.perf_counter()
+            w = pool._spawn()  # a fresh worker from the warm fork server, up to its hello
+            spawns.append(time.perf_counter() - t0)
+            pool.release(w)
+    finally:
+        creator.close()
+        pool.close()
+
+    out = {"container": figures(container), "dedicated": figures(dedicated), "forkserver_spawn": figures(spawns),
+           "step_round_trip": figures(steps)}
+    ratio = out["forkserver_spawn"]["median_ms"] / out["container"]["median_ms"]
+    verdict = "PASS" if out["container"]["median_ms"] <= GOAL_MS else "MISS"
+    if args.json:
+        print(json.dumps({**out, "spawn_over_container": ratio, "goal_ms": GOAL_MS, "verdict": verdict}, indent=2))
+        return
+    load = ", ".join(f"{x:.2f}" for x in os.getloadavg())
+    print(f"Python {sys.version.split()[0]}, {os.cpu_count()} CPUs, load {load}; {args.repeat} samples each")
+    for name, label in (("container", "place in a warm container"), ("dedicated", "place in a dedicated process"),
+                        ("forkserver_spawn", "warm forkserver spawn (peer)"), ("step_round_trip", "step round trip")):
+        f = out[name]
+        print(f"  {label:30} median {f['median_ms']:7.3f} ms   p90 {f['p90_ms']:7.3f} ms")
+    print(f"  spawn / container placement  {ratio:7.1f}x")
+    print(f"  goal: container placement <= {GOAL_MS:g} ms median: {verdict}")
+
+
+if __name__ == "__main__":
+    main()

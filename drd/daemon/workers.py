@@ -1,0 +1,556 @@
+"""The Component Creator's worker processes: pre-started containers, dedicated processes, the pipe protocol.
+
+Component code is not ours to trust: a component that crashes the interpreter (`os._exit`, a segfault in an
+extension, the OOM killer) must take down its process, never the daemon. So the Creator
+(`drd.daemon.creator`) runs every component instance in a worker process and keeps the trusted side to
+itself: the catalog check, the drivers, their fencing (`drd.runtime.fence.Fenced`), the per-cycle
+arbitration of actuator commands and the simulator.
+
+- `WorkerPool` keeps `size` idle workers started ahead of time (default 2, `DRD_WORKERS`) and refills in a
+  background thread, so placing an instance costs a pipe round trip, not a process start. Workers come from
+  a `multiprocessing` **forkserver**: the daemon holds zenoh threads and must never fork; the fork server is a
+  fresh single-threaded interpreter that imports the behavior modules once (`preload`), so a refill is a
+  fork of a warm process (a few ms) and a first placement finds its module already imported.
+- A worker taken by the Creator becomes a **container** (hosting every instance whose manifest says
+  `process: container` with the same `scheduling`) or a **dedicated** process (one instance, never shared).
+- The protocol is duplex, over one `multiprocessing` pipe per worker, pickled tuples: the Creator sends
+  `("run", calls, latest)` (one or several calls, see `run_calls`), the worker may answer with any number
+  of driver requests `("dev", path, need, method, args, kwargs)` / `("attr", path, need, name)`, each
+  answered `("ok", value)` or `("raise", exception)`, and ends with `("done", replies)`. `("drop", paths)`
+  forgets instances (no answer). What comes from a worker is unpickled with `PlainUnpickler`: plain data
+  only (no class is ever looked up), so a component cannot make the Creator build an object.
+- A worker that dies, or does not answer within `call_timeout` (it is then killed), raises `WorkerDied`
+  with its exit code; the Creator fails the calls of its instances and takes another worker.
+
+`Tune`/`Tuned` are the Creator's run-time scheduling request and answer (`missionctl tune`).
+"""
+
+from __future__ import annotations
+
+import collections
+import functools
+import importlib
+import io
+import logging
+import multiprocessing
+import os
+import pickle
+import select
+import signal
+import sys
+import threading
+import time
+from collections.abc import Iterable, Sequence
+from multiprocessing.connection import Connection
+from multiprocessing.process import BaseProcess
+from typing import Any
+
+import psutil
+
+from drd.bus import Message, message
+
+log = logging.getLogger("drd.daemon.workers")
+
+#: Idle workers kept ready (`DRD_WORKERS` overrides it for a daemon).
+DEFAULT_SIZE = 2
+#: Seconds a worker may take to send its next message during a call before it is killed. Below the
+#: executive's 1 s per call (`drd.daemon.missions.CALL_TIMEOUT`): a component stuck in a loop fails its
+#: state with a clear error instead of making its whole host look lost.
+CALL_TIMEOUT = 0.8
+#: Seconds a new worker may take to say hello.
+START_TIMEOUT = 20.0
+#: Modules every worker needs, imported once by the fork server.
+BASE_PRELOAD = ("drd.daemon.workers", "drd.runtime.component", "drd.runtime.records", "drd.hw.interfaces")
+
+_PROTOCOL = pickle.HIGHEST_PROTOCOL
+
+
+@message("drd.creator.tune", 1)
+class Tune(Message):
+    """Set the CPU affinity (`cores`) and/or nice level of the process running `instance`; None leaves it.
+    With neither, it only reports the current settings."""
+
+    instance: str
+    cores: list[int] | None = None
+    nice: int | None = None
+
+
+@message("drd.creator.tuned", 1)
+class Tuned(Message):
+    """What the process of `instance` runs with now, and which other instances share it (a container)."""
+
+    instance: str
+    host: str
+    pid: int
+    process: str
+    cores: list[int]
+    nice: int
+    shared_with: list[str]
+
+
+class WorkerDied(Exception):
+    """The worker process is gone (crashed, killed, or stuck and killed by us); the message says how."""
+
+
+class PlainUnpickler(pickle.Unpickler):
+    """Unpickles plain data only (str, numbers, None, bool, lists, tuples, dicts, sets): never looks a class up."""
+
+    def find_class(self, module: str, name: str) -> Any:
+        raise pickle.UnpicklingError(f"{module}.{name}: a component process may send plain data only")
+
+
+def loads_plain(data: bytes) -> Any:
+    return PlainUnpickler(io.BytesIO(data)).load()
+
+
+# -- the Creator's side ---------------------------------------------------------------------------------
+
+
+class Worker:
+    """One worker process and the Creator's end of its pipe (used under the Creator's lock)."""
+
+    def __init__(self, proc: BaseProcess, conn: Connection, pid: int, lock: threading.Lock | None = None) -> None:
+        self.proc = proc
+        # multiprocessing reads a forkserver child's exit code from a pipe once: two threads polling at once
+        # (ours, and Process.start's clean-up of finished children) could lose it, so polls share the pool's lock
+        self._lock = lock or threading.Lock()
+        self.conn = conn
+        self.pid = pid
+        self.kind = "idle"  # idle, container or dedicated
+        self.key: tuple[tuple[int, ...] | None, int] | None = None  # the manifest scheduling it was placed with
+        self.tuned = False  # changed at run time: no new instance joins it
+        self.instances: set[str] = set()
+        self.died = ""  # why it is gone, once it is
+        # one poll object for the pipe and the exit sentinel: `multiprocessing.connection.wait` builds a selector
+        # per call, which is most of a round trip's cost on the Creator's side
+        self._poll = select.poll()
+        self._poll.register(conn.fileno(), select.POLLIN)
+        self._poll.register(proc.sentinel, select.POLLIN)
+
+    def __repr__(self) -> str:
+        return f"Worker(pid={self.pid}, {self.kind}, {sorted(self.instances)})"
+
+    def send(self, msg: Any) -> None:
+        try:
+            self.conn.send_bytes(pickle.dumps(msg, _PROTOCOL))
+        except (BrokenPipeError, ConnectionResetError, EOFError) as e:
+            raise self._gone() from e
+
+    def recv(self, timeout: float) -> Any:
+        """The worker's next message; WorkerDied if it dies or stays silent for `timeout` seconds (killed)."""
+        try:
+            events = self._poll.poll(max(0, int(timeout * 1000)))
+        except (OSError, ValueError):  # the pipe is closed
+            events = [(self.proc.sentinel, select.POLLHUP)]
+        fds = {fd for fd, _ in events}
+        if not self.conn.closed and self.conn.fileno() in fds:
+            try:
+                return loads_plain(self.conn.recv_bytes())
+            except (EOFError, OSError):
+                pass
+            except pickle.UnpicklingError as e:
+                self.kill()
+                raise WorkerDied(f"sent something that is not plain data ({e}): killed") from None
+        elif not events:
+            self.kill()
+            self.died = f"did not answer within {timeout:g} s (killed)"
+            raise WorkerDied(self.died)
+        raise self._gone()
+
+    def _gone(self) -> WorkerDied:
+        with self._lock:
+            self.proc.join(1.0)
+            code = self.proc.exitcode
+        self.died = self.died or f"died (exit code {code if code is not None else 'unknown'})"
+        return WorkerDied(self.died)
+
+    def kill(self) -> None:
+        """SIGKILL and reap (bounded): a worker never outlives this call."""
+        with self._lock:
+            if self.proc.exitcode is None:
+                try:
+                    self.proc.kill()
+                except (OSError, ValueError, AttributeError):
+                    pass
+                self.proc.join(5.0)
+        self.died = self.died or "stopped"
+        self.conn.close()
+
+    @property
+    def alive(self) -> bool:
+        if self.died:
+            return False
+        with self._lock:
+            return self.proc.exitcode is None
+
+
+_open_pools = 0
+_open_lock = threading.Lock()
+
+
+class WorkerPool:
+    """`size` idle workers started ahead of time (a background thread refills); `take` hands one out.
+
+    `preload` modules are imported once by the fork server (the behavior modules of the catalog), so neither a
+    refill nor a first placement imports them. The pool owns every worker it started: `close` kills them all
+    (by pid, reaped), and the last pool of the process also stops the fork server.
+    """
+
+    def __init__(self, size: int = DEFAULT_SIZE, *, preload: Iterable[str] = (), call_timeout: float = CALL_TIMEOUT,
+                 method: str = "forkserver") -> None:
+        global _open_pools
+        if size < 0:
+            raise ValueError(f"pool size must be >= 0, not {size}")
+        self.size = size
+        self.call_timeout = call_timeout
+        self._ctx: Any = multiprocessing.get_context(method)
+        if method == "forkserver":
+            self._ctx.set_forkserver_preload(_preload(preload))
+        self._idle: collections.deque[Worker] = collections.deque()
+        self._workers: dict[int, Worker] = {}  # every live worker of ours, idle or taken
+        self._cond = threading.Condition()
+        self._spawn_lock = threading.Lock()  # Process.start is not thread-safe (multiprocessing's child list)
+        self._closed = False
+        self.started = 0
+        with _open_lock:
+            _open_pools += 1
+        self._thread = threading.Thread(target=self._refill, name="drd-workers", daemon=True)
+        self._thread.start()
+
+    def take(self, timeout: float = START_TIMEOUT) -> Worker:
+        """An idle worker (started now if none is ready); the pool starts another in the background."""
+        with self._cond:
+            if self._closed:
+                raise RuntimeError("the worker pool is closed")
+            while self._idle:
+                w = self._idle.popleft()
+                if w.alive:
+                    self._cond.notify_all()
+                    return w
+                self._forget(w)
+            self._cond.notify_all()
+        w = self._spawn(timeout)
+        with self._cond:
+            if self._closed:
+                w.kill()
+                raise RuntimeError("the worker pool is closed")
+        return w
+
+    def release(self, worker: Worker) -> None:
+        """Kill a worker taken from the pool (its instances are gone) and forget it."""
+        worker.kill()
+        with self._cond:
+            self._forget(worker)
+
+    def idle(self) -> int:
+        with self._cond:
+            return sum(1 for w in self._idle if w.alive)
+
+    def pids(self) -> list[int]:
+        """Every live worker process of this pool, idle or taken."""
+        with self._cond:
+            return [pid for pid, w in self._workers.items() if w.alive]
+
+    def wait_ready(self, timeout: float = START_TIMEOUT) -> bool:
+        """Block until `size` workers are idle (bounded): for benches and tests."""
+        deadline = time.monotonic() + timeout
+        with self._cond:
+            while sum(1 for w in self._idle if w.alive) < self.size:
+                left = deadline - time.monotonic()
+                if left <= 0 or self._closed:
+                    return False
+                self._cond.wait(min(left, 0.05))
+        return True
+
+    def close(self) -> None:
+        """Kill every worker (SIGKILL by pid, reaped); the last pool of the process also stops the fork server."""
+        global _open_pools
+        with self._cond:
+            if self._closed:
+                return
+            self._closed = True
+            workers = list(self._workers.values())
+            self._workers.clear()
+            self._idle.clear()
+            self._cond.notify_all()
+        self._thread.join(START_TIMEOUT)  # a worker being started when we closed is killed by its starter
+        for w in workers:
+            w.kill()
+        with _open_lock:
+            _open_pools -= 1
+            last = _open_pools == 0
+        if last:
+            _stop_forkserver()
+
+    def _forget(self, worker: Worker) -> None:
+        self._workers.pop(worker.pid, None)
+
+    def _spawn(self, timeout: float = START_TIMEOUT) -> Worker:
+        with self._spawn_lock:
+            parent, child = self._ctx.Pipe(duplex=True)
+            proc = self._ctx.Process(target=worker_main, args=(child,), name="drd-worker", daemon=True)
+            proc.start()
+            child.close()
+            assert proc.pid is not None
+            w = Worker(proc, parent, proc.pid, self._spawn_lock)
+            self.started += 1
+        with self._cond:  # never while holding the spawn lock: `take` polls workers (that lock) under this one
+            self._workers[w.pid] = w
+        try:
+            hello = w.recv(timeout)
+        except WorkerDied:
+            with self._cond:
+                self._forget(w)
+            raise
+        if not (isinstance(hello, tuple) and hello[:1] == ("ready",)):
+            self.release(w)
+            raise WorkerDied(f"a new worker said {hello!r} instead of hello")
+        return w
+
+    def _refill(self) -> None:
+        failures = 0
+        while True:
+            with self._cond:
+                while not self._closed and sum(1 for w in self._idle if w.alive) >= self.size:
+                    self._cond.wait()
+                if self._closed:
+                    return
+            try:
+                w = self._spawn()
+            except Exception as e:  # keep the daemon serving; try again a little later
+                failures += 1
+                log.warning("could not start a worker process (%s); retrying", e)
+                time.sleep(min(5.0, 0.2 * failures))
+                continue
+            failures = 0
+            with self._cond:
+                if self._closed:
+                    w.kill()
+                    return
+                self._idle.append(w)
+                self._cond.notify_all()
+
+
+def _preload(modules: Iterable[str]) -> list[str]:
+    """What the fork server imports: the main module (else each worker would run it again), ours, `modules`."""
+    main = sys.modules.get("__main__")
+    spec = getattr(main, "__spec__", None)
+    first = [spec.name] if spec is not None and spec.name else ["__main__"] if getattr(main, "__file__", None) else []
+    return list(dict.fromkeys([*first, *BASE_PRELOAD, *modules]))
+
+
+def _stop_forkserver() -> None:
+    """Stop multiprocessing's fork server (and its resource tracker): no process of ours is left behind.
+    Private API (`_stop`, used by CPython's own tests); if it changes, they still exit with this process."""
+    try:
+        from multiprocessing import forkserver, resource_tracker
+
+        forkserver._forkserver._stop()  # type: ignore[attr-defined]
+        resource_tracker._resource_tracker._stop()  # type: ignore[attr-defined]
+    except Exception:  # pragma: no cover - best effort
+        log.debug("could not stop the fork server", exc_info=True)
+
+
+def apply_scheduling(pid: int, cores: Sequence[int] | None, nice: int | None) -> list[int]:
+    """Set the nice level and CPU affinity of every thread of process `pid`; the threads it changed.
+
+    Raises psutil.Error/OSError/ValueError (AccessDenied: raising priority needs privileges)."""
+    proc = psutil.Process(pid)
+    tids = [t.id for t in proc.threads()] or [pid]
+    for tid in tids:
+        if nice is not None:
+            os.setpriority(os.PRIO_PROCESS, tid, nice)
+        if cores is not None:
+            os.sched_setaffinity(tid, list(cores))
+    return tids
+
+
+def scheduling_of(pid: int) -> tuple[list[int], int]:
+    """(CPU affinity, nice) of process `pid`, as psutil reports them."""
+    proc = psutil.Process(pid)
+    return sorted(proc.cpu_affinity() or []), int(proc.nice())
+
+
+def device_methods(driver: object) -> list[str]:
+    """The public methods of a driver's class: the calls a worker's proxy forwards (other names are attributes)."""
+    cls = type(driver)
+    return sorted(n for n in dir(cls) if not n.startswith("_") and callable(getattr(cls, n, None)))
+
+
+# -- the worker's side ----------------------------------------------------------------------------------
+
+
+class _Link:
+    """The worker's end of the pipe, for driver requests made from inside a call."""
+
+    def __init__(self, conn: Connection) -> None:
+        self.conn = conn
+
+    def send(self, msg: Any) -> None:
+        self.conn.send_bytes(pickle.dumps(msg, _PROTOCOL))
+
+    def request(self, msg: tuple[Any, ...]) -> Any:
+        try:
+            self.send(msg)
+        except (pickle.PicklingError, TypeError, AttributeError) as e:
+            raise TypeError(f"a driver call takes plain data only: {e}") from None
+        kind, value = pickle.loads(self.conn.recv_bytes())
+        if kind == "raise":
+            raise value
+        return value
+
+    def call(self, path: str, need: str, method: str, *args: Any, **kwargs: Any) -> Any:
+        return self.request(("dev", path, need, method, args, kwargs))
+
+
+class DeviceProxy:
+    """A device as a component in a worker sees it: each method call and attribute read goes to the Creator,
+    which runs it on the fenced driver (`drd.runtime.fence.Fenced`)."""
+
+    __slots__ = ("_link", "_path", "_need", "_methods")
+
+    def __init__(self, link: _Link, path: str, need: str, methods: Iterable[str]) -> None:
+        self._link = link
+        self._path = path
+        self._need = need
+        self._methods = frozenset(methods)
+
+    def __getattr__(self, name: str) -> Any:
+        if name.startswith("_"):
+            raise AttributeError(name)
+        if name in self._methods:
+            return functools.partial(self._link.call, self._path, self._need, name)
+        return self._link.request(("attr", self._path, self._need, name))
+
+    def __repr__(self) -> str:
+        return f"DeviceProxy({self._path}:{self._need})"
+
+
+class _Hosted:
+    """One component instance in a worker, and what it emitted since the last reply."""
+
+    __slots__ = ("comp", "ctx", "events", "logs", "deps", "now")
+
+    def __init__(self) -> None:
+        self.comp: Any = None
+        self.ctx: Any = None
+        self.events: list[list[Any]] = []
+        self.logs: list[str] = []
+        self.deps: list[list[Any]] = []
+        self.now = 0.0
+
+
+def worker_main(conn: Connection) -> None:
+    """A worker's life: say hello, then serve the Creator's messages until its end of the pipe closes."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # a Ctrl-C of the daemon's terminal is for the daemon
+    _die_with_parent()
+    link = _Link(conn)
+    hosted: dict[str, _Hosted] = {}
+    link.send(("ready", os.getpid()))
+    while True:
+        try:
+            msg = pickle.loads(conn.recv_bytes())
+        except (EOFError, OSError):
+            break
+        if msg[0] == "run":
+            link.send(("done", run_calls(msg[1], msg[2], link, hosted)))
+        elif msg[0] == "drop":
+            for path in msg[1]:
+                hosted.pop(path, None)
+    os._exit(0)
+
+
+def _die_with_parent() -> None:
+    """Linux: SIGKILL this worker when the fork server exits (it does when the daemon dies, even by kill -9)."""
+    if sys.platform.startswith("linux"):
+        try:
+            import ctypes
+
+            ctypes.CDLL(None, use_errno=True).prctl(1, signal.SIGKILL)  # PR_SET_PDEATHSIG
+        except Exception:  # pragma: no cover - best effort
+            pass
+
+
+def run_calls(calls: Sequence[tuple[Any, ...]], latest: dict[str, Any], link: _Link,
+              hosted: dict[str, _Hosted]) -> list[tuple[Any, ...]]:
+    """Run calls in order, as `Creator.handle_batch` did in process: stop after one that emitted events,
+    changed dependencies or failed; chain shared dicts (`shared_ids`) through `latest`.
+
+    A call is `(path, op, now, status, shared, shared_ids, siblings, params, setup)`; `setup` is
+    `(entry_point, resources, {need: methods})` for a new instance. A reply is
+    `(status, outputs, events, logs, shared, dependencies, error, setup_failed)`."""
+    from drd.runtime.component import Status
+    from drd.runtime.records import plain
+
+    replies: list[tuple[Any, ...]] = []
+    for path, op, now, status, shared, ids, siblings, params, setup in calls:
+        if shared is not None and ids:
+            for name, ref in ids.items():
+                if ref in latest and name in shared:
+                    shared[name] = plain(latest[ref])  # a copy: the earlier reply keeps its own
+        h = hosted.get(path)
+        if setup is not None:
+            try:
+                h = _setup(path, setup, params, link)
+            except Exception as e:  # a failed start: the Creator forgets the instance
+                replies.append(("", None, [], [], None, [], f"{type(e).__name__}: {e}", True))
+                break
+            hosted[path] = h
+        elif op == "start" and h is not None:
+            h.ctx.params, h.ctx.outputs = dict(params or {}), {}
+        if h is None:
+            replies.append(("", None, [], [], None, [], f"no instance {path} in worker {os.getpid()}", False))
+            break
+        h.now = now
+        services = h.ctx.services
+        services["shared"] = shared if shared is not None else {}
+        services["siblings"] = siblings if siblings is not None else {}
+        result = ""
+        error = ""
+        try:
+            if op == "step":
+                result = str(h.comp.step(now))
+            elif op == "start":
+                h.comp.start()
+            elif op == "suspend":
+                h.comp.suspend()
+            elif op == "resume":
+                h.comp.resume()
+            elif op == "terminate":
+                h.comp.terminate(Status(status) if status in Status.__members__.values() else Status.RUNNING)
+            else:
+                error = f"unknown op {op!r}"
+        except Exception as e:  # component code is not ours to trust: the state fails, the worker goes on
+            error = f"component raised {type(e).__name__}: {e}"
+        out_shared = plain(services["shared"])
+        reply = (result, plain(h.ctx.outputs), h.events, h.logs, out_shared, h.deps, error, False)
+        h.events, h.logs, h.deps = [], [], []
+        replies.append(reply)
+        if ids:
+            for name, ref in ids.items():
+                if name in out_shared:
+                    latest[ref] = out_shared[name]
+        if reply[2] or reply[5] or error:
+            break  # the controller reacts to this before the next step
+    return replies
+
+
+def _setup(path: str, setup: tuple[Any, ...], params: dict[str, Any] | None, link: _Link) -> _Hosted:
+    from drd.runtime.component import Context
+    from drd.runtime.records import plain
+
+    entry, resources, methods = setup
+    module, _, cls_name = entry.partition(":")
+    factory = getattr(importlib.import_module(module), cls_name)
+    h = _Hosted()
+    devices = {need: DeviceProxy(link, path, need, names) for need, names in methods.items()}
+    ctx = Context(path, dict(params or {}), dict(resources),
+                  lambda ev, **f: h.events.append([ev, plain(f)]),
+                  lambda text: h.logs.append(str(text)),
+                  lambda: h.now, devices=devices,
+                  services={"shared": {}, "siblings": {},
+                            "dependencies": lambda rid, k, v: h.deps.append([rid, k, plain(v)])})
+    h.ctx = ctx
+    h.comp = factory()
+    h.comp.setup(ctx)
+    return h
