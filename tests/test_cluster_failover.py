@@ -57,6 +57,7 @@ def test_killing_one_rangers_host_fails_its_instances_and_the_mission_goes_on(cl
         eventually(ranger2_works, "ranger2's drive to be granted", 40, poll=0.05)
         time.sleep(0.5)
         cluster.procs["ranger2"].send_signal(signal.SIGKILL)
+        cluster.procs["ranger2"].wait(timeout=10)  # reaped: the next test starts a new ranger2 under the name
         out, err = proc.communicate(timeout=120)
     finally:
         if proc.poll() is None:
@@ -72,3 +73,39 @@ def test_killing_one_rangers_host_fails_its_instances_and_the_mission_goes_on(cl
     # ranger1 carried on: Scouts launched after the loss, and none of them from ranger2's magazine
     scouts = {s["scout"] for s in report["scouts"]}
     assert scouts and scouts <= {"scout1", "scout2", "scout3", "scout4", "scout5", "scout6"}
+
+
+def test_a_ranger_host_that_joins_mid_mission_grows_the_multiplicity(cluster: DaemonCluster) -> None:
+    """After the test above ranger2 is down (its resources left the manager): a mission starts with ranger1's
+    three Scouts, then ranger2's daemon starts again, its Ranger and Scouts join the manager, and the running
+    `RoomSurveillance[1..count(Scout)]` grows to six instances, the new ones working with ranger2."""
+    client = cluster.client()
+    eventually(lambda: not any(u.id.startswith("ranger2.") for u in client.resources().units),
+               "ranger2's resources to leave the manager", 10, poll=0.05)
+    cmd = [*MISSIONCTL, "run", MISSION, "--config", str(cluster.hosts_file), "--world", "two_rangers",
+           "--speed", "10", "--until", "400", "--json"]
+    proc = subprocess.Popen(cmd, cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        def instances() -> set[str]:
+            assert proc.poll() is None, proc.communicate()
+            found, stack = set(), [m["tree"] for m in client.missions() if m.get("outcome") is None and m.get("tree")]
+            while stack:
+                node = stack.pop()
+                if re.search(r"RoomSurveillance\[\d+\]$", node["path"]):
+                    found.add(node["path"])
+                stack.extend(node["children"])
+            return found
+
+        eventually(lambda: len(instances()) == 3, "three RoomSurveillance instances (ranger1's Scouts)", 30, 0.05)
+        cluster.start("ranger2")
+        eventually(lambda: len(instances()) == 6, "six instances once ranger2 joined", 40, poll=0.1)
+        out, err = proc.communicate(timeout=150)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.communicate(timeout=10)
+    log = cluster.log("controller")
+    assert proc.returncode == 0, (out[-2000:], err[-2000:], log[-3000:])
+    report = json.loads(out)
+    assert report["outcome"] == "success"
+    assert {"scout4", "scout5", "scout6"} & {s["scout"] for s in report["scouts"]}, report["scouts"]

@@ -11,7 +11,8 @@ applies them to the local context, so the interpreter sees what a local componen
 
 A component with no device needs is *movable*. With a placer (`ComponentRouter.place`, the Load Balancer's
 policy over the hosts that are up, `drd.placement`), its `start` goes to the host the policy picks; a host that
-does not answer within `timeout` is excluded and the next best is tried (`PLACE_TRIES` hosts in all). When its
+does not register it within `START_TIMEOUT` (every `start` may take that long: a first start on a host may
+load the component's module) is excluded and the next best is tried (`PLACE_TRIES` hosts in all). When its
 host is lost later, the instance is started again on another host before its next call: its code state is lost,
 but the mission sees the same component go on (it gets its parameters, shared data and siblings' outputs again
 with every call). Without a placer (the router of a test), a movable component runs right here, in the
@@ -105,6 +106,8 @@ class HostDown(ComponentError):
 
 #: How many hosts a movable component's start is tried on before its state fails.
 PLACE_TRIES = 3
+#: Seconds a Creator may take to register a started instance (its first start on a host may load its module).
+START_TIMEOUT = 5.0
 
 
 @dataclass
@@ -175,13 +178,14 @@ class ComponentRouter:
         if self.is_down(host):
             raise HostDown(f"host {host} is down: the component cannot run there")
         t0 = time.perf_counter()
+        timeout = max(self.timeout, START_TIMEOUT) if op == "start" else self.timeout
         try:
-            reply = self.bus.call(self.creator_key(host), msg, timeout=self.timeout)
+            reply = self.bus.call(self.creator_key(host), msg, timeout=timeout)
         except RemoteError as e:
             raise ComponentError(f"{host}'s Creator refused {op} of {path}: {e.reason}") from None
         except BusError as e:
             self.gone.add(host)
-            raise HostDown(f"host {host} did not answer {op} within {self.timeout:g} s ({e})") from None
+            raise HostDown(f"host {host} did not answer {op} within {timeout:g} s ({e})") from None
         return reply, time.perf_counter() - t0
 
     def call(self, host: str, msg: ComponentCall) -> ComponentReply:
