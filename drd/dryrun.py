@@ -153,8 +153,9 @@ def run(chart: Statechart, cluster: Cluster, world: World, catalog: Catalog, *, 
     clock = SimulationClock(sim)
     drivers = merged_drivers(cluster, sim, catalog)
     bus = LocalNetwork().session("controller")
+    late = {i.target for i in injections if i.action is Action.JOIN}  # hosts whose daemon starts later
     executive = Executive(bus, clock, registry or EntryPoints(catalog), cluster=cluster.name,
-                          resources=cluster.resources(), lease=cluster.lease,
+                          resources=[r for r in cluster.resources() if r.host not in late], lease=cluster.lease,
                           services={"drivers": drivers})
     result = DryRun(chart.name, None, "", 0.0, 0.0)
     listeners: list[Callable[[rec.Record], None]] = [result.records.append, lambda r: _facts(result, r, sim)]
@@ -192,7 +193,15 @@ def run(chart: Statechart, cluster: Cluster, world: World, catalog: Catalog, *, 
 def _inject(inj: Injection, sim: Simulation, executive: Executive, cluster: Cluster) -> dict[str, Any]:
     """Apply one injected failure now; the record says what it did."""
     what = str(inj)
-    if inj.action is Action.KILL:
+    if inj.action is Action.JOIN:
+        found = [r for r in cluster.resources() if r.host == inj.target]
+        running = [m for m in executive.missions.values() if not m.finished]
+        if running:
+            running[0].add_resources(found)  # one pool: the other missions see them at their next step
+        else:
+            executive.pool.add(found, sim.time)
+        what += f": {len(found)} resources joined the manager"
+    elif inj.action is Action.KILL:
         robots = [r.id for r in cluster.host(inj.target).robots if r.id in sim.robots]
         for rid in robots:
             sim.lose(rid)  # nothing drives them any more

@@ -6,6 +6,8 @@ Pure: parsing and checking against the cluster and the world; `drd.dryrun` appli
   holding them fail or degrade as the language says) and the robots it drives stop where they are.
 - `lose ROBOT`: one robot is gone (a Scout falls down the stairs): its resources leave the manager, the
   instance that held it fails, the rest of the mission goes on.
+- `join HOST`: the host's daemon starts late: until then the manager does not know its resources (its robots
+  stand idle in the world); when it joins they are added, and a running multiplicity below its max grows.
 - `block DOOR`: an open door is obstructed (as solid as closed, and not openable).
 - `close DOOR` / `open DOOR`: a door changes state.
 """
@@ -23,6 +25,7 @@ from dsl.errors import did_you_mean
 
 class Action(StrEnum):
     KILL = "kill"
+    JOIN = "join"
     LOSE = "lose"
     BLOCK = "block"
     CLOSE = "close"
@@ -30,7 +33,7 @@ class Action(StrEnum):
 
 
 #: What each action applies to, for messages.
-TARGET = {Action.KILL: "host", Action.LOSE: "robot", Action.BLOCK: "door", Action.CLOSE: "door",
+TARGET = {Action.KILL: "host", Action.JOIN: "host", Action.LOSE: "robot", Action.BLOCK: "door", Action.CLOSE: "door",
           Action.OPEN: "door"}
 
 _FORM = re.compile(r"^\s*(?P<action>\w+)\s+(?P<target>[\w.\-]+)\s+at\s+(?P<at>\S+)\s*$")

@@ -16,6 +16,7 @@ KNOWN = {"hosts": {"controller", "ranger1"}, "robots": {"ranger1", "scout1", "sc
 
 @pytest.mark.parametrize(("text", "expected"), [
     ("kill ranger1 at 90s", Injection(90.0, Action.KILL, "ranger1")),
+    ("join ranger1 at 10s", Injection(10.0, Action.JOIN, "ranger1")),
     ("lose scout2 at 2min", Injection(120.0, Action.LOSE, "scout2")),
     ("  BLOCK door_n1 at 1.5s ", Injection(1.5, Action.BLOCK, "door_n1")),
     ("close door_s2 at 500ms", Injection(0.5, Action.CLOSE, "door_s2")),
@@ -26,8 +27,8 @@ def test_injections_are_read_with_the_languages_durations(text: str, expected: I
 
 
 @pytest.mark.parametrize(("text", "message"), [
-    ("kil ranger1 at 90s", "unknown injection 'kil' in 'kil ranger1 at 90s': use one of kill, lose, block, close, "
-                           "open (did you mean kill?)"),
+    ("kil ranger1 at 90s", "unknown injection 'kil' in 'kil ranger1 at 90s': use one of kill, join, lose, block, "
+                           "close, open (did you mean kill?)"),
     ("kill scout1 at 90s", "no host 'scout1' to kill"),
     ("lose scout3 at 1s", "known robots are ranger1, scout1, scout2 (did you mean scout1?)"),
     ("block door_n9 at 1s", "no door 'door_n9' to block"),
@@ -73,6 +74,25 @@ def test_a_lost_scout_fails_its_own_instance_not_the_mission() -> None:
     assert rows["CorridorSurveillance"]["status"] == "stopped"
     survivors = [t for p, t in rows.items() if p.count("/") == 2 and p != lost[0]["path"]]
     assert survivors and all(t["status"] != "failure" for t in survivors)
+
+
+def test_a_host_that_joins_late_grows_the_running_multiplicity() -> None:
+    """ranger2's daemon starts at 40 s: until then its Scouts are unknown, so three RoomSurveillance instances
+    run; then three more start, bound to ranger2 and its Scouts, and the mission still succeeds."""
+    code, report, err = dry_run("missions/corridor_surveillance.mission", "--world", "two_rangers", "--hosts",
+                                "hosts.two_rangers.yaml", "--inject", "join ranger2 at 40s")
+    assert code == 0 and report["outcome"] == "success", err
+    rows = {t["path"]: t for t in report["timeline"]}  # type: ignore[union-attr]
+    instances = {p: t for p, t in rows.items() if p.count("/") == 1 and p.endswith("]")}
+    entered = sorted(t["entered"] for t in instances.values())
+    assert len(entered) == 6 and entered[:3] == [0.0] * 3 and entered[3:] == [pytest.approx(40.0, abs=0.11)] * 3
+    assert "18 resources joined" in report["injections"][0]["effect"]  # type: ignore[index]
+    early = [h for h in report["holds"] if h["from"] < 40.0]  # type: ignore[union-attr]
+    theirs = {"ranger2", "scout4", "scout5", "scout6"}
+    assert early and not any(set(h["resources"].values()) & theirs or any(u.startswith(("ranger2.", "scout4.",
+                             "scout5.", "scout6.")) for u in h["units"]) for h in early)
+    late = [h for h in report["holds"] if set(h["resources"].values()) & theirs]  # type: ignore[union-attr]
+    assert late and min(h["from"] for h in late) >= 40.0
 
 
 def test_bad_injections_are_invalid_input() -> None:
