@@ -40,6 +40,7 @@ import signal
 import sys
 import threading
 import time
+import warnings
 from collections.abc import Iterable, Sequence
 from multiprocessing.connection import Connection
 from multiprocessing.process import BaseProcess
@@ -59,6 +60,10 @@ DEFAULT_SIZE = 2
 CALL_TIMEOUT = 0.8
 #: Seconds a new worker may take to say hello.
 START_TIMEOUT = 20.0
+# A worker re-runs the daemon's `-m` main module as `__mp_main__` although the fork server preloaded it (on
+# purpose: it is cheap then); runpy warns about exactly that, once per worker, in every daemon's log.
+warnings.filterwarnings("ignore", message=r".* found in sys\.modules after import of package", category=RuntimeWarning)
+
 #: Modules every worker needs, imported once by the fork server.
 BASE_PRELOAD = ("drd.daemon.workers", "drd.runtime.component", "drd.runtime.records", "drd.hw.interfaces")
 
