@@ -26,7 +26,7 @@ STARTED = re.compile(r"mission Pause-\d+ started")
 def cluster(tmp_path_factory: pytest.TempPathFactory) -> Iterator[DaemonCluster]:
     folder = tmp_path_factory.mktemp("cluster_placement")
     with running_cluster(folder, NAMES) as c:
-        c.hosts_file.write_text(corridor_hosts(c))
+        c.hosts_file.write_text(corridor_hosts(c))  # the simulator on the controller: we kill a worker, not the world
         c.start_all()
         c.wait_ready()
         c.wait_up()

@@ -25,10 +25,14 @@ SPEED = "50"
 UNTIL = "300"
 
 
-def corridor_hosts(cluster: DaemonCluster) -> str:
-    """The repository's hosts.yaml (controller + simulator, ranger1 with six Scouts) on our free ports, plus a
-    spare worker, with the test lease."""
+def corridor_hosts(cluster: DaemonCluster, *, simulator: str = "controller") -> str:
+    """The repository's hosts.yaml (controller, ranger1 with six Scouts) on our free ports, plus a spare worker,
+    with the test lease. The simulator runs on `simulator`: on the controller by default (the repository puts it
+    on ranger1, for speed), so that killing ranger1 tests the loss of a Ranger's host, not of the world."""
     text = (ROOT / "hosts.yaml").read_text()
+    if simulator == "controller":
+        text = text.replace("roles: [worker, simulator]", "roles: [worker]")
+        text = text.replace("roles: [controller]", "roles: [controller, simulator]")
     ports = dict(zip(NAMES, cluster.ports, strict=True))
     text = text.replace("name: corridor", f"name: {cluster.name}").replace("lease: 3s", "lease: 1000ms")
     text = text.replace("127.0.0.1:7447", f"127.0.0.1:{ports['controller']}")

@@ -37,8 +37,9 @@ def test_corridor_hosts_load(catalog: Catalog) -> None:
     assert cluster.security == Security(SecurityMode.NONE)
     assert [h.name for h in cluster.hosts] == ["controller", "ranger1"]
     assert cluster.controller is cluster.host("controller")
-    assert cluster.controller.roles == (Role.CONTROLLER, Role.SIMULATOR)
+    assert cluster.controller.roles == (Role.CONTROLLER,)
     ranger1 = cluster.host("ranger1")
+    assert ranger1.roles == (Role.WORKER, Role.SIMULATOR)  # the simulator beside the devices it serves
     assert [r.id for r in ranger1.robots] == ["ranger1", *(f"scout{i}" for i in range(1, 7))]
     assert {r.carrier for r in ranger1.robots if r.type == "Scout"} == {"ranger1"}
     assert {d.driver for d in cluster.devices} == {"sim"}

@@ -261,7 +261,7 @@ TUNE_CLI = ("import typer\nfrom drd.cli.common import run_app\nfrom drd.cli.tune
 
 
 def corridor_hosts(c: Any) -> str:
-    """The repository's hosts.yaml (controller + simulator, ranger1) on our free ports, with the test lease."""
+    """The repository's hosts.yaml (controller, ranger1 + simulator) on our free ports, with the test lease."""
     text = (ROOT / "hosts.yaml").read_text()
     text = text.replace("name: corridor", f"name: {c.name}").replace("lease: 3s", "lease: 1000ms")
     return text.replace("127.0.0.1:7447", f"127.0.0.1:{c.ports[0]}").replace("127.0.0.1:7448",
