@@ -519,3 +519,21 @@ def test_misuse_is_refused() -> None:
         rm.add_aggregate(Aggregate("r9", "Ranger", {"cam": "nope"}), 5.0)
     with pytest.raises(ValueError, match="duplicate need names"):
         Request("B", 1, (CAMERA, CAMERA))
+
+
+def test_a_preempted_holder_whose_needs_no_longer_fit_what_it_held_is_unsatisfiable_not_queued_forever() -> None:
+    """Found by the stateful test: a Scout moved to another Ranger while held; when the holder is preempted, its
+    `scout.carrier == ranger` cannot be met again, so it must fail (Unsatisfiable), not wait for ever."""
+
+    def carried(scout: Candidate, chosen: Mapping[str, Candidate]) -> bool:
+        return scout.properties.get("carrier") == chosen["ranger"].id
+
+    rm = manager(Unit("cam2", "Camera"), Unit("drive2", "Drive"), Unit("s2", "Scout", properties={"carrier": "r2"}),
+                 default_slice=1.0)
+    rm.add_aggregate(Aggregate("r2", "Ranger", {"drive": "drive2", "camera": "cam2"}, {}), 0.0)
+    needs = (NeedRequest("ranger", "Ranger"), NeedRequest("scout", "Scout", where=carried))
+    assert of(Granted, rm.request(Request("M1", 1, needs), 0.0))
+    rm.set_property("s2", "carrier", "r1", 0.5)  # r1 is not even known: no Scout rides on r2 any more
+    out = rm.request(Request("M2", 1, (CAMERA,)), 2.0)  # M1's slice is over: M2 takes the camera
+    assert [type(d) for d in out] == [Revoked, Unsatisfiable, Granted]
+    assert of(Unsatisfiable, out)[0].holder == "M1" and "M1" not in rm.queue()

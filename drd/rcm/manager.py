@@ -480,7 +480,12 @@ class ResourceManager:
         request = dataclasses.replace(hold.request, needs=needs)
         key = (request.priority, 1, 0.0, next(self._order))
         wait = Wait(request, key, hold.since, resumed=True, given=given)
-        self._enqueue(wait)
+        alts, capped = self._reg.alternatives(request.needs, given, self.max_alternatives)
+        if not alts:  # what it held no longer fits its needs (a Scout moved to another Ranger): never resumable
+            need, reason = diagnose(request.needs, self._reg, given) or ("", "")
+            out.append(Unsatisfiable(holder, need, reason))
+            return units
+        self._enqueue(wait, alts, capped)
         return (*units, *wait.claims)  # it may resume at once elsewhere (another free camera)
 
     def _end_hold(self, holder: str) -> tuple[str, ...]:
