@@ -55,7 +55,7 @@ from drd.daemon.workers import (
     scheduling_of,
 )
 from drd.hosts import Cluster
-from drd.runtime.fence import Arbiter, Fenced, Proposal
+from drd.runtime.fence import Arbiter, Fenced, Proposal, is_command
 from drd.runtime.remote import ComponentBatch, ComponentBatchReply, ComponentCall, ComponentReply
 from dsl.catalog import Catalog, ComponentType, Kind, Process
 
@@ -123,6 +123,7 @@ class Creator:
         self._sim: Any = None
         mine = cluster.host(host)
         self._devices = {d.id for d in mine.devices} | {r.id for r in mine.robots}  # what a need may be bound to
+        self._command_errors: list[tuple[str, str]] = []  # (instance path, error) of setpoints that raised
         self._lock = threading.Lock()
         self._own_pool = pool is None
         self.pool = pool if pool is not None else WorkerPool(_pool_size(workers), preload=behavior_modules(catalog))
@@ -171,7 +172,7 @@ class Creator:
                 self._publish()
             if refused and not reply.error:
                 reply = ComponentReply(reply.status, reply.outputs, reply.events, reply.logs, reply.shared,
-                                       reply.dependencies, f"component raised HardwareError: {refused[0][1]}")
+                                       reply.dependencies, refused[0][1])
             return reply
 
     def handle_batch(self, batch: ComponentBatch) -> ComponentBatchReply:
@@ -230,17 +231,19 @@ class Creator:
                     if at is not None and at < len(replies) and not replies[at].error:
                         r = replies[at]
                         replies[at] = ComponentReply(r.status, r.outputs, r.events, r.logs, r.shared, r.dependencies,
-                                                    f"component raised HardwareError: {error}")
+                                                    error)
                 self._publish()
         return ComponentBatchReply(replies)
 
     def _flush_sim(self) -> list[tuple[str, str]]:
-        """Send the actuator commands the drivers queued (one request): [(instance path, error)] of refusals."""
+        """Send the actuator commands the drivers queued (one request): [(instance path, error)] of refusals, with
+        the setpoint commands that raised here (sent by workers without waiting, see `_exchange`)."""
+        refused, self._command_errors = self._command_errors, []
         sim = self._sim
         if sim is None or not hasattr(sim, "flush"):
-            return []
+            return refused
         sim.owner = ""
-        refused: list[tuple[str, str]] = sim.flush()
+        refused += [(path, f"component raised HardwareError: {error}") for path, error in sim.flush()]
         return refused
 
     def _prepare(self, call: ComponentCall) -> Instance:
@@ -309,11 +312,17 @@ class Creator:
             if kind in ("dev", "attr") and len(got) >= 4:
                 self._device_request(worker, got)
                 continue
+            if kind == "cmd" and len(got) >= 6:  # a setpoint: no answer awaited, a refusal fails the step after
+                error = self._device_request(worker, got, answer=False)
+                if error is not None:
+                    self._command_errors.append((got[1], f"component raised {type(error).__name__}: {error}"))
+                continue
             worker.kill()
             raise WorkerDied(f"sent an unexpected message ({str(kind)[:40]}): killed")
 
-    def _device_request(self, worker: Worker, req: tuple[Any, ...]) -> None:
-        """Run one driver call (or attribute read) of a component in `worker` on its fenced driver; answer it."""
+    def _device_request(self, worker: Worker, req: tuple[Any, ...], answer: bool = True) -> Exception | None:
+        """Run one driver call (or attribute read) of a component in `worker` on its fenced driver; answer it
+        (or, for a setpoint command, return what it raised)."""
         kind, path, need, name = req[:4]
         try:
             inst = self.instances.get(path) if isinstance(path, str) else None
@@ -327,21 +336,26 @@ class Creator:
             if self._sim is not None:
                 self._sim.owner = path
             target = getattr(fenced, name)
-            if kind == "dev":
+            if kind in ("dev", "cmd"):
                 args, kwargs = (req[4], req[5]) if len(req) >= 6 else ((), {})
-                answer: tuple[str, Any] = ("ok", target(*args, **kwargs))
+                result: tuple[str, Any] = ("ok", target(*args, **kwargs))
             elif callable(target):
                 raise TypeError(f"{need}.{name} is a method: call it")
             else:
-                answer = ("ok", target)
+                result = ("ok", target)
         except Exception as e:  # the component sees the driver's exception, as it would in process
-            answer = ("raise", e)
+            if not answer:
+                return e
+            result = ("raise", e)
+        if not answer:
+            return None
         try:
-            worker.send(answer)
+            worker.send(result)
         except (pickle.PicklingError, TypeError, AttributeError) as e:
-            what = f"{type(answer[1]).__name__}: {answer[1]}" if answer[0] == "raise" else "its result"
+            what = f"{type(result[1]).__name__}: {result[1]}" if result[0] == "raise" else "its result"
             worker.send(("raise", RuntimeError(f"{need}.{name}: {what} cannot be sent to the component process"
                                                f" ({e})")))
+        return None
 
     # -- processes ----------------------------------------------------------------------------------------
 
@@ -515,6 +529,7 @@ class Creator:
         drivers = self._drivers_for(call.world)
         devices: dict[str, Fenced] = {}
         methods: dict[str, list[str]] = {}
+        commands: dict[str, list[str]] = {}  # setpoints: sent by the worker without waiting for an answer
         rank = (int((call.rank or [0, 0])[0]), int((call.rank or [0, 0])[1]))
         holder: dict[str, Instance] = {}
         for need, (rid, robot, part) in bindings.items():
@@ -523,10 +538,12 @@ class Creator:
             if driver is not None:
                 devices[need] = Fenced(driver, _epoch_of(holder, need), self.arbiter, rank, call.path)
                 methods[need] = device_methods(driver)
+                commands[need] = [m for m in methods[need] if is_command(getattr(driver, m))]
         worker, notes = self._place(ct)
         assert ct.entry_point is not None
         new = Instance(call.component, bindings, worker, devices,
-                       setup=(ct.entry_point, {n: b[0] for n, b in bindings.items()}, methods), notes=notes)
+                       setup=(ct.entry_point, {n: b[0] for n, b in bindings.items()}, methods, commands),
+                       notes=notes)
         holder["it"] = new
         self.instances[call.path] = new
         worker.instances.add(call.path)

@@ -407,22 +407,32 @@ class _Link:
     def call(self, path: str, need: str, method: str, *args: Any, **kwargs: Any) -> Any:
         return self.request(("dev", path, need, method, args, kwargs))
 
+    def command(self, path: str, need: str, method: str, *args: Any, **kwargs: Any) -> None:
+        """A setpoint: sent without waiting (it returns nothing; a refusal fails the step when it ends)."""
+        try:
+            self.send(("cmd", path, need, method, args, kwargs))
+        except (pickle.PicklingError, TypeError, AttributeError) as e:
+            raise TypeError(f"a driver call takes plain data only: {e}") from None
+
 
 class DeviceProxy:
     """A device as a component in a worker sees it: each method call and attribute read goes to the Creator,
     which runs it on the fenced driver (`drd.runtime.fence.Fenced`)."""
 
-    __slots__ = ("_link", "_path", "_need", "_methods")
+    __slots__ = ("_link", "_path", "_need", "_methods", "_commands")
 
-    def __init__(self, link: _Link, path: str, need: str, methods: Iterable[str]) -> None:
+    def __init__(self, link: _Link, path: str, need: str, methods: Iterable[str], commands: Iterable[str] = ()) -> None:
         self._link = link
         self._path = path
         self._need = need
         self._methods = frozenset(methods)
+        self._commands = frozenset(commands)
 
     def __getattr__(self, name: str) -> Any:
         if name.startswith("_"):
             raise AttributeError(name)
+        if name in self._commands:
+            return functools.partial(self._link.command, self._path, self._need, name)
         if name in self._methods:
             return functools.partial(self._link.call, self._path, self._need, name)
         return self._link.request(("attr", self._path, self._need, name))
@@ -544,11 +554,11 @@ def _setup(path: str, setup: tuple[Any, ...], params: dict[str, Any] | None, lin
     from drd.runtime.component import Context
     from drd.runtime.records import plain
 
-    entry, resources, methods = setup
+    entry, resources, methods, commands = setup
     module, _, cls_name = entry.partition(":")
     factory = getattr(importlib.import_module(module), cls_name)
     h = _Hosted()
-    devices = {need: DeviceProxy(link, path, need, names) for need, names in methods.items()}
+    devices = {need: DeviceProxy(link, path, need, names, commands.get(need, ())) for need, names in methods.items()}
     ctx = Context(path, dict(params or {}), dict(resources),
                   lambda ev, **f: h.events.append([ev, plain(f)]),
                   lambda text: h.logs.append(str(text)),

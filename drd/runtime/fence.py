@@ -109,6 +109,11 @@ def _signature_returns_nothing(func: Any) -> bool:
         return False
 
 
+def is_command(method: Any) -> bool:
+    """A setpoint command: fenced by an epoch and returning nothing (`Fenced` multiplexes those per cycle)."""
+    return callable(method) and _takes_epoch(method) and _returns_nothing(method)
+
+
 def _returns_nothing(method: Any) -> bool:
     """Setpoint commands (`set_velocity`, `stop`) return None: those are multiplexed per cycle."""
     return _signature_returns_nothing(getattr(method, "__func__", method))
