@@ -20,6 +20,7 @@ Goal: `missionctl status` of a 10-daemon cluster < 1 s (median). Every daemon st
 from __future__ import annotations
 
 import argparse
+import contextlib
 import cProfile
 import functools
 import io
@@ -145,9 +146,13 @@ def stats(samples: Sequence[float]) -> dict[str, float]:
             "max": max(samples), "runs": len(samples)}
 
 
+#: Subprocesses import this checkout's drd, even through a console script installed for another checkout.
+CHILD_ENV = {**os.environ, "PYTHONPATH": os.pathsep.join(p for p in (str(ROOT), os.environ.get("PYTHONPATH")) if p)}
+
+
 def timed_run(cmd: Sequence[str], check: Callable[[str], None] | None = None) -> float:
     start = time.perf_counter()
-    proc = subprocess.run(cmd, cwd=ROOT, capture_output=True, text=True, timeout=60, check=False)
+    proc = subprocess.run(cmd, cwd=ROOT, capture_output=True, text=True, timeout=60, check=False, env=CHILD_ENV)
     elapsed = time.perf_counter() - start
     if proc.returncode != 0:
         raise SystemExit(f"{' '.join(cmd)} exited with {proc.returncode}:\n{proc.stderr[-2000:]}")
@@ -179,8 +184,11 @@ def measure(cluster: Cluster, repeat: int) -> dict[str, Any]:
 
     from rich.console import Console
 
+    from drd.cli.common import print_json
+
     phases: dict[str, list[float]] = {k: [] for k in ("connect", "status()", "close", "connect+status+close",
-                                                      "print_json (rich, to a pipe)")}
+                                                      "print_json (rich, to a pipe)",
+                                                      "print_json (missionctl's, to a pipe)")}
     calls: dict[str, list[float]] = {k: [] for k in ("daemons()", "hosts()", "components()", "daemon_status()",
                                                       "resources()", "missions()")}
     for i in range(repeat + 1):  # the first round is a warm-up
@@ -208,10 +216,14 @@ def measure(cluster: Cluster, repeat: int) -> dict[str, Any]:
                 phases[k].append(v)
             for k, v in one.items():
                 calls[k].append(v)
-            sink = Console(file=io.StringIO())  # as `missionctl status --json` prints, stdout not a terminal
+            sink = Console(file=io.StringIO())  # as `missionctl status --json` printed, stdout not a terminal
             s = time.perf_counter()
             sink.print_json(json.dumps(data))
             phases["print_json (rich, to a pipe)"].append(time.perf_counter() - s)
+            with contextlib.redirect_stdout(io.StringIO()):  # as it prints now: json.dumps when not a terminal
+                s = time.perf_counter()
+                print_json(data)
+                phases["print_json (missionctl's, to a pipe)"].append(time.perf_counter() - s)
     return {"subprocess": {k: stats(v) for k, v in wall.items()},
             "in_process": {k: stats(v) for k, v in phases.items()},
             "requests": {k: stats(v) for k, v in calls.items()}}
@@ -223,7 +235,7 @@ def profile(cluster: Cluster) -> str:
     status_args = ["status", "--json", "--config", str(cluster.hosts_file)]
     entry = "from drd.cli.missionctl import main; main()"  # the console script's body
     proc = subprocess.run([sys.executable, "-X", "importtime", "-c", entry, *status_args],
-                          cwd=ROOT, capture_output=True, text=True, timeout=60, check=False)
+                          cwd=ROOT, capture_output=True, text=True, timeout=60, check=False, env=CHILD_ENV)
     per_package: dict[str, int] = {}
     for line in proc.stderr.splitlines():
         if line.startswith("import time:") and "|" in line and "self [us]" not in line:
@@ -238,7 +250,7 @@ def profile(cluster: Cluster) -> str:
         run = (f"import sys, cProfile; sys.argv = ['missionctl', *{status_args!r}]; "
                f"cProfile.run({entry!r}, {out.name!r})")
         cmd = [sys.executable, "-c", run]
-        subprocess.run(cmd, cwd=ROOT, capture_output=True, timeout=60, check=False)
+        subprocess.run(cmd, cwd=ROOT, capture_output=True, timeout=60, check=False, env=CHILD_ENV)
         buf = io.StringIO()
         pstats.Stats(out.name, stream=buf).sort_stats("cumulative").print_stats(30)
     lines += ["", "cProfile of one `missionctl status --json` subprocess (cumulative):", buf.getvalue()]

@@ -158,7 +158,7 @@ def run(chart: Statechart, cluster: Cluster, world: World, catalog: Catalog, *, 
                           resources=[r for r in cluster.resources() if r.host not in late], lease=cluster.lease,
                           services={"drivers": drivers})
     result = DryRun(chart.name, None, "", 0.0, 0.0)
-    listeners: list[Callable[[rec.Record], None]] = [result.records.append, lambda r: _facts(result, r, sim)]
+    listeners: list[Callable[[rec.Record], None]] = [result.records.append, lambda r: facts(result, r)]
     if trace is not None:
         listeners.append(TraceWriter(trace))
     start = time.perf_counter()
@@ -231,7 +231,7 @@ def _robot_resources(cluster: Cluster, robot: str) -> list[str]:
     return [robot, *(u for u in mine.parts.values() if u not in others)]
 
 
-def _facts(result: DryRun, r: rec.Record, sim: Simulation) -> None:
+def facts(result: DryRun, r: rec.Record) -> None:
     """Doors found, Scouts placed and intruders seen, from the behaviors' events."""
     if not isinstance(r, rec.Event):
         return

@@ -204,6 +204,10 @@ def parse_hosts(data: object, source: str, catalog: Catalog) -> Cluster:
     Raises:
         HostsError: with every problem found, once the whole file has been read.
     """
+    return _parse(data, source, catalog)
+
+
+def _parse(data: object, source: str, catalog: Catalog | None) -> Cluster:
     parser = _Parser(source, catalog)
     cluster = parser.cluster(data)
     if parser.problems or cluster is None:
@@ -212,9 +216,13 @@ def parse_hosts(data: object, source: str, catalog: Catalog) -> Cluster:
 
 
 class _Parser(ConfigReader):
-    """Collects problems; each reader reports what is wrong and returns a safe value to go on with."""
+    """Collects problems; each reader reports what is wrong and returns a safe value to go on with.
 
-    def __init__(self, source: str, catalog: Catalog) -> None:
+    Without a catalog, only what joining the cluster needs is read (`load_endpoints`): the hosts'
+    `devices` and `robots` are skipped, unread, so the hosts come out without hardware.
+    """
+
+    def __init__(self, source: str, catalog: Catalog | None) -> None:
         super().__init__(source)
         self.catalog = catalog
         self.refs: list[tuple[str, str, str]] = []  # (key, type, id): checked once every resource is known
@@ -265,6 +273,8 @@ class _Parser(ConfigReader):
         endpoint = self.endpoint(data["endpoint"], f"{key}.endpoint") if "endpoint" in data else ""
         roles = self.roles(data["roles"], f"{key}.roles") if "roles" in data else ()
         cores = self.number(data["cores"], f"{key}.cores", integer=True) if "cores" in data else None
+        if self.catalog is None:
+            return Host(name, endpoint, roles, cores)
         raw = data.get("devices", {})
         devices = [self.device(name, d, v, p) for d, v, p in self.entries(raw, f"{key}.devices", _DEVICE_ID)]
         # Broken entries still count (typeless), so the parts naming them are not reported again;
@@ -379,7 +389,8 @@ class _Parser(ConfigReader):
                 if robots.setdefault(r.id, r) is not r:
                     self.fail(f"hosts.{h.name}.robots.{r.id}", f"duplicate robot id, also on host {robots[r.id].host}")
         types = {d.id: d.type for h in hosts for d in h.devices} | {r.id: r.type for r in robots.values()}
-        for key, type_, value in self.refs:
+        for key, type_, value in self.refs:  # none without a catalog: hardware was not read
+            assert self.catalog is not None
             target = self.catalog.get(type_)
             if target is None or not target.is_resource:
                 self.fail(key, f"{type_} is not a resource type; it cannot be configured here")
@@ -455,6 +466,7 @@ class _Parser(ConfigReader):
     def component(self, value: object, key: str, kind: Kind) -> ComponentType | None:
         """The catalog type `value` names, if it is of `kind` (an rc for devices, an arc for robots)."""
         name = self.text(value, key)
+        assert self.catalog is not None  # hardware is read only with a catalog
         t = self.catalog.get(name)
         if t is not None and t.kind is kind:
             return t
@@ -477,10 +489,27 @@ def load_hosts(path: str | os.PathLike[str], catalog: Catalog) -> Cluster:
     Raises:
         HostsError: the file is missing or unreadable, is not valid YAML (with the line), or has problems.
     """
-    path = Path(path)
+    return _load(Path(path), catalog)
+
+
+def load_endpoints(path: str | os.PathLike[str]) -> Cluster:
+    """What a client needs to join the cluster, read without the component catalog: a lighter `load_hosts`.
+
+    The cluster's name, security (paths as `load_hosts` gives them), lease and placement, and each
+    host's endpoint, roles and cores, checked as `load_hosts` checks them; the hosts' devices and
+    robots are not read, so each host comes out without hardware and problems there go unreported
+    (the daemons, which read the whole file, report them). For `missionctl`'s cluster commands,
+    which would otherwise load every component manifest only to skip the hardware.
+
+    Raises:
+        HostsError: the file is missing or unreadable, is not valid YAML, or has problems outside the hardware.
+    """
+    return _load(Path(path), None)
+
+
+def _load(path: Path, catalog: Catalog | None) -> Cluster:
     source = display_path(path)
-    data = read_yaml(path, source, HostsError)
-    cluster = parse_hosts(data, source, catalog)
+    cluster = _parse(read_yaml(path, source, HostsError), source, catalog)
     folder = path.absolute().parent  # `/` keeps absolute paths as they are
     files: dict[str, Any] = {k: str(folder / Path(v).expanduser()) for k, v in cluster.security.files.items()}
     return replace(cluster, security=replace(cluster.security, **files))

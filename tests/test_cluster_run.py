@@ -92,6 +92,25 @@ def test_detach_then_status_shows_the_active_states_then_stop(cluster: DaemonClu
     assert {m["id"]: m["outcome"] for m in s["missions"]}[mid] == "stopped"
 
 
+def test_ctrl_c_on_run_stops_the_mission_and_prints_how_it_ended(cluster: DaemonCluster) -> None:
+    cmd = [*MISSIONCTL, "run", MISSION, "--config", str(cluster.hosts_file), "--speed", "5", "--json"]
+    proc = subprocess.Popen(cmd, cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        client = cluster.client()
+        eventually(lambda: any(m.get("outcome") is None for m in client.missions()), "the mission to run", 30, 0.05)
+        proc.send_signal(signal.SIGINT)
+        out, err = proc.communicate(timeout=30)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.communicate(timeout=10)
+    assert proc.returncode == 1, err[-2000:]
+    assert "Ctrl-C: stopping mission" in err and "Traceback" not in err
+    report = json.loads(out)
+    assert report["outcome"] == "stopped"
+    assert all(m.get("outcome") is not None for m in client.missions()), "nothing left running on the cluster"
+
+
 def test_the_corridor_mission_runs_on_the_cluster_as_in_the_dry_run(cluster: DaemonCluster) -> None:
     from drd.dryrun import run as dry_run
     from drd.hosts import load_hosts

@@ -15,9 +15,9 @@ from abc import ABC, abstractmethod
 from collections.abc import Callable
 from dataclasses import dataclass, fields
 from types import TracebackType
-from typing import Self
+from typing import NamedTuple, Self
 
-from .keys import intersects, is_concrete, valid_key
+from .keys import intersects, valid_key
 from .messages import ErrorReply, MalformedMessage, Message, decode, encode
 
 log = logging.getLogger("drd.bus")
@@ -274,9 +274,10 @@ class Bus(ABC):
     def _answer(self, handler: Handler, query_key: str, queryable: str, data: bytes | None) -> Answer | None:
         """Run a handler on raw request bytes; the answer to send back, or None for silence.
 
-        Never raises: malformed requests and handler exceptions become error answers.
+        Never raises: malformed requests and handler exceptions become error answers. On every
+        request's path: a handler's plain message reply takes the fewest steps.
         """
-        default_key = query_key if is_concrete(query_key) or not is_concrete(queryable) else queryable
+        default_key = query_key if "*" not in query_key or "*" in queryable else queryable
         try:
             payload = None if data is None else decode(data)
         except MalformedMessage as exc:
@@ -288,19 +289,20 @@ class Bus(ABC):
             self.stats.bump("handler_errors")
             log.exception("bus %s: handler for %r raised on %r", self.name, queryable, query_key)
             return Answer.failure(default_key, f"{type(exc).__name__}: {exc}")
-        if result is None:
-            return None
         key = default_key
-        if isinstance(result, Reply):
-            key = result.key or default_key
-            if result.error is not None:
-                return Answer.failure(key, result.error)
-            if result.key is not None and not (valid_key(result.key) and intersects(result.key, query_key)):
-                return Answer.failure(key, f"reply key {result.key!r} does not match the query {query_key!r}")
-            result = result.payload
         if not isinstance(result, Message):
-            self.stats.bump("handler_errors")
-            return Answer.failure(key, f"handler returned {type(result).__name__}, not a message")
+            if result is None:
+                return None
+            if isinstance(result, Reply):
+                key = result.key or default_key
+                if result.error is not None:
+                    return Answer.failure(key, result.error)
+                if result.key is not None and not (valid_key(result.key) and intersects(result.key, query_key)):
+                    return Answer.failure(key, f"reply key {result.key!r} does not match the query {query_key!r}")
+                result = result.payload
+            if not isinstance(result, Message):
+                self.stats.bump("handler_errors")
+                return Answer.failure(key, f"handler returned {type(result).__name__}, not a message")
         try:
             return Answer(key, encode(result), False)
         except MalformedMessage as exc:
@@ -319,9 +321,8 @@ class Bus(ABC):
         return Reply(msg, key)
 
 
-@dataclass(frozen=True, slots=True)
-class Answer:
-    """The wire form of a handler's reply: what the implementations send back."""
+class Answer(NamedTuple):
+    """The wire form of a handler's reply: what the implementations send back (a tuple: built on every request)."""
 
     key: str
     data: bytes

@@ -21,7 +21,7 @@ import typing
 from collections.abc import Callable
 from typing import Any, ClassVar, TypeVar, dataclass_transform
 
-from .schema import SCHEMAS, Mismatch, check_annotation, dumper, forget, kind, loader
+from .schema import RAW_INIT, SCHEMAS, Convert, Mismatch, check_annotation, dumper, forget, kind, loader
 
 MAX_SIZE = 1 << 20  # 1 MiB: bigger payloads belong in a file or a stream, not a bus message.
 
@@ -45,6 +45,9 @@ class Message:
 
 _REGISTRY: dict[tuple[str, int], type[Message]] = {}
 _ENVELOPE = frozenset({"v", "type", "body"})
+# Per class and per (type, version), built on first use: what encode and decode need in one lookup.
+_ENCODERS: dict[type, tuple[Convert, bytes]] = {}  # class -> (dumper, the envelope's bytes up to the body)
+_DECODERS: dict[tuple[str, int], Convert] = {}  # (type, version) -> the class's loader
 
 
 @dataclass_transform(frozen_default=True)
@@ -63,10 +66,12 @@ def message(type_name: str, version: int = 1) -> Callable[[type[M]], type[M]]:
     def register(cls: type[M]) -> type[M]:
         if not issubclass(cls, Message):
             raise TypeError(f"{cls.__name__} must subclass drd.bus.messages.Message")
+        generated_init = "__dataclass_fields__" not in cls.__dict__ and "__init__" not in cls.__dict__
         if "__dataclass_fields__" not in cls.__dict__:
             cls = dataclasses.dataclass(frozen=True)(cls)
         hints = typing.get_type_hints(cls)
-        schema = tuple((f.name, hints[f.name]) for f in dataclasses.fields(cls))  # type: ignore[arg-type]
+        fields = dataclasses.fields(cls)  # type: ignore[arg-type]
+        schema = tuple((f.name, hints[f.name]) for f in fields)
         for name, annotation in schema:
             check_annotation(annotation, f"{cls.__name__}.{name}")
         old = _REGISTRY.get((type_name, version))
@@ -75,7 +80,14 @@ def message(type_name: str, version: int = 1) -> Callable[[type[M]], type[M]]:
         cls.TYPE, cls.VERSION = type_name, version
         _REGISTRY[(type_name, version)] = cls
         SCHEMAS[cls] = schema
+        if (generated_init and not hasattr(cls, "__post_init__") and all(f.init for f in fields)
+                and not any("__slots__" in c.__dict__ for c in cls.__mro__[:-1])):
+            RAW_INIT.add(cls)
+        else:
+            RAW_INIT.discard(cls)
         forget(cls)
+        _ENCODERS.pop(cls, None)
+        _DECODERS.pop((type_name, version), None)
         return cls
 
     return register
@@ -88,12 +100,11 @@ def registered() -> dict[tuple[str, int], type[Message]]:
 
 def encode(msg: Message) -> bytes:
     """The wire bytes of ``msg``; raises MalformedMessage if it breaks its own schema."""
-    cls = type(msg)
-    if cls not in SCHEMAS:
-        raise MalformedMessage(f"{cls.__name__} is not a registered message type")
+    codec = _ENCODERS.get(type(msg))
+    if codec is None:
+        codec = _encoder(type(msg))
     try:
-        body = dumper(cls)(msg)
-        data = _dumps({"v": cls.VERSION, "type": cls.TYPE, "body": body})
+        data = codec[1] + _dumps(codec[0](msg)) + b"}"
     except Mismatch as exc:
         raise MalformedMessage(exc.describe("body")) from None
     except (TypeError, ValueError) as exc:  # what JSON cannot carry, inside an ``Any`` field
@@ -105,12 +116,14 @@ def encode(msg: Message) -> bytes:
 
 def decode(data: bytes | bytearray | memoryview) -> Message:
     """Parse and schema-check wire bytes; raises MalformedMessage(reason) on anything off."""
-    if not isinstance(data, bytes | bytearray | memoryview):
-        raise MalformedMessage(f"payload is {type(data).__name__}, not bytes")
+    if type(data) is not bytes:
+        if not isinstance(data, bytes | bytearray | memoryview):
+            raise MalformedMessage(f"payload is {type(data).__name__}, not bytes")
+        data = bytes(data)
     if len(data) > MAX_SIZE:
         raise MalformedMessage(f"too large: {len(data)} bytes > {MAX_SIZE}")
     try:
-        env = _loads(bytes(data))
+        env = _loads(data)
     except (ValueError, RecursionError) as exc:  # UnicodeDecodeError and JSONDecodeError are ValueErrors
         raise MalformedMessage(f"bad JSON: {exc}") from None
     if type(env) is not dict:
@@ -123,17 +136,38 @@ def decode(data: bytes | bytearray | memoryview) -> Message:
         raise MalformedMessage(f"envelope 'type' must be a string, got {kind(name)}")
     if type(version) is not int:
         raise MalformedMessage(f"envelope 'v' must be an int, got {kind(version)}")
+    convert = _DECODERS.get((name, version))
+    if convert is None:
+        convert = _decoder(name, version)
+    try:
+        result: Message = convert(env["body"])
+    except Mismatch as exc:
+        raise MalformedMessage(exc.describe("body")) from None
+    return result
+
+
+def _encoder(cls: type) -> tuple[Convert, bytes]:
+    """Build and cache the class's (dumper, envelope head): the head is the envelope's bytes as the codec
+    writes them, up to the body, so ``head + body + b"}"`` is byte for byte the whole envelope's encoding."""
+    if cls not in SCHEMAS:
+        raise MalformedMessage(f"{cls.__name__} is not a registered message type")
+    envelope = _dumps({"v": cls.VERSION, "type": cls.TYPE, "body": None})  # type: ignore[attr-defined]
+    if not envelope.endswith(b"null}"):  # pragma: no cover - every JSON codec writes null as null
+        raise AssertionError(f"unexpected envelope encoding {envelope!r}")
+    codec = _ENCODERS[cls] = (dumper(cls), envelope[: -len(b"null}")])
+    return codec
+
+
+def _decoder(name: str, version: int) -> Convert:
+    """Build and cache the loader of a registered (type, version); MalformedMessage names what is known."""
     cls = _REGISTRY.get((name, version))
     if cls is None:
         known = sorted(v for (t, v) in _REGISTRY if t == name)
         if not known:
             raise MalformedMessage(f"unknown message type {name!r}")
         raise MalformedMessage(f"unsupported version {version} of {name!r} (supported: {known})")
-    try:
-        result: Message = loader(cls)(env["body"])
-    except Mismatch as exc:
-        raise MalformedMessage(exc.describe("body")) from None
-    return result
+    convert = _DECODERS[(name, version)] = loader(cls)
+    return convert
 
 
 def _no_constant(token: str) -> Any:

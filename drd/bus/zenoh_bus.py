@@ -20,10 +20,10 @@ paths, e.g. ``{"transport/auth/usrpwd/user": "drd"}``.
 
 from __future__ import annotations
 
+import functools
 import json
 import threading
 from collections.abc import Mapping, Sequence
-from importlib.metadata import PackageNotFoundError, version
 from typing import Any
 
 import zenoh
@@ -43,10 +43,24 @@ from .base import (
 )
 from .keys import check_key_expr
 
-try:
-    ZENOH_VERSION = version("eclipse-zenoh")  # zenoh-python 1.x has no zenoh.__version__
-except PackageNotFoundError:  # pragma: no cover - a build from source
-    ZENOH_VERSION = "unknown"
+
+@functools.cache
+def zenoh_version() -> str:
+    """The installed eclipse-zenoh's version (zenoh-python 1.x has no ``zenoh.__version__``)."""
+    from importlib.metadata import PackageNotFoundError, version  # 20 ms: only when asked
+
+    try:
+        return version("eclipse-zenoh")
+    except PackageNotFoundError:  # pragma: no cover - a build from source
+        return "unknown"
+
+
+def __getattr__(name: str) -> str:
+    """``ZENOH_VERSION``, read from the package metadata on first use (a CLI call never needs it)."""
+    if name == "ZENOH_VERSION":
+        return zenoh_version()
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
 
 _ALL = zenoh.QueryTarget.ALL
 _NO_CONSOLIDATION = zenoh.ConsolidationMode.NONE
@@ -159,8 +173,10 @@ class ZenohBus(Bus):
             sample = reply.ok
             if sample is not None:
                 raw.append((str(sample.key_expr), sample.payload.to_bytes(), False))
-            elif reply.err is not None:
-                body = reply.err.payload.to_bytes()
+                continue
+            err = reply.err  # read once: each read builds a new object
+            if err is not None:
+                body = err.payload.to_bytes()
                 if body != b"Timeout":  # zenoh's own marker (encoding varies) for "not all answered in time";
                     raw.append((key, body, True))  # our error replies are always JSON, so this cannot hide one
         # decode only once the query is finished: an in-process queryable needs the GIL to finalize it

@@ -8,22 +8,29 @@ fails with exit code 2 and one line naming the endpoints it tried.
 
 from __future__ import annotations
 
+import functools
+import inspect
 import json
+import re
 import time
-from collections.abc import Callable, Iterator
+import typing
+from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
 from dataclasses import asdict
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import typer
-from rich.console import Group, RenderableType
-from rich.table import Table
 from rich.text import Text
+from typer.core import TyperCommand
+from typer.models import CommandInfo, OptionInfo
 
-from drd.cli.common import INVALID, OK, catalog, err, fail, out
+from drd.cli.common import INVALID, OK, err, fail, out, print_json
 
 if TYPE_CHECKING:
+    from rich.console import RenderableType
+    from rich.table import Table
+
     from drd.daemon.client import ClusterClient
 
 ConfigOption = typer.Option(Path("hosts.yaml"), "--config", "-c",
@@ -43,6 +50,116 @@ def register(app: typer.Typer) -> None:
     app.command("query")(query)
     app.command("run")(run)
     app.command("stop")(stop)
+
+
+# --- the fast path of the read-only commands ------------------------------------------------------
+
+#: Commands `fast_command` may run without typer: read-only, options only, run often (and by scripts).
+FAST_COMMANDS = ("hosts", "status", "components", "resources")
+_PLAIN_NUMBER = {int: re.compile(r"0|[1-9][0-9]*"), float: re.compile(r"[0-9]+(?:\.[0-9]+)?")}
+#: OptionInfo fields that change only the help text; any other field set makes an option "not plain".
+_COSMETIC = frozenset({"default", "param_decls", "help", "min", "show_default", "metavar", "rich_help_panel", "hidden"})
+
+
+def fast_command(app: typer.Typer, argv: Sequence[str]) -> Callable[[], object] | None:
+    """The call of `missionctl COMMAND ...` when `argv` is a plain, valid use of a fast command; else None.
+
+    Typer 0.29 checks every parameter through pydantic, whose first import costs about 0.25 s: a
+    quarter of a `missionctl status`. For the commands of FAST_COMMANDS this parses the options
+    itself, reading them (names, defaults, minimums, types) from the command's typer signature,
+    so nothing is declared twice. It accepts only what it is sure typer would accept with the same
+    values: `--help`, an unknown or repeated option, a value that is not a plain number, a number
+    below its minimum, an option typer would treat specially (env var, callback, parser...) all
+    return None, and typer then parses, answers or refuses as always (the same help, the same errors).
+    """
+    if not argv or argv[0] not in FAST_COMMANDS or app.registered_callback is not None or app.info.context_settings:
+        return None
+    fn = _registered(app, argv[0])
+    spec = _option_spec(fn) if fn is not None else None
+    if fn is None or spec is None:
+        return None
+    kwargs = {name: info.default for name, (info, _) in spec.values()}
+    seen: set[str] = set()
+    args = list(argv[1:])
+    while args:
+        word = args.pop(0)
+        flag, eq, inline = word.partition("=") if word.startswith("--") else (word, "", "")
+        if flag not in spec:
+            return None
+        name, (info, kind) = spec[flag]
+        if kind is bool:
+            if eq or name in seen:
+                return None
+            kwargs[name] = True
+        else:
+            if eq:
+                text = inline
+            elif args:
+                text = args.pop(0)
+            else:
+                return None
+            value = _plain_value(text, kind.__args__[0] if kind in (list[str], list[Path]) else kind, info.min)
+            if value is None:
+                return None
+            if kind in (list[str], list[Path]):
+                kwargs[name] = [*(kwargs[name] or []), value]
+                seen.add(name)
+                continue
+            if name in seen:
+                return None
+            kwargs[name] = value
+        seen.add(name)
+    return functools.partial(fn, **kwargs)
+
+
+def _registered(app: typer.Typer, name: str) -> Callable[..., object] | None:
+    """The callback registered as command `name`, if its registration sets nothing typer treats specially."""
+    plain = vars(CommandInfo())
+    for info in reversed(app.registered_commands):  # a name registered twice: typer keeps the last
+        callback = info.callback
+        if callback is None or (info.name or callback.__name__.replace("_", "-")) != name:
+            continue
+        settings = {k: v for k, v in vars(info).items() if k not in ("name", "callback", "cls", "help", "short_help",
+                                                                      "epilog", "hidden", "rich_help_panel")}
+        if info.cls not in (None, TyperCommand) or any(plain.get(k) != v for k, v in settings.items()):
+            return None
+        return callback
+    return None
+
+
+@functools.cache
+def _option_spec(fn: Callable[..., object]) -> dict[str, tuple[str, tuple[OptionInfo, Any]]] | None:
+    """Each option word of `fn` -> (parameter, (its OptionInfo, its type)); None if a parameter is not plain."""
+    plain = vars(OptionInfo())
+    hints = typing.get_type_hints(fn)
+    spec: dict[str, tuple[str, tuple[OptionInfo, Any]]] = {}
+    for name, param in inspect.signature(fn).parameters.items():
+        info, kind = param.default, hints.get(name)
+        if not isinstance(info, OptionInfo) or kind not in (bool, str, int, float, Path, list[str],
+                                                                           list[Path]):
+            return None
+        if any(plain.get(k) != v for k, v in vars(info).items() if k not in _COSMETIC):
+            return None
+        if kind is bool and (info.default is not False or info.min is not None):
+            return None
+        decls = info.param_decls or ()
+        if not decls or any("/" in d or not d.startswith("-") or " " in d for d in decls):
+            return None
+        for word in decls:
+            spec[word] = (name, (info, kind))
+    return spec
+
+
+def _plain_value(text: str, kind: Any, minimum: float | None) -> Any:
+    """`text` as typer would convert it to `kind`, or None when unsure (typer then decides)."""
+    if not text or text.startswith("-"):
+        return None
+    if kind in _PLAIN_NUMBER:
+        if not _PLAIN_NUMBER[kind].fullmatch(text):
+            return None
+        value = kind(text)
+        return None if minimum is not None and value < minimum else value
+    return Path(text) if kind is Path else text
 
 
 @contextmanager
@@ -73,12 +190,12 @@ def _endpoints(config: Path, connect: list[str] | None) -> tuple[list[str], dict
     if connect:
         return list(connect), {}, None, []
     from drd.daemon.security import SecurityError, transport
-    from drd.hosts import HostsError, load_hosts
+    from drd.hosts import HostsError, load_endpoints
 
     if not config.exists():
         fail(f"{config}: no such file", hint="pass --config FILE, or --connect tcp/HOST:PORT")
     try:
-        cluster = load_hosts(config, catalog(None))
+        cluster = load_endpoints(config)  # endpoints, roles and security: no hardware, so no component catalog
         tr = transport(cluster)
     except (HostsError, SecurityError) as e:
         for p in e.problems:
@@ -98,7 +215,7 @@ def hosts(config: Path = ConfigOption, connect: list[str] = ConnectOption, as_js
         reply = client.hosts()
     data = [asdict(h) for h in reply.hosts]
     if as_json:
-        out.print_json(json.dumps({"cluster": reply.cluster, "answered_by": reply.answered_by, "hosts": data}))
+        print_json({"cluster": reply.cluster, "answered_by": reply.answered_by, "hosts": data})
     else:
         out.print(_hosts_table(data, reply.at))
     return OK
@@ -114,7 +231,7 @@ def status(config: Path = ConfigOption, connect: list[str] = ConnectOption, as_j
         if not watch:
             data = client.status(events)
             if as_json:
-                out.print_json(json.dumps(data))
+                print_json(data)
             else:
                 out.print(_status_view(data))
             return OK
@@ -128,9 +245,11 @@ def components(config: Path = ConfigOption, connect: list[str] = ConnectOption, 
     with _cluster(config, connect, timeout) as client:
         reply = client.components()
     if as_json:
-        out.print_json(json.dumps({"types": reply.types, "instances": [asdict(i) for i in reply.instances],
-                                   "services": [asdict(s) for s in reply.services]}))
+        print_json({"types": reply.types, "instances": [asdict(i) for i in reply.instances],
+                    "services": [asdict(s) for s in reply.services]})
         return OK
+    from rich.table import Table
+
     table = Table(title="component types (hosts up that can run them)", title_justify="left")
     table.add_column("type")
     table.add_column("hosts")
@@ -155,8 +274,10 @@ def resources(config: Path = ConfigOption, connect: list[str] = ConnectOption, a
     data = {"units": [asdict(u) for u in reply.units], "robots": [asdict(r) for r in reply.robots],
             "queue": [asdict(w) for w in reply.queue], "removing": reply.removing}
     if as_json:
-        out.print_json(json.dumps(data))
+        print_json(data)
     else:
+        from rich.console import Group
+
         out.print(Group(*_resources_view(data)))
     return OK
 
@@ -177,8 +298,10 @@ def query(text: str = typer.Argument(..., metavar="QUERY", show_default=False,
             err.print(Text(e.reason))
             raise typer.Exit(INVALID) from None
     if as_json:
-        out.print_json(json.dumps(reply.offers))
+        print_json(reply.offers)
         return OK
+    from rich.table import Table
+
     table = Table(title=f"{len(reply.offers)} offers for {text}", title_justify="left")
     for col in ("id", "type", "host", "load", "properties"):
         table.add_column(col)
@@ -214,7 +337,8 @@ def run(mission: Path = typer.Argument(..., help="The mission file.", show_defau
         watch = _RecordWatch(client)
         try:
             request = RunMission(source, str(mission), world, speed, until, seed)
-            reply = client.bus.call(run_key(client.cluster), request, timeout=max(timeout, 15.0))
+            with _deferred_interrupt() as interrupted:  # a Ctrl-C now would leave the mission running unseen
+                reply = client.bus.call(run_key(client.cluster), request, timeout=max(timeout, 15.0))
             if not isinstance(reply, RunReply):
                 fail(f"the controller answered a {type(reply).TYPE}")
             if not reply.ok:
@@ -227,16 +351,53 @@ def run(mission: Path = typer.Argument(..., help="The mission file.", show_defau
                 return OK
             err.print(Text.assemble(("▶ ", "bold green"), f"mission {reply.mission} started on the cluster "
                                     f"(world {reply.world}, {reply.speed:g}x real time)"))
-            report = watch.follow(reply.mission, until / speed + 120.0, reply.base)
+            try:
+                if interrupted:
+                    raise KeyboardInterrupt
+                report = watch.follow(reply.mission, until / speed + 120.0, reply.base)
+            except KeyboardInterrupt:  # the operator's Ctrl-C stops the mission, not just this command
+                report = _stop_on_interrupt(client, watch, reply.mission, reply.base)
         finally:
             watch.close()
     if as_json:
-        out.print_json(json.dumps(report.to_dict(), default=str))
+        print_json(report.to_dict(), default=str)
     else:
         from drd.cli.missionctl import _print_report
 
         _print_report(report)
     return OK if report.outcome == "success" else MISSION_FAILED
+
+
+@contextmanager
+def _deferred_interrupt() -> Iterator[list[int]]:
+    """Hold a Ctrl-C (SIGINT) until the block ends; the list yielded is non-empty if one came."""
+    import signal
+
+    got: list[int] = []
+    try:
+        previous = signal.signal(signal.SIGINT, lambda signum, frame: got.append(signum))
+    except ValueError:  # not the main thread: nothing to defer
+        yield got
+        return
+    try:
+        yield got
+    finally:
+        signal.signal(signal.SIGINT, previous)
+
+
+def _stop_on_interrupt(client: ClusterClient, watch: _RecordWatch, mission: str, base: float) -> Any:
+    """Ask the executive to stop `mission`, then wait (bounded) for its last records, so the report says how it
+    ended; a second Ctrl-C gives up waiting (the mission is stopped either way)."""
+    from drd.executive import MissionCommand
+
+    err.print(Text.assemble(("■ ", "bold yellow"), f"Ctrl-C: stopping mission {mission}"))
+    try:
+        client.bus.call(client.keys.executive, MissionCommand("stop", mission), timeout=5.0)
+        return watch.follow(mission, 15.0, base)
+    except KeyboardInterrupt:
+        fail(f"mission {mission} stopped; its report was not awaited", code=1)
+    except Exception as e:  # the controller may be the reason the operator pressed Ctrl-C
+        fail(f"mission {mission}: could not confirm the stop ({e}); see `missionctl status`", code=1)
 
 
 def stop(mission: str = typer.Argument("", help="The mission id (default: every mission).", show_default=False),
@@ -276,7 +437,7 @@ class _RecordWatch:
         """Print progress until the mission's `finished` record (or its outcome in the status); the report."""
         import queue
 
-        from drd.dryrun import DryRun, _facts
+        from drd.dryrun import DryRun, facts
         from drd.runtime import records as rec
 
         result = DryRun(mission, None, "", 0.0, 0.0)
@@ -296,7 +457,7 @@ class _RecordWatch:
                 r = _record(msg, rec, base)
                 if r is not None:
                     result.records.append(r)
-                    _facts(result, r, None)
+                    facts(result, r)
                     result.sim_time = max(result.sim_time, r.at)
                     if isinstance(r, rec.Entered):
                         active[r.path] = None
@@ -319,7 +480,7 @@ class _RecordWatch:
                             extra: Any = self.queue.get()
                             if extra.mission == mission and (r := _record(extra, rec, base)) is not None:
                                 result.records.append(r)
-                                _facts(result, r, None)
+                                facts(result, r)
                         finished = (m["outcome"], m.get("reason") or "")
         result.outcome, result.reason = finished
         result.wall_time = time.monotonic() - start
@@ -361,6 +522,9 @@ def _watch(fetch: Callable[[], dict[str, Any]], as_json: bool, interval: float) 
 
 
 def _status_view(data: dict[str, Any]) -> RenderableType:
+    from rich.console import Group
+    from rich.table import Table
+
     parts: list[RenderableType] = [
         Text.assemble(("cluster ", "bold"), data["cluster"], (f"  (answered by {data['answered_by']})", "dim")),
         _hosts_table(data["hosts"], data["at"]),
@@ -395,6 +559,8 @@ def _status_view(data: dict[str, Any]) -> RenderableType:
 
 
 def _hosts_table(rows: list[dict[str, Any]], now: float) -> Table:
+    from rich.table import Table
+
     table = Table(title="hosts", title_justify="left")
     for col in ("host", "state", "cpu", "mem", "load1", "inst", "since", "why"):
         table.add_column(col, no_wrap=col != "why")
@@ -418,6 +584,8 @@ def _ago(seconds: float) -> str:
 
 
 def _resources_view(data: dict[str, Any], with_parts: bool = True) -> list[RenderableType]:
+    from rich.table import Table
+
     units = Table(title="resources", title_justify="left")
     for col in ("id", "type", "host", "holders", "queue", "epoch", "use"):
         units.add_column(col)
@@ -442,6 +610,8 @@ def _resources_view(data: dict[str, Any], with_parts: bool = True) -> list[Rende
 
 
 def _missions_view(missions: list[dict[str, Any]]) -> RenderableType:
+    from rich.table import Table
+
     if not missions:
         return Text("missions: none", style="dim")
     t = Table(title="missions", title_justify="left")

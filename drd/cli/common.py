@@ -6,20 +6,21 @@ exit code 2 (set `DRD_DEBUG=1` to see the traceback instead).
 
 from __future__ import annotations
 
+import json
 import os
 import sys
 import traceback
 from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
-from typing import NoReturn
+from typing import TYPE_CHECKING, Any, NoReturn
 
-import click
 import typer
 from rich.console import Console
 from rich.text import Text
 
-from dsl.catalog import Catalog
-from dsl.errors import Diagnostic, Severity, caret, source_line
+if TYPE_CHECKING:  # the mission language loads only for the commands that use it
+    from dsl.catalog import Catalog
+    from dsl.errors import Diagnostic
 
 #: Exit codes, the same for every command.
 OK, MISSION_FAILED, INVALID = 0, 1, 2
@@ -60,8 +61,24 @@ def catalog(extra: Sequence[Path] | None) -> Catalog:
         raise typer.Exit(INVALID) from None
 
 
+def print_json(data: Any, default: Callable[[Any], Any] | None = None) -> None:
+    """Print `data` as indented JSON on stdout: highlighted on a terminal, else plain `json.dumps`.
+
+    To a pipe or a file the text is exactly what rich's `print_json` writes there, without
+    importing and running rich's JSON renderer (a tenth of a second for a cluster's status).
+    """
+    text = json.dumps(data, default=default)
+    if out.is_terminal:
+        out.print_json(text)
+        return
+    sys.stdout.write(json.dumps(json.loads(text), indent=2, ensure_ascii=False) + "\n")
+    sys.stdout.flush()
+
+
 def render_diagnostic(d: Diagnostic, sources: Mapping[str, str], console: Console = err) -> None:
     """file:line:col, the message, the source line with a caret, notes and the hint."""
+    from dsl.errors import Severity, caret, source_line
+
     colour = "red" if d.severity is Severity.ERROR else "yellow"
     console.print(Text.assemble((f"{d.span}: ", "bold"), (f"{d.severity.value}: ", f"bold {colour}"), d.message))
     line = source_line(d.span, sources)
@@ -78,26 +95,39 @@ def render_diagnostic(d: Diagnostic, sources: Mapping[str, str], console: Consol
         console.print(Text.assemble(("  hint: ", "cyan"), d.hint))
 
 
-def run_app(app: Callable[..., object], prog: str) -> NoReturn:
-    """Run a typer app with the safety net: clean errors, documented exit codes."""
+def run_app(app: Callable[..., object], prog: str,
+            fast: Callable[[Sequence[str]], Callable[[], object] | None] | None = None) -> NoReturn:
+    """Run a typer app with the safety net: clean errors, documented exit codes.
+
+    `fast(argv)` may return the call of a command it parsed itself (see `drd.cli.cluster.fast_command`):
+    it then runs without typer building its parameters; otherwise (None) typer parses as usual.
+    """
     try:
-        rc = app(prog_name=prog, standalone_mode=False)
+        call = fast(sys.argv[1:]) if fast is not None else None
+        if call is not None:
+            try:
+                rc = call()
+            except KeyboardInterrupt:  # as typer does for a command it runs
+                rc = 130
+        else:
+            rc = app(prog_name=prog, standalone_mode=False)
     except typer.Exit as e:
         sys.exit(e.exit_code)
-    except click.exceptions.Abort:
+    except typer.Abort:
         err.print("aborted")
         sys.exit(130)
-    except click.ClickException as e:
-        e.show()
-        sys.exit(INVALID)
     except KeyboardInterrupt:
         err.print("interrupted")
         sys.exit(130)
     except Exception as e:  # the last line of defence: never a traceback for a user
-        if debug():
+        show = getattr(e, "show", None)
+        if callable(show) and isinstance(getattr(e, "exit_code", None), int):
+            show()  # a usage error or a bad value: click's (or typer's own click's) message and usage line
+        elif debug():
             traceback.print_exc()
         else:
             err.print(Text.assemble(("error: ", "bold red"), f"{type(e).__name__}: {e}"))
             err.print(Text("  (set DRD_DEBUG=1 to see the traceback)", style="dim"))
         sys.exit(INVALID)
     sys.exit(rc if isinstance(rc, int) else OK)
+

@@ -11,7 +11,6 @@ from typing import TYPE_CHECKING
 
 import typer
 from rich.text import Text
-from rich.tree import Tree
 
 from drd.cli.common import (
     INVALID,
@@ -22,15 +21,16 @@ from drd.cli.common import (
     err,
     fail,
     out,
+    print_json,
     render_diagnostic,
     run_app,
 )
 from dsl import Compiled, compile_file
-from dsl.export import need_label, state_label, to_dict, to_dot, to_mermaid, trigger_label
 from dsl.statechart import State, Statechart, StateKind
 
-if TYPE_CHECKING:
+if TYPE_CHECKING:  # rich's tables and trees, and the exporters, load only for the commands that draw them
     from rich.table import Table
+    from rich.tree import Tree
 
     from drd.dryrun import DryRun
     from drd.executive import Executive
@@ -66,7 +66,7 @@ def validate(
     cat = catalog(components)
     results = [compile_file(f, cat) for f in files]
     if as_json:
-        out.print_json(json.dumps([_result_dict(r) for r in results]))
+        print_json([_result_dict(r) for r in results])
     else:
         for r in results:
             for d in r.diagnostics:
@@ -102,6 +102,8 @@ def plan(
     components: list[Path] = ComponentsOption,
 ) -> int:
     """Show the compiled statechart: states, transitions, resources and how they are bound."""
+    from dsl.export import to_dict, to_dot, to_mermaid
+
     result = compile_file(file, catalog(components))
     for d in result.diagnostics:
         render_diagnostic(d, result.sources)
@@ -138,6 +140,8 @@ def plan(
 
 
 def _draw(chart: Statechart, output: Path, kind: str) -> None:
+    from dsl.export import to_dot
+
     dot = shutil.which("dot")
     if dot is None:
         fail(f"drawing {output.name} needs Graphviz's `dot`, which is not installed",
@@ -155,6 +159,8 @@ _KIND_STYLE = {StateKind.COMPOUND: "bold", StateKind.PARALLEL: "bold magenta", S
 
 
 def _tree(chart: Statechart) -> Tree:
+    from rich.tree import Tree
+
     root = chart[chart.root]
     tree = Tree(_label(root))
     _grow(chart, root, tree)
@@ -162,6 +168,8 @@ def _tree(chart: Statechart) -> Tree:
 
 
 def _grow(chart: Statechart, state: State, node: Tree) -> None:
+    from dsl.export import need_label, trigger_label
+
     for t in state.starts:
         node.add(Text.assemble(("start → ", "green"), t.target.rsplit("/", 1)[-1], f"  {trigger_label(t)}"))
     for child in chart.children(state.id):
@@ -180,6 +188,8 @@ def _grow(chart: Statechart, state: State, node: Tree) -> None:
 
 
 def _label(s: State, initial: bool = False) -> Text:
+    from dsl.export import state_label
+
     text = Text()
     if initial:
         text.append("▸ ", style="green")
@@ -192,7 +202,8 @@ def _label(s: State, initial: bool = False) -> Text:
 
 
 def main() -> None:
-    run_app(app, "missionctl")
+    # `missionctl status` and the other read-only cluster commands skip typer's parameter building
+    run_app(app, "missionctl", fast=lambda argv: cluster.fast_command(app, argv))
 
 
 @app.command("dry-run")
@@ -274,7 +285,7 @@ def dry_run(
         draw(sim_world, report, render)
         err.print(Text.assemble(("✓ ", "bold green"), f"drew {render}"))
     if as_json:
-        out.print_json(json.dumps(report.to_dict(), default=str))
+        print_json(report.to_dict(), default=str)
     else:
         _print_report(report)
     return OK if report.outcome == "success" else MISSION_FAILED
@@ -339,3 +350,7 @@ def _table(title: str, columns: tuple[str, ...], rows: list[tuple[str, ...]]) ->
 from drd.cli import cluster  # noqa: E402  # the commands that look at a running cluster
 
 cluster.register(app)
+
+from drd.cli import tune  # noqa: E402  # `missionctl tune INSTANCE --cores --nice`: a running instance's process
+
+tune.register(app)
