@@ -25,7 +25,8 @@ declared last), but executed at once: a lower-ranked command that comes after a 
 same round is dropped, and one that comes before is overwritten, so the last setpoint is the same.
 
 `sim` drivers reach the simulator through a `drd.sim.service.RemoteSimulation`, built per mission for the
-world the call names (on the simulator host itself it calls the service in-process).
+world the call names; on the simulator host itself they call the simulation directly
+(`drd.sim.service.LocalSimulation`, under the service's lock), as in the dry-run.
 """
 
 from __future__ import annotations
@@ -106,7 +107,7 @@ class CreatorError(ValueError):
 
 class Creator:
     def __init__(self, bus: Bus | None, cluster: Cluster, host: str, catalog: Catalog, *,
-                 sim_call: Callable[[Any], Any] | None = None, pool: WorkerPool | None = None,
+                 sim_service: Any = None, pool: WorkerPool | None = None,
                  workers: int | None = None, on_change: Callable[[], None] | None = None) -> None:
         """`pool`: the worker processes to use (default: a pool of `workers` idle ones, else `$DRD_WORKERS`, else
         2, owned and closed by this Creator); `on_change` is called when the announced instances change."""
@@ -117,7 +118,7 @@ class Creator:
         self.mission = ""
         self.calls = 0
         self.arbiter = CycleArbiter()
-        self._sim_call = sim_call  # in-process calls to this host's own SimulationService
+        self._sim_service = sim_service  # this host's own SimulationService (drd.sim.service), if it has one
         self._bus = bus
         self._drivers: Any = None
         self._sim: Any = None
@@ -494,11 +495,17 @@ class Creator:
             from drd.hw.drivers import drivers_for
             from drd.sim.service import RemoteSimulation
 
-            if self._sim_call is not None:
-                self._sim = RemoteSimulation(self._sim_call, world)
+            service = self._sim_service
+            local = service.local(world) if service is not None else None
+            if local is not None:  # the simulator is in this process: direct calls, as in the dry-run
+                sim: Any = local
+            elif service is not None:
+                sim = self._sim = RemoteSimulation(service.handle, world)
             elif self._bus is not None:
-                self._sim = RemoteSimulation.over(self._bus, self.cluster.name, world)
-            self._drivers = drivers_for(self.cluster, self.host, self._sim, catalog=self.catalog)
+                sim = self._sim = RemoteSimulation.over(self._bus, self.cluster.name, world)
+            else:
+                sim = None
+            self._drivers = drivers_for(self.cluster, self.host, sim, catalog=self.catalog)
         return self._drivers
 
     def _check(self, call: ComponentCall) -> ComponentType:

@@ -173,7 +173,7 @@ class Daemon:
         from drd.daemon.creator import Creator
 
         self.creator = Creator(bus, self.cluster, me, self.config.catalog,
-                               sim_call=self.sim_service.handle if self.sim_service is not None else None,
+                               sim_service=self.sim_service,
                                on_change=self._instances_changed)
         if Role.CONTROLLER in roles:
             from drd.daemon.missions import MissionRunner

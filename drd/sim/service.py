@@ -144,6 +144,29 @@ def decode_value(value: Any, types: dict[str, Callable[..., Any]] | None = None)
 
 # -- the service -------------------------------------------------------------------------------------
 
+class LocalSimulation:
+    """A simulation in this process, as the `sim` drivers of the simulator host's own Creator see it: each method
+    call runs at once under the service's lock. No request objects, no JSON values, nothing deferred: readings
+    and commands behave exactly as in the dry-run."""
+
+    __slots__ = ("_sim", "_lock")
+
+    def __init__(self, sim: Any, lock: threading.Lock) -> None:
+        self._sim = sim
+        self._lock = lock
+
+    def __getattr__(self, name: str) -> Any:
+        value = getattr(self._sim, name)
+        if not callable(value):
+            return value
+        lock = self._lock
+
+        def call(*args: Any, **kwargs: Any) -> Any:
+            with lock:
+                return value(*args, **kwargs)
+        return call
+
+
 class SimulationService:
     """Owns the simulation of the running mission and answers `SimRequest`s (one lock: calls are serialized)."""
 
@@ -157,6 +180,14 @@ class SimulationService:
         self._profile = cProfile.Profile() if os.environ.get("DRD_PROFILE") else None  # see drd.daemon.creator
         self._profiled = 0
         self._queryable = bus.serve(key(cluster), self._serve) if bus is not None else None
+
+    def local(self, world: str) -> LocalSimulation | None:
+        """The running simulation for drivers of this very process (the simulator host's Creator), or None when
+        it is not `world` (the caller then goes through requests, which say what is wrong)."""
+        with self._lock:
+            if self.sim is None or self.world_name != world:
+                return None
+            return LocalSimulation(self.sim, self._lock)
 
     def reset(self, world: str, seed: int = 0) -> SimReply:
         from drd.sim import Simulation, load_world
