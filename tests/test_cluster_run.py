@@ -107,7 +107,9 @@ def test_ctrl_c_on_run_stops_the_mission_and_prints_how_it_ended(cluster: Daemon
     assert proc.returncode == 1, err[-2000:]
     assert "Ctrl-C: stopping mission" in err and "Traceback" not in err
     report = json.loads(out)
-    assert report["outcome"] == "stopped"
+    assert report["outcome"] == "stopped" and report["reason"] == "stopped by operator"
+    assert report["timeline"][0]["entered"] == 0.0, "the report keeps what came before the Ctrl-C"
+    assert 0 < report["wall_time"] < 30 and report["sim_time"] > 0
     assert all(m.get("outcome") is not None for m in client.missions()), "nothing left running on the cluster"
 
 

@@ -337,6 +337,7 @@ def run(mission: Path = typer.Argument(..., help="The mission file.", show_defau
         watch = _RecordWatch(client)
         try:
             request = RunMission(source, str(mission), world, speed, until, seed)
+            began = time.monotonic()
             with _deferred_interrupt() as interrupted:  # a Ctrl-C now would leave the mission running unseen
                 reply = client.bus.call(run_key(client.cluster), request, timeout=max(timeout, 15.0))
             if not isinstance(reply, RunReply):
@@ -354,9 +355,9 @@ def run(mission: Path = typer.Argument(..., help="The mission file.", show_defau
             try:
                 if interrupted:
                     raise KeyboardInterrupt
-                report = watch.follow(reply.mission, until / speed + 120.0, reply.base)
+                report = watch.follow(reply.mission, until / speed + 120.0, reply.base, began)
             except KeyboardInterrupt:  # the operator's Ctrl-C stops the mission, not just this command
-                report = _stop_on_interrupt(client, watch, reply.mission, reply.base)
+                report = _stop_on_interrupt(client, watch, reply.mission, reply.base, began)
         finally:
             watch.close()
     if as_json:
@@ -385,7 +386,7 @@ def _deferred_interrupt() -> Iterator[list[int]]:
         signal.signal(signal.SIGINT, previous)
 
 
-def _stop_on_interrupt(client: ClusterClient, watch: _RecordWatch, mission: str, base: float) -> Any:
+def _stop_on_interrupt(client: ClusterClient, watch: _RecordWatch, mission: str, base: float, began: float) -> Any:
     """Ask the executive to stop `mission`, then wait (bounded) for its last records, so the report says how it
     ended; a second Ctrl-C gives up waiting (the mission is stopped either way)."""
     from drd.executive import MissionCommand
@@ -393,7 +394,7 @@ def _stop_on_interrupt(client: ClusterClient, watch: _RecordWatch, mission: str,
     err.print(Text.assemble(("■ ", "bold yellow"), f"Ctrl-C: stopping mission {mission}"))
     try:
         client.bus.call(client.keys.executive, MissionCommand("stop", mission), timeout=5.0)
-        return watch.follow(mission, 15.0, base)
+        return watch.follow(mission, 15.0, base, began)
     except KeyboardInterrupt:
         fail(f"mission {mission} stopped; its report was not awaited", code=1)
     except Exception as e:  # the controller may be the reason the operator pressed Ctrl-C
@@ -424,6 +425,7 @@ class _RecordWatch:
 
         self.client = client
         self.queue: queue.Queue[object] = queue.Queue()
+        self.seen: dict[str, tuple[Any, dict[str, None]]] = {}  # mission -> (its report so far, active paths)
 
         def on_record(sample: Any) -> None:
             if isinstance(sample.payload, MissionRecord):
@@ -433,17 +435,18 @@ class _RecordWatch:
     def close(self) -> None:
         self.sub.close()
 
-    def follow(self, mission: str, limit: float, base: float = 0.0) -> Any:
+    def follow(self, mission: str, limit: float, base: float = 0.0, began: float | None = None) -> Any:
         """Print progress until the mission's `finished` record (or its outcome in the status); the report."""
         import queue
 
         from drd.dryrun import DryRun, facts
         from drd.runtime import records as rec
 
-        result = DryRun(mission, None, "", 0.0, 0.0)
+        if mission not in self.seen:  # a second follow (after a Ctrl-C) goes on with what the first received
+            self.seen[mission] = (DryRun(mission, None, "", 0.0, 0.0), {})
+        result, active = self.seen[mission]
         start = time.monotonic()
         next_print = next_poll = start + 1.0
-        active: dict[str, None] = {}
         finished = None
         while finished is None:
             now = time.monotonic()
@@ -483,7 +486,7 @@ class _RecordWatch:
                                 facts(result, r)
                         finished = (m["outcome"], m.get("reason") or "")
         result.outcome, result.reason = finished
-        result.wall_time = time.monotonic() - start
+        result.wall_time = time.monotonic() - (start if began is None else began)
         return result
 
 
