@@ -58,7 +58,9 @@ SECURITY_KEYS: Mapping[SecurityMode, tuple[str, ...]] = {
     SecurityMode.TLS: ("ca", "cert", "key"),
 }
 _TOP_KEYS = ("cluster", "hosts")
-_CLUSTER_KEYS = ("name", "security", "lease", "placement")
+_CLUSTER_KEYS = ("name", "security", "lease", "placement", "world")
+#: The simulated world when hosts.yaml names none (`sim` drivers need one: worlds/NAME.yaml).
+DEFAULT_WORLD = "corridor"
 _HOST_KEYS = ("endpoint", "roles", "cores", "devices", "robots")
 _DEVICE_KEYS = ("type", "driver", "options", "capacity", "slice")
 _ROBOT_KEYS = ("type", "carrier", "parts", "properties")
@@ -153,6 +155,7 @@ class Cluster:
     placement: Placement
     hosts: tuple[Host, ...]
     source: str = "hosts.yaml"
+    world: str = DEFAULT_WORLD  # the world its `sim` drivers live in (worlds/NAME.yaml), unless a command says
 
     @property
     def controller(self) -> Host:
@@ -240,11 +243,12 @@ class _Parser(ConfigReader):
         security = self.security(c.get("security", {"mode": "none"}), "cluster.security")
         lease = self.duration(c["lease"], "cluster.lease") if "lease" in c else DEFAULT_LEASE
         placement = self.placement(c.get("placement", {}), "cluster.placement")
+        world = self.name(c["world"], "cluster.world") if "world" in c else DEFAULT_WORLD
         hosts = tuple(self.host(n, h, p) for n, h, p in self.entries(data.get("hosts", {}), "hosts"))
         if data.get("hosts") == {}:
             self.fail("hosts", "expected at least one host")
         self.check_cluster(hosts)
-        return Cluster(name or "", security, lease, placement, hosts, self.source)
+        return Cluster(name or "", security, lease, placement, hosts, self.source, world or DEFAULT_WORLD)
 
     def security(self, value: object, key: str) -> Security:
         data = self.mapping(value, key)

@@ -44,7 +44,7 @@ def cluster(tmp_path_factory: pytest.TempPathFactory) -> Iterator[DaemonCluster]
 
 
 def test_killing_one_rangers_host_fails_its_instances_and_the_mission_goes_on(cluster: DaemonCluster) -> None:
-    cmd = [*MISSIONCTL, "run", MISSION, "--config", str(cluster.hosts_file), "--world", "two_rangers",
+    cmd = [*MISSIONCTL, "run", MISSION, "--config", str(cluster.hosts_file),  # the world: cluster.world
            "--speed", "40", "--until", "400", "--json"]
     proc = subprocess.Popen(cmd, cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:

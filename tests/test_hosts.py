@@ -38,6 +38,7 @@ def test_corridor_hosts_load(catalog: Catalog) -> None:
     assert [h.name for h in cluster.hosts] == ["controller", "ranger1"]
     assert cluster.controller is cluster.host("controller")
     assert cluster.controller.roles == (Role.CONTROLLER,)
+    assert cluster.world == "corridor"
     ranger1 = cluster.host("ranger1")
     assert ranger1.roles == (Role.WORKER, Role.SIMULATOR)  # the simulator beside the devices it serves
     assert [r.id for r in ranger1.robots] == ["ranger1", *(f"scout{i}" for i in range(1, 7))]
@@ -202,6 +203,7 @@ BAD: list[tuple[str, Callable[[dict[str, Any]], object], list[str]]] = [
      ["hosts.r1.roles: controller is already a role of host ctl; a cluster has exactly one controller"]),
     ("two-simulators", edit(**{"hosts/ctl/roles": ["controller", "simulator"], "hosts/r1/roles": ["simulator"]}),
      ["hosts.r1.roles: simulator is already a role of host ctl; a cluster has at most one simulator"]),
+    ("world-not-a-name", edit(**{"cluster/world": "../etc"}), [f"cluster.world: '../etc' {NOT_A_NAME}"]),
     ("cores-zero", edit(**{"hosts/ctl/cores": 0}), ["hosts.ctl.cores: expected a positive integer, got int 0"]),
     ("cores-float", edit(**{"hosts/ctl/cores": 1.5}), ["hosts.ctl.cores: expected a positive integer, got float 1.5"]),
     ("devices-not-mapping", edit(**{"hosts/r1/devices": ["drive"]}),

@@ -79,8 +79,8 @@ def test_a_lost_scout_fails_its_own_instance_not_the_mission() -> None:
 def test_a_host_that_joins_late_grows_the_running_multiplicity() -> None:
     """ranger2's daemon starts at 40 s: until then its Scouts are unknown, so three RoomSurveillance instances
     run; then three more start, bound to ranger2 and its Scouts, and the mission still succeeds."""
-    code, report, err = dry_run("missions/corridor_surveillance.mission", "--world", "two_rangers", "--hosts",
-                                "hosts.two_rangers.yaml", "--inject", "join ranger2 at 40s")
+    code, report, err = dry_run("missions/corridor_surveillance.mission", "--hosts", "hosts.two_rangers.yaml",
+                                "--inject", "join ranger2 at 40s")  # its cluster.world: two_rangers
     assert code == 0 and report["outcome"] == "success", err
     rows = {t["path"]: t for t in report["timeline"]}  # type: ignore[union-attr]
     instances = {p: t for p, t in rows.items() if p.count("/") == 1 and p.endswith("]")}

@@ -315,7 +315,9 @@ def query(text: str = typer.Argument(..., metavar="QUERY", show_default=False,
 
 def run(mission: Path = typer.Argument(..., help="The mission file.", show_default=False),
         config: Path = ConfigOption, connect: list[str] = ConnectOption,
-        world: str = typer.Option("corridor", "--world", "-w", help="The simulator's world (a name under worlds/)."),
+        world: str = typer.Option("", "--world", "-w", show_default=False,
+                                  help="The simulator's world (a name under worlds/) [default: the controller's"
+                                       " hosts.yaml cluster.world, else corridor]."),
         speed: float = typer.Option(1.0, "--speed", min=0.01, help="Run at most this multiple of real time."),
         until: float = typer.Option(1800.0, "--until", help="Stop after this much sim time, in seconds."),
         seed: int = typer.Option(0, "--seed", help="Seed of the simulation."),

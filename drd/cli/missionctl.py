@@ -209,7 +209,9 @@ def main() -> None:
 @app.command("dry-run")
 def dry_run(
     mission: Path = typer.Argument(..., help="The mission file.", show_default=False),
-    world: str = typer.Option("corridor", "--world", "-w", help="A world name (worlds/NAME.yaml) or a path."),
+    world: str = typer.Option(None, "--world", "-w", show_default=False,
+                              help="A world name (worlds/NAME.yaml) or a path [default: hosts.yaml's cluster.world,"
+                                   " else corridor]."),
     hosts: Path = typer.Option(Path("hosts.yaml"), "--hosts", help="The cluster's resource configuration."),
     seed: int = typer.Option(0, "--seed", help="Seed of the simulation (same seed, same run)."),
     speed: float = typer.Option(None, "--speed", help="Run at this multiple of real time (default: as fast "
@@ -244,7 +246,7 @@ def dry_run(
         return INVALID if not result.ok else fail(f"{mission} declares no mission to run")
     try:
         cluster = load_hosts(hosts, cat)
-        sim_world = load_world(world_path(world, Path.cwd()))
+        sim_world = load_world(world_path(world or cluster.world, Path.cwd()))
     except (HostsError, WorldError) as e:
         for p in e.problems:
             err.print(Text.assemble(("error: ", "bold red"), str(p)))

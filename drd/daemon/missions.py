@@ -45,7 +45,7 @@ class RunMission(Message):
 
     source: str
     file: str
-    world: str = "corridor"
+    world: str = ""  # "": the cluster's (hosts.yaml `cluster.world`)
     speed: float = 1.0
     until: float = 1800.0
     seed: int = 0
@@ -193,7 +193,7 @@ class MissionRunner:
         from drd.sim.service import world_file
         from drd.sim.world import check_hosts
 
-        path = world_file(req.world)
+        path = world_file(req.world or self.cluster.world)
         problems = check_hosts(load_world(path), self.cluster)
         if problems:
             raise ValueError("; ".join(map(str, problems)))
