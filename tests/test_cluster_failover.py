@@ -1,4 +1,5 @@
-"""Losing a Ranger's host mid-mission on a real cluster: the mission goes on as the language says.
+"""Two Rangers on a real cluster: the corridor mission to completion, then losing a Ranger's host mid-mission (the
+mission goes on as the language says), then a Ranger's host joining mid-mission (the multiplicity grows).
 
 A controller (and simulator), ranger1 and ranger2, as real `drd start` processes on loopback, run the corridor
 mission in the two-Ranger world. When ranger2 is killed with SIGKILL while it works, the controller sees it
@@ -41,6 +42,21 @@ def cluster(tmp_path_factory: pytest.TempPathFactory) -> Iterator[DaemonCluster]
         c.wait_ready()
         c.wait_up()
         yield c
+
+
+def test_the_corridor_mission_runs_to_completion_with_two_rangers_within_a_minute(cluster: DaemonCluster) -> None:
+    """The issue's first cluster test: a controller and two Rangers as real processes, the simulator served by
+    ranger1's daemon, `missionctl run FILE --speed 20`: done, with both Rangers' Scouts (in about 15-25 s here)."""
+    t0 = time.monotonic()
+    r = subprocess.run([*MISSIONCTL, "run", MISSION, "--config", str(cluster.hosts_file), "--speed", "20", "--json"],
+                       cwd=ROOT, capture_output=True, text=True, timeout=120, check=False)
+    wall = time.monotonic() - t0
+    assert r.returncode == 0, (r.stdout[-2000:], r.stderr[-2000:])
+    report = json.loads(r.stdout)
+    assert report["outcome"] == "success"
+    scouts = {s["scout"] for s in report["scouts"]}
+    assert scouts & {"scout1", "scout2", "scout3"} and scouts & {"scout4", "scout5", "scout6"}, scouts
+    print(f"\ntwo-Ranger corridor mission: {report['sim_time']:.1f} s of sim time in {wall:.1f} s")  # no timing assert
 
 
 def test_killing_one_rangers_host_fails_its_instances_and_the_mission_goes_on(cluster: DaemonCluster) -> None:
