@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import signal
 import subprocess
 import time
@@ -85,9 +86,16 @@ def test_detach_then_status_shows_the_active_states_then_stop(cluster: DaemonClu
         return out
 
     eventually(lambda: any("FollowCorridor:active" in p for p in active()), "FollowCorridor to be active", 20)
+    client = cluster.client()
+    tokens = f"drd/{cluster.name}/instance/**"
+    mine = re.compile(rf"drd/{cluster.name}/instance/ranger1/CorridorSurveillance/RoomSurveillance\[\d\]/"
+                      r"FindNewDoor/FollowCorridor")
+    eventually(lambda: any(mine.fullmatch(k) for k in client.bus.alive(tokens)), "FollowCorridor's liveliness token",
+               10, poll=0.05)
     r = missionctl(cluster, "stop", mid)
     assert r.returncode == 0, r.stderr
     assert "stopped" in r.stdout
+    eventually(lambda: not client.bus.alive(tokens), "the instances' tokens to vanish with the mission", 10, 0.05)
     s = json.loads(missionctl(cluster, "status", "--json").stdout)
     assert {m["id"]: m["outcome"] for m in s["missions"]}[mid] == "stopped"
 

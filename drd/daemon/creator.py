@@ -42,7 +42,8 @@ from typing import Any
 
 import psutil
 
-from drd.bus import Bus, Message, Query, Reply
+from drd.bus import Bus, BusError, Message, Query, Reply
+from drd.daemon.keys import ClusterKeys
 from drd.daemon.messages import InstanceInfo
 from drd.daemon.workers import (
     DEFAULT_SIZE,
@@ -133,6 +134,8 @@ class Creator:
         self._dirty = False
         self._infos: list[InstanceInfo] = []
         self.key = f"drd/{cluster.name}/host/{host}/creator"
+        self._keys = ClusterKeys(cluster.name)
+        self._tokens: dict[str, Any] = {}  # instance path -> its liveliness token
         # DRD_PROFILE=path: profile the step batches (cProfile), dumped to path.<host> every 200 batches
         self._profile_path = os.environ.get("DRD_PROFILE", "")
         self._profile = cProfile.Profile() if self._profile_path else None
@@ -148,6 +151,7 @@ class Creator:
             self.instances.clear()
             self._dirty = False
             self._infos = []
+            self._sync_tokens(set())
         if self._own_pool:
             self.pool.close()
 
@@ -437,8 +441,22 @@ class Creator:
                  for path, inst in self.instances.items() if inst.state not in (TERMINATED, "starting")]
         if infos != self._infos:
             self._infos = infos
+            self._sync_tokens({i.name for i in infos})
             if self._on_change is not None:
                 self._on_change()
+
+    def _sync_tokens(self, running: set[str]) -> None:
+        """A liveliness token per running instance (`drd/<c>/instance/<host>/<path>`): it vanishes when the
+        instance ends or its daemon dies, so a peer sees either without asking."""
+        if self._bus is None:
+            return
+        for path in [p for p in self._tokens if p not in running]:
+            self._tokens.pop(path).close()
+        for path in running - self._tokens.keys():
+            try:
+                self._tokens[path] = self._bus.declare_token(self._keys.instance(self.host, path))
+            except (ValueError, BusError) as e:  # a path that is no key (never for compiled missions): say so once
+                log.warning("creator %s: no liveliness token for %s: %s", self.host, path, e)
 
     # -- run-time scheduling ------------------------------------------------------------------------------
 

@@ -63,6 +63,14 @@ class ClusterKeys:
             raise ValueError(f"unknown database operation {op!r} (expected one of {', '.join(DB_OPS)})")
         return f"{self.host(host)}/db/{op}"
 
+    def instance(self, host: str, path: str) -> str:
+        """A running component instance's liveliness token (its path's `/` are key separators)."""
+        return f"{self.root}/instance/{host}/{path}"
+
+    @property
+    def instances(self) -> str:
+        return f"{self.root}/instance/**"
+
     @property
     def resources(self) -> str:
         """The controller's Resource Controller Manager view (`ResourcesReply`)."""

@@ -462,16 +462,16 @@ def worker_main(conn: Connection) -> None:
     link = _Link(conn)
     hosted: dict[str, _Hosted] = {}
     link.send(("ready", os.getpid()))
-    while True:
-        try:
+    try:
+        while True:
             msg = pickle.loads(conn.recv_bytes())
-        except (EOFError, OSError):
-            break
-        if msg[0] == "run":
-            link.send(("done", run_calls(msg[1], msg[2], link, hosted)))
-        elif msg[0] == "drop":
-            for path in msg[1]:
-                hosted.pop(path, None)
+            if msg[0] == "run":
+                link.send(("done", run_calls(msg[1], msg[2], link, hosted)))
+            elif msg[0] == "drop":
+                for path in msg[1]:
+                    hosted.pop(path, None)
+    except (EOFError, OSError):  # the Creator retired this worker (or died): its end of the pipe is closed
+        pass
     os._exit(0)
 
 
