@@ -79,6 +79,15 @@ def test_a_host_that_does_not_answer_the_start_is_excluded_and_the_next_one_trie
     assert comp.host == "b"
     assert hosts.asked == [frozenset(), frozenset({"a"})]
     assert hosts.calls == [("b", "start")]
+    assert "a" not in comp.router.gone, "a slow start excludes a from this placement only, not from the mission"
+
+
+def test_hosts_that_timed_out_in_this_mission_are_not_offered_again() -> None:
+    hosts = Hosts(LocalBus(), ["b"], ["a", "b"])
+    comp, _ = movable(hosts)
+    comp.router.gone.add("a")  # a step there timed out earlier
+    comp.start()
+    assert comp.host == "b" and hosts.asked == [frozenset({"a"})], "no try is spent on a"
 
 
 def test_the_start_fails_the_state_after_as_many_hosts_as_it_may_try() -> None:

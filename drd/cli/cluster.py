@@ -398,7 +398,9 @@ def _stop_on_interrupt(client: ClusterClient, watch: _RecordWatch, mission: str,
         client.bus.call(client.keys.executive, MissionCommand("stop", mission), timeout=5.0)
         return watch.follow(mission, 15.0, base, began)
     except KeyboardInterrupt:
-        fail(f"mission {mission} stopped; its report was not awaited", code=1)
+        fail(f"mission {mission}: stop requested, its report was not awaited (see `missionctl status`)", code=1)
+    except typer.Exit:
+        raise
     except Exception as e:  # the controller may be the reason the operator pressed Ctrl-C
         fail(f"mission {mission}: could not confirm the stop ({e}); see `missionctl status`", code=1)
 
@@ -486,6 +488,7 @@ class _RecordWatch:
                             if extra.mission == mission and (r := _record(extra, rec, base)) is not None:
                                 result.records.append(r)
                                 facts(result, r)
+                                result.sim_time = max(result.sim_time, r.at)
                         finished = (m["outcome"], m.get("reason") or "")
         result.outcome, result.reason = finished
         result.wall_time = time.monotonic() - (start if began is None else began)

@@ -180,7 +180,7 @@ class Daemon:
 
             with self._lock:
                 self.controller = Controller(bus, self.cluster, self.config.catalog, me, self._lock,
-                                             on_reject=self._reject, on_change=self._record,
+                                             on_reject=self._reject, on_change=self._controller_change,
                                              clock=self._controller_clock)
                 self.runner = MissionRunner(bus, self.cluster, self.config.catalog, me, self._lock, self.controller,
                                             self.controller.mission_clock, sim_service=self.sim_service,
@@ -339,8 +339,13 @@ class Daemon:
                     self.controller.host_up(change.host)
             elif change.kind == HostState.DOWN and self.controller is not None:
                 self.controller.host_down(change.host)
-                if self.runner is not None:
-                    self.runner.host_lost(change.host)  # its robots stop in the simulation
+
+    def _controller_change(self, kind: str, host: str, detail: str) -> None:
+        """The controller's news: recorded; a host whose resources left the manager (its lease ran out, so it
+        did not come back) also leaves the running mission's simulation with its robots."""
+        self._record(kind, host, detail)
+        if kind == "resources-removed" and self.runner is not None:
+            self.runner.host_lost(host)
 
     def _record(self, kind: str, host: str, detail: str, at: float | None = None) -> None:
         wall = self.wall() if at is None else self._to_wall(at)

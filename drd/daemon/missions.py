@@ -136,9 +136,10 @@ class MissionRunner:
             run.thread.join(timeout=5)
 
     def host_lost(self, host: str) -> None:
-        """A host went down (called with the daemon's lock held, on a bus thread): its robots stop in the
-        simulation at the next control cycle, when the mission loop talks to the simulator anyway."""
-        if self.current is not None and self.current.thread.is_alive():
+        """A host's resources left the manager: it went down and did not come back within the lease (called
+        with the daemon's lock held). Its robots leave the simulation at the next control cycle, when the
+        mission loop talks to the simulator anyway; a short freeze costs nothing, as for its grants."""
+        if self.current is not None:
             self.lost.append(host)
 
     def _lose_robots(self) -> None:

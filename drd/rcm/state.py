@@ -188,6 +188,10 @@ class Registry:
             self.aggregates[candidate.id] = candidate
         else:
             self.units[candidate.id] = candidate
+            if candidate.capacity - self.load.get(candidate.id, 0.0) <= EPS:  # a new capacity may change room
+                self.full.add(candidate.id)
+            else:
+                self.full.discard(candidate.id)
         self._typed.pop(candidate.type, None)
         self._alternatives.clear()
 

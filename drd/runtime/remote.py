@@ -25,6 +25,7 @@ that state.
 
 from __future__ import annotations
 
+import threading
 import time
 from collections import deque
 from collections.abc import Callable, Iterator, Mapping
@@ -184,9 +185,27 @@ class ComponentRouter:
         except RemoteError as e:
             raise ComponentError(f"{host}'s Creator refused {op} of {path}: {e.reason}") from None
         except BusError as e:
-            self.gone.add(host)
+            if op == "start":  # a slow start excludes the host from this placement only; the instance it may
+                self._forget_late_start(host, msg)  # still register there is terminated (best effort)
+            else:
+                self.gone.add(host)
             raise HostDown(f"host {host} did not answer {op} within {timeout:g} s ({e})") from None
         return reply, time.perf_counter() - t0
+
+    def _forget_late_start(self, host: str, msg: ComponentCall | ComponentBatch) -> None:
+        """Terminate, in the background, an instance whose start timed out: if the host was only slow, it would
+        otherwise run there unseen (the Creator handles calls in turn, so this comes after the start)."""
+        if not isinstance(msg, ComponentCall):
+            return
+        stop = ComponentCall("terminate", msg.mission, msg.path, msg.component, msg.world, status="failure")
+        key = self.creator_key(host)
+
+        def send() -> None:
+            try:
+                self.bus.call(key, stop, timeout=START_TIMEOUT)
+            except Exception:  # the host is really gone: nothing runs there
+                pass
+        threading.Thread(target=send, name=f"drd-forget-{host}", daemon=True).start()
 
     def call(self, host: str, msg: ComponentCall) -> ComponentReply:
         reply, seconds = self._request(host, msg, msg.op, msg.path)
@@ -347,7 +366,9 @@ class RemoteComponent(Component):
         path, tried = self._ctx.path, set(avoid)
         last: HostDown | None = None
         for _ in range(PLACE_TRIES):
-            self.host = place(self.name, self._params, frozenset(tried))  # ComponentError when no host can
+            self.host = None
+            # hosts that timed out in this mission are left out (down ones the policy refuses itself)
+            self.host = place(self.name, self._params, frozenset(tried | self.router.gone))  # or ComponentError
             try:
                 self._call("start", params=self._params, bindings={}, rank=self._rank)
             except HostDown as e:
@@ -362,6 +383,7 @@ class RemoteComponent(Component):
     def _replace(self) -> None:
         """Its host is lost: start the instance again on another host (its code state went with the host)."""
         lost = self.host or ""
+        self.router._ready.pop(id(self), None)  # a step reply batched from the lost host is no longer ours
         self._place("re-placed", {lost})
         self._ctx.log(f"{self.name} placed again on {self.host}: its host {lost} was lost")
 

@@ -149,20 +149,24 @@ class LocalSimulation:
     call runs at once under the service's lock. No request objects, no JSON values, nothing deferred: readings
     and commands behave exactly as in the dry-run."""
 
-    __slots__ = ("_sim", "_lock")
+    __slots__ = ("_sim", "_service")
 
-    def __init__(self, sim: Any, lock: threading.Lock) -> None:
+    def __init__(self, sim: Any, service: SimulationService) -> None:
         self._sim = sim
-        self._lock = lock
+        self._service = service
 
     def __getattr__(self, name: str) -> Any:
         value = getattr(self._sim, name)
         if not callable(value):
             return value
-        lock = self._lock
+        service, sim = self._service, self._sim
 
         def call(*args: Any, **kwargs: Any) -> Any:
-            with lock:
+            with service._lock:
+                if service.sim is not sim:  # a `reset` replaced the world under us: never drive a stale one
+                    from drd.sim import SimError
+
+                    raise SimError(f"the world was reset: {name} on a simulation that is gone")
                 return value(*args, **kwargs)
         return call
 
@@ -187,7 +191,7 @@ class SimulationService:
         with self._lock:
             if self.sim is None or self.world_name != world:
                 return None
-            return LocalSimulation(self.sim, self._lock)
+            return LocalSimulation(self.sim, self)
 
     def reset(self, world: str, seed: int = 0) -> SimReply:
         from drd.sim import Simulation, load_world
