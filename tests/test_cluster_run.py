@@ -67,6 +67,16 @@ def test_an_invalid_mission_is_refused_by_the_controller_with_a_located_error(cl
     assert "not run" in r.stderr
 
 
+def test_params_set_the_missions_variables_on_the_controller(cluster: DaemonCluster, tmp_path: Path) -> None:
+    choose = tmp_path / "choose.mission"
+    choose.write_text("mission Choose {\n    var ok: bool = false\n    Wait(duration: 1s)\n"
+                      "    Wait -> done [ok]\n    Wait -> fail [not ok]\n}\n")
+    r = missionctl(cluster, "run", str(choose), "--speed", "10", "--param", "ok=true", "--json")
+    assert r.returncode == 0 and json.loads(r.stdout)["outcome"] == "success", r.stderr[-2000:]
+    r = missionctl(cluster, "run", str(choose), "--param", "ok=maybe")
+    assert r.returncode == 2 and "ok is a bool, and 'maybe' is not one" in r.stderr, r.stderr
+
+
 def test_detach_then_status_shows_the_active_states_then_stop(cluster: DaemonCluster) -> None:
     r = missionctl(cluster, "run", MISSION, "--detach", "--speed", "5")
     assert r.returncode == 0, r.stderr

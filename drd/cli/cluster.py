@@ -321,6 +321,8 @@ def run(mission: Path = typer.Argument(..., help="The mission file.", show_defau
         speed: float = typer.Option(1.0, "--speed", min=0.01, help="Run at most this multiple of real time."),
         until: float = typer.Option(1800.0, "--until", help="Stop after this much sim time, in seconds."),
         seed: int = typer.Option(0, "--seed", help="Seed of the simulation."),
+        param: list[str] = typer.Option([], "--param", "-p", show_default=False,
+                                        help="NAME=VALUE: start the mission's variable NAME at VALUE (repeatable)."),
         detach: bool = typer.Option(False, "--detach", "-d", help="Print the mission id and return at once."),
         as_json: bool = typer.Option(False, "--json", help="Print the report as JSON."),
         timeout: float = TimeoutOption) -> int:
@@ -328,6 +330,7 @@ def run(mission: Path = typer.Argument(..., help="The mission file.", show_defau
     2 if it is invalid."""
     from drd.cli.common import MISSION_FAILED
     from drd.daemon.missions import RunMission, RunReply, run_key
+    from dsl.params import ParamError, parse_assignments
 
     if not mission.is_file():
         fail(f"{mission}: no such file")
@@ -335,10 +338,14 @@ def run(mission: Path = typer.Argument(..., help="The mission file.", show_defau
         source = mission.read_text(encoding="utf-8")
     except (OSError, UnicodeDecodeError) as e:
         fail(f"{mission}: cannot read it: {e}")
+    try:
+        params = parse_assignments(param)
+    except ParamError as e:
+        fail(str(e))
     with _cluster(config, connect, timeout) as client:
         watch = _RecordWatch(client)
         try:
-            request = RunMission(source, str(mission), world, speed, until, seed)
+            request = RunMission(source, str(mission), world, speed, until, seed, params or None)
             began = time.monotonic()
             with _deferred_interrupt() as interrupted:  # a Ctrl-C now would leave the mission running unseen
                 reply = client.bus.call(run_key(client.cluster), request, timeout=max(timeout, 15.0))

@@ -209,6 +209,8 @@ def main() -> None:
 @app.command("dry-run")
 def dry_run(
     mission: Path = typer.Argument(..., help="The mission file.", show_default=False),
+    param: list[str] = typer.Option([], "--param", "-p", show_default=False,
+                                    help="NAME=VALUE: start the mission's variable NAME at VALUE (repeatable)."),
     world: str = typer.Option(None, "--world", "-w", show_default=False,
                               help="A world name (worlds/NAME.yaml) or a path [default: hosts.yaml's cluster.world,"
                                    " else corridor]."),
@@ -237,6 +239,7 @@ def dry_run(
     from drd.inject import parse_all as parse_injections
     from drd.render import SUPPORTED_SUFFIXES
     from drd.sim.world import WorldError, load_world
+    from dsl.params import ParamError, apply_params, parse_assignments
 
     cat = catalog(components)
     result = compile_file(mission, cat)
@@ -244,6 +247,12 @@ def dry_run(
         render_diagnostic(d, result.sources)
     if not result.ok or result.statechart is None:
         return INVALID if not result.ok else fail(f"{mission} declares no mission to run")
+    try:
+        chart = apply_params(result.statechart, parse_assignments(param))
+    except ParamError as e:
+        for line in str(e).splitlines():
+            err.print(Text.assemble(("error: ", "bold red"), line))
+        return INVALID
     try:
         cluster = load_hosts(hosts, cat)
         sim_world = load_world(world_path(world or cluster.world, Path.cwd()))
@@ -272,7 +281,7 @@ def dry_run(
         if live is not None:
             live.start()
         try:
-            report = run_dry(result.statechart, cluster, sim_world, cat, seed=seed, until=until, speed=speed,
+            report = run_dry(chart, cluster, sim_world, cat, seed=seed, until=until, speed=speed,
                              trace=fh, progress=progress, injections=injections)
         except ValueError as e:
             fail(str(e))

@@ -49,6 +49,7 @@ class RunMission(Message):
     speed: float = 1.0
     until: float = 1800.0
     seed: int = 0
+    params: dict[str, str] | None = None  # --param NAME=VALUE: the mission's own variables (dsl.params)
 
 
 @message("drd.mission.run-reply", 1)
@@ -185,6 +186,12 @@ class MissionRunner:
         if not compiled.ok or compiled.statechart is None:
             diags = render(list(compiled.diagnostics), dict(compiled.sources))
             return RunReply("", False, diags or [f"{req.file}: declares no mission to run"])
+        from dsl.params import ParamError, apply_params
+
+        try:
+            chart = apply_params(compiled.statechart, dict(req.params or {}))
+        except ParamError as e:
+            return RunReply("", False, str(e).splitlines())
         if self.current is not None and self.current.thread.is_alive():
             raise ValueError(f"mission {self.current.mission} is running: one mission at a time on a cluster"
                              f" (missionctl stop {self.current.mission})")
@@ -202,7 +209,6 @@ class MissionRunner:
             reset = self.sim(SimRequest("reset", world=path.stem, seed=req.seed))
         except Exception as e:
             raise ValueError(f"the simulator on {self.simulator} did not start the world: {e}") from None
-        chart = compiled.statechart
         with self.lock:
             executive = self.controller.executive
             self.clock.start_mission()
