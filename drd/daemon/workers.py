@@ -144,7 +144,7 @@ class Worker:
     def recv(self, timeout: float) -> Any:
         """The worker's next message; WorkerDied if it dies or stays silent for `timeout` seconds (killed)."""
         try:
-            events = self._poll.poll(max(0, int(timeout * 1000)))
+            events = _spin(self._poll) or self._poll.poll(max(0, int(timeout * 1000)))
         except (OSError, ValueError):  # the pipe is closed
             events = [(self.proc.sentinel, select.POLLHUP)]
         fds = {fd for fd, _ in events}
@@ -356,6 +356,20 @@ def _stop_forkserver() -> None:
         log.debug("could not stop the fork server", exc_info=True)
 
 
+#: Seconds a side of the pipe polls before it sleeps in the kernel: most answers come within it, and a
+#: wake-up from sleep costs more than the answer on a busy machine (measured in docs/design.md).
+SPIN = 0.0002
+
+
+def _spin(poll: Any) -> list[tuple[int, int]]:
+    """Poll without sleeping for up to `SPIN` seconds: the events, or [] (then sleep in `poll` as usual)."""
+    deadline = time.perf_counter() + SPIN
+    while True:
+        events: list[tuple[int, int]] = poll.poll(0)
+        if events or time.perf_counter() >= deadline:
+            return events
+
+
 def apply_scheduling(pid: int, cores: Sequence[int] | None, nice: int | None) -> list[int]:
     """Set the nice level and CPU affinity of every thread of process `pid`; the threads it changed.
 
@@ -390,6 +404,8 @@ class _Link:
 
     def __init__(self, conn: Connection) -> None:
         self.conn = conn
+        self._poll = select.poll()
+        self._poll.register(conn.fileno(), select.POLLIN)
 
     def send(self, msg: Any) -> None:
         self.conn.send_bytes(pickle.dumps(msg, _PROTOCOL))
@@ -399,6 +415,7 @@ class _Link:
             self.send(msg)
         except (pickle.PicklingError, TypeError, AttributeError) as e:
             raise TypeError(f"a driver call takes plain data only: {e}") from None
+        _spin(self._poll)  # the Creator answers a reading in ~0.1 ms: do not fall asleep for it
         kind, value = pickle.loads(self.conn.recv_bytes())
         if kind == "raise":
             raise value
