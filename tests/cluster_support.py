@@ -174,6 +174,27 @@ class DaemonCluster:
 
 
 @contextmanager
+def running(cmd: Sequence[str]) -> Iterator[subprocess.Popen[str]]:
+    """A command (`missionctl run ...`) running in the background; killed and reaped if still running after."""
+    proc = subprocess.Popen(list(cmd), cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        yield proc
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.communicate(timeout=10)
+
+
+def succeeded(cluster: DaemonCluster, proc: subprocess.Popen[str], out: str, err: str) -> dict[str, object]:
+    """The JSON report of a `missionctl run --json` that exited 0 with a successful mission (else fail, showing
+    its output and the controller's log)."""
+    assert proc.returncode == 0, (out[-2000:], err[-2000:], cluster.log("controller")[-3000:])
+    report: dict[str, object] = json.loads(out)
+    assert report["outcome"] == "success"
+    return report
+
+
+@contextmanager
 def running_cluster(folder: Path, names: Sequence[str], *, lease: float = LEASE,
                     security: str = "{mode: none}") -> Iterator[DaemonCluster]:
     cluster = DaemonCluster(folder, names, lease=lease, security=security)

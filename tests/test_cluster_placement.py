@@ -9,13 +9,12 @@ from __future__ import annotations
 
 import re
 import signal
-import subprocess
 import time
 from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
-from cluster_support import MISSIONCTL, ROOT, DaemonCluster, eventually, running_cluster
+from cluster_support import MISSIONCTL, DaemonCluster, eventually, running, running_cluster, succeeded
 from test_cluster_run import NAMES, corridor_hosts
 
 PLACED = re.compile(r"placement: Wait on (\w+)")
@@ -42,23 +41,18 @@ def test_a_movable_component_goes_to_a_worker_and_moves_when_its_host_is_killed(
     mission = tmp_path / "pause.mission"
     mission.write_text("mission Pause {\n    Wait(duration: 40s)\n}\n")
     cmd = [*MISSIONCTL, "run", str(mission), "--config", str(cluster.hosts_file), "--speed", "8", "--json"]
-    proc = subprocess.Popen(cmd, cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    try:
-        def running() -> bool:
+    with running(cmd) as proc:
+        def started() -> bool:
             assert proc.poll() is None, proc.communicate()
             return STARTED.search(cluster.log("controller")) is not None
 
-        eventually(running, "the mission to start", 30, poll=0.05)
+        eventually(started, "the mission to start", 30, poll=0.05)
         time.sleep(0.5)  # a few cycles of steps on the first host
         first = placements(cluster)[0]
         assert first in ("ranger1", "spare"), "a worker takes it, never the controller"
         cluster.procs[first].send_signal(signal.SIGKILL)
         out, err = proc.communicate(timeout=60)
-    finally:
-        if proc.poll() is None:
-            proc.kill()
-            proc.communicate(timeout=10)
-    assert proc.returncode == 0, (out[-2000:], err[-2000:], cluster.log("controller")[-3000:])
+    succeeded(cluster, proc, out, err)
     moved = placements(cluster)
     other = ({"ranger1", "spare"} - {first}).pop()
     assert moved[-1] == other, moved
