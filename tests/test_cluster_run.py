@@ -17,6 +17,7 @@ import time
 from collections.abc import Iterator
 from pathlib import Path
 
+import psutil
 import pytest
 from cluster_support import MISSIONCTL, ROOT, DaemonCluster, eventually, running_cluster
 
@@ -102,6 +103,9 @@ def test_detach_then_status_shows_the_active_states_then_stop(cluster: DaemonClu
                       r"FindNewDoor/FollowCorridor")
     eventually(lambda: any(mine.fullmatch(k) for k in client.bus.alive(tokens)), "FollowCorridor's liveliness token",
                10, poll=0.05)
+    pids = {i.pid for i in client.components().instances if i.host == "ranger1"}
+    assert pids and all(isinstance(p, int) and psutil.pid_exists(p) and p != cluster.pid("ranger1") for p in pids), \
+        "each instance names the worker process that runs it"
     r = missionctl(cluster, "stop", mid)
     assert r.returncode == 0, r.stderr
     assert "stopped" in r.stdout

@@ -258,10 +258,10 @@ def components(config: Path = ConfigOption, connect: list[str] = ConnectOption, 
     out.print(table)
     for title, rows in (("instances", reply.instances), ("services", reply.services)):
         t = Table(title=title, title_justify="left")
-        for col in ("name", "component", "host", "state", "key"):
+        for col in ("name", "component", "host", "state", "pid", "key"):
             t.add_column(col)
         for i in rows:
-            t.add_row(i.name, i.component, i.host, i.state, i.key)
+            t.add_row(i.name, i.component, i.host, i.state, str(i.pid or "—"), i.key)
         out.print(t if rows else Text(f"{title}: none", style="dim"))
     return OK
 
@@ -546,10 +546,10 @@ def _status_view(data: dict[str, Any]) -> RenderableType:
     ]
     if data["instances"]:
         t = Table(title="instances", title_justify="left")
-        for col in ("name", "component", "host", "state"):
+        for col in ("name", "component", "host", "state", "pid"):
             t.add_column(col)
         for i in data["instances"]:
-            t.add_row(i["name"], i["component"], i["host"], i["state"])
+            t.add_row(i["name"], i["component"], i["host"], i["state"], str(i.get("pid") or "—"))
         parts.append(t)
     else:
         parts.append(Text("instances: none", style="dim"))

@@ -437,7 +437,7 @@ class Creator:
         if not self._dirty:
             return
         self._dirty = False
-        infos = [InstanceInfo(path, inst.name, self.host, inst.state, self.key)
+        infos = [InstanceInfo(path, inst.name, self.host, inst.state, self.key, inst.worker.pid)
                  for path, inst in self.instances.items() if inst.state not in (TERMINATED, "starting")]
         if infos != self._infos:
             self._infos = infos

@@ -22,6 +22,7 @@ class InstanceInfo(Message):
     host: str
     state: str = "running"
     key: str = ""
+    pid: int | None = None  # the worker process running a component instance (None for a daemon service)
 
 
 @message("drd.daemon.announce", 1)
