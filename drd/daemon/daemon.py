@@ -52,7 +52,7 @@ from drd.daemon.messages import (
     TraderRequest,
     ViewRequest,
 )
-from drd.daemon.peers import diagnose
+from drd.daemon.peers import REFUSED, diagnose
 from drd.daemon.security import Transport, describe, transport
 from drd.daemon.view import Change, ClusterView, HostState, runnable_components
 from drd.hosts import Cluster, Role
@@ -124,6 +124,7 @@ class Daemon:
         self.events: deque[ClusterEvent] = deque(maxlen=MAX_EVENTS)
         self.rejected: Counter[str] = Counter()
         self.unreachable: dict[str, str] = {}
+        self._suspects: dict[str, str] = {}  # host -> a "refused credentials" diagnosis seen once, not yet confirmed
         self.controller: Controller | None = None
         self.runner: Any = None  # drd.daemon.missions.MissionRunner, on the controller
         self.creator: Any = None  # drd.daemon.creator.Creator
@@ -334,6 +335,7 @@ class Daemon:
             self._record(change.kind, change.host, change.detail, change.at)
             if change.kind == HostState.UP:
                 self.unreachable.pop(change.host, None)
+                self._suspects.pop(change.host, None)
                 self._announce_due = True  # a newcomer learns about us (and whoever came back)
                 if self.controller is not None:
                     self.controller.host_up(change.host)
@@ -441,9 +443,15 @@ class Daemon:
                 found = diagnose(down)
                 with self._lock:
                     for host, why in found.items():
-                        if self.view.state(host) is HostState.DOWN and self.unreachable.get(host) != why:
-                            self.unreachable[host] = why
-                            log.warning("peer %s unreachable: %s", host, why)
+                        if self.view.state(host) is not HostState.DOWN or self.unreachable.get(host) == why:
+                            continue
+                        if why.endswith(REFUSED) and self._suspects.get(host) != why:
+                            # a peer still starting accepts connections before its session: confirm next check
+                            self._suspects[host] = why
+                            continue
+                        self._suspects.pop(host, None)
+                        self.unreachable[host] = why
+                        log.warning("peer %s unreachable: %s", host, why)
             finally:
                 self._checking = False
 
