@@ -195,6 +195,19 @@ def succeeded(cluster: DaemonCluster, proc: subprocess.Popen[str], out: str, err
 
 
 @contextmanager
+def serving_cluster(folder: Path, names: Sequence[str],
+                    hosts: Callable[[DaemonCluster], str]) -> Iterator[DaemonCluster]:
+    """Daemons of the hosts file `hosts(cluster)` (written on the cluster's free ports), every one started, ready
+    and seen up by the controller; all killed by pid afterwards."""
+    with running_cluster(folder, names) as cluster:
+        cluster.hosts_file.write_text(hosts(cluster))
+        cluster.start_all()
+        cluster.wait_ready()
+        cluster.wait_up()
+        yield cluster
+
+
+@contextmanager
 def running_cluster(folder: Path, names: Sequence[str], *, lease: float = LEASE,
                     security: str = "{mode: none}") -> Iterator[DaemonCluster]:
     cluster = DaemonCluster(folder, names, lease=lease, security=security)

@@ -18,7 +18,7 @@ import time
 from collections.abc import Iterator
 
 import pytest
-from cluster_support import MISSIONCTL, ROOT, DaemonCluster, eventually, running, running_cluster, succeeded
+from cluster_support import MISSIONCTL, ROOT, DaemonCluster, eventually, running, serving_cluster, succeeded
 
 NAMES = ["controller", "ranger1", "ranger2"]
 MISSION = "missions/corridor_surveillance.mission"
@@ -35,12 +35,7 @@ def two_ranger_hosts(cluster: DaemonCluster) -> str:
 
 @pytest.fixture(scope="module")
 def cluster(tmp_path_factory: pytest.TempPathFactory) -> Iterator[DaemonCluster]:
-    folder = tmp_path_factory.mktemp("cluster_failover")
-    with running_cluster(folder, NAMES) as c:
-        c.hosts_file.write_text(two_ranger_hosts(c))
-        c.start_all()
-        c.wait_ready()
-        c.wait_up()
+    with serving_cluster(tmp_path_factory.mktemp("cluster_failover"), NAMES, two_ranger_hosts) as c:
         yield c
 
 

@@ -14,7 +14,7 @@ from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
-from cluster_support import MISSIONCTL, DaemonCluster, eventually, running, running_cluster, succeeded
+from cluster_support import MISSIONCTL, DaemonCluster, eventually, running, serving_cluster, succeeded
 from test_cluster_run import NAMES, corridor_hosts
 
 PLACED = re.compile(r"placement: Wait on (\w+)")
@@ -23,12 +23,8 @@ STARTED = re.compile(r"mission Pause-\d+ started")
 
 @pytest.fixture(scope="module")
 def cluster(tmp_path_factory: pytest.TempPathFactory) -> Iterator[DaemonCluster]:
-    folder = tmp_path_factory.mktemp("cluster_placement")
-    with running_cluster(folder, NAMES) as c:
-        c.hosts_file.write_text(corridor_hosts(c))  # the simulator on the controller: we kill a worker, not the world
-        c.start_all()
-        c.wait_ready()
-        c.wait_up()
+    # corridor_hosts keeps the simulator on the controller: we kill a worker, not the world
+    with serving_cluster(tmp_path_factory.mktemp("cluster_placement"), NAMES, corridor_hosts) as c:
         yield c
 
 

@@ -19,7 +19,7 @@ from pathlib import Path
 
 import psutil
 import pytest
-from cluster_support import MISSIONCTL, ROOT, DaemonCluster, eventually, running_cluster
+from cluster_support import MISSIONCTL, ROOT, DaemonCluster, eventually, serving_cluster
 
 NAMES = ["controller", "ranger1", "spare"]
 MISSION = "missions/corridor_surveillance.mission"
@@ -45,12 +45,7 @@ def corridor_hosts(cluster: DaemonCluster, *, simulator: str = "controller") -> 
 
 @pytest.fixture(scope="module")
 def cluster(tmp_path_factory: pytest.TempPathFactory) -> Iterator[DaemonCluster]:
-    folder = tmp_path_factory.mktemp("cluster_run")
-    with running_cluster(folder, NAMES) as c:
-        c.hosts_file.write_text(corridor_hosts(c))
-        c.start_all()
-        c.wait_ready()
-        c.wait_up()
+    with serving_cluster(tmp_path_factory.mktemp("cluster_run"), NAMES, corridor_hosts) as c:
         yield c
 
 

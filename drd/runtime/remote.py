@@ -232,6 +232,10 @@ class ComponentRouter:
             self._ready[id(c)] = (now, reply)
         return replies[0]
 
+    def forget_reply(self, comp: RemoteComponent) -> None:
+        """Drop `comp`'s step reply received with an earlier batch of this cycle (its host was lost)."""
+        self._ready.pop(id(comp), None)
+
     def call_batch(self, host: str, msg: ComponentBatch) -> list[ComponentReply]:
         reply, seconds = self._request(host, msg, "step", msg.calls[0].path)
         self.batches.add(host, seconds)
@@ -383,7 +387,7 @@ class RemoteComponent(Component):
     def _replace(self) -> None:
         """Its host is lost: start the instance again on another host (its code state went with the host)."""
         lost = self.host or ""
-        self.router._ready.pop(id(self), None)  # a step reply batched from the lost host is no longer ours
+        self.router.forget_reply(self)  # a step reply batched from the lost host is no longer ours
         self._place("re-placed", {lost})
         self._ctx.log(f"{self.name} placed again on {self.host}: its host {lost} was lost")
 
