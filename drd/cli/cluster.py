@@ -347,25 +347,29 @@ def run(mission: Path = typer.Argument(..., help="The mission file.", show_defau
         try:
             request = RunMission(source, str(mission), world, speed, until, seed, params or None)
             began = time.monotonic()
-            with _deferred_interrupt() as interrupted:  # a Ctrl-C now would leave the mission running unseen
-                reply = client.bus.call(run_key(client.cluster), request, timeout=max(timeout, 15.0))
-            if not isinstance(reply, RunReply):
-                fail(f"the controller answered a {type(reply).TYPE}")
-            if not reply.ok:
-                for text in reply.diagnostics:
-                    err.print(Text(text))
-                err.print(Text.assemble(("✗ ", "bold red"), f"{mission}: invalid, not run"))
-                raise typer.Exit(INVALID)
-            if detach:
-                out.print(reply.mission)
-                return OK
-            err.print(Text.assemble(("▶ ", "bold green"), f"mission {reply.mission} started on the cluster "
-                                    f"(world {reply.world}, {reply.speed:g}x real time)"))
+            reply: RunReply | None = None
             try:
+                with _deferred_interrupt() as interrupted:  # a Ctrl-C before `follow` would leave the mission unseen
+                    answer = client.bus.call(run_key(client.cluster), request, timeout=max(timeout, 15.0))
+                    if not isinstance(answer, RunReply):
+                        fail(f"the controller answered a {type(answer).TYPE}")
+                    if not answer.ok:
+                        for text in answer.diagnostics:
+                            err.print(Text(text))
+                        err.print(Text.assemble(("✗ ", "bold red"), f"{mission}: invalid, not run"))
+                        raise typer.Exit(INVALID)
+                    reply = answer
+                    if detach:
+                        out.print(reply.mission)
+                        return OK
+                    err.print(Text.assemble(("▶ ", "bold green"), f"mission {reply.mission} started on the cluster "
+                                            f"(world {reply.world}, {reply.speed:g}x real time)"))
                 if interrupted:
                     raise KeyboardInterrupt
                 report = watch.follow(reply.mission, until / speed + 120.0, reply.base, began)
             except KeyboardInterrupt:  # the operator's Ctrl-C stops the mission, not just this command
+                if reply is None:  # before the controller took it: nothing runs
+                    raise
                 report = _stop_on_interrupt(client, watch, reply.mission, reply.base, began)
         finally:
             watch.close()
