@@ -316,3 +316,30 @@ def test_one_scan_per_sim_instant_is_shared_by_its_readers() -> None:
     assert second is not first and laser.scan() is second
     sim.set_door("door_n1", DoorState.CLOSED)
     assert laser.scan() is not second
+
+
+def test_a_reading_is_a_function_of_the_instant_asked_again_early_or_never() -> None:
+    """Sensor noise is seeded per instant: reading twice gives the same answer, and reading or not now changes
+    no later reading (so the cluster's Creator may read ahead of a component's step; motion noise is unaffected)."""
+    people = {"x": (4.0, 3.5)}
+
+    def run(read_now: bool) -> list[object]:
+        sim = Simulation(world_with((ranger_at(4.0, 0, UP),), people=people), seed=3)
+        sim.set_velocity("ranger1", 0.2, 0.0)
+        sim.step(0.1)
+        if read_now:
+            first = (sim.ranges("ranger1", 61, 8.0), sim.camera("ranger1", 1.0, 10.0),
+                     sim.brightness("ranger1", 1.0, 8))
+            assert first == (sim.ranges("ranger1", 61, 8.0), sim.camera("ranger1", 1.0, 10.0),
+                             sim.brightness("ranger1", 1.0, 8))
+        sim.step(0.1)
+        return [sim.ranges("ranger1", 61, 8.0), sim.camera("ranger1", 1.0, 10.0), sim.brightness("ranger1", 1.0, 8),
+                sim.odometry("ranger1")]
+
+    later = run(read_now=True)
+    assert later == run(read_now=False)
+    sim = Simulation(world_with((ranger_at(4.0, 0, UP),), people=people), seed=3)
+    sim.step(0.1)
+    a = sim.ranges("ranger1", 61, 8.0)
+    sim.step(0.1)
+    assert sim.ranges("ranger1", 61, 8.0) != a, "a new instant draws new noise"

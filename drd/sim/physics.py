@@ -1,8 +1,11 @@
 """The 2D simulator behind every `sim` driver: a pymunk space built from a `World`, stepped at a fixed rate.
 
 Pure and seeded: no I/O, no wall clock, no threads. Sim time advances only in `step`, every
-random draw comes from a generator seeded by (seed, robot, sensor), and pymunk is deterministic,
-so the same world, seed and command sequence give bit-identical poses and readings. Drivers
+random draw of the motion comes from a generator seeded by (seed, robot, what), and pymunk is deterministic,
+so the same world, seed and command sequence give bit-identical poses and readings. A sensor reading is a
+function of the world at one instant: its noise is seeded by (seed, robot, sensor, `version`), so asking
+again at the same instant gives the same answer, and asking ahead of need, or not at all, changes no
+other reading (the cluster's Creator reads ahead of a component's step: `drd.daemon.creator`). Drivers
 command robots (`set_velocity`, `launch`, `jump`) and read sensors (`ranges`, `camera`,
 `brightness`, `radio_ok`, `odometry`); `pose`, `intruders` and `trajectory` are ground truth,
 for the report and the picture only.
@@ -59,6 +62,7 @@ class Simulation:
         self.space.damping = 0.0
         self._rays = sensors.RayCaster(self.space)
         self._rngs: dict[tuple[str, str], random.Random] = {}
+        self._reading = random.Random()
         self._heights: dict[pymunk.Shape, float] = {}
         self._doors: dict[str, tuple[DoorState, pymunk.Segment]] = {}
         self._build_static()
@@ -350,11 +354,17 @@ class Simulation:
         return r
 
     def _rng(self, robot_id: str, sensor: str) -> random.Random:
-        """One generator per (robot, sensor): reading one sensor more often never changes another's noise."""
+        """One generator per (robot, what) for the motion (odometry, launches): one robot's moves never change
+        another's."""
         key = (robot_id, sensor)
         if key not in self._rngs:
             self._rngs[key] = random.Random(f"{self.seed}/{robot_id}/{sensor}")  # str seeds hash with SHA-512
         return self._rngs[key]
+
+    def _noise(self, robot_id: str, sensor: str) -> random.Random:
+        """The generator of one reading's noise, seeded by (seed, robot, sensor, version): see the module doc."""
+        self._reading.seed(f"{self.seed}/{robot_id}/{sensor}/{self.version}")  # str seeds hash with SHA-512
+        return self._reading
 
     # ---------------------------------------------------------------- doors and the world
 
@@ -402,14 +412,14 @@ class Simulation:
             raise ValueError(f"need n_beams >= 1 and max_range > 0, got {n_beams} and {max_range}")
         x, y, heading, group = self._sensor_pose(robot_id)
         return sensors.scan(self._rays, (x, y), heading, n_beams, max_range, fov, group,
-                            self._rng(robot_id, "ranges"), self.noise.range)
+                            self._noise(robot_id, "ranges"), self.noise.range)
 
     def camera(self, robot_id: str, fov: float, max_range: float, min_light: float = 0.2) -> list[Detection]:
         """Intruders the robot's camera sees: within `fov` radians and `max_range`, no wall or closed door
         in between, and standing in light of at least `min_light` (a person in a dark corner is not seen)."""
         x, y, heading, _ = self._sensor_pose(robot_id)
         return sensors.detect(self._rays, self.world, (x, y), heading, fov, max_range, min_light,
-                              self.intruders(), self._rng(robot_id, "camera"), self.noise)
+                              self.intruders(), self._noise(robot_id, "camera"), self.noise)
 
     def brightness(self, robot_id: str, fov: float, n_regions: int, max_range: float = 10.0) -> list[float]:
         """Mean light of `n_regions` vertical strips of the camera image, right to left (dark corners show here)."""
@@ -417,7 +427,7 @@ class Simulation:
             raise ValueError(f"need n_regions >= 1, got {n_regions}")
         x, y, heading, _ = self._sensor_pose(robot_id)
         return sensors.brightness(self._rays, self.world, (x, y), heading, fov, n_regions, max_range,
-                                  self._rng(robot_id, "brightness"), self.noise.light)
+                                  self._noise(robot_id, "brightness"), self.noise.light)
 
     def radio_ok(self, scout_id: str, ranger_id: str, range: float) -> bool:
         """Whether a Scout and a Ranger can talk: a radio of `range` metres in the open, shortened by every wall
