@@ -9,6 +9,7 @@ Every process is ours and killed by pid; every wait is bounded.
 
 from __future__ import annotations
 
+import math
 import os
 import signal
 import subprocess
@@ -68,6 +69,21 @@ class Probe(Component):
         return Status.RUNNING
 
 
+class Reader(Component):
+    """Reads the Ranger's sensors each step (the readings the Creator reads ahead); `mode: launch` launches a
+    Scout first, at its second step, and reads the magazine after it."""
+
+    def step(self, now: float) -> Status:
+        ctx = self.ctx
+        assert ctx is not None
+        launcher = self.device("launcher")
+        if ctx.params.get("mode") == "launch" and now >= 2.0 and not ctx.outputs.get("landing"):
+            ctx.outputs["landing"] = launcher.launch(launcher.loaded()[0], 0.0, 1.0) is not None
+        ctx.outputs.update(odometry=self.device("drive").odometry(), scan=list(self.device("ranges").scan().ranges),
+                           fov=self.device("camera").fov, loaded=launcher.loaded())
+        return Status.RUNNING
+
+
 class FakeDrive:
     """A fenced drive that records what reached it (in the Creator's process)."""
 
@@ -94,11 +110,16 @@ def _type(name: str, process: Process = Process.CONTAINER, scheduling: Schedulin
                          needs=(NeedSpec("drive", "Drive"),))
 
 
+READER = ComponentType("Reader", Kind.BEHAVIOR, entry_point=f"{__name__}:Reader", params=(ParamSpec("mode", "str"),),
+                       needs=tuple(NeedSpec(n, t) for n, t in (("drive", "Drive"), ("ranges", "RangeSensor"),
+                                                               ("camera", "Camera"), ("launcher", "Launcher"))))
+
+
 @pytest.fixture(scope="module")
 def catalog_() -> Catalog:
     base = load_catalog()
     return Catalog.of([*base.components.values(), _type("Probe"), _type("Alone", Process.DEDICATED),
-                       _type("Niced", scheduling=Scheduling((0,), 3))])
+                       _type("Niced", scheduling=Scheduling((0,), 3)), READER])
 
 
 @pytest.fixture(scope="module")
@@ -252,6 +273,68 @@ def test_a_new_mission_retires_the_processes_of_the_last_one(creator: Creator) -
     assert (r.outputs or {})["pid"] not in pids
     assert not [pid for pid in pids if _alive(pid)]
     assert [i.name for i in creator.instance_infos()] == ["M/A"]
+
+
+@pytest.fixture
+def simulated(cluster_: Cluster, catalog_: Catalog, pool: WorkerPool) -> Iterator[tuple[Creator, Any, list[Any]]]:
+    """A Creator whose `sim` drivers run on a simulation in this process (as on the simulator host), and the
+    driver requests that come over the pipe (a spy on the Creator's side)."""
+    from drd.sim.service import SimulationService
+
+    service = SimulationService(None, cluster_.name)
+    service.reset("corridor")
+    c = Creator(None, cluster_, "ranger1", catalog_, pool=pool, sim_service=service)
+    asked: list[Any] = []
+    serve = c._device_request
+
+    def spy(worker: Any, req: tuple[Any, ...], answer: bool = True) -> Exception | None:
+        asked.append(req[3])
+        return serve(worker, req, answer)
+    c._device_request = spy  # type: ignore[method-assign]
+    try:
+        yield c, service, asked
+    finally:
+        c.close()
+
+
+READER_BINDINGS = {n: [f"ranger1.{n}", "", ""] for n in ("drive", "ranges", "camera", "launcher")}
+
+
+def test_readings_are_read_ahead_of_a_step_and_equal_those_asked(simulated: tuple[Creator, Any, list[Any]]) -> None:
+    c, service, asked = simulated
+    assert c.handle(ComponentCall("start", MISSION, "M/R", component="Reader", params={"mode": ""}, world="corridor",
+                                  bindings=READER_BINDINGS)).error == ""
+    first = c.handle(ComponentCall("step", MISSION, "M/R", now=1.0))
+    assert first.error == "" and sorted(asked) == ["fov", "loaded", "odometry", "scan"]  # learnt over the pipe
+    sim = service.sim
+    sim.set_velocity("ranger1", 0.5, 0.2)
+    for now in (2.0, 3.0):
+        sim.step(0.1)
+        asked.clear()
+        r = c.handle(ComponentCall("step", MISSION, "M/R", now=now))
+        assert r.error == "" and asked == [], "every reading came with the call"
+        out = r.outputs or {}
+        p = sim.odometry("ranger1")  # readings are a function of the instant: the same asked now
+        assert out["odometry"] == [p.x, p.y, p.heading] and out["odometry"] != (first.outputs or {})["odometry"]
+        assert out["scan"] == sim.ranges("ranger1", 181, 8.0, math.pi)
+        assert out["fov"] == pytest.approx(math.radians(60.0)) and len(out["loaded"]) == 6
+
+
+def test_a_launch_during_a_step_makes_the_readings_read_ahead_stale(
+        simulated: tuple[Creator, Any, list[Any]]) -> None:
+    c, service, asked = simulated
+    c.handle(ComponentCall("start", MISSION, "M/R", component="Reader", params={"mode": "launch"}, world="corridor",
+                           bindings=READER_BINDINGS))
+    before = (c.handle(ComponentCall("step", MISSION, "M/R", now=1.0)).outputs or {})["loaded"]
+    service.sim.step(0.1)
+    asked.clear()
+    r = c.handle(ComponentCall("step", MISSION, "M/R", now=2.0))
+    assert r.error == "" and (r.outputs or {})["landing"] is True
+    assert asked == ["launch", "odometry", "scan", "fov", "loaded"]  # loaded() came ahead, the rest is asked
+    assert (r.outputs or {})["loaded"] == before[1:], "the magazine as it is after the launch"
+    asked.clear()
+    c.handle(ComponentCall("step", MISSION, "M/R", now=3.0))
+    assert "loaded" not in asked
 
 
 # -- against real daemons ---------------------------------------------------------------------------------

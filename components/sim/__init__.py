@@ -33,6 +33,11 @@ class _SimErrors:
 class SimDriver:
     """Base of every sim driver: the device, the robot it belongs to, the simulator and the epoch fence."""
 
+    #: Methods and attributes whose value is a function of the simulated world at one instant (its `version`):
+    #: no side effect, noise seeded per instant. The cluster's Creator reads them ahead of a component's step
+    #: (`drd.daemon.creator`), which then costs no round trip to the component's process.
+    READINGS: frozenset[str] = frozenset()
+
     def __init__(self, device: Device, robot_id: str, sim: Simulation) -> None:
         self.device, self.robot_id, self.sim = device, robot_id, sim
         self.fence = Fence(f"{device.id} ({robot_id})")

@@ -16,6 +16,8 @@ class SimCamera(SimDriver):
     default 640: bearings are reported to the pixel, regions at most one per pixel), `max_range` (m, default
     10), `min_light` (0..1, default 0.2: darker than this, nobody is seen)."""
 
+    READINGS = frozenset({"detections", "brightness", "fov", "resolution", "max_range", "min_light"})
+
     def __init__(self, device: Device, robot_id: str, sim: Simulation) -> None:
         super().__init__(device, robot_id, sim)
         self.fov = math.radians(self.option("fov", 60.0, lambda x: 0 < x < 360))

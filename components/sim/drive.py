@@ -12,6 +12,8 @@ from drd.sim import Simulation
 class SimDrive(SimDriver):
     """A simulated wheeled base. Options: `max_speed` (m/s; without it, only the simulator's wheels limit)."""
 
+    READINGS = frozenset({"odometry", "max_speed"})
+
     def __init__(self, device: Device, robot_id: str, sim: Simulation) -> None:
         super().__init__(device, robot_id, sim)
         self.max_speed = math.inf

@@ -11,6 +11,8 @@ class SimJump(SimDriver):
     """A simulated foot. Options: `max_height` (m, informative: the simulator's obstacle height limit applies),
     `max_distance` (m, default and cap: the simulator's longest hop)."""
 
+    READINGS = frozenset({"max_height", "max_distance"})
+
     def __init__(self, device: Device, robot_id: str, sim: Simulation) -> None:
         super().__init__(device, robot_id, sim)
         self.max_height = self.option("max_height", sim.jump_height)

@@ -14,6 +14,8 @@ from drd.sim.physics import MAX_LAUNCH
 class SimLauncher(SimDriver):
     """A simulated launcher on a Ranger. Options: `max_range` (m, at most the simulator's 30 m)."""
 
+    READINGS = frozenset({"loaded", "max_range"})
+
     def __init__(self, device: Device, robot_id: str, sim: Simulation) -> None:
         super().__init__(device, robot_id, sim)
         self.max_range = min(MAX_LAUNCH, self.option("max_range", MAX_LAUNCH))

@@ -11,6 +11,8 @@ class SimRadioChannel(SimDriver):
     """A simulated radio. Options: `range` (m in the open, default 30). `peer`: the robot at the other end
     by default (a Scout's carrier); if not given, a Scout's Ranger is the one whose magazine it starts in."""
 
+    READINGS = frozenset({"link_ok", "range", "peer"})
+
     def __init__(self, device: Device, robot_id: str, sim: Simulation, peer: str | None = None) -> None:
         super().__init__(device, robot_id, sim)
         self.range = self.option("range", 30.0)

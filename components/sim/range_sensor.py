@@ -18,6 +18,8 @@ class SimRangeSensor(SimDriver):
     object, and the rays are cast once; a new scan is taken when the simulation has changed (`Simulation.version`).
     """
 
+    READINGS = frozenset({"scan", "beams", "max_range", "fov"})
+
     def __init__(self, device: Device, robot_id: str, sim: Simulation) -> None:
         super().__init__(device, robot_id, sim)
         self.beams = int(self.option("beams", 181, lambda x: x >= 1 and x == int(x)))

@@ -54,6 +54,7 @@ from drd.daemon.workers import (
     WorkerPool,
     apply_scheduling,
     device_methods,
+    reading_key,
     scheduling_of,
 )
 from drd.hosts import Cluster
@@ -100,6 +101,9 @@ class Instance:
     state: str = "starting"
     dead: str = ""  # how its process went, once it has
     notes: list[str] = field(default_factory=list)  # scheduling not applied: told in the start reply's logs
+    readings: dict[str, frozenset[str]] = field(default_factory=dict)  # need -> its driver's `READINGS`
+    reads: list[tuple[Any, ...]] = field(default_factory=list)  # readings of its last step: read ahead of the next
+    asked: list[tuple[Any, ...]] = field(default_factory=list)  # readings it asked over the pipe in this step
 
 
 class CreatorError(ValueError):
@@ -122,7 +126,9 @@ class Creator:
         self._sim_service = sim_service  # this host's own SimulationService (drd.sim.service), if it has one
         self._bus = bus
         self._drivers: Any = None
-        self._sim: Any = None
+        self._sim: Any = None  # a RemoteSimulation, when the drivers reach the simulator through requests
+        self._world: Any = None  # the simulation the drivers use (local or remote), for its `version`
+        self._ahead_version: int | None = None  # the world's version when the current run's readings were read
         mine = cluster.host(host)
         self._devices = {d.id for d in mine.devices} | {r.id for r in mine.robots}  # what a need may be bound to
         self._command_errors: list[tuple[str, str]] = []  # (instance path, error) of setpoints that raised
@@ -276,10 +282,14 @@ class Creator:
         if inst0.dead:
             return [ComponentReply(error=f"component process of {first.path} {inst0.dead}")]
         msgs = []
+        aheads: list[dict[tuple[Any, ...], Any] | None] = []
+        self._ahead_version = getattr(self._world, "version", None)
         for call, inst in run:
             self.calls += 1
+            ahead = self._read_ahead(call.path, inst) if call.op == "step" else None
+            aheads.append(ahead)
             msgs.append((call.path, call.op, call.now, call.status, call.shared, call.shared_ids, call.siblings,
-                         call.params if call.op == "start" else None, inst.setup))
+                         call.params if call.op == "start" else None, inst.setup, ahead))
             inst.setup = None
         try:
             raw = self._exchange(worker, ("run", msgs, latest))
@@ -287,8 +297,10 @@ class Creator:
             self._worker_died(worker, str(e))
             return [ComponentReply(error=f"component process of {first.path} {e}")]
         replies = []
-        for (call, inst), (status, outputs, events, logs, shared, deps, error, setup_failed) in zip(run, raw,
-                                                                                                      strict=False):
+        for (call, inst), ahead, (status, outputs, events, logs, shared, deps, error, setup_failed, unused) in zip(
+                run, aheads, raw, strict=False):
+            if ahead is not None or inst.asked:
+                inst.reads = _reads_next(ahead, unused, inst.asked)
             if setup_failed:  # setup raised: the start fails and the instance is forgotten
                 self._forget(call.path)
                 replies.append(ComponentReply(error=error))
@@ -327,40 +339,68 @@ class Creator:
 
     def _device_request(self, worker: Worker, req: tuple[Any, ...], answer: bool = True) -> Exception | None:
         """Run one driver call (or attribute read) of a component in `worker` on its fenced driver; answer it
-        (or, for a setpoint command, return what it raised)."""
+        (or, for a setpoint command, return what it raised). An answer tells the worker when the world changed
+        since its readings were read ahead (a launch): it then asks for the rest of the run's readings."""
         kind, path, need, name = req[:4]
+        args, kwargs = (req[4], req[5]) if len(req) >= 6 else ((), {})
         try:
             inst = self.instances.get(path) if isinstance(path, str) else None
             if inst is None or inst.worker is not worker:
                 raise LookupError(f"no instance {path!r} in this process")
-            fenced = inst.devices.get(need) if isinstance(need, str) else None
-            if fenced is None:
-                raise LookupError(f"{path}: no device for need {need!r} (have: {', '.join(inst.devices) or 'none'})")
-            if not isinstance(name, str) or name.startswith("_"):
-                raise AttributeError(f"{need}: no public attribute {name!r}")
-            if self._sim is not None:
-                self._sim.owner = path
-            target = getattr(fenced, name)
-            if kind in ("dev", "cmd"):
-                args, kwargs = (req[4], req[5]) if len(req) >= 6 else ((), {})
-                result: tuple[str, Any] = ("ok", target(*args, **kwargs))
-            elif callable(target):
-                raise TypeError(f"{need}.{name} is a method: call it")
-            else:
-                result = ("ok", target)
+            if kind != "cmd" and isinstance(need, str) and name in inst.readings.get(need, ()):
+                key = reading_key(kind, need, name, args, kwargs)
+                if key is not None and key not in inst.asked:
+                    inst.asked.append(key)
+            result: tuple[Any, ...] = ("ok", self._device_value(inst, path, kind, need, name, args, kwargs))
         except Exception as e:  # the component sees the driver's exception, as it would in process
             if not answer:
                 return e
             result = ("raise", e)
         if not answer:
             return None
+        changed: tuple[str, ...] = ()
+        if self._ahead_version is not None and getattr(self._world, "version", None) != self._ahead_version:
+            changed, self._ahead_version = ("changed",), None
         try:
-            worker.send(result)
+            worker.send((*result, *changed))
         except (pickle.PicklingError, TypeError, AttributeError) as e:
             what = f"{type(result[1]).__name__}: {result[1]}" if result[0] == "raise" else "its result"
             worker.send(("raise", RuntimeError(f"{need}.{name}: {what} cannot be sent to the component process"
-                                               f" ({e})")))
+                                               f" ({e})"), *changed))
         return None
+
+    def _device_value(self, inst: Instance, path: str, kind: str, need: Any, name: Any, args: Any,
+                      kwargs: Any) -> Any:
+        """A driver call (`dev`, `cmd`) or attribute read (`attr`) of instance `path` on its fenced driver."""
+        fenced = inst.devices.get(need) if isinstance(need, str) else None
+        if fenced is None:
+            raise LookupError(f"{path}: no device for need {need!r} (have: {', '.join(inst.devices) or 'none'})")
+        if not isinstance(name, str) or name.startswith("_"):
+            raise AttributeError(f"{need}: no public attribute {name!r}")
+        if self._sim is not None:
+            self._sim.owner = path
+        target = getattr(fenced, name)
+        if kind in ("dev", "cmd"):
+            return target(*args, **kwargs)
+        if callable(target):
+            raise TypeError(f"{need}.{name} is a method: call it")
+        return target
+
+    def _read_ahead(self, path: str, inst: Instance) -> dict[tuple[Any, ...], Any] | None:
+        """The readings `inst` made in its last step, read now for this one (`READINGS` of the `sim` drivers: a
+        function of the world's instant, so reading ahead changes nothing); each saves a pipe round trip. One
+        that raises is left out: asked over the pipe, it raises there as it would have."""
+        inst.asked = []
+        if not inst.reads or self._ahead_version is None:
+            return None
+        ahead: dict[tuple[Any, ...], Any] = {}
+        for key in inst.reads:
+            kind, need, name, args, kwargs = key
+            try:
+                ahead[key] = self._device_value(inst, path, kind, need, name, args, dict(kwargs))
+            except Exception:
+                continue
+        return ahead or None
 
     # -- processes ----------------------------------------------------------------------------------------
 
@@ -505,7 +545,7 @@ class Creator:
         self._retire_all()
         self.instances.clear()
         self.mission = mission
-        self._drivers = self._sim = None
+        self._drivers = self._sim = self._world = None
         self._dirty = True
 
     def _drivers_for(self, world: str) -> Any:
@@ -524,6 +564,7 @@ class Creator:
             else:
                 sim = None
             self._drivers = drivers_for(self.cluster, self.host, sim, catalog=self.catalog)
+            self._world = sim
         return self._drivers
 
     def _check(self, call: ComponentCall) -> ComponentType:
@@ -555,6 +596,7 @@ class Creator:
         devices: dict[str, Fenced] = {}
         methods: dict[str, list[str]] = {}
         commands: dict[str, list[str]] = {}  # setpoints: sent by the worker without waiting for an answer
+        readings: dict[str, frozenset[str]] = {}
         rank = (int((call.rank or [0, 0])[0]), int((call.rank or [0, 0])[1]))
         holder: dict[str, Instance] = {}
         for need, (rid, robot, part) in bindings.items():
@@ -563,12 +605,13 @@ class Creator:
             if driver is not None:
                 devices[need] = Fenced(driver, _epoch_of(holder, need), self.arbiter, rank, call.path)
                 methods[need] = device_methods(driver)
+                readings[need] = frozenset(getattr(driver, "READINGS", ()))
                 commands[need] = [m for m in methods[need] if is_command(getattr(driver, m))]
         worker, notes = self._place(ct)
         assert ct.entry_point is not None
         new = Instance(call.component, bindings, worker, devices,
                        setup=(ct.entry_point, {n: b[0] for n, b in bindings.items()}, methods, commands),
-                       notes=notes)
+                       notes=notes, readings=readings)
         holder["it"] = new
         self.instances[call.path] = new
         worker.instances.add(call.path)
@@ -597,6 +640,19 @@ class Creator:
         except Exception as e:  # a driver could not be built, no worker could start: this call fails, we go on
             log.warning("creator %s: %s of %s failed: %s", self.host, query.payload.op, query.payload.path, e)
             return ComponentReply(error=f"{type(e).__name__}: {e}")
+
+
+#: At most this many readings of one instance are read ahead of its step.
+MAX_AHEAD = 32
+
+
+def _reads_next(ahead: dict[tuple[Any, ...], Any] | None, unused: Any,
+                asked: list[tuple[Any, ...]]) -> list[tuple[Any, ...]]:
+    """What to read ahead of an instance's next step: what it read in this one, from ahead (all but `unused`)
+    or over the pipe (`asked`)."""
+    left = {tuple(k) for k in unused} if isinstance(unused, list) else set()
+    reads = [k for k in ahead or () if k not in left]
+    return (reads + [k for k in asked if k not in (ahead or {})])[:MAX_AHEAD]
 
 
 def behavior_modules(catalog: Catalog) -> list[str]:

@@ -19,6 +19,10 @@ arbitration of actuator commands and the simulator.
   answered `("ok", value)` or `("raise", exception)`, and ends with `("done", replies)`. `("drop", paths)`
   forgets instances (no answer). What comes from a worker is unpickled with `PlainUnpickler`: plain data
   only (no class is ever looked up), so a component cannot make the Creator build an object.
+- Readings ahead: a step call may carry the readings its instance made in its previous step, read again by
+  the Creator just before (the `READINGS` of the `sim` drivers, a function of the world's instant); the
+  proxy serves those without a round trip. An answer with a third element (`"changed"`) says the world
+  changed since (a launch): the rest of the run asks for every reading.
 - A worker that dies, or does not answer within `call_timeout` (it is then killed), raises `WorkerDied`
   with its exit code; the Creator fails the calls of its instances and takes another worker.
 
@@ -399,13 +403,46 @@ def device_methods(driver: object) -> list[str]:
 # -- the worker's side ----------------------------------------------------------------------------------
 
 
+def reading_key(kind: str, need: str, name: str, args: Sequence[Any] = (),
+                kwargs: dict[str, Any] | None = None) -> tuple[Any, ...] | None:
+    """How a reading read ahead is named, the same on both ends of the pipe; None if its arguments are not
+    hashable (it is then always asked)."""
+    key = (kind, need, name, tuple(args), tuple(sorted(kwargs.items())) if kwargs else ())
+    try:
+        hash(key)
+    except TypeError:
+        return None
+    return key
+
+
 class _Link:
-    """The worker's end of the pipe, for driver requests made from inside a call."""
+    """The worker's end of the pipe, for driver requests made from inside a call, and the readings the Creator
+    read ahead of the call (`ahead`, see `drd.daemon.creator.Creator._read_ahead`)."""
 
     def __init__(self, conn: Connection) -> None:
         self.conn = conn
         self._poll = select.poll()
         self._poll.register(conn.fileno(), select.POLLIN)
+        self.ahead: dict[tuple[Any, ...], Any] = {}
+        self.used: set[tuple[Any, ...]] = set()
+        self.changed = False  # the world changed during this run: what was read ahead of it is stale
+
+    def begin(self, ahead: dict[tuple[Any, ...], Any] | None) -> None:
+        """A call starts, with the readings read ahead of it (none once the world changed in this run)."""
+        self.ahead = {} if self.changed or ahead is None else ahead
+        self.used = set()
+
+    def unused(self) -> list[tuple[Any, ...]]:
+        """The call is over: the readings read ahead that it did not use."""
+        left = [k for k in self.ahead if k not in self.used]
+        self.ahead = {}
+        return left
+
+    def _ahead(self, key: tuple[Any, ...] | None, once: bool) -> tuple[bool, Any]:
+        if key is None or key not in self.ahead:
+            return False, None
+        self.used.add(key)
+        return True, self.ahead.pop(key) if once else self.ahead[key]
 
     def send(self, msg: Any) -> None:
         self.conn.send_bytes(pickle.dumps(msg, _PROTOCOL))
@@ -416,13 +453,26 @@ class _Link:
         except (pickle.PicklingError, TypeError, AttributeError) as e:
             raise TypeError(f"a driver call takes plain data only: {e}") from None
         _spin(self._poll)  # the Creator answers a reading in ~0.1 ms: do not fall asleep for it
-        kind, value = pickle.loads(self.conn.recv_bytes())
+        kind, value, *changed = pickle.loads(self.conn.recv_bytes())
+        if changed:
+            self.changed, self.ahead = True, {}
         if kind == "raise":
             raise value
         return value
 
     def call(self, path: str, need: str, method: str, *args: Any, **kwargs: Any) -> Any:
+        if self.ahead:  # a method's result is used once (the component may change it); the next call asks
+            found, value = self._ahead(reading_key("dev", need, method, args, kwargs), once=True)
+            if found:
+                return value
         return self.request(("dev", path, need, method, args, kwargs))
+
+    def attr(self, path: str, need: str, name: str) -> Any:
+        if self.ahead:
+            found, value = self._ahead(reading_key("attr", need, name), once=False)
+            if found:
+                return value
+        return self.request(("attr", path, need, name))
 
     def command(self, path: str, need: str, method: str, *args: Any, **kwargs: Any) -> None:
         """A setpoint: sent without waiting (it returns nothing; a refusal fails the step when it ends)."""
@@ -452,7 +502,7 @@ class DeviceProxy:
             return functools.partial(self._link.command, self._path, self._need, name)
         if name in self._methods:
             return functools.partial(self._link.call, self._path, self._need, name)
-        return self._link.request(("attr", self._path, self._need, name))
+        return self._link.attr(self._path, self._need, name)
 
     def __repr__(self) -> str:
         return f"DeviceProxy({self._path}:{self._need})"
@@ -508,14 +558,17 @@ def run_calls(calls: Sequence[tuple[Any, ...]], latest: dict[str, Any], link: _L
     """Run calls in order, as `Creator.handle_batch` did in process: stop after one that emitted events,
     changed dependencies or failed; chain shared dicts (`shared_ids`) through `latest`.
 
-    A call is `(path, op, now, status, shared, shared_ids, siblings, params, setup)`; `setup` is
-    `(entry_point, resources, {need: methods})` for a new instance. A reply is
-    `(status, outputs, events, logs, shared, dependencies, error, setup_failed)`."""
+    A call is `(path, op, now, status, shared, shared_ids, siblings, params, setup, ahead)`; `setup` is
+    `(entry_point, resources, {need: methods})` for a new instance, `ahead` the readings read ahead of it
+    (`{reading_key: value}`, or None). A reply is
+    `(status, outputs, events, logs, shared, dependencies, error, setup_failed, unused)`, `unused` the keys of
+    `ahead` the call did not use."""
     from drd.runtime.component import Status
     from drd.runtime.records import plain
 
     replies: list[tuple[Any, ...]] = []
-    for path, op, now, status, shared, ids, siblings, params, setup in calls:
+    link.changed = False
+    for path, op, now, status, shared, ids, siblings, params, setup, ahead in calls:
         if shared is not None and ids:
             for name, ref in ids.items():
                 if ref in latest and name in shared:
@@ -525,13 +578,13 @@ def run_calls(calls: Sequence[tuple[Any, ...]], latest: dict[str, Any], link: _L
             try:
                 h = _setup(path, setup, params, link)
             except Exception as e:  # a failed start: the Creator forgets the instance
-                replies.append(("", None, [], [], None, [], f"{type(e).__name__}: {e}", True))
+                replies.append(("", None, [], [], None, [], f"{type(e).__name__}: {e}", True, []))
                 break
             hosted[path] = h
         elif op == "start" and h is not None:
             h.ctx.params, h.ctx.outputs = dict(params or {}), {}
         if h is None:
-            replies.append(("", None, [], [], None, [], f"no instance {path} in worker {os.getpid()}", False))
+            replies.append(("", None, [], [], None, [], f"no instance {path} in worker {os.getpid()}", False, []))
             break
         h.now = now
         services = h.ctx.services
@@ -539,6 +592,7 @@ def run_calls(calls: Sequence[tuple[Any, ...]], latest: dict[str, Any], link: _L
         services["siblings"] = siblings if siblings is not None else {}
         result = ""
         error = ""
+        link.begin(ahead)
         try:
             if op == "step":
                 result = str(h.comp.step(now))
@@ -555,7 +609,7 @@ def run_calls(calls: Sequence[tuple[Any, ...]], latest: dict[str, Any], link: _L
         except Exception as e:  # component code is not ours to trust: the state fails, the worker goes on
             error = f"component raised {type(e).__name__}: {e}"
         out_shared = plain(services["shared"])
-        reply = (result, plain(h.ctx.outputs), h.events, h.logs, out_shared, h.deps, error, False)
+        reply = (result, plain(h.ctx.outputs), h.events, h.logs, out_shared, h.deps, error, False, link.unused())
         h.events, h.logs, h.deps = [], [], []
         replies.append(reply)
         if ids:
