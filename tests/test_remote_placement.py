@@ -148,3 +148,32 @@ def test_a_component_bound_to_devices_is_never_moved() -> None:
     with pytest.raises(HostDown):
         comp.step(0.1)
     assert hosts.calls == []
+
+
+def test_the_cycles_simulation_step_rides_on_a_batch_to_the_simulator_host_else_goes_alone() -> None:
+    from types import SimpleNamespace
+
+    steps: list[float] = []
+
+    def step_sim(dt: float) -> Any:
+        steps.append(dt)
+        return SimpleNamespace(time=1.5, version=42)
+
+    router = ComponentRouter(LocalBus(), "t", {}, "controller", node=lambda path: None, local={}, mission="m",
+                             world="corridor", dead=lambda h: h == "gone")
+    router.simulator, router.step_sim = "ranger1", step_sim
+    router.pending_step = 0.1
+    assert router.step_first("ranger1") == 0.1 and steps == [] and router.pending_step == 0.0  # carried
+    assert router.step_first("ranger1") == 0.0 and steps == []  # once per cycle
+    router.pending_step = 0.1
+    assert router.step_first("ranger2") == 0.0 and steps == [0.1]  # made alone, before the call
+    assert (router.sim_time, router.sim_version) == (1.5, 42)
+    router.simulator, router.pending_step = "gone", 0.1
+    assert router.step_first("gone") == 0.0 and steps == [0.1, 0.1]  # a down simulator host carries nothing
+
+    def down(dt: float) -> Any:
+        raise TimeoutError("no answer")
+    router.step_sim, router.pending_step = down, 0.1
+    with pytest.raises(ComponentError, match="the simulator did not step: no answer"):
+        router.step_first(None)
+    assert isinstance(router.sim_error, TimeoutError)

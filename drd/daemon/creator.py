@@ -207,6 +207,7 @@ class Creator:
         latest: dict[str, Any] = {}  # shared dict id on the controller -> its value after the last step
         with self._lock:
             owners: dict[str, int] = {}
+            stepped = self._step_world(batch.sim_step) if batch.sim_step else None
             try:
                 calls, i = batch.calls, 0
                 while i < len(calls):
@@ -244,7 +245,21 @@ class Creator:
                         replies[at] = ComponentReply(r.status, r.outputs, r.events, r.logs, r.shared, r.dependencies,
                                                     error)
                 self._publish()
-        return ComponentBatchReply(replies)
+        if stepped is None:
+            return ComponentBatchReply(replies)
+        return ComponentBatchReply(replies, stepped.time, stepped.version)
+
+    def _step_world(self, dt: float) -> Any:
+        """The cycle's simulation step, carried by the batch (`ComponentBatch.sim_step`): this host must serve the
+        simulation. A RemoteSimulation of this process learns the new time and version from it."""
+        if self._sim_service is None:
+            raise CreatorError(f"{self.host} serves no simulation: a batch cannot step it")
+        from drd.sim.service import SimRequest
+
+        reply = self._sim_service.handle(SimRequest("step", dt=dt))
+        if self._sim is not None:
+            self._sim.sync(reply.time, reply.version)
+        return reply
 
     def _flush_sim(self) -> list[tuple[str, str]]:
         """Send the actuator commands the drivers queued (one request): [(instance path, error)] of refusals, with
@@ -263,7 +278,7 @@ class Creator:
             raise CreatorError(f"unknown op {call.op!r}: use {', '.join(OPS)}")
         if call.mission != self.mission:
             self._new_mission(call.mission)
-        if self._sim is not None and call.sim_version >= 0:
+        if self._sim is not None and call.sim_version > self._sim.version:  # a batch that stepped knows better
             self._sim.sync(call.sim_time, call.sim_version)
         inst = self.instances.get(call.path)
         if call.op == "start":

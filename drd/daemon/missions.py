@@ -6,9 +6,11 @@ from the wire is never trusted) and answers a `RunReply`: the mission id, or the
 (rendered as `missionctl validate` prints them) when the mission is invalid.
 
 A valid mission runs in lockstep with the simulator, on a thread of its own (`MissionRun`): each control
-cycle (0.1 s of sim time) it asks the simulator host to step (`drd.sim.service`), sets the executive's clock
-to the simulation's time from the reply, then steps the executive under the daemon's lock; components on
-other hosts are stepped through their Creators (`drd.runtime.remote`). `speed` caps the pace at that multiple
+cycle (0.1 s of sim time) the simulation steps, then the executive steps under the daemon's lock, its clock
+at the simulation's new time; components on other hosts are stepped through their Creators
+(`drd.runtime.remote`). The step is made just before the cycle's first call to another host: carried by
+that call when it is a batch to the simulator host (one round trip for both), else asked of the simulator
+(`drd.sim.service`) on its own. `speed` caps the pace at that multiple
 of real time. Records go out on `drd/<cluster>/mission/<id>/record` as for every mission of the executive.
 One cluster mission runs at a time: the simulator holds one world.
 """
@@ -220,6 +222,8 @@ class MissionRunner:
                                      mission=mid, world=path.stem, timeout=CALL_TIMEOUT, dead=self.host_down,
                                      catalog=self.catalog, place=self.place if self.host_views else None)
             router.sim_time, router.sim_version = reset.time, reset.version
+            router.step_sim = lambda dt: self.sim(SimRequest("step", dt=dt))
+            router.simulator = self.simulator if self.sim_service is None else ""  # a batch there steps it
             run = MissionRun(self, mid, router, req)
             self.current, self.lost = run, []
             executive.submit(chart, mid, registry=router.registry())
@@ -270,13 +274,12 @@ class MissionRun:
         self.req = req
         self.stopping = threading.Event()
         self.cycles = 0
-        self.sim_seconds = 0.0
         self.thread = threading.Thread(target=self._loop, name=f"drd-mission-{mission}", daemon=True)
 
     def _loop(self) -> None:
         runner, req = self.runner, self.req
         start = time.perf_counter()
-        sim_time = 0.0
+        sim_time = max(0.0, self.router.sim_time)
         profile_path = os.environ.get("DRD_PROFILE", "")  # cProfile of this loop, dumped to path.controller
         prof = cProfile.Profile() if profile_path else None
         if prof is not None:
@@ -289,19 +292,22 @@ class MissionRun:
                         break
                 if runner.lost:
                     runner._lose_robots()
-                t0 = time.perf_counter()
-                try:
-                    reply = runner.sim(SimRequest("step", dt=CONTROL_PERIOD))
-                except Exception as e:
-                    with runner.lock:
-                        interp.stop(f"the simulator on {runner.simulator} stopped answering: {e}")
-                    break
-                self.sim_seconds += time.perf_counter() - t0
-                sim_time = reply.time
                 with runner.lock:
-                    self.router.sim_time, self.router.sim_version = reply.time, reply.version
-                    runner.clock.set_sim(reply.time)
+                    # the world steps before the cycle's first call (carried by a batch to the simulator host,
+                    # see ComponentRouter.step_first); the executive's clock reads the time it will then have
+                    self.router.pending_step = CONTROL_PERIOD
+                    runner.clock.set_sim(sim_time + CONTROL_PERIOD)
                     runner.controller.executive.step()
+                    if self.router.pending_step and self.router.sim_error is None:  # no call this cycle
+                        try:
+                            self.router.step_first(None)
+                        except ComponentError:
+                            pass
+                    if self.router.sim_error is not None:
+                        interp.stop(f"the simulator on {runner.simulator} stopped answering: {self.router.sim_error}")
+                        break
+                    sim_time = self.router.sim_time
+                    runner.clock.set_sim(sim_time)
                     if not interp.finished and sim_time >= req.until:
                         interp.stop(f"sim time limit of {req.until:g} s reached")
                 self.cycles += 1
@@ -330,10 +336,10 @@ class MissionRun:
             interp = runner.controller.executive.missions.get(self.mission)
             outcome = (interp.outcome, interp.reason) if interp is not None else (None, "")
         log.info("mission %s ended %s (%s)", self.mission, *outcome)
-        log.info("mission %s ended: %.1f s sim in %.2f s wall (%.1fx), %d cycles (%.2f ms each), sim step %.2f ms, "
-                 "component steps %s, step batches %s, other lifecycle calls %s", self.mission, sim_time, wall,
-                 sim_time / wall if wall else 0.0, self.cycles, 1000 * wall / max(1, self.cycles),
-                 1000 * self.sim_seconds / max(1, self.cycles), stats, self.router.batches.as_dict(),
+        log.info("mission %s ended: %.1f s sim in %.2f s wall (%.1fx), %d cycles (%.2f ms each), sim steps not "
+                 "carried by a batch %s, component steps %s, step batches %s, other lifecycle calls %s", self.mission,
+                 sim_time, wall, sim_time / wall if wall else 0.0, self.cycles, 1000 * wall / max(1, self.cycles),
+                 self.router.steps_alone.as_dict(), stats, self.router.batches.as_dict(),
                  self.router.stats.seconds and round(self.router.stats.seconds * 1000 / max(1, self.cycles), 3))
 
 

@@ -85,16 +85,23 @@ class ComponentBatch(Message):
     Dependency Database or failed to run: the controller must react to that before the next step (an event
     may exit the components that come later), so those are stepped again by a later call. `shared_ids` of
     each call name the shared dicts that are one object on the controller, so a later step of the batch
-    sees what an earlier one left in them, as it would over single calls."""
+    sees what an earlier one left in them, as it would over single calls.
+
+    `sim_step` (seconds), on a batch to the simulator host: step the simulation by that much before the calls
+    (the cycle's step, carried by its first batch: one round trip less per cycle)."""
 
     calls: list[ComponentCall]
+    sim_step: float = 0.0
 
 
 @message("drd.component.batch-reply", 1)
 class ComponentBatchReply(Message):
-    """One reply per call that ran, in order (a prefix of the batch's calls)."""
+    """One reply per call that ran, in order (a prefix of the batch's calls); the simulation's time and version
+    after the step, when the batch carried one."""
 
     replies: list[ComponentReply]
+    sim_time: float = -1.0
+    sim_version: int = -1
 
 
 class ComponentError(Exception):
@@ -158,12 +165,39 @@ class ComponentRouter:
         self.gone: set[str] = set()
         self.sim_time = -1.0
         self.sim_version = -1
+        # The cycle's simulation step is made before its first call, by `step_first`: carried by a batch to the
+        # simulator host when that is another host (`simulator`), else made at once by `step_sim(dt)`.
+        self.simulator = ""
+        self.step_sim: Callable[[float], Any] | None = None
+        self.pending_step = 0.0
+        self.sim_error: Exception | None = None  # the simulator did not answer a step: the mission must stop
+        self.steps_alone = RouterStats()
         self.stats = RouterStats()
         self.batches = RouterStats()  # one per host per cycle when nothing interrupts the cycle
         self._ready: dict[int, tuple[float, ComponentReply]] = {}  # id(component) -> (now, its step's reply)
 
     def is_down(self, host: str) -> bool:
         return host in self.gone or self.dead(host)
+
+    def step_first(self, host: str | None) -> float:
+        """Make the cycle's pending simulation step before a call to `host`: returns the seconds a batch to the
+        simulator host carries (it steps the world first), else 0.0 once the step is made. ComponentError if
+        the simulator did not answer (`sim_error` says so to the mission loop)."""
+        dt, self.pending_step = self.pending_step, 0.0
+        if not dt:
+            return 0.0
+        if host and host == self.simulator and not self.is_down(host):
+            return dt
+        assert self.step_sim is not None, "a pending step needs step_sim"
+        t0 = time.perf_counter()
+        try:
+            reply = self.step_sim(dt)
+        except Exception as e:
+            self.sim_error = e
+            raise ComponentError(f"the simulator did not step: {e}") from None
+        self.steps_alone.add("simulator", time.perf_counter() - t0)
+        self.sim_time, self.sim_version = reply.time, reply.version
+        return 0.0
 
     def param_names(self, component: str) -> set[str] | None:
         """The parameters the manifest declares (what a call may carry), or None if unknown."""
@@ -224,10 +258,16 @@ class ComponentRouter:
         ready = self._ready.pop(id(comp), None)
         if ready is not None and ready[0] == now:
             return ready[1]
-        group = comp.followers()
-        msg = ComponentBatch([c.message("step", now=now) for c in group])
         assert comp.host is not None
-        replies = self.call_batch(comp.host, msg)
+        dt = self.step_first(comp.host)
+        group = comp.followers()
+        msg = ComponentBatch([c.message("step", now=now) for c in group], dt)
+        try:
+            replies = self.call_batch(comp.host, msg)
+        except HostDown as e:
+            if dt:  # the simulator's host did not answer: the world did not step
+                self.sim_error = e
+            raise
         for c, reply in zip(group[1:], replies[1:], strict=False):
             self._ready[id(c)] = (now, reply)
         return replies[0]
@@ -241,6 +281,8 @@ class ComponentRouter:
         self.batches.add(host, seconds)
         if not isinstance(reply, ComponentBatchReply) or not reply.replies:
             raise ComponentError(f"{host} answered a step batch with a {type(reply).TYPE}")
+        if msg.sim_step and reply.sim_version >= 0:
+            self.sim_time, self.sim_version = reply.sim_time, reply.sim_version
         for _ in reply.replies:
             self.stats.calls += 1  # component steps, for the figures (one round trip carried them all)
             self.stats.by_host[host] = self.stats.by_host.get(host, 0) + 1
@@ -460,6 +502,7 @@ class RemoteComponent(Component):
 
     def _call(self, op: str, **fields: Any) -> ComponentReply:
         assert self.host is not None
+        self.router.step_first(None)
         msg = self.message(op, **fields)
         reply = self.router.call(self.host, msg)
         self._apply(reply)

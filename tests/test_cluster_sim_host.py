@@ -1,0 +1,55 @@
+"""The corridor mission to its end on a real cluster laid out as the repository's hosts.yaml: the simulator on
+ranger1, beside the devices it serves (plus a spare worker). Each cycle's simulation step then rides on the
+cycle's first step batch to ranger1 (`ComponentRouter.step_first`) and the Creator reads the simulation in its
+own process. The result is compared with the embedded dry-run of the same files. Every process is ours and
+killed by pid (`tests/cluster_support.py`).
+"""
+
+from __future__ import annotations
+
+import json
+import re
+import time
+from collections.abc import Iterator
+
+import pytest
+from cluster_support import ROOT, DaemonCluster, serving_cluster
+from test_cluster_run import MISSION, NAMES, corridor_hosts, missionctl
+
+SPEED = "50"
+UNTIL = "300"
+
+
+@pytest.fixture(scope="module")
+def cluster(tmp_path_factory: pytest.TempPathFactory) -> Iterator[DaemonCluster]:
+    with serving_cluster(tmp_path_factory.mktemp("cluster_sim_host"), NAMES,
+                         lambda c: corridor_hosts(c, simulator="ranger1")) as c:
+        yield c
+
+
+def test_the_corridor_mission_runs_on_the_cluster_as_in_the_dry_run(cluster: DaemonCluster) -> None:
+    from drd.dryrun import run as dry_run
+    from drd.hosts import load_hosts
+    from drd.manifests import load_catalog
+    from drd.sim.world import load_world
+    from dsl import compile_file
+
+    cat = load_catalog()
+    expected = dry_run(compile_file(ROOT / MISSION, cat).statechart, load_hosts(ROOT / "hosts.yaml", cat),
+                       load_world(ROOT / "worlds" / "corridor.yaml"), cat, until=float(UNTIL))
+    t0 = time.monotonic()
+    r = missionctl(cluster, "run", MISSION, "--speed", SPEED, "--until", UNTIL, "--json", timeout=150)
+    wall = time.monotonic() - t0
+    assert r.returncode == (0 if expected.outcome == "success" else 1), r.stdout[:300] + r.stderr[-3000:]
+    report = json.loads(r.stdout)
+    assert report["outcome"] == (expected.outcome or "stopped")
+    # Same behaviors, same world: the open doors are found and Scouts launched (the order in which the
+    # RoomSurveillance instances take turns on the Ranger may differ, so the counts are compared loosely).
+    assert report["doors"] and report["doors"][0]["at"] < 30
+    assert {round(d["x"]) for d in report["doors"]} <= {round(d["x"]) for d in expected.doors} | {None}
+    if expected.scouts:
+        assert report["scouts"], "Scouts launched"
+    assert report["sim_time"] > 0 and wall < 100
+    ended = [line for line in cluster.log("controller").splitlines() if " ended: " in line]
+    assert ended and re.search(r"sim steps not carried by a batch \{'calls': 0,", ended[-1]), \
+        "every cycle's step rode on a batch to ranger1"
