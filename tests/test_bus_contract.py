@@ -263,6 +263,18 @@ def test_request_collects_replies_from_every_queryable(pair: Pair) -> None:
     assert pair.b.call("svc/y/echo", Chat("one")) in (Chat("by:one"), Chat("b*:one"))
 
 
+def test_a_queryable_declared_after_the_first_request_is_reached_and_a_wildcard_serves_many_keys(
+        pair: Pair) -> None:
+    assert pair.a.request("svc/late/echo", Chat("x"), timeout=0.3) == []
+    pair.b.serve("svc/late/echo", echo("late"))
+    served(pair.a, "svc/late/echo")
+    assert pair.a.call("svc/late/echo", Chat("hi"), timeout=2.0) == Chat("late:hi")
+    pair.b.serve("svc/many/*", echo("m"))
+    served(pair.a, "svc/many/0")
+    for i in range(80):
+        assert pair.a.call(f"svc/many/{i}", Chat(str(i)), timeout=2.0) == Chat(f"m:{i}")
+
+
 def test_request_without_queryable_and_without_payload(pair: Pair) -> None:
     assert pair.a.request("svc/nobody", Chat("x"), timeout=0.5) == []
     with pytest.raises(BusTimeout):
