@@ -177,3 +177,30 @@ def test_the_cycles_simulation_step_rides_on_a_batch_to_the_simulator_host_else_
     with pytest.raises(ComponentError, match="the simulator did not step: no answer"):
         router.step_first(None)
     assert isinstance(router.sim_error, TimeoutError)
+
+
+@pytest.mark.parametrize("steps", [True, False])
+def test_a_batch_that_carries_the_step_brings_the_new_time_or_stops_the_cycle(steps: bool) -> None:
+    bus, seen = LocalBus(), []
+
+    def creator(query: Query) -> Message:
+        msg = query.payload
+        assert isinstance(msg, ComponentBatch)
+        seen.append(msg.sim_step)
+        replies = [ComponentReply(status="running") for _ in msg.calls]
+        return ComponentBatchReply(replies, 2.0, 7) if steps else ComponentBatchReply(
+            [ComponentReply(error="ValueError: no simulation is running")])
+    bus.serve("drd/t/host/a/creator", creator)
+    router = ComponentRouter(bus, "t", {"a.drive": "a"}, "controller", node=lambda path: None, local={},
+                             mission="m", world="corridor")
+    router.simulator, router.pending_step = "a", 0.1
+    comp = RemoteComponent("FollowCorridor", router)
+    comp.setup(Context("M/F", {}, {}, lambda ev, **f: None, lambda s: None, lambda: 0.0))
+    comp.host = "a"
+    if steps:
+        assert comp.step(0.1) is Status.RUNNING
+        assert seen == [0.1] and (router.sim_time, router.sim_version) == (2.0, 7) and router.sim_error is None
+    else:
+        with pytest.raises(ComponentError, match="a did not step the simulation: ValueError: no simulation"):
+            comp.step(0.1)
+        assert isinstance(router.sim_error, ComponentError), "the mission loop stops the mission"

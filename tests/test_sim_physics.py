@@ -343,3 +343,11 @@ def test_a_reading_is_a_function_of_the_instant_asked_again_early_or_never() -> 
     a = sim.ranges("ranger1", 61, 8.0)
     sim.step(0.1)
     assert sim.ranges("ranger1", 61, 8.0) != a, "a new instant draws new noise"
+
+
+def test_a_step_of_dt_adds_exactly_dt_to_the_time_as_a_lockstep_clock_does() -> None:
+    sim, t = Simulation(CORRIDOR, seed=1), 0.0
+    for _ in range(30):  # 0.1 s in two sub-steps of 0.05 s: summed, they drift from t + 0.1 by an ulp
+        sim.step(0.1)
+        t += 0.1
+        assert sim.time == t

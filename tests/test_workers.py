@@ -404,3 +404,17 @@ def test_missionctl_tune_finds_the_instance_and_tunes_its_process(tmp_path: Path
         os.kill(c.pid("ranger1"), signal.SIGTERM)  # a clean stop kills its workers
         c.procs["ranger1"].wait(20)
         eventually(lambda: not [pid for pid in children if _alive(pid)], "ranger1's processes to be gone", 10.0)
+
+
+def test_a_setpoint_that_changes_readings_at_once_is_answered_a_velocity_is_not() -> None:
+    """A hop changes what the sensors read within the step, so it is sent and answered (the answer says the
+    world changed); a velocity takes effect at the next step, so it goes without waiting."""
+    from drd.daemon.creator import setpoints
+    from drd.hw.drivers import drivers_for
+    from drd.sim import Simulation, load_world
+
+    catalog = load_catalog()
+    sim = Simulation(load_world(ROOT / "worlds" / "corridor.yaml"))
+    drivers = drivers_for(load_hosts(ROOT / "hosts.yaml", catalog), "ranger1", sim, catalog=catalog)
+    assert setpoints(drivers.robots["scout1"]["foot"]) == []
+    assert setpoints(drivers.robots["scout1"]["wheels"]) == ["set_velocity", "stop"]

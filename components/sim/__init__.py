@@ -37,6 +37,9 @@ class SimDriver:
     #: no side effect, noise seeded per instant. The cluster's Creator reads them ahead of a component's step
     #: (`drd.daemon.creator`), which then costs no round trip to the component's process.
     READINGS: frozenset[str] = frozenset()
+    #: Setpoint commands that change what the sensors read at once (a hop), not at the next step as a velocity
+    #: does: a component's process sends them and waits for the answer, which says the world changed.
+    CHANGES_READINGS: frozenset[str] = frozenset()
 
     def __init__(self, device: Device, robot_id: str, sim: Simulation) -> None:
         self.device, self.robot_id, self.sim = device, robot_id, sim

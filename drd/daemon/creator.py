@@ -237,6 +237,11 @@ class Creator:
                     if refused:
                         replies.append(ComponentReply(error=refused))
                         break
+            except Exception as e:  # the world stepped: the reply must still say so, or the controller is behind
+                if stepped is None:
+                    raise
+                log.warning("creator %s: a step batch failed after its simulation step: %s", self.host, e)
+                replies.append(ComponentReply(error=f"{type(e).__name__}: {e}"))
             finally:
                 for path, error in self._flush_sim():
                     at = owners.get(path)
@@ -621,7 +626,7 @@ class Creator:
                 devices[need] = Fenced(driver, _epoch_of(holder, need), self.arbiter, rank, call.path)
                 methods[need] = device_methods(driver)
                 readings[need] = frozenset(getattr(driver, "READINGS", ()))
-                commands[need] = [m for m in methods[need] if is_command(getattr(driver, m))]
+                commands[need] = setpoints(driver)
         worker, notes = self._place(ct)
         assert ct.entry_point is not None
         new = Instance(call.component, bindings, worker, devices,
@@ -655,6 +660,14 @@ class Creator:
         except Exception as e:  # a driver could not be built, no worker could start: this call fails, we go on
             log.warning("creator %s: %s of %s failed: %s", self.host, query.payload.op, query.payload.path, e)
             return ComponentReply(error=f"{type(e).__name__}: {e}")
+
+
+def setpoints(driver: object) -> list[str]:
+    """The commands a worker sends without waiting for an answer: setpoints (`is_command`), except those the
+    driver says change its readings at once (`CHANGES_READINGS`, a hop): their answer says the world changed,
+    so the worker stops using the readings read ahead of the step."""
+    sudden = getattr(driver, "CHANGES_READINGS", ())
+    return [m for m in device_methods(driver) if m not in sudden and is_command(getattr(driver, m))]
 
 
 #: At most this many readings of one instance are read ahead of its step.

@@ -296,8 +296,12 @@ class MissionRun:
                     # the world steps before the cycle's first call (carried by a batch to the simulator host,
                     # see ComponentRouter.step_first); the executive's clock reads the time it will then have
                     self.router.pending_step = CONTROL_PERIOD
-                    runner.clock.set_sim(sim_time + CONTROL_PERIOD)
-                    runner.controller.executive.step()
+                    runner.clock.set_sim(sim_time + CONTROL_PERIOD)  # exactly the world's (Simulation.step)
+                    try:
+                        runner.controller.executive.step()
+                    except BaseException:
+                        self.router.pending_step = 0.0  # the stop that follows must not step the world
+                        raise
                     if self.router.pending_step and self.router.sim_error is None:  # no call this cycle
                         try:
                             self.router.step_first(None)

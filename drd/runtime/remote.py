@@ -264,8 +264,8 @@ class ComponentRouter:
         msg = ComponentBatch([c.message("step", now=now) for c in group], dt)
         try:
             replies = self.call_batch(comp.host, msg)
-        except HostDown as e:
-            if dt:  # the simulator's host did not answer: the world did not step
+        except Exception as e:
+            if dt:  # the simulator's host did not answer, or not with the step: the cycle cannot go on
                 self.sim_error = e
             raise
         for c, reply in zip(group[1:], replies[1:], strict=False):
@@ -281,7 +281,9 @@ class ComponentRouter:
         self.batches.add(host, seconds)
         if not isinstance(reply, ComponentBatchReply) or not reply.replies:
             raise ComponentError(f"{host} answered a step batch with a {type(reply).TYPE}")
-        if msg.sim_step and reply.sim_version >= 0:
+        if msg.sim_step:
+            if reply.sim_version < 0:
+                raise ComponentError(f"{host} did not step the simulation: {reply.replies[0].error or 'no reason'}")
             self.sim_time, self.sim_version = reply.sim_time, reply.sim_version
         for _ in reply.replies:
             self.stats.calls += 1  # component steps, for the figures (one round trip carried them all)

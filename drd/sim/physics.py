@@ -130,8 +130,10 @@ class Simulation:
         if total <= 0:
             raise ValueError(f"dt must be positive, got {total}")
         n = max(1, math.ceil(total / self.dt - 1e-9))
+        t0 = self.time
         for _ in range(n):
             self._substep(total / n)
+        self.time = t0 + total  # exactly: a lockstep controller's clock adds the same `dt`
 
     def run_until(self, t: float) -> None:
         """Step at the fixed rate until sim time reaches `t` (within float error)."""
