@@ -168,3 +168,17 @@ def test_unexpected_errors_are_one_line_unless_debugging(tmp_path: Path) -> None
     assert "IsADirectoryError" in r.stderr and "DRD_DEBUG=1" in r.stderr
     r = run("missionctl", "plan", str(CORRIDOR), "-o", str(target), env={**os.environ, "DRD_DEBUG": "1"})
     assert r.returncode == 2 and "Traceback (most recent call last)" in r.stderr
+
+
+@pytest.mark.parametrize("args", [("plan", str(CORRIDOR)), ("validate", str(CORRIDOR), "--json")])
+def test_a_reader_that_went_away_ends_the_command_with_141_and_no_error(args: tuple[str, ...]) -> None:
+    """`missionctl ... | head`: rich would exit 1 (a failed mission, by our codes); a shell tool killed by SIGPIPE
+    exits 141."""
+    exe = shutil.which("missionctl") or "missionctl"
+    r, w = os.pipe()
+    os.close(r)  # the reader is gone before anything is written
+    try:
+        proc = subprocess.run([exe, *args], stdout=w, stderr=subprocess.PIPE, text=True, timeout=60, check=False)
+    finally:
+        os.close(w)
+    assert (proc.returncode, proc.stderr) == (141, "")

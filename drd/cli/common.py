@@ -24,9 +24,27 @@ if TYPE_CHECKING:  # the mission language loads only for the commands that use i
 
 #: Exit codes, the same for every command.
 OK, MISSION_FAILED, INVALID = 0, 1, 2
+#: The reader of our output went away (`missionctl status | head`): 128 + SIGPIPE, as a shell tool killed by it.
+BROKEN_PIPE = 141
 
-out = Console(highlight=False, soft_wrap=True)
-err = Console(stderr=True, highlight=False, soft_wrap=True)
+
+def _reader_gone() -> NoReturn:
+    """Stop writing to a closed pipe, quietly (Python's own note on SIGPIPE): later writes go nowhere."""
+    devnull = os.open(os.devnull, os.O_WRONLY)
+    os.dup2(devnull, sys.stdout.fileno())
+    sys.exit(BROKEN_PIPE)
+
+
+class _Console(Console):
+    """rich's Console, ending on a closed pipe with `BROKEN_PIPE`: rich's own exit code, 1, means a failed mission."""
+
+    def on_broken_pipe(self) -> None:
+        self.quiet = True
+        _reader_gone()
+
+
+out = _Console(highlight=False, soft_wrap=True)
+err = _Console(stderr=True, highlight=False, soft_wrap=True)
 
 ComponentsOption = typer.Option(
     None, "--components", "-C", help="Extra folder of component manifests (repeatable; also $DRD_COMPONENTS).",
@@ -71,8 +89,11 @@ def print_json(data: Any, default: Callable[[Any], Any] | None = None) -> None:
     if out.is_terminal:
         out.print_json(text)
         return
-    sys.stdout.write(json.dumps(json.loads(text), indent=2, ensure_ascii=False) + "\n")
-    sys.stdout.flush()
+    try:
+        sys.stdout.write(json.dumps(json.loads(text), indent=2, ensure_ascii=False) + "\n")
+        sys.stdout.flush()
+    except BrokenPipeError:  # here, not in run_app: click would make it exit 1 first
+        _reader_gone()
 
 
 def render_diagnostic(d: Diagnostic, sources: Mapping[str, str], console: Console = err) -> None:
@@ -119,6 +140,8 @@ def run_app(app: Callable[..., object], prog: str,
     except KeyboardInterrupt:
         err.print("interrupted")
         sys.exit(130)
+    except BrokenPipeError:  # a plain print to a reader that went away
+        _reader_gone()
     except Exception as e:  # the last line of defence: never a traceback for a user
         show = getattr(e, "show", None)
         if callable(show) and isinstance(getattr(e, "exit_code", None), int):
