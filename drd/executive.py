@@ -16,7 +16,8 @@ import itertools
 from collections.abc import Callable, Iterable, Mapping
 from typing import Any
 
-from drd.bus import Bus, Message, Query, Reply, message
+from drd.bus import Bus, Message, Query, Reply
+from drd.executive_messages import MissionCommand, MissionRecord, MissionStatus
 from drd.rcm import ReleaseReason, ResourceManager
 from drd.runtime import records as rec
 from drd.runtime.broker import ResourceBroker
@@ -27,35 +28,6 @@ from drd.runtime.pool import ResourcePool
 from drd.runtime.records import plain
 from dsl.catalog import Catalog
 from dsl.statechart import Statechart
-
-
-@message("drd.mission.record", 1)
-class MissionRecord(Message):
-    """One runtime record (entry, exit, transition, grant, event...) of one mission."""
-
-    mission: str
-    kind: str
-    at: float
-    path: str
-    data: dict[str, Any]
-
-
-@message("drd.mission.command", 1)
-class MissionCommand(Message):
-    """An operator's command: `status`, `stop` (a mission, or all with mission ""), `emit`."""
-
-    op: str
-    mission: str = ""
-    event: str = ""
-    fields: dict[str, Any] | None = None
-
-
-@message("drd.mission.status", 1)
-class MissionStatus(Message):
-    """Every mission the executive knows, with its outcome and active state tree."""
-
-    time: float
-    missions: list[dict[str, Any]]
 
 
 class EntryPoints(Mapping[str, Callable[[], Component]]):

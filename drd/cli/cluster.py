@@ -402,7 +402,7 @@ def _deferred_interrupt() -> Iterator[list[int]]:
 def _stop_on_interrupt(client: ClusterClient, watch: _RecordWatch, mission: str, base: float, began: float) -> Any:
     """Ask the executive to stop `mission`, then wait (bounded) for its last records, so the report says how it
     ended; a second Ctrl-C gives up waiting (the mission is stopped either way)."""
-    from drd.executive import MissionCommand
+    from drd.executive_messages import MissionCommand
 
     err.print(Text.assemble(("■ ", "bold yellow"), f"Ctrl-C: stopping mission {mission}"))
     try:
@@ -419,7 +419,7 @@ def _stop_on_interrupt(client: ClusterClient, watch: _RecordWatch, mission: str,
 def stop(mission: str = typer.Argument("", help="The mission id (default: every mission).", show_default=False),
          config: Path = ConfigOption, connect: list[str] = ConnectOption, timeout: float = TimeoutOption) -> int:
     """Stop a running mission (its behaviors are terminated, its resources released)."""
-    from drd.executive import MissionCommand, MissionStatus
+    from drd.executive_messages import MissionCommand, MissionStatus
 
     with _cluster(config, connect, timeout) as client:
         reply = client.bus.call(client.keys.executive, MissionCommand("stop", mission), timeout=max(timeout, 5.0))
@@ -436,7 +436,7 @@ class _RecordWatch:
     def __init__(self, client: ClusterClient) -> None:
         import queue
 
-        from drd.executive import MissionRecord
+        from drd.executive_messages import MissionRecord
 
         self.client = client
         self.queue: queue.Queue[object] = queue.Queue()

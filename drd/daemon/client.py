@@ -137,7 +137,7 @@ class ClusterClient:
 
     def missions(self) -> list[dict[str, Any]]:
         """The controller's missions (`MissionStatus.missions`). Raises ClientError when it does not answer."""
-        from drd.executive import MissionCommand, MissionStatus  # registers the executive's messages
+        from drd.executive_messages import MissionCommand, MissionStatus  # registers the executive's messages
 
         try:
             reply = self.bus.call(self.keys.executive, MissionCommand("status"), timeout=self.timeout)

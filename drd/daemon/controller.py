@@ -176,7 +176,8 @@ class Controller:
     def __init__(self, bus: Bus, cluster: Cluster, catalog: Catalog, me: str, lock: threading.RLock, *,
                  on_reject: Callable[[str, str], None] | None = None,
                  on_change: Callable[[str, str, str], None] | None = None, clock: Clock | None = None) -> None:
-        from drd.executive import EntryPoints, Executive, MissionCommand  # the runtime: only on the controller
+        from drd.executive import EntryPoints, Executive  # the runtime: only on the controller
+        from drd.executive_messages import MissionCommand
 
         self.cluster = cluster
         self.me = me

@@ -1,0 +1,38 @@
+"""The Mission Executive's messages on the bus (`drd.executive`), in a module of their own: a client such as
+`missionctl status` registers them without importing the executive, its manager and its interpreter (a fifth
+of a second)."""
+
+from __future__ import annotations
+
+from typing import Any
+
+from drd.bus import Message, message
+
+
+@message("drd.mission.record", 1)
+class MissionRecord(Message):
+    """One runtime record (entry, exit, transition, grant, event...) of one mission."""
+
+    mission: str
+    kind: str
+    at: float
+    path: str
+    data: dict[str, Any]
+
+
+@message("drd.mission.command", 1)
+class MissionCommand(Message):
+    """An operator's command: `status`, `stop` (a mission, or all with mission ""), `emit`."""
+
+    op: str
+    mission: str = ""
+    event: str = ""
+    fields: dict[str, Any] | None = None
+
+
+@message("drd.mission.status", 1)
+class MissionStatus(Message):
+    """Every mission the executive knows, with its outcome and active state tree."""
+
+    time: float
+    missions: list[dict[str, Any]]
