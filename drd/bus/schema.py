@@ -90,10 +90,17 @@ def kind(value: Any) -> str:
 
 
 def name(tp: Any) -> str:
+    """An annotation as an error names it: ``str | null``, ``list[int]``, ``dict[str, Any]``."""
     if tp in SCALARS:
         return SCALARS[tp]
-    args = typing.get_args(tp)
-    return " | ".join(name(a) for a in args) if args else getattr(tp, "__name__", str(tp))
+    origin, args = typing.get_origin(tp), typing.get_args(tp)
+    if origin in (typing.Union, types.UnionType):
+        return " | ".join(name(a) for a in args)
+    if origin in (list, tuple):
+        return f"list[{name(args[0])}]"
+    if origin is dict:
+        return f"dict[str, {name(args[1])}]"
+    return "Any" if tp is Any else getattr(tp, "__name__", str(tp))
 
 
 def _identity(v: Any) -> Any:
@@ -133,6 +140,18 @@ def _compile(tp: Any, *, load: bool) -> Convert:
         return number
     if origin in (typing.Union, types.UnionType):
         arms, expected = [sub(a) for a in args], name(tp)
+        if len(args) == 2 and type(None) in args:  # X | None: most optional fields are None, and a Mismatch costs
+            arm = arms[args.index(type(None)) ^ 1]  # an exception; None fits no other arm (Any keeps it: the same)
+
+            def optional(v: Any) -> Any:
+                if v is None:
+                    return None
+                try:
+                    return arm(v)
+                except Mismatch:
+                    raise Mismatch(f"expected {expected}, got {got(v)}") from None
+
+            return optional
 
         def union(v: Any) -> Any:
             for arm in arms:
@@ -147,6 +166,14 @@ def _compile(tp: Any, *, load: bool) -> Convert:
         item = sub(args[0]) if args else _identity
         accepted = (list,) if load else (list, tuple)
         as_tuple = load and tuple in (tp, origin)
+        if item is _identity and not as_tuple:  # list[Any]: nothing to check inside, the value itself will do
+
+            def any_sequence(v: Any) -> Any:
+                if type(v) not in accepted:
+                    raise Mismatch(f"expected list, got {got(v)}")
+                return v
+
+            return any_sequence
 
         def sequence(v: Any) -> Any:
             if type(v) not in accepted:
@@ -162,6 +189,18 @@ def _compile(tp: Any, *, load: bool) -> Convert:
         return sequence
     if tp is dict or origin is dict:
         value = sub(args[1]) if args else _identity
+        if value is _identity:  # dict[str, Any]: only the keys to check (and JSON's keys are strings already)
+
+            def any_mapping(v: Any) -> dict[str, Any]:
+                if type(v) is not dict:
+                    raise Mismatch(f"expected {'object' if load else 'dict'}, got {got(v)}")
+                if not load:
+                    for k in v:
+                        if type(k) is not str:
+                            raise Mismatch(f"keys must be str, got {type(k).__name__}")
+                return v
+
+            return any_mapping
 
         def mapping(v: Any) -> dict[str, Any]:
             if type(v) is not dict:
@@ -225,11 +264,15 @@ def _message_converter(cls: type, load: bool) -> Convert:
                 ]
         elif tp is not Any:
             ns[f"c{i}"] = loader(tp) if load else dumper(tp)
+            pad = ""
+            if _optional(tp):  # most optional fields are None: skip the call
+                lines.append(f"    if {x} is not None:")
+                pad = "    "
             lines += [
-                "    try:",
-                f"        {x} = c{i}({x})",
-                "    except Mismatch as exc:",
-                f"        raise exc.at({step}) from None",
+                f"{pad}    try:",
+                f"{pad}        {x} = c{i}({x})",
+                f"{pad}    except Mismatch as exc:",
+                f"{pad}        raise exc.at({step}) from None",
             ]
     pairs = [(field, f"x{i}") for i, (field, _) in enumerate(fields)]
     if load and cls in RAW_INIT:
@@ -243,6 +286,11 @@ def _message_converter(cls: type, load: bool) -> Convert:
     exec("\n".join(lines), ns)  # noqa: S102 - code built from a registered class's field names only
     fn: Convert = ns["convert"]
     return fn
+
+
+def _optional(tp: Any) -> bool:
+    """``X | None`` (or a wider union with None): None converts to None whatever the other arms are."""
+    return typing.get_origin(tp) in (typing.Union, types.UnionType) and type(None) in typing.get_args(tp)
 
 
 def _fields_error(cls: type, fields: tuple[tuple[str, Any], ...]) -> Callable[[dict[str, Any]], None]:
