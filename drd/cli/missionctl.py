@@ -12,6 +12,7 @@ from typing import TYPE_CHECKING
 import typer
 from rich.text import Text
 
+from drd.cache import cache_parser_tables
 from drd.cli.common import (
     INVALID,
     MISSION_FAILED,
@@ -25,7 +26,7 @@ from drd.cli.common import (
     render_diagnostic,
     run_app,
 )
-from dsl import Compiled, compile_file
+from dsl import Catalog, Compiled, compile_file
 from dsl.statechart import State, Statechart, StateKind
 
 if TYPE_CHECKING:  # rich's tables and trees, and the exporters, load only for the commands that draw them
@@ -56,6 +57,12 @@ FORMAT_BY_SUFFIX = {".json": Format.json, ".dot": Format.dot, ".gv": Format.dot,
 IMAGE_SUFFIXES = {".svg": "svg", ".png": "png", ".pdf": "pdf"}
 
 
+def _compile(path: Path, cat: Catalog) -> Compiled:
+    """`compile_file`, with the parser's tables from the user's cache (`drd.cache`)."""
+    cache_parser_tables()
+    return compile_file(path, cat)
+
+
 @app.command()
 def validate(
     files: list[Path] = typer.Argument(..., help="Mission files to check.", show_default=False),
@@ -64,7 +71,7 @@ def validate(
 ) -> int:
     """Check mission files: syntax, names, types, plans, resources. Exit 0 if all are valid, 2 if not."""
     cat = catalog(components)
-    results = [compile_file(f, cat) for f in files]
+    results = [_compile(f, cat) for f in files]
     if as_json:
         print_json([_result_dict(r) for r in results])
     else:
@@ -104,7 +111,7 @@ def plan(
     """Show the compiled statechart: states, transitions, resources and how they are bound."""
     from dsl.export import to_dict, to_dot, to_mermaid
 
-    result = compile_file(file, catalog(components))
+    result = _compile(file, catalog(components))
     for d in result.diagnostics:
         render_diagnostic(d, result.sources)
     if not result.ok:
@@ -242,7 +249,7 @@ def dry_run(
     from dsl.params import ParamError, apply_params, parse_assignments
 
     cat = catalog(components)
-    result = compile_file(mission, cat)
+    result = _compile(mission, cat)
     for d in result.diagnostics:
         render_diagnostic(d, result.sources)
     if not result.ok or result.statechart is None:
