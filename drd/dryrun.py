@@ -58,6 +58,14 @@ class DryRun:
     injections: list[dict[str, Any]] = field(default_factory=list)
     #: Ground-truth (t, x, y) trails of every robot and intruder, for the picture.
     tracks: dict[str, list[tuple[float, float, float]]] = field(default_factory=dict)
+    #: The pace asked for (a multiple of real time), None for as fast as the machine allows.
+    speed: float | None = None
+    on_cluster: bool = False  # a `missionctl run` on a cluster's daemons, not a dry-run in this process
+
+    @property
+    def kept_up(self) -> bool:
+        """Did the run keep (nearly: within 10 %, which a cluster's start-up takes) the pace it was asked for?"""
+        return not self.speed or self.real_time_factor >= 0.9 * self.speed
 
     @property
     def real_time_factor(self) -> float:
@@ -125,7 +133,8 @@ class DryRun:
     def to_dict(self) -> dict[str, Any]:
         return {"mission": self.mission, "outcome": self.outcome, "reason": self.reason,
                 "sim_time": self.sim_time, "wall_time": self.wall_time,
-                "real_time_factor": self.real_time_factor, "timeline": self.timeline(), "holds": self.holds(),
+                "real_time_factor": self.real_time_factor, "speed": self.speed, "timeline": self.timeline(),
+                "holds": self.holds(),
                 "waits": self.waits(), "injections": self.injections,
                 "doors": self.doors, "scouts": self.scouts, "detections": self.detections}
 
@@ -157,7 +166,7 @@ def run(chart: Statechart, cluster: Cluster, world: World, catalog: Catalog, *, 
     executive = Executive(bus, clock, registry or EntryPoints(catalog), cluster=cluster.name,
                           resources=[r for r in cluster.resources() if r.host not in late], lease=cluster.lease,
                           services={"drivers": drivers})
-    result = DryRun(chart.name, None, "", 0.0, 0.0)
+    result = DryRun(chart.name, None, "", 0.0, 0.0, speed=speed)
     listeners: list[Callable[[rec.Record], None]] = [result.records.append, lambda r: facts(result, r)]
     if trace is not None:
         listeners.append(TraceWriter(trace))

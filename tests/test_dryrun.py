@@ -130,3 +130,20 @@ def test_live_progress_shows_time_active_behaviors_holds_and_waiters(catalog: Ca
     assert first.startswith("sim     0.1 s") and "FollowCorridor" in first and "DetectDoor" in first
     assert "holds RoomSurveillance[0]→ranger1+scout1" in first and "waiting 5 (RoomSurveillance[1]" in first
     assert "RoomSurveillance[0]→scout1" in later  # the Ranger was released after the launch; the Scout is kept
+
+
+def test_a_run_that_cannot_keep_the_pace_asked_says_so() -> None:
+    """No machine runs a million times real time: the report says the pace was not kept, and by whom."""
+    import subprocess
+
+    mission = str(ROOT / "missions" / "corridor_surveillance.mission")
+    lines = {}
+    for speed in ("1000000", None):
+        args = ["--speed", speed] if speed else []
+        r = subprocess.run(["missionctl", "dry-run", mission, "--until", "3", *args], cwd=ROOT, capture_output=True,
+                           text=True, timeout=300, check=False)
+        lines[speed] = next(line for line in r.stdout.splitlines() if line.startswith("sim time"))
+    assert lines["1000000"].endswith("x real time (1e+06x asked: the machine could not keep up)"), lines
+    assert lines[None].endswith("x real time"), lines
+    report = dry_run_cli(ROOT / "missions" / "corridor_surveillance.mission", "--until", "3", "--speed", "1000000")
+    assert report["speed"] == 1_000_000

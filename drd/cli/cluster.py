@@ -373,6 +373,7 @@ def run(mission: Path = typer.Argument(..., help="The mission file.", show_defau
                 report = _stop_on_interrupt(client, watch, reply.mission, reply.base, began)
         finally:
             watch.close()
+    report.speed, report.on_cluster = speed, True
     if as_json:
         print_json(report.to_dict(), default=str)
     else:

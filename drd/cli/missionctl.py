@@ -330,7 +330,10 @@ def _print_report(r: DryRun) -> None:
     colour = "green" if r.outcome == "success" else "red"
     out.print(Text.assemble(("mission ", "bold"), r.mission, "  ", (f"{r.outcome}", f"bold {colour}"),
                             f"  {r.reason}".rstrip()))
-    out.print(f"sim time {r.sim_time:.1f} s · wall time {r.wall_time:.2f} s · {r.real_time_factor:.0f}x real time")
+    pace = f"{r.real_time_factor:.0f}x real time"
+    if not r.kept_up:  # say so, rather than leave the operator to compare with what they asked
+        pace += f" ({r.speed:g}x asked: the {'cluster' if r.on_cluster else 'machine'} could not keep up)"
+    out.print(f"sim time {r.sim_time:.1f} s · wall time {r.wall_time:.2f} s · {pace}")
     for row in r.injections:
         out.print(Text.assemble(("injected ", "bold yellow"), f"at {row['at']:.1f} s: {row['effect']}"))
     out.print(_table("timeline", ("behavior", "entered", "exited", "status"),
