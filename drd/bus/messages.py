@@ -126,6 +126,21 @@ def decode(data: bytes | bytearray | memoryview) -> Message:
         env = _loads(data)
     except (ValueError, RecursionError) as exc:  # UnicodeDecodeError and JSONDecodeError are ValueErrors
         raise MalformedMessage(f"bad JSON: {exc}") from None
+    try:  # the usual case in a few steps: a known (type, version), an int version, nothing else in the envelope
+        version = env["v"]
+        convert = _DECODERS[env["type"], version]
+        if type(version) is int and len(env) == 3:
+            return convert(env["body"])  # type: ignore[no-any-return]
+    except (KeyError, TypeError):  # not an object, a key missing, a type not decoded yet: the checks below say
+        pass
+    except Mismatch as exc:
+        raise MalformedMessage(exc.describe("body")) from None
+    return _decode_envelope(env)
+
+
+def _decode_envelope(env: Any) -> Message:
+    """`decode` after the JSON parse, every check spelled out: what is wrong with the envelope, or the body's
+    first use of its (type, version)."""
     if type(env) is not dict:
         raise MalformedMessage(f"envelope is a JSON {kind(env)}, not an object")
     if env.keys() != _ENVELOPE:
