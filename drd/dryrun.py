@@ -133,9 +133,9 @@ class DryRun:
     def to_dict(self) -> dict[str, Any]:
         return {"mission": self.mission, "outcome": self.outcome, "reason": self.reason,
                 "sim_time": self.sim_time, "wall_time": self.wall_time,
-                "real_time_factor": self.real_time_factor, "speed": self.speed, "timeline": self.timeline(),
-                "holds": self.holds(),
-                "waits": self.waits(), "injections": self.injections,
+                "real_time_factor": self.real_time_factor, "speed": self.speed,
+                "timeline": self.timeline(), "holds": self.holds(), "waits": self.waits(),
+                "injections": self.injections,
                 "doors": self.doors, "scouts": self.scouts, "detections": self.detections}
 
 
