@@ -626,7 +626,7 @@ class Creator:
                 devices[need] = Fenced(driver, _epoch_of(holder, need), self.arbiter, rank, call.path)
                 methods[need] = device_methods(driver)
                 readings[need] = frozenset(getattr(driver, "READINGS", ()))
-                commands[need] = setpoints(driver)
+                commands[need] = setpoints(driver, methods[need])
         worker, notes = self._place(ct)
         assert ct.entry_point is not None
         new = Instance(call.component, bindings, worker, devices,
@@ -662,12 +662,15 @@ class Creator:
             return ComponentReply(error=f"{type(e).__name__}: {e}")
 
 
-def setpoints(driver: object) -> list[str]:
+def setpoints(driver: object, methods: list[str] | None = None) -> list[str]:
     """The commands a worker sends without waiting for an answer: setpoints (`is_command`), except those the
     driver says change its readings at once (`CHANGES_READINGS`, a hop): their answer says the world changed,
-    so the worker stops using the readings read ahead of the step."""
+    so the worker stops using the readings read ahead of the step. `methods`: `device_methods(driver)`, when
+    the caller has them already."""
     sudden = getattr(driver, "CHANGES_READINGS", ())
-    return [m for m in device_methods(driver) if m not in sudden and is_command(getattr(driver, m))]
+    if methods is None:
+        methods = device_methods(driver)
+    return [m for m in methods if m not in sudden and is_command(getattr(driver, m))]
 
 
 #: At most this many readings of one instance are read ahead of its step.
