@@ -56,12 +56,12 @@ def main() -> None:
     parser.add_argument("--json", action="store_true", help="print the figures as JSON")
     args = parser.parse_args()
 
+    from drd.cluster.remote import ComponentCall
     from drd.daemon.creator import Creator, behavior_modules
     from drd.daemon.workers import WorkerPool
     from drd.hosts import load_hosts
     from drd.hw.drivers import HostDrivers
     from drd.manifests import load_catalog
-    from drd.runtime.remote import ComponentCall
     from dsl.catalog import Catalog, ComponentType, Kind, Process
     from tests.cluster_support import hosts_yaml
 

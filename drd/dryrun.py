@@ -9,6 +9,7 @@ CLI renders it.
 
 from __future__ import annotations
 
+import functools
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
@@ -61,6 +62,8 @@ class DryRun:
     #: The pace asked for (a multiple of real time), None for as fast as the machine allows.
     speed: float | None = None
     on_cluster: bool = False  # a `missionctl run` on a cluster's daemons, not a dry-run in this process
+    priority: int = 1  # the mission's rank against the others sharing the team
+    mission_id: str = ""
 
     @property
     def kept_up(self) -> bool:
@@ -103,12 +106,12 @@ class DryRun:
         for r in self.records:
             if isinstance(r, rec.Granted):
                 close(r.path, r.at, None, "regranted")
-                open_[r.path] = {"path": r.path, "resources": dict(r.resources), "units": sorted(r.epochs),
-                                 "from": r.at}
+                needs = {k: v for k, v in r.resources.items() if "." not in k}  # not each part of an aggregate
+                open_[r.path] = {"path": r.path, "resources": needs, "units": sorted(r.epochs), "from": r.at}
             elif isinstance(r, rec.Revoked):
                 close(r.path, r.at, tuple(r.resources), "revoked")
             elif isinstance(r, rec.Released):
-                close(r.path, r.at, tuple(r.resources), r.reason or "released")
+                close(r.path, r.at, tuple(r.resources), _ENDED.get(r.reason, r.reason or "released"))
             elif isinstance(r, rec.Exited):
                 close(r.path, r.at, None, "exited")
         for path in list(open_):
@@ -131,12 +134,17 @@ class DryRun:
         return sorted(rows, key=lambda w: (w["from"], w["path"]))
 
     def to_dict(self) -> dict[str, Any]:
-        return {"mission": self.mission, "outcome": self.outcome, "reason": self.reason,
+        return {"mission": self.mission, "id": self.mission_id, "priority": self.priority,
+                "outcome": self.outcome, "reason": self.reason,
                 "sim_time": self.sim_time, "wall_time": self.wall_time,
                 "real_time_factor": self.real_time_factor, "speed": self.speed,
                 "timeline": self.timeline(), "holds": self.holds(), "waits": self.waits(),
                 "injections": self.injections,
                 "doors": self.doors, "scouts": self.scouts, "detections": self.detections}
+
+
+#: How the report words the end of a hold (the trace's `released` reasons).
+_ENDED = {"exit": "exited", "release": "released"}
 
 
 def merged_drivers(cluster: Cluster, sim: Simulation, catalog: Catalog) -> HostDrivers:
@@ -150,11 +158,30 @@ def merged_drivers(cluster: Cluster, sim: Simulation, catalog: Catalog) -> HostD
     return out
 
 
-def run(chart: Statechart, cluster: Cluster, world: World, catalog: Catalog, *, seed: int = 0,
-        until: float = 1800.0, speed: float | None = None, trace: IO[str] | None = None,
-        registry: Any = None, progress: Callable[[Simulation, Executive], None] | None = None,
-        progress_every: float = 1.0, injections: Sequence[Injection] = ()) -> DryRun:
-    """Run `chart` to its end (or `until` seconds of sim time) and report; `injections` happen on the way."""
+@dataclass(frozen=True)
+class Mission:
+    """One mission of a dry-run: its chart and its priority against the others (None: the chart's own)."""
+
+    chart: Statechart
+    priority: int | None = None
+
+
+def run(chart: Statechart, cluster: Cluster, world: World, catalog: Catalog, **options: Any) -> DryRun:
+    """Run `chart` to its end (or `until` seconds of sim time) and report (options as `run_many`)."""
+    return run_many([Mission(chart)], cluster, world, catalog, **options)[0]
+
+
+def run_many(missions: Sequence[Mission], cluster: Cluster, world: World, catalog: Catalog, *, seed: int = 0,
+             until: float = 1800.0, speed: float | None = None, trace: IO[str] | None = None,
+             registry: Any = None, progress: Callable[[Simulation, Executive], None] | None = None,
+             progress_every: float = 1.0, injections: Sequence[Injection] = ()) -> list[DryRun]:
+    """Run missions together on one team until all have ended (or `until` seconds of sim time), one report each.
+
+    They share the world, the robots and the one Resource Controller Manager, which ranks their requests by the
+    missions' priorities, then their behaviors'. `injections` happen on the way; `trace` gets every mission's
+    records, each with its mission's id."""
+    if not missions:
+        raise ValueError("no mission to run")
     problems = check_hosts(world, cluster)
     if problems:
         raise ValueError("\n".join(map(str, problems)))
@@ -166,19 +193,28 @@ def run(chart: Statechart, cluster: Cluster, world: World, catalog: Catalog, *, 
     executive = Executive(bus, clock, registry or EntryPoints(catalog), cluster=cluster.name,
                           resources=[r for r in cluster.resources() if r.host not in late], lease=cluster.lease,
                           services={"drivers": drivers})
-    result = DryRun(chart.name, None, "", 0.0, 0.0, speed=speed)
-    listeners: list[Callable[[rec.Record], None]] = [result.records.append, lambda r: facts(result, r)]
-    if trace is not None:
-        listeners.append(TraceWriter(trace))
+    results: list[DryRun] = []
+    ids: list[str] = []
     start = time.perf_counter()
-    mid = executive.submit(chart, listeners=listeners)
-    mission = executive.missions[mid]
+    for n, m in enumerate(missions, 1):
+        result = DryRun(m.chart.name, None, "", 0.0, 0.0, speed=speed, priority=m.priority or m.chart.priority)
+        mid = f"{m.chart.name}-{n}"
+        listeners: list[Callable[[rec.Record], None]] = [result.records.append, functools.partial(facts, result)]
+        if trace is not None:
+            listeners.append(TraceWriter(trace, mid))
+        result.mission_id = mid
+        executive.submit(m.chart, mid, listeners=listeners, priority=result.priority)
+        results.append(result)
+        ids.append(mid)
+    running = [executive.missions[mid] for mid in ids]  # the interpreters
     next_progress = 0.0
     pending = sorted(injections)
-    while not mission.finished and sim.time < until:
+    while not all(interp.finished for interp in running) and sim.time < until:
         sim.step(CONTROL_PERIOD)
         while pending and pending[0].at <= sim.time + 1e-9:
-            result.injections.append(_inject(pending.pop(0), sim, executive, cluster))
+            effect = _inject(pending.pop(0), sim, executive, cluster)
+            for result in results:
+                result.injections.append(effect)
         executive.step()
         if speed:
             lag = sim.time / speed - (time.perf_counter() - start)
@@ -187,16 +223,20 @@ def run(chart: Statechart, cluster: Cluster, world: World, catalog: Catalog, *, 
         if progress is not None and sim.time >= next_progress:
             progress(sim, executive)
             next_progress = sim.time + progress_every
-    if not mission.finished:
-        mission.stop(f"sim time limit of {until:g} s reached")
-    result.outcome, result.reason = mission.outcome, mission.reason
-    result.sim_time, result.wall_time = sim.time, time.perf_counter() - start
-    for scout in result.scouts:
-        pose = sim.pose(scout["scout"])
-        scout.update(x=round(pose.x, 2), y=round(pose.y, 2))
-    result.tracks = {rid: sim.trajectory(rid) for rid in (*sim.robots, *sim.intruders())}
+    for interp in running:
+        if not interp.finished:
+            interp.stop(f"sim time limit of {until:g} s reached")
+    tracks = {rid: sim.trajectory(rid) for rid in (*sim.robots, *sim.intruders())}
+    wall = time.perf_counter() - start
+    for interp, result in zip(running, results, strict=True):
+        result.outcome, result.reason = interp.outcome, interp.reason
+        result.sim_time, result.wall_time = sim.time, wall
+        for scout in result.scouts:
+            pose = sim.pose(scout["scout"])
+            scout.update(x=round(pose.x, 2), y=round(pose.y, 2))
+        result.tracks = tracks
     executive.close()
-    return result
+    return results
 
 
 def _inject(inj: Injection, sim: Simulation, executive: Executive, cluster: Cluster) -> dict[str, Any]:
@@ -204,11 +244,7 @@ def _inject(inj: Injection, sim: Simulation, executive: Executive, cluster: Clus
     what = str(inj)
     if inj.action is Action.JOIN:
         found = [r for r in cluster.resources() if r.host == inj.target]
-        running = [m for m in executive.missions.values() if not m.finished]
-        if running:
-            running[0].add_resources(found)  # one pool: the other missions see them at their next step
-        else:
-            executive.pool.add(found, sim.time)
+        executive.add_resources(found)
         what += f": {len(found)} resources joined the manager"
     elif inj.action is Action.KILL:
         robots = [r.id for r in cluster.host(inj.target).robots if r.id in sim.robots]
@@ -250,6 +286,19 @@ def facts(result: DryRun, r: rec.Record) -> None:
         result.scouts.append({"at": r.at, "scout": r.fields.get("scout"), "by": r.path})
     elif r.name == "MotionDetected":
         result.detections.append({"at": r.at, "by": r.path, **r.fields})
+
+
+def merged(reports: Sequence[DryRun]) -> DryRun:
+    """Several missions' reports as one, for the picture of the team's run (their doors, Scouts, sightings)."""
+    first = reports[0]
+    out = DryRun(" + ".join(r.mission for r in reports), first.outcome, first.reason, first.sim_time,
+                 first.wall_time, tracks=first.tracks, speed=first.speed)
+    for r in reports:
+        out.records += r.records
+        out.doors += r.doors
+        out.scouts += r.scouts
+        out.detections += r.detections
+    return out
 
 
 def world_path(name: str, root: Path) -> Path:

@@ -18,12 +18,13 @@ from typing import Any
 
 from drd.bus import Bus, Message, Query, Reply
 from drd.executive_messages import MissionCommand, MissionRecord, MissionStatus
-from drd.rcm import ReleaseReason, ResourceManager
+from drd.rcm import ReleaseReason, ResourceManager, Unit
 from drd.runtime import records as rec
 from drd.runtime.broker import ResourceBroker
 from drd.runtime.clock import Clock
 from drd.runtime.component import Component
 from drd.runtime.interpreter import Interpreter
+from drd.runtime.ownership import Gates, LocalGates, NoGates
 from drd.runtime.pool import ResourcePool
 from drd.runtime.records import plain
 from dsl.catalog import Catalog
@@ -70,7 +71,10 @@ class Executive:
 
     def __init__(self, bus: Bus, clock: Clock, registry: Mapping[str, Callable[[], Component]], *,
                  cluster: str = "local", resources: Iterable[Any] = (), lease: float = 3.0,
-                 default_slice: float = 5.0, services: Mapping[str, Any] | None = None, preallocate: bool = False):
+                 default_slice: float = 5.0, services: Mapping[str, Any] | None = None, preallocate: bool = False,
+                 gates: Gates | None = None):
+        """`gates`: the devices' gates; by default, gates over the in-process drivers of `services["drivers"]`
+        (the dry-run), shared by every mission so that ownership holds across missions."""
         self.bus = bus
         self.clock = clock
         self.registry = registry
@@ -81,21 +85,40 @@ class Executive:
         self.pool = ResourcePool(self.broker)
         self.pool.add(resources, clock.now())
         self.missions: dict[str, Interpreter] = {}
+        self.gates: Gates = self._gates(gates)
         self._ids = itertools.count(1)
         self._queryable = bus.serve(f"drd/{cluster}/executive", self._command)
 
+    def _gates(self, gates: Gates | None) -> Gates:
+        if gates is not None:
+            return gates
+        drivers = self.services.get("drivers")
+        if drivers is None:
+            return NoGates()
+        sharable = [c.id for c in self.pool.candidates.values() if isinstance(c, Unit) and c.sharable]
+        return LocalGates.of(getattr(drivers, "devices", {}), getattr(drivers, "robots", {}), sharable, self.record)
+
+    def record(self, mission: str, record: rec.Record) -> None:
+        """A record about `mission` from outside its interpreter (a device's gate): to its listeners."""
+        interp = self.missions.get(mission)
+        if interp is not None:
+            interp.record(record)
+
     def submit(self, chart: Statechart, mission_id: str | None = None,
                listeners: Iterable[Callable[[rec.Record], None]] = (),
-               registry: Mapping[str, Callable[[], Component]] | None = None) -> str:
+               registry: Mapping[str, Callable[[], Component]] | None = None, priority: int = 1) -> str:
         """Start a compiled mission; returns its id (`<name>-<n>`).
 
-        `registry` replaces the executive's own for this mission (a cluster mission's `RemoteRegistry`)."""
+        `registry` replaces the executive's own for this mission (a cluster mission's `RemoteRegistry`);
+        `priority` ranks the mission against the others sharing the team (1 first)."""
         mid = mission_id or f"{chart.name}-{next(self._ids)}"
         if mid in self.missions:
             raise ValueError(f"a mission {mid} is already running")
+        if "/" in mid:
+            raise ValueError(f"a mission id has no '/': {mid!r}")
         interp = Interpreter(chart, registry if registry is not None else self.registry, self.broker, self.clock,
-                             pool=self.pool, mission=mid,
-                             services=self.services, preallocate=self.preallocate)
+                             pool=self.pool, mission=mid, services=self.services, preallocate=self.preallocate,
+                             gates=self.gates, priority=priority)
         key = f"drd/{self.cluster}/mission/{mid}/record"
         interp.attach(lambda r: self.bus.put(key, _to_message(mid, r)))
         for listener in listeners:
@@ -113,6 +136,13 @@ class Executive:
         while self.clock.now() < until and not (done() if done else self.finished):
             advance()
             self.step()
+
+    def add_resources(self, resources: Iterable[Any]) -> None:
+        """Hot-plug: new units and aggregates join the shared pool once; every running mission may grow into them."""
+        self.pool.add(resources, self.clock.now())
+        for m in list(self.missions.values()):
+            if not m.finished:
+                m.grow()
 
     def remove_host(self, host: str) -> None:
         """A host is gone: its resources leave the shared manager; every mission settles the consequences."""

@@ -290,7 +290,10 @@ Item = Need | Shared | Var | Child | Parallel | Transition | Plan
 
 @dataclass(frozen=True, slots=True)
 class Behavior:
-    """A `mission` (the root, `is_mission`) or a `behavior` declaration."""
+    """A `mission` (the root, `is_mission`) or a `behavior` declaration.
+
+    A behavior's `priority` is its default priority among the behaviors of its mission; a mission's ranks it
+    against the other missions sharing the team (both: 1 is the highest)."""
 
     name: str
     params: tuple[Param, ...]

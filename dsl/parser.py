@@ -133,8 +133,8 @@ class _Builder(Transformer):  # type: ignore[type-arg]
         return ast.Import(self.text(c[1]), span=self.cover(c[0], c[1]))
 
     def mission(self, c: list[Any]) -> ast.Behavior:
-        items, end = c[2]
-        return ast.Behavior(str(c[1]), (), items, None, True, span=self.cover(c[0], end),
+        items, end = c[3]
+        return ast.Behavior(str(c[1]), (), items, c[2], True, span=self.cover(c[0], end),
                             name_span=self.tspan(c[1]))
 
     def behavior(self, c: list[Any]) -> ast.Behavior:

@@ -150,7 +150,7 @@ def item(i: ast.Item, indent: str) -> list[str]:
 
 def behavior(b: ast.Behavior) -> str:
     if b.is_mission:
-        head = f"mission {b.name}"
+        head = f"mission {b.name}" + (f" priority {b.priority}" if b.priority is not None else "")
     else:
         params = ", ".join(f"{p.name}: {p.type.name}" + (f" = {expr(p.default)}" if p.default is not None else "")
                            for p in b.params)

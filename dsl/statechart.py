@@ -105,6 +105,8 @@ class Statechart:
     root: str
     states: Mapping[str, State]
     file: str = "<string>"
+    #: The mission's rank against other missions sharing the team (`mission Name priority N`), 1 the highest.
+    priority: int = 1
 
     def __getitem__(self, state_id: str) -> State:
         return self.states[state_id]

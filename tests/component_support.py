@@ -5,8 +5,9 @@
                      params={"speed": 0.4})
     status = rig.run(comp, until=20.0)              # steps sim and component at 10 Hz
 
-`needs` maps each need name to `(robot id, part)`; the rig hands the component that robot's part
-driver through `Component.device(need)`, exactly as the runtime does.
+`needs` maps each need name to `(robot id, part)`; the rig grants those devices to the component and hands it
+each robot part through `Component.device(need)`, behind the device's gate, exactly as the runtime does
+(commands run at once: no other component competes for them).
 """
 
 from __future__ import annotations
@@ -18,7 +19,7 @@ from drd.hosts import load_hosts
 from drd.hw.drivers import drivers_for
 from drd.manifests import load_catalog
 from drd.runtime.component import Component, Context, Status
-from drd.runtime.fence import Fenced
+from drd.runtime.ownership import Binding, BoundDevice, LocalGates
 from drd.sim.physics import Simulation
 from drd.sim.world import load_world
 
@@ -40,8 +41,16 @@ class Rig:
         """Set up and start one component, with defaults from its manifest and `params` over them."""
         spec = self.catalog.get(cls.__name__)
         defaults = {p.name: p.default for p in spec.params if not p.required} if spec else {}
-        devices = {need: Fenced(self.drivers.robots[robot][part], None) for need, (robot, part) in needs.items()}
         resources = {need: self.cluster_part(robot, part) for need, (robot, part) in needs.items()}
+        gates = LocalGates.of(self.drivers.devices, self.drivers.robots)
+        issuer = f"rig/{path}"
+        devices = {}
+        for need, (robot, part) in needs.items():
+            unit = resources[need]
+            gates.grant(unit, issuer, 1, self.sim.time)
+            gate, driver = gates.bound(unit, robot, part) or (None, None)
+            binding = Binding(need, unit, issuer, 1, gate, driver, robot, part)
+            devices[need] = BoundDevice(binding, issuer, None, (0, 0), None, lambda: self.sim.time)
         ctx = Context(path, {**defaults, **(params or {})}, resources,
                       lambda name, **fields: self.events.append((name, fields)), self.logs.append,
                       lambda: self.sim.time, services={"shared": self.shared, "sim": self.sim}, devices=devices)

@@ -7,7 +7,7 @@ is expected to hold exactly. The shapes the parser normalizes are avoided:
 - an `Interp` has at least one expression, no empty string parts and no two adjacent
   string parts; expressions inside `{ }` hold no string (a `"` would end the outer string);
 - a `Parallel` written without a policy (`explicit=False`) always has policy ALL;
-- a mission has no params and no priority (the syntax has neither);
+- a mission has no params (the syntax has none);
 - expressions stay well below `dsl.parser.MAX_EXPR_DEPTH`.
 """
 
@@ -191,7 +191,8 @@ def grammar(names: st.SearchStrategy[str], type_names: st.SearchStrategy[str],
     params = st.builds(ast.Param, names, type_refs, st.none() | exprs)
     behaviors = st.builds(lambda name, ps, body, prio: ast.Behavior(name, tuple(ps), body, prio, False),
                           names, st.lists(params, max_size=3), bodies, st.none() | priorities)
-    missions = st.builds(lambda name, body: ast.Behavior(name, (), body, None, True), names, bodies)
+    missions = st.builds(lambda name, body, prio: ast.Behavior(name, (), body, prio, True), names, bodies,
+                         st.one_of(st.none(), st.integers(1, 99)))
     return Grammar(exprs, interp_safe, string_exprs, children, items, behaviors, missions,
                    strings.map(ast.Import))
 

@@ -93,8 +93,8 @@ def test_detach_then_status_shows_the_active_states_then_stop(cluster: DaemonClu
     eventually(lambda: any("FollowCorridor:active" in p for p in active()), "FollowCorridor to be active", 20)
     client = cluster.client()
     tokens = f"drd/{cluster.name}/instance/**"
-    mine = re.compile(rf"drd/{cluster.name}/instance/ranger1/CorridorSurveillance/RoomSurveillance\[\d\]/"
-                      r"FindNewDoor/FollowCorridor")
+    mine = re.compile(rf"drd/{cluster.name}/instance/ranger1/{re.escape(mid)}/CorridorSurveillance/"
+                      r"RoomSurveillance\[\d\]/FindNewDoor/FollowCorridor")
     eventually(lambda: any(mine.fullmatch(k) for k in client.bus.alive(tokens)), "FollowCorridor's liveliness token",
                10, poll=0.05)
     pids = {i.pid for i in client.components().instances if i.host == "ranger1"}

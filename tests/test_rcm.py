@@ -57,7 +57,7 @@ def test_a_request_is_granted_whole_or_not_at_all() -> None:
     assert rm.request(both, 0.0) == (Waiting("Survey", ("Other",)),)
     assert rm.holders("cam1") == ()  # the free camera is not taken alone
     decisions = rm.release("Other", 1.0)
-    assert decisions[0] == Released("Other", ("drive1",), "release")
+    assert decisions[0] == Released("Other", ("drive1",), "release", ("drive",))
     grant = decisions[1]
     assert isinstance(grant, Granted) and grant.holder == "Survey"
     assert grant.assignment == {"camera": "cam1", "drive": "drive1"}
@@ -203,7 +203,7 @@ def test_leases_expire_unless_renewed() -> None:
     assert rm.renew("A", 2.0) == (Renewed("A", 5.0),)
     assert rm.tick(4.9) == ()
     released, regrant = rm.tick(5.0)
-    assert released == Released("A", ("cam1",), "expired")
+    assert released == Released("A", ("cam1",), "expired", ("camera",))
     assert isinstance(regrant, Granted) and regrant.holder == "B"
     assert rm.renew("A", 5.0) == ()  # too late: the lease is gone
 
@@ -212,7 +212,7 @@ def test_an_expired_lease_is_applied_by_any_later_call() -> None:
     rm = manager(Unit("cam1", "Camera"), lease=3.0)
     rm.request(Request("A", 1, (CAMERA,)), 0.0)
     decisions = rm.request(Request("B", 1, (CAMERA,)), 10.0)
-    assert decisions[0] == Released("A", ("cam1",), "expired")
+    assert decisions[0] == Released("A", ("cam1",), "expired", ("camera",))
     assert granted(decisions)["B"].lease_until == 13.0
 
 
@@ -324,7 +324,7 @@ def test_host_loss_releases_its_holders_and_rejects_waiters_that_cannot_be_met()
     rm.request(Request("AnyRanger", 2, (NeedRequest("ranger", "Ranger"),)), 0.0)
     rm.request(Request("SecondRanger", 2, (NeedRequest("ranger", "Ranger"),)), 0.0)
     decisions = rm.remove_host("r2", 1.0)
-    assert decisions[0] == Released("OnR2", ("r2.drive", "r2.cam", "r2.launcher"), "host lost")
+    assert decisions[0] == Released("OnR2", ("r2.drive", "r2.cam", "r2.launcher"), "host lost", ("ranger",))
     assert Unsatisfiable("AlsoR2", "ranger", "no Ranger satisfies the constraint") in decisions
     assert rm.queue() == ("SecondRanger",)
     assert rm.snapshot()["aggregates"].keys() == {"r1"}
@@ -337,7 +337,7 @@ def test_a_lost_robot_fails_only_its_holder_and_the_next_waiter_gets_another() -
     rm.request(Request("WithS2", 1, scout), 0.0)
     rm.request(Request("Third", 1, scout), 0.0)
     decisions = rm.remove(["s1", "s1.wheels", "not-there"], 1.0)
-    assert decisions[0] == Released("WithS1", ("s1.wheels",), "resource lost")
+    assert decisions[0] == Released("WithS1", ("s1.wheels",), "resource lost", ("scout",))
     assert "s1" not in rm.snapshot()["aggregates"] and rm.holders("s2.wheels") == ("WithS2",)
     assert rm.queue() == ("Third",)  # s2 is still held; Third waits for it, not for the lost s1
     assert granted(rm.release("WithS2", 2.0))["Third"].assignment == {"scout": "s2"}
@@ -440,7 +440,7 @@ def test_cancel_withdraws_a_grant_a_wait_or_a_reservation() -> None:
     rm.reserve(Request("R", 1, (CAMERA,)), 0.0, at=50.0)
     assert rm.cancel("B", 1.0) == (Released("B", (), "cancelled"),)
     assert rm.cancel("R", 1.0) == (Released("R", (), "cancelled"),)
-    assert rm.cancel("A", 1.0) == (Released("A", ("cam1",), "cancelled"),)
+    assert rm.cancel("A", 1.0) == (Released("A", ("cam1",), "cancelled", ("camera",)),)
     assert rm.cancel("nobody", 1.0) == ()
     assert rm.tick(60.0) == ()
 
@@ -450,10 +450,10 @@ def test_partial_release_by_need_name_keeps_the_rest() -> None:
     rm.request(Request("A", 1, (CAMERA, NeedRequest("drive", "Drive"))), 0.0)
     rm.request(Request("B", 1, (NeedRequest("drive", "Drive"),)), 0.0)
     released, grant = rm.release("A", 1.0, units=["drive"])
-    assert released == Released("A", ("drive1",), "release")
+    assert released == Released("A", ("drive1",), "release", ("drive",))
     assert isinstance(grant, Granted) and grant.holder == "B"
     assert rm.holders("cam1") == ("A",)
-    assert rm.release("A", 2.0, units=["cam1"]) == (Released("A", ("cam1",), "release"),)
+    assert rm.release("A", 2.0, units=["cam1"]) == (Released("A", ("cam1",), "release", ("camera",)),)
     assert "A" not in rm.snapshot()["holds"]
 
 
@@ -474,7 +474,7 @@ def test_releasing_a_suspended_holder_withdraws_its_queued_request() -> None:
     rm.tick(5.0)  # A suspended, queued again
     assert rm.queue() == ("A",)
     assert rm.release("A", 6.0) == (Released("A", (), "release"),)
-    assert rm.release("B", 7.0) == (Released("B", ("cam1",), "release"),)
+    assert rm.release("B", 7.0) == (Released("B", ("cam1",), "release", ("camera",)),)
 
 
 def charged(ranger: Candidate, chosen: Mapping[str, Candidate]) -> bool:

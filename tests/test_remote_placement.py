@@ -11,8 +11,7 @@ import pytest
 
 from drd.bus import Message, Query, Reply
 from drd.bus.local import LocalBus
-from drd.runtime.component import Context, Status
-from drd.runtime.remote import (
+from drd.cluster.remote import (
     PLACE_TRIES,
     ComponentBatch,
     ComponentBatchReply,
@@ -23,6 +22,7 @@ from drd.runtime.remote import (
     HostDown,
     RemoteComponent,
 )
+from drd.runtime.component import Context, Status
 
 
 class Hosts:
@@ -54,7 +54,7 @@ class Hosts:
 
 
 def movable(hosts: Hosts, **kw: Any) -> tuple[RemoteComponent, list[str]]:
-    router = ComponentRouter(hosts.bus, "t", {}, "controller", node=lambda path: None, local={}, mission="m",
+    router = ComponentRouter(hosts.bus, "t", {}, "controller", local={}, mission="m",
                              world="corridor", timeout=0.05, dead=lambda h: h in hosts.dead, place=hosts.place, **kw)
     comp = RemoteComponent("Wait", router)
     logs: list[str] = []
@@ -138,7 +138,7 @@ def test_a_host_that_stops_answering_mid_mission_also_moves_it() -> None:
 
 def test_a_component_bound_to_devices_is_never_moved() -> None:
     hosts = Hosts(LocalBus(), ["a", "b"], ["a", "b"])
-    router = ComponentRouter(hosts.bus, "t", {"a.drive": "a"}, "controller", node=lambda path: None, local={},
+    router = ComponentRouter(hosts.bus, "t", {"a.drive": "a"}, "controller", local={},
                              mission="m", world="corridor", timeout=0.05, dead=lambda h: h in hosts.dead,
                              place=hosts.place)
     comp = RemoteComponent("FollowCorridor", router)
@@ -159,7 +159,7 @@ def test_the_cycles_simulation_step_rides_on_a_batch_to_the_simulator_host_else_
         steps.append(dt)
         return SimpleNamespace(time=1.5, version=42)
 
-    router = ComponentRouter(LocalBus(), "t", {}, "controller", node=lambda path: None, local={}, mission="m",
+    router = ComponentRouter(LocalBus(), "t", {}, "controller", local={}, mission="m",
                              world="corridor", dead=lambda h: h == "gone")
     router.simulator, router.step_sim = "ranger1", step_sim
     router.pending_step = 0.1
@@ -191,7 +191,7 @@ def test_a_batch_that_carries_the_step_brings_the_new_time_or_stops_the_cycle(st
         return ComponentBatchReply(replies, 2.0, 7) if steps else ComponentBatchReply(
             [ComponentReply(error="ValueError: no simulation is running")])
     bus.serve("drd/t/host/a/creator", creator)
-    router = ComponentRouter(bus, "t", {"a.drive": "a"}, "controller", node=lambda path: None, local={},
+    router = ComponentRouter(bus, "t", {"a.drive": "a"}, "controller", local={},
                              mission="m", world="corridor")
     router.simulator, router.pending_step = "a", 0.1
     comp = RemoteComponent("FollowCorridor", router)

@@ -411,6 +411,8 @@ def test_a_livelock_fails_the_mission_instead_of_hanging(catalog: Catalog) -> No
 class RecordingDrive:
     """A driver that records what reaches the hardware."""
 
+    SETPOINTS = ("set_velocity",)
+
     def __init__(self) -> None:
         self.calls: list[tuple[float, float, int | None]] = []
 

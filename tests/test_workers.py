@@ -21,6 +21,7 @@ from typing import Any
 import psutil
 import pytest
 
+from drd.cluster.remote import ComponentBatch, ComponentCall, ComponentReply
 from drd.daemon.creator import Creator, CreatorError
 from drd.daemon.workers import Tune, WorkerPool
 from drd.hosts import Cluster, load_hosts
@@ -28,7 +29,6 @@ from drd.hw.drivers import HostDrivers
 from drd.hw.interfaces import Fence, HardwareError
 from drd.manifests import load_catalog
 from drd.runtime.component import Component, Status
-from drd.runtime.remote import ComponentBatch, ComponentCall, ComponentReply
 from dsl.catalog import Catalog, ComponentType, Kind, NeedSpec, ParamSpec, Process, Scheduling
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -87,6 +87,7 @@ class Reader(Component):
 class FakeDrive:
     """A fenced drive that records what reached it (in the Creator's process)."""
 
+    SETPOINTS = ("set_velocity",)
     max_speed = 0.8
 
     def __init__(self) -> None:
@@ -147,9 +148,9 @@ def pool(catalog_: Catalog) -> Iterator[WorkerPool]:
 
 @pytest.fixture
 def creator(cluster_: Cluster, catalog_: Catalog, pool: WorkerPool) -> Iterator[Creator]:
-    c = Creator(None, cluster_, "ranger1", catalog_, pool=pool)
     drive = FakeDrive()
-    c._drivers_for = lambda world: HostDrivers({"ranger1.drive": drive})  # type: ignore[method-assign]
+    c = Creator(None, cluster_, "ranger1", catalog_, pool=pool,
+                drivers=lambda world: HostDrivers({"ranger1.drive": drive}))
     c.fake_drive = drive  # type: ignore[attr-defined]
     try:
         yield c
@@ -187,14 +188,33 @@ def test_a_component_runs_in_a_worker_process_not_in_the_daemon(creator: Creator
     assert [(i.name, i.state, i.host) for i in creator.instance_infos()] == [("M/A", "running", "ranger1")]
 
 
-def test_driver_calls_come_back_to_the_fenced_driver_in_the_creator(creator: Creator) -> None:
-    start(creator, "M/D", mode="drive", epochs={"drive": 7})
+def test_driver_calls_come_back_to_the_gated_driver_in_the_creator(creator: Creator) -> None:
+    grant = [["grant", "ranger1.drive", f"{MISSION}/M", 7, 0.0]]  # the controller's word: M holds the drive
+    start(creator, "M/D", mode="drive", epochs={"drive": 7}, gates=grant)
     r = step(creator, "M/D")
     assert r.error == "", r.error
     assert r.outputs is not None
     assert r.outputs["odometry"] == [1.0, 2.0, 0.5] and r.outputs["max_speed"] == 0.8
     assert creator.fake_drive.commands == [(0.5, 0.1, 7, os.getpid())]  # type: ignore[attr-defined]
     assert r.logs == ["caught HardwareError: the wheels are jammed"]
+    assert r.records == [{"mission": MISSION, "kind": "command", "at": 1.0, "path": "M/D", "device": "ranger1.drive",
+                          "method": "set_velocity", "epoch": 7, "accepted": True, "reason": ""}]
+
+
+@pytest.mark.parametrize(("gates", "epoch", "why"), [
+    (None, 7, "nobody holds the device"),
+    ([["grant", "ranger1.drive", f"{MISSION}/Other", 7, 0.0]], 7, "not under the holder Other"),
+    ([["grant", "ranger1.drive", "m2/M", 7, 0.0]], 7, "not under the holder M"),  # another mission's M
+    ([["grant", "ranger1.drive", f"{MISSION}/M", 8, 0.0]], 7, "epoch 7 is not the grant's (8)"),
+    ([["grant", "ranger1.drive", f"{MISSION}/M", 7, 0.0], ["clear", "ranger1.drive", f"{MISSION}/M", 0.5, "x"]],
+     7, "nobody holds the device"),
+])
+def test_the_gate_in_the_creator_refuses_a_command_outside_the_current_grant(
+        creator: Creator, gates: list[list[Any]] | None, epoch: int, why: str) -> None:
+    start(creator, "M/D", mode="drive", epochs={"drive": epoch}, gates=gates)
+    r = step(creator, "M/D")
+    assert creator.fake_drive.commands == []  # type: ignore[attr-defined]
+    assert r.records is not None and [(d["accepted"], d["reason"]) for d in r.records] == [(False, why)]
 
 
 def test_dedicated_gets_a_process_of_its_own_containers_share_one(creator: Creator) -> None:
@@ -266,13 +286,18 @@ def test_tune_sets_affinity_and_nice_of_the_instance_process(creator: Creator) -
     assert (start(creator, "M/C").outputs or {})["pid"] != pid
 
 
-def test_a_new_mission_retires_the_processes_of_the_last_one(creator: Creator) -> None:
+def test_missions_run_side_by_side_in_processes_of_their_own_until_retired(creator: Creator) -> None:
     pids = [(start(creator, p, c).outputs or {})["pid"] for p, c in (("M/A", "Probe"), ("M/X", "Alone"))]
     r = creator.handle(ComponentCall("start", "m2", "M/A", component="Probe", params={"mode": ""},
                                      bindings={"drive": ["ranger1.drive", "", ""]}))
-    assert (r.outputs or {})["pid"] not in pids
-    assert not [pid for pid in pids if _alive(pid)]
-    assert [i.name for i in creator.instance_infos()] == ["M/A"]
+    other = (r.outputs or {})["pid"]
+    assert other not in pids and all(_alive(pid) for pid in [*pids, other])  # the same path, its own process
+    assert sorted((i.mission, i.name) for i in creator.instance_infos()) == [
+        ("m1", "M/A"), ("m1", "M/X"), ("m2", "M/A")]
+    assert step(creator, "M/A").status == "running"  # m1's M/A is still m1's
+    creator.handle(ComponentCall("retire", MISSION, ""))
+    assert not [pid for pid in pids if _alive(pid)] and _alive(other)
+    assert [(i.mission, i.name) for i in creator.instance_infos()] == [("m2", "M/A")]
 
 
 @pytest.fixture
@@ -323,8 +348,9 @@ def test_readings_are_read_ahead_of_a_step_and_equal_those_asked(simulated: tupl
 def test_a_launch_during_a_step_makes_the_readings_read_ahead_stale(
         simulated: tuple[Creator, Any, list[Any]]) -> None:
     c, service, asked = simulated
+    grant = [["grant", "ranger1.launcher", f"{MISSION}/M", 3, 0.0]]
     c.handle(ComponentCall("start", MISSION, "M/R", component="Reader", params={"mode": "launch"}, world="corridor",
-                           bindings=READER_BINDINGS))
+                           bindings=READER_BINDINGS, gates=grant, epochs={"launcher": 3}))
     before = (c.handle(ComponentCall("step", MISSION, "M/R", now=1.0)).outputs or {})["loaded"]
     service.sim.step(0.1)
     asked.clear()
@@ -406,15 +432,17 @@ def test_missionctl_tune_finds_the_instance_and_tunes_its_process(tmp_path: Path
         eventually(lambda: not [pid for pid in children if _alive(pid)], "ranger1's processes to be gone", 10.0)
 
 
-def test_a_setpoint_that_changes_readings_at_once_is_answered_a_velocity_is_not() -> None:
-    """A hop changes what the sensors read within the step, so it is sent and answered (the answer says the
-    world changed); a velocity takes effect at the next step, so it goes without waiting."""
-    from drd.daemon.creator import setpoints
+def test_an_action_is_answered_a_setpoint_is_not() -> None:
+    """A hop (an action) changes what the sensors read within the step, so it is sent and answered (the answer
+    says the world changed); a velocity (a setpoint) takes effect at the next step, so it goes without waiting.
+    What is which is what each driver declares (`drd.hw.commands`)."""
+    from drd.hw.commands import spec_of
     from drd.hw.drivers import drivers_for
     from drd.sim import Simulation, load_world
 
     catalog = load_catalog()
     sim = Simulation(load_world(ROOT / "worlds" / "corridor.yaml"))
     drivers = drivers_for(load_hosts(ROOT / "hosts.yaml", catalog), "ranger1", sim, catalog=catalog)
-    assert setpoints(drivers.robots["scout1"]["foot"]) == []
-    assert setpoints(drivers.robots["scout1"]["wheels"]) == ["set_velocity", "stop"]
+    foot, wheels = spec_of(drivers.robots["scout1"]["foot"]), spec_of(drivers.robots["scout1"]["wheels"])
+    assert (foot.setpoints, foot.actions) == (frozenset(), {"jump"})
+    assert (wheels.setpoints, wheels.actions, wheels.stop) == ({"set_velocity", "stop"}, frozenset(), "stop")

@@ -37,9 +37,12 @@ class SimDriver:
     #: no side effect, noise seeded per instant. The cluster's Creator reads them ahead of a component's step
     #: (`drd.daemon.creator`), which then costs no round trip to the component's process.
     READINGS: frozenset[str] = frozenset()
-    #: Setpoint commands that change what the sensors read at once (a hop), not at the next step as a velocity
-    #: does: a component's process sends them and waits for the answer, which says the world changed.
-    CHANGES_READINGS: frozenset[str] = frozenset()
+    #: Commands (`drd.runtime.ownership`): setpoints hold until the next one and are multiplexed per control
+    #: cycle; actions run at once and return a result; `STOP` brings the device to a safe stop. Each goes through
+    #: the device's gate, which lets only the current grant's holder through.
+    SETPOINTS: tuple[str, ...] = ()
+    ACTIONS: tuple[str, ...] = ()
+    STOP: str | None = None
 
     def __init__(self, device: Device, robot_id: str, sim: Simulation) -> None:
         self.device, self.robot_id, self.sim = device, robot_id, sim

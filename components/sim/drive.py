@@ -13,6 +13,8 @@ class SimDrive(SimDriver):
     """A simulated wheeled base. Options: `max_speed` (m/s; without it, only the simulator's wheels limit)."""
 
     READINGS = frozenset({"odometry", "max_speed"})
+    SETPOINTS = ("set_velocity", "stop")
+    STOP = "stop"
 
     def __init__(self, device: Device, robot_id: str, sim: Simulation) -> None:
         super().__init__(device, robot_id, sim)

@@ -12,7 +12,7 @@ class SimJump(SimDriver):
     `max_distance` (m, default and cap: the simulator's longest hop)."""
 
     READINGS = frozenset({"max_height", "max_distance"})
-    CHANGES_READINGS = frozenset({"jump"})
+    ACTIONS = ("jump",)
 
     def __init__(self, device: Device, robot_id: str, sim: Simulation) -> None:
         super().__init__(device, robot_id, sim)

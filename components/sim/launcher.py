@@ -15,6 +15,7 @@ class SimLauncher(SimDriver):
     """A simulated launcher on a Ranger. Options: `max_range` (m, at most the simulator's 30 m)."""
 
     READINGS = frozenset({"loaded", "max_range"})
+    ACTIONS = ("launch",)
 
     def __init__(self, device: Device, robot_id: str, sim: Simulation) -> None:
         super().__init__(device, robot_id, sim)

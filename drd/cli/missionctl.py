@@ -215,9 +215,14 @@ def main() -> None:
 
 @app.command("dry-run")
 def dry_run(
-    mission: Path = typer.Argument(..., help="The mission file.", show_default=False),
+    missions: list[Path] = typer.Argument(..., help="The mission file; several run together on one team, each "
+                                                    "with its own report.", show_default=False),
+    priority: list[int] = typer.Option([], "--priority", "-P", min=1, show_default=False,
+                                       help="The mission's priority against the others (1 the highest; default: "
+                                            "its `mission ... priority`). Repeat it for each mission, in order."),
     param: list[str] = typer.Option([], "--param", "-p", show_default=False,
-                                    help="NAME=VALUE: start the mission's variable NAME at VALUE (repeatable)."),
+                                    help="NAME=VALUE: start the mission's variable NAME at VALUE (repeatable; with "
+                                         "several missions, in each that declares NAME)."),
     world: str = typer.Option(None, "--world", "-w", show_default=False,
                               help="A world name (worlds/NAME.yaml) or a path [default: hosts.yaml's cluster.world,"
                                    " else corridor]."),
@@ -233,29 +238,35 @@ def dry_run(
     inject: list[str] = typer.Option([], "--inject", help="A failure at a sim time, e.g. 'kill ranger1 at 90s', "
                                                           "'lose scout3 at 2min', 'block door_n3 at 60s' "
                                                           "(also close/open DOOR). Repeatable.", show_default=False),
-    as_json: bool = typer.Option(False, "--json", help="Print the report as JSON."),
+    as_json: bool = typer.Option(False, "--json", help="Print the report as JSON (a list of reports for several "
+                                                       "missions)."),
     components: list[Path] = ComponentsOption,
 ) -> int:
-    """Run a mission against the 2D simulation in this process: exit 0 if it succeeds, 1 if it fails."""
+    """Run missions against the 2D simulation in this process: exit 0 if every one succeeds, 1 if one fails."""
     from rich.live import Live
 
-    from drd.dryrun import run as run_dry
-    from drd.dryrun import world_path
+    from drd.dryrun import Mission, merged, run_many, world_path
     from drd.hosts import HostsError, load_hosts
     from drd.inject import InjectionError
     from drd.inject import parse_all as parse_injections
     from drd.render import SUPPORTED_SUFFIXES
     from drd.sim.world import WorldError, load_world
-    from dsl.params import ParamError, apply_params, parse_assignments
+    from dsl.params import ParamError, parse_assignments
 
     cat = catalog(components)
-    result = _compile(mission, cat)
-    for d in result.diagnostics:
-        render_diagnostic(d, result.sources)
-    if not result.ok or result.statechart is None:
-        return INVALID if not result.ok else fail(f"{mission} declares no mission to run")
+    if len(priority) > len(missions):
+        fail(f"{len(priority)} --priority for {len(missions)} mission{'s' if len(missions) > 1 else ''}:"
+             " give one per mission, in order")
+    charts = []
+    for mission in missions:
+        result = _compile(mission, cat)
+        for d in result.diagnostics:
+            render_diagnostic(d, result.sources)
+        if not result.ok or result.statechart is None:
+            return INVALID if not result.ok else fail(f"{mission} declares no mission to run")
+        charts.append(result.statechart)
     try:
-        chart = apply_params(result.statechart, parse_assignments(param))
+        charts = _with_params(charts, parse_assignments(param))
     except ParamError as e:
         for line in str(e).splitlines():
             err.print(Text.assemble(("error: ", "bold red"), line))
@@ -288,8 +299,9 @@ def dry_run(
         if live is not None:
             live.start()
         try:
-            report = run_dry(chart, cluster, sim_world, cat, seed=seed, until=until, speed=speed,
-                             trace=fh, progress=progress, injections=injections)
+            runs = [Mission(chart, priority[i] if i < len(priority) else None) for i, chart in enumerate(charts)]
+            reports = run_many(runs, cluster, sim_world, cat, seed=seed, until=until, speed=speed,
+                               trace=fh, progress=progress, injections=injections)
         except ValueError as e:
             fail(str(e))
     finally:
@@ -300,13 +312,81 @@ def dry_run(
     if render is not None:
         from drd.render import render as draw
 
-        draw(sim_world, report, render)
+        draw(sim_world, reports[0] if len(reports) == 1 else merged(reports), render)
         err.print(Text.assemble(("✓ ", "bold green"), f"drew {render}"))
     if as_json:
-        print_json(report.to_dict(), default=str)
+        print_json(reports[0].to_dict() if len(reports) == 1 else [r.to_dict() for r in reports], default=str)
     else:
-        _print_report(report)
-    return OK if report.outcome == "success" else MISSION_FAILED
+        for report in reports:
+            _print_report(report, several=len(reports) > 1)
+    return OK if all(r.outcome == "success" for r in reports) else MISSION_FAILED
+
+
+def _with_params(charts: list[Statechart], params: dict[str, str]) -> list[Statechart]:
+    """`--param` in every mission that declares the variable (ParamError for one that none declares)."""
+    from dsl.params import ParamError, apply_params
+
+    if len(charts) == 1 or not params:
+        return [apply_params(chart, params) for chart in charts]
+    declared = [{v.name for v in chart.states[chart.root].vars} for chart in charts]
+    unknown = sorted(name for name in params if not any(name in d for d in declared))
+    if unknown:
+        raise ParamError("\n".join(f"no mission declares a variable {name!r} to set" for name in unknown))
+    return [apply_params(chart, {k: v for k, v in params.items() if k in d}) for chart, d in zip(charts, declared,
+                                                                                                 strict=True)]
+
+
+@app.command("check-trace")
+def check_trace(
+    traces: list[Path] = typer.Argument(..., help="Trace files (JSON lines, as --trace writes them).",
+                                        show_default=False),
+    sharable: list[str] = typer.Option([], "--sharable", show_default=False,
+                                       help="A unit several holders may hold at once (repeatable; default: the "
+                                            "sharable devices of --hosts)."),
+    hosts: Path = typer.Option(Path("hosts.yaml"), "--hosts", help="Where the sharable devices are read from."),
+    as_json: bool = typer.Option(False, "--json", help="Print the result as JSON."),
+    components: list[Path] = ComponentsOption,
+) -> int:
+    """Check traces for the ownership invariant (docs/trace.md): only a grant's holder, at its epoch, moved a
+    device, no exclusive unit had two holders, nothing was held at the end. Exit 0 if it holds, 1 if not."""
+    from drd.tracecheck import check
+
+    shared = set(sharable)
+    if not shared and hosts.is_file():
+        from drd.hosts import HostsError, load_hosts
+
+        try:
+            shared = {d.id for d in load_hosts(hosts, catalog(components)).devices if d.sharable}
+        except HostsError as e:
+            for p in e.problems:
+                err.print(Text.assemble(("error: ", "bold red"), str(p)))
+            return INVALID
+    results = []
+    for path in traces:
+        try:
+            lines = path.read_text(encoding="utf-8").splitlines()
+            records = [json.loads(line) for line in lines if line.strip()]
+        except (OSError, UnicodeDecodeError, json.JSONDecodeError) as e:
+            fail(f"{path}: cannot read it as a trace: {e}")
+        if not all(isinstance(r, dict) for r in records):
+            fail(f"{path}: every line of a trace is a JSON object")
+        results.append((path, check(records, shared)))
+    if as_json:
+        print_json([{"file": str(p), "ok": r.ok, "commands": r.commands, "accepted": r.accepted,
+                     "refused": r.refused, "grants": r.grants,
+                     "breaches": [{"at": b.at, "kind": b.kind, "detail": b.detail} for b in r.breaches]}
+                    for p, r in results])
+    else:
+        for p, r in results:
+            mark = ("✓ ", "bold green") if r.ok else ("✗ ", "bold red")
+            out.print(Text.assemble(mark, f"{p}: {r.summary()}"))
+            for b in r.breaches[:20]:
+                out.print(f"  at {b.at:.2f} s: {b.kind}: {b.detail}")
+            if len(r.breaches) > 20:
+                out.print(f"  … and {len(r.breaches) - 20} more")
+            if r.commands == 0:
+                out.print("  no command records: nothing moved, or the trace was not written by a gate")
+    return OK if all(r.ok for _, r in results) else MISSION_FAILED
 
 
 def _progress_view(sim: Simulation, executive: Executive) -> Text:
@@ -326,9 +406,10 @@ def _short(holder: str) -> str:
     return holder.rsplit("/", 1)[-1]
 
 
-def _print_report(r: DryRun) -> None:
+def _print_report(r: DryRun, several: bool = False) -> None:
     colour = "green" if r.outcome == "success" else "red"
-    out.print(Text.assemble(("mission ", "bold"), r.mission, "  ", (f"{r.outcome}", f"bold {colour}"),
+    who = f"{r.mission_id or r.mission} (priority {r.priority})" if several else r.mission
+    out.print(Text.assemble(("mission ", "bold"), who, "  ", (f"{r.outcome}", f"bold {colour}"),
                             f"  {r.reason}".rstrip()))
     pace = f"{r.real_time_factor:.0f}x real time"
     if not r.kept_up:  # say so, rather than leave the operator to compare with what they asked

@@ -209,7 +209,7 @@ class Controller:
 
     def step(self) -> None:
         """Apply removals that fell due. Missions are stepped in lockstep with the simulator by their own
-        loop (`drd.daemon.missions.MissionRun`), not here."""
+        loop (`drd.daemon.missions.WorldRun`), not here."""
         self._apply(self.membership.due(self.clock.now()))
 
     def resources(self) -> ResourcesReply:
@@ -228,13 +228,7 @@ class Controller:
         for action in actions:
             if action.kind == "add":
                 found = host_resources(self.cluster, action.host)
-                running = [m for m in self.executive.missions.values() if not m.finished]
-                if running:
-                    for m in running:
-                        m.add_resources(found)  # hot-plug: a running multiplicity may grow
-                        break  # the pool is shared: added once, the other missions see it in their next step
-                else:
-                    pool.add(found, now)
+                self.executive.add_resources(found)  # hot-plug: running multiplicities may grow
                 detail = f"{len(found)} resources added to the manager"
             else:
                 if any(not m.finished for m in self.executive.missions.values()):

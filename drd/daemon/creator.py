@@ -1,28 +1,32 @@
 """The Component Creator of one host: runs the components whose devices this host owns.
 
-It serves `drd/<cluster>/host/<host>/creator` with `drd.runtime.remote.ComponentCall`s from the controller's
+It serves `drd/<cluster>/host/<host>/creator` with `drd.cluster.remote.ComponentCall`s from the controller's
 executive (through `RemoteComponent` proxies) and answers each with a `ComponentReply`. It is closed:
 
 - it instantiates only elementary behaviors declared by a manifest of its own catalog, from that manifest's
   entry point (never a module or class named on the wire);
 - parameters must be declared by the manifest and of its declared type (`float`, `duration`, `int`...);
-- a need's resource must be a device of this host; its driver is this host's (`drd.hw.drivers`), fenced by
-  the grant's epoch as in the dry-run (`drd.runtime.fence.Fenced`).
+- a need's resource must be a device of this host; its driver is this host's (`drd.hw.drivers`), behind the
+  device's gate (`drd.runtime.ownership`): the controller tells the gates every grant and end of one
+  (`drd.cluster.gates`, carried by each call or sent alone), so only the holder's subtree, at its grant's
+  epoch, moves a device, and a device whose holder lost it is stopped here, next to it.
 
 Component code runs in worker processes (`drd.daemon.workers`): a pre-started container shared by the
 instances whose manifest says `process: container` (and the same `scheduling`), or a process of its own for
 `process: dedicated`. What stays here, on the trusted side: the checks above, the drivers and their fencing,
 the arbitration below and the simulator. Inside the worker a component's devices are proxies: each method
-call comes back over the pipe and runs here on the `Fenced` driver, so one call costs one pipe round trip plus
+call comes back over the pipe and runs here on the gated driver, so one call costs one pipe round trip plus
 one per driver call, and a batch one round trip per run of consecutive steps in the same process. A worker
 that dies fails the calls of its instances (`component process of X died (exit code -9)`) and nothing else;
-the pool replaces it. A new mission retires the processes of the previous one. `Tune` (on the Creator's key)
-changes the CPU affinity and nice of the process running an instance at run time.
+the pool replaces it. Several missions may run at once: instances are kept per mission (`<mission>/<path>`),
+each mission has processes of its own, retired when the controller says the mission ended (`retire`). `Tune`
+(on the Creator's key) changes the CPU affinity and nice of the process running an instance at run time.
 
-Actuator commands of one control
-cycle are arbitrated per driver as the dry-run's `Arbiter` does (highest priority, then the behavior
-declared last), but executed at once: a lower-ranked command that comes after a higher-ranked one in the
-same round is dropped, and one that comes before is overwritten, so the last setpoint is the same.
+Actuator commands of one control cycle are fenced by the gate first, then arbitrated per device as the
+dry-run's `Arbiter` does (highest priority, then the behavior declared last), but executed at once: a
+lower-ranked command that comes after a higher-ranked one in the same round is dropped, and one that comes
+before is overwritten, so the last setpoint is the same. What the gates record (each command, each halt) goes
+back to the controller with the reply.
 
 `sim` drivers reach the simulator through a `drd.sim.service.RemoteSimulation`, built per mission for the
 world the call names; on the simulator host itself they call the simulation directly
@@ -32,6 +36,7 @@ world the call names; on the simulator host itself they call the simulation dire
 from __future__ import annotations
 
 import cProfile
+import dataclasses
 import logging
 import os
 import pickle
@@ -43,6 +48,8 @@ from typing import Any
 import psutil
 
 from drd.bus import Bus, BusError, Message, Query, Reply
+from drd.cluster.gates import GateUpdate, GateUpdateReply, wire_record
+from drd.cluster.remote import ComponentBatch, ComponentBatchReply, ComponentCall, ComponentReply
 from drd.daemon.keys import ClusterKeys
 from drd.daemon.messages import InstanceInfo
 from drd.daemon.workers import (
@@ -58,29 +65,40 @@ from drd.daemon.workers import (
     scheduling_of,
 )
 from drd.hosts import Cluster
-from drd.runtime.fence import Arbiter, Fenced, Proposal, is_command
-from drd.runtime.remote import ComponentBatch, ComponentBatchReply, ComponentCall, ComponentReply
+from drd.hw.commands import spec_of
+from drd.runtime import records as rec
+from drd.runtime.ownership import Arbiter, Binding, BoundDevice, LocalGates, Proposal
 from dsl.catalog import Catalog, ComponentType, Kind, Process
 
 log = logging.getLogger("drd.daemon.creator")
 
-OPS = ("start", "step", "suspend", "resume", "terminate")
+OPS = ("start", "step", "suspend", "resume", "terminate", "retire")
 
 
 class CycleArbiter(Arbiter):
-    """`Arbiter` with immediate execution (see the module docstring); `round` changes per cycle and phase."""
+    """`Arbiter` with immediate execution (see the module docstring): fenced by the gate, then run at once unless
+    a higher-ranked behavior commanded the device in this round; `round` changes per cycle and phase. A driver
+    that raises is reported through `on_error(owner, exception)`."""
 
-    def __init__(self) -> None:
-        super().__init__()
+    def __init__(self, clock: Callable[[], float], on_error: Callable[[Any, Exception], None]) -> None:
+        super().__init__(clock)
+        self.on_error = on_error
         self.round: tuple[float, bool] = (-1.0, False)
-        self._best: dict[int, tuple[tuple[float, bool], tuple[int, int]]] = {}
+        self._best: dict[str, tuple[tuple[float, bool], tuple[int, int]]] = {}
 
-    def propose(self, driver: Any, proposal: Proposal) -> None:
-        best = self._best.get(id(driver))
-        if best is not None and best[0] == self.round and proposal.rank < best[1]:
-            return  # a higher-ranked behavior already commanded this driver in this round
-        self._best[id(driver)] = (self.round, proposal.rank)
-        proposal.call()
+    def propose(self, p: Proposal) -> None:
+        why = p.gate.verdict(p.issuer, p.binding.epoch)
+        if why:
+            p.gate.refuse(p.issuer, p.binding.epoch, p.method, why, self.clock())
+            return
+        best = self._best.get(p.gate.device)
+        if best is not None and best[0] == self.round and p.rank < best[1]:
+            return  # a higher-ranked behavior already commanded this device in this round
+        self._best[p.gate.device] = (self.round, p.rank)
+        try:
+            p.gate.execute(p.binding.driver, p.issuer, p.binding.epoch, p.method, p.args, p.kwargs, self.clock())
+        except Exception as e:  # the driver refused it (fenced out is NotHolder, recorded, never raised here)
+            self.on_error(p.owner, e)
 
 
 #: Instance states, as announced to the Component Database.
@@ -90,13 +108,15 @@ _STATE_AFTER = {"start": RUNNING, "resume": RUNNING, "suspend": SUSPENDED, "term
 
 @dataclass
 class Instance:
-    """A component instance as the Creator keeps it: the process running its code, and its fenced devices."""
+    """A component instance as the Creator keeps it: the process running its code, and its gated devices."""
 
     name: str
+    mission: str
+    path: str
     bindings: dict[str, list[str]]
     worker: Worker
-    devices: dict[str, Fenced] = field(default_factory=dict)
-    epochs: dict[str, int | None] = field(default_factory=dict)
+    devices: dict[str, BoundDevice] = field(default_factory=dict)
+    bound: dict[str, Binding] = field(default_factory=dict)  # need -> its binding (epoch from each call)
     setup: tuple[Any, ...] | None = None  # sent with its first call (entry point, resources, device methods)
     state: str = "starting"
     dead: str = ""  # how its process went, once it has
@@ -113,35 +133,43 @@ class CreatorError(ValueError):
 class Creator:
     def __init__(self, bus: Bus | None, cluster: Cluster, host: str, catalog: Catalog, *,
                  sim_service: Any = None, pool: WorkerPool | None = None,
-                 workers: int | None = None, on_change: Callable[[], None] | None = None) -> None:
+                 workers: int | None = None, on_change: Callable[[], None] | None = None,
+                 drivers: Callable[[str], Any] | None = None) -> None:
         """`pool`: the worker processes to use (default: a pool of `workers` idle ones, else `$DRD_WORKERS`, else
-        2, owned and closed by this Creator); `on_change` is called when the announced instances change."""
+        2, owned and closed by this Creator); `on_change` is called when the announced instances change;
+        `drivers(world)`: this host's drivers (`drd.hw.HostDrivers`) for a world, instead of those hosts.yaml names
+        (a test's fakes)."""
         self.cluster = cluster
         self.host = host
         self.catalog = catalog
-        self.instances: dict[str, Instance] = {}
-        self.mission = ""
+        self.instances: dict[str, Instance] = {}  # by `<mission>/<path>`
         self.calls = 0
-        self.arbiter = CycleArbiter()
+        self._now = 0.0  # the controller's time of the call being served (the gates' records carry it)
+        self.arbiter = CycleArbiter(lambda: self._now, self._setpoint_failed)
         self._sim_service = sim_service  # this host's own SimulationService (drd.sim.service), if it has one
         self._bus = bus
         self._drivers: Any = None
+        self._make_drivers = drivers
+        self._generation: tuple[str, int] | None = None  # (world, reset generation) the drivers were built for
+        self._gates = LocalGates(self._gate_record)
+        self._records: list[dict[str, Any]] = []  # what the gates recorded since the last reply
         self._sim: Any = None  # a RemoteSimulation, when the drivers reach the simulator through requests
         self._world: Any = None  # the simulation the drivers use (local or remote), for its `version`
         self._ahead_version: int | None = None  # the world's version when the current run's readings were read
         mine = cluster.host(host)
         self._devices = {d.id for d in mine.devices} | {r.id for r in mine.robots}  # what a need may be bound to
-        self._command_errors: list[tuple[str, str]] = []  # (instance path, error) of setpoints that raised
+        self._sharable = {d.id for d in mine.devices if d.sharable}
+        self._command_errors: list[tuple[str, str]] = []  # (instance key, error) of setpoints that raised
         self._lock = threading.Lock()
         self._own_pool = pool is None
         self.pool = pool if pool is not None else WorkerPool(_pool_size(workers), preload=behavior_modules(catalog))
-        self._workers: dict[int, Worker] = {}  # the processes taken from the pool for this mission, by pid
+        self._workers: dict[int, Worker] = {}  # the processes taken from the pool for the missions, by pid
         self._on_change = on_change
         self._dirty = False
         self._infos: list[InstanceInfo] = []
         self.key = f"drd/{cluster.name}/host/{host}/creator"
         self._keys = ClusterKeys(cluster.name)
-        self._tokens: dict[str, Any] = {}  # instance path -> its liveliness token
+        self._tokens: dict[str, Any] = {}  # instance key -> its liveliness token
         # DRD_PROFILE=path: profile the step batches (cProfile), dumped to path.<host> every 200 batches
         self._profile_path = os.environ.get("DRD_PROFILE", "")
         self._profile = cProfile.Profile() if self._profile_path else None
@@ -161,9 +189,14 @@ class Creator:
         if self._own_pool:
             self.pool.close()
 
+    @property
+    def missions(self) -> list[str]:
+        """The missions with instances here."""
+        return sorted({inst.mission for inst in self.instances.values()})
+
     def names(self) -> list[tuple[str, str]]:
-        """(instance path, component) of the instances of the current mission."""
-        return [(path, inst.name) for path, inst in self.instances.items()]
+        """(instance path, component) of the instances here, of every mission."""
+        return [(inst.path, inst.name) for inst in self.instances.values()]
 
     def instance_infos(self) -> list[InstanceInfo]:
         """The instances to announce: those of the current mission not terminated (`failed` if their process died)."""
@@ -173,8 +206,15 @@ class Creator:
 
     def handle(self, call: ComponentCall) -> ComponentReply:
         with self._lock:
+            self._now = call.now
+            if call.op == "retire":
+                self._apply_gates(call.gates, call.world, call.generation)
+                self._retire(call.mission)
+                self._publish()
+                return ComponentReply(records=self._take_records())
+            self._apply_gates(call.gates, call.world, call.generation)
             if self._sim is not None:
-                self._sim.owner = call.path
+                self._sim.owner = _key(call)
             try:
                 inst = self._prepare(call)
                 reply = self._run(inst.worker, [(call, inst)], {})[0]
@@ -182,9 +222,15 @@ class Creator:
                 refused = self._flush_sim()
                 self._publish()
             if refused and not reply.error:
-                reply = ComponentReply(reply.status, reply.outputs, reply.events, reply.logs, reply.shared,
-                                       reply.dependencies, refused[0][1])
-            return reply
+                reply = dataclasses.replace(reply, error=refused[0][1])
+            return dataclasses.replace(reply, records=self._take_records())
+
+    def update_gates(self, update: GateUpdate) -> GateUpdateReply:
+        """Apply gate operations from the controller (grants, ends of grants, unbindings); the halts they caused."""
+        with self._lock:
+            self._apply_gates(update.ops, update.world, update.generation)
+            self._flush_sim()
+            return GateUpdateReply(self._take_records() or [])
 
     def handle_batch(self, batch: ComponentBatch) -> ComponentBatchReply:
         """The steps of one cycle in order, up to the first the controller must see first (`ComponentBatch`)."""
@@ -206,6 +252,9 @@ class Creator:
         replies: list[ComponentReply] = []
         latest: dict[str, Any] = {}  # shared dict id on the controller -> its value after the last step
         with self._lock:
+            first = batch.calls[0]
+            self._now = first.now
+            self._apply_gates(batch.gates, first.world, first.generation)
             owners: dict[str, int] = {}
             stepped = self._step_world(batch.sim_step) if batch.sim_step else None
             try:
@@ -228,7 +277,7 @@ class Creator:
                         i += 1
                     if run:
                         for k, (call, _) in enumerate(run):
-                            owners[call.path] = len(replies) + k
+                            owners[_key(call)] = len(replies) + k
                         got = self._run(run[0][1].worker, run, latest)
                         replies += got
                         last = got[-1]
@@ -243,16 +292,15 @@ class Creator:
                 log.warning("creator %s: a step batch failed after its simulation step: %s", self.host, e)
                 replies.append(ComponentReply(error=f"{type(e).__name__}: {e}"))
             finally:
-                for path, error in self._flush_sim():
-                    at = owners.get(path)
+                for key, error in self._flush_sim():
+                    at = owners.get(key)
                     if at is not None and at < len(replies) and not replies[at].error:
-                        r = replies[at]
-                        replies[at] = ComponentReply(r.status, r.outputs, r.events, r.logs, r.shared, r.dependencies,
-                                                    error)
+                        replies[at] = dataclasses.replace(replies[at], error=error)
                 self._publish()
+            records = self._take_records()
         if stepped is None:
-            return ComponentBatchReply(replies)
-        return ComponentBatchReply(replies, stepped.time, stepped.version)
+            return ComponentBatchReply(replies, records=records)
+        return ComponentBatchReply(replies, stepped.time, stepped.version, records=records)
 
     def _step_world(self, dt: float) -> Any:
         """The cycle's simulation step, carried by the batch (`ComponentBatch.sim_step`): this host must serve the
@@ -267,31 +315,72 @@ class Creator:
         return reply
 
     def _flush_sim(self) -> list[tuple[str, str]]:
-        """Send the actuator commands the drivers queued (one request): [(instance path, error)] of refusals, with
+        """Send the actuator commands the drivers queued (one request): [(instance key, error)] of refusals, with
         the setpoint commands that raised here (sent by workers without waiting, see `_exchange`)."""
         refused, self._command_errors = self._command_errors, []
         sim = self._sim
         if sim is None or not hasattr(sim, "flush"):
             return refused
         sim.owner = ""
-        refused += [(path, f"component raised HardwareError: {error}") for path, error in sim.flush()]
+        refused += [(key, f"component raised HardwareError: {error}") for key, error in sim.flush()]
         return refused
 
+    # -- the gates ------------------------------------------------------------------------------------
+
+    def _apply_gates(self, ops: list[list[Any]] | None, world: str, generation: int) -> None:
+        """The controller's gate operations, in order, before anything else of the message (malformed ones are
+        logged and skipped: the gates keep what they had)."""
+        if not ops:
+            return
+        self._drivers_for(world, generation)
+        gates = self._gates
+        for op in ops:
+            try:
+                match op:
+                    case ["grant", str(device), str(holder), int(epoch), float() | int() as at]:
+                        gates.grant(device, holder, epoch, float(at))
+                    case ["clear", str(device), str(holder), float() | int() as at, str(reason)]:
+                        gates.clear(device, holder, float(at), reason)
+                    case ["unbind", str(device), str(issuer), float() | int() as at, str(reason)]:
+                        gates.unbind(device, issuer, float(at), reason)
+                    case _:
+                        log.warning("creator %s: a malformed gate operation was ignored: %.200r", self.host, op)
+            except Exception as e:  # a driver that cannot stop is reported in the halt's record, never raised
+                log.warning("creator %s: gate operation %.200r failed: %s", self.host, op, e)
+
+    def _gate_record(self, mission: str, record: rec.Record) -> None:
+        self._records.append(wire_record(mission, record))
+
+    def _take_records(self) -> list[dict[str, Any]] | None:
+        records, self._records = self._records, []
+        return records or None
+
+    def _setpoint_failed(self, owner: Any, e: Exception) -> None:
+        """A setpoint the driver refused (sent by a worker without waiting): fails that instance's step."""
+        if isinstance(owner, str):
+            self._command_errors.append((owner, f"component raised {type(e).__name__}: {e}"))
+
+    # -- calls ----------------------------------------------------------------------------------------
+
     def _prepare(self, call: ComponentCall) -> Instance:
-        """Everything before the call goes to the worker: checks, mission, sim clock, placement, epochs."""
+        """Everything before the call goes to the worker: checks, sim clock, placement, epochs."""
         if call.op not in OPS:
             raise CreatorError(f"unknown op {call.op!r}: use {', '.join(OPS)}")
-        if call.mission != self.mission:
-            self._new_mission(call.mission)
+        if not call.mission or "/" in call.mission:
+            raise CreatorError(f"a call names a mission (without '/'), not {call.mission!r}")
         if self._sim is not None and call.sim_version > self._sim.version:  # a batch that stepped knows better
             self._sim.sync(call.sim_time, call.sim_version)
-        inst = self.instances.get(call.path)
+        inst = self.instances.get(_key(call))
         if call.op == "start":
             inst = self._start_instance(call, inst)
         elif inst is None:
             raise CreatorError(f"no instance {call.path} of mission {call.mission} on {self.host}")
-        if call.epochs is not None:
-            inst.epochs.update(call.epochs)
+        elif call.op == "resume" and call.bindings is not None and call.bindings != inst.bindings:
+            self._rebind(inst, dict(call.bindings), _rank(call))
+        for need, epoch in (call.epochs or {}).items():
+            binding = inst.bound.get(need)
+            if binding is not None:
+                binding.epoch = epoch
         self.arbiter.round = (call.now, call.op == "step")
         return inst
 
@@ -306,7 +395,7 @@ class Creator:
         self._ahead_version = getattr(self._world, "version", None)
         for call, inst in run:
             self.calls += 1
-            ahead = self._read_ahead(call.path, inst) if call.op == "step" else None
+            ahead = self._read_ahead(inst) if call.op == "step" else None
             aheads.append(ahead)
             msgs.append((call.path, call.op, call.now, call.status, call.shared, call.shared_ids, call.siblings,
                          call.params if call.op == "start" else None, inst.setup, ahead))
@@ -322,7 +411,7 @@ class Creator:
             if ahead is not None or inst.asked:
                 inst.reads = _reads_next(ahead, unused, inst.asked)
             if setup_failed:  # setup raised: the start fails and the instance is forgotten
-                self._forget(call.path)
+                self._forget(_key(call))
                 replies.append(ComponentReply(error=error))
                 continue
             if inst.notes:
@@ -352,26 +441,27 @@ class Creator:
             if kind == "cmd" and len(got) >= 6:  # a setpoint: no answer awaited, a refusal fails the step after
                 error = self._device_request(worker, got, answer=False)
                 if error is not None:
-                    self._command_errors.append((got[1], f"component raised {type(error).__name__}: {error}"))
+                    self._command_errors.append((f"{worker.mission}/{got[1]}",
+                                                 f"component raised {type(error).__name__}: {error}"))
                 continue
             worker.kill()
             raise WorkerDied(f"sent an unexpected message ({str(kind)[:40]}): killed")
 
     def _device_request(self, worker: Worker, req: tuple[Any, ...], answer: bool = True) -> Exception | None:
-        """Run one driver call (or attribute read) of a component in `worker` on its fenced driver; answer it
+        """Run one driver call (or attribute read) of a component in `worker` on its gated device; answer it
         (or, for a setpoint command, return what it raised). An answer tells the worker when the world changed
         since its readings were read ahead (a launch): it then asks for the rest of the run's readings."""
         kind, path, need, name = req[:4]
         args, kwargs = (req[4], req[5]) if len(req) >= 6 else ((), {})
         try:
-            inst = self.instances.get(path) if isinstance(path, str) else None
+            inst = self.instances.get(f"{worker.mission}/{path}") if isinstance(path, str) else None
             if inst is None or inst.worker is not worker:
                 raise LookupError(f"no instance {path!r} in this process")
             if kind != "cmd" and isinstance(need, str) and name in inst.readings.get(need, ()):
                 key = reading_key(kind, need, name, args, kwargs)
                 if key is not None and key not in inst.asked:
                     inst.asked.append(key)
-            result: tuple[Any, ...] = ("ok", self._device_value(inst, path, kind, need, name, args, kwargs))
+            result: tuple[Any, ...] = ("ok", self._device_value(inst, kind, need, name, args, kwargs))
         except Exception as e:  # the component sees the driver's exception, as it would in process
             if not answer:
                 return e
@@ -389,24 +479,23 @@ class Creator:
                                                f" ({e})"), *changed))
         return None
 
-    def _device_value(self, inst: Instance, path: str, kind: str, need: Any, name: Any, args: Any,
-                      kwargs: Any) -> Any:
-        """A driver call (`dev`, `cmd`) or attribute read (`attr`) of instance `path` on its fenced driver."""
-        fenced = inst.devices.get(need) if isinstance(need, str) else None
-        if fenced is None:
-            raise LookupError(f"{path}: no device for need {need!r} (have: {', '.join(inst.devices) or 'none'})")
+    def _device_value(self, inst: Instance, kind: str, need: Any, name: Any, args: Any, kwargs: Any) -> Any:
+        """A driver call (`dev`, `cmd`) or attribute read (`attr`) of an instance on its gated device."""
+        device = inst.devices.get(need) if isinstance(need, str) else None
+        if device is None:
+            raise LookupError(f"{inst.path}: no device for need {need!r} (have: {', '.join(inst.devices) or 'none'})")
         if not isinstance(name, str) or name.startswith("_"):
             raise AttributeError(f"{need}: no public attribute {name!r}")
         if self._sim is not None:
-            self._sim.owner = path
-        target = getattr(fenced, name)
+            self._sim.owner = f"{inst.mission}/{inst.path}"
+        target = getattr(device, name)
         if kind in ("dev", "cmd"):
             return target(*args, **kwargs)
         if callable(target):
             raise TypeError(f"{need}.{name} is a method: call it")
         return target
 
-    def _read_ahead(self, path: str, inst: Instance) -> dict[tuple[Any, ...], Any] | None:
+    def _read_ahead(self, inst: Instance) -> dict[tuple[Any, ...], Any] | None:
         """The readings `inst` made in its last step, read now for this one (`READINGS` of the `sim` drivers: a
         function of the world's instant, so reading ahead changes nothing); each saves a pipe round trip. One
         that raises is left out: asked over the pipe, it raises there as it would have."""
@@ -417,25 +506,26 @@ class Creator:
         for key in inst.reads:
             kind, need, name, args, kwargs = key
             try:
-                ahead[key] = self._device_value(inst, path, kind, need, name, args, dict(kwargs))
+                ahead[key] = self._device_value(inst, kind, need, name, args, dict(kwargs))
             except Exception:
                 continue
         return ahead or None
 
     # -- processes ----------------------------------------------------------------------------------------
 
-    def _place(self, ct: ComponentType) -> tuple[Worker, list[str]]:
+    def _place(self, ct: ComponentType, mission: str) -> tuple[Worker, list[str]]:
         """The process for a new instance of `ct`: the mission's container with the same scheduling (not tuned
         since), else a pre-started worker from the pool (always, for `process: dedicated`)."""
         sched = ct.scheduling
         key = (tuple(sched.cores) if sched.cores is not None else None, sched.nice)
         if ct.process is not Process.DEDICATED:
             for w in self._workers.values():
-                if w.kind == "container" and w.key == key and not w.tuned and w.alive:
+                if w.kind == "container" and w.mission == mission and w.key == key and not w.tuned and w.alive:
                     return w, []
         w = self.pool.take()
         w.kind = "dedicated" if ct.process is Process.DEDICATED else "container"
         w.key = key
+        w.mission = mission
         self._workers[w.pid] = w
         return w, self._apply_manifest(w, ct)
 
@@ -459,7 +549,7 @@ class Creator:
         worker.died = worker.died or reason
         names = sorted(worker.instances)
         for path in names:
-            inst = self.instances.get(path)
+            inst = self.instances.get(f"{worker.mission}/{path}")
             if inst is not None and inst.worker is worker:
                 inst.dead, inst.state = reason, FAILED
         log.warning("creator %s: component process %d (%s) %s", self.host, worker.pid, ", ".join(names) or "idle",
@@ -468,14 +558,14 @@ class Creator:
         self.pool.release(worker)
         self._dirty = True
 
-    def _forget(self, path: str) -> None:
+    def _forget(self, key: str) -> None:
         """Drop an instance: from its container (which goes on), or with its dedicated process."""
-        inst = self.instances.pop(path, None)
+        inst = self.instances.pop(key, None)
         if inst is None:
             return
         self._dirty = True
         w = inst.worker
-        w.instances.discard(path)
+        w.instances.discard(inst.path)
         if w.died:
             return
         if w.kind == "dedicated" or not w.alive:
@@ -483,9 +573,17 @@ class Creator:
             self.pool.release(w)
             return
         try:
-            w.send(("drop", [path]))
+            w.send(("drop", [inst.path]))
         except WorkerDied:
             self._worker_died(w, w.died)
+
+    def _retire(self, mission: str) -> None:
+        """A mission ended: its instances are dropped and its processes retired (killed; the pool has fresh ones)."""
+        for key in [k for k, inst in self.instances.items() if inst.mission == mission]:
+            del self.instances[key]
+        for pid in [pid for pid, w in self._workers.items() if w.mission == mission]:
+            self.pool.release(self._workers.pop(pid))
+        self._dirty = True
 
     def _retire_all(self) -> None:
         for w in self._workers.values():
@@ -497,37 +595,45 @@ class Creator:
         if not self._dirty:
             return
         self._dirty = False
-        infos = [InstanceInfo(path, inst.name, self.host, inst.state, self.key, inst.worker.pid)
-                 for path, inst in self.instances.items() if inst.state not in (TERMINATED, "starting")]
+        infos = [InstanceInfo(inst.path, inst.name, self.host, inst.state, self.key, inst.worker.pid, inst.mission)
+                 for inst in self.instances.values() if inst.state not in (TERMINATED, "starting")]
         if infos != self._infos:
             self._infos = infos
-            self._sync_tokens({i.name for i in infos})
+            self._sync_tokens({f"{i.mission}/{i.name}" for i in infos})
             if self._on_change is not None:
                 self._on_change()
 
     def _sync_tokens(self, running: set[str]) -> None:
-        """A liveliness token per running instance (`drd/<c>/instance/<host>/<path>`): it vanishes when the
-        instance ends or its daemon dies, so a peer sees either without asking."""
+        """A liveliness token per running instance (`drd/<c>/instance/<host>/<mission>/<path>`): it vanishes when
+        the instance ends or its daemon dies, so a peer sees either without asking."""
         if self._bus is None:
             return
-        for path in [p for p in self._tokens if p not in running]:
-            self._tokens.pop(path).close()
-        for path in running - self._tokens.keys():
+        for key in [k for k in self._tokens if k not in running]:
+            self._tokens.pop(key).close()
+        for key in running - self._tokens.keys():
             try:
-                self._tokens[path] = self._bus.declare_token(self._keys.instance(self.host, path))
+                self._tokens[key] = self._bus.declare_token(self._keys.instance(self.host, key))
             except (ValueError, BusError) as e:  # a path that is no key (never for compiled missions): say so once
-                log.warning("creator %s: no liveliness token for %s: %s", self.host, path, e)
+                log.warning("creator %s: no liveliness token for %s: %s", self.host, key, e)
 
     # -- run-time scheduling ------------------------------------------------------------------------------
+
+    def _find(self, name: str) -> Instance | None:
+        """An instance by `<mission>/<path>`, or by its path when only one mission runs it."""
+        inst = self.instances.get(name)
+        if inst is not None:
+            return inst
+        found = [i for i in self.instances.values() if i.path == name]
+        return found[0] if len(found) == 1 else None
 
     def tune(self, req: Tune) -> Tuned:
         """Set cores and/or nice of the process running `req.instance`; what it runs with now and who shares it.
 
         Raises CreatorError: unknown instance, cores or nice out of range, or the OS refused (privileges)."""
         with self._lock:
-            inst = self.instances.get(req.instance)
+            inst = self._find(req.instance)
             if inst is None or inst.state in (TERMINATED, "starting"):
-                running = sorted(p for p, i in self.instances.items() if i.state not in (TERMINATED, "starting"))
+                running = sorted(i.path for i in self.instances.values() if i.state not in (TERMINATED, "starting"))
                 raise CreatorError(f"no instance {req.instance!r} runs on {self.host}"
                                    f" (running: {', '.join(running) or 'none'})")
             if inst.dead:
@@ -555,21 +661,21 @@ class Creator:
                 now_cores, now_nice = scheduling_of(w.pid)
             except (psutil.Error, OSError) as e:
                 raise CreatorError(f"process {w.pid} running {req.instance}: {_os_reason(e)}") from None
-            return Tuned(req.instance, self.host, w.pid, w.kind, now_cores, now_nice,
-                         sorted(w.instances - {req.instance}))
+            return Tuned(inst.path, self.host, w.pid, w.kind, now_cores, now_nice,
+                         sorted(w.instances - {inst.path}))
 
     # -- helpers ----------------------------------------------------------------------------------------
 
-    def _new_mission(self, mission: str) -> None:
-        """A new mission: the previous one's processes are retired (killed; the pool has fresh ones ready)."""
-        self._retire_all()
-        self.instances.clear()
-        self.mission = mission
-        self._drivers = self._sim = self._world = None
-        self._dirty = True
-
-    def _drivers_for(self, world: str) -> Any:
-        if self._drivers is None:
+    def _drivers_for(self, world: str, generation: int) -> Any:
+        """This host's drivers and their gates for the world the controller runs (built again when the world is
+        reset: a new world, or the same one restarted for a mission that runs alone)."""
+        if self._drivers is None or self._generation != (world, generation):
+            if self._make_drivers is not None:
+                self._drivers = self._make_drivers(world)
+                self._gates = LocalGates.of(self._drivers.devices, self._drivers.robots, self._sharable,
+                                            self._gate_record)
+                self._generation = (world, generation)
+                return self._drivers
             from drd.hw.drivers import drivers_for
             from drd.sim.service import RemoteSimulation
 
@@ -577,14 +683,18 @@ class Creator:
             local = service.local(world) if service is not None else None
             if local is not None:  # the simulator is in this process: direct calls, as in the dry-run
                 sim: Any = local
+                self._sim = None
             elif service is not None:
                 sim = self._sim = RemoteSimulation(service.handle, world)
             elif self._bus is not None:
                 sim = self._sim = RemoteSimulation.over(self._bus, self.cluster.name, world)
             else:
-                sim = None
+                sim = self._sim = None
             self._drivers = drivers_for(self.cluster, self.host, sim, catalog=self.catalog)
+            self._gates = LocalGates.of(self._drivers.devices, self._drivers.robots, self._sharable,
+                                        self._gate_record)
             self._world = sim
+            self._generation = (world, generation)
         return self._drivers
 
     def _check(self, call: ComponentCall) -> ComponentType:
@@ -599,43 +709,55 @@ class Creator:
                 raise CreatorError(f"{call.component} has no parameter {name!r} (declared: {declared})")
             if not _type_ok(spec.type, value):
                 raise CreatorError(f"{call.component}.{name} must be a {spec.type}, got {value!r}")
-        for need, binding in (call.bindings or {}).items():
-            if len(binding) != 3 or binding[0] not in self._devices:
-                raise CreatorError(f"{call.path}: need {need} is bound to {binding[0] if binding else '?'},"
-                                   f" not a device of {self.host}")
+        self._check_bindings(call.path, call.bindings or {})
         return ct
+
+    def _check_bindings(self, path: str, bindings: dict[str, list[str]]) -> None:
+        for need, binding in bindings.items():
+            if len(binding) != 3 or binding[0] not in self._devices:
+                raise CreatorError(f"{path}: need {need} is bound to {binding[0] if binding else '?'},"
+                                   f" not a device of {self.host}")
 
     def _start_instance(self, call: ComponentCall, inst: Instance | None) -> Instance:
         ct = self._check(call)
         bindings = dict(call.bindings or {})
+        key = _key(call)
         if inst is not None and not inst.dead and inst.name == call.component and inst.bindings == bindings:
             return inst  # the worker resets its params and outputs on start
         if inst is not None:
-            self._forget(call.path)
-        drivers = self._drivers_for(call.world)
-        devices: dict[str, Fenced] = {}
-        methods: dict[str, list[str]] = {}
-        commands: dict[str, list[str]] = {}  # setpoints: sent by the worker without waiting for an answer
-        readings: dict[str, frozenset[str]] = {}
-        rank = (int((call.rank or [0, 0])[0]), int((call.rank or [0, 0])[1]))
-        holder: dict[str, Instance] = {}
-        for need, (rid, robot, part) in bindings.items():
-            by_robot = drivers.robots.get(robot, {}) if robot and part else {}
-            driver = by_robot.get(part) or drivers.devices.get(rid)
-            if driver is not None:
-                devices[need] = Fenced(driver, _epoch_of(holder, need), self.arbiter, rank, call.path)
-                methods[need] = device_methods(driver)
-                readings[need] = frozenset(getattr(driver, "READINGS", ()))
-                commands[need] = setpoints(driver, methods[need])
-        worker, notes = self._place(ct)
+            self._forget(key)
+        self._drivers_for(call.world, call.generation)
+        worker, notes = self._place(ct, call.mission)
         assert ct.entry_point is not None
-        new = Instance(call.component, bindings, worker, devices,
-                       setup=(ct.entry_point, {n: b[0] for n, b in bindings.items()}, methods, commands),
-                       notes=notes, readings=readings)
-        holder["it"] = new
-        self.instances[call.path] = new
+        new = Instance(call.component, call.mission, call.path, {}, worker, notes=notes)
+        methods, commands = self._rebind(new, bindings, _rank(call))
+        new.setup = (ct.entry_point, {n: b[0] for n, b in bindings.items()}, methods, commands)
+        self.instances[key] = new
         worker.instances.add(call.path)
         return new
+
+    def _rebind(self, inst: Instance, bindings: dict[str, list[str]], rank: tuple[int, int]
+                ) -> tuple[dict[str, list[str]], dict[str, list[str]]]:
+        """The instance's gated devices for these bindings (a resumed grant may name other units); the methods
+        and the setpoints (sent by the worker without waiting) of each need's driver."""
+        self._check_bindings(inst.path, bindings)
+        issuer = f"{inst.mission}/{inst.path}"
+        inst.bindings, inst.devices, inst.bound, inst.readings = bindings, {}, {}, {}
+        methods: dict[str, list[str]] = {}
+        commands: dict[str, list[str]] = {}
+        for need, (unit, robot, part) in bindings.items():
+            found = self._gates.bound(unit, robot, part)
+            if found is None:
+                continue
+            gate, driver = found
+            binding = Binding(need, unit, "", None, gate, driver, robot, part)
+            inst.bound[need] = binding
+            inst.devices[need] = BoundDevice(binding, issuer, self.arbiter, rank, f"{inst.mission}/{inst.path}",
+                                             lambda: self._now)
+            methods[need] = device_methods(driver)
+            inst.readings[need] = frozenset(getattr(driver, "READINGS", ()))
+            commands[need] = sorted(spec_of(driver).setpoints)
+        return methods, commands
 
     def _serve(self, query: Query) -> Message | Reply:
         if isinstance(query.payload, ComponentBatch):
@@ -645,7 +767,10 @@ class Creator:
                 return self.handle_batch(query.payload)
             except Exception as e:
                 log.warning("creator %s: a step batch failed: %s", self.host, e)
-                return ComponentBatchReply([ComponentReply(error=f"{type(e).__name__}: {e}")])
+                return ComponentBatchReply([ComponentReply(error=f"{type(e).__name__}: {e}")],
+                                           records=self._take_records())
+        if isinstance(query.payload, GateUpdate):
+            return self.update_gates(query.payload)
         if isinstance(query.payload, Tune):
             try:
                 return self.tune(query.payload)
@@ -659,18 +784,17 @@ class Creator:
             return query.error(str(e))
         except Exception as e:  # a driver could not be built, no worker could start: this call fails, we go on
             log.warning("creator %s: %s of %s failed: %s", self.host, query.payload.op, query.payload.path, e)
-            return ComponentReply(error=f"{type(e).__name__}: {e}")
+            return ComponentReply(error=f"{type(e).__name__}: {e}", records=self._take_records())
 
 
-def setpoints(driver: object, methods: list[str] | None = None) -> list[str]:
-    """The commands a worker sends without waiting for an answer: setpoints (`is_command`), except those the
-    driver says change its readings at once (`CHANGES_READINGS`, a hop): their answer says the world changed,
-    so the worker stops using the readings read ahead of the step. `methods`: `device_methods(driver)`, when
-    the caller has them already."""
-    sudden = getattr(driver, "CHANGES_READINGS", ())
-    if methods is None:
-        methods = device_methods(driver)
-    return [m for m in methods if m not in sudden and is_command(getattr(driver, m))]
+def _key(call: ComponentCall) -> str:
+    """An instance's key here: `<mission>/<path>` (several missions may run the same mission file)."""
+    return f"{call.mission}/{call.path}"
+
+
+def _rank(call: ComponentCall) -> tuple[int, int]:
+    rank = call.rank or [0, 0]
+    return int(rank[0]), int(rank[1])
 
 
 #: At most this many readings of one instance are read ahead of its step.
@@ -710,10 +834,6 @@ def _os_reason(e: BaseException) -> str:
     if isinstance(e, psutil.NoSuchProcess):
         return "the process is gone"
     return f"{type(e).__name__}: {e}"
-
-
-def _epoch_of(holder: dict[str, Instance], need: str) -> Callable[[], int | None]:
-    return lambda: holder["it"].epochs.get(need)
 
 
 def _type_ok(kind: str, value: Any) -> bool:

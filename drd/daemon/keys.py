@@ -65,7 +65,7 @@ class ClusterKeys:
 
     def instance(self, host: str, path: str) -> str:
         """A running component instance's liveliness token (its path's `/` are key separators)."""
-        return f"{self.root}/instance/{host}/{path}"
+        return f"{self.root}/instance/{host}/{path}"  # path: `<mission>/<instance path>`
 
     @property
     def instances(self) -> str:

@@ -13,7 +13,7 @@ from typing import Any
 from drd.bus import Message, message
 
 
-@message("drd.daemon.instance", 1)
+@message("drd.daemon.instance", 2)
 class InstanceInfo(Message):
     """A running component instance (or a daemon service) and where it answers."""
 
@@ -23,6 +23,7 @@ class InstanceInfo(Message):
     state: str = "running"
     key: str = ""
     pid: int | None = None  # the worker process running a component instance (None for a daemon service)
+    mission: str = ""  # the mission of a component instance (several may run the same paths)
 
 
 @message("drd.daemon.announce", 1)

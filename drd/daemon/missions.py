@@ -5,19 +5,23 @@
 from the wire is never trusted) and answers a `RunReply`: the mission id, or the located diagnostics
 (rendered as `missionctl validate` prints them) when the mission is invalid.
 
-A valid mission runs in lockstep with the simulator, on a thread of its own (`MissionRun`): each control
+A valid mission runs in lockstep with the simulator, on the thread of its world (`WorldRun`): each control
 cycle (0.1 s of sim time) the simulation steps, then the executive steps under the daemon's lock, its clock
 at the simulation's new time; components on other hosts are stepped through their Creators
-(`drd.runtime.remote`). The step is made just before the cycle's first call to another host: carried by
+(`drd.cluster.remote`), and the gate operations no call carried go to the devices' hosts at the end of the
+cycle (`drd.cluster.gates`). The step is made just before the cycle's first call to another host: carried by
 that call when it is a batch to the simulator host (one round trip for both), else asked of the simulator
 (`drd.sim.service`) on its own. `speed` caps the pace at that multiple
 of real time. Records go out on `drd/<cluster>/mission/<id>/record` as for every mission of the executive.
-One cluster mission runs at a time: the simulator holds one world.
+The simulator holds one world: the missions of the cluster share it (a second `missionctl run` joins the world
+the first one started, and the one Resource Controller Manager arbitrates their grants by priority); it stops
+when its last mission ends, and each ended mission's processes are retired on every host it used.
 """
 
 from __future__ import annotations
 
 import cProfile
+import functools
 import logging
 import os
 import threading
@@ -26,9 +30,10 @@ from collections.abc import Callable, Mapping
 from typing import Any
 
 from drd.bus import Bus, Message, Query, Reply, message
+from drd.cluster.gates import GateUpdate, GateUpdateReply, RemoteGates, deliver
+from drd.cluster.remote import ComponentCall, ComponentError, ComponentRouter, SimCycle
 from drd.hosts import Cluster, Role
 from drd.placement import HostView
-from drd.runtime.remote import ComponentError, ComponentRouter
 from drd.sim.service import SimReply, SimRequest, SimulationService
 from drd.sim.service import key as sim_key
 from dsl.catalog import Catalog
@@ -41,7 +46,7 @@ CONTROL_PERIOD = 0.1
 CALL_TIMEOUT = 1.0
 
 
-@message("drd.mission.run", 1)
+@message("drd.mission.run", 2)
 class RunMission(Message):
     """Run this mission source (`file` names it in diagnostics) in world `world` at `speed` x real time."""
 
@@ -52,9 +57,10 @@ class RunMission(Message):
     until: float = 1800.0
     seed: int = 0
     params: dict[str, str] | None = None  # --param NAME=VALUE: the mission's own variables (dsl.params)
+    priority: int | None = None  # the mission's rank against the others (1 first); None: its `mission ... priority`
 
 
-@message("drd.mission.run-reply", 1)
+@message("drd.mission.run-reply", 2)
 class RunReply(Message):
     """`mission` is the id of the started mission; when `ok` is false, `diagnostics` say why (rendered)."""
 
@@ -64,7 +70,8 @@ class RunReply(Message):
     world: str = ""
     speed: float = 0.0
     started: float = 0.0
-    base: float = 0.0  # the executive's time at sim time 0 (records' `at` minus this is sim time)
+    base: float = 0.0  # the executive's time when the mission started (records' `at` minus this is its time)
+    priority: int = 1
 
 
 class SimTimeClock:
@@ -109,7 +116,12 @@ def render(diagnostics: list[Any], sources: dict[str, str]) -> list[str]:
 
 
 class MissionRunner:
-    """Serves `missions/run` on the controller and runs each accepted mission in lockstep (see module doc)."""
+    """Serves `missions/run` on the controller and runs the accepted missions in lockstep (see the module doc).
+
+    The missions of a cluster share its one simulated world: the first one starts it (a fresh simulation, at the
+    seed and speed it asks), the next ones join it while it runs, and it stops when its last mission ends. Each
+    mission ranks against the others by its priority (`RunMission.priority`, else its own `mission ... priority`),
+    through the one Resource Controller Manager."""
 
     def __init__(self, bus: Bus, cluster: Cluster, catalog: Catalog, me: str, lock: threading.RLock,
                  controller: Any, clock: SimTimeClock, *, sim_service: SimulationService | None = None,
@@ -127,8 +139,13 @@ class MissionRunner:
         self.host_views = host_views
         self.resource_hosts = {r.id: r.host for r in cluster.resources() if r.host}
         self.simulator = next((h.name for h in cluster.hosts if Role.SIMULATOR in h.roles), None)
-        self.current: MissionRun | None = None
-        self.lost: list[str] = []  # hosts seen down whose robots the running mission's loop stops in the simulator
+        # the devices' gates are on their hosts: every mission's grants reach them through these
+        self.gates = RemoteGates({u.id: u.host for u in cluster.resources() if u.host and type(u).__name__ == "Unit"})
+        controller.executive.gates = self.gates
+        self.world: WorldRun | None = None
+        self._starting = threading.Lock()
+        self.generation = 0  # worlds started so far: a Creator builds its drivers again for a new one
+        self.lost: list[str] = []  # hosts seen down whose robots the world's loop stops in the simulator
         self._queryable = bus.serve(run_key(cluster.name), self._serve)
         threading.Thread(target=self._warm_up, name="drd-compiler-warm-up", daemon=True).start()
 
@@ -144,12 +161,18 @@ class MissionRunner:
         except Exception:  # only ever a head start: the first run compiles as it would have
             log.debug("compiler warm-up failed", exc_info=True)
 
+    @property
+    def current(self) -> WorldRun | None:
+        """The world running now, if any (one whose last mission ended takes no new one)."""
+        world = self.world
+        return world if world is not None and not world.closed else None
+
     def close(self) -> None:
         self._queryable.close()
-        run = self.current
-        if run is not None:
-            run.stopping.set()
-            run.thread.join(timeout=5)
+        world = self.world
+        if world is not None:
+            world.stopping.set()
+            world.thread.join(timeout=5)
 
     def host_lost(self, host: str) -> None:
         """A host's resources left the manager: it went down and did not come back within the lease (called
@@ -197,6 +220,8 @@ class MissionRunner:
         cache_parser_tables()  # done by the warm-up unless a run comes first
         if not (req.speed > 0) or not (req.until > 0):
             raise ValueError("speed and until must be positive")
+        if req.priority is not None and req.priority < 1:
+            raise ValueError("priority must be 1 or more (1 is the highest)")
         if len(req.source) > 1_000_000:
             raise ValueError("mission source larger than 1 MB")
         compiled = compile_text(req.source, self.catalog, req.file or "<mission>")
@@ -209,11 +234,46 @@ class MissionRunner:
             chart = apply_params(compiled.statechart, dict(req.params or {}))
         except ParamError as e:
             return RunReply("", False, str(e).splitlines())
-        if self.current is not None and self.current.thread.is_alive():
-            raise ValueError(f"mission {self.current.mission} is running: one mission at a time on a cluster"
-                             f" (missionctl stop {self.current.mission})")
         if self.simulator is None:
             raise ValueError("no host has the role simulator in hosts.yaml: the sim drivers need one")
+        priority = req.priority or chart.priority
+        with self._starting:  # one start at a time: two first missions must not start two worlds
+            return self._start(req, chart, priority)
+
+    def _start(self, req: RunMission, chart: Any, priority: int) -> RunReply:
+        world = self.current
+        if world is not None:  # the mission joins the world that runs
+            if req.world and req.world != world.name:
+                raise ValueError(f"world {world.name} is running (missions {', '.join(world.missions())}): a mission"
+                                 f" joins it; run this one in {world.name}, or after they end")
+        else:
+            if self.world is not None:  # its loop is ending: let it retire its missions first
+                self.world.thread.join(timeout=10)
+            world = self._new_world(req)
+        with self.lock:
+            if world.closed:  # its last mission ended while this one was compiled: start the world again
+                raise ValueError(f"world {world.name} ended just now: run the mission again")
+            executive = self.controller.executive
+            mid = f"{chart.name}-{int(time.time() * 1000) % 10_000_000}"
+            while mid in executive.missions:
+                mid += "x"
+            router = ComponentRouter(self.bus, self.cluster.name, self.resource_hosts, self.me,
+                                     local=executive.registry, mission=mid, world=world.name,
+                                     active=functools.partial(_active, executive, mid), timeout=CALL_TIMEOUT,
+                                     dead=self.host_down, catalog=self.catalog,
+                                     place=self.place if self.host_views else None, gates=self.gates,
+                                     records=executive.record, cycle=world.cycle, generation=world.generation)
+            base = self.clock.now()
+            world.add(mid, router, base, req.until)
+            executive.submit(chart, mid, registry=router.registry(), priority=priority)
+        if not world.thread.is_alive() and not world.started:
+            world.started = True
+            world.thread.start()
+        log.info("mission %s started (%s, world %s, speed %gx, priority %d)", mid, req.file, world.name,
+                 world.speed, priority)
+        return RunReply(mid, True, [], world.name, world.speed, time.time(), base, priority)
+
+    def _new_world(self, req: RunMission) -> WorldRun:
         from drd.sim import load_world
         from drd.sim.service import world_file
         from drd.sim.world import check_hosts
@@ -227,25 +287,16 @@ class MissionRunner:
         except Exception as e:
             raise ValueError(f"the simulator on {self.simulator} did not start the world: {e}") from None
         with self.lock:
-            executive = self.controller.executive
+            self.generation += 1
+            world = WorldRun(self, path.stem, self.generation, req.speed)
+            world.cycle.sim_time, world.cycle.sim_version = reset.time, reset.version
+            world.cycle.step_sim = lambda dt: self.sim(SimRequest("step", dt=dt))
+            world.cycle.simulator = (self.simulator or "") if self.sim_service is None else ""  # a batch there steps it
             self.clock.start_mission()
             self.clock.set_sim(reset.time)
-            self._reset_dependencies(executive)
-            mid = f"{chart.name}-{int(time.time() * 1000) % 10_000_000}"
-            router = ComponentRouter(self.bus, self.cluster.name, self.resource_hosts, self.me,
-                                     node=lambda path: _find(executive, mid, path), local=executive.registry,
-                                     mission=mid, world=path.stem, timeout=CALL_TIMEOUT, dead=self.host_down,
-                                     catalog=self.catalog, place=self.place if self.host_views else None)
-            router.sim_time, router.sim_version = reset.time, reset.version
-            router.step_sim = lambda dt: self.sim(SimRequest("step", dt=dt))
-            router.simulator = self.simulator if self.sim_service is None else ""  # a batch there steps it
-            run = MissionRun(self, mid, router, req)
-            self.current, self.lost = run, []
-            executive.submit(chart, mid, registry=router.registry())
-        run.thread.start()
-        log.info("mission %s started (%s, world %s, speed %gx)", mid, req.file, path.stem, req.speed)
-        return RunReply(mid, True, [], path.stem, req.speed, time.time(), self.clock.base)
-
+            self._reset_dependencies(self.controller.executive)
+            self.world, self.lost = world, []
+        return world
 
     def place(self, component: str, params: Mapping[str, Any], exclude: frozenset[str]) -> str:
         """The host for one more instance of a movable component (`drd.placement.place` over the Component
@@ -264,6 +315,23 @@ class MissionRunner:
         log.info("placement: %s on %s (%s)", component, decision.host, "; ".join(decision.reasons))
         return decision.host
 
+    def flush_gates(self, world: WorldRun) -> None:
+        """Send the gate operations nobody carried this cycle (a device whose holder lost it stops now)."""
+        executive = self.controller.executive
+        for host in self.gates.hosts():
+            ops = self.gates.take(host)
+            if not ops or self.host_down(host):
+                continue
+            try:
+                reply = self.bus.call(f"drd/{self.cluster.name}/host/{host}/creator",
+                                      GateUpdate(ops, world.name, world.generation), timeout=CALL_TIMEOUT)
+            except Exception as e:  # the host's loss is noticed by the membership and the next calls
+                log.warning("the gate operations for %s were not delivered: %s", host, e)
+                continue
+            if isinstance(reply, GateUpdateReply):
+                with self.lock:
+                    deliver(reply.records, executive.record)
+
     def _reset_dependencies(self, executive: Any) -> None:
         """A new world puts every Scout back in its magazine: the Static Dependency Database starts again from
         hosts.yaml (a previous mission's launches set `carrier` to "")."""
@@ -279,94 +347,132 @@ class MissionRunner:
                     log.debug("could not reset %s.%s", r.id, k, exc_info=True)
 
 
-class MissionRun:
-    """One mission's lockstep loop (a thread)."""
+class WorldRun:
+    """One simulated world's lockstep loop (a thread) and the missions running in it."""
 
-    def __init__(self, runner: MissionRunner, mission: str, router: ComponentRouter, req: RunMission) -> None:
+    def __init__(self, runner: MissionRunner, name: str, generation: int, speed: float) -> None:
         self.runner = runner
-        self.mission = mission
-        self.router = router
-        self.req = req
+        self.name = name
+        self.generation = generation
+        self.speed = speed
+        self.cycle = SimCycle()
+        self.routers: dict[str, ComponentRouter] = {}
+        self.deadlines: dict[str, tuple[float, float]] = {}  # mission -> (executive time to stop it, its `until`)
         self.stopping = threading.Event()
+        self.started = False
+        self.closed = False  # its loop takes no new mission (set under the runner's lock)
         self.cycles = 0
-        self.thread = threading.Thread(target=self._loop, name=f"drd-mission-{mission}", daemon=True)
+        self.thread = threading.Thread(target=self._loop, name=f"drd-world-{name}-{generation}", daemon=True)
+
+    def add(self, mission: str, router: ComponentRouter, start: float, until: float) -> None:
+        """A mission joins the world at executive time `start`, to be stopped `until` seconds later (called with
+        the runner's lock held)."""
+        self.routers[mission] = router
+        self.deadlines[mission] = (start + until, until)
+
+    def missions(self) -> list[str]:
+        return sorted(self.routers)
+
+    def _unfinished(self) -> list[str]:
+        missions = self.runner.controller.executive.missions
+        return [m for m in self.routers if m in missions and not missions[m].finished]
 
     def _loop(self) -> None:
-        runner, req = self.runner, self.req
+        runner = self.runner
         start = time.perf_counter()
-        sim_time = max(0.0, self.router.sim_time)
+        sim_time = max(0.0, self.cycle.sim_time)
         profile_path = os.environ.get("DRD_PROFILE", "")  # cProfile of this loop, dumped to path.controller
         prof = cProfile.Profile() if profile_path else None
         if prof is not None:
             prof.enable()
+        executive = runner.controller.executive
         try:
             while not self.stopping.is_set():
                 with runner.lock:
-                    interp = runner.controller.executive.missions.get(self.mission)
-                    if interp is None or interp.finished:
+                    if not self._unfinished():
+                        self.closed = True
                         break
                 if runner.lost:
                     runner._lose_robots()
                 with runner.lock:
                     # the world steps before the cycle's first call (carried by a batch to the simulator host,
                     # see ComponentRouter.step_first); the executive's clock reads the time it will then have
-                    self.router.pending_step = CONTROL_PERIOD
+                    self.cycle.pending_step = CONTROL_PERIOD
                     runner.clock.set_sim(sim_time + CONTROL_PERIOD)  # exactly the world's (Simulation.step)
                     try:
-                        runner.controller.executive.step()
+                        executive.step()
                     except BaseException:
-                        self.router.pending_step = 0.0  # the stop that follows must not step the world
+                        self.cycle.pending_step = 0.0  # the stop that follows must not step the world
                         raise
-                    if self.router.pending_step and self.router.sim_error is None:  # no call this cycle
+                    router = next(iter(self.routers.values()))
+                    if self.cycle.pending_step and self.cycle.sim_error is None:  # no call this cycle
                         try:
-                            self.router.step_first(None)
+                            router.step_first(None)
                         except ComponentError:
                             pass
-                    if self.router.sim_error is not None:
-                        interp.stop(f"the simulator on {runner.simulator} stopped answering: {self.router.sim_error}")
+                    if self.cycle.sim_error is not None:
+                        self.closed = True
+                        for mid in self._unfinished():
+                            executive.missions[mid].stop(
+                                f"the simulator on {runner.simulator} stopped answering: {self.cycle.sim_error}")
                         break
-                    sim_time = self.router.sim_time
+                    sim_time = self.cycle.sim_time
                     runner.clock.set_sim(sim_time)
-                    if not interp.finished and sim_time >= req.until:
-                        interp.stop(f"sim time limit of {req.until:g} s reached")
+                    now = runner.clock.now()
+                    for mid in self._unfinished():
+                        deadline, until = self.deadlines[mid]
+                        if now >= deadline - 1e-9:
+                            executive.missions[mid].stop(f"sim time limit of {until:g} s reached")
+                runner.flush_gates(self)
+                self._retire_finished()
                 self.cycles += 1
-                lag = sim_time / req.speed - (time.perf_counter() - start)
+                lag = sim_time / self.speed - (time.perf_counter() - start)
                 if lag > 0:
                     self.stopping.wait(lag)
             else:
                 with runner.lock:
-                    interp = runner.controller.executive.missions.get(self.mission)
-                    if interp is not None and not interp.finished:
-                        interp.stop("the controller's daemon is stopping")
+                    self.closed = True
+                    for mid in self._unfinished():
+                        executive.missions[mid].stop("the controller's daemon is stopping")
         except Exception:  # never leave a mission hanging silently
-            log.exception("mission %s: the run loop failed", self.mission)
+            log.exception("world %s: the run loop failed", self.name)
             with runner.lock:
-                interp = runner.controller.executive.missions.get(self.mission)
-                if interp is not None and not interp.finished:
-                    interp.stop("internal error in the controller's run loop (see its log)")
+                self.closed = True
+                for mid in self._unfinished():
+                    executive.missions[mid].stop("internal error in the controller's run loop (see its log)")
+        runner.flush_gates(self)
+        self._retire_finished(everyone=True)
         wall = time.perf_counter() - start
         if prof is not None:
             prof.disable()
             prof.dump_stats(f"{profile_path}.controller")
-        stats = self.router.stats.as_dict()
-        for path, host, how in self.router.placed:
-            log.info("mission %s: %s %s on %s", self.mission, path, how, host)
+        log.info("world %s ended: %.1f s sim in %.2f s wall (%.1fx), %d cycles (%.2f ms each), sim steps not "
+                 "carried by a batch %s", self.name, sim_time, wall, sim_time / wall if wall else 0.0, self.cycles,
+                 1000 * wall / max(1, self.cycles), self.cycle.steps_alone.as_dict())
+
+    def _retire_finished(self, everyone: bool = False) -> None:
+        """Tell the hosts of each finished mission to retire its instances and processes, and log its figures."""
+        runner = self.runner
         with runner.lock:
-            interp = runner.controller.executive.missions.get(self.mission)
-            outcome = (interp.outcome, interp.reason) if interp is not None else (None, "")
-        log.info("mission %s ended %s (%s)", self.mission, *outcome)
-        log.info("mission %s ended: %.1f s sim in %.2f s wall (%.1fx), %d cycles (%.2f ms each), sim steps not "
-                 "carried by a batch %s, component steps %s, step batches %s, other lifecycle calls %s", self.mission,
-                 sim_time, wall, sim_time / wall if wall else 0.0, self.cycles, 1000 * wall / max(1, self.cycles),
-                 self.router.steps_alone.as_dict(), stats, self.router.batches.as_dict(),
-                 self.router.stats.seconds and round(self.router.stats.seconds * 1000 / max(1, self.cycles), 3))
+            missions = runner.controller.executive.missions
+            done = [m for m in self.routers if everyone or m not in missions or missions[m].finished]
+            ended = {m: self.routers.pop(m) for m in done}
+            outcomes = {m: (missions[m].outcome, missions[m].reason) if m in missions else (None, "") for m in ended}
+        for mid, router in ended.items():
+            for host in sorted(set(router.stats.by_host) | set(router.batches.by_host)):
+                if host == runner.me or runner.host_down(host):
+                    continue
+                try:
+                    router.call(host, ComponentCall("retire", mid, "", world=self.name, generation=self.generation))
+                except Exception as e:  # a host that does not answer has lost the mission's processes anyway
+                    log.info("mission %s: %s did not confirm the retirement: %s", mid, host, e)
+            for path, host, how in router.placed:
+                log.info("mission %s: %s %s on %s", mid, path, how, host)
+            log.info("mission %s ended %s (%s); component steps %s, step batches %s", mid, *outcomes[mid],
+                     router.stats.as_dict(), router.batches.as_dict())
 
 
-def _find(executive: Any, mission: str, path: str) -> tuple[Any, Any] | None:
+def _active(executive: Any, mission: str) -> Any:
+    """The mission's components in step order (for a router's batches), none once it is gone."""
     interp = executive.missions.get(mission)
-    if interp is None:
-        return None
-    for node in interp.active():
-        if node.path == path:
-            return node, interp
-    return None
+    return interp.host.active() if interp is not None else ()

@@ -127,6 +127,7 @@ class Worker:
         self.pid = pid
         self.kind = "idle"  # idle, container or dedicated
         self.key: tuple[tuple[int, ...] | None, int] | None = None  # the manifest scheduling it was placed with
+        self.mission = ""  # the mission whose instances it hosts (a process never serves two)
         self.tuned = False  # changed at run time: no new instance joins it
         self.instances: set[str] = set()
         self.died = ""  # why it is gone, once it is

@@ -22,6 +22,7 @@ from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
 from drd.hosts import Cluster, Device
+from drd.hw.commands import DriverDeclarationError, spec_of
 from dsl.catalog import Catalog
 
 if TYPE_CHECKING:  # the simulator (pymunk) is imported only by hosts that run sim drivers
@@ -85,11 +86,16 @@ def load_driver(device: Device, robot_id: str, services: Mapping[str, Any]) -> o
     if device.driver == SIM and backend is None:
         raise DriverError(f"{where}: the sim driver needs a Simulation in services['sim'], got {backend!r}")
     try:
-        return cls(device, robot_id, backend)
+        driver = cls(device, robot_id, backend)
     except DriverError:
         raise
     except Exception as e:
         raise DriverError(f"{where}: {entry} could not be built for {robot_id}: {e}") from e
+    try:
+        spec_of(driver)
+    except DriverDeclarationError as e:
+        raise DriverError(f"{where}: {e} (see docs/drivers.md: declaring commands)") from None
+    return driver
 
 
 @dataclass

@@ -10,7 +10,7 @@ has a waiting descendant.
 from __future__ import annotations
 
 from collections.abc import Callable, Iterable
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
     import networkx as nx
@@ -54,8 +54,8 @@ def find_cycle(starts: Iterable[str], successors: Callable[[str], Iterable[str]]
     return tuple(cycle[start:] + cycle[:start])
 
 
-def choose_victim(candidates: Iterable[str], rank: Callable[[str], tuple[int, int]]) -> str:
-    """The request to cancel: the largest `rank` = (priority number, request order).
+def choose_victim(candidates: Iterable[str], rank: Callable[[str], tuple[Any, ...]]) -> str:
+    """The request to cancel: the largest `rank` = ((mission priority, priority) numbers, request order).
 
     That is the lowest priority and, among equals, the most recent requester: older work and more
     important work survive.

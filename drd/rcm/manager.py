@@ -67,6 +67,9 @@ from drd.rcm.state import Hold, Key, Pending, Registry, Wait, WaitQueue
 
 # Event kinds, in the order they are applied when due at the same instant.
 _LEASE, _RESERVE, _SLICE = 0, 1, 2
+#: An event due within this of `now` is due now: callers step time in floating-point increments (0.1 s ten times
+#: is 0.9999999999999999 s), and a slice due at 5 s must end in the cycle at 5 s, not in the next one.
+TIME_EPS = 1e-6
 
 
 class ResourceManager:
@@ -142,8 +145,9 @@ class ResourceManager:
         affected = {h for u in touched for h in self._queue.claimants(u)}
         freed: set[str] = set()
         for holder in sorted(lost):
+            needs = self._holds[holder].names()
             released = self._end_hold(holder)
-            out.append(Released(holder, released, reason))
+            out.append(Released(holder, released, reason, needs))
             freed.update(released)
         for cid in sorted(aggs | units):
             reg.remove(cid)
@@ -208,12 +212,14 @@ class ResourceManager:
                 self._withdraw(wait, "release", now, out)
             return self._finish(now, out)
         changed: tuple[str, ...] = ()
+        before = hold.names()
         if units is None:
             freed = self._end_hold(holder)
         else:
             freed, changed = self._release_part(hold, set(units))
         if freed or changed:
-            out.append(Released(holder, freed, "release"))
+            left = set(hold.alloc) if holder in self._holds else set()
+            out.append(Released(holder, freed, "release", tuple(n for n in before if n not in left)))
             self._dispatch((*freed, *changed), now, out)
         return self._finish(now, out)
 
@@ -232,8 +238,9 @@ class ResourceManager:
         out = self._begin(now)
         wait = self._queue.get(holder)
         if holder in self._holds:
+            needs = self._holds[holder].names()
             units = self._end_hold(holder)
-            out.append(Released(holder, units, "cancelled"))
+            out.append(Released(holder, units, "cancelled", needs))
             self._dispatch(units, now, out)
         elif wait is not None:
             self._withdraw(wait, "cancelled", now, out)
@@ -262,7 +269,8 @@ class ResourceManager:
             **self._reg.describe(),
             "holds": {h: hold.describe() for h, hold in sorted(self._holds.items())},
             "queue": [self._queue.waits[h].describe() for h in self._queue.order()],
-            "reservations": {h: {"priority": p.request.priority, "at": p.at} for h, p in sorted(self._pending.items())},
+            "reservations": {h: {"priority": p.request.priority, "mission_priority": p.request.mission_priority,
+                                 "at": p.at} for h, p in sorted(self._pending.items())},
         }
 
     # -- time ----------------------------------------------------------------------------------
@@ -273,12 +281,13 @@ class ResourceManager:
             raise ValueError(f"time went backwards: {now} < {self._now}")
         self._now = now
         out: list[Decision] = []
-        while self._events and self._events[0][0] <= now:
+        while self._events and self._events[0][0] <= now + TIME_EPS:
             time, kind, token, holder = heappop(self._events)
             hold = self._holds.get(holder)
             if kind == _LEASE and hold is not None and hold.gid == token and hold.lease_until == time:
+                needs = hold.names()
                 units = self._end_hold(holder)
-                out.append(Released(holder, units, "expired"))
+                out.append(Released(holder, units, "expired", needs))
                 self._dispatch(units, now, out)
             elif kind == _SLICE and hold is not None and hold.gid == token:
                 hold.overtime = True
@@ -314,7 +323,7 @@ class ResourceManager:
         since: int | None = None,
     ) -> None:
         order = next(self._order)
-        key = (request.priority, 1, 0.0, order) if reserved_at is None else (request.priority, 0, reserved_at, order)
+        key = (*request.rank, 1, 0.0, order) if reserved_at is None else (*request.rank, 0, reserved_at, order)
         wait = Wait(request, key, order if since is None else since, resumed=False, given={})
         touched = self._try_grant(wait, now, out)
         if touched is not None:
@@ -387,7 +396,7 @@ class ResourceManager:
     def _preemptible(self, hold: Hold, wait: Wait) -> bool:
         return (
             hold.overtime
-            and hold.request.priority >= wait.request.priority
+            and hold.request.rank >= wait.request.rank
             and not same_owner(hold.request.holder, wait.holder)
         )
 
@@ -478,7 +487,7 @@ class ResourceManager:
         given.update({name: c for name, c in hold.chosen.items() if name not in hold.alloc})
         needs = tuple(n for n in hold.request.needs if n.name in hold.alloc)
         request = dataclasses.replace(hold.request, needs=needs)
-        key = (request.priority, 1, 0.0, next(self._order))
+        key = (*request.rank, 1, 0.0, next(self._order))
         wait = Wait(request, key, hold.since, resumed=True, given=given)
         alts, capped = self._reg.alternatives(request.needs, given, self.max_alternatives)
         if not alts:  # what it held no longer fits its needs (a Scout moved to another Ranger): never resumable
@@ -586,9 +595,9 @@ class ResourceManager:
                 found.add(best[1])
         return found
 
-    def _rank(self, holder: str) -> tuple[int, int]:
+    def _rank(self, holder: str) -> tuple[tuple[int, int], int]:
         wait = self._queue.waits[holder]
-        return wait.request.priority, wait.since
+        return wait.request.rank, wait.since
 
     def _check_new_holder(self, holder: str) -> None:
         if holder in self._holds or holder in self._queue or holder in self._pending:

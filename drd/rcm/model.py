@@ -108,13 +108,21 @@ class Request:
 
     `holder` is the behavior instance path ("CorridorSurveillance/RoomSurveillance[2]"); a path is
     owned by each of its prefixes, which is how nested requests enter the wait-for graph.
-    `priority` 1 is the highest. `mission` is informational only: priority alone decides.
+    `priority` 1 is the highest. Requests of several missions sharing the manager are ranked by their
+    missions' priorities first (`mission_priority`, 1 the highest), then by their own: `rank`. `mission` only
+    names the mission in snapshots.
     """
 
     holder: str
     priority: int
     needs: tuple[NeedRequest, ...] = ()
     mission: str = ""
+    mission_priority: int = 1
+
+    @property
+    def rank(self) -> tuple[int, int]:
+        """(mission priority, priority): the smaller is served first."""
+        return self.mission_priority, self.priority
 
     def __post_init__(self) -> None:
         if not self.holder:
@@ -166,12 +174,14 @@ class Revoked:
 class Released:
     """Units left `holder` for good: released, lease expired, host or resource lost, or cancelled.
 
-    `units` is empty when a request that was still waiting is withdrawn.
+    `units` is empty when a request that was still waiting is withdrawn. `needs` names the needs given back
+    whole (all of them unless a release named some).
     """
 
     holder: str
     units: tuple[str, ...]
     reason: ReleaseReason
+    needs: tuple[str, ...] = ()
 
 
 @dataclass(frozen=True, slots=True)

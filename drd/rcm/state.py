@@ -17,8 +17,8 @@ from drd.rcm.deadlock import ancestors
 from drd.rcm.model import Aggregate, Candidate, NeedRequest, Request, Unit
 from drd.rcm.solver import EPS, Solution, alternatives, demand_of
 
-#: Queue order: (priority, 0 for a due reservation else 1, reservation time, request order).
-Key = tuple[int, int, float, int]
+#: Queue order: (mission priority, priority, 0 for a due reservation else 1, reservation time, request order).
+Key = tuple[int, int, int, float, int]
 
 
 @dataclass(slots=True, eq=False)
@@ -41,6 +41,7 @@ class Wait:
             "holder": self.holder,
             "priority": self.request.priority,
             "mission": self.request.mission,
+            "mission_priority": self.request.mission_priority,
             "needs": {n.name: n.type for n in self.request.needs},
             "resumed": self.resumed,
         }
@@ -61,6 +62,10 @@ class Hold:
     granted_at: float
     loose: dict[str, float] = field(default_factory=dict)
     overtime: bool = False
+
+    def names(self) -> tuple[str, ...]:
+        """The needs still held whole."""
+        return tuple(self.alloc)
 
     def quantities(self) -> dict[str, float]:
         """What the holder takes of each unit, in grant order."""
@@ -90,6 +95,7 @@ class Hold:
         return {
             "priority": self.request.priority,
             "mission": self.request.mission,
+            "mission_priority": self.request.mission_priority,
             "assignment": {n: c.id for n, c in self.chosen.items() if n in self.alloc},
             "units": list(self.quantities()),
             "granted_at": self.granted_at,

@@ -29,8 +29,15 @@ class ResourceBroker:
             self.listeners.remove(listener)
 
     def _publish(self, decisions: tuple[Decision, ...]) -> tuple[Decision, ...]:
-        for listener in list(self.listeners):
-            listener(decisions)
+        """Hand the decisions out one at a time, in the manager's order, to every listener: a release seen by one
+        mission comes before the grant it made to another, in every mission's records as in the manager."""
+        listeners = self.listeners
+        if len(listeners) == 1:
+            listeners[0](decisions)
+            return decisions
+        for d in decisions:
+            for listener in list(listeners):
+                listener((d,))
         return decisions
 
     def request(self, req: Request, now: float) -> tuple[Decision, ...]:

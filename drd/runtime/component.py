@@ -36,7 +36,11 @@ class Context:
     now: Callable[[], float]
     outputs: dict[str, Any] = field(default_factory=dict)
     services: Mapping[str, Any] = field(default_factory=dict)  # shared data, simulator handles
-    devices: Mapping[str, Any] = field(default_factory=dict)  # need name -> driver (fenced by epoch)
+    devices: Mapping[str, Any] = field(default_factory=dict)  # need name -> its device, through the gate
+    #: need name -> `drd.runtime.ownership.Binding` (unit, robot part, the holder and the epoch it is bound at):
+    #: what a proxy of a component running elsewhere forwards to the devices' host.
+    bindings: Mapping[str, Any] = field(default_factory=dict)
+    rank: tuple[int, int] = (0, 0)  # (-priority, declaration order): how its setpoints rank in a cycle
 
 
 class Component:

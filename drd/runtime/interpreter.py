@@ -1,130 +1,77 @@
 """Run a compiled statechart: run-to-completion steps over a tree of active instances.
 
-`Interpreter.step()` is one macro step at the clock's current time: apply the Resource
-Controller Manager's decisions (slice boundaries, lease expiry), step every running
-component once, then take transitions (completion, error, change, timeout, event) until
-nothing more is enabled. Taking a transition exits the source (children first: each
-component gets `terminate`, each grant is released), runs the actions, then enters the
-target. A failure with no `on error` propagates to the parent like an exception; a
-multiplicity fails only when fewer than its minimum instances succeeded. The
-interpreter never sleeps and never reads the wall clock; it reports through listeners.
+`Interpreter.step()` is one macro step at the clock's current time and returns a `MacroStep` saying what it
+did: apply the Resource Controller Manager's decisions (slice boundaries, lease expiry), step every running
+component once, then take transitions (completion, error, change, timeout, event) until nothing more is
+enabled. Taking a transition exits the source (children first: each component gets `terminate`, each grant is
+released), runs the actions, then enters the target. A failure with no `on error` propagates to the parent like
+an exception; a multiplicity fails only when fewer than its minimum instances succeeded. The interpreter never
+sleeps and never reads the wall clock; it reports through listeners.
+
+Ownership is built in (`drd.runtime.ownership`): a component commands a device only through a binding live at
+the grant of the holder it is bound through. Whatever ends a component's authority — its subtree suspended (a
+holder above it revoked), a `release`, an exit, a stop, a lost host — unbinds the whole affected subtree before
+anything else runs, and a resumed holder wakes only the parts of its subtree whose own needs are held again.
+The work is split three ways: this module (statechart semantics), `drd.runtime.resources` (requests, grants,
+bindings, gates) and `drd.runtime.hosting` (the components).
 """
 
 from __future__ import annotations
 
 import collections
-from collections.abc import Callable, Iterable, Iterator, Mapping
+from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass
-from enum import StrEnum
 from typing import Any
 
-from drd.rcm import (
-    Deadlock,
-    Granted,
-    NeedRequest,
-    Released,
-    ReleaseReason,
-    Request,
-    ResourceManager,
-    Revoked,
-    Unsatisfiable,
-)
+from drd.rcm import Deadlock, Granted, Released, ReleaseReason, ResourceManager, Revoked, Unit, Unsatisfiable
 from drd.rcm import Waiting as WaitingDecision
 from drd.runtime import records as rec
 from drd.runtime.broker import ResourceBroker
 from drd.runtime.clock import Clock
-from drd.runtime.component import Component, Context, Registry, Status
-from drd.runtime.fence import Arbiter, Fenced
-from drd.runtime.pool import ResourcePool, ResourceView
+from drd.runtime.component import Registry, Status
+from drd.runtime.hosting import ComponentHost
+from drd.runtime.ownership import Arbiter, Gates, LocalGates, NoGates
+from drd.runtime.pool import ResourcePool
+from drd.runtime.resources import BindingError, ResourceClient
+from drd.runtime.tree import (
+    ACTIVE,
+    COMPOUND,
+    DONE,
+    FINAL,
+    LEAF,
+    MULTI,
+    PARALLEL,
+    SUSPENDED,
+    WAITING,
+    Node,
+    Phase,
+    StatePlan,
+)
 from dsl import ast
 from dsl.evaluate import EvalError, evaluate, format_value, truthy
 from dsl.export import trigger_label
-from dsl.statechart import ResourceNeed, State, Statechart, StateKind, Transition
+from dsl.statechart import ResourceNeed, State, Statechart, Transition
 
-_FINAL_STATUS = {"success": Status.SUCCESS, "failure": Status.FAILURE}
+__all__ = ["MAX_MICROSTEPS", "Interpreter", "Listener", "MacroStep", "Node", "Phase"]
 
 #: Transitions one macro step may take before the chart is declared livelocked.
 MAX_MICROSTEPS = 10_000
+#: Times closer than this are the same instant (sim time adds 0.1 s steps in floating point).
+TIME_EPS = 1e-6
 
 Listener = Callable[[rec.Record], None]
-
-
-class Phase(StrEnum):
-    WAITING = "waiting"
-    """Entered, waiting for the Resource Controller Manager to grant its needs."""
-    ACTIVE = "active"
-    """Running: children entered, component stepping."""
-    SUSPENDED = "suspended"
-    """A resource was taken away at a slice boundary; resumes when granted again."""
-    DONE = "done"
-    """Exited (successfully, failed or stopped)."""
-
-
-# Enum members as module constants, which this module compares against: on CPython 3.11 each
-# `Phase.DONE` or `StateKind.LEAF` is a metaclass attribute lookup (~0.1 µs), and a transition made a dozen.
-_WAITING, _ACTIVE, _SUSPENDED, _DONE = Phase.WAITING, Phase.ACTIVE, Phase.SUSPENDED, Phase.DONE
-_LEAF, _COMPOUND, _PARALLEL, _MULTI, _FINAL = (StateKind.LEAF, StateKind.COMPOUND, StateKind.PARALLEL,
-                                                StateKind.MULTI, StateKind.FINAL)
 _RUNNING, _SUCCESS, _FAILURE = Status.RUNNING, Status.SUCCESS, Status.FAILURE
 
 
-class _Plan:
-    """What entering and exiting a state needs to know, worked out once per chart, not per entry."""
+@dataclass(frozen=True, slots=True)
+class MacroStep:
+    """What one `step()` did (sismic's `MacroStep`): at what time, how many components it stepped, which
+    transitions it took (source path, target path, trigger), and whether the mission is over."""
 
-    __slots__ = ("requested", "on_event", "timed", "defaults")
-
-    def __init__(self, state: State):
-        self.requested = tuple(n for n in state.needs if n.requested)  # asked of the manager on entry
-        by_event: dict[str, list[Transition]] = {}
-        for t in state.transitions:
-            if t.kind is ast.TriggerKind.EVENT and t.event:
-                by_event.setdefault(t.event, []).append(t)
-        self.on_event = {k: tuple(v) for k, v in by_event.items()}  # event name -> its `on` transitions
-        self.timed = any(t.kind in (ast.TriggerKind.TIMEOUT, ast.TriggerKind.CHANGE) for t in state.transitions)
-        self.defaults: dict[str, Any] | None = None  # parameter defaults, evaluated at the first entry
-
-
-@dataclass(eq=False, slots=True, init=False)
-class Node:
-    """One active instance of a state."""
-
-    state: State
-    path: str
-    parent: Node | None
-    entered: float
-    plan: _Plan
-    phase: Phase
-    scope: dict[str, Any]  # params, vars, shared, resources
-    outputs: dict[str, Any]  # finished children's outputs by name
-    children: list[Node]
-    finished: set[str]  # ids of children that succeeded (parallel)
-    component: Component | None
-    context: Context | None
-    assignment: dict[str, str]  # requested need -> resource id
-    epochs: dict[str, int]  # unit id -> fencing epoch of its grant
-    requested: bool
-    lease_until: float
-    instances: int  # multi: created so far
-    succeeded: int
-    failed: int
-    bounds: tuple[int, int]
-    reserved_by: str  # a preallocation made when this (future) node's predecessor was entered
-    last_failure: str  # multi: why the most recent instance failed, for the report
-
-    def __init__(self, state: State, path: str, parent: Node | None, entered: float, plan: _Plan,
-                 scope: dict[str, Any], reserved_by: str = ""):
-        # Written out: a node is made on every entry, and the generated __init__ (six default
-        # factories, defaults checked one by one) cost twice as much. `scope` is taken, not copied.
-        self.state, self.path, self.parent, self.entered, self.plan = state, path, parent, entered, plan
-        self.phase = _WAITING
-        self.scope = scope
-        self.outputs, self.children, self.finished = {}, [], set()
-        self.component, self.context = None, None
-        self.assignment, self.epochs = {}, {}
-        self.requested, self.lease_until = False, 0.0
-        self.instances = self.succeeded = self.failed = 0
-        self.bounds = (0, 0)
-        self.reserved_by, self.last_failure = reserved_by, ""
+    at: float
+    stepped: int = 0
+    transitions: tuple[tuple[str, str, str], ...] = ()
+    outcome: str | None = None
 
 
 class Interpreter:
@@ -132,7 +79,9 @@ class Interpreter:
 
     def __init__(self, chart: Statechart, registry: Registry, rcm: ResourceManager | ResourceBroker, clock: Clock, *,
                  pool: ResourcePool | None = None, mission: str = "", services: Mapping[str, Any] | None = None,
-                 lease: float = 3.0, preallocate: bool = False):
+                 lease: float = 3.0, preallocate: bool = False, gates: Gates | None = None, priority: int = 1):
+        """`gates`: the devices' gates (default: gates over `services["drivers"]` when given, else none);
+        `priority`: the mission's rank against the other missions sharing the manager (1 first)."""
         self.chart = chart
         self.registry = registry
         self.clock = clock
@@ -142,69 +91,90 @@ class Interpreter:
         self.services = dict(services or {})
         self.lease = lease
         self.preallocate = preallocate
-        self._reservations: dict[str, Node] = {}  # holder -> provisional node of a state not yet entered
+        self.priority = priority
         self.listeners: list[Listener] = []
         self.root: Node | None = None
         self.outcome: str | None = None
         self.reason = ""
         self.events: collections.deque[rec.Event] = collections.deque()
-        self.holders: dict[str, Node] = {}  # request holder path -> node
         self._finishing: list[tuple[Node, bool, str]] = []
-        self.rcm.attach(self._apply)
+        self._reservations: dict[str, Node] = {}  # holder -> provisional node of a state not yet entered
         self._states = chart.states
-        self._plans = {sid: _Plan(st) for sid, st in chart.states.items()}  # per state, not per entry
+        self._plans = {sid: StatePlan(st) for sid, st in chart.states.items()}  # per state, not per entry
         # Indices kept in step with entry and exit, so a step never walks the whole tree.
-        self._running: dict[Node, None] = {}  # leaves with a component, in entry order
         self._timed: dict[Node, None] = {}  # nodes with `after`/`when` transitions
         self._listening: dict[str, dict[Node, None]] = {  # event name -> nodes with `on` transitions
             event: {} for plan in self._plans.values() for event in plan.on_event}
-        self._components: dict[str, tuple[Component, Context, _Resolved]] = {}  # reused per instance path
         self._last_tick = -1.0
         self._settling = False
-        self._arbiter = Arbiter()  # one control cycle's actuator commands, multiplexed by priority
-        self._rank = {sid: i for i, sid in enumerate(s.id for s in chart.walk())}  # declaration order
+        self._taken: list[tuple[str, str, str]] = []
         # What a state's descendants may read of it: its shared data and resources.
         self._visible = {sid: frozenset(n for n, _ in st.shared) | frozenset(n.name for n in st.needs)
                          for sid, st in chart.states.items()}
+        self.arbiter = Arbiter(clock.now)  # one control cycle's setpoints, fenced, then multiplexed by rank
+        self.resources = ResourceClient(self.rcm, self.pool, self.mission, gates or self._own_gates(), self.arbiter,
+                                        clock.now, self._names, priority)
+        rank = {sid: i for i, sid in enumerate(s.id for s in chart.walk())}  # declaration order
+        self.host = ComponentHost(registry, self.resources, self.arbiter, clock.now,
+                                  {**self.services, "dependencies": self._dependency}, notify=self._notify,
+                                  emit=self.emit, on_failure=lambda node, why: self._finish(node, False, why),
+                                  rank=rank)
+        self.rcm.attach(self._apply)
+
+    def _own_gates(self) -> Gates:
+        """Gates over the drivers of `services["drivers"]` (a `drd.hw.HostDrivers`), for a mission run alone."""
+        drivers = self.services.get("drivers")
+        if drivers is None:
+            return NoGates()
+        sharable = [c.id for c in self.pool.candidates.values() if isinstance(c, Unit) and c.sharable]
+        return LocalGates.of(getattr(drivers, "devices", {}), getattr(drivers, "robots", {}), sharable,
+                             lambda mission, record: self._notify(record))
 
     # ------------------------------------------------------------- public API
     def attach(self, listener: Listener) -> None:
         self.listeners.append(listener)
 
-    def start(self) -> None:
+    def record(self, record: rec.Record) -> None:
+        """A record about this mission made outside it (a device's gate: a command, a halt): to the listeners."""
+        self._notify(record)
+
+    def start(self) -> MacroStep:
         """Enter the root state (and, through grants, everything below it)."""
         if self.root is not None:
             raise RuntimeError("this interpreter has already started")
+        self._taken = []
         root_state = self._states[self.chart.root]
         self._enter(root_state, root_state.id, None, {})
         self._settle()
         self._flush()
+        return MacroStep(self.clock.now(), 0, tuple(self._taken), self.outcome)
 
-    def step(self) -> None:
+    def step(self) -> MacroStep:
         """One macro step at `clock.now()`."""
-        if self.outcome is not None:
-            return
         now = self.clock.now()
+        if self.outcome is not None:
+            return MacroStep(now, 0, (), self.outcome)
+        self._taken = []
         if now != self._last_tick:  # nothing can fall due without time passing
             self._last_tick = now
             self.rcm.tick(now)
-            self._renew(now)
-        for node in list(self._running):
+            self.resources.renew(now, self.lease)
+        stepped = 0
+        host = self.host
+        for node in list(host.running):
             comp = node.component
-            if node.phase is not _ACTIVE or comp is None:
+            if node.phase is not ACTIVE or comp is None:
                 continue
-            try:
-                status = comp.step(now)
-            except Exception as e:  # component code is not ours to trust
-                self._component_failed(node, e)
-                continue
+            stepped += 1
+            status = host.step(node, comp, now)
             if status is _SUCCESS or status is _FAILURE:
                 self._finish(node, status is _SUCCESS, "" if status is _SUCCESS else "failed")
-        if self._arbiter.best:  # most cycles of most charts command nothing: no call then
+        if self.arbiter.best:  # most cycles of most charts command nothing: no call then
             self._flush()
         self._settle()
-        if self._arbiter.best:  # what exits and entries commanded (a terminate's stop, a start's first move)
+        if self.arbiter.best:  # what exits and entries commanded (a start's first move)
             self._flush()
+        return MacroStep(now, stepped, tuple(self._taken), self.outcome)
 
     def emit(self, name: str, source: str = "operator", **fields: Any) -> None:
         """Queue an event (from a component, an action or the operator)."""
@@ -217,15 +187,19 @@ class Interpreter:
 
     def stop(self, reason: str = "stopped by operator") -> None:
         """Shut everything down, children first; idempotent."""
-        if self.root is not None and self.root.phase is not _DONE:
+        if self.root is not None and self.root.phase is not DONE:
             self._exit(self.root, "stopped")
-            self._flush()  # the terminates' last commands (stop the drive) still reach the hardware
+            self._flush()
         if self.outcome is None:
             self._end("stopped", reason)
 
     def add_resources(self, resources: Iterable[Any]) -> None:
         """Hot-plug: new units and aggregates; running multiplicities may grow."""
         self.pool.add(resources, self.clock.now())
+        self.grow()
+
+    def grow(self) -> None:
+        """Let running multiplicities grow to what the resources now allow (after a hot-plug, by any mission)."""
         self._grow_multis()
         self._settle()
 
@@ -254,19 +228,19 @@ class Interpreter:
 
     def active(self) -> list[Node]:
         """Every live node, parents first."""
-        out: list[Node] = []
-        stack = [self.root] if self.root is not None and self.root.phase is not _DONE else []
-        while stack:
-            n = stack.pop()
-            out.append(n)
-            stack.extend(reversed(n.children))
-        return out
+        if self.root is None or self.root.phase is DONE:
+            return []
+        return list(self.root.subtree())
+
+    def find(self, path: str) -> Node | None:
+        """The live node at `path`, if any."""
+        return next((n for n in self.active() if n.path == path), None)
 
     def snapshot(self) -> dict[str, Any]:
         """The active state tree, for status views and JSON."""
         def tree(n: Node) -> dict[str, Any]:
             return {"path": n.path, "kind": n.state.kind.value, "phase": n.phase.value,
-                    "resources": dict(n.assignment), "children": [tree(c) for c in n.children]}
+                    "resources": dict(n.grant or {}), "children": [tree(c) for c in n.children]}
         return {"mission": self.mission, "outcome": self.outcome, "reason": self.reason,
                 "time": self.clock.now(), "tree": tree(self.root) if self.root else None}
 
@@ -293,6 +267,12 @@ class Interpreter:
         except EvalError as e:
             self._finish(node, False, e.message)
             return node
+        if plan.adopted:
+            try:
+                self.resources.adopt(node)
+            except BindingError as e:
+                self._finish(node, False, str(e))
+                return node
         if self.preallocate and parent is not None:
             self._preallocate(node)
         if plan.requested:  # a state whose needs are all bound above never talks to the manager
@@ -302,53 +282,30 @@ class Interpreter:
         return node
 
     def _request(self, node: Node, needs: tuple[ResourceNeed, ...]) -> None:
-        try:
-            reqs = tuple(self._need_request(node, n) for n in needs)
-        except EvalError as e:
-            self._finish(node, False, e.message)
-            return
-        node.requested = True
-        holder = self._holder(node)
-        self.holders[holder] = node
+        resources = self.resources
+        holder = resources.holder(node)
         early = self._reservations.pop(holder, None)
         if early is not None:  # preallocated ahead of need: adopt what was granted (or keep waiting)
-            if early.assignment:
-                self._granted(node, early.assignment)
+            node.requested = True
+            resources.holders[holder] = node
+            if early.grant is not None:
+                node.grant, node.epochs, node.units = early.grant, early.epochs, early.units
+                node.lease_until = early.lease_until
+                for need, rid in early.grant.items():
+                    node.scope[need] = self.pool.view(rid)
+                self._activate(node)
             return
         if self.listeners:
             self._notify(rec.Waiting(self.clock.now(), node.path, tuple(f"{n.name}: {n.type}" for n in needs)))
-        self.rcm.request(Request(self._holder(node), node.state.priority, reqs, self.mission), self.clock.now())
-
-    def _need_request(self, node: Node, need: ResourceNeed) -> NeedRequest:
-        quantity = need.quantity
-        if isinstance(quantity, ast.Expr):
-            value = evaluate(quantity, self._names(node), self.pool.count)
-            quantity = float(value) if isinstance(value, int | float) else 1.0
-        where = None
-        if need.where is not None:
-            expr, base = need.where, node
-
-            def where(cand: Any, chosen: Mapping[str, Any]) -> bool:
-                names = self._names(base)
-                names.update({k: ResourceView(v, self.pool) for k, v in chosen.items()})
-                names[need.name] = ResourceView(cand, self.pool)
-                try:
-                    return truthy(expr, names, self.pool.count)
-                except EvalError:
-                    return False
-        return NeedRequest(need.name, need.type, float(quantity or 1.0), need.slice, where)
-
-    def _granted(self, node: Node, assignment: Mapping[str, str]) -> None:
-        node.assignment = dict(assignment)
-        for need, rid in assignment.items():
-            node.scope[need] = self.pool.view(rid)
-        if node.phase is _WAITING:
-            self._activate(node)
+        try:
+            resources.request(node, needs)
+        except EvalError as e:
+            self._finish(node, False, e.message)
 
     def _preallocate(self, node: Node) -> None:
         """Reserve, now, what the state after `node` will need (paper 4.3 c): it starts without waiting."""
         parent = node.parent
-        if parent is None or parent.state.kind is not _COMPOUND:
+        if parent is None or parent.state.kind is not COMPOUND:
             return
         nxt = next((t for t in node.state.transitions
                     if t.kind is ast.TriggerKind.COMPLETION and t.guard is None), None)
@@ -356,48 +313,50 @@ class Interpreter:
             return
         target = self._states[nxt.target]
         needs = [n for n in target.needs if n.requested]
-        if not needs or target.kind not in (_COMPOUND, _PARALLEL, _LEAF):
+        if not needs or target.kind not in (COMPOUND, PARALLEL, LEAF):
             return
         future = Node(target, f"{parent.path}/{target.name}", parent, self.clock.now(), self._plans[target.id], {},
                       reserved_by=node.path)
-        holder = self._holder(future)
-        if holder in self.holders or holder in self._reservations:
+        holder = self.resources.holder(future)
+        if holder in self.resources.holders or holder in self._reservations:
             return
         try:
             future.scope.update({a.name: evaluate(a.value, self._names(parent), self.pool.count) for a in target.args})
-            reqs = tuple(self._need_request(future, n) for n in needs)
+            self._reservations[holder] = future
+            self.resources.request(future, needs, at=self.clock.now())
         except EvalError:
-            return  # it will simply ask on entry
-        self._reservations[holder] = self.holders[holder] = future
-        now = self.clock.now()
-        self.rcm.reserve(Request(holder, target.priority, reqs, self.mission), now, now)
+            self._reservations.pop(holder, None)
+            self.resources.forget(future)  # it will simply ask on entry
 
     def _drop_reservations(self, made_by: str, keep: str = "") -> None:
         """Cancel preallocations made for the successor of `made_by` (except the one being entered)."""
         for holder, future in list(self._reservations.items()):
             if (future.reserved_by == made_by or future.reserved_by.startswith(made_by + "/")) and holder != keep:
                 del self._reservations[holder]
-                self.holders.pop(holder, None)
-                self.rcm.cancel(holder, self.clock.now())
+                self.resources.cancel(future)  # a grant it held is released (and recorded) first
+                self.resources.forget(future)
 
     def _activate(self, node: Node) -> None:
-        if self.outcome is not None or node.phase is _DONE:
+        if self.outcome is not None or node.phase is DONE or node.closing:
             return
-        node.phase = _ACTIVE
+        if node.blocked:  # granted while a holder above is suspended: it starts when that one resumes
+            node.phase, node.pending = SUSPENDED, True
+            return
+        node.phase = ACTIVE
         state = node.state
         kind = state.kind
-        if kind is _LEAF:
-            self._start_component(node)
-        elif kind is _COMPOUND:
+        if kind is LEAF:
+            self.host.start(node)
+        elif kind is COMPOUND:
             target = self._initial(node)
             if target is not None:
                 self._enter_child(node, target)
-        elif kind is _PARALLEL:
+        elif kind is PARALLEL:
             for cid in state.children:
                 child = self._states[cid]
-                if child.kind is not _FINAL and not child.after:
+                if child.kind is not FINAL and not child.after:
                     self._enter_child(node, child)
-        elif kind is _MULTI:
+        elif kind is MULTI:
             self._start_multi(node)
 
     def _initial(self, node: Node) -> State | None:
@@ -408,15 +367,15 @@ class Interpreter:
         return self._states[node.state.initial] if node.state.initial else None
 
     def _enter_child(self, parent: Node, state: State, index: int | None = None, why: str = "") -> Node | None:
-        if self.outcome is not None or parent.phase is _DONE:  # stopped meanwhile (e.g. by a listener)
+        if self.outcome is not None or parent.phase is DONE or parent.closing:  # stopped meanwhile
             return None
-        if state.kind is _FINAL:
+        if state.kind is FINAL:
             self._finish(parent, bool(state.success), "" if state.success else (why or "reached fail"))
             return None
         path = f"{parent.path}[{index}]" if index is not None else f"{parent.path}/{state.name}"
         params: dict[str, Any] = {}
         if state.args:
-            domain = parent.parent if parent.state.kind is _MULTI else parent
+            domain = parent.parent if parent.state.kind is MULTI else parent
             try:
                 params = {a.name: evaluate(a.value, self._names(domain), self.pool.count) for a in state.args} \
                     if domain is not None else {}
@@ -459,7 +418,7 @@ class Interpreter:
 
     def _grow_multi(self, node: Node) -> None:
         template = self._states[node.state.children[0]]
-        while node.instances < node.bounds[1] and node.phase is _ACTIVE:
+        while node.instances < node.bounds[1] and node.phase is ACTIVE:
             index = node.instances
             node.instances += 1
             self._enter_child(node, template, index)
@@ -467,7 +426,7 @@ class Interpreter:
     def _grow_multis(self) -> None:
         for node in self.active():
             m = node.state.multiplicity
-            if node.state.kind is _MULTI and m is not None and m.high is not None and not m.exact:
+            if node.state.kind is MULTI and m is not None and m.high is not None and not m.exact:
                 try:
                     high = int(evaluate(m.high, self._names(node.parent) if node.parent else {},  # type: ignore[call-overload]
                                         self.pool.count))
@@ -477,81 +436,8 @@ class Interpreter:
                     node.bounds = (node.bounds[0], high)
                     self._grow_multi(node)
 
-    def _start_component(self, node: Node) -> None:
-        """Set a component up once per instance path (py_trees style); start it on every entry."""
-        cached = self._components.get(node.path)
-        if cached is not None:
-            comp, ctx, resolved = cached
-            resolved.reset(node)  # the same views, resolved again for this entry
-            ctx.params, ctx.outputs = dict(node.scope), {}
-        else:
-            resolved = _Resolved(self._devices, node)  # most components never ask: resolve on first use
-            resources, devices = resolved.view(0), resolved.view(1)
-            name = node.state.component or ""
-            factory = self.registry.get(name)
-            if factory is None:
-                self._finish(node, False, f"no implementation of component {name} is available")
-                return
-            shared: dict[str, Any] = {}
-            for anc in self._ancestors(node):
-                for k, _ in anc.state.shared:
-                    shared.setdefault(k, anc.scope.get(k))
-            path = node.path
-            ctx = Context(path, dict(node.scope), resources,
-                          lambda ev, **f: self.emit(ev, path, **f),
-                          lambda text: self._notify(rec.Log(self.clock.now(), path, text)),
-                          self.clock.now, devices=devices,
-                          services={**self.services, "shared": shared, "dependencies": self._dependency,
-                                    "siblings": node.parent.outputs if node.parent else {}})
-            try:
-                comp = factory()
-                comp.setup(ctx)
-            except Exception as e:  # component code is not ours to trust
-                self._component_failed(node, e)
-                return
-            self._components[node.path] = (comp, ctx, resolved)
-        node.component, node.context = comp, ctx
-        try:
-            comp.start()
-        except Exception as e:
-            self._component_failed(node, e)
-            return
-        self._running[node] = None
-
     def _flush(self) -> None:
-        self._arbiter.flush(self._command_failed)
-
-    def _command_failed(self, owner: object, e: Exception) -> None:
-        """A driver refused the winning command of a cycle: its proposer (a node) fails."""
-        if isinstance(owner, Node):
-            self._component_failed(owner, e)
-
-    def _component_failed(self, node: Node, e: Exception) -> None:
-        self._notify(rec.Log(self.clock.now(), node.path, f"component raised {type(e).__name__}: {e}"))
-        self._finish(node, False, f"component raised {type(e).__name__}: {e}")
-
-    def _devices(self, node: Node) -> tuple[dict[str, str], dict[str, Any]]:
-        """Each need's resource id, and its driver (a robot's own part driver when bound through a part)."""
-        drivers = self.services.get("drivers")
-        resources: dict[str, str] = {}
-        devices: dict[str, Any] = {}
-        for need in node.state.needs:
-            holder, rid, robot, part = node, node.assignment.get(need.name), None, None
-            if rid is None and need.bound_to is not None:
-                state_id, name, part = need.bound_to
-                holder = next((a for a in self._ancestors(node) if a.state.id == state_id), node)
-                robot = holder.assignment.get(name)
-                rid = self.pool.part(robot, part) if robot else None
-            if not rid:
-                continue
-            resources[need.name] = rid
-            if drivers is not None:
-                by_robot = getattr(drivers, "robots", {}).get(robot, {}) if robot and part else {}
-                driver = by_robot.get(part) or getattr(drivers, "devices", {}).get(rid)
-                if driver is not None:
-                    rank = (-node.state.priority, self._rank.get(node.state.id, 0))
-                    devices[need.name] = Fenced(driver, _current_epoch(holder, rid), self._arbiter, rank, node)
-        return resources, devices
+        self.arbiter.flush(self.host.command_failed)
 
     # ------------------------------------------------------------- finishing and transitions
     def _finish(self, node: Node, success: bool, reason: str = "") -> None:
@@ -576,7 +462,7 @@ class Interpreter:
                 return
             if self._finishing:
                 node, ok, why = self._finishing.pop(0)
-                if node.phase is not _DONE or node is self.root:
+                if node.phase is not DONE or node is self.root:
                     self._complete(node, ok, why)
                 continue
             if self._timed and self._fire_one():
@@ -595,9 +481,11 @@ class Interpreter:
             self._exit(node, "success" if ok else "failure")
             self._end("success" if ok else "failure", why)
             return
-        if node.phase is not _DONE:
+        if parent.closing:
+            return  # its parent is being exited: nothing reacts any more
+        if node.phase is not DONE:
             self._exit(node, "success" if ok else "failure")
-        if node.state.kind is _LEAF and node.context is not None:
+        if node.state.kind is LEAF and node.context is not None:
             parent.outputs[node.state.name] = dict(node.context.outputs)
         elif node.outputs:  # a composite's outputs are its finished children's, merged (FindNewDoor.door)
             parent.outputs[node.state.name] = {k: v for child in node.outputs.values() for k, v in child.items()}
@@ -607,26 +495,26 @@ class Interpreter:
                 self._take(node, t, None, why)
                 return
         pk = parent.state.kind
-        if pk is _MULTI:
+        if pk is MULTI:
             self._instance_done(parent, ok, why)
         elif not ok:
             self._finish(parent, False, why or f"{node.path} failed")
-        elif pk is _PARALLEL:
+        elif pk is PARALLEL:
             parent.finished.add(node.state.id)
             self._region_done(parent, node)
-        elif pk is _COMPOUND:
+        elif pk is COMPOUND:
             self._finish(parent, True)
 
     def _region_done(self, parent: Node, node: Node) -> None:
         state = parent.state
-        regions = [c for c in state.children if self._states[c].kind is not _FINAL]
+        regions = [c for c in state.children if self._states[c].kind is not FINAL]
         if state.policy is ast.Policy.ANY or (state.policy is ast.Policy.UNTIL and node.state.id == state.until):
             self._finish(parent, True)
             return
         if all(r in parent.finished for r in regions):
             self._finish(parent, True)
             return
-        running = {c.state.id for c in parent.children if c.phase is not _DONE}
+        running = {c.state.id for c in parent.children if c.phase is not DONE}
         for rid in regions:
             child = self._states[rid]
             if child.after and rid not in running and rid not in parent.finished \
@@ -641,7 +529,7 @@ class Interpreter:
             multi.last_failure = why
             self._notify(rec.Log(self.clock.now(), multi.path, f"an instance failed: {why}"))
         low, _ = multi.bounds
-        running = [c for c in multi.children if c.phase is not _DONE]
+        running = [c for c in multi.children if c.phase is not DONE]
         if multi.succeeded + len(running) < low:
             last = f" (last failure: {multi.last_failure})" if multi.last_failure else ""
             self._finish(multi, False, f"only {multi.succeeded} of at least {low} instances of "
@@ -650,18 +538,18 @@ class Interpreter:
             self._finish(multi, True)
 
     def _fire_one(self) -> bool:
-        """Take the first enabled change or timeout transition, if any."""
+        """Take the first enabled change or timeout transition, if any (none inside a frozen subtree)."""
         if not self._timed:
             return False
         now = self.clock.now()
         for node in list(self._timed):
-            if node.parent is None or node.phase is _DONE:
-                continue
             domain = node.parent
+            if domain is None or node.phase is DONE or domain.phase is not ACTIVE or domain.closing:
+                continue
             for t in node.state.transitions:
                 if t.kind is ast.TriggerKind.TIMEOUT:
                     delay = self._delay(domain, t)
-                    if delay is None or now - node.entered < delay:
+                    if delay is None or now - node.entered < delay - TIME_EPS:
                         continue
                 elif t.kind is ast.TriggerKind.CHANGE:
                     if t.condition is None or not self._truthy(domain, t.condition, None):
@@ -690,32 +578,33 @@ class Interpreter:
             return
         for node in list(listening):  # a copy: taking a transition changes who listens
             domain = node.parent
-            if domain is None or node.phase is _DONE:
-                continue
+            if domain is None or node.phase is DONE or domain.phase is not ACTIVE or domain.closing:
+                continue  # a frozen subtree hears nothing
             for t in node.plan.on_event[event.name]:
                 if t.guard is None or self._truthy(domain, t.guard, event):
                     self._take(node, t, event)
                     break
 
     def _take(self, node: Node, t: Transition, event: rec.Event | None, why: str = "") -> None:
-        domain = node.parent  # the node whose body declares the transition (a multi's parent for instances)
+        domain = node.parent  # the node whose body declares the transition
         assert domain is not None
         target = self._states[t.target]
+        target_path = f"{domain.path}/{target.name}"
+        self._taken.append((node.path, target_path, t.kind.value))
         if self.listeners:
-            self._notify(rec.Taken(self.clock.now(), node.path, _target_path(domain, target), t.kind.value,
-                                   trigger_label(t)))
-        if node.phase is not _DONE:
+            self._notify(rec.Taken(self.clock.now(), node.path, target_path, t.kind.value, trigger_label(t)))
+        if node.phase is not DONE:
             self._exit(node, "stopped")
         if self._reservations:
-            self._drop_reservations(node.path, keep=f"{self.mission}/{domain.path}/{target.name}")
-        final = target.kind is _FINAL
-        if final and domain.state.kind is _PARALLEL:
+            self._drop_reservations(node.path, keep=f"{self.mission}/{target_path}")
+        final = target.kind is FINAL
+        if final and domain.state.kind is PARALLEL:
             for c in list(domain.children):
-                if c.phase is not _DONE:
+                if c.phase is not DONE:
                     self._exit(c, "stopped")
         if t.actions:
             self._take_actions(domain, t, event)
-        if domain.phase is not _DONE:
+        if domain.phase is not DONE:
             if not why and final and not target.success and t.kind is not ast.TriggerKind.COMPLETION:
                 why = f"{node.state.name}: {trigger_label(t)}"  # say why the behavior failed
             self._enter_child(domain, target, why=why)
@@ -741,49 +630,56 @@ class Interpreter:
                 self._notify(rec.Log(self.clock.now(), domain.path, format_value(evaluate(m, names, self.pool.count))))
 
     def _release_need(self, domain: Node, name: str) -> None:
-        holder = next((n for n in [domain, *self._ancestors(domain)] if name in n.assignment), None)
+        """`release(name)`: the components bound through it are unbound first, then the need goes back."""
+        holder = next((n for n in [domain, *domain.ancestors()] if name in (n.grant or {})), None)
         if holder is None:
             return
-        self.rcm.release(self._holder(holder), self.clock.now(), [name])  # by need name: exact even on shared units
+        resources = self.resources
+        for leaf, needs in resources.bound_through(holder, name):
+            resources.unbind(leaf, f"{name} released", needs)
+        holder.released.add(name)
+        resources.release(holder, [name])  # by need name: exact even on shared units
 
     # ------------------------------------------------------------- exiting
     def _exit(self, node: Node, status: str) -> None:
-        """Exit children first, terminate the component, give resources back."""
-        if node.phase is _DONE:
-            if node.parent is not None and node in node.parent.children:
-                node.parent.children.remove(node)
+        """Exit `node` and its subtree, children first: close it (nothing inside is granted, activated or takes a
+        transition any more, waiting requests are withdrawn), then per node terminate its component, let its last
+        setpoint through and unbind it, give its grant back, and say it exited."""
+        if node.phase is DONE:
+            node.detach()
             return
-        while node.children:
-            self._exit(node.children[-1], "stopped")
-        comp = node.component
-        if comp is not None:
-            self._running.pop(node, None)
-            try:
-                comp.terminate(_FINAL_STATUS.get(status, _RUNNING))
-            except Exception as e:  # the node is leaving anyway: just say so
-                self._notify(rec.Log(self.clock.now(), node.path, f"component raised {type(e).__name__}: {e}"))
-        node.phase = _DONE
-        if self._reservations and node.state.children:
-            self._drop_reservations(node.path)  # reservations for states inside it
-        plan = node.plan
-        if plan.timed:
-            self._timed.pop(node, None)
-        for event in plan.on_event:
-            self._listening[event].pop(node, None)
-        if node.requested:
-            self.holders.pop(self._holder(node), None)
-            now = self.clock.now()
-            if node.assignment:
-                self.rcm.release(self._holder(node), now)
-            else:
-                self.rcm.cancel(self._holder(node), now)
-        parent = node.parent
-        if parent is not None and parent.children and parent.children[-1] is node:
-            parent.children.pop()
-        elif parent is not None and node in parent.children:
-            parent.children.remove(node)
+        order = node.children_first()
+        for n in order:
+            n.closing = True
+        resources = self.resources
+        for n in order:
+            if n.requested and n.grant is None and n.phase is not DONE:
+                resources.cancel(n)  # still waiting (or revoked and queued again): it can no longer be granted
+        for n in order:
+            if n.phase is not DONE:
+                self._leave(n, status if n is node else "stopped")
+
+    def _leave(self, n: Node, status: str) -> None:
+        resources = self.resources
+        if n.component is not None:
+            self.host.terminate(n, status)
+            if n.bindings:
+                self.arbiter.flush_from(resources.holder(n), self.host.command_failed)
+                resources.unbind(n, "exited")
+        n.phase = DONE
+        if self._reservations and n.state.children:
+            self._drop_reservations(n.path)  # reservations for states inside it
+        if n.plan.timed:
+            self._timed.pop(n, None)
+        for event in n.plan.on_event:
+            self._listening[event].pop(n, None)
+        if n.requested:
+            if n.grant is not None:
+                resources.release(n)  # recorded as `released` (exit) before any grant of what it frees
+            resources.forget(n)
+        n.detach()
         if self.listeners:
-            self._notify(rec.Exited(self.clock.now(), node.path, node.state.id, status))
+            self._notify(rec.Exited(self.clock.now(), n.path, n.state.id, status))
 
     def _end(self, outcome: str, reason: str) -> None:
         self.rcm.detach(self._apply)
@@ -793,74 +689,134 @@ class Interpreter:
 
     # ------------------------------------------------------------- resources
     def _apply(self, decisions: Iterable[object]) -> None:
+        holders = self.resources.holders
         for d in decisions:
             holder = getattr(d, "holder", None) or getattr(d, "victim", None)
-            node = self.holders.get(holder) if isinstance(holder, str) else None
+            node = holders.get(holder) if isinstance(holder, str) else None
             if node is None:
                 continue
-            now = self.clock.now()
             match d:
                 case Granted():
-                    node.lease_until = d.lease_until
-                    node.epochs = dict(d.epochs)
-                    if self.listeners:
-                        self._notify(rec.Granted(now, node.path, dict(d.assignment), dict(d.epochs)))
-                    if node.reserved_by:
-                        node.assignment = dict(d.assignment)  # held for a state not entered yet
-                    elif node.phase is _SUSPENDED:
-                        node.assignment = dict(d.assignment)
-                        self._suspend(node, False)
-                    else:
-                        self._granted(node, d.assignment)
+                    self._on_granted(node, d)
                 case Revoked():
-                    self._notify(rec.Revoked(now, node.path, d.units, f"preempted by {d.by}"))
-                    self._suspend(node, True)
-                case Released(reason="release"):
-                    self._notify(rec.Released(now, node.path, d.units, "release"))
+                    self._on_revoked(node, d)
                 case Released():
-                    self._notify(rec.Released(now, node.path, d.units, d.reason))
-                    if node.phase is not _DONE:
-                        self._finish(node, False, f"lost its resources ({d.reason})")
+                    self._on_released(node, d)
                 case Unsatisfiable():
-                    self._finish(node, False, f"resource need {d.need} can never be satisfied: {d.reason}")
+                    if not node.closing:
+                        self._finish(node, False, f"resource need {d.need} can never be satisfied: {d.reason}")
                 case Deadlock():
-                    self._finish(node, False, f"cancelled to break a resource deadlock: {' -> '.join(d.cycle)}")
+                    if not node.closing:
+                        self._finish(node, False, f"cancelled to break a resource deadlock: {' -> '.join(d.cycle)}")
                 case WaitingDecision():
-                    self._notify(rec.Waiting(now, node.path, (), d.blocked_by))
+                    if self.listeners:
+                        self._notify(rec.Waiting(self.clock.now(), node.path, (),
+                                                 tuple(_path(b) for b in d.blocked_by)))
 
-    def _suspend(self, node: Node, suspend: bool) -> None:
-        node.phase = _SUSPENDED if suspend else _ACTIVE
-        self._notify((rec.Suspended if suspend else rec.Resumed)(self.clock.now(), node.path))
-        stack = list(node.children)
+    def _on_granted(self, node: Node, d: Granted) -> None:
+        was_revoked = node.revoked
+        self.resources.took(node, d.assignment, d.epochs, d.units, d.lease_until)
+        if self.listeners:
+            self._notify(rec.Granted(self.clock.now(), node.path, self.resources.resources_of(d.assignment),
+                                     dict(d.epochs)))
+        if node.reserved_by or node.closing:
+            return  # held for a state not entered yet, or given back by the exit under way
+        if was_revoked:
+            self._resume(node)
+        elif node.phase is WAITING:
+            self._activate(node)
+
+    def _on_revoked(self, node: Node, d: Revoked) -> None:
+        """Preempted at a slice boundary: the subtree's last words while its grant still stands, then unbound,
+        then the grant ends (the devices stop if anything of it still moves them) and the node is suspended."""
+        froze = node.phase is ACTIVE and not node.closing
+        if froze:
+            self._freeze(node, f"preempted by {_path(d.by)}")
+        now = self.clock.now()
+        if self.listeners:
+            self._notify(rec.Revoked(now, node.path, d.units, f"preempted by {_path(d.by)}"))
+        ended = self.resources.lost(node, d.units, "revoked")
+        node.revoked = True
+        if self.listeners:
+            self._notify(rec.Released(now, node.path, ended, "revoked"))
+            if froze:
+                self._notify(rec.Suspended(now, node.path))
+
+    def _on_released(self, node: Node, d: Released) -> None:
+        if not d.units:
+            return  # a request withdrawn before it was granted: no hold ended
+        reason: str = d.reason
+        if reason == "release":
+            reason = "exit" if node.closing else "release"
+        elif not node.closing and not node.reserved_by:  # lost (host, resource, lease): unbind everything first
+            qualified = self.resources.holder(node)
+            for n in node.subtree():
+                mine = [b.need for b in n.bindings.values() if b.holder == qualified]
+                if mine:
+                    self.resources.unbind(n, f"{node.path} lost its grant ({reason})", mine)
+        ended = self.resources.lost(node, d.units, reason, d.needs)
+        if self.listeners:
+            self._notify(rec.Released(self.clock.now(), node.path, ended, reason))
+        if reason in ("exit", "release") or node.closing or node.reserved_by:
+            return
+        if node.phase is not DONE:
+            self._finish(node, False, f"lost its resources ({d.reason})")
+
+    def _freeze(self, top: Node, reason: str) -> None:
+        """Suspend `top`'s subtree: nothing in it steps or takes a transition; its components get `suspend` (their
+        last setpoints go through), then every binding in it dies (a setpoint still in force is stopped)."""
+        live = [n for n in top.subtree() if n.phase is ACTIVE]
+        for n in live:
+            n.phase = SUSPENDED
+        host = self.host
+        for n in live:
+            if n.component is not None and n in host.running:
+                host.suspend(n)
+        self.arbiter.flush_from(self.resources.holder(top), host.command_failed)
+        for n in live:
+            if n.bindings:
+                self.resources.unbind(n, reason)
+
+    def _resume(self, node: Node) -> None:
+        """`node` holds its needs again: unless a holder above is still suspended, wake its subtree, except the
+        parts whose own grants are still gone (they wait for them)."""
+        if node.blocked or node.phase is not SUSPENDED:
+            return
+        woken: list[Node] = []
+        starting: list[Node] = []
+        stack = [node]
         while stack:
             n = stack.pop()
-            stack.extend(n.children)
-            if n.component is not None and n.phase is not _DONE:
-                comp = n.component
-                self._guard_call(n, comp.suspend if suspend else comp.resume)
-                n.phase = _SUSPENDED if suspend else _ACTIVE
-        if node.component is not None:
-            comp = node.component
-            self._guard_call(node, comp.suspend if suspend else comp.resume)
-
-    def _renew(self, now: float) -> None:
-        for holder, node in list(self.holders.items()):
-            if node.assignment and node.lease_until - now < self.lease / 2:
-                for d in self.rcm.renew(holder, now):
-                    until = getattr(d, "lease_until", None)
-                    if until is not None:
-                        node.lease_until = until
+            if n is not node and n.revoked:
+                continue
+            if n.phase is SUSPENDED:
+                if n.pending:
+                    n.pending, n.phase = False, WAITING
+                    starting.append(n)
+                    continue
+                n.phase = ACTIVE
+                woken.append(n)
+            stack.extend(reversed(n.children))
+        if self.listeners:
+            self._notify(rec.Resumed(self.clock.now(), node.path))
+        for n in woken:
+            if n.bindings:
+                try:
+                    self.resources.rebind(n)
+                except BindingError as e:
+                    self._finish(n, False, str(e))
+        for n in woken:
+            if n.component is not None and n.phase is ACTIVE:
+                self.host.resume(n)
+        for n in starting:
+            self._activate(n)
 
     # ------------------------------------------------------------- helpers
-    def _holder(self, node: Node) -> str:
-        """The manager's name for a node: unique across missions sharing it, prefixes kept."""
-        return f"{self.mission}/{node.path}"
-
     def _names(self, node: Node | None, event: rec.Event | None = None) -> dict[str, Any]:
         if node is None:
             return {}
         names: dict[str, Any] = {}
-        for anc in reversed(self._ancestors(node)):
+        for anc in reversed(node.ancestors()):
             shown = self._visible[anc.state.id]
             names.update((k, v) for k, v in anc.scope.items() if k in shown)
         names.update(node.scope)
@@ -868,15 +824,6 @@ class Interpreter:
         if event is not None:
             names["event"] = event.fields
         return names
-
-    @staticmethod
-    def _ancestors(node: Node) -> list[Node]:
-        out = []
-        p = node.parent
-        while p is not None:
-            out.append(p)
-            p = p.parent
-        return out
 
     def _truthy(self, node: Node, expr: ast.Expr, event: rec.Event | None) -> bool:
         try:
@@ -888,64 +835,11 @@ class Interpreter:
     def _enabled_guard(self, domain: Node, t: Transition, event: rec.Event | None) -> bool:
         return t.guard is None or self._truthy(domain, t.guard, event)
 
-    def _guard_call(self, node: Node, fn: Callable[[], Any], on_error: bool = True) -> Any:
-        """Call component code; an exception fails the node, never the executive."""
-        try:
-            return fn()
-        except Exception as e:  # component code is not ours to trust
-            self._notify(rec.Log(self.clock.now(), node.path, f"component raised {type(e).__name__}: {e}"))
-            if on_error:
-                self._finish(node, False, f"component raised {type(e).__name__}: {e}")
-            return None
-
     def _notify(self, record: rec.Record) -> None:
         for listener in self.listeners:
             listener(record)
 
 
-class _Resolved:
-    """A component's resources and devices, worked out the first time it asks for either."""
-
-    __slots__ = ("_resolve", "_node", "_value")
-
-    def __init__(self, resolve: Callable[[Node], tuple[dict[str, str], dict[str, Any]]], node: Node):
-        self._resolve = resolve
-        self._node = node
-        self._value: tuple[dict[str, str], dict[str, Any]] | None = None
-
-    def reset(self, node: Node) -> None:
-        """A new entry of the same path: resolve again, for `node`, when next asked."""
-        self._node, self._value = node, None
-
-    def get(self, which: int) -> dict[str, Any]:
-        if self._value is None:
-            self._value = self._resolve(self._node)
-        return self._value[which]
-
-    def view(self, which: int) -> _LazyMap:
-        return _LazyMap(self, which)
-
-
-class _LazyMap(Mapping[str, Any]):
-    __slots__ = ("_resolved", "_which")
-
-    def __init__(self, resolved: _Resolved, which: int):
-        self._resolved, self._which = resolved, which
-
-    def __getitem__(self, key: str) -> Any:
-        return self._resolved.get(self._which)[key]
-
-    def __iter__(self) -> Iterator[str]:
-        return iter(self._resolved.get(self._which))
-
-    def __len__(self) -> int:
-        return len(self._resolved.get(self._which))
-
-
-def _current_epoch(holder: Node, unit: str) -> Callable[[], int | None]:
-    """Read at each command: a resumed grant replaces `holder.epochs`, so never bind the dict itself."""
-    return lambda: holder.epochs.get(unit)
-
-
-def _target_path(domain: Node, target: State) -> str:
-    return f"{domain.path}/{target.name}"
+def _path(holder: str) -> str:
+    """A manager holder `<mission>/<path>` as a path of the trace."""
+    return holder.partition("/")[2] or holder

@@ -53,20 +53,55 @@ class Waiting(Record):
 
 @dataclass(frozen=True, slots=True)
 class Granted(Record):
-    resources: dict[str, str] = field(default_factory=dict)  # need -> resource id
+    """`path` holds these resources from now on: need -> resource id, and for an aggregate each of its parts
+    (`ranger.drive` -> `ranger1.drive`); `epochs`: unit id -> the fencing epoch of this grant."""
+
+    resources: dict[str, str] = field(default_factory=dict)
     epochs: dict[str, int] = field(default_factory=dict)
 
 
 @dataclass(frozen=True, slots=True)
 class Revoked(Record):
+    """The manager preempted `path` at a slice boundary (a `released` with reason `revoked` follows)."""
+
+    resources: tuple[str, ...] = ()
+    reason: str = ""
+
+
+#: Why a hold ended (`Released.reason`).
+END_REASONS = ("exit", "release", "revoked", "host lost", "resource lost", "expired", "cancelled")
+
+
+@dataclass(frozen=True, slots=True)
+class Released(Record):
+    """A hold of `path` ended, for these resource ids (aggregates and their units); `reason` is one of
+    `END_REASONS`. Every end of a hold has one, before any grant of the units it freed."""
+
     resources: tuple[str, ...] = ()
     reason: str = ""
 
 
 @dataclass(frozen=True, slots=True)
-class Released(Record):
-    resources: tuple[str, ...] = ()
+class Command(Record):
+    """An actuator command reached the gate of `device`: from the component at `path`, at the `epoch` it was
+    bound with (None: unbound); `accepted` says whether the driver got it, `reason` why not."""
+
+    device: str = ""
+    method: str = ""
+    epoch: int | None = None
+    accepted: bool = False
     reason: str = ""
+
+
+@dataclass(frozen=True, slots=True)
+class Halted(Record):
+    """The system brought `device` to its safe stop (`method`) because the authority of `path` over it ended
+    (`reason`); `error` if the device could not be reached."""
+
+    device: str = ""
+    method: str = ""
+    reason: str = ""
+    error: str = ""
 
 
 @dataclass(frozen=True, slots=True)

@@ -14,15 +14,20 @@ def _default(value: Any) -> Any:
 
 
 class TraceWriter:
-    """Attach with `interpreter.attach(TraceWriter(fh))`; each record becomes one line."""
+    """Attach with `interpreter.attach(TraceWriter(fh, mission))`; each record becomes one line, with the mission
+    it belongs to (several missions may write one file). The format is `docs/trace.md`."""
 
-    def __init__(self, out: IO[str], flush_every: int = 64):
+    def __init__(self, out: IO[str], mission: str = "", flush_every: int = 64):
         self.out = out
+        self.mission = mission
         self.flush_every = flush_every
         self.count = 0
 
     def __call__(self, record: Record) -> None:
-        self.out.write(json.dumps(record.to_dict(), default=_default, separators=(",", ":")) + "\n")
+        data = record.to_dict()
+        if self.mission:
+            data["mission"] = self.mission
+        self.out.write(json.dumps(data, default=_default, separators=(",", ":")) + "\n")
         self.count += 1
         if self.count % self.flush_every == 0:
             self.out.flush()

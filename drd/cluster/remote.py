@@ -1,13 +1,16 @@
 """Components that run on another host: `RemoteComponent`, the executive's proxy, and its wire messages.
 
 The executive steps a `RemoteComponent` exactly like a local one. It works out, at each `start`, which host
-owns the devices its needs resolved to (`ranger1.drive` -> `ranger1`) and sends each lifecycle call
-(`start`, `step`, `suspend`, `resume`, `terminate`) to that host's Creator (`drd.daemon.creator`) as a
-`ComponentCall`. A call carries what the component may read of the mission: its parameters, the resource
-bound to each need with the fencing epoch of the grant, the shared data (`shared visited: DoorLog`) and its
-finished siblings' outputs. The `ComponentReply` brings back its status, outputs, the events it emitted,
-its log lines, the shared data as it left it and its changes to the Static Dependency Database; the proxy
-applies them to the local context, so the interpreter sees what a local component would have done.
+owns the devices its needs are bound to (`ranger1.drive` -> `ranger1`, from its context's bindings) and sends
+each lifecycle call (`start`, `step`, `suspend`, `resume`, `terminate`) to that host's Creator
+(`drd.daemon.creator`) as a `ComponentCall`. A call carries what the component may read of the mission: its
+parameters, the unit bound to each need with the epoch it is bound at (None once unbound: the gate on the
+device's host then refuses its commands), the shared data (`shared visited: DoorLog`) and its finished
+siblings' outputs. Every message to a host first carries the gate operations queued for it
+(`drd.cluster.gates.RemoteGates`). The `ComponentReply` brings back its status, outputs, the events it
+emitted, its log lines, the shared data as it left it, its changes to the Static Dependency Database and what
+the gates there recorded; the proxy applies them to the local context, so the interpreter sees what a local
+component would have done.
 
 A component with no device needs is *movable*. With a placer (`ComponentRouter.place`, the Load Balancer's
 policy over the hosts that are up, `drd.placement`), its `start` goes to the host the policy picks; a host that
@@ -25,25 +28,29 @@ that state.
 
 from __future__ import annotations
 
+import dataclasses
 import threading
 import time
 from collections import deque
-from collections.abc import Callable, Iterator, Mapping
+from collections.abc import Callable, Iterable, Iterator, Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
 from drd.bus import Bus, BusError, Message, RemoteError, message
+from drd.cluster.gates import RemoteGates, deliver
 from drd.runtime.component import Component, Context, Status
-from drd.runtime.records import plain
+from drd.runtime.records import Record, plain
 
 
-@message("drd.component.call", 1)
+@message("drd.component.call", 2)
 class ComponentCall(Message):
     """One lifecycle call for the instance `path` of mission `mission` (see the module docstring).
 
-    `bindings`: need -> [resource id, robot, part] (robot and part "" unless bound through a robot's part);
-    `epochs`: need -> fencing epoch of its grant; `rank`: [-priority, declaration order], for the host's
-    per-cycle arbitration of actuator commands; `sim_time`/`sim_version`: the simulation's clock."""
+    `bindings`: need -> [unit id, robot, part] (robot and part "" unless bound through a robot's part);
+    `epochs`: need -> the epoch it is bound at (None: unbound); `rank`: [-priority, declaration order], for the
+    host's per-cycle arbitration of actuator commands; `sim_time`/`sim_version`: the simulation's clock;
+    `gates`: the gate operations for this host, applied before the call (`drd.cluster.gates.GateUpdate`);
+    `retire` (no path) ends mission `mission` on that host: its instances and processes go."""
 
     op: str
     mission: str
@@ -61,12 +68,15 @@ class ComponentCall(Message):
     siblings: dict[str, Any] | None = None
     status: str = ""
     shared_ids: dict[str, str] | None = None
+    gates: list[list[Any]] | None = None
+    generation: int = 0  # the world's reset count: a new one means new drivers on the device's host
 
 
-@message("drd.component.reply", 1)
+@message("drd.component.reply", 2)
 class ComponentReply(Message):
     """What the call did: `status` (after a step), outputs, events `[name, fields]`, log lines, shared data,
-    dependency changes `[resource, key, value]`, and `error` if the component raised (the state fails)."""
+    dependency changes `[resource, key, value]`, and `error` if the component raised (the state fails);
+    `records`: what the host's gates recorded meanwhile (`drd.cluster.gates.wire_record`)."""
 
     status: str = ""
     outputs: dict[str, Any] | None = None
@@ -75,9 +85,10 @@ class ComponentReply(Message):
     shared: dict[str, Any] | None = None
     dependencies: list[list[Any]] | None = None
     error: str = ""
+    records: list[dict[str, Any]] | None = None
 
 
-@message("drd.component.batch", 1)
+@message("drd.component.batch", 2)
 class ComponentBatch(Message):
     """The `step` calls of one control cycle for one host, in the interpreter's order (see `ComponentRouter.step`).
 
@@ -92,16 +103,18 @@ class ComponentBatch(Message):
 
     calls: list[ComponentCall]
     sim_step: float = 0.0
+    gates: list[list[Any]] | None = None
 
 
-@message("drd.component.batch-reply", 1)
+@message("drd.component.batch-reply", 2)
 class ComponentBatchReply(Message):
     """One reply per call that ran, in order (a prefix of the batch's calls); the simulation's time and version
-    after the step, when the batch carried one."""
+    after the step, when the batch carried one; what the host's gates recorded meanwhile."""
 
     replies: list[ComponentReply]
     sim_time: float = -1.0
     sim_version: int = -1
+    records: list[dict[str, Any]] | None = None
 
 
 class ComponentError(Exception):
@@ -137,23 +150,45 @@ class RouterStats:
                 "by_host": dict(self.by_host)}
 
 
+class SimCycle:
+    """The lockstep of one world, shared by the routers of every mission running in it: the simulation's time and
+    version, and the cycle's step, made once before the cycle's first call to another host (carried by a batch
+    to the simulator host `simulator`, else made alone by `step_sim(dt)`); `sim_error` when the simulator did not
+    answer a step (the missions must stop)."""
+
+    def __init__(self) -> None:
+        self.sim_time = -1.0
+        self.sim_version = -1
+        self.simulator = ""
+        self.step_sim: Callable[[float], Any] | None = None
+        self.pending_step = 0.0
+        self.sim_error: Exception | None = None
+        self.steps_alone = RouterStats()
+
+
 class ComponentRouter:
     """What every `RemoteComponent` of one mission shares: where resources live, the bus, the sim clock.
 
-    `node(path)` finds the interpreter's node of an instance and the interpreter, as a pair (for its needs,
-    grants and epochs);
-    `local` builds components that run in this process (those with no device needs)."""
+    `active()` gives the mission's components in the order the interpreter steps them in this cycle (as
+    `drd.runtime.hosting.ComponentHost.active` does: (node, component) pairs), for batching;
+    `local` builds components that run in this process (those with no device needs);
+    `gates` queues the gate operations for each host, `records` takes (mission, record) of what gates send back."""
 
     def __init__(self, bus: Bus, cluster: str, resource_hosts: Mapping[str, str], me: str, *,
-                 node: Callable[[str], Any], local: Mapping[str, Callable[[], Component]],
-                 mission: str, world: str, timeout: float = 1.0, dead: Callable[[str], bool] = lambda h: False,
-                 catalog: Any = None,
-                 place: Callable[[str, Mapping[str, Any], frozenset[str]], str] | None = None):
+                 local: Mapping[str, Callable[[], Component]], mission: str, world: str,
+                 active: Callable[[], Iterable[tuple[Any, Component]]] = lambda: (),
+                 timeout: float = 1.0, dead: Callable[[str], bool] = lambda h: False, catalog: Any = None,
+                 place: Callable[[str, Mapping[str, Any], frozenset[str]], str] | None = None,
+                 gates: RemoteGates | None = None,
+                 records: Callable[[str, Record], None] = lambda mission, record: None,
+                 cycle: SimCycle | None = None, generation: int = 0):
         self.bus = bus
         self.cluster = cluster
         self.resource_hosts = dict(resource_hosts)
         self.me = me
-        self.node = node
+        self.active = active
+        self.gates = gates
+        self.records = records
         self.local = local
         self.mission = mission
         self.world = world
@@ -163,18 +198,64 @@ class ComponentRouter:
         self.place = place  # (component, params, hosts to avoid) -> host, or ComponentError saying why none
         self.placed: deque[tuple[str, str, str]] = deque(maxlen=200)  # (path, host, "placed" or "re-placed")
         self.gone: set[str] = set()
-        self.sim_time = -1.0
-        self.sim_version = -1
-        # The cycle's simulation step is made before its first call, by `step_first`: carried by a batch to the
-        # simulator host when that is another host (`simulator`), else made at once by `step_sim(dt)`.
-        self.simulator = ""
-        self.step_sim: Callable[[float], Any] | None = None
-        self.pending_step = 0.0
-        self.sim_error: Exception | None = None  # the simulator did not answer a step: the mission must stop
-        self.steps_alone = RouterStats()
+        self.cycle = cycle if cycle is not None else SimCycle()
+        self.generation = generation
         self.stats = RouterStats()
         self.batches = RouterStats()  # one per host per cycle when nothing interrupts the cycle
         self._ready: dict[int, tuple[float, ComponentReply]] = {}  # id(component) -> (now, its step's reply)
+
+    # The world's clock and the cycle's pending step live in the `SimCycle` every mission in the world shares.
+    @property
+    def sim_time(self) -> float:
+        return self.cycle.sim_time
+
+    @sim_time.setter
+    def sim_time(self, value: float) -> None:
+        self.cycle.sim_time = value
+
+    @property
+    def sim_version(self) -> int:
+        return self.cycle.sim_version
+
+    @sim_version.setter
+    def sim_version(self, value: int) -> None:
+        self.cycle.sim_version = value
+
+    @property
+    def simulator(self) -> str:
+        return self.cycle.simulator
+
+    @simulator.setter
+    def simulator(self, value: str) -> None:
+        self.cycle.simulator = value
+
+    @property
+    def step_sim(self) -> Callable[[float], Any] | None:
+        return self.cycle.step_sim
+
+    @step_sim.setter
+    def step_sim(self, value: Callable[[float], Any] | None) -> None:
+        self.cycle.step_sim = value
+
+    @property
+    def pending_step(self) -> float:
+        return self.cycle.pending_step
+
+    @pending_step.setter
+    def pending_step(self, value: float) -> None:
+        self.cycle.pending_step = value
+
+    @property
+    def sim_error(self) -> Exception | None:
+        return self.cycle.sim_error
+
+    @sim_error.setter
+    def sim_error(self, value: Exception | None) -> None:
+        self.cycle.sim_error = value
+
+    @property
+    def steps_alone(self) -> RouterStats:
+        return self.cycle.steps_alone
 
     def is_down(self, host: str) -> bool:
         return host in self.gone or self.dead(host)
@@ -212,6 +293,9 @@ class ComponentRouter:
         answer is marked gone, so later calls fail at once (the daemon removes it at lease expiry)."""
         if self.is_down(host):
             raise HostDown(f"host {host} is down: the component cannot run there")
+        ops = self.gates.take(host) if self.gates is not None else None
+        if ops:  # the gate operations queued for that host go first
+            msg = dataclasses.replace(msg, gates=ops)
         t0 = time.perf_counter()
         timeout = max(self.timeout, START_TIMEOUT) if op == "start" else self.timeout
         try:
@@ -224,6 +308,7 @@ class ComponentRouter:
             else:
                 self.gone.add(host)
             raise HostDown(f"host {host} did not answer {op} within {timeout:g} s ({e})") from None
+        deliver(getattr(reply, "records", None), self.records)
         return reply, time.perf_counter() - t0
 
     def _forget_late_start(self, host: str, msg: ComponentCall | ComponentBatch) -> None:
@@ -330,10 +415,7 @@ class RemoteComponent(Component):
         self.movable = False  # no device needs and a placer: the policy picks its host (module docstring)
         self._params: dict[str, Any] = {}
         self._bindings: dict[str, list[str]] = {}
-        self._holders: dict[str, tuple[Any, str]] = {}  # need -> (node holding the grant, unit id)
         self._rank: list[int] = [0, 0]
-        self._node: Any = None  # the interpreter's node of this entry and the interpreter (for batching)
-        self._interp: Any = None
 
     # -- lifecycle ------------------------------------------------------------------------------------
 
@@ -376,6 +458,13 @@ class RemoteComponent(Component):
         self._lifecycle("suspend")
 
     def resume(self) -> None:
+        if self.host is not None and not self.movable:  # a resumed grant may name other units of the same types
+            old = self.host
+            self._resolve()
+            if self.host != old:
+                raise ComponentError(f"{self._ctx.path}: resumed with devices on {self.host}, not {old}")
+            self._call("resume", bindings=self._bindings)
+            return
         self._lifecycle("resume")
 
     def terminate(self, status: Status) -> None:
@@ -436,56 +525,30 @@ class RemoteComponent(Component):
         self._ctx.log(f"{self.name} placed again on {self.host}: its host {lost} was lost")
 
     def _resolve(self) -> None:
-        """Which resource (and robot part) each need is bound to, the grants' holders, and so the host."""
-        found = self.router.node(self._ctx.path)
-        self._bindings, self._holders = {}, {}
-        self._node, self._interp = found if found is not None else (None, None)
-        hosts: set[str] = set()
-        if found is not None:
-            node, interp = found
-            self._rank = [-node.state.priority, interp._rank.get(node.state.id, 0) if interp else 0]
-            for need in node.state.needs:
-                holder, rid, robot, part = node, node.assignment.get(need.name), "", ""
-                if rid is None and need.bound_to is not None:
-                    state_id, name, part = need.bound_to
-                    holder = next((a for a in _ancestors(node) if a.state.id == state_id), node)
-                    robot = holder.assignment.get(name) or ""
-                    rid = interp.pool.part(robot, part) if robot and interp else None
-                if not rid:
-                    continue
-                self._bindings[need.name] = [rid, robot or "", part or ""]
-                self._holders[need.name] = (holder, rid)
-                where = self.router.resource_hosts.get(rid)
-                if where:
-                    hosts.add(where)
+        """Which unit (and robot part) each need is bound to, from the context's bindings, and so the host."""
+        ctx = self._ctx
+        self._rank = list(ctx.rank)
+        self._bindings = {need: [b.unit, b.robot or "", b.part or ""] for need, b in ctx.bindings.items()}
+        hosts = {h for h in (self.router.resource_hosts.get(b.unit) for b in ctx.bindings.values()) if h}
         if len(hosts) > 1:
-            raise ComponentError(f"{self._ctx.path}: its devices are on several hosts ({', '.join(sorted(hosts))})")
+            raise ComponentError(f"{ctx.path}: its devices are on several hosts ({', '.join(sorted(hosts))})")
         self.host = next(iter(hosts)) if hosts else None
         self.movable = not hosts and not self._bindings and self.router.place is not None
 
     def _epochs(self) -> dict[str, int | None]:
-        return {need: holder.epochs.get(rid) for need, (holder, rid) in self._holders.items()}
+        return {need: b.epoch for need, b in self._ctx.bindings.items()}
 
     def followers(self) -> list[RemoteComponent]:
         """This component, then those the interpreter steps after it in this cycle on the same host, up to the
-        first active component that runs anywhere else (inactive ones are skipped, as the interpreter does)."""
+        first active component that runs anywhere else."""
         group: list[RemoteComponent] = [self]
-
-        node, interp = self._node, self._interp
-        running = getattr(interp, "_running", None)
-        if node is None or running is None or node not in running:
-            return group
-        active = node.phase  # ours is active: the interpreter is stepping us
         seen = False
-        for other in list(running):
+        for _node, comp in self.router.active():
             if not seen:
-                seen = other is node
+                seen = comp is self
                 continue
-            comp = other.component
-            if other.phase is not active or comp is None:
-                continue
-            if (not isinstance(comp, RemoteComponent) or comp.router is not self.router or comp.host != self.host
-                    or comp._node is not other):
+            if not isinstance(comp, RemoteComponent) or comp.router is not self.router or comp.host != self.host \
+                    or comp.local is not None and comp.host is None:
                 break
             group.append(comp)
         return group
@@ -496,7 +559,7 @@ class RemoteComponent(Component):
         siblings = ctx.services.get("siblings")
         ids = ({k: str(id(v)) for k, v in shared.items() if isinstance(v, dict)}
                if isinstance(shared, dict) else None)
-        return ComponentCall(op, router.mission, ctx.path, self.name, router.world,
+        return ComponentCall(op, router.mission, ctx.path, self.name, router.world, generation=router.generation,
                              epochs=self._epochs(), sim_time=router.sim_time, sim_version=router.sim_version,
                              shared=plain(shared) if isinstance(shared, dict) else None,
                              siblings=plain(siblings) if isinstance(siblings, Mapping) else None,
@@ -535,13 +598,3 @@ class RemoteComponent(Component):
         for event in reply.events or ():
             if len(event) == 2 and isinstance(event[1], dict):
                 ctx.emit(str(event[0]), **event[1])
-
-
-def _ancestors(node: Any) -> list[Any]:
-    out, p = [], node.parent
-    while p is not None:
-        out.append(p)
-        p = p.parent
-    return out
-
-

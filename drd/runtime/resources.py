@@ -1,0 +1,261 @@
+"""One mission's side of the Resource Controller Manager: requests, grants, bindings and the gates they open.
+
+A node that declares needs of its own is a *holder*: it asks the manager under `<mission>/<path>` and holds
+what it is granted (`Node.grant`, `Node.epochs`). A component's needs are *bound*: each resolves through the
+binding chain to the holder whose grant provides it (its own, or an ancestor's by name, then by type, through
+a part of an aggregate: `dsl.build`), and becomes a `drd.runtime.ownership.Binding` live at that grant's epoch.
+The client keeps the devices' gates in step: a grant opens them to the holder, the end of a hold closes them,
+and an unbound component's setpoint is stopped (`drd.runtime.ownership`).
+
+The interpreter decides what a decision means for the statechart (activate, suspend, fail); this module only
+keeps the books and talks to the manager and the gates.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Iterable, Mapping
+from typing import Any
+
+from drd.rcm import Aggregate, NeedRequest, Request
+from drd.runtime.broker import ResourceBroker
+from drd.runtime.ownership import Arbiter, Binding, Gates, LocalGates
+from drd.runtime.pool import ResourcePool, ResourceView
+from drd.runtime.tree import Node
+from dsl import ast
+from dsl.evaluate import EvalError, evaluate, truthy
+from dsl.statechart import ResourceNeed
+
+Names = Callable[[Node], dict[str, Any]]
+
+
+class BindingError(Exception):
+    """A need cannot be bound: what the binding chain leads to is not held (released, or never granted)."""
+
+
+class ResourceClient:
+    """Requests, grants and bindings of one mission's nodes (see the module docstring)."""
+
+    def __init__(self, broker: ResourceBroker, pool: ResourcePool, mission: str, gates: Gates, arbiter: Arbiter,
+                 clock: Callable[[], float], names: Names, mission_priority: int = 1) -> None:
+        self.broker = broker
+        self.pool = pool
+        self.mission = mission
+        self.gates = gates
+        self.arbiter = arbiter
+        self.now = clock
+        self.names = names
+        self.mission_priority = mission_priority
+        self.holders: dict[str, Node] = {}  # request holder -> node
+
+    # -------------------------------------------------------------- requests
+    def holder(self, node: Node) -> str:
+        """The manager's name for a node: unique across missions sharing it, path prefixes kept."""
+        return f"{self.mission}/{node.path}"
+
+    def request(self, node: Node, needs: Iterable[ResourceNeed], *, at: float | None = None) -> None:
+        """Ask for `needs` (all or nothing); with `at`, a preallocation that queues first from then.
+
+        Raises:
+            EvalError: a `quantity` or a parameter could not be evaluated (the node fails, nothing is asked).
+        """
+        reqs = tuple(self.need_request(node, n) for n in needs)
+        node.requested = True
+        holder = self.holder(node)
+        self.holders[holder] = node
+        request = Request(holder, node.state.priority, reqs, self.mission, self.mission_priority)
+        if at is None:
+            self.broker.request(request, self.now())
+        else:
+            self.broker.reserve(request, self.now(), at)
+
+    def need_request(self, node: Node, need: ResourceNeed) -> NeedRequest:
+        quantity = need.quantity
+        if isinstance(quantity, ast.Expr):
+            value = evaluate(quantity, self.names(node), self.pool.count)
+            quantity = float(value) if isinstance(value, int | float) and not isinstance(value, bool) else 1.0
+        return NeedRequest(need.name, need.type, float(quantity or 1.0), need.slice, self.where(node, need))
+
+    def where(self, node: Node, need: ResourceNeed) -> Any:
+        """The need's `where` as the solver calls it: evaluated in the node's scope, with the candidate (and the
+        earlier needs' choices) under their need names."""
+        if need.where is None:
+            return None
+        expr, pool, names = need.where, self.pool, self.names
+
+        def where(cand: Any, chosen: Mapping[str, Any]) -> bool:
+            scope = names(node)
+            scope.update({k: ResourceView(v, pool) for k, v in chosen.items()})
+            scope[need.name] = ResourceView(cand, pool)
+            try:
+                return truthy(expr, scope, pool.count)
+            except EvalError:
+                return False
+        return where
+
+    def release(self, node: Node, names: Iterable[str] | None = None) -> None:
+        """Give back the whole grant (None) or these needs; the manager's decisions follow through the broker."""
+        self.broker.release(self.holder(node), self.now(), None if names is None else list(names))
+
+    def cancel(self, node: Node) -> None:
+        """Withdraw a request still waiting (or a reservation); a grant in force is given back."""
+        self.broker.cancel(self.holder(node), self.now())
+
+    def forget(self, node: Node) -> None:
+        self.holders.pop(self.holder(node), None)
+
+    def renew(self, now: float, lease: float) -> None:
+        for holder, node in list(self.holders.items()):
+            if node.grant and node.lease_until - now < lease / 2:
+                for d in self.broker.renew(holder, now):
+                    until = getattr(d, "lease_until", None)
+                    if until is not None:
+                        node.lease_until = until
+
+    # -------------------------------------------------------------- grants
+    def took(self, node: Node, assignment: Mapping[str, str], epochs: Mapping[str, int], units: Iterable[str],
+             lease_until: float) -> None:
+        """A grant is in force: book it, open the gates to the holder, show the resources in its scope."""
+        node.grant = dict(assignment)
+        node.epochs = dict(epochs)
+        node.units = tuple(units)
+        node.lease_until = lease_until
+        node.revoked = False
+        holder, now = self.holder(node), self.now()
+        for unit, epoch in node.epochs.items():
+            self.gates.grant(unit, holder, epoch, now)
+        for need, rid in node.grant.items():
+            node.scope[need] = self.pool.view(rid)
+
+    def lost(self, node: Node, units: Iterable[str], reason: str, needs: Iterable[str] = ()) -> tuple[str, ...]:
+        """Units left a holder (revoked, released, lost): close their gates and forget the needs given back whole
+        (`needs`, or every need once nothing is left); returns the resource ids that ended (those needs'
+        resources, then the units), as the `released` record lists them."""
+        units = tuple(units)
+        gone = set(units)
+        grant = node.grant or {}
+        left = [u for u in node.units if u not in gone]
+        names = list(grant) if not left else [n for n in needs if n in grant]
+        ids = [grant.pop(n) for n in names]
+        for n in names:
+            node.scope.pop(n, None)
+        holder, now = self.holder(node), self.now()
+        for unit in units:
+            self.gates.clear(unit, holder, now, reason)
+            node.epochs.pop(unit, None)
+        node.units = tuple(left)
+        if not left:
+            node.grant = None
+        return tuple(dict.fromkeys([*ids, *units]))
+
+    def resources_of(self, assignment: Mapping[str, str]) -> dict[str, str]:
+        """What a `granted` record lists: each need's resource id, and each part of an aggregate as `need.part`."""
+        out = dict(assignment)
+        for need, rid in assignment.items():
+            cand = self.pool.candidates.get(rid)
+            if isinstance(cand, Aggregate):
+                out.update({f"{need}.{part}": unit for part, unit in cand.parts.items()})
+        return out
+
+    # -------------------------------------------------------------- bindings
+    def resolve(self, node: Node, need: ResourceNeed) -> tuple[Node, str, str, str]:
+        """(holder node, resource id, robot, part) of a need, through the binding chain.
+
+        Raises:
+            BindingError: the holder the chain leads to does not hold that resource now.
+        """
+        holder, name, part = node, need.name, None
+        bound = need.bound_to
+        while bound is not None:
+            state_id, name, inner = bound
+            holder = next((a for a in holder.ancestors() if a.state.id == state_id), holder)
+            if inner is not None:
+                part = inner if part is None else part
+            spec = next((n for n in holder.state.needs if n.name == name), None)
+            bound = spec.bound_to if spec is not None else None
+        rid = (holder.grant or {}).get(name)
+        if rid is None:
+            where = "its own" if holder is node else f"{name} of {holder.path}"
+            why = (f"{holder.path} released it" if name in holder.released else
+                   f"{holder.path} lost it at a slice boundary" if holder.revoked else "it is not held")
+            raise BindingError(f"need {need.name} ({need.type}) is bound to {where}, but {why}")
+        if part is None:
+            return holder, rid, "", ""
+        return holder, self.pool.part(rid, part), rid, part
+
+    def adopt(self, node: Node) -> None:
+        """A node's needs that an ancestor holds (a re-declared need, or one bound by type or through a part):
+        each resolves through the binding chain, shows under its own name in the node's scope, and must satisfy
+        the node's own `where`.
+
+        Raises:
+            BindingError: what the chain leads to is not held, or does not satisfy the `where`.
+        """
+        for need in node.state.needs:
+            if need.requested:
+                continue
+            holder, rid, robot, _part = self.resolve(node, need)
+            view = self.pool.view(rid)
+            if need.where is not None:
+                scope = self.names(node)
+                scope[need.name] = view
+                try:
+                    ok = truthy(need.where, scope, self.pool.count)
+                except EvalError as e:
+                    raise BindingError(f"need {need.name}: its where cannot be evaluated: {e.message}") from None
+                if not ok:
+                    raise BindingError(f"need {need.name} ({need.type}) is {rid}, held by {holder.path}, which does"
+                                       f" not satisfy its where")
+            node.scope[need.name] = view
+
+    def bind(self, leaf: Node) -> dict[str, Binding]:
+        """Bind every need of a leaf, live at the grants' epochs (raises BindingError)."""
+        out: dict[str, Binding] = {}
+        for need in leaf.state.needs:
+            holder, unit, robot, part = self.resolve(leaf, need)
+            out[need.name] = Binding(need.name, unit, self.holder(holder), holder.epochs.get(unit), robot=robot,
+                                     part=part)
+        self._attach(out.values())
+        leaf.bindings = out
+        return out
+
+    def rebind(self, leaf: Node) -> None:
+        """A resumed leaf: its bindings live again at the current grants (a resumed grant may name other units)."""
+        for need in leaf.state.needs:
+            binding = leaf.bindings.get(need.name)
+            if binding is None:
+                continue
+            holder, unit, robot, part = self.resolve(leaf, need)
+            binding.unit, binding.holder, binding.robot, binding.part = unit, self.holder(holder), robot, part
+            binding.epoch = holder.epochs.get(unit)
+        self._attach(leaf.bindings.values())
+
+    def _attach(self, bindings: Iterable[Binding]) -> None:
+        gates = self.gates
+        if isinstance(gates, LocalGates):
+            for b in bindings:
+                found = gates.bound(b.unit, b.robot, b.part)
+                b.gate, b.driver = found if found is not None else (None, None)
+
+    def unbind(self, leaf: Node, reason: str, needs: Iterable[str] | None = None) -> None:
+        """The leaf (or these of its needs) may no longer command: its pending setpoints are dropped and a setpoint
+        of its in force is stopped by the gate."""
+        issuer = self.holder(leaf)
+        now = self.now()
+        chosen = leaf.bindings.values() if needs is None else [leaf.bindings[n] for n in needs if n in leaf.bindings]
+        self.arbiter.drop(issuer, {b.unit for b in chosen})
+        for b in chosen:
+            if b.epoch is None:
+                continue
+            b.epoch = None
+            self.gates.unbind(b.unit, issuer, now, reason)
+
+    def bound_through(self, holder: Node, need: str) -> list[tuple[Node, list[str]]]:
+        """The leaves below `holder` with needs bound to its `need` (what a `release(need)` unbinds)."""
+        qualified = self.holder(holder)
+        units = set(self.pool.units((holder.grant or {}).get(need, ""))) | {(holder.grant or {}).get(need, "")}
+        out = []
+        for n in holder.subtree():
+            hit = [b.need for b in n.bindings.values() if b.holder == qualified and b.unit in units]
+            if hit:
+                out.append((n, hit))
+        return out

@@ -1,0 +1,211 @@
+"""Only the holder drives: the ownership bugs of issue #11, each checked from outside (the trace and the robot).
+
+Every mission here runs in the real dry-run (executive, manager, gates, `sim` drivers, pymunk) with test
+components. What is asserted is what a user or a robot sees: the `command` records of the trace (checked with
+`drd.tracecheck`, the invariant of `docs/trace.md`), and the velocity the simulated robot was commanded.
+"""
+
+from __future__ import annotations
+
+import io
+import json
+from collections.abc import Callable
+from typing import Any
+
+import pytest
+
+from drd.dryrun import DryRun, Mission, run_many
+from drd.executive import EntryPoints
+from drd.hosts import load_hosts
+from drd.runtime.component import Component, Status
+from drd.sim.physics import Simulation
+from drd.sim.world import load_world
+from drd.tracecheck import check
+from dsl import compile_text
+from dsl.catalog import Catalog, ComponentType, Kind, NeedSpec, ParamSpec
+from tests.conftest import ROOT
+
+
+class Push(Component):
+    """Drives its Drive forward at `v` m/s every cycle, for `duration` seconds of running time."""
+
+    def start(self) -> None:
+        assert self.ctx is not None
+        self.left = float(self.ctx.params["duration"])
+        self.last = self.ctx.now()
+
+    def step(self, now: float) -> Status:
+        assert self.ctx is not None
+        self.left -= now - self.last
+        self.last = now
+        self.device("drive").set_velocity(float(self.ctx.params["v"]), 0.0)
+        return Status.SUCCESS if self.left <= 1e-9 else Status.RUNNING
+
+    def resume(self) -> None:
+        assert self.ctx is not None
+        self.last = self.ctx.now()
+
+
+PUSH = ComponentType("Push", Kind.BEHAVIOR, "drives forward", entry_point="tests.test_ownership:Push",
+                     params=(ParamSpec("v", "float", 0.2), ParamSpec("duration", "duration", 5.0)),
+                     needs=(NeedSpec("drive", "Drive", ("Ranger",)),), interfaces=("Drive",))
+
+
+@pytest.fixture(scope="module")
+def cat(catalog: Catalog) -> Catalog:
+    return Catalog.of([*catalog.components.values(), PUSH])
+
+
+def dry(cat: Catalog, *texts: str, until: float = 60.0, priorities: tuple[int | None, ...] = (),
+        sample: Callable[[Simulation], Any] | None = None, **kw: Any
+        ) -> tuple[list[DryRun], list[dict[str, Any]], list[tuple[float, Any]]]:
+    """Dry-run the missions together; their reports, the trace's records, and `sample(sim)` every cycle."""
+    charts = []
+    for i, text in enumerate(texts):
+        r = compile_text(text, cat, f"m{i}.mission")
+        assert r.ok and r.statechart is not None, [d.message for d in r.diagnostics]
+        charts.append(Mission(r.statechart, priorities[i] if i < len(priorities) else None))
+    trace = io.StringIO()
+    seen: list[tuple[float, Any]] = []
+    progress = (lambda sim, _ex: seen.append((round(sim.time, 3), sample(sim)))) if sample else None
+    reports = run_many(charts, load_hosts(ROOT / "hosts.yaml", cat), load_world(ROOT / "worlds" / "corridor.yaml"),
+                       cat, until=until, trace=trace, registry=EntryPoints(cat, {"Push": Push}),
+                       progress=progress, progress_every=0.1, **kw)
+    return reports, [json.loads(line) for line in trace.getvalue().splitlines()], seen
+
+
+def commands(records: list[dict[str, Any]], suffix: str) -> list[dict[str, Any]]:
+    return [r for r in records if r["kind"] == "command" and r["path"].endswith(suffix)]
+
+
+def assert_owned(records: list[dict[str, Any]]) -> None:
+    report = check(records, sharable={"ranger1.radio"})
+    assert report.ok, report.breaches[:5]
+    assert report.accepted > 0, "nothing was commanded: the test proves nothing"
+
+
+SUSPENDED_CHILD = """
+mission Bug1 {
+    parallel all { P; R; Q }
+}
+behavior P {
+    needs cam: Camera where cam.id == "ranger1.camera" for 2s
+    C
+}
+behavior C {
+    needs drv: Drive where drv.id == "ranger1.drive" for 3s
+    Push(v: 0.3, duration: 8s)
+}
+behavior R {
+    needs drv: Drive where drv.id == "ranger1.drive" for 3s
+    Push(v: -0.3, duration: 8s)
+}
+behavior Q {
+    needs cam: Camera where cam.id == "ranger1.camera" for 2s
+    Observe(duration: 6s)
+}
+"""
+
+
+def test_a_resumed_parent_does_not_resume_a_child_whose_own_grant_was_revoked(cat: Catalog) -> None:
+    """Bug 1: P (camera) is resumed at 4 s while its child C lost the drive to R at 3 s; C must stay suspended,
+    and from 2 s (P suspended) the drive obeys nobody but its holder."""
+    (report,), records, seen = dry(cat, SUSPENDED_CHILD, sample=lambda sim: sim.command("ranger1"))
+    assert report.outcome == "success", report.reason
+    assert_owned(records)
+    c_cmds = [r["at"] for r in commands(records, "P/C/Push") if r["accepted"]]
+    r_cmds = [r["at"] for r in commands(records, "R/Push") if r["accepted"]]
+    assert c_cmds and r_cmds
+    assert not [t for t in c_cmds if 2.0 - 1e-6 < t < 6.0 - 1e-6], "C drove while suspended"
+    # the robot's side: stopped as soon as C's subtree froze, pushed backwards only while R held the drive
+    stopped = [cmd for t, cmd in seen if 2.05 < t < 2.95]
+    assert stopped and all(cmd == (0.0, 0.0) for cmd in stopped)
+    backwards = [t for t, cmd in seen if cmd[0] + cmd[1] < 0]
+    assert backwards and min(backwards) >= 3.0 - 1e-6
+
+
+RELEASE = """
+mission Rel {
+    parallel all { A; B }
+}
+behavior A {
+    needs drv: Drive where drv.id == "ranger1.drive"
+    start -> first
+    Push(v: 0.3, duration: 2s) as first
+    Push(v: 0.3, duration: 5s) as second
+    first -> second / release(drv)
+    second -> done on error
+}
+behavior B priority 2 {
+    needs drv: Drive where drv.id == "ranger1.drive"
+    Push(v: -0.3, duration: 3s)
+}
+"""
+
+
+def test_release_unbinds_the_need_at_once(cat: Catalog) -> None:
+    """Bug 2: after `release(drv)` nothing below A commands the drive; B gets it, and `second`, which needs the
+    released drive, fails saying so instead of driving with the old epoch."""
+    (report,), records, _ = dry(cat, RELEASE)
+    assert_owned(records)
+    assert not commands(records, "A/second"), "second commanded the released drive"
+    assert [r for r in commands(records, "B/Push") if r["accepted"]], "B never got the drive"
+    released = [r for r in records if r["kind"] == "released" and r["path"] == "Rel/A"]
+    assert released and released[0]["reason"] == "release" and "ranger1.drive" in released[0]["resources"]
+    failure = [r for r in records if r["kind"] == "exited" and r["path"] == "Rel/A/second"]
+    assert failure and failure[0]["status"] == "failure"
+    taken = [r for r in records if r["kind"] == "taken" and r["path"] == "Rel/A/second"]
+    assert taken and taken[0]["trigger"] == "error"
+    assert report.outcome == "success", report.reason
+
+
+STOPPING = """
+mission Stopping {
+    parallel all { A; B }
+}
+behavior A {
+    needs drv: Drive where drv.id == "ranger1.drive" for 60s
+    Push(v: 0.3, duration: 100s)
+}
+behavior B {
+    needs drv: Drive where drv.id == "ranger1.drive"
+    Push(v: -0.3, duration: 100s)
+}
+"""
+
+
+def test_a_stopping_mission_grants_nothing_to_its_waiters(cat: Catalog) -> None:
+    """Bug 3: when the mission stops (its time limit), A's drive is released while B waits for it; B must not
+    be granted, started, or moved."""
+    (report,), records, _ = dry(cat, STOPPING, until=3.0)
+    assert report.outcome == "stopped"
+    assert_owned(records)
+    b = [r for r in records if r["path"].startswith("Stopping/B")]
+    assert [r["kind"] for r in b if r["kind"] in ("granted", "resumed", "entered")] == ["entered"]  # B itself only
+    assert not commands(records, "B/Push")
+
+
+REDECLARED = """
+mission Chain {
+    needs ranger: Ranger
+    Inner
+}
+behavior Inner {
+    needs ranger: Ranger WHERE
+    Observe(duration: 2s)
+}
+"""
+
+
+def test_a_need_redeclared_by_a_child_binds_to_the_ancestors_grant(cat: Catalog) -> None:
+    """Bug 4: `Inner` re-declares `ranger`; Observe's camera is the ancestor's Ranger's camera."""
+    (report,), records, _ = dry(cat, REDECLARED.replace(" WHERE", ""))
+    assert report.outcome == "success", report.reason
+    granted = [r for r in records if r["kind"] == "granted"]
+    assert [(r["path"], r["resources"]["ranger"]) for r in granted] == [("Chain", "ranger1")]
+
+
+def test_a_redeclared_need_whose_where_the_ancestors_grant_fails_is_a_clear_failure(cat: Catalog) -> None:
+    (report,), _, _ = dry(cat, REDECLARED.replace("WHERE", 'where ranger.id == "ranger9"'))
+    assert report.outcome == "failure"
+    assert "ranger" in report.reason and "where" in report.reason and "ranger1" in report.reason
