@@ -258,6 +258,17 @@ class ResourceManager:
         """Who holds a unit now."""
         return tuple(sorted(self._reg.used.get(unit_id, ())))
 
+    def distinct(self, needs: tuple[NeedRequest, ...], limit: int = 10_000) -> int:
+        """How many requests of these needs could hold distinct resources, as far as the known resources go: for
+        the need with the most choices, the number of candidates (honoring `where`) that fill it in some complete
+        assignment, capacity only (what is held now does not count). `limit` bounds the assignments looked at."""
+        seen: dict[str, set[str]] = {n.name: set() for n in needs}
+        units = self._reg.units
+        for solution in islice(solutions(needs, self._reg, lambda u: units[u].capacity), limit):
+            for name, candidate in solution.chosen.items():
+                seen[name].add(candidate.id)
+        return max((len(ids) for ids in seen.values()), default=0)
+
     def queue(self) -> tuple[str, ...]:
         """The waiting holders in the order they would be served (due reservations first)."""
         return tuple(self._queue.order())

@@ -411,10 +411,17 @@ class Interpreter:
         self._grow_multi(node)
 
     def _capacity(self, node: Node) -> int:
-        """For `[a..*]`: as many instances as the template's first requested resource type allows."""
+        """For `[a..*]`: as many instances as could each hold distinct resources for the template's own needs
+        (their `where` honored, in the multiplicity's scope): one per Scout that may serve, not one per Ranger."""
         template = self._states[node.state.children[0]]
-        need = next((n for n in template.needs if n.requested), None)
-        return self.pool.count(need.type, None) if need else 0
+        needs = self._plans[template.id].requested
+        if not needs:
+            return 0
+        try:
+            reqs = tuple(self.resources.need_request(node, n) for n in needs)
+        except EvalError:
+            return 0
+        return int(self.rcm.distinct(reqs))
 
     def _grow_multi(self, node: Node) -> None:
         template = self._states[node.state.children[0]]
@@ -424,17 +431,21 @@ class Interpreter:
             self._enter_child(node, template, index)
 
     def _grow_multis(self) -> None:
+        """After a hot-plug: each running `[a..b]` whose bound now evaluates higher, and each `[a..*]` whose
+        resources now allow more instances, grows."""
         for node in self.active():
             m = node.state.multiplicity
-            if node.state.kind is MULTI and m is not None and m.high is not None and not m.exact:
-                try:
-                    high = int(evaluate(m.high, self._names(node.parent) if node.parent else {},  # type: ignore[call-overload]
-                                        self.pool.count))
-                except (EvalError, TypeError, ValueError):
-                    continue
-                if high > node.bounds[1]:
-                    node.bounds = (node.bounds[0], high)
-                    self._grow_multi(node)
+            if node.state.kind is not MULTI or m is None or m.exact or node.phase is not ACTIVE:
+                continue
+            try:
+                high = self._capacity(node) if m.high is None else int(
+                    evaluate(m.high, self._names(node.parent) if node.parent else {},  # type: ignore[call-overload]
+                             self.pool.count))
+            except (EvalError, TypeError, ValueError):
+                continue
+            if high > node.bounds[1]:
+                node.bounds = (node.bounds[0], high)
+                self._grow_multi(node)
 
     def _flush(self) -> None:
         self.arbiter.flush(self.host.command_failed)
@@ -531,9 +542,10 @@ class Interpreter:
         low, _ = multi.bounds
         running = [c for c in multi.children if c.phase is not DONE]
         if multi.succeeded + len(running) < low:
-            last = f" (last failure: {multi.last_failure})" if multi.last_failure else ""
-            self._finish(multi, False, f"only {multi.succeeded} of at least {low} instances of "
-                         f"{multi.state.name} can succeed{last}")
+            last = f"; last failure: {multi.last_failure}" if multi.last_failure else ""
+            self._finish(multi, False, f"only {multi.succeeded + len(running)} of at least {low} instances of "
+                         f"{multi.state.name} can succeed ({multi.succeeded} succeeded, {len(running)} running, "
+                         f"{multi.failed} failed{last})")
         elif not running:
             self._finish(multi, True)
 
