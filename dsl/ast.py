@@ -20,7 +20,7 @@ from dsl.errors import NOWHERE, Span
 KEYWORDS = frozenset(
     "import mission behavior priority needs where quantity for shared var as parallel all any until "
     "start done fail when on error after set emit release log plan concurrent true false and or not "
-    "event".split()
+    "event constraint preallocate".split()
 )
 
 #: Seconds per duration unit, as written in the language (`250ms 30s 5min 2h`).
@@ -262,6 +262,8 @@ class Transition:
     delay: Expr | None = None  # a duration: a literal, a parameter, an expression
     guard: Expr | None = None
     actions: tuple[Action, ...] = ()
+    #: `A -> B preallocate`: entering A reserves B's needs, so B starts without waiting when A completes.
+    preallocate: bool = field(default=False, kw_only=True)
     span: Span = field(default=NOWHERE, compare=False, repr=False, kw_only=True)
     source_span: Span = field(default=NOWHERE, compare=False, repr=False, kw_only=True)
     target_span: Span = field(default=NOWHERE, compare=False, repr=False, kw_only=True)
@@ -275,14 +277,25 @@ class PlanStep:
 
 @dataclass(frozen=True, slots=True)
 class Plan:
-    """`plan [concurrent] { A < B < C; A < D }`: chains of precedence."""
+    """`plan [concurrent] [preallocate] { A < B < C; A < D }`: chains of precedence."""
 
     concurrent: bool
     chains: tuple[tuple[PlanStep, ...], ...]
+    preallocate: bool = field(default=False, kw_only=True)  # each step reserves the next one's needs
     span: Span = field(default=NOWHERE, compare=False, repr=False, kw_only=True)
 
 
-Item = Need | Shared | Var | Child | Parallel | Transition | Plan
+@dataclass(frozen=True, slots=True)
+class Constraint:
+    """`constraint name: condition`: while the behavior is active, the condition must hold of the resources it
+    reaches (`distance(ranger, point(0, 0)) <= 12`, `ranger.battery >= 0.2`, `inside(ranger, "n1")`)."""
+
+    name: str
+    condition: Expr
+    span: Span = field(default=NOWHERE, compare=False, repr=False, kw_only=True)
+
+
+Item = Need | Shared | Var | Child | Parallel | Transition | Plan | Constraint
 
 
 # ---------------------------------------------------------------- declarations

@@ -16,7 +16,7 @@ from dataclasses import dataclass, replace
 from dsl import ast
 from dsl.catalog import Catalog, Kind
 from dsl.checker import Body, Checked
-from dsl.errors import Reporter, Span
+from dsl.errors import NOWHERE, Reporter, Span
 from dsl.linearize import plan_graph, predecessors, total_order
 from dsl.statechart import ResourceNeed, State, Statechart, StateKind, Transition
 
@@ -74,7 +74,8 @@ class Builder:
         self.states[sid] = State(sid, name, StateKind.COMPOUND, parent, depth, component=behavior.name, args=args,
                                  defaults=defaults, needs=needs,
                                  shared=tuple((s.name, s.type.name) for s in body.shared),
-                                 vars=tuple(body.vars), priority=prio, span=child.span)
+                                 vars=tuple(body.vars), priority=prio, constraints=tuple(body.constraints),
+                                 span=child.span)
         # A need bound to an ancestor's resource is that resource under a new name: it hides the old entry.
         hidden = {(n.bound_to[0], n.bound_to[1]) for n in needs if n.bound_to and n.bound_to[2] is None}
         inner = tuple(_Held(sid, n.name, n.type.name) for n in body.needs) + tuple(
@@ -114,8 +115,9 @@ class Builder:
                 self.states[s.id] = replace(s, after=tuple(kids[p] for p in preds))
         else:
             order = total_order(plan_graph(body.plan)) if body.plan is not None else []
+            ahead = body.plan is not None and body.plan.preallocate
             for a, b in zip(order, order[1:], strict=False):
-                generated.append(_completion(sid, kids[a], kids[b]))
+                generated.append(_completion(sid, kids[a], kids[b], ahead))
             initial = kids[order[0]] if order else (starts[0].target if starts else next(iter(kids.values()), None))
             leads_on = {t.source for t in written + generated if t.kind is ast.TriggerKind.COMPLETION
                         and t.guard is None}
@@ -125,6 +127,11 @@ class Builder:
             by_source.setdefault(t.source, []).append(t)
         for src, ts in by_source.items():
             self.states[src] = replace(self.states[src], transitions=tuple(ts))
+        for t in written + generated:
+            if t.preallocate and not any(n.requested for n in self.states[t.target].needs):
+                self.report.warning("preallocate", f"{self.states[t.target].name} asks for no resource of its own"
+                                    " (its needs are its ancestors'): there is nothing to preallocate",
+                                    t.span if t.span is not NOWHERE else state.span)
         children = tuple(kids.values()) + tuple(finals.values())
         return replace(self.states[sid], kind=kind, children=children, initial=initial, policy=policy,
                        until=until, starts=starts if len(starts) > 1 or any(t.guard for t in starts) else ())
@@ -133,7 +140,7 @@ class Builder:
     def _transition(t: ast.Transition, domain: str, source: str, target: str) -> Transition:
         delay = t.delay.seconds if isinstance(t.delay, ast.Duration) else t.delay
         return Transition(source, target, domain, t.kind, t.event, t.condition, delay, t.guard, t.actions,
-                          span=t.span)
+                          preallocate=t.preallocate, span=t.span)
 
     # ------------------------------------------------------------- resources
     def _need(self, n: ast.Need, held: tuple[_Held, ...]) -> ResourceNeed:
@@ -197,8 +204,8 @@ def _literal(value: object, type_name: str) -> ast.Expr:
     return ast.Literal(value)
 
 
-def _completion(domain: str, source: str, target: str) -> Transition:
-    return Transition(source, target, domain, ast.TriggerKind.COMPLETION, generated=True)
+def _completion(domain: str, source: str, target: str, preallocate: bool = False) -> Transition:
+    return Transition(source, target, domain, ast.TriggerKind.COMPLETION, generated=True, preallocate=preallocate)
 
 
 def _distinct(hits: list[_Held]) -> list[_Held]:

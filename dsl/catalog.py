@@ -114,6 +114,15 @@ class ComponentType:
 
 #: Properties every resource has, whatever its manifest says.
 BUILTIN_PROPERTIES: Mapping[str, str] = MappingProxyType({"id": "str", "host": "str"})
+#: What every robot (an aggregate) tells of itself at run time: where it is (metres, radians, in the world's frame,
+#: as its odometry has it) and the charge left (0 to 1). Constraints and guards read them (`ranger.x`).
+ROBOT_PROPERTIES: Mapping[str, str] = MappingProxyType({"x": "float", "y": "float", "heading": "float",
+                                                          "battery": "float"})
+#: The event a behavior gets when one of its constraints is violated (`A -> B on violation`).
+VIOLATION = RecordSpec("violation", MappingProxyType({"constraint": "str", "resource": "str", "value": "float",
+                                                      "limit": "float"}), "event",
+                       "A constraint of the behavior does not hold: its name, the robot, the measured value and the"
+                       " limit.")
 
 
 @dataclass(frozen=True)
@@ -134,7 +143,7 @@ class Catalog:
 
     @property
     def events(self) -> dict[str, RecordSpec]:
-        out: dict[str, RecordSpec] = {}
+        out: dict[str, RecordSpec] = {VIOLATION.name: VIOLATION}
         for t in self.components.values():
             for e in t.events:
                 out.setdefault(e.name, e)
@@ -145,6 +154,8 @@ class Catalog:
         t = self.components.get(type_name)
         props = dict(BUILTIN_PROPERTIES)
         if t is not None:
+            if t.kind is Kind.ARC:
+                props.update(ROBOT_PROPERTIES)
             props.update(t.properties)
             props.update(t.parts)  # `ranger.camera` names the part
         return props

@@ -54,6 +54,7 @@ class Body:
     parallels: list[ast.Parallel] = field(default_factory=list)
     plans: list[ast.Plan] = field(default_factory=list)
     transitions: list[ast.Transition] = field(default_factory=list)
+    constraints: list[ast.Constraint] = field(default_factory=list)
     implicit: set[str] = field(default_factory=set)  # named only in transitions or plans
 
     @property
@@ -85,6 +86,8 @@ def summarize(b: ast.Behavior) -> Body:
                 body.plans.append(item)
             case ast.Transition():
                 body.transitions.append(item)
+            case ast.Constraint():
+                body.constraints.append(item)
     for child in body.declared:
         body.children.setdefault(child.key, child)
 
@@ -244,9 +247,19 @@ class Checker:
                 self.typer.expect(v.value, t, scope, f"var {v.name}")
             declare(v.name, t or ANY, v.span, "var")
         scope = self._scope(b, locals_)
+        self._constraints(b, body, scope)
         self._children(b, body, scope, seen)
         self._structure(b, body)
         self._transitions(b, body, scope)
+
+    def _constraints(self, b: ast.Behavior, body: Body, scope: Scope) -> None:
+        named: dict[str, Span] = {}
+        for c in body.constraints:
+            if c.name in named:
+                self.report.error("duplicate", f"constraint {c.name} is declared twice in {b.name}", c.span,
+                                  notes=[("first declared here", named[c.name])])
+            named[c.name] = c.span
+            self.typer.expect(c.condition, "bool", scope, f"constraint {c.name}")
 
     def _scope(self, b: ast.Behavior, locals_: Mapping[str, Type]) -> Scope:
         body = self.bodies[b.name]
@@ -401,6 +414,10 @@ class Checker:
         self._reachability(b, body, entry)
 
     def _plan(self, plan: ast.Plan) -> None:
+        if plan.preallocate and plan.concurrent:
+            self.report.error("preallocate", "plan concurrent preallocate: a concurrent plan starts each step when "
+                              "its predecessors are done, so there is no next step to preallocate", plan.span,
+                              "remove preallocate, or make the plan sequential")
         g = plan_graph(plan)
         cycle = find_cycle(g)
         if cycle is not None:
@@ -441,6 +458,8 @@ class Checker:
                     self.report.error("unknown-event", f"unknown event {t.event}", t.span,
                                       did_you_mean(t.event, self.events)
                                       or f"known events: {', '.join(sorted(self.events)) or 'none'}")
+            if t.preallocate:
+                self._preallocating(t)
             tscope = Scope(scope.names, scope.children, event, scope.open)
             if t.condition is not None:
                 self.typer.expect(t.condition, "bool", tscope, "when")
@@ -450,6 +469,18 @@ class Checker:
                 self.typer.expect(t.guard, "bool", tscope, "a guard")
             for a in t.actions:
                 self._action(b, body, a, tscope)
+
+    def _preallocating(self, t: ast.Transition) -> None:
+        if t.kind is not ast.TriggerKind.COMPLETION:
+            self.report.error("preallocate", f"{t.source} -> {t.target} preallocate: only a completion transition "
+                              "preallocates (entering the source reserves the target's needs)", t.span,
+                              "remove the trigger, or remove preallocate")
+        elif t.source == "start":
+            self.report.error("preallocate", "start -> ... preallocate: the first state is entered at once, there "
+                              "is nothing to reserve ahead", t.source_span, "remove preallocate")
+        elif t.target in ("done", "fail"):
+            self.report.error("preallocate", f"{t.source} -> {t.target} preallocate: {t.target} needs no resources",
+                              t.target_span, "remove preallocate")
 
     def _action(self, b: ast.Behavior, body: Body, a: ast.Action, scope: Scope) -> None:
         match a:

@@ -28,6 +28,8 @@ def trigger_label(t: Transition) -> str:
             out = f"after {printer.expr(delay) if isinstance(delay, ast.Expr) else _seconds(delay or 0.0)}"
         case _:
             out = ""
+    if t.preallocate:
+        out += " preallocate"
     if t.guard is not None:
         out += f" [{printer.expr(t.guard)}]"
     if t.actions:

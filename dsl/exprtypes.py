@@ -26,7 +26,9 @@ class ChildRef:
 Type = str | RecordSpec | ChildRef
 ANY = "any"
 NUMBERS = ("int", "float")
-FUNCTIONS = ("count", "min", "max", "abs", "len")
+FUNCTIONS = ("count", "min", "max", "abs", "len", "point", "distance", "inside")
+#: A place in the world's frame: `point(x, y)`, or a robot's pose.
+POINT = "point"
 
 
 def show(t: Type) -> str:
@@ -173,6 +175,8 @@ class Typer:
                               expr.where.span)
         if expr.func == "count":
             return self._count(expr, scope)
+        if expr.func in ("point", "distance", "inside"):
+            return self._spatial(expr, scope)
         arity = {"abs": (1, 1), "len": (1, 1), "min": (1, 99), "max": (1, 99)}[expr.func]
         if not arity[0] <= len(expr.args) <= arity[1]:
             self.report.error("type", f"{expr.func} takes {arity[0]} argument" if arity[0] == arity[1]
@@ -186,6 +190,42 @@ class Typer:
         if "float" in types:
             return "float"
         return types[0] if types and all(t == types[0] for t in types) else ANY
+
+    def _spatial(self, expr: ast.Call, scope: Scope) -> Type:
+        """`point(x, y)`, `distance(a, b)` (robots or points, metres) and `inside(robot, "room", ...)`."""
+        func, args = expr.func, expr.args
+        types = [self.infer(a, scope) for a in args]
+        if func == "point":
+            if len(args) != 2:
+                self.report.error("type", "point takes two numbers: point(x, y), in metres", expr.span)
+            for a, t in zip(args, types, strict=False):
+                if t not in (*NUMBERS, ANY):
+                    self.report.error("type", f"point expects numbers, got {show(t)}", a.span)
+            return POINT
+        if func == "distance":
+            if len(args) != 2:
+                self.report.error("type", "distance takes two places: distance(ranger, point(2, 0)) or "
+                                  "distance(scout, ranger)", expr.span)
+            for a, t in zip(args, types, strict=False):
+                if not self._place(t):
+                    self.report.error("type", f"distance expects a robot or a point, got {show(t)}", a.span)
+            return "float"
+        if not args or len(args) < 2:
+            self.report.error("type", 'inside takes a robot and room names: inside(ranger, "n1", "corridor")',
+                              expr.span)
+            return "bool"
+        if not self._place(types[0]) or types[0] == POINT:
+            self.report.error("type", f"inside expects a robot first, got {show(types[0])}", args[0].span)
+        for a, t in zip(args[1:], types[1:], strict=True):
+            if t not in ("str", ANY):
+                self.report.error("type", f"inside expects room names (strings), got {show(t)}", a.span)
+        return "bool"
+
+    def _place(self, t: Type) -> bool:
+        if t in (POINT, ANY):
+            return True
+        ct = self.catalog.get(t) if isinstance(t, str) else None
+        return ct is not None and ct.kind is Kind.ARC
 
     def _count(self, expr: ast.Call, scope: Scope) -> Type:
         if len(expr.args) != 1 or not isinstance(expr.args[0], ast.Name):

@@ -34,7 +34,7 @@ MAX_SYNTAX_ERRORS = 10
 
 # Tokens that can start an item or a declaration: when one is acceptable we are between items.
 ITEM_STARTS = frozenset({"NAME", "NEEDS", "SHARED", "VAR", "PARALLEL", "PLAN", "START", "MISSION",
-                         "BEHAVIOR", "IMPORT"})
+                         "BEHAVIOR", "IMPORT", "CONSTRAINT"})
 
 _ESCAPES = {"n": "\n", "t": "\t", '"': '"', "\\": "\\", "{": "{", "}": "}"}
 
@@ -63,8 +63,10 @@ AFTER_TOKEN = {
     "AS": "expected an alias name after as",
     "PRIORITY": "expected a priority number after priority (1 is the highest)",
     "IMPORT": 'expected a file name in quotes after import',
-    "PLAN": "expected { or concurrent after plan",
+    "PLAN": "expected {, concurrent or preallocate after plan",
     "CONCURRENT": "expected { after plan concurrent",
+    "PREALLOCATE": "expected a guard, actions or the end of the item after preallocate",
+    "CONSTRAINT": "expected `name: condition` after constraint",
     "PARALLEL": "expected { or all/any/until after parallel",
     "UNTIL": "expected the name of the child that ends the parallel block after until",
     "LT": "expected a plan step after <",
@@ -218,15 +220,18 @@ class _Builder(Transformer):  # type: ignore[type-arg]
         return c[0], (c[1] if len(c) > 1 else None)
 
     def transition(self, c: list[Any]) -> ast.Transition:
-        src, _, dst, trig, guard, actions = c
+        src, _, dst, pre, trig, guard, actions = c
         kind, event, cond, delay, event_tok = trig or (ast.TriggerKind.COMPLETION, None, None, None, None)
         end: Any = dst
-        for part in (cond or delay or event_tok, guard and guard[1], actions and actions[-1]):
+        for part in (pre, cond or delay or event_tok, guard and guard[1], actions and actions[-1]):
             if part is not None:
                 end = part
         return ast.Transition(str(src), str(dst), kind, event, cond, delay, guard and guard[0],
-                              tuple(actions or ()), span=self.cover(src, end),
+                              tuple(actions or ()), preallocate=pre is not None, span=self.cover(src, end),
                               source_span=self.tspan(src), target_span=self.tspan(dst))
+
+    def constraint(self, c: list[Any]) -> ast.Constraint:
+        return ast.Constraint(str(c[1]), c[2], span=self.cover(c[0], c[2]))
 
     def source(self, c: list[Any]) -> Token:
         return c[0]  # type: ignore[no-any-return]
@@ -266,8 +271,8 @@ class _Builder(Transformer):  # type: ignore[type-arg]
         return ast.LogAction(self.string([c[1]]), span=self.cover(c[0], c[1]))
 
     def plan(self, c: list[Any]) -> ast.Plan:
-        chains = tuple(x for x in c[2:-1] if x is not None)
-        return ast.Plan(c[1] is not None, chains, span=self.cover(c[0], c[-1]))
+        chains = tuple(x for x in c[3:-1] if x is not None)
+        return ast.Plan(c[1] is not None, chains, preallocate=c[2] is not None, span=self.cover(c[0], c[-1]))
 
     def chain(self, c: list[Any]) -> tuple[ast.PlanStep, ...]:
         return tuple(x for x in c if isinstance(x, ast.PlanStep))

@@ -105,7 +105,7 @@ def child(c: ast.Child) -> str:
 
 
 def transition(t: ast.Transition) -> str:
-    out = f"{t.source} -> {t.target}"
+    out = f"{t.source} -> {t.target}" + (" preallocate" if t.preallocate else "")
     match t.kind:
         case ast.TriggerKind.CHANGE:
             out += f" when {expr(t.condition)}"  # type: ignore[arg-type]
@@ -141,10 +141,12 @@ def item(i: ast.Item, indent: str) -> list[str]:
             return [f"{indent}{head} {{", *(indent + "    " + child(k) for k in kids), indent + "}"]
         case ast.Transition():
             return [indent + transition(i)]
-        case ast.Plan(concurrent=c, chains=chains):
-            head = "plan concurrent {" if c else "plan {"
+        case ast.Plan(concurrent=c, chains=chains, preallocate=pre):
+            head = "plan" + (" concurrent" if c else "") + (" preallocate" if pre else "") + " {"
             body = [indent + "    " + " < ".join(s.name for s in ch) for ch in chains]
             return [indent + head, *body, indent + "}"]
+        case ast.Constraint(name=n, condition=cond):
+            return [f"{indent}constraint {n}: {expr(cond)}"]
     raise TypeError(f"not an item: {i!r}")
 
 

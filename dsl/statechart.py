@@ -68,6 +68,7 @@ class Transition:
     guard: ast.Expr | None = None
     actions: tuple[ast.Action, ...] = ()
     generated: bool = False  # made by the compiler (plans, implicit completion), not written
+    preallocate: bool = False  # entering the source reserves the target's needs
     span: Span = field(default=NOWHERE, compare=False, repr=False)
 
 
@@ -91,6 +92,7 @@ class State:
     policy: ast.Policy | None = None
     until: str | None = None
     after: tuple[str, ...] = ()  # concurrent plans: siblings that must be done before this starts
+    constraints: tuple[ast.Constraint, ...] = ()  # hold while the state is active (checked every control cycle)
     multiplicity: ast.Multiplicity | None = None
     success: bool | None = None  # final states
     transitions: tuple[Transition, ...] = ()

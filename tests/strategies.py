@@ -166,17 +166,20 @@ def grammar(names: st.SearchStrategy[str], type_names: st.SearchStrategy[str],
         durations.map(lambda d: {"kind": ast.TriggerKind.TIMEOUT, "delay": d}),
     )
     transitions = st.builds(
-        lambda src, dst, trig, guard, acts: ast.Transition(src, dst, guard=guard, actions=tuple(acts), **trig),
+        lambda src, dst, trig, guard, acts, pre: ast.Transition(src, dst, guard=guard, actions=tuple(acts),
+                                                                preallocate=pre, **trig),
         st.just("start") | names,
         st.sampled_from(["done", "fail"]) | names,
         triggers,
         st.none() | exprs,
         st.lists(actions, max_size=3),
+        st.booleans(),
     )
     plans = st.builds(
-        lambda concurrent, chains: ast.Plan(concurrent, tuple(tuple(c) for c in chains)),
+        lambda concurrent, chains, pre: ast.Plan(concurrent, tuple(tuple(c) for c in chains), preallocate=pre),
         st.booleans(),
         st.lists(st.lists(names.map(ast.PlanStep), min_size=1, max_size=4), max_size=4),
+        st.booleans(),
     )
     items: st.SearchStrategy[ast.Item] = st.one_of(
         st.builds(ast.Need, names, type_refs, st.none() | exprs, st.none() | exprs, st.none() | durations),
@@ -186,6 +189,7 @@ def grammar(names: st.SearchStrategy[str], type_names: st.SearchStrategy[str],
         parallels,
         transitions,
         plans,
+        st.builds(ast.Constraint, names, exprs),
     )
     bodies = st.lists(items, max_size=max_items).map(tuple)
     params = st.builds(ast.Param, names, type_refs, st.none() | exprs)

@@ -32,8 +32,8 @@ ERRORS: list[tuple[str, str, str, str | None]] = [
     ("single-quotes", m("  Inspect(label: 'a')", "behavior Inspect(label: str) { Observe }"),
      "2:18 syntax: unexpected character \"'\"", "double quotes"),
     ("unclosed-brace", "mission M {\n  Observe\n", "2:10 syntax: the file ends too early: expected `}`", "matching }"),
-    ("action-outside-transition", m("  log \"hi\""), "2:3 syntax: expected `}`, a name, needs, parallel, plan, "
-     "shared, start or var, got `log`", "follow a / at the end of a transition"),
+    ("action-outside-transition", m("  log \"hi\""), "2:3 syntax: expected `}`, a name, constraint, needs, "
+     "parallel, plan, shared, start or var, got `log`", "follow a / at the end of a transition"),
     ("after-needs-duration", m("  Observe\n  Observe -> done after\n"),
      "3:24 syntax: expected a duration after after (e.g. 2min)", None),
     ("after-unit", m("  Observe\n  Observe -> done after 5"), "3:25 after expects duration, got int", "write a unit"),

@@ -8,7 +8,7 @@ from drd.runtime import records as rec
 from dsl import compile_text
 from dsl.catalog import Catalog
 from dsl.statechart import Statechart
-from tests.runtime_support import Forever, Harness, Timed, ranger_world
+from tests.runtime_support import Fails, Forever, Harness, Timed, ranger_world
 
 
 def compiled(text: str, catalog: Catalog) -> Statechart:
@@ -97,3 +97,90 @@ behavior B { needs cam: Camera for 5s; Observe(duration: 12s) }
     assert h.run(dt=0.1) == "success"
     grants = [r.at for r in h.of(rec.Granted)]
     assert [round(b - a, 6) for a, b in zip(grants[:3], grants[1:4], strict=True)] == [5.0, 5.0, 5.0]
+
+
+PREALLOCATED = """
+mission M {
+    needs r: Ranger
+    start -> Prep
+    Prep -> Look preallocate
+}
+behavior Prep { Calibrate(samples: 3) }
+behavior Look { needs cam: Camera where cam.id == "cam"
+    Observe(duration: 1s) }"""
+
+
+def _against_a_rival(catalog: Catalog, text: str, prep: type = Timed) -> tuple[list[rec.Record], str | None]:
+    """Run `text` while another mission asks for the camera half a second in: does `Look` wait for it?"""
+    from drd.rcm import ResourceManager
+    from drd.runtime.clock import SimClock
+    from drd.runtime.interpreter import Interpreter
+    from drd.runtime.pool import ResourcePool
+
+    clock, rcm = SimClock(), ResourceManager()
+    pool = ResourcePool(rcm)
+    pool.add([*ranger_world(1, 0), Unit("cam", "Camera")], 0.0)
+    log: list[rec.Record] = []
+    mine = Interpreter(compiled(text, catalog), {"Calibrate": prep, "Observe": Timed}, rcm, clock, pool=pool,
+                       mission="mine")
+    other = Interpreter(compiled("mission Other { needs c: Camera\n Observe(duration: 20s) }", catalog),
+                        {"Observe": Timed}, rcm, clock, pool=pool, mission="other")
+    mine.attach(log.append)
+    mine.start()
+    clock.advance(0.5)
+    other.start()
+    while not mine.finished and clock.now() < 60:
+        clock.advance(0.5)
+        mine.step()
+        other.step()
+    return log, mine.outcome
+
+
+def test_preallocate_reserves_the_next_states_needs_after_a_composite_predecessor(catalog: Catalog) -> None:
+    """`Prep -> Look preallocate`: Look's camera is reserved when Prep (a behavior, not a leaf) is entered and
+    survives Prep's exit, so Look starts at once although another mission asked for the camera meanwhile."""
+    log, outcome = _against_a_rival(catalog, PREALLOCATED)
+    assert outcome == "success"
+    reserved = [r for r in log if isinstance(r, rec.Reserved)]
+    assert [(r.path, r.by) for r in reserved] == [("M/Look", "M/Prep")] and reserved[0].at == 0.0
+    granted = next(r.at for r in log if isinstance(r, rec.Granted) and r.path == "M/Look")
+    entered = next(r.at for r in log if isinstance(r, rec.Entered) and r.path == "M/Look")
+    assert granted == 0.0 and entered >= 1.0  # held ahead of need, not waited for
+    assert not [r for r in log if isinstance(r, rec.Waiting) and r.path == "M/Look"]
+
+
+def test_without_preallocate_the_next_state_waits(catalog: Catalog) -> None:
+    log, outcome = _against_a_rival(catalog, PREALLOCATED.replace(" preallocate", ""))
+    assert outcome == "success"
+    assert next(r.at for r in log if isinstance(r, rec.Granted) and r.path == "M/Look") >= 5.0  # the rival's slice
+
+
+def test_a_sequential_plan_can_preallocate(catalog: Catalog) -> None:
+    text = PREALLOCATED.replace("    start -> Prep\n    Prep -> Look preallocate\n",
+                                "    plan preallocate { Prep < Look }\n")
+    log, outcome = _against_a_rival(catalog, text)
+    assert outcome == "success"
+    assert [(r.path, r.by) for r in log if isinstance(r, rec.Reserved)] == [("M/Look", "M/Prep")]
+
+
+def test_a_preallocation_not_used_is_released_and_recorded(catalog: Catalog) -> None:
+    text = PREALLOCATED.replace("Prep -> Look preallocate", "Prep -> Look preallocate\n    Prep -> done on error")
+    log, outcome = _against_a_rival(catalog, text, prep=Fails)
+    assert outcome == "success"
+    ends = [r for r in log if isinstance(r, rec.Released) and r.path == "M/Look"]
+    assert [(r.reason, r.resources) for r in ends] == [("cancelled", ("cam",))]
+    assert not [r for r in log if isinstance(r, rec.Entered) and r.path == "M/Look"]
+
+
+def test_preallocate_is_checked(catalog: Catalog) -> None:
+    def errors(text: str) -> list[str]:
+        return [d.message for d in compile_text(text, catalog, "t.mission").diagnostics]
+
+    assert any("only a completion transition preallocates" in m
+               for m in errors(PREALLOCATED.replace("Look preallocate", "Look preallocate on error")))
+    assert any("plan concurrent preallocate" in m
+               for m in errors(PREALLOCATED.replace("    start -> Prep\n    Prep -> Look preallocate\n",
+                                                    "    plan concurrent preallocate { Prep < Look }\n")))
+    warned = compile_text(PREALLOCATED.replace("behavior Look { needs cam: Camera where cam.id == \"cam\"",
+                                               "behavior Look {"), catalog, "t.mission").diagnostics
+    assert [d.severity.value for d in warned] == ["warning"] and "nothing to preallocate" in warned[0].message

@@ -273,7 +273,7 @@ class Interpreter:
             except BindingError as e:
                 self._finish(node, False, str(e))
                 return node
-        if self.preallocate and parent is not None:
+        if parent is not None and (plan.reserves or self.preallocate):
             self._preallocate(node)
         if plan.requested:  # a state whose needs are all bound above never talks to the manager
             self._request(node, plan.requested)
@@ -303,12 +303,14 @@ class Interpreter:
             self._finish(node, False, e.message)
 
     def _preallocate(self, node: Node) -> None:
-        """Reserve, now, what the state after `node` will need (paper 4.3 c): it starts without waiting."""
+        """Reserve, now, what the state after `node` will need (paper 4.3 c): it starts without waiting. The next
+        state is the target of `node`'s first `preallocate` completion transition (of its first unguarded
+        completion when the interpreter preallocates everything)."""
         parent = node.parent
         if parent is None or parent.state.kind is not COMPOUND:
             return
-        nxt = next((t for t in node.state.transitions
-                    if t.kind is ast.TriggerKind.COMPLETION and t.guard is None), None)
+        nxt = node.plan.reserves[0] if node.plan.reserves else next(
+            (t for t in node.state.transitions if t.kind is ast.TriggerKind.COMPLETION and t.guard is None), None)
         if nxt is None:
             return
         target = self._states[nxt.target]
@@ -323,15 +325,20 @@ class Interpreter:
         try:
             future.scope.update({a.name: evaluate(a.value, self._names(parent), self.pool.count) for a in target.args})
             self._reservations[holder] = future
+            if self.listeners:
+                self._notify(rec.Reserved(self.clock.now(), future.path, node.path,
+                                          tuple(f"{n.name}: {n.type}" for n in needs)))
             self.resources.request(future, needs, at=self.clock.now())
         except EvalError:
             self._reservations.pop(holder, None)
             self.resources.forget(future)  # it will simply ask on entry
 
-    def _drop_reservations(self, made_by: str, keep: str = "") -> None:
-        """Cancel preallocations made for the successor of `made_by` (except the one being entered)."""
+    def _drop_reservations(self, made_by: str, keep: str = "", inside: bool = False) -> None:
+        """Cancel preallocations made by `made_by` and the states inside it (only those inside, with `inside`),
+        except the one being entered (`keep`)."""
         for holder, future in list(self._reservations.items()):
-            if (future.reserved_by == made_by or future.reserved_by.startswith(made_by + "/")) and holder != keep:
+            by = future.reserved_by
+            if ((by == made_by and not inside) or by.startswith(made_by + "/")) and holder != keep:
                 del self._reservations[holder]
                 self.resources.cancel(future)  # a grant it held is released (and recorded) first
                 self.resources.forget(future)
@@ -660,6 +667,8 @@ class Interpreter:
         if node.phase is DONE:
             node.detach()
             return
+        if self._reservations:  # what states inside it reserved goes back first (its own is its transition's)
+            self._drop_reservations(node.path, inside=True)
         order = node.children_first()
         for n in order:
             n.closing = True
@@ -679,8 +688,6 @@ class Interpreter:
                 self.arbiter.flush_from(resources.holder(n), self.host.command_failed)
                 resources.unbind(n, "exited")
         n.phase = DONE
-        if self._reservations and n.state.children:
-            self._drop_reservations(n.path)  # reservations for states inside it
         if n.plan.timed:
             self._timed.pop(n, None)
         for event in n.plan.on_event:

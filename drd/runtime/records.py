@@ -52,6 +52,14 @@ class Waiting(Record):
 
 
 @dataclass(frozen=True, slots=True)
+class Reserved(Record):
+    """`path`'s needs are preallocated now, while `by` (the state before it) runs: it will start without waiting."""
+
+    by: str
+    needs: tuple[str, ...] = ()
+
+
+@dataclass(frozen=True, slots=True)
 class Granted(Record):
     """`path` holds these resources from now on: need -> resource id, and for an aggregate each of its parts
     (`ranger.drive` -> `ranger1.drive`); `epochs`: unit id -> the fencing epoch of this grant."""

@@ -54,7 +54,9 @@ class StatePlan:
         self.on_event = {k: tuple(v) for k, v in by_event.items()}  # event name -> its `on` transitions
         self.timed = any(t.kind in (ast.TriggerKind.TIMEOUT, ast.TriggerKind.CHANGE) for t in state.transitions)
         self.defaults: dict[str, Any] | None = None  # parameter defaults, evaluated at the first entry
-        self.reserves: str | None = None  # the sibling whose needs entering this state preallocates
+        # the completion transitions that preallocate their target's needs when this state is entered
+        self.reserves = tuple(t for t in state.transitions
+                              if t.kind is ast.TriggerKind.COMPLETION and t.preallocate)
 
 
 @dataclass(eq=False, slots=True, init=False)
