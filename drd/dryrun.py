@@ -190,9 +190,10 @@ def run_many(missions: Sequence[Mission], cluster: Cluster, world: World, catalo
     drivers = merged_drivers(cluster, sim, catalog)
     bus = LocalNetwork().session("controller")
     late = {i.target for i in injections if i.action is Action.JOIN}  # hosts whose daemon starts later
+    places = {room.id: (room.x0, room.y0, room.x1, room.y1) for room in world.rooms}
     executive = Executive(bus, clock, registry or EntryPoints(catalog), cluster=cluster.name,
                           resources=[r for r in cluster.resources() if r.host not in late], lease=cluster.lease,
-                          services={"drivers": drivers})
+                          services={"drivers": drivers, "places": places})
     results: list[DryRun] = []
     ids: list[str] = []
     start = time.perf_counter()

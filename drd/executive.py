@@ -23,10 +23,12 @@ from drd.runtime import records as rec
 from drd.runtime.broker import ResourceBroker
 from drd.runtime.clock import Clock
 from drd.runtime.component import Component
-from drd.runtime.interpreter import Interpreter
+from drd.runtime.constraints import ConstraintGuard
+from drd.runtime.interpreter import Interpreter, describe_devices
 from drd.runtime.ownership import Gates, LocalGates, NoGates
 from drd.runtime.pool import ResourcePool
 from drd.runtime.records import plain
+from drd.runtime.telemetry import DriverTelemetry
 from dsl.catalog import Catalog
 from dsl.statechart import Statechart
 
@@ -85,7 +87,9 @@ class Executive:
         self.pool = ResourcePool(self.broker)
         self.pool.add(resources, clock.now())
         self.missions: dict[str, Interpreter] = {}
+        self.guard = ConstraintGuard(self.pool)  # the constraints in force, of every mission
         self.gates: Gates = self._gates(gates)
+        self.pool.places = dict(self.services.get("places", {}))  # the world's rooms: `inside(ranger, "n1")`
         self._ids = itertools.count(1)
         self._queryable = bus.serve(f"drd/{cluster}/executive", self._command)
 
@@ -96,7 +100,10 @@ class Executive:
         if drivers is None:
             return NoGates()
         sharable = [c.id for c in self.pool.candidates.values() if isinstance(c, Unit) and c.sharable]
-        return LocalGates.of(getattr(drivers, "devices", {}), getattr(drivers, "robots", {}), sharable, self.record)
+        local = LocalGates.of(getattr(drivers, "devices", {}), getattr(drivers, "robots", {}), sharable, self.record)
+        local.describe(*describe_devices(self.pool), self.guard)
+        self.pool.telemetry = DriverTelemetry(drivers, self.pool, self.clock.now)
+        return local
 
     def record(self, mission: str, record: rec.Record) -> None:
         """A record about `mission` from outside its interpreter (a device's gate): to its listeners."""
@@ -118,7 +125,7 @@ class Executive:
             raise ValueError(f"a mission id has no '/': {mid!r}")
         interp = Interpreter(chart, registry if registry is not None else self.registry, self.broker, self.clock,
                              pool=self.pool, mission=mid, services=self.services, preallocate=self.preallocate,
-                             gates=self.gates, priority=priority)
+                             gates=self.gates, priority=priority, guard=self.guard)
         key = f"drd/{self.cluster}/mission/{mid}/record"
         interp.attach(lambda r: self.bus.put(key, _to_message(mid, r)))
         for listener in listeners:

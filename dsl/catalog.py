@@ -119,7 +119,7 @@ BUILTIN_PROPERTIES: Mapping[str, str] = MappingProxyType({"id": "str", "host": "
 ROBOT_PROPERTIES: Mapping[str, str] = MappingProxyType({"x": "float", "y": "float", "heading": "float",
                                                           "battery": "float"})
 #: The event a behavior gets when one of its constraints is violated (`A -> B on violation`).
-VIOLATION = RecordSpec("violation", MappingProxyType({"constraint": "str", "resource": "str", "value": "float",
+VIOLATION = RecordSpec("violation", MappingProxyType({"name": "str", "resource": "str", "value": "float",
                                                       "limit": "float"}), "event",
                        "A constraint of the behavior does not hold: its name, the robot, the measured value and the"
                        " limit.")

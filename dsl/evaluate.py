@@ -9,7 +9,9 @@ runtime knows which resources exist.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable, Mapping, Sized
+from typing import NamedTuple
 
 from dsl import ast
 from dsl.errors import Span
@@ -17,6 +19,42 @@ from dsl.exprtypes import snake
 
 #: `count(type_name, predicate)`: how many known resources of a type satisfy the predicate.
 CountFn = Callable[[str, Callable[[object], bool] | None], int]
+#: `place(name)`: the rectangle (x0, y0, x1, y1) of a named region of the world (a room), or None.
+PlaceFn = Callable[[str], tuple[float, float, float, float] | None]
+
+
+class Point(NamedTuple):
+    """`point(x, y)`: a place in the world's frame, in metres."""
+
+    x: float
+    y: float
+
+    def __str__(self) -> str:
+        return f"({self.x:g}, {self.y:g})"
+
+
+def coordinates(value: object) -> tuple[float, float] | None:
+    """Where a value is: a `Point`, or a robot (a mapping with `x` and `y`, as a resource's pose)."""
+    if isinstance(value, Point):
+        return value.x, value.y
+    if isinstance(value, Mapping):
+        try:
+            x, y = value["x"], value["y"]
+        except KeyError:
+            return None
+        if isinstance(x, int | float) and isinstance(y, int | float) and not isinstance(x, bool):
+            return float(x), float(y)
+    return None
+
+
+def signed_depth(x: float, y: float, rects: list[tuple[float, float, float, float]]) -> float:
+    """How deep (x, y) is inside the union of `rects` (metres to the nearest edge of the one it is in), or minus how
+    far it is from the nearest of them when it is outside: > 0 inside, < 0 outside."""
+    best = -math.inf
+    for x0, y0, x1, y1 in rects:
+        dx, dy = max(x0 - x, 0.0, x - x1), max(y0 - y, 0.0, y - y1)
+        best = max(best, min(x - x0, x1 - x, y - y0, y1 - y) if dx == 0.0 and dy == 0.0 else -math.hypot(dx, dy))
+    return best
 
 
 class EvalError(Exception):
@@ -28,16 +66,18 @@ class EvalError(Exception):
         self.span = span
 
 
-def evaluate(expr: ast.Expr, names: Mapping[str, object], count: CountFn | None = None) -> object:
-    """The value of `expr` with `names` in scope."""
-    return _Evaluator(names, count).eval(expr)
+def evaluate(expr: ast.Expr, names: Mapping[str, object], count: CountFn | None = None,
+             place: PlaceFn | None = None) -> object:
+    """The value of `expr` with `names` in scope (`place` answers `inside(...)`'s room names)."""
+    return _Evaluator(names, count, place).eval(expr)
 
 
-def truthy(expr: ast.Expr | None, names: Mapping[str, object], count: CountFn | None = None) -> bool:
+def truthy(expr: ast.Expr | None, names: Mapping[str, object], count: CountFn | None = None,
+           place: PlaceFn | None = None) -> bool:
     """A guard or condition: absent means true; anything but a bool is an error."""
     if expr is None:
         return True
-    value = evaluate(expr, names, count)
+    value = evaluate(expr, names, count, place)
     if not isinstance(value, bool):
         raise EvalError(f"a condition must be true or false, got {format_value(value)}", expr.span)
     return value
@@ -53,9 +93,10 @@ def format_value(v: object) -> str:
 
 
 class _Evaluator:
-    def __init__(self, names: Mapping[str, object], count: CountFn | None):
+    def __init__(self, names: Mapping[str, object], count: CountFn | None, place: PlaceFn | None = None):
         self.names = names
         self.count = count
+        self.place = place
 
     def eval(self, e: ast.Expr) -> object:
         match e:
@@ -142,9 +183,17 @@ class _Evaluator:
                 where, var = e.where, snake(type_name)
 
                 def pred(candidate: object) -> bool:
-                    return truthy(where, {**self.names, var: candidate}, self.count)
+                    return truthy(where, {**self.names, var: candidate}, self.count, self.place)
             return self.count(type_name, pred)
         values = [self.eval(a) for a in e.args]
+        if e.func == "point":
+            return Point(float(self._number(e.args[0])), float(self._number(e.args[1])))
+        if e.func == "distance":
+            (ax, ay), (bx, by) = (self._where(v, a) for v, a in zip(values, e.args, strict=True))
+            return math.hypot(ax - bx, ay - by)
+        if e.func == "inside":
+            x, y = self._where(values[0], e.args[0])
+            return signed_depth(x, y, self._rooms(values[1:], e)) >= 0.0
         if e.func == "len":
             if not isinstance(values[0], Sized):
                 raise EvalError(f"len of {format_value(values[0])}", e.span)
@@ -155,6 +204,21 @@ class _Evaluator:
             nums = [self._number(a) for a in e.args]
             return min(nums) if e.func == "min" else max(nums)
         raise EvalError(f"unknown function {e.func}", e.span)
+
+    def _where(self, value: object, e: ast.Expr) -> tuple[float, float]:
+        found = coordinates(value)
+        if found is None:
+            raise EvalError(f"{format_value(value)} has no position (a robot or point(x, y) has)", e.span)
+        return found
+
+    def _rooms(self, names: list[object], e: ast.Call) -> list[tuple[float, float, float, float]]:
+        rects = []
+        for name in names:
+            rect = self.place(str(name)) if self.place is not None else None
+            if rect is None:
+                raise EvalError(f"no room named {format_value(name)} in this world", e.span)
+            rects.append(rect)
+        return rects
 
 
 def _attribute(obj: object, attr: str, span: Span) -> object:
@@ -168,4 +232,5 @@ def _attribute(obj: object, attr: str, span: Span) -> object:
     raise EvalError(f"{format_value(obj)} has no {attr}", span)
 
 
-__all__ = ["CountFn", "EvalError", "evaluate", "format_value", "truthy"]
+__all__ = ["CountFn", "EvalError", "PlaceFn", "Point", "coordinates", "evaluate", "format_value", "signed_depth",
+           "truthy"]

@@ -87,7 +87,7 @@ class CycleArbiter(Arbiter):
         self._best: dict[str, tuple[tuple[float, bool], tuple[int, int]]] = {}
 
     def propose(self, p: Proposal) -> None:
-        why = p.gate.verdict(p.issuer, p.binding.epoch)
+        why = p.gate.admit(p.issuer, p.binding.epoch, p.method, p.args, p.kwargs, self.clock())
         if why:
             p.gate.refuse(p.issuer, p.binding.epoch, p.method, why, self.clock())
             return

@@ -14,11 +14,12 @@ from typing import Any
 
 from drd.runtime import records as rec
 from drd.runtime.component import Component, Context, Registry, Status
-from drd.runtime.ownership import Arbiter, BoundDevice
+from drd.runtime.ownership import Arbiter, Binding, BoundDevice
 from drd.runtime.resources import ResourceClient
 from drd.runtime.tree import ACTIVE, Node
 
 _FINAL_STATUS = {"success": Status.SUCCESS, "failure": Status.FAILURE}
+_RUNNING = Status.RUNNING
 
 
 class ComponentHost:
@@ -38,7 +39,7 @@ class ComponentHost:
         self.on_failure = on_failure
         self.rank = rank  # state id -> declaration order (a later layer subsumes an earlier one)
         self.running: dict[Node, None] = {}  # leaves with a started component, in entry order
-        self._made: dict[str, tuple[Component, Context]] = {}  # per instance path, reused on re-entry
+        self._made: dict[str, tuple[Component, Context, _Bindings]] = {}  # per instance path, reused on re-entry
 
     def active(self) -> Iterator[tuple[Node, Component]]:
         """The components stepped in this cycle, in order (active ones only)."""
@@ -48,23 +49,18 @@ class ComponentHost:
                 yield node, comp
 
     def start(self, node: Node) -> None:
-        """Bind the leaf's needs, set its component up (first entry of this path only) and start it."""
-        try:
-            bindings = self.resources.bind(node)
-        except Exception as e:  # a binding error names the need and the holder it leads to
-            self.on_failure(node, str(e))
-            return
-        issuer = self.resources.holder(node)
-        rank = (-node.state.priority, self.rank.get(node.state.id, 0))
-        devices = {need: BoundDevice(b, issuer, self.arbiter, rank, node, self.now)
-                   for need, b in bindings.items() if b.driver is not None}
-        resources = {need: b.unit for need, b in bindings.items()}
+        """Set the leaf's component up (first entry of this path only) and start it. Its needs are bound the first
+        time it (or its proxy) asks for one: most components of most states never do, and nothing is built for
+        nobody."""
         made = self._made.get(node.path)
         if made is not None:
-            comp, ctx = made
+            comp, ctx, lazy = made
+            lazy.reset(node)  # the same views, bound again for this entry when first read
             ctx.params, ctx.outputs = dict(node.scope), {}
-            ctx.resources, ctx.devices, ctx.bindings, ctx.rank = resources, devices, bindings, rank
         else:
+            lazy = _Bindings(self, node)
+            resources, devices, bindings = lazy.view(0), lazy.view(1), lazy.view(2)
+            rank = (-node.state.priority, self.rank.get(node.state.id, 0))
             name = node.state.component or ""
             factory = self.registry.get(name)
             if factory is None:
@@ -88,9 +84,12 @@ class ComponentHost:
             except Exception as e:  # component code is not ours to trust
                 self.failed(node, e)
                 return
-            self._made[node.path] = (comp, ctx)
+            self._made[node.path] = (comp, ctx, lazy)
         node.component, node.context = comp, ctx
-        if not self.call(node, comp.start):
+        try:
+            comp.start()
+        except Exception as e:  # component code is not ours to trust
+            self.failed(node, e)
             return
         self.running[node] = None
 
@@ -118,7 +117,10 @@ class ComponentHost:
         if comp is None:
             return
         self.running.pop(node, None)
-        self.call(node, lambda: comp.terminate(_FINAL_STATUS.get(status, Status.RUNNING)), fail=False)
+        try:
+            comp.terminate(_FINAL_STATUS.get(status, _RUNNING))
+        except Exception as e:  # the node is leaving anyway: just say so
+            self.notify(rec.Log(self.now(), node.path, f"component raised {type(e).__name__}: {e}"))
 
     def call(self, node: Node, fn: Callable[[], Any], fail: bool = True) -> bool:
         """Call component code; an exception fails the node (unless `fail` is False), never the executive."""
@@ -141,3 +143,54 @@ class ComponentHost:
         """A driver raised on the winning setpoint of a cycle: its proposer (a node) fails."""
         if isinstance(owner, Node):
             self.failed(owner, e)
+
+    def bind(self, node: Node) -> tuple[dict[str, str], dict[str, BoundDevice], dict[str, Binding]]:
+        """A leaf's bindings (made now, at its holders' current grants), the resources and the devices they give.
+
+        Raises:
+            BindingError: a need leads to a holder that does not hold it now (released, lost).
+        """
+        bindings = self.resources.bind(node)
+        issuer = self.resources.holder(node)
+        rank = (-node.state.priority, self.rank.get(node.state.id, 0))
+        devices = {need: BoundDevice(b, issuer, self.arbiter, rank, node, self.now)
+                   for need, b in bindings.items() if b.driver is not None}
+        return {need: b.unit for need, b in bindings.items()}, devices, bindings
+
+
+class _Bindings:
+    """A leaf's resources, devices and bindings, made the first time any of them is read."""
+
+    __slots__ = ("_host", "_node", "_value")
+
+    def __init__(self, host: ComponentHost, node: Node) -> None:
+        self._host, self._node = host, node
+        self._value: tuple[dict[str, str], dict[str, BoundDevice], dict[str, Binding]] | None = None
+
+    def reset(self, node: Node) -> None:
+        """A new entry of the same path: bind again, for `node`, when next read."""
+        self._node, self._value = node, None
+
+    def get(self, which: int) -> Mapping[str, Any]:
+        if self._value is None:
+            self._value = self._host.bind(self._node)
+        return self._value[which]
+
+    def view(self, which: int) -> Mapping[str, Any]:
+        return _LazyMap(self, which)
+
+
+class _LazyMap(Mapping[str, Any]):
+    __slots__ = ("_bindings", "_which")
+
+    def __init__(self, bindings: _Bindings, which: int) -> None:
+        self._bindings, self._which = bindings, which
+
+    def __getitem__(self, key: str) -> Any:
+        return self._bindings.get(self._which)[key]
+
+    def __iter__(self) -> Iterator[str]:
+        return iter(self._bindings.get(self._which))
+
+    def __len__(self) -> int:
+        return len(self._bindings.get(self._which))

@@ -19,20 +19,23 @@ bindings, gates) and `drd.runtime.hosting` (the components).
 from __future__ import annotations
 
 import collections
+import functools
 from collections.abc import Callable, Iterable, Mapping
-from dataclasses import dataclass
-from typing import Any
+from typing import Any, NamedTuple
 
 from drd.rcm import Deadlock, Granted, Released, ReleaseReason, ResourceManager, Revoked, Unit, Unsatisfiable
 from drd.rcm import Waiting as WaitingDecision
+from drd.rcm.constraints import Measure, measure
 from drd.runtime import records as rec
 from drd.runtime.broker import ResourceBroker
 from drd.runtime.clock import Clock
 from drd.runtime.component import Registry, Status
+from drd.runtime.constraints import Active, ConstraintGuard, robots_named
 from drd.runtime.hosting import ComponentHost
 from drd.runtime.ownership import Arbiter, Gates, LocalGates, NoGates
 from drd.runtime.pool import ResourcePool
 from drd.runtime.resources import BindingError, ResourceClient
+from drd.runtime.telemetry import DriverTelemetry
 from drd.runtime.tree import (
     ACTIVE,
     COMPOUND,
@@ -63,10 +66,10 @@ Listener = Callable[[rec.Record], None]
 _RUNNING, _SUCCESS, _FAILURE = Status.RUNNING, Status.SUCCESS, Status.FAILURE
 
 
-@dataclass(frozen=True, slots=True)
-class MacroStep:
+class MacroStep(NamedTuple):
     """What one `step()` did (sismic's `MacroStep`): at what time, how many components it stepped, which
-    transitions it took (source path, target path, trigger), and whether the mission is over."""
+    transitions it took (source path, target path, trigger), and whether the mission is over. (A named tuple: one
+    is made per step, and a frozen dataclass costs three times as much to build.)"""
 
     at: float
     stepped: int = 0
@@ -79,9 +82,11 @@ class Interpreter:
 
     def __init__(self, chart: Statechart, registry: Registry, rcm: ResourceManager | ResourceBroker, clock: Clock, *,
                  pool: ResourcePool | None = None, mission: str = "", services: Mapping[str, Any] | None = None,
-                 lease: float = 3.0, preallocate: bool = False, gates: Gates | None = None, priority: int = 1):
+                 lease: float = 3.0, preallocate: bool = False, gates: Gates | None = None, priority: int = 1,
+                 guard: ConstraintGuard | None = None):
         """`gates`: the devices' gates (default: gates over `services["drivers"]` when given, else none);
-        `priority`: the mission's rank against the other missions sharing the manager (1 first)."""
+        `priority`: the mission's rank against the other missions sharing the manager (1 first); `guard`: the
+        constraints in force of every mission sharing the gates (default: this mission's own)."""
         self.chart = chart
         self.registry = registry
         self.clock = clock
@@ -112,6 +117,9 @@ class Interpreter:
         self._visible = {sid: frozenset(n for n, _ in st.shared) | frozenset(n.name for n in st.needs)
                          for sid, st in chart.states.items()}
         self.arbiter = Arbiter(clock.now)  # one control cycle's setpoints, fenced, then multiplexed by rank
+        self.guard = guard if guard is not None else ConstraintGuard(self.pool)
+        self._constraints: dict[Node, list[Active]] = {}  # active behaviors' constraints
+        self._violations: collections.deque[tuple[Node, Active, Measure]] = collections.deque()
         self.resources = ResourceClient(self.rcm, self.pool, self.mission, gates or self._own_gates(), self.arbiter,
                                         clock.now, self._names, priority)
         rank = {sid: i for i, sid in enumerate(s.id for s in chart.walk())}  # declaration order
@@ -127,8 +135,12 @@ class Interpreter:
         if drivers is None:
             return NoGates()
         sharable = [c.id for c in self.pool.candidates.values() if isinstance(c, Unit) and c.sharable]
-        return LocalGates.of(getattr(drivers, "devices", {}), getattr(drivers, "robots", {}), sharable,
-                             lambda mission, record: self._notify(record))
+        gates = LocalGates.of(getattr(drivers, "devices", {}), getattr(drivers, "robots", {}), sharable,
+                              lambda mission, record: self._notify(record))
+        gates.describe(*describe_devices(self.pool), self.guard)
+        if self.pool.telemetry is None:
+            self.pool.telemetry = DriverTelemetry(drivers, self.pool, self.clock.now)
+        return gates
 
     # ------------------------------------------------------------- public API
     def attach(self, listener: Listener) -> None:
@@ -159,6 +171,8 @@ class Interpreter:
             self._last_tick = now
             self.rcm.tick(now)
             self.resources.renew(now, self.lease)
+            if self._constraints:
+                self._monitor()
         stepped = 0
         host = self.host
         for node in list(host.running):
@@ -166,7 +180,11 @@ class Interpreter:
             if node.phase is not ACTIVE or comp is None:
                 continue
             stepped += 1
-            status = host.step(node, comp, now)
+            try:
+                status = comp.step(now)
+            except Exception as e:  # component code is not ours to trust
+                host.failed(node, e)
+                continue
             if status is _SUCCESS or status is _FAILURE:
                 self._finish(node, status is _SUCCESS, "" if status is _SUCCESS else "failed")
         if self.arbiter.best:  # most cycles of most charts command nothing: no call then
@@ -346,11 +364,14 @@ class Interpreter:
     def _activate(self, node: Node) -> None:
         if self.outcome is not None or node.phase is DONE or node.closing:
             return
-        if node.blocked:  # granted while a holder above is suspended: it starts when that one resumes
-            node.phase, node.pending = SUSPENDED, True
+        parent = node.parent
+        if parent is not None and parent.phase is SUSPENDED:  # granted while a holder above is suspended:
+            node.phase, node.pending = SUSPENDED, True  # it starts when that one resumes
             return
         node.phase = ACTIVE
         state = node.state
+        if state.constraints:
+            self._watch(node)
         kind = state.kind
         if kind is LEAF:
             self.host.start(node)
@@ -466,7 +487,7 @@ class Interpreter:
         """Run to completion: finish nodes and take enabled transitions until quiet."""
         if self._settling:
             return
-        if not (self._finishing or self._timed or self.events):
+        if not (self._finishing or self._timed or self.events or self._violations):
             return  # nothing to finish, no change or timeout to check, no event: quiet already
         self._settling = True
         try:
@@ -484,6 +505,9 @@ class Interpreter:
                     self._complete(node, ok, why)
                 continue
             if self._timed and self._fire_one():
+                continue
+            if self._violations:
+                self._on_violation(*self._violations.popleft())
                 continue
             if self.events:
                 self._dispatch(self.events.popleft())
@@ -609,7 +633,7 @@ class Interpreter:
         assert domain is not None
         target = self._states[t.target]
         target_path = f"{domain.path}/{target.name}"
-        self._taken.append((node.path, target_path, t.kind.value))
+        self._taken.append((node.path, target_path, t.kind))  # a StrEnum: a str, without `.value`
         if self.listeners:
             self._notify(rec.Taken(self.clock.now(), node.path, target_path, t.kind.value, trigger_label(t)))
         if node.phase is not DONE:
@@ -656,7 +680,7 @@ class Interpreter:
         resources = self.resources
         for leaf, needs in resources.bound_through(holder, name):
             resources.unbind(leaf, f"{name} released", needs)
-        holder.released.add(name)
+        holder.released = holder.released | {name}
         resources.release(holder, [name])  # by need name: exact even on shared units
 
     # ------------------------------------------------------------- exiting
@@ -666,6 +690,12 @@ class Interpreter:
         setpoint through and unbind it, give its grant back, and say it exited."""
         if node.phase is DONE:
             node.detach()
+            return
+        if not node.children:  # a leaf, most often: nothing inside to close first
+            if node.requested and node.grant is None:
+                node.closing = True
+                self.resources.cancel(node)  # still waiting (or revoked and queued again)
+            self._leave(node, status)
             return
         if self._reservations:  # what states inside it reserved goes back first (its own is its transition's)
             self._drop_reservations(node.path, inside=True)
@@ -681,6 +711,7 @@ class Interpreter:
                 self._leave(n, status if n is node else "stopped")
 
     def _leave(self, n: Node, status: str) -> None:
+        n.closing = True
         resources = self.resources
         if n.component is not None:
             self.host.terminate(n, status)
@@ -688,6 +719,9 @@ class Interpreter:
                 self.arbiter.flush_from(resources.holder(n), self.host.command_failed)
                 resources.unbind(n, "exited")
         n.phase = DONE
+        if n in self._constraints:
+            del self._constraints[n]
+            self.guard.remove(resources.holder(n))
         if n.plan.timed:
             self._timed.pop(n, None)
         for event in n.plan.on_event:
@@ -705,6 +739,74 @@ class Interpreter:
         if self.outcome is None:
             self.outcome, self.reason = outcome, reason
             self._notify(rec.Finished(self.clock.now(), self.chart.root, outcome, reason))
+
+    # ------------------------------------------------------------- constraints
+    def _watch(self, node: Node) -> None:
+        """`node` became active: its constraints are in force (measured each cycle, guarding its subtree's
+        commands at the gates)."""
+        names = self._names(node)
+        actives = self._constraints.setdefault(node, [])
+        for c in node.state.constraints:
+            active = Active(self.resources.holder(node), node.path, c.name, c.condition,
+                            robots_named(c.condition, names), functools.partial(self._measure, node, c.condition))
+            active.refused = functools.partial(self._breached, node, active)
+            actives.append(active)
+            self.guard.add(active)
+
+    def _measure(self, node: Node, condition: ast.Expr) -> Measure:
+        return measure(condition, self._names(node), self.pool.count, self.pool.place)
+
+    def _monitor(self) -> None:
+        """Each control cycle: a constraint that stopped holding stops what its behavior's subtree set moving on
+        the robots it names, and its behavior gets a `violation` (handled in the run to completion)."""
+        now = self.clock.now()
+        for node, actives in list(self._constraints.items()):
+            if node.phase is not ACTIVE or node.closing:
+                continue  # a frozen subtree commands nothing
+            for a in actives:
+                try:
+                    m = a.measure()
+                except EvalError as e:
+                    if not a.violated and self.listeners:
+                        self._notify(rec.Log(now, node.path, f"constraint {a.name} cannot be measured: {e.message}"))
+                    a.violated = True
+                    continue
+                if m.holds:
+                    if now - a.refused_at > 0.15:  # held, and nothing refused in the last cycle: armed again
+                        a.violated = False
+                    continue
+                if not a.violated:
+                    for robot in a.robots:
+                        for unit in self.pool.units(robot):
+                            self.resources.gates.unbind(unit, a.holder, now, f"constraint {a.name} violated")
+                    self._breached(node, a, m)
+
+    def _breached(self, node: Node, a: Active, m: Measure) -> None:
+        """A constraint broke, or a command that would have broken it was refused (`m`: where it would have led)."""
+        now = self.clock.now()
+        a.refused_at = now
+        if a.violated:
+            return
+        a.violated = True
+        self._violations.append((node, a, m))  # recorded and handled in the run to completion, after the refusal
+
+    def _on_violation(self, node: Node, a: Active, m: Measure) -> None:
+        """The first `on violation` of the behavior (declared for it in its parent), else of its active child
+        (declared in its own body), takes the violation; without one the behavior fails, naming the constraint."""
+        if node.phase is DONE or node.closing:
+            return
+        event = rec.Event(self.clock.now(), node.path, "violation", _violation_fields(a, m))
+        if self.listeners:
+            self._notify(event)
+        for cand in [node, *(c for c in node.children if c.phase is not DONE)]:
+            domain = cand.parent
+            if domain is None or domain.phase is not ACTIVE:
+                continue
+            for t in cand.plan.on_event.get("violation", ()):
+                if t.guard is None or self._truthy(domain, t.guard, event):
+                    self._take(cand, t, event)
+                    return
+        self._finish(node, False, f"constraint {a.name} violated: {a.text} ({m.value:.3g} against {m.limit:.3g})")
 
     # ------------------------------------------------------------- resources
     def _apply(self, decisions: Iterable[object]) -> None:
@@ -857,6 +959,21 @@ class Interpreter:
     def _notify(self, record: rec.Record) -> None:
         for listener in self.listeners:
             listener(record)
+
+
+def _violation_fields(a: Active, m: Measure) -> dict[str, Any]:
+    return {"name": a.name, "resource": ", ".join(a.robots), "value": m.value, "limit": m.limit}
+
+
+def describe_devices(pool: ResourcePool) -> tuple[dict[str, str], dict[str, str]]:
+    """Each unit's RC type, and the robot it moves (the one aggregate it is a part of; none when shared)."""
+    kinds = {c.id: c.type for c in pool.candidates.values() if isinstance(c, Unit)}
+    owners: dict[str, list[str]] = {}
+    for c in pool.candidates.values():
+        if not isinstance(c, Unit):
+            for unit in pool.units(c.id):
+                owners.setdefault(unit, []).append(c.id)
+    return kinds, {unit: robots[0] for unit, robots in owners.items() if len(robots) == 1}
 
 
 def _path(holder: str) -> str:

@@ -57,6 +57,9 @@ class DeviceGate:
     sink: Callable[[str, rec.Record], None]  # (mission, record): records go to the mission they concern
     holders: dict[str, int] = field(default_factory=dict)
     commander: str | None = None  # qualified path of the issuer of the setpoint in force
+    kind: str = ""  # its RC type (Drive, Jump...): how a command moves the robot
+    robot: str = ""  # the robot it moves ("" for a device several robots share)
+    guard: Guard | None = None  # the constraints in force (`drd.runtime.constraints.ConstraintGuard`)
 
     def verdict(self, issuer: str, epoch: int | None) -> str:
         """Why `issuer` may not command now ("" if it may)."""
@@ -69,11 +72,22 @@ class DeviceGate:
             return "nobody holds the device"
         return f"not under the holder {_path(next(iter(self.holders)))}"
 
+    def admit(self, issuer: str, epoch: int | None, method: str, args: tuple[Any, ...], kwargs: Mapping[str, Any],
+              at: float) -> str:
+        """Why this command may not go ("" if it may): the holder's authority, then the constraints in force. A
+        command refused by a constraint also stops the setpoint in force (it was heading where it must not)."""
+        why = self.verdict(issuer, epoch)
+        if not why and self.guard is not None:
+            why = self.guard(self, issuer, method, args, kwargs)
+            if why and self.commander is not None:
+                self.halt(at, self.commander, why)
+        return why
+
     def execute(self, driver: object, issuer: str, epoch: int | None, method: str, args: tuple[Any, ...],
                 kwargs: Mapping[str, Any], at: float) -> Any:
         """Fence, record, then call `driver.method` (the driver the issuer was bound with: a robot's part driver
         of a shared device). Raises NotHolder when refused, or whatever the driver raises."""
-        why = self.verdict(issuer, epoch)
+        why = self.admit(issuer, epoch, method, args, kwargs, at)
         self._record(at, issuer, method, epoch, why)
         if why:
             raise NotHolder(f"{self.device}.{method} from {_path(issuer)} refused: {why}")
@@ -125,6 +139,10 @@ class DeviceGate:
         self.sink(mission, rec.Command(at, path, self.device, method, epoch, not why, why))
 
 
+#: A gate's guard: (gate, issuer, method, args, kwargs) -> why the command may not go, "" if it may.
+Guard = Callable[[DeviceGate, str, str, tuple[Any, ...], Mapping[str, Any]], str]
+
+
 def _split(qualified: str) -> tuple[str, str]:
     """(mission, path) of a qualified path `<mission>/<path>`."""
     mission, _, path = qualified.partition("/")
@@ -159,6 +177,11 @@ class LocalGates:
         self.gates: dict[str, DeviceGate] = {}
         self.sharable: set[str] = set()
         self.parts: dict[str, dict[str, object]] = {}  # robot -> part -> driver
+
+    def describe(self, kinds: Mapping[str, str], robots: Mapping[str, str], guard: Guard | None) -> None:
+        """What each device is (RC type) and which robot it moves, and the guard of the constraints in force."""
+        for device, gate in self.gates.items():
+            gate.kind, gate.robot, gate.guard = kinds.get(device, ""), robots.get(device, ""), guard
 
     def add(self, device: str, driver: object, sharable: bool = False) -> DeviceGate:
         gate = self.gates.get(device)
@@ -266,7 +289,7 @@ class Arbiter:
         self.best: dict[str, Proposal] = {}
 
     def propose(self, p: Proposal) -> None:
-        why = p.gate.verdict(p.issuer, p.binding.epoch)
+        why = p.gate.admit(p.issuer, p.binding.epoch, p.method, p.args, p.kwargs, self.clock())
         if why:  # fenced before the pick: a refused command never outranks a valid one
             p.gate.refuse(p.issuer, p.binding.epoch, p.method, why, self.clock())
             return
@@ -291,6 +314,8 @@ class Arbiter:
 
     def drop(self, issuer: str, devices: Iterable[str] | None = None) -> None:
         """Forget the proposals of `issuer`'s subtree (on `devices`, or all): it was unbound before the cycle's end."""
+        if not self.best:
+            return
         only = None if devices is None else set(devices)
         for device in [d for d, p in self.best.items() if under(p.issuer, issuer) and (only is None or d in only)]:
             del self.best[device]

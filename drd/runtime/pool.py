@@ -1,12 +1,23 @@
 """The resources the executive knows, as the Resource Controller Manager's candidates and as
-values expressions can read (`ranger.battery`, `scout.carrier == ranger`)."""
+values expressions can read (`ranger.battery`, `scout.carrier == ranger`, `ranger.x`).
+
+A robot (an aggregate) also reads as where it is and the charge it has left (`x`, `y`, `heading`, `battery`):
+live values from its drivers, through the `telemetry` the executive gives the pool (the static `battery` of
+hosts.yaml when there is none). `predicting` shows a robot somewhere else for a moment: how the gates ask
+"would this command break a constraint?" (`drd.runtime.constraints`)."""
 
 from __future__ import annotations
 
 from collections.abc import Callable, Iterable, Iterator, Mapping
+from contextlib import contextmanager
 
 from drd.rcm import Aggregate, Candidate, ReleaseReason, ResourceManager
 from drd.runtime.broker import ResourceBroker
+
+#: What a robot tells of itself at run time (`dsl.catalog.ROBOT_PROPERTIES`).
+LIVE = frozenset({"x", "y", "heading", "battery"})
+#: robot id -> {"x", "y", "heading", "battery"} (some may be missing), or None when it cannot be read now.
+Telemetry = Callable[[str], Mapping[str, float] | None]
 
 
 class ResourceView(Mapping[str, object]):
@@ -26,6 +37,10 @@ class ResourceView(Mapping[str, object]):
     def id(self) -> str:
         return self._cand.id
 
+    @property
+    def candidate(self) -> Candidate:
+        return self._cand
+
     def _data(self) -> dict[str, object]:
         c = self._cand
         data: dict[str, object] = {"id": c.id, "host": c.host, **self._pool.properties(c.id)}
@@ -40,8 +55,13 @@ class ResourceView(Mapping[str, object]):
             return c.id
         if key == "host":
             return c.host
-        if isinstance(c, Aggregate) and key in c.parts:
-            return self._pool.view(c.parts[key])
+        if isinstance(c, Aggregate):
+            if key in c.parts:
+                return self._pool.view(c.parts[key])
+            if key in LIVE:
+                value = self._pool.live(c.id, key)
+                if value is not None:
+                    return value
         return self._pool.properties(c.id)[key]  # KeyError for an unknown property, as a mapping should
 
     def __iter__(self) -> Iterator[str]:
@@ -74,6 +94,41 @@ class ResourcePool:
         self.broker = rcm if isinstance(rcm, ResourceBroker) else ResourceBroker(rcm)
         self.candidates: dict[str, Candidate] = {}
         self._props: dict[str, dict[str, object]] = {}
+        self.telemetry: Telemetry | None = None
+        self.places: dict[str, tuple[float, float, float, float]] = {}  # the world's named regions (rooms)
+        self._seen: dict[str, dict[str, float]] = {}  # robot -> what `predicting` shows instead of its telemetry
+
+    def live(self, robot: str, key: str) -> float | None:
+        """A robot's live value (`x`, `y`, `heading`, `battery`), or None when nobody can tell."""
+        shown = self._seen.get(robot)
+        if shown is not None and key in shown:
+            return shown[key]
+        if self.telemetry is None:
+            return None
+        data = self.telemetry(robot)
+        value = data.get(key) if data is not None else None
+        return float(value) if isinstance(value, int | float) and not isinstance(value, bool) else None
+
+    def pose(self, robot: str) -> tuple[float, float, float] | None:
+        x, y, h = self.live(robot, "x"), self.live(robot, "y"), self.live(robot, "heading")
+        return None if x is None or y is None or h is None else (x, y, h)
+
+    @contextmanager
+    def predicting(self, robot: str, pose: tuple[float, float, float]) -> Iterator[None]:
+        """Within the block, `robot` reads as standing at `pose`."""
+        previous = self._seen.get(robot)
+        self._seen[robot] = {"x": pose[0], "y": pose[1], "heading": pose[2]}
+        try:
+            yield
+        finally:
+            if previous is None:
+                del self._seen[robot]
+            else:
+                self._seen[robot] = previous
+
+    def place(self, name: str) -> tuple[float, float, float, float] | None:
+        """A named region of the world (`inside(ranger, "n1")`), or None."""
+        return self.places.get(name)
 
     def add(self, resources: Iterable[Candidate], now: float) -> None:
         """Register units before the aggregates that use them (decisions go to the broker's listeners)."""

@@ -8,8 +8,17 @@ and the sim or wall time it happened at. `to_dict` gives the JSON-lines trace fo
 from __future__ import annotations
 
 from collections.abc import Mapping
-from dataclasses import asdict, dataclass, field
+from dataclasses import dataclass, field, fields
 from typing import Any
+
+_FIELDS: dict[type, tuple[str, ...]] = {}
+
+
+def _fields(cls: type) -> tuple[str, ...]:
+    found = _FIELDS.get(cls)
+    if found is None:
+        found = _FIELDS[cls] = tuple(f.name for f in fields(cls))
+    return found
 
 
 @dataclass(frozen=True, slots=True)
@@ -22,7 +31,12 @@ class Record:
         return type(self).__name__.lower()
 
     def to_dict(self) -> dict[str, Any]:
-        return {"kind": self.kind, **asdict(self)}
+        """The record as the trace has it: `kind`, then its fields (shallow: records are frozen, and what they
+        hold is plain data already; `dataclasses.asdict` deep-copied every field of every record)."""
+        out: dict[str, Any] = {"kind": self.kind}
+        for name in _fields(type(self)):
+            out[name] = getattr(self, name)
+        return out
 
 
 @dataclass(frozen=True, slots=True)

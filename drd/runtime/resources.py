@@ -116,7 +116,7 @@ class ResourceClient:
              lease_until: float) -> None:
         """A grant is in force: book it, open the gates to the holder, show the resources in its scope."""
         node.grant = dict(assignment)
-        node.epochs = dict(epochs)
+        node.epochs = dict(epochs)  # its own (a new node shares an empty one)
         node.units = tuple(units)
         node.lease_until = lease_until
         node.revoked = False
@@ -139,9 +139,10 @@ class ResourceClient:
         for n in names:
             node.scope.pop(n, None)
         holder, now = self.holder(node), self.now()
+        if units and node.epochs:
+            node.epochs = {u: e for u, e in node.epochs.items() if u not in gone}
         for unit in units:
             self.gates.clear(unit, holder, now, reason)
-            node.epochs.pop(unit, None)
         node.units = tuple(left)
         if not left:
             node.grant = None

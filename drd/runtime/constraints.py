@@ -1,0 +1,110 @@
+"""Constraints in force: which behaviors declare which, measured each control cycle, and the gates' guard.
+
+A behavior's `constraint` items hold while it is active. `ConstraintGuard` keeps those of every mission sharing
+the gates and answers a gate before it lets a command through: a command from the declaring behavior's subtree
+to a robot the constraint names is refused when, where the command would take the robot within the guard's
+horizon (`drd.hw.motion.predict`), the constraint would break and be worse off than now
+(`drd.rcm.constraints.refuses`). Measuring each cycle and reacting to a violation is the interpreter's
+(`Interpreter._monitor`).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Callable, Iterable, Mapping
+from dataclasses import dataclass, field
+from typing import Any
+
+from drd.hw.motion import predict
+from drd.rcm import Aggregate
+from drd.rcm.constraints import Measure, refuses, text_of
+from drd.runtime.ownership import DeviceGate, under
+from drd.runtime.pool import ResourcePool, ResourceView
+from dsl import ast
+from dsl.evaluate import EvalError
+
+#: Seconds ahead a command is judged by: two control cycles, so a robot stops before its boundary, not past it.
+HORIZON = 0.2
+
+
+@dataclass(eq=False)
+class Active:
+    """One constraint of one active behavior (`holder`: its `<mission>/<path>`)."""
+
+    holder: str
+    path: str
+    name: str
+    condition: ast.Expr
+    robots: tuple[str, ...]  # the robots it names
+    measure: Callable[[], Measure]  # in the declaring behavior's scope
+    refused: Callable[[Measure], None] = lambda m: None  # a command was refused: where it would have led
+    violated: bool = False  # broken, or a command refused, since it last held with nothing refused
+    refused_at: float = -1.0
+    text: str = field(default="", init=False)
+
+    def __post_init__(self) -> None:
+        self.text = text_of(self.condition)
+
+
+def robots_named(condition: ast.Expr, names: Mapping[str, object]) -> tuple[str, ...]:
+    """The robots (aggregates) a condition names, directly or as the owner of a part (`scout.radio`)."""
+    found: dict[str, None] = {}
+    for node in _walk(condition):
+        if isinstance(node, ast.Name):
+            value = names.get(node.id)
+            if isinstance(value, ResourceView) and isinstance(value.candidate, Aggregate):
+                found[value.id] = None
+    return tuple(found)
+
+
+def _walk(e: ast.Expr) -> Iterable[ast.Expr]:
+    stack: list[Any] = [e]
+    while stack:
+        node = stack.pop()
+        yield node
+        for f in dataclasses.fields(node):
+            value = getattr(node, f.name)
+            if isinstance(value, ast.Expr):
+                stack.append(value)
+            elif isinstance(value, tuple):
+                stack.extend(v for v in value if isinstance(v, ast.Expr))
+
+
+class ConstraintGuard:
+    """The gates' guard (`drd.runtime.ownership.LocalGates.guard`) over the constraints of every mission."""
+
+    def __init__(self, pool: ResourcePool, horizon: float = HORIZON) -> None:
+        self.pool = pool
+        self.horizon = horizon
+        self.active: list[Active] = []
+
+    def add(self, constraint: Active) -> None:
+        self.active.append(constraint)
+
+    def remove(self, holder: str) -> None:
+        self.active = [a for a in self.active if a.holder != holder]
+
+    def __call__(self, gate: DeviceGate, issuer: str, method: str, args: tuple[Any, ...],
+                 kwargs: Mapping[str, Any]) -> str:
+        robot = gate.robot
+        if not robot or not self.active:
+            return ""
+        relevant = [a for a in self.active if robot in a.robots and under(issuer, a.holder)]
+        if not relevant:
+            return ""
+        pose = self.pool.pose(robot)
+        then = predict(gate.kind, method, args, kwargs, pose, self.horizon) if pose is not None else None
+        if then is None:
+            return ""
+        for a in relevant:
+            try:
+                before = a.measure()
+                with self.pool.predicting(robot, then):
+                    after = a.measure()
+            except EvalError:
+                continue  # a condition that cannot be read now: the monitor reports it, the gate does not guess
+            if refuses(before, after):
+                a.refused(after)
+                return (f"constraint {a.name} ({a.text}) would not hold: {after.value:.3g} against"
+                        f" {after.limit:.3g}")
+        return ""

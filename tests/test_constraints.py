@@ -1,0 +1,114 @@
+"""Constraints on held resources (issue #11, the paper's goals d-e): monitored every cycle, enforced at the gate.
+
+Dry-runs of the corridor world: the Ranger starts at (1, 0) facing east down the corridor, and FollowCorridor
+drives it east. Positions are checked on the simulated robot itself (ground truth), the refusals in the trace.
+"""
+
+from __future__ import annotations
+
+import io
+import json
+import math
+from typing import Any
+
+from drd.dryrun import DryRun, Mission, run_many
+from drd.hosts import load_hosts
+from drd.sim.world import load_world
+from drd.tracecheck import check
+from dsl import compile_text
+from dsl.catalog import Catalog
+from tests.conftest import ROOT
+
+
+def dry(catalog: Catalog, text: str, until: float = 60.0) -> tuple[DryRun, list[dict[str, Any]]]:
+    r = compile_text(text, catalog, "c.mission")
+    assert r.ok and r.statechart is not None, [d.message for d in r.diagnostics]
+    trace = io.StringIO()
+    (report,) = run_many([Mission(r.statechart)], load_hosts(ROOT / "hosts.yaml", catalog),
+                         load_world(ROOT / "worlds" / "corridor.yaml"), catalog, until=until, trace=trace)
+    records = [json.loads(line) for line in trace.getvalue().splitlines()]
+    assert check(records, {"ranger1.radio"}).ok
+    return report, records
+
+
+def final_x(report: DryRun, robot: str = "ranger1") -> float:
+    return report.tracks[robot][-1][1]
+
+
+FENCED = """
+mission Fenced {
+    needs ranger: Ranger
+    constraint fence: distance(ranger, point(1, 0)) <= 6
+    FollowCorridor(speed: 0.5)
+}
+"""
+
+
+def test_a_robot_driving_out_of_its_geofence_is_stopped_at_the_boundary_and_the_holder_fails(
+        catalog: Catalog) -> None:
+    report, records = dry(catalog, FENCED, until=40.0)
+    assert report.outcome == "failure"
+    assert "constraint fence violated" in report.reason and "distance(ranger, point(1, 0)) <= 6" in report.reason
+    x = final_x(report)
+    assert 6.4 < x <= 7.0 + 0.05, x  # stopped at the fence (7 m), not before it and not past it
+    violation = [r for r in records if r["kind"] == "event" and r["name"] == "violation"]
+    assert violation and violation[0]["fields"]["name"] == "fence" and violation[0]["path"] == "Fenced"
+    refused = [r for r in records if r["kind"] == "command" and not r["accepted"]]
+    assert refused and "constraint fence" in refused[0]["reason"]
+
+
+HANDLED = """
+mission Patrol {
+    needs ranger: Ranger
+    constraint fence: distance(ranger, point(1, 0)) <= 6
+    start -> Out
+    FollowCorridor(speed: 0.5) as Out
+    Out -> Home on violation [event.name == "fence"]
+    ReturnToStart(speed: 0.4) as Home
+}
+"""
+
+
+def test_a_violation_handler_takes_over_and_drives_back_inside(catalog: Catalog) -> None:
+    report, records = dry(catalog, HANDLED, until=120.0)
+    assert report.outcome == "success", report.reason
+    taken = [r for r in records if r["kind"] == "taken" and r["trigger"] == "event"]
+    assert [(r["path"], r["target"]) for r in taken] == [("Patrol/Out", "Patrol/Home")]
+    xs = [x for _t, x, _y in report.tracks["ranger1"]]
+    assert max(xs) <= 7.05 and math.hypot(final_x(report) - 1.0, report.tracks["ranger1"][-1][2]) < 1.0
+    home = [r for r in records if r["kind"] == "command" and r["path"] == "Patrol/Home"]
+    assert home and all(r["accepted"] for r in home)  # driving back in breaks nothing
+
+
+ROOMS = """
+mission Indoors {
+    needs ranger: Ranger
+    constraint stay: inside(ranger, "n1", "s1") or ranger.x < 4
+    FollowCorridor(speed: 0.5)
+}
+"""
+
+
+def test_a_region_constraint_stops_the_robot_where_it_would_leave(catalog: Catalog) -> None:
+    report, _ = dry(catalog, ROOMS, until=40.0)
+    assert report.outcome == "failure" and "constraint stay violated" in report.reason
+    assert 3.4 < final_x(report) <= 4.05
+
+
+def test_a_battery_floor_can_be_read_and_checked(catalog: Catalog) -> None:
+    text = FENCED.replace("distance(ranger, point(1, 0)) <= 6", "ranger.battery >= 2")
+    report, records = dry(catalog, text, until=10.0)
+    assert report.outcome == "failure" and "constraint fence violated: ranger.battery >= 2" in report.reason
+    assert final_x(report) < 1.2  # it never drove: the floor was broken from the start
+
+
+def test_constraints_are_checked_at_compile_time(catalog: Catalog) -> None:
+    def messages(text: str) -> list[str]:
+        return [d.message for d in compile_text(text, catalog, "c.mission").diagnostics]
+
+    assert messages(FENCED.replace("<= 6", "")) == ["constraint fence expects bool, got float"]
+    assert "distance expects a robot or a point, got int" in messages(FENCED.replace("point(1, 0)", "3"))
+    assert any("declared twice" in m for m in messages(FENCED.replace(
+        "    FollowCorridor", "    constraint fence: ranger.battery > 0.1\n    FollowCorridor")))
+    assert messages(HANDLED.replace('event.name == "fence"', "event.nope")) == [
+        "violation has no field nope"]
