@@ -303,8 +303,13 @@ def merged(reports: Sequence[DryRun]) -> DryRun:
 
 
 def world_path(name: str, root: Path) -> Path:
-    """`corridor` or `worlds/corridor.yaml` or any path."""
+    """`corridor` or `worlds/corridor.yaml` or any path: a file as given, else `<root>/worlds/<name>.yaml` (root:
+    the folder of the hosts file that names the world), else the worlds that ship with drd."""
     p = Path(name)
     if p.suffix in (".yaml", ".yml") or p.exists():
         return p
-    return root / "worlds" / f"{name}.yaml"
+    found = root / "worlds" / f"{name}.yaml"
+    if found.exists():
+        return found
+    shipped = Path(__file__).resolve().parents[1] / "worlds" / f"{name}.yaml"
+    return shipped if shipped.exists() else found

@@ -273,7 +273,8 @@ def dry_run(
         return INVALID
     try:
         cluster = load_hosts(hosts, cat)
-        sim_world = load_world(world_path(world or cluster.world, Path.cwd()))
+        sim_world = load_world(world_path(world, Path.cwd()) if world else
+                               world_path(cluster.world, hosts.resolve().parent))
     except (HostsError, WorldError) as e:
         for p in e.problems:
             err.print(Text.assemble(("error: ", "bold red"), str(p)))
