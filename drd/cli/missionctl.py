@@ -26,7 +26,8 @@ from drd.cli.common import (
     render_diagnostic,
     run_app,
 )
-from dsl import Catalog, Compiled, compile_file
+from dsl import Compiled, compile_file
+from dsl.catalog import Catalog
 from dsl.statechart import State, Statechart, StateKind
 
 if TYPE_CHECKING:  # rich's tables and trees, and the exporters, load only for the commands that draw them
@@ -359,8 +360,8 @@ def check_trace(
         try:
             shared = {d.id for d in load_hosts(hosts, catalog(components)).devices if d.sharable}
         except HostsError as e:
-            for p in e.problems:
-                err.print(Text.assemble(("error: ", "bold red"), str(p)))
+            for problem in e.problems:
+                err.print(Text.assemble(("error: ", "bold red"), str(problem)))
             return INVALID
     results = []
     for path in traces:
