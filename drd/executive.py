@@ -91,6 +91,7 @@ class Executive:
         self.gates: Gates = self._gates(gates)
         self.pool.places = dict(self.services.get("places", {}))  # the world's rooms: `inside(ranger, "n1")`
         self._ids = itertools.count(1)
+        self._seq = itertools.count(1)  # the records of every mission, in the order they happened
         self._queryable = bus.serve(f"drd/{cluster}/executive", self._command)
 
     def _gates(self, gates: Gates | None) -> Gates:
@@ -127,7 +128,7 @@ class Executive:
                              pool=self.pool, mission=mid, services=self.services, preallocate=self.preallocate,
                              gates=self.gates, priority=priority, guard=self.guard)
         key = f"drd/{self.cluster}/mission/{mid}/record"
-        interp.attach(lambda r: self.bus.put(key, _to_message(mid, r)))
+        interp.attach(lambda r: self.bus.put(key, _to_message(mid, r, next(self._seq))))
         for listener in listeners:
             interp.attach(listener)
         self.missions[mid] = interp
@@ -199,9 +200,9 @@ class Executive:
         return query.error(f"unknown command {cmd.op!r}: use status, stop or emit EVENT")
 
 
-def _to_message(mission: str, r: rec.Record) -> MissionRecord:
+def _to_message(mission: str, r: rec.Record, seq: int = 0) -> MissionRecord:
     data = r.to_dict()
     kind, at, path = data.pop("kind"), data.pop("at"), data.pop("path")
-    return MissionRecord(mission, kind, at, path, plain(data))
+    return MissionRecord(mission, kind, at, path, plain(data), seq)
 
 

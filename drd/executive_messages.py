@@ -9,15 +9,18 @@ from typing import Any
 from drd.bus import Message, message
 
 
-@message("drd.mission.record", 1)
+@message("drd.mission.record", 2)
 class MissionRecord(Message):
-    """One runtime record (entry, exit, transition, grant, event...) of one mission."""
+    """One runtime record (entry, exit, transition, grant, event...) of one mission. `seq` numbers the records
+    of every mission of one controller in the order they happened (so the traces of missions that ran together
+    merge in causal order)."""
 
     mission: str
     kind: str
     at: float
     path: str
     data: dict[str, Any]
+    seq: int = 0
 
 
 @message("drd.mission.command", 1)

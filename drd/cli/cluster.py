@@ -18,7 +18,7 @@ from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
 from dataclasses import asdict
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import IO, TYPE_CHECKING, Any
 
 import typer
 from rich.text import Text
@@ -323,11 +323,17 @@ def run(mission: Path = typer.Argument(..., help="The mission file.", show_defau
         seed: int = typer.Option(0, "--seed", help="Seed of the simulation."),
         param: list[str] = typer.Option([], "--param", "-p", show_default=False,
                                         help="NAME=VALUE: start the mission's variable NAME at VALUE (repeatable)."),
+        priority: int | None = typer.Option(None, "--priority", "-P", min=1, show_default=False,
+                                     help="The mission's priority against the missions running with it (1 the"
+                                          " highest) [default: its `mission ... priority`, else 1]."),
+        trace: Path | None = typer.Option(None, "--trace", show_default=False,
+                                   help="Write every record of the mission as JSON lines to this file"
+                                        " (docs/trace.md)."),
         detach: bool = typer.Option(False, "--detach", "-d", help="Print the mission id and return at once."),
         as_json: bool = typer.Option(False, "--json", help="Print the report as JSON."),
         timeout: float = TimeoutOption) -> int:
     """Run a mission on the cluster: the controller compiles and runs it; exit 0 if it succeeds, 1 if it fails,
-    2 if it is invalid."""
+    2 if it is invalid. A mission started while others run joins them: they share the team by priority."""
     from drd.cli.common import MISSION_FAILED
     from drd.daemon.missions import RunMission, RunReply, run_key
     from dsl.params import ParamError, parse_assignments
@@ -342,10 +348,16 @@ def run(mission: Path = typer.Argument(..., help="The mission file.", show_defau
         params = parse_assignments(param)
     except ParamError as e:
         fail(str(e))
+    if trace is not None and detach:
+        fail("--trace needs the records as they come: it cannot be used with --detach")
+    try:
+        trace_out = trace.open("w", encoding="utf-8") if trace is not None else None
+    except OSError as e:
+        fail(f"{trace}: cannot write the trace: {e}")
     with _cluster(config, connect, timeout) as client:
-        watch = _RecordWatch(client)
+        watch = _RecordWatch(client, trace_out)
         try:
-            request = RunMission(source, str(mission), world, speed, until, seed, params or None)
+            request = RunMission(source, str(mission), world, speed, until, seed, params or None, priority)
             began = time.monotonic()
             reply: RunReply | None = None
             try:
@@ -363,7 +375,8 @@ def run(mission: Path = typer.Argument(..., help="The mission file.", show_defau
                         out.print(reply.mission)
                         return OK
                     err.print(Text.assemble(("▶ ", "bold green"), f"mission {reply.mission} started on the cluster "
-                                            f"(world {reply.world}, {reply.speed:g}x real time)"))
+                                            f"(world {reply.world}, {reply.speed:g}x real time, priority "
+                                            f"{reply.priority})"))
                 if interrupted:
                     raise KeyboardInterrupt
                 report = watch.follow(reply.mission, until / speed + 120.0, reply.base, began)
@@ -373,6 +386,8 @@ def run(mission: Path = typer.Argument(..., help="The mission file.", show_defau
                 report = _stop_on_interrupt(client, watch, reply.mission, reply.base, began)
         finally:
             watch.close()
+            if trace_out is not None:
+                trace_out.close()
     report.speed, report.on_cluster = speed, True
     if as_json:
         print_json(report.to_dict(), default=str)
@@ -434,12 +449,13 @@ def stop(mission: str = typer.Argument("", help="The mission id (default: every 
 class _RecordWatch:
     """The records of the cluster's missions, from the moment `missionctl run` subscribed; then a report."""
 
-    def __init__(self, client: ClusterClient) -> None:
+    def __init__(self, client: ClusterClient, trace: IO[str] | None = None) -> None:
         import queue
 
         from drd.executive_messages import MissionRecord
 
         self.client = client
+        self.trace = trace  # --trace: the followed mission's records, as docs/trace.md lines
         self.queue: queue.Queue[object] = queue.Queue()
         self.seen: dict[str, tuple[Any, dict[str, None]]] = {}  # mission -> (its report so far, active paths)
 
@@ -455,7 +471,7 @@ class _RecordWatch:
         """Print progress until the mission's `finished` record (or its outcome in the status); the report."""
         import queue
 
-        from drd.dryrun import DryRun, facts
+        from drd.dryrun import DryRun
         from drd.runtime import records as rec
 
         if mission not in self.seen:  # a second follow (after a Ctrl-C) goes on with what the first received
@@ -473,17 +489,13 @@ class _RecordWatch:
             except queue.Empty:
                 msg = None
             if msg is not None and msg.mission == mission:
-                r = _record(msg, rec, base)
-                if r is not None:
-                    result.records.append(r)
-                    facts(result, r)
-                    result.sim_time = max(result.sim_time, r.at)
-                    if isinstance(r, rec.Entered):
-                        active[r.path] = None
-                    elif isinstance(r, rec.Exited):
-                        active.pop(r.path, None)
-                    elif isinstance(r, rec.Finished):
-                        finished = (r.outcome, r.reason)
+                r = self._take(msg, result, base)
+                if isinstance(r, rec.Entered):
+                    active[r.path] = None
+                elif isinstance(r, rec.Exited):
+                    active.pop(r.path, None)
+                elif isinstance(r, rec.Finished):
+                    finished = (r.outcome, r.reason)
             now = time.monotonic()
             if now >= next_print and finished is None:
                 next_print = now + 1.0
@@ -497,14 +509,29 @@ class _RecordWatch:
                         time.sleep(0.5)  # the records in flight come first
                         while not self.queue.empty():
                             extra: Any = self.queue.get()
-                            if extra.mission == mission and (r := _record(extra, rec, base)) is not None:
-                                result.records.append(r)
-                                facts(result, r)
-                                result.sim_time = max(result.sim_time, r.at)
+                            if extra.mission == mission:
+                                self._take(extra, result, base)
                         finished = (m["outcome"], m.get("reason") or "")
         result.outcome, result.reason = finished
         result.wall_time = time.monotonic() - (start if began is None else began)
         return result
+
+
+    def _take(self, msg: Any, result: Any, base: float) -> Any:
+        """One record of the followed mission: into its report (and the trace file); the record, or None."""
+        from drd.dryrun import facts
+        from drd.runtime import records as rec
+
+        if self.trace is not None:
+            line = {"kind": msg.kind, "at": round(msg.at - base, 6), "path": msg.path, **msg.data,
+                    "mission": msg.mission, "seq": msg.seq}
+            self.trace.write(json.dumps(line, separators=(",", ":"), default=str) + "\n")
+        r = _record(msg, rec, base)
+        if r is not None:
+            result.records.append(r)
+            facts(result, r)
+            result.sim_time = max(result.sim_time, r.at)
+        return r
 
 
 def _record(msg: Any, rec: Any, base: float = 0.0) -> Any:

@@ -7,7 +7,7 @@ import shutil
 import subprocess
 from enum import StrEnum
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import typer
 from rich.text import Text
@@ -227,7 +227,8 @@ def dry_run(
     world: str = typer.Option(None, "--world", "-w", show_default=False,
                               help="A world name (worlds/NAME.yaml) or a path [default: hosts.yaml's cluster.world,"
                                    " else corridor]."),
-    hosts: Path = typer.Option(Path("hosts.yaml"), "--hosts", help="The cluster's resource configuration."),
+    hosts: Path = typer.Option(Path("hosts.yaml"), "--config", "-c", "--hosts",
+                               help="The cluster's hosts file (its robots and devices; `--hosts` is an alias)."),
     seed: int = typer.Option(0, "--seed", help="Seed of the simulation (same seed, same run)."),
     speed: float = typer.Option(None, "--speed", help="Run at this multiple of real time (default: as fast "
                                                       "as the CPU allows).", show_default=False),
@@ -345,7 +346,12 @@ def check_trace(
     sharable: list[str] = typer.Option([], "--sharable", show_default=False,
                                        help="A unit several holders may hold at once (repeatable; default: the "
                                             "sharable devices of --hosts)."),
-    hosts: Path = typer.Option(Path("hosts.yaml"), "--hosts", help="Where the sharable devices are read from."),
+    hosts: Path = typer.Option(Path("hosts.yaml"), "--config", "-c", "--hosts",
+                               help="The hosts file the sharable devices are read from (`--hosts` is an alias)."),
+    together: bool = typer.Option(False, "--together",
+                                  help="The files are missions that ran together on one cluster (each from its"
+                                       " own `missionctl run --trace`): check them as one trace, in the order"
+                                       " of their records' `seq`."),
     as_json: bool = typer.Option(False, "--json", help="Print the result as JSON."),
     components: list[Path] = ComponentsOption,
 ) -> int:
@@ -363,16 +369,15 @@ def check_trace(
             for problem in e.problems:
                 err.print(Text.assemble(("error: ", "bold red"), str(problem)))
             return INVALID
-    results = []
-    for path in traces:
-        try:
-            lines = path.read_text(encoding="utf-8").splitlines()
-            records = [json.loads(line) for line in lines if line.strip()]
-        except (OSError, UnicodeDecodeError, json.JSONDecodeError) as e:
-            fail(f"{path}: cannot read it as a trace: {e}")
-        if not all(isinstance(r, dict) for r in records):
-            fail(f"{path}: every line of a trace is a JSON object")
-        results.append((path, check(records, shared)))
+    loaded = [(str(path), _trace_records(path)) for path in traces]
+    if together and len(loaded) > 1:
+        unordered = [name for name, records in loaded if not all(isinstance(r.get("seq"), int) for r in records)]
+        if unordered:
+            fail(f"{', '.join(unordered)}: records without `seq` (a dry-run writes missions that ran together into"
+                 " one file: check that file alone)")
+        merged = sorted((r for _, records in loaded for r in records), key=lambda r: int(r["seq"]))
+        loaded = [(" + ".join(name for name, _ in loaded), merged)]
+    results = [(name, check(records, shared)) for name, records in loaded]
     if as_json:
         print_json([{"file": str(p), "ok": r.ok, "commands": r.commands, "accepted": r.accepted,
                      "refused": r.refused, "grants": r.grants,
@@ -389,6 +394,18 @@ def check_trace(
             if r.commands == 0:
                 out.print("  no command records: nothing moved, or the trace was not written by a gate")
     return OK if all(r.ok for _, r in results) else MISSION_FAILED
+
+
+def _trace_records(path: Path) -> list[dict[str, Any]]:
+    """The records of a trace file (JSON lines), or a clear error."""
+    try:
+        lines = path.read_text(encoding="utf-8").splitlines()
+        records = [json.loads(line) for line in lines if line.strip()]
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as e:
+        fail(f"{path}: cannot read it as a trace: {e}")
+    if not all(isinstance(r, dict) for r in records):
+        fail(f"{path}: every line of a trace is a JSON object")
+    return records
 
 
 def _progress_view(sim: Simulation, executive: Executive) -> Text:

@@ -95,6 +95,18 @@ def run_key(cluster: str) -> str:
     return f"drd/{cluster}/missions/run"
 
 
+def cluster_unsupported(chart: Any) -> list[Any]:
+    """What a cluster cannot run yet, as diagnostics at the place in the mission: constraints are measured and
+    enforced in the dry-run only (a cluster's controller does not read its robots' pose and battery each cycle);
+    running such a mission unguarded would promise a safety it does not give."""
+    from dsl.errors import Diagnostic
+
+    return [Diagnostic("cluster-constraint", f"constraint {c.name}: constraints are enforced in the dry-run only, not"
+                       " yet on a cluster", c.span, hint="dry-run it (`missionctl dry-run`), or remove the"
+                       " constraint to run it on the cluster without that guard")
+            for state in chart.states.values() for c in state.constraints]
+
+
 def render(diagnostics: list[Any], sources: dict[str, str]) -> list[str]:
     """Diagnostics as `missionctl validate` prints them (file:line:col, message, source line, caret), plain text."""
     from dsl.errors import caret, source_line
@@ -236,6 +248,9 @@ class MissionRunner:
             return RunReply("", False, str(e).splitlines())
         if self.simulator is None:
             raise ValueError("no host has the role simulator in hosts.yaml: the sim drivers need one")
+        unmeasured = cluster_unsupported(chart)
+        if unmeasured:
+            return RunReply("", False, render(unmeasured, dict(compiled.sources)))
         priority = req.priority or chart.priority
         with self._starting:  # one start at a time: two first missions must not start two worlds
             return self._start(req, chart, priority)

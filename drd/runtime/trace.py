@@ -25,6 +25,7 @@ class TraceWriter:
 
     def __call__(self, record: Record) -> None:
         data = record.to_dict()
+        data["at"] = round(data["at"], 6)  # float steps (0.1 s ten times) would read 0.9999999999999999
         if self.mission:
             data["mission"] = self.mission
         self.out.write(json.dumps(data, default=_default, separators=(",", ":")) + "\n")

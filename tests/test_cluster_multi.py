@@ -1,0 +1,141 @@
+"""Two missions share one Ranger by priority on a real 2-daemon cluster (controller + simulator, ranger1).
+
+A low-priority patrol (`--priority 2`) follows the corridor with ranger1 in 4 s slices; a second `missionctl run`
+of a mission that declares `priority 1` joins it while it runs and needs the same drive. What is asserted is
+what the operator and an outside tool see: both `missionctl run` reports (apart, each a success), and the two
+`--trace` files checked together by `missionctl check-trace --together` and read record by record: the patrol's
+drive revoked for the other mission, nobody but the holder moving the drive, the patrol resumed afterwards.
+Every process is ours and killed by pid (`tests/cluster_support.py`).
+"""
+
+from __future__ import annotations
+
+import json
+import subprocess
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+import pytest
+from cluster_support import MISSIONCTL, ROOT, DaemonCluster, eventually, running, serving_cluster
+
+NAMES = ["controller", "ranger1"]
+
+LOW = """\
+mission Low {
+    Patrol
+    Patrol -> done after 16s
+}
+
+behavior Patrol {
+    needs ranger: Ranger for 4s
+    FollowCorridor(speed: 0.3)
+}
+"""
+
+HIGH = """\
+mission High priority 1 {
+    start -> Pause
+    Wait(duration: 1s) as Pause
+    Pause -> Drive
+    FollowCorridor(speed: 0.2) as Drive
+    Drive -> done after 4s
+}
+"""
+
+CONSTRAINED = """\
+mission Fenced {
+    needs ranger: Ranger
+    constraint home: distance(ranger, point(0, 0)) <= 12
+    FollowCorridor(speed: 0.3)
+}
+"""
+
+
+def corridor_hosts(cluster: DaemonCluster) -> str:
+    """The repository's hosts.yaml (controller, ranger1 with its Scouts) on our free ports, the test lease, the
+    simulator on the controller."""
+    text = (ROOT / "hosts.yaml").read_text()
+    text = text.replace("roles: [worker, simulator]", "roles: [worker]")
+    text = text.replace("roles: [controller]", "roles: [controller, simulator]")
+    ports = dict(zip(NAMES, cluster.ports, strict=True))
+    text = text.replace("name: corridor", f"name: {cluster.name}").replace("lease: 3s", "lease: 1000ms")
+    text = text.replace("127.0.0.1:7447", f"127.0.0.1:{ports['controller']}")
+    return text.replace("127.0.0.1:7448", f"127.0.0.1:{ports['ranger1']}")
+
+
+@pytest.fixture(scope="module")
+def cluster(tmp_path_factory: pytest.TempPathFactory) -> Iterator[DaemonCluster]:
+    with serving_cluster(tmp_path_factory.mktemp("cluster_multi"), NAMES, corridor_hosts) as c:
+        yield c
+
+
+def records(path: Path) -> list[dict[str, Any]]:
+    return [json.loads(line) for line in path.read_text().splitlines() if line.strip()]
+
+
+def test_two_missions_share_one_ranger_by_priority(cluster: DaemonCluster, tmp_path: Path) -> None:
+    (tmp_path / "low.mission").write_text(LOW)
+    (tmp_path / "high.mission").write_text(HIGH)
+    low_trace, high_trace = tmp_path / "low.jsonl", tmp_path / "high.jsonl"
+    config = ["--config", str(cluster.hosts_file), "--speed", "4", "--json"]
+    low_cmd = [*MISSIONCTL, "run", str(tmp_path / "low.mission"), *config, "--priority", "2", "--trace", str(low_trace)]
+    high_cmd = [*MISSIONCTL, "run", str(tmp_path / "high.mission"), *config, "--trace", str(high_trace)]
+    client = cluster.client()
+    with running(low_cmd) as low:
+        def patrolling() -> bool:
+            assert low.poll() is None, low.communicate()
+            return any(m.get("outcome") is None and "Low" in str(m.get("id")) for m in client.missions())
+
+        eventually(patrolling, "the low-priority patrol to run", 30, poll=0.1)
+        with running(high_cmd) as high:
+            high_out, high_err = high.communicate(timeout=90)
+        low_out, low_err = low.communicate(timeout=90)
+    assert high.returncode == 0, (high_err[-2000:], cluster.log("controller")[-3000:])
+    assert low.returncode == 0, (low_err[-2000:], cluster.log("controller")[-3000:])
+    high_report, low_report = json.loads(high_out), json.loads(low_out)
+    assert high_report["outcome"] == low_report["outcome"] == "success"
+    assert "priority 1" in high_err and "priority 2" in low_err  # each run says the rank it got
+
+    low_recs, high_recs = records(low_trace), records(high_trace)
+    assert {r["mission"] for r in low_recs} == {low_report["mission"]}, "each trace holds its own mission"
+    assert {r["mission"] for r in high_recs} == {high_report["mission"]}
+
+    # The outside check: only the holder moved a device, no double hold, everything released.
+    check = subprocess.run([*MISSIONCTL, "check-trace", "--together", str(low_trace), str(high_trace), "--config",
+                            str(cluster.hosts_file), "--json"], cwd=ROOT, capture_output=True, text=True,
+                           timeout=60, check=False)
+    assert check.returncode == 0, check.stdout + check.stderr
+    [together] = json.loads(check.stdout)
+    assert together["ok"] and together["accepted"] > 0 and together["grants"] >= 3
+
+    # Read in causal order: the patrol's drive is revoked for High, High drives, then the patrol resumes.
+    merged = sorted(low_recs + high_recs, key=lambda r: r["seq"])
+    drive = "ranger1.drive"
+    revoked = next(i for i, r in enumerate(merged) if r["kind"] == "revoked" and drive in r["resources"])
+    assert merged[revoked]["mission"] == low_report["mission"]
+    assert "High" in merged[revoked]["reason"], merged[revoked]
+    high_grant = next(i for i, r in enumerate(merged)
+                      if r["kind"] == "granted" and r["mission"] == high_report["mission"] and drive in r["epochs"])
+    assert high_grant > revoked, "the drive is granted to High only after the patrol lost it"
+    high_done = next(i for i, r in enumerate(merged) if r["kind"] == "released" and drive in r["resources"]
+                     and r["mission"] == high_report["mission"])
+    resumed = next(i for i, r in enumerate(merged) if r["kind"] == "resumed" and r["mission"] == low_report["mission"])
+    assert high_grant < high_done < resumed
+    window = merged[high_grant:high_done]
+    moved = [r for r in window if r["kind"] == "command" and r["device"] == drive and r["accepted"]]
+    assert moved and all(r["mission"] == high_report["mission"] for r in moved), \
+        "while High held the drive, only High moved it"
+    assert [r for r in merged[resumed:] if r["kind"] == "command" and r["device"] == drive and r["accepted"]
+            and r["mission"] == low_report["mission"]], "the patrol drove again once resumed"
+
+
+def test_a_mission_with_constraints_is_refused_by_the_cluster_with_its_place(cluster: DaemonCluster,
+                                                                             tmp_path: Path) -> None:
+    fenced = tmp_path / "fenced.mission"
+    fenced.write_text(CONSTRAINED)
+    r = cluster.missionctl("run", str(fenced), "--config", str(cluster.hosts_file), timeout=60)
+    assert r.returncode == 2, r.stderr
+    assert "fenced.mission:3:" in r.stderr and "dry-run only" in r.stderr and "not run" in r.stderr
+    eventually(lambda: not any(m.get("outcome") is None for m in cluster.client().missions()),
+               "no mission to run", 5)
