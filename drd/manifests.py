@@ -27,6 +27,7 @@ from dsl.catalog import (
     SCALAR_TYPES,
     Catalog,
     ComponentType,
+    InputSpec,
     Kind,
     NeedSpec,
     ParamSpec,
@@ -44,10 +45,10 @@ _COMMON = ("name", "kind", "description")
 _RUNNABLE = ("entry_point", "process", "multiplicity", "scheduling", "params")
 #: The keys each kind may use, in the order manifests write them.
 KEYS: Mapping[Kind, tuple[str, ...]] = {
-    Kind.BEHAVIOR: (*_COMMON, *_RUNNABLE, "needs", "outputs", "events", "interfaces"),
+    Kind.BEHAVIOR: (*_COMMON, *_RUNNABLE, "needs", "inputs", "outputs", "events", "interfaces"),
     Kind.RC: (*_COMMON, *_RUNNABLE, "interfaces", "sharable", "capacity", "properties"),
     Kind.ARC: (*_COMMON, "properties", "parts"),
-    Kind.DATA: _COMMON,
+    Kind.DATA: (*_COMMON, "fields"),
 }
 REQUIRED: Mapping[Kind, tuple[str, ...]] = {
     Kind.BEHAVIOR: (*_COMMON, "entry_point"),
@@ -246,10 +247,21 @@ def _needs(c: _Checker, value: object, key: str) -> tuple[NeedSpec, ...]:
 def _records(c: _Checker, value: object, key: str) -> tuple[RecordSpec, ...]:
     out = []
     for name, spec, path in c.entries(value, key, dict):
-        c.keys(spec, path, ("fields", "description"))
+        c.keys(spec, path, ("type", "fields", "description") if key == "outputs" else ("fields", "description"))
         fields = _typemap(c, spec.get("fields", {}), f"{path}.fields")
         description = c.text(spec.get("description", ""), f"{path}.description")
-        out.append(RecordSpec(name, fields, description=description))
+        type_ = c.text(spec.get("type", "record"), f"{path}.type") if key == "outputs" else "record"
+        out.append(RecordSpec(name, fields, type_ or "record", description=description))
+    return tuple(out)
+
+
+def _inputs(c: _Checker, value: object, key: str) -> tuple[InputSpec, ...]:
+    out = []
+    for name, spec, path in c.entries(value, key, dict):
+        c.keys(spec, path, ("type", "optional", "description"), required=("type",))
+        out.append(InputSpec(name, c.text(spec.get("type", ""), f"{path}.type"),
+                             c.flag(spec.get("optional", False), f"{path}.optional"),
+                             c.text(spec.get("description", ""), f"{path}.description")))
     return tuple(out)
 
 
@@ -273,7 +285,9 @@ _PARSERS: dict[str, _Parser] = {
     "scheduling": _scheduling,
     "params": _params,
     "needs": _needs,
+    "inputs": _inputs,
     "outputs": _records,
+    "fields": _typemap,
     "events": _records,
     "interfaces": _Checker.names,
     "sharable": _Checker.flag,
@@ -340,6 +354,15 @@ class _References:
             for r in records:
                 for field, type_ in r.fields.items():
                     self.ref(type_, f"{kind}.{r.name}.fields.{field}", scalars=True)
+        for r in t.outputs:
+            if r.type != "record":
+                self.ref(r.type, f"outputs.{r.name}.type", Kind.DATA)
+        for spec in t.inputs:
+            self.ref(spec.type, f"inputs.{spec.name}.type", Kind.DATA)
+            if t.param(spec.name) is not None:
+                self.fail(f"inputs.{spec.name}", "is a parameter too: an argument must mean one thing")
+        for name, type_ in t.fields.items():
+            self.ref(type_, f"fields.{name}", scalars=True)
         for name, type_ in t.properties.items():
             self.ref(type_, f"properties.{name}", scalars=True)
         for name, type_ in t.parts.items():

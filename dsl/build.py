@@ -11,14 +11,19 @@ Controller Manager itself. Completion transitions the language implies (plan ord
 
 from __future__ import annotations
 
+from collections.abc import Iterator
 from dataclasses import dataclass, replace
 
 from dsl import ast
-from dsl.catalog import Catalog, Kind
+from dsl.catalog import Catalog, ComponentType, InputSpec, Kind
 from dsl.checker import Body, Checked
+from dsl.dataflow import UNTYPED, Ambiguous, InputBinding, Offer, bind, producer_order
 from dsl.errors import NOWHERE, Reporter, Span
 from dsl.linearize import plan_graph, predecessors, total_order
 from dsl.statechart import ResourceNeed, State, Statechart, StateKind, Transition
+
+#: The data in scope of a child, nearest level first (`dsl.dataflow`).
+_Levels = tuple[tuple[Offer, ...], ...]
 
 
 @dataclass(frozen=True, slots=True)
@@ -40,32 +45,36 @@ class Builder:
 
     def build(self, mission: ast.Behavior, file: str) -> Statechart:
         root = ast.Child(mission.name, span=mission.name_span)
-        self._instance(mission.name, mission.name, root, None, 0, 1, ())
+        self._instance(mission.name, mission.name, root, None, 0, 1, (), ())
         return Statechart(mission.name, mission.name, dict(self.states), file, mission.priority or 1)
 
     # ------------------------------------------------------------- states
-    def _child(self, parent: str, child: ast.Child, depth: int, prio: int, held: tuple[_Held, ...]) -> str:
+    def _child(self, parent: str, child: ast.Child, depth: int, prio: int, held: tuple[_Held, ...],
+               data: _Levels) -> str:
         sid = f"{parent}/{child.key}"
         behavior = self.checked.behaviors.get(child.name)
         eff = child.priority or (behavior.priority if behavior else None) or prio
         if child.mult is None:
-            self._instance(sid, child.key, child, parent, depth, eff, held)
+            self._instance(sid, child.key, child, parent, depth, eff, held, data)
             return sid
         self.states[sid] = State(sid, child.key, StateKind.MULTI, parent, depth, (sid + "[*]",),
                                  component=child.name, priority=eff, multiplicity=child.mult, span=child.span)
-        self._instance(sid + "[*]", child.key + "[*]", child, sid, depth + 1, eff, held)
+        self._instance(sid + "[*]", child.key + "[*]", child, sid, depth + 1, eff, held, data)
         return sid
 
     def _instance(self, sid: str, name: str, child: ast.Child, parent: str | None, depth: int, prio: int,
-                  held: tuple[_Held, ...]) -> None:
+                  held: tuple[_Held, ...], data: _Levels) -> None:
         behavior = self.checked.behaviors.get(child.name)
         args = child.args or ()
         if behavior is None:
             ct = self.catalog.get(child.name)
             defaults = tuple(ast.Arg(p.name, _literal(p.default, p.type)) for p in (ct.params if ct else ())
                              if not p.required)
-            self.states[sid] = State(sid, name, StateKind.LEAF, parent, depth, component=child.name, args=args,
-                                     defaults=defaults, needs=self._leaf_needs(child, held), priority=prio,
+            inputs = self._inputs(child, ct, data) if ct is not None else ()
+            bound = {i.name for i in ct.inputs} if ct is not None else set()
+            self.states[sid] = State(sid, name, StateKind.LEAF, parent, depth, component=child.name,
+                                     args=tuple(a for a in args if a.name not in bound), defaults=defaults,
+                                     needs=self._leaf_needs(child, held), priority=prio, inputs=inputs,
                                      span=child.span)
             return
         body = self.checked.bodies[behavior.name]
@@ -80,7 +89,12 @@ class Builder:
         hidden = {(n.bound_to[0], n.bound_to[1]) for n in needs if n.bound_to and n.bound_to[2] is None}
         inner = tuple(_Held(sid, n.name, n.type.name) for n in body.needs) + tuple(
             h for h in held if (h.state, h.name) not in hidden)
-        kids = {key: self._child(sid, c, depth + 1, prio, inner) for key, c in body.children.items()}
+        offers = [o for key, c in body.children.items() if c.mult is None
+                  for o in self._offers(f"{sid}/{key}", key, c.name, ())]
+        offers += [Offer(sid, s.name, s.type.name, True) for s in body.shared]
+        kids = {key: self._child(sid, c, depth + 1, prio, inner,
+                                 (tuple(o for o in offers if o.shared or o.key != key), *data))
+                for key, c in body.children.items()}
         self.states[sid] = self._body(self.states[sid], body, kids)
 
     def _body(self, state: State, body: Body, kids: dict[str, str]) -> State:
@@ -105,9 +119,11 @@ class Builder:
                        for t in body.transitions if t.source == "start")
         kind, initial, policy, until = StateKind.COMPOUND, None, None, None
         generated: list[Transition] = []
+        entry: tuple[str, ...] = ()
         if body.parallel is not None:
             kind, policy = StateKind.PARALLEL, body.parallel.policy
             until = kids[body.parallel.until] if body.parallel.until in kids else None
+            entry = self._producers_first(list(kids.values()), body.parallel.span)
         elif body.plan is not None and body.plan.concurrent:
             kind, policy = StateKind.PARALLEL, ast.Policy.ALL
             for step, preds in predecessors(plan_graph(body.plan)).items():
@@ -134,13 +150,121 @@ class Builder:
                                     t.span if t.span is not NOWHERE else state.span)
         children = tuple(kids.values()) + tuple(finals.values())
         return replace(self.states[sid], kind=kind, children=children, initial=initial, policy=policy,
-                       until=until, starts=starts if len(starts) > 1 or any(t.guard for t in starts) else ())
+                       until=until, starts=starts if len(starts) > 1 or any(t.guard for t in starts) else (),
+                       entry=entry)
 
     @staticmethod
     def _transition(t: ast.Transition, domain: str, source: str, target: str) -> Transition:
         delay = t.delay.seconds if isinstance(t.delay, ast.Duration) else t.delay
         return Transition(source, target, domain, t.kind, t.event, t.condition, delay, t.guard, t.actions,
                           preallocate=t.preallocate, span=t.span)
+
+    # ------------------------------------------------------------- data flow
+    def _offers(self, state: str, key: str, callee: str, seen: tuple[str, ...]) -> list[Offer]:
+        """What a child produces: a component's outputs, or those of every child of a behavior, all the way down
+        (a composite's outputs are its finished children's: FindNewDoor's `door` is DetectDoor's)."""
+        behavior = self.checked.behaviors.get(callee)
+        if behavior is None:
+            ct = self.catalog.get(callee)
+            return [Offer(state, o.name, o.type, False, key) for o in (ct.outputs if ct else ())]
+        if callee in seen:
+            return []
+        body = self.checked.bodies[behavior.name]
+        return [o for c in body.children.values() if c.mult is None
+                for o in self._offers(state, key, c.name, (*seen, callee))]
+
+    def _inputs(self, child: ast.Child, ct: ComponentType, data: _Levels) -> tuple[InputBinding, ...]:
+        given = {a.name: a for a in child.args or ()}
+        out = []
+        for spec in ct.inputs:
+            arg = given.get(spec.name)
+            if arg is not None:
+                binding = self._explicit(child, spec, arg, data)
+                if binding is not None:
+                    out.append(binding)
+                continue
+            found = bind(spec, data)
+            if isinstance(found, Offer):
+                out.append(InputBinding(spec.name, found.state, found.name, found.shared))
+            elif isinstance(found, Ambiguous):
+                names = " or ".join(o.describe() for o in found.offers)
+                self._error("ambiguous-input", f"{child.name}'s input {spec.name} ({spec.type}) could read {names}",
+                            child.span, f"bind it: {child.name}({spec.name}: {_reference(found.offers[0])})")
+            elif not spec.optional:
+                self._error("missing-input", f"{child.name} needs input {spec.name} ({spec.type}): nothing in scope"
+                            f" is called {spec.name} or is a {spec.type}", child.span,
+                            f"run a behavior that outputs a {spec.type} before it, declare `shared {spec.name}:"
+                            f" {spec.type}` in an enclosing behavior, or bind it: {child.name}({spec.name}: ...)")
+        return tuple(out)
+
+    def _explicit(self, child: ast.Child, spec: InputSpec, arg: ast.Arg, data: _Levels) -> InputBinding | None:
+        """`X(door: finder.door)`, `X(visited: doors)`, `X(door: last(finder.door))`."""
+        value, last = arg.value, False
+        if isinstance(value, ast.Call) and value.func == "last" and len(value.args) == 1 and value.where is None:
+            value, last = value.args[0], True
+        near = data[0] if data else ()
+        offer: Offer | None
+        if isinstance(value, ast.Attr) and isinstance(value.obj, ast.Name):
+            key, field = value.obj.id, value.attr
+            hits = [o for o in near if not o.shared and o.key == key and o.name == field]
+            if not hits:
+                outputs = sorted({o.name for o in near if not o.shared and o.key == key})
+                self._error("unknown-input-source", f"{key}.{field} is not an output of a sibling of {child.name}",
+                            arg.span, f"{key}'s outputs: {', '.join(outputs)}" if outputs else
+                            f"siblings with outputs: {', '.join(sorted({o.key for o in near if not o.shared}))}"
+                            or None)
+                return None
+            offer = hits[0]
+        elif isinstance(value, ast.Name):
+            offer = next((o for level in data for o in level if o.shared and o.name == value.id), None)
+            if offer is None:
+                self._error("unknown-input-source", f"{value.id} is no shared datum in scope of {child.name}",
+                            arg.span, "an input reads a sibling's output (sibling.output) or a `shared` datum")
+                return None
+        else:
+            self._error("input-binding", f"input {spec.name} of {child.name} reads a sibling's output"
+                        " (sibling.output) or a shared datum (its name), not an expression", arg.span,
+                        f"e.g. {child.name}({spec.name}: finder.{spec.name})")
+            return None
+        if offer.type not in (spec.type, UNTYPED):
+            self._error("type", f"{child.name}'s input {spec.name} is a {spec.type}; {_reference(offer)} is a"
+                        f" {offer.type}", arg.span)
+            return None
+        return InputBinding(spec.name, offer.state, offer.name, offer.shared, last)
+
+    def _producers_first(self, kids: list[str], span: Span) -> tuple[str, ...]:
+        """Concurrent children, each producer before those that read its outputs this cycle; a cycle of such reads
+        is an error (one of them must read `last(...)`)."""
+        feeds = []
+        for consumer in kids:
+            for leaf in self._leaves_under(consumer):
+                for b in self.states[leaf].inputs:
+                    if not b.shared and not b.last and b.state in kids:
+                        feeds.append((b.state, consumer))
+        if not feeds:
+            return ()
+        order = producer_order(kids, feeds)
+        if order[-1] is None:
+            cycle = " -> ".join(self.states[s].name for s in order if s is not None)
+            self._error("input-cycle", f"concurrent behaviors feed each other every cycle: {cycle}", span,
+                        "read one of these inputs as last(sibling.output): the previous cycle's value")
+            return ()
+        return tuple(s for s in order if s is not None)
+
+    def _leaves_under(self, sid: str) -> Iterator[str]:
+        state = self.states.get(sid)
+        if state is None:
+            return
+        if state.kind is StateKind.LEAF:
+            yield sid
+        for c in state.children:
+            yield from self._leaves_under(c)
+
+    def _error(self, code: str, message: str, span: Span, hint: str | None = None) -> None:
+        if (message, span) in self._reported:  # a behavior used twice is built twice
+            return
+        self._reported.add((message, span))
+        self.report.error(code, message, span, hint)
 
     # ------------------------------------------------------------- resources
     def _need(self, n: ast.Need, held: tuple[_Held, ...]) -> ResourceNeed:
@@ -194,6 +318,11 @@ class Builder:
         self._reported.add((msg, span))
         self.report.error("ambiguous-binding", msg, span,
                           f"name one of them {name} so it is chosen by name, or keep one {typ} in scope")
+
+
+def _reference(offer: Offer) -> str:
+    """How a mission names a datum in an explicit binding."""
+    return offer.name if offer.shared else f"{offer.key}.{offer.name}"
 
 
 def _literal(value: object, type_name: str) -> ast.Expr:

@@ -63,11 +63,26 @@ class NeedSpec:
 
 @dataclass(frozen=True, slots=True)
 class RecordSpec:
-    """A named record with typed fields: a component output or an event."""
+    """A named record with typed fields: a component output or an event. An output's `type` is the data type it
+    produces (`Door`), which inputs of that type bind to; "record" when it declares fields only."""
 
     name: str
     fields: Mapping[str, str] = field(default_factory=dict)
     type: str = "record"
+    description: str = ""
+
+
+@dataclass(frozen=True, slots=True)
+class InputSpec:
+    """A datum an elementary behavior reads, of a data type (`door: Door`, `visited: DoorLog`).
+
+    The mission binds it to what is in scope where the behavior is used: a sibling's output or an ancestor's
+    `shared` datum, by name, else by type, else explicitly (`AlignRanger(door: finder.door)`); `optional` inputs
+    may stay unbound (the component then reads None). See `dsl.dataflow`."""
+
+    name: str
+    type: str
+    optional: bool = False
     description: str = ""
 
 
@@ -88,11 +103,13 @@ class ComponentType:
     description: str = ""
     params: tuple[ParamSpec, ...] = ()
     needs: tuple[NeedSpec, ...] = ()
+    inputs: tuple[InputSpec, ...] = ()
     outputs: tuple[RecordSpec, ...] = ()
     events: tuple[RecordSpec, ...] = ()
     interfaces: tuple[str, ...] = ()
     parts: Mapping[str, str] = field(default_factory=dict)
     properties: Mapping[str, str] = field(default_factory=dict)
+    fields: Mapping[str, str] = field(default_factory=dict)  # a data type's (a Door's width, x, y, side)
     sharable: bool = False
     capacity: float | None = None
     multiplicity: int | None = None
@@ -106,6 +123,9 @@ class ComponentType:
 
     def output(self, name: str) -> RecordSpec | None:
         return next((o for o in self.outputs if o.name == name), None)
+
+    def input(self, name: str) -> InputSpec | None:
+        return next((i for i in self.inputs if i.name == name), None)
 
     @property
     def is_resource(self) -> bool:

@@ -326,10 +326,14 @@ class Checker:
                 self.report.error("duplicate", f"{arg.name} is given twice", arg.span)
             given[arg.name] = arg
             spec = params.get(arg.name)
+            if spec is None and isinstance(target, ComponentType) and target.input(arg.name) is not None:
+                continue  # binds an input: checked where the scope is known (dsl.build)
             if spec is None:
+                inputs = [i.name for i in target.inputs] if isinstance(target, ComponentType) else []
                 self.report.error("unknown-parameter", f"{child.name} has no parameter {arg.name}", arg.span,
-                                  did_you_mean(arg.name, params) or
-                                  (f"its parameters: {', '.join(params)}" if params else f"{child.name} takes none"))
+                                  did_you_mean(arg.name, [*params, *inputs]) or
+                                  (f"its parameters: {', '.join(params)}" if params else f"{child.name} takes none")
+                                  + (f"; its inputs: {', '.join(inputs)}" if inputs else ""))
                 continue
             self.typer.expect(arg.value, spec.type, scope, arg.name)
         for spec in params.values():

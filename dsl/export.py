@@ -9,6 +9,7 @@ import json
 from typing import Any
 
 from dsl import ast, printer
+from dsl.dataflow import InputBinding
 from dsl.statechart import ResourceNeed, State, Statechart, StateKind, Transition
 
 SCHEMA_VERSION = 1
@@ -56,6 +57,13 @@ def state_label(s: State) -> str:
     if s.kind is not StateKind.FINAL:
         bits.append(f"priority {s.priority}")
     return " · ".join(bits)
+
+
+def input_label(b: InputBinding) -> str:
+    """`door ← FindNewDoor.door`, `visited ← shared visited (CorridorSurveillance)`, `n ← last(Tick.n)`."""
+    source = (f"shared {b.field} ({b.state.rsplit('/', 1)[-1]})" if b.shared
+              else f"{b.state.rsplit('/', 1)[-1]}.{b.field}")
+    return f"{b.name} ← " + (f"last({source})" if b.last else source)
 
 
 def need_label(n: ResourceNeed) -> str:
@@ -110,6 +118,9 @@ def _state_dict(s: State) -> dict[str, Any]:
                    "quantity": (printer.expr(n.quantity) if isinstance(n.quantity, ast.Expr) else n.quantity),
                    "slice": n.slice} for n in s.needs],
         "shared": [{"name": n, "type": t} for n, t in s.shared],
+        "inputs": [{"name": b.name, "from": b.state, "field": b.field, "shared": b.shared, "last": b.last}
+                   for b in s.inputs],
+        "entry": list(s.entry),
         "vars": [{"name": v.name, "type": v.type.name, "value": printer.expr(v.value) if v.value else None}
                  for v in s.vars],
         "transitions": [_transition_dict(t) for t in (*s.starts, *s.transitions)],
@@ -146,7 +157,8 @@ def to_dot(chart: Statechart) -> str:
         return ids[sid] + ("_in" if s.children and s.kind is not StateKind.FINAL else "")
 
     def emit(s: State, indent: str) -> None:
-        label = _dot_escape(s.name + "\\n" + state_label(s) + "".join("\\n" + need_label(n) for n in s.needs))
+        label = _dot_escape(s.name + "\\n" + state_label(s) + "".join("\\n" + need_label(n) for n in s.needs)
+                            + "".join("\\n" + input_label(b) for b in s.inputs))
         if s.kind is StateKind.FINAL:
             color = "#2e7d32" if s.success else "#c62828"
             out.append(f'{indent}{ids[s.id]} [label="{s.name}", shape=doublecircle, fillcolor="{color}", '
@@ -172,6 +184,12 @@ def to_dot(chart: Statechart) -> str:
         clip = "".join(f", {end}=cluster_{ids[sid]}" for end, sid in (("ltail", t.source), ("lhead", t.target))
                        if chart[sid].children and chart[sid].kind is not StateKind.FINAL)
         out.append(f'  {anchor(t.source)} -> {anchor(t.target)} [label="{label}"{style}{clip}];')
+    for s in chart.walk():  # data flow: a sibling's output to the input that reads it
+        for b in s.inputs:
+            if not b.shared and b.state in ids:
+                clip = f", ltail=cluster_{ids[b.state]}" if chart[b.state].children else ""
+                out.append(f'  {anchor(b.state)} -> {ids[s.id]} [label="{_dot_escape(b.field)}", style=dotted,'
+                           f' color="#00897b", fontcolor="#00897b", constraint=false{clip}];')
     out.append("}")
     return "\n".join(out) + "\n"
 

@@ -17,6 +17,7 @@ from dataclasses import dataclass, field
 from enum import StrEnum
 
 from dsl import ast
+from dsl.dataflow import InputBinding
 from dsl.errors import NOWHERE, Span
 
 
@@ -93,6 +94,9 @@ class State:
     until: str | None = None
     after: tuple[str, ...] = ()  # concurrent plans: siblings that must be done before this starts
     constraints: tuple[ast.Constraint, ...] = ()  # hold while the state is active (checked every control cycle)
+    inputs: tuple[InputBinding, ...] = ()  # leaf: what each declared input reads (dsl.dataflow)
+    entry: tuple[str, ...] = ()  # parallel: the children in the order they are entered and stepped (producers
+    #                              first); empty: declaration order
     multiplicity: ast.Multiplicity | None = None
     success: bool | None = None  # final states
     transitions: tuple[Transition, ...] = ()

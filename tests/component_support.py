@@ -34,11 +34,13 @@ class Rig:
         self.drivers = drivers_for(self.cluster, host, self.sim, catalog=self.catalog)
         self.events: list[tuple[str, dict[str, Any]]] = []
         self.logs: list[str] = []
-        self.shared: dict[str, Any] = {}
+        self.inputs: dict[str, Any] = {}  # the component's inputs, as a mission would bind them
 
     def start(self, cls: type[Component], needs: dict[str, tuple[str, str]], params: dict[str, Any] | None = None,
-              path: str = "M/Test") -> Component:
-        """Set up and start one component, with defaults from its manifest and `params` over them."""
+              path: str = "M/Test", inputs: dict[str, Any] | None = None) -> Component:
+        """Set up and start one component, with defaults from its manifest and `params` over them; `inputs` join
+        the rig's (what a mission would bind its declared inputs to)."""
+        self.inputs.update(inputs or {})
         spec = self.catalog.get(cls.__name__)
         defaults = {p.name: p.default for p in spec.params if not p.required} if spec else {}
         resources = {need: self.cluster_part(robot, part) for need, (robot, part) in needs.items()}
@@ -53,7 +55,7 @@ class Rig:
             devices[need] = BoundDevice(binding, issuer, None, (0, 0), None, lambda: self.sim.time)
         ctx = Context(path, {**defaults, **(params or {})}, resources,
                       lambda name, **fields: self.events.append((name, fields)), self.logs.append,
-                      lambda: self.sim.time, services={"shared": self.shared, "sim": self.sim}, devices=devices)
+                      lambda: self.sim.time, services={"sim": self.sim}, devices=devices, inputs=self.inputs)
         comp = cls()
         comp.setup(ctx)
         comp.start()

@@ -71,7 +71,7 @@ def matching_door(found: dict) -> dict:
 
 def test_detect_door_finds_the_first_open_door():
     rig = Rig()
-    rig.shared["visited"] = {}
+    rig.inputs["visited"] = {}
     status, det = detect(rig)
     assert status is Status.SUCCESS
     found = det.ctx.outputs["door"]
@@ -80,12 +80,12 @@ def test_detect_door_finds_the_first_open_door():
     assert abs(found["x"] - 4.0) < 0.15 and abs(found["y"] - 1.25) < 0.15 and found["side"] == "left"
     assert abs(found["width"] - 1.0) < 0.15
     assert rig.events == [("DoorDetected", {"width": found["width"], "x": found["x"], "y": found["y"]})]
-    assert len(rig.shared["visited"]) == 1
+    assert len(rig.inputs["visited"]) == 1
 
 
 def test_detect_door_skips_known_doors_and_never_finds_a_closed_one():
     rig = Rig()
-    rig.shared["visited"] = {}
+    rig.inputs["visited"] = {}
     found = []
     for _ in range(3):
         status, det = detect(rig, until=rig.sim.time + 30.0)
@@ -94,22 +94,22 @@ def test_detect_door_skips_known_doors_and_never_finds_a_closed_one():
     # n1 (x=4) is skipped once in the DoorLog; s1 (5), n2 and s3 are closed: next are s2 (11, right), n3 (17)
     assert [d["id"] for d in found] == ["door_n1", "door_s2", "door_n3"]
     assert all(d["state"] == "open" for d in found)
-    assert len(rig.shared["visited"]) == 3
+    assert len(rig.inputs["visited"]) == 3
 
 
 def test_detect_door_skips_a_door_already_in_the_doorlog():
     rig = Rig()
-    rig.shared["visited"] = {(4.0, "left"): {"width": 1.0, "x": 4.0, "y": 1.25, "side": "left"}}
+    rig.inputs["visited"] = {(4.0, "left"): {"width": 1.0, "x": 4.0, "y": 1.25, "side": "left"}}
     status, det = detect(rig, until=25.0)
     assert status is Status.SUCCESS
     assert matching_door(det.ctx.outputs["door"])["id"] == "door_s2"
 
 
-def test_align_ranger_faces_the_last_door():
+def test_align_ranger_faces_the_door_it_is_given():
     rig = Rig()
-    rig.shared["visited"] = {}
-    detect(rig)
-    align = rig.start(AlignRanger, needs=RANGER, params={"tolerance": 0.05})
+    rig.inputs["visited"] = {}
+    _, det = detect(rig)
+    align = rig.start(AlignRanger, needs=RANGER, params={"tolerance": 0.05}, inputs={"door": det.ctx.outputs["door"]})
     assert rig.run(align, until=rig.sim.time + 10.0) is Status.SUCCESS
     p = rig.sim.pose("ranger1")
     bearing = math.atan2(1.25 - p.y, 4.0 - p.x)
@@ -124,9 +124,9 @@ def test_align_ranger_fails_without_a_door():
 
 def test_launch_scout_lands_in_the_room_behind_the_open_door():
     rig = Rig()
-    rig.shared["visited"] = {}
-    detect(rig)
-    rig.run(rig.start(AlignRanger, needs=RANGER), until=rig.sim.time + 10.0)
+    rig.inputs["visited"] = {}
+    _, det = detect(rig)
+    rig.run(rig.start(AlignRanger, needs=RANGER, inputs={"door": det.ctx.outputs["door"]}), until=rig.sim.time + 10.0)
     launch = rig.start(LaunchScout, needs={"launcher": ("ranger1", "launcher"), "ranges": ("ranger1", "ranges")})
     assert rig.run(launch, until=rig.sim.time + 1.0) is Status.SUCCESS
     scout = launch.ctx.outputs["scout"]
@@ -159,7 +159,7 @@ def test_calibrate_measures_the_corridor_width():
 
 def test_return_to_start_drives_back_home():
     rig = Rig()
-    follow = rig.start(FollowCorridor, needs=RANGER, params={"speed": 0.6})  # records home in the shared data
+    follow = rig.start(FollowCorridor, needs=RANGER, params={"speed": 0.6})  # home: where its odometry began
     rig.run(follow, until=10.0)
     assert rig.sim.pose("ranger1").x > 6.0
     back = rig.start(ReturnToStart, needs=RANGER)
@@ -200,7 +200,7 @@ def test_follow_corridor_ends_at_the_end_wall_and_turns_round_when_it_starts_the
 
 def test_detect_door_fails_at_the_end_of_the_corridor_when_every_door_is_known():
     rig = Rig()
-    rig.shared["visited"] = {(round(x), "any"): {"x": x, "y": y, "width": 1.0} for x, y in
+    rig.inputs["visited"] = {(round(x), "any"): {"x": x, "y": y, "width": 1.0} for x, y in
                              ((4.0, 1.25), (11.0, -1.25), (17.0, 1.25), (23.0, 1.25), (29.0, -1.25), (35.0, -1.25))}
     follow = rig.start(FollowCorridor, needs=RANGER, params={"speed": 0.8})
     det = rig.start(DetectDoor, needs=RANGER)
@@ -213,7 +213,7 @@ def test_detect_door_fails_at_the_end_of_the_corridor_when_every_door_is_known()
 
 def test_align_ranger_drives_back_to_where_its_door_was_seen():
     rig = Rig()
-    rig.shared["visited"] = {}
+    rig.inputs["visited"] = {}
     status, det = detect(rig)
     assert status is Status.SUCCESS
     door = det.ctx.outputs["door"]
@@ -221,7 +221,7 @@ def test_align_ranger_drives_back_to_where_its_door_was_seen():
     rig.run(follow, until=rig.sim.time + 7.0)
     follow.terminate(Status.SUCCESS)
     assert rig.sim.pose("ranger1").x > door["from"]["x"] + 2.0
-    align = rig.start(AlignRanger, needs=RANGER, params={"door": door})
+    align = rig.start(AlignRanger, needs=RANGER, inputs={"door": door})
     assert rig.run(align, until=rig.sim.time + 30.0) is Status.SUCCESS
     p = rig.sim.pose("ranger1")
     assert math.hypot(p.x - door["from"]["x"], p.y - door["from"]["y"]) < 0.35, p

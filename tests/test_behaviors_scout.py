@@ -83,7 +83,7 @@ def test_servo_to_goal_reaches_the_dark_corner(rig):
     locate = rig.start(LocateDarkCorner, needs=SCOUT)
     assert rig.run(locate, until=20.0) is Status.SUCCESS
     goal = locate.ctx.outputs["goal"]
-    servo = rig.start(ServoToGoal, needs=SCOUT, params={"goal": goal})
+    servo = rig.start(ServoToGoal, needs=SCOUT, inputs={"goal": goal})
     assert rig.run(servo, until=rig.sim.time + 30) is Status.SUCCESS
     x, y, _ = rig.drivers.robots["scout1"]["wheels"].odometry()
     assert math.hypot(goal["x"] - x, goal["y"] - y) <= 0.3
@@ -93,7 +93,7 @@ def test_servo_to_goal_reaches_the_dark_corner(rig):
 
 
 def test_servo_to_goal_stops_and_waits_while_the_link_is_lost(rig):
-    servo = rig.start(ServoToGoal, needs=SCOUT, params={"goal": {"x": 21.0, "y": 5.2}})
+    servo = rig.start(ServoToGoal, needs=SCOUT, inputs={"goal": {"x": 21.0, "y": 5.2}})
     assert steps(rig, servo, 2.0) is Status.RUNNING
     assert rig.sim.command("scout1") != (0.0, 0.0)
     rig.sim.lose("ranger1")  # no Ranger, no proxy processing
@@ -157,7 +157,7 @@ def test_observe_counts_frames(rig):
 
 def test_servo_to_goal_succeeds_when_a_wall_stops_it_short_of_the_goal(rig):
     """A dark corner's goal is a guess along a bearing, often beyond the walls: pressed into them is arrived."""
-    servo = rig.start(ServoToGoal, needs=SCOUT, params={"goal": {"x": 22.5, "y": 9.0}})  # behind n4's back wall
+    servo = rig.start(ServoToGoal, needs=SCOUT, inputs={"goal": {"x": 22.5, "y": 9.0}})  # behind n4's back wall
     assert rig.run(servo, until=rig.sim.time + 40) is Status.SUCCESS
     p = rig.sim.pose("scout1")
     assert p.y > 5.8, p  # at the back wall (y = 6.25), not in the middle of the room

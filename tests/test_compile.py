@@ -20,7 +20,7 @@ def chart(text: str, catalog: Catalog) -> Statechart:
 
 
 def test_sequential_plan_follows_declaration_order_on_ties(catalog: Catalog) -> None:
-    c = chart("mission M {\n needs r: Ranger\n plan { Calibrate < ReturnToStart; AlignRanger < ReturnToStart }\n}",
+    c = chart("mission M {\n needs r: Ranger\n plan { Calibrate < ReturnToStart; TurnToWatch < ReturnToStart }\n}",
               catalog)
     root = c["M"]
     assert root.kind is StateKind.COMPOUND and root.initial == "M/Calibrate"
@@ -29,14 +29,14 @@ def test_sequential_plan_follows_declaration_order_on_ties(catalog: Catalog) -> 
     while state in nxt:
         order.append(state)
         state = nxt[state]
-    assert order + [state] == ["M/Calibrate", "M/AlignRanger", "M/ReturnToStart", "M/done"]
+    assert order + [state] == ["M/Calibrate", "M/TurnToWatch", "M/ReturnToStart", "M/done"]
 
 
 def test_concurrent_plan_is_parallel_with_predecessors(catalog: Catalog) -> None:
     c = chart("mission M {\n needs r: Ranger\n"
-              " plan concurrent { Calibrate < ReturnToStart; AlignRanger < ReturnToStart }\n}", catalog)
+              " plan concurrent { Calibrate < ReturnToStart; TurnToWatch < ReturnToStart }\n}", catalog)
     assert c["M"].kind is StateKind.PARALLEL
-    assert c["M/ReturnToStart"].after == ("M/Calibrate", "M/AlignRanger")
+    assert c["M/ReturnToStart"].after == ("M/Calibrate", "M/TurnToWatch")
     assert c["M/Calibrate"].after == ()
 
 

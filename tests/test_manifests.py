@@ -30,7 +30,7 @@ DOCS = Path(__file__).resolve().parents[1] / "docs" / "components.md"
 KINDS = {
     Kind.RC: ["Drive", "RangeSensor", "Camera", "Launcher", "Jump", "RadioChannel"],
     Kind.ARC: ["Ranger", "Scout"],
-    Kind.DATA: ["OccupancyMap", "DoorLog"],
+    Kind.DATA: ["OccupancyMap", "DoorLog", "Door", "Goal"],
     Kind.BEHAVIOR: [
         "FollowCorridor", "AvoidObstacles", "DetectDoor", "AlignRanger", "LaunchScout", "LocateDarkCorner",
         "ServoToGoal", "TurnToWatch", "Watch", "Observe", "Calibrate", "ReturnToStart", "Wait",

@@ -49,13 +49,13 @@ mission M {
     needs ranger: Ranger
     var seen: int = 0
     start -> Calibrate
-    Calibrate -> AlignRanger / set seen = seen + 1
-    AlignRanger -> done [seen == 1] / release(ranger)
+    Calibrate -> TurnToWatch / set seen = seen + 1
+    TurnToWatch -> done [seen == 1] / release(ranger)
 }"""
-    h = Harness(compiled(text, catalog), {"Calibrate": Timed, "AlignRanger": Timed}, ranger_world())
+    h = Harness(compiled(text, catalog), {"Calibrate": Timed, "TurnToWatch": Timed}, ranger_world())
     assert h.run() == "success"
     taken = [(r.path.rsplit("/", 1)[-1], r.target.rsplit("/", 1)[-1]) for r in h.of(rec.Taken)]
-    assert taken == [("Calibrate", "AlignRanger"), ("AlignRanger", "done")]
+    assert taken == [("Calibrate", "TurnToWatch"), ("TurnToWatch", "done")]
     assert h.of(rec.Released)[0].resources  # release(ranger) gave the units back before the exit
 
 
@@ -71,7 +71,7 @@ def test_a_composites_outputs_are_its_childrens_for_the_siblings_after_it(catalo
     class Reads(Timed):
         def start(self) -> None:
             super().start()
-            seen.append(self.sibling_output("Find", "door"))
+            seen.append(self.input("door"))  # bound by the mission to Find's door (a sibling's output)
 
     text = """
 mission M {
@@ -285,14 +285,14 @@ class StopsOnStart(Forever):
 
 def test_stop_during_entry(catalog: Catalog) -> None:
     Forever.calls = []
-    text = "mission M {\n needs r: Ranger\n parallel { Calibrate; AlignRanger; ReturnToStart }\n}"
-    h = Harness(compiled(text, catalog), {"Calibrate": Forever, "AlignRanger": StopsOnStart,
+    text = "mission M {\n needs r: Ranger\n parallel { Calibrate; TurnToWatch; ReturnToStart }\n}"
+    h = Harness(compiled(text, catalog), {"Calibrate": Forever, "TurnToWatch": StopsOnStart,
                                          "ReturnToStart": Forever}, ranger_world())
     StopsOnStart.interp = h.interp
     h.interp.start()
     assert h.interp.outcome == "stopped" and h.interp.active() == []
     started = [p for c, p in Forever.calls if c == "start"]
-    assert started == ["M/Calibrate", "M/AlignRanger"]  # ReturnToStart was never entered
+    assert started == ["M/Calibrate", "M/TurnToWatch"]  # ReturnToStart was never entered
     assert sorted(p for c, p in Forever.calls if c == "terminate") == sorted(started)
     assert h.rcm.holders("ranger1.drive") == ()
 

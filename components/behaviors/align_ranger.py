@@ -1,8 +1,8 @@
 """AlignRanger: go back to where the door was seen, then turn on the spot to face it.
 
-Which door: the `door` parameter if the mission passes one ({x, y} in odometry coordinates), else the door
-its own behavior instance found (the output `door` of a finished sibling FindNewDoor or DetectDoor), else
-the most recent entry of the shared DoorLog (`visited`, a dict: insertion order is detection order).
+Which door: its input `door` (a Door, in odometry coordinates), as the mission binds it: the door its own
+search found (a sibling's output, whatever that sibling is called), or one the mission names explicitly
+(`AlignRanger(door: finder.door)`).
 
 Why it may have to drive first: with one Ranger and several RoomSurveillance instances of equal priority,
 the Ranger is shared round-robin, so between the slice in which this instance found its door and the one in
@@ -29,20 +29,9 @@ SPEED = 0.4
 
 
 def own_door(comp: Component) -> dict[str, Any] | None:
-    """The door to face: `params["door"]`, else this instance's own door, else the DoorLog's latest record."""
-    door = comp.ctx.params.get("door")
-    if isinstance(door, dict) and "x" in door:
-        return door
-    for sibling in ("FindNewDoor", "DetectDoor"):
-        door = comp.sibling_output(sibling, "door")
-        if isinstance(door, dict) and "x" in door:
-            return door
-    log = comp.shared("visited")
-    if isinstance(log, dict) and log:
-        rec = list(log.values())[-1]
-        if isinstance(rec, dict) and "x" in rec:
-            return rec
-    return None
+    """The door to face: the input `door`, if it is one."""
+    door = comp.input("door")
+    return door if isinstance(door, dict) and "x" in door and "y" in door else None
 
 
 def turn_rate(err: float) -> float:
@@ -63,7 +52,7 @@ class AlignRanger(Component):
 
     def step(self, now: float) -> Status:
         if self.door is None:
-            self.ctx.log("AlignRanger: no door to face (no door param, no door found, empty DoorLog)")
+            self.ctx.log("AlignRanger: no door to face (its input door has no door yet)")
             return Status.FAILURE
         drive = self.device("drive")
         x, y, a = drive.odometry()

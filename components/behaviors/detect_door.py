@@ -112,7 +112,7 @@ class DetectDoor(Component):
         left, right = corridor(scan, self.expect)
         self.expect = (left.distance if left else self.expect[0], right.distance if right else self.expect[1])
         pose = self._pose() or (0.0, 0.0, 0.0)
-        log = self.shared("visited")
+        log = self.input("visited")
         for gap in find_gaps(scan, min_width, self.expect):
             px, py, pa = pose
             x = px + gap["x"] * math.cos(pa) - gap["y"] * math.sin(pa)

@@ -1,6 +1,6 @@
 """FollowCorridor: keep to the middle of the corridor from the side ranges, driving forward.
 
-Also home of the small scan helpers the other Ranger behaviors share (wall fit, home pose),
+Also home of the small scan helpers the other Ranger behaviors share (wall fit, clearance),
 all computed in the robot frame from a `Scan` and from odometry, never from ground truth.
 """
 
@@ -205,21 +205,6 @@ def wrap(a: float) -> float:
     return (a + math.pi) % (2 * math.pi) - math.pi
 
 
-def remember_home(comp: Component) -> None:
-    """Record where this robot's mission started (its first odometry pose) in the shared data, if any, under
-    `home[<drive resource>]`, so ReturnToStart can drive back there."""
-    ctx = comp.ctx
-    shared: Any = ctx.services.get("shared") if ctx else None
-    if ctx is None or not isinstance(shared, dict) or "drive" not in ctx.devices:
-        return
-    homes = shared.setdefault("home", {})
-    if isinstance(homes, dict):
-        key = ctx.resources.get("drive", "drive")
-        if key not in homes:
-            x, y, _ = comp.device("drive").odometry()
-            homes[key] = (x, y)
-
-
 class FollowCorridor(Component):
     """Drive forward at `speed`, steering to the centre line and along the walls, to the end of the corridor.
 
@@ -233,7 +218,6 @@ class FollowCorridor(Component):
         self.expect: tuple[float | None, float | None] = (None, None)
         self.origin: tuple[float, float] | None = None
         self.turn_to: float | None = None  # heading to turn to, when turning around
-        remember_home(self)
 
     def step(self, now: float) -> Status:
         speed = float(self.ctx.params.get("speed", 0.4))

@@ -1,16 +1,16 @@
 """ReturnToStart: drive back to where the mission started, along odometry.
 
-Home is, in order: the `home` parameter ((x, y) in odometry coordinates), the pose this robot's first
-Ranger behavior recorded in the shared data (`home[<drive resource>]`, see `remember_home`), else the
-odometry origin (0, 0). It turns toward home, drives, slows down for what the front beams show, and
-succeeds within ARRIVED metres, or when blocked within NEAR metres of home (odometry drift).
+Home is where the robot's odometry began (`Drive.origin()`: where the robot was put when the world started,
+on a real robot where it was switched on), else the odometry origin (0, 0). Nothing is read from other
+components by name. It turns toward home, drives, slows down for what the front beams show, and succeeds
+within ARRIVED metres, or when blocked within NEAR metres of home (odometry drift).
 """
 
 from __future__ import annotations
 
 import math
 
-from components.behaviors.follow_corridor import clearance_ahead, remember_home, wrap
+from components.behaviors.follow_corridor import clearance_ahead, wrap
 from drd.runtime.component import Component, Status
 
 ARRIVED = 0.3
@@ -23,12 +23,8 @@ BODY = 0.45
 
 class ReturnToStart(Component):
     def start(self) -> None:
-        home = self.ctx.params.get("home")
-        if home is None:
-            homes = self.shared("home")
-            home = homes.get(self.ctx.resources.get("drive", "drive")) if isinstance(homes, dict) else None
-        self.home = tuple(home) if home is not None else (0.0, 0.0)
-        remember_home(self)
+        origin = getattr(self.device("drive"), "origin", None)
+        self.home = tuple(origin())[:2] if callable(origin) else (0.0, 0.0)
 
     def step(self, now: float) -> Status:
         speed = float(self.ctx.params.get("speed", 0.5))

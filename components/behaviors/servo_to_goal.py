@@ -5,8 +5,8 @@ which sends the steering back. Modelled from the sensors: the camera is read eve
 and the steering is computed only while `radio.link_ok()`; when the link is down the Scout stops and waits
 (RUNNING) until it comes back. Steering: the bearing to the goal from odometry and the goal.
 
-Where the goal comes from: the `goal` param ({x, y} or {x, y, light}, odometry coordinates) when given,
-else the `goal` output of a finished sibling LocateDarkCorner (`Component.sibling_output`).
+Where the goal comes from: its input `goal` (a Goal, {x, y}, odometry coordinates) as the mission binds it,
+e.g. the `goal` a sibling LocateDarkCorner found.
 When the Scout is stopped short of the goal by a wall or an obstacle (driving forward but, by odometry, not
 moving for `stall` seconds), it is as close as it can get: it stops and succeeds. The goal of a dark corner
 is only an estimate along a bearing (LocateDarkCorner has no depth), so it often lies beyond the corner's
@@ -32,7 +32,7 @@ class ServoToGoal(Component):
         self.drive = self.device("drive")
         self.camera = self.device("camera")
         self.radio = self.device("radio")
-        self.goal = p.get("goal") or self.sibling_output("LocateDarkCorner", "goal") or self.ctx.outputs.get("goal")
+        self.goal = self.input("goal")
         self.stall = float(p.get("stall", 1.5))
         self.frames_sent = 0
         self.link_was_ok = True

@@ -5,8 +5,8 @@ owns the devices its needs are bound to (`ranger1.drive` -> `ranger1`, from its 
 each lifecycle call (`start`, `step`, `suspend`, `resume`, `terminate`) to that host's Creator
 (`drd.daemon.creator`) as a `ComponentCall`. A call carries what the component may read of the mission: its
 parameters, the unit bound to each need with the epoch it is bound at (None once unbound: the gate on the
-device's host then refuses its commands), the shared data (`shared visited: DoorLog`) and its finished
-siblings' outputs. Every message to a host first carries the gate operations queued for it
+device's host then refuses its commands), the inputs the mission bound (shared data such as a DoorLog,
+siblings' outputs). Every message to a host first carries the gate operations queued for it
 (`drd.cluster.gates.RemoteGates`). The `ComponentReply` brings back its status, outputs, the events it
 emitted, its log lines, the shared data as it left it, its changes to the Static Dependency Database and what
 the gates there recorded; the proxy applies them to the local context, so the interpreter sees what a local
@@ -17,7 +17,7 @@ policy over the hosts that are up, `drd.placement`), its `start` goes to the hos
 does not register it within `START_TIMEOUT` (every `start` may take that long: a first start on a host may
 load the component's module) is excluded and the next best is tried (`PLACE_TRIES` hosts in all). When its
 host is lost later, the instance is started again on another host before its next call: its code state is lost,
-but the mission sees the same component go on (it gets its parameters, shared data and siblings' outputs again
+but the mission sees the same component go on (it gets its parameters and inputs again
 with every call). Without a placer (the router of a test), a movable component runs right here, in the
 controller (`local`).
 
@@ -42,7 +42,7 @@ from drd.runtime.component import Component, Context, Status
 from drd.runtime.records import Record, plain
 
 
-@message("drd.component.call", 2)
+@message("drd.component.call", 3)
 class ComponentCall(Message):
     """One lifecycle call for the instance `path` of mission `mission` (see the module docstring).
 
@@ -65,7 +65,7 @@ class ComponentCall(Message):
     sim_time: float = -1.0
     sim_version: int = -1
     shared: dict[str, Any] | None = None
-    siblings: dict[str, Any] | None = None
+    inputs: dict[str, Any] | None = None  # the component's inputs that are not shared data (siblings' outputs)
     status: str = ""
     shared_ids: dict[str, str] | None = None
     gates: list[list[Any]] | None = None
@@ -555,14 +555,14 @@ class RemoteComponent(Component):
 
     def message(self, op: str, **fields: Any) -> ComponentCall:
         ctx, router = self._ctx, self.router
-        shared = ctx.services.get("shared")
-        siblings = ctx.services.get("siblings")
+        shared = ctx.services.get("shared")  # the inputs bound to shared data, by input name
+        inputs = {k: v for k, v in ctx.inputs.items() if not isinstance(shared, dict) or k not in shared}
         ids = ({k: str(id(v)) for k, v in shared.items() if isinstance(v, dict)}
                if isinstance(shared, dict) else None)
         return ComponentCall(op, router.mission, ctx.path, self.name, router.world, generation=router.generation,
                              epochs=self._epochs(), sim_time=router.sim_time, sim_version=router.sim_version,
                              shared=plain(shared) if isinstance(shared, dict) else None,
-                             siblings=plain(siblings) if isinstance(siblings, Mapping) else None,
+                             inputs=plain(inputs) if inputs else None,
                              now=fields.pop("now", ctx.now()), shared_ids=ids or None, **fields)
 
     def _call(self, op: str, **fields: Any) -> ComponentReply:

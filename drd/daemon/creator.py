@@ -397,7 +397,7 @@ class Creator:
             self.calls += 1
             ahead = self._read_ahead(inst) if call.op == "step" else None
             aheads.append(ahead)
-            msgs.append((call.path, call.op, call.now, call.status, call.shared, call.shared_ids, call.siblings,
+            msgs.append((call.path, call.op, call.now, call.status, call.shared, call.shared_ids, call.inputs,
                          call.params if call.op == "start" else None, inst.setup, ahead))
             inst.setup = None
         try:

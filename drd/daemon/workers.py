@@ -559,7 +559,7 @@ def run_calls(calls: Sequence[tuple[Any, ...]], latest: dict[str, Any], link: _L
     """Run calls in order, as `Creator.handle_batch` did in process: stop after one that emitted events,
     changed dependencies or failed; chain shared dicts (`shared_ids`) through `latest`.
 
-    A call is `(path, op, now, status, shared, shared_ids, siblings, params, setup, ahead)`; `setup` is
+    A call is `(path, op, now, status, shared, shared_ids, inputs, params, setup, ahead)`; `setup` is
     `(entry_point, resources, {need: methods})` for a new instance, `ahead` the readings read ahead of it
     (`{reading_key: value}`, or None). A reply is
     `(status, outputs, events, logs, shared, dependencies, error, setup_failed, unused)`, `unused` the keys of
@@ -569,7 +569,7 @@ def run_calls(calls: Sequence[tuple[Any, ...]], latest: dict[str, Any], link: _L
 
     replies: list[tuple[Any, ...]] = []
     link.changed = False
-    for path, op, now, status, shared, ids, siblings, params, setup, ahead in calls:
+    for path, op, now, status, shared, ids, inputs, params, setup, ahead in calls:
         if shared is not None and ids:
             for name, ref in ids.items():
                 if ref in latest and name in shared:
@@ -590,7 +590,7 @@ def run_calls(calls: Sequence[tuple[Any, ...]], latest: dict[str, Any], link: _L
         h.now = now
         services = h.ctx.services
         services["shared"] = shared if shared is not None else {}
-        services["siblings"] = siblings if siblings is not None else {}
+        h.ctx.inputs = {**(inputs or {}), **services["shared"]}  # shared data: the objects sent back
         result = ""
         error = ""
         link.begin(ahead)
@@ -635,7 +635,7 @@ def _setup(path: str, setup: tuple[Any, ...], params: dict[str, Any] | None, lin
                   lambda ev, **f: h.events.append([ev, plain(f)]),
                   lambda text: h.logs.append(str(text)),
                   lambda: h.now, devices=devices,
-                  services={"shared": {}, "siblings": {},
+                  services={"shared": {},
                             "dependencies": lambda rid, k, v: h.deps.append([rid, k, plain(v)])})
     h.ctx = ctx
     h.comp = factory()

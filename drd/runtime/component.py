@@ -35,6 +35,9 @@ class Context:
     log: Callable[[str], None]
     now: Callable[[], float]
     outputs: dict[str, Any] = field(default_factory=dict)
+    #: input name -> its value, as the mission bound it (`dsl.dataflow`): a sibling's output (current before each
+    #: step), or an ancestor's shared datum (the one object, which the component may change)
+    inputs: dict[str, Any] = field(default_factory=dict)
     services: Mapping[str, Any] = field(default_factory=dict)  # shared data, simulator handles
     devices: Mapping[str, Any] = field(default_factory=dict)  # need name -> its device, through the gate
     #: need name -> `drd.runtime.ownership.Binding` (unit, robot part, the holder and the epoch it is bound at):
@@ -70,15 +73,12 @@ class Component:
             raise LookupError(f"{self.ctx.path}: no dependency database in this context")
         update(resource, key, value)
 
-    def sibling_output(self, sibling: str, name: str) -> Any:
-        """An output of a finished sibling (`LocateDarkCorner`'s `goal`), or None."""
-        assert self.ctx is not None
-        return self.ctx.services.get("siblings", {}).get(sibling, {}).get(name)
-
-    def shared(self, name: str) -> Any:
-        """Shared data declared by an ancestor (`shared visited: DoorLog`), or None."""
-        assert self.ctx is not None
-        return self.ctx.services.get("shared", {}).get(name)
+    def input(self, name: str) -> Any:
+        """The value of one of the inputs the manifest declares (`door`), as the mission bound it, or None (an
+        optional input bound to nothing, or an output not produced yet). A component never reads a sibling or an
+        ancestor's data by name: the mission says which datum an input reads."""
+        assert self.ctx is not None, "input() before setup()"
+        return self.ctx.inputs.get(name)
 
     def start(self) -> None:
         """On entry, just in time."""

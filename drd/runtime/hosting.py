@@ -40,6 +40,8 @@ class ComponentHost:
         self.rank = rank  # state id -> declaration order (a later layer subsumes an earlier one)
         self.running: dict[Node, None] = {}  # leaves with a started component, in entry order
         self._made: dict[str, tuple[Component, Context, _Bindings]] = {}  # per instance path, reused on re-entry
+        self._previous: dict[tuple[str, str], Any] = {}  # (path, input) -> a `last(...)` input's next value
+        self._lagging: dict[Node, None] = {}  # running leaves with `last(...)` inputs
 
     def active(self) -> Iterator[tuple[Node, Component]]:
         """The components stepped in this cycle, in order (active ones only)."""
@@ -66,17 +68,11 @@ class ComponentHost:
             if factory is None:
                 self.on_failure(node, f"no implementation of component {name} is available")
                 return
-            shared: dict[str, Any] = {}
-            for anc in node.ancestors():
-                for k, _ in anc.state.shared:
-                    shared.setdefault(k, anc.scope.get(k))
             path = node.path
             ctx = Context(path, dict(node.scope), resources,
                           lambda ev, **f: self.emit(ev, path, **f),
                           lambda text: self.notify(rec.Log(self.now(), path, text)),
-                          self.now, devices=devices,
-                          services={**self.services, "shared": shared, "siblings": node.parent.outputs
-                                    if node.parent else {}},
+                          self.now, devices=devices, services={**self.services, "shared": {}},
                           bindings=bindings, rank=rank)
             try:
                 comp = factory()
@@ -86,12 +82,53 @@ class ComponentHost:
                 return
             self._made[node.path] = (comp, ctx, lazy)
         node.component, node.context = comp, ctx
+        if node.state.inputs:
+            self.read_inputs(node, entry=True)
         try:
             comp.start()
         except Exception as e:  # component code is not ours to trust
             self.failed(node, e)
             return
         self.running[node] = None
+
+    def read_inputs(self, node: Node, entry: bool = False) -> None:
+        """Set a leaf's inputs as the mission bound them (`dsl.dataflow`): on entry every one (a shared datum is
+        the ancestor's own object, in `services["shared"]` too, so a proxy sends it and brings its changes
+        back), before each step the siblings' outputs, as they are now (a `last(...)` one as it was when this
+        component last stepped)."""
+        ctx = node.context
+        if ctx is None:
+            return
+        shared = ctx.services.get("shared")
+        for b in node.state.inputs:
+            if b.shared:
+                if entry:
+                    anc = _ancestor(node, b.state)
+                    value = anc.scope.get(b.field) if anc is not None else None
+                    ctx.inputs[b.name] = value
+                    if isinstance(shared, dict):
+                        shared[b.name] = value
+            elif not b.last:
+                ctx.inputs[b.name] = _output(node, b.state, b.field)
+            else:  # as it was at the end of the previous cycle (`end_cycle`): that breaks a cycle of feeds
+                ctx.inputs[b.name] = None if entry else self._previous.get((node.path, b.name))
+                if entry:
+                    self._lagging[node] = None
+
+    @property
+    def lagging(self) -> bool:
+        """Whether some running component reads a `last(...)` input."""
+        return bool(self._lagging)
+
+    def end_cycle(self) -> None:
+        """Every component has stepped: keep what the `last(...)` inputs will read at the next cycle."""
+        for node in list(self._lagging):
+            if node.component is None or node not in self.running:
+                del self._lagging[node]
+                continue
+            for b in node.state.inputs:
+                if b.last and not b.shared:
+                    self._previous[(node.path, b.name)] = _output(node, b.state, b.field)
 
     def step(self, node: Node, comp: Component, now: float) -> Status | None:
         """One control cycle of one component: its status, or None when it raised (its state fails)."""
@@ -194,3 +231,40 @@ class _LazyMap(Mapping[str, Any]):
 
     def __len__(self) -> int:
         return len(self._bindings.get(self._which))
+
+
+def _ancestor(node: Node, state: str) -> Node | None:
+    """The nearest ancestor of `node` that is an instance of `state`."""
+    anc = node.parent
+    while anc is not None and anc.state.id != state:
+        anc = anc.parent
+    return anc
+
+
+def _output(node: Node, producer: str, field: str) -> Any:
+    """Output `field` of the sibling state `producer` of `node` or of one of its ancestors: its value now if the
+    producer runs (a port), else the value it finished with, else None."""
+    anc = _ancestor(node, producer.rsplit("/", 1)[0])
+    if anc is None:
+        return None
+    for child in anc.children:
+        if child.state.id == producer and child.phase is ACTIVE:
+            value = _live(child, field)
+            if value is not None:
+                return value
+    return anc.outputs.get(producer.rsplit("/", 1)[1], {}).get(field)
+
+
+def _live(node: Node, field: str) -> Any:
+    """`field` as a running subtree has it now: a running leaf's output, else a finished child's."""
+    if node.context is not None and field in node.context.outputs:
+        return node.context.outputs[field]
+    for child in node.children:
+        if child.phase is ACTIVE:
+            value = _live(child, field)
+            if value is not None:
+                return value
+    for outputs in node.outputs.values():
+        if isinstance(outputs, dict) and field in outputs:
+            return outputs[field]
+    return None

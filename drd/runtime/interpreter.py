@@ -180,6 +180,8 @@ class Interpreter:
             if node.phase is not ACTIVE or comp is None:
                 continue
             stepped += 1
+            if node.state.inputs:
+                host.read_inputs(node)
             try:
                 status = comp.step(now)
             except Exception as e:  # component code is not ours to trust
@@ -187,6 +189,8 @@ class Interpreter:
                 continue
             if status is _SUCCESS or status is _FAILURE:
                 self._finish(node, status is _SUCCESS, "" if status is _SUCCESS else "failed")
+        if host.lagging:
+            host.end_cycle()
         if self.arbiter.best:  # most cycles of most charts command nothing: no call then
             self._flush()
         self._settle()
@@ -380,7 +384,7 @@ class Interpreter:
             if target is not None:
                 self._enter_child(node, target)
         elif kind is PARALLEL:
-            for cid in state.children:
+            for cid in state.entry or state.children:  # producers first: they are stepped in entry order
                 child = self._states[cid]
                 if child.kind is not FINAL and not child.after:
                     self._enter_child(node, child)
