@@ -287,12 +287,14 @@ class Interpreter:
             for var in state.vars:
                 node.scope[var.name] = evaluate(var.value, self._names(node), self.pool.count) if var.value else None
         except EvalError as e:
+            self._unreserve(node)
             self._finish(node, False, e.message)
             return node
         if plan.adopted:
             try:
                 self.resources.adopt(node)
             except BindingError as e:
+                self._unreserve(node)
                 self._finish(node, False, str(e))
                 return node
         if parent is not None and (plan.reserves or self.preallocate):
@@ -355,12 +357,20 @@ class Interpreter:
             self._reservations.pop(holder, None)
             self.resources.forget(future)  # it will simply ask on entry
 
+    def _unreserve(self, node: Node) -> None:
+        """`node` fails as it is entered: what was preallocated for it goes back (it will never adopt it)."""
+        if self._reservations:
+            early = self._reservations.pop(self.resources.holder(node), None)
+            if early is not None:
+                self.resources.cancel(early)  # a grant it held is released (and recorded) first
+                self.resources.forget(early)
+
     def _drop_reservations(self, made_by: str, keep: str = "", inside: bool = False) -> None:
         """Cancel preallocations made by `made_by` and the states inside it (only those inside, with `inside`),
-        except the one being entered (`keep`)."""
+        except the one being entered (`keep`). Inside a multiplicity `M/w`, its instances are `M/w[0]/...`."""
         for holder, future in list(self._reservations.items()):
             by = future.reserved_by
-            if ((by == made_by and not inside) or by.startswith(made_by + "/")) and holder != keep:
+            if ((by == made_by and not inside) or by.startswith((made_by + "/", made_by + "["))) and holder != keep:
                 del self._reservations[holder]
                 self.resources.cancel(future)  # a grant it held is released (and recorded) first
                 self.resources.forget(future)
@@ -695,14 +705,14 @@ class Interpreter:
         if node.phase is DONE:
             node.detach()
             return
+        if self._reservations:  # what states inside it reserved goes back first (its own is its transition's)
+            self._drop_reservations(node.path, inside=True)
         if not node.children:  # a leaf, most often: nothing inside to close first
             if node.requested and node.grant is None:
                 node.closing = True
                 self.resources.cancel(node)  # still waiting (or revoked and queued again)
             self._leave(node, status)
             return
-        if self._reservations:  # what states inside it reserved goes back first (its own is its transition's)
-            self._drop_reservations(node.path, inside=True)
         order = node.children_first()
         for n in order:
             n.closing = True
