@@ -20,7 +20,7 @@ from dsl.errors import NOWHERE, Span
 KEYWORDS = frozenset(
     "import mission behavior priority needs where quantity for shared var as parallel all any until "
     "start done fail when on error after set emit release log plan concurrent true false and or not "
-    "event constraint preallocate".split()
+    "event constraint preallocate from".split()
 )
 
 #: Seconds per duration unit, as written in the language (`250ms 30s 5min 2h`).
@@ -264,6 +264,8 @@ class Transition:
     actions: tuple[Action, ...] = ()
     #: `A -> B preallocate`: entering A reserves B's needs, so B starts without waiting when A completes.
     preallocate: bool = field(default=False, kw_only=True)
+    #: `on E from X`: only events emitted inside the sibling X (X's subtree, in the same instance of the body).
+    sender: str | None = field(default=None, kw_only=True)
     span: Span = field(default=NOWHERE, compare=False, repr=False, kw_only=True)
     source_span: Span = field(default=NOWHERE, compare=False, repr=False, kw_only=True)
     target_span: Span = field(default=NOWHERE, compare=False, repr=False, kw_only=True)

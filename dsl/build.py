@@ -157,7 +157,7 @@ class Builder:
     def _transition(t: ast.Transition, domain: str, source: str, target: str) -> Transition:
         delay = t.delay.seconds if isinstance(t.delay, ast.Duration) else t.delay
         return Transition(source, target, domain, t.kind, t.event, t.condition, delay, t.guard, t.actions,
-                          preallocate=t.preallocate, span=t.span)
+                          preallocate=t.preallocate, sender=t.sender, span=t.span)
 
     # ------------------------------------------------------------- data flow
     def _offers(self, state: str, key: str, callee: str, seen: tuple[str, ...]) -> list[Offer]:

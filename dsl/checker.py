@@ -462,6 +462,10 @@ class Checker:
                     self.report.error("unknown-event", f"unknown event {t.event}", t.span,
                                       did_you_mean(t.event, self.events)
                                       or f"known events: {', '.join(sorted(self.events)) or 'none'}")
+                if t.sender is not None and t.sender not in body.children:
+                    self.report.error("unknown-state", f"on {t.event} from {t.sender}: {b.name} has no child"
+                                      f" {t.sender}", t.span, did_you_mean(t.sender, body.children)
+                                      or f"its children: {', '.join(body.children) or 'none'}")
             if t.preallocate:
                 self._preallocating(t)
             tscope = Scope(scope.names, scope.children, event, scope.open)

@@ -21,7 +21,7 @@ def trigger_label(t: Transition) -> str:
         case ast.TriggerKind.CHANGE:
             out = f"when {printer.expr(t.condition)}" if t.condition is not None else "when"
         case ast.TriggerKind.EVENT:
-            out = f"on {t.event}"
+            out = f"on {t.event}" + (f" from {t.sender}" if t.sender else "")
         case ast.TriggerKind.ERROR:
             out = "on error"
         case ast.TriggerKind.TIMEOUT:

@@ -221,13 +221,14 @@ class _Builder(Transformer):  # type: ignore[type-arg]
 
     def transition(self, c: list[Any]) -> ast.Transition:
         src, _, dst, pre, trig, guard, actions = c
-        kind, event, cond, delay, event_tok = trig or (ast.TriggerKind.COMPLETION, None, None, None, None)
+        kind, event, cond, delay, event_tok, *rest = trig or (ast.TriggerKind.COMPLETION, None, None, None, None)
         end: Any = dst
         for part in (pre, cond or delay or event_tok, guard and guard[1], actions and actions[-1]):
             if part is not None:
                 end = part
         return ast.Transition(str(src), str(dst), kind, event, cond, delay, guard and guard[0],
-                              tuple(actions or ()), preallocate=pre is not None, span=self.cover(src, end),
+                              tuple(actions or ()), preallocate=pre is not None, sender=rest[0] if rest else None,
+                              span=self.cover(src, end),
                               source_span=self.tspan(src), target_span=self.tspan(dst))
 
     def constraint(self, c: list[Any]) -> ast.Constraint:
@@ -245,7 +246,8 @@ class _Builder(Transformer):  # type: ignore[type-arg]
         return ast.TriggerKind.ERROR, None, None, None, None
 
     def on_event(self, c: list[Any]) -> tuple[Any, ...]:
-        return ast.TriggerKind.EVENT, str(c[0]), None, None, c[0]
+        name, _, sender = c
+        return ast.TriggerKind.EVENT, str(name), None, None, sender or name, str(sender) if sender else None
 
     def after(self, c: list[Any]) -> tuple[Any, ...]:
         return ast.TriggerKind.TIMEOUT, None, None, c[0], None

@@ -110,7 +110,7 @@ def transition(t: ast.Transition) -> str:
         case ast.TriggerKind.CHANGE:
             out += f" when {expr(t.condition)}"  # type: ignore[arg-type]
         case ast.TriggerKind.EVENT:
-            out += f" on {t.event}"
+            out += f" on {t.event}" + (f" from {t.sender}" if t.sender else "")
         case ast.TriggerKind.ERROR:
             out += " on error"
         case ast.TriggerKind.TIMEOUT:

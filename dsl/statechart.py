@@ -70,6 +70,7 @@ class Transition:
     actions: tuple[ast.Action, ...] = ()
     generated: bool = False  # made by the compiler (plans, implicit completion), not written
     preallocate: bool = False  # entering the source reserves the target's needs
+    sender: str | None = None  # `on E from X`: the sibling (its name in the domain) whose subtree's events count
     span: Span = field(default=NOWHERE, compare=False, repr=False)
 
 

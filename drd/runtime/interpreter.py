@@ -637,7 +637,11 @@ class Interpreter:
             domain = node.parent
             if domain is None or node.phase is DONE or domain.phase is not ACTIVE or domain.closing:
                 continue  # a frozen subtree hears nothing
+            if not hears(domain.path, event.path):
+                continue
             for t in node.plan.on_event[event.name]:
+                if t.sender is not None and not under(event.path, f"{domain.path}/{t.sender}"):
+                    continue
                 if t.guard is None or self._truthy(domain, t.guard, event):
                     self._take(node, t, event)
                     break
@@ -993,3 +997,19 @@ def describe_devices(pool: ResourcePool) -> tuple[dict[str, str], dict[str, str]
 def _path(holder: str) -> str:
     """A manager holder `<mission>/<path>` as a path of the trace."""
     return holder.partition("/")[2] or holder
+
+
+def under(path: str, root: str) -> bool:
+    """Whether `path` is `root` or inside it (a multiplicity `root` includes its instances `root[i]`)."""
+    return path == root or path.startswith((root + "/", root + "["))
+
+
+def hears(listener: str, source: str) -> bool:
+    """Whether a behavior in `listener`'s body hears an event emitted at `source`: not when the two lie in
+    different instances of one multiplicity (`Lookout[0]` never hears `Lookout[1]`'s sightings); the operator,
+    the mission and everything outside a multiplicity reach everyone."""
+    for a, b in zip(listener.split("/"), source.split("/"), strict=False):
+        if a != b:
+            base_a, bracket, _ = a.partition("[")
+            return not (bracket and b.startswith(base_a + "["))
+    return True
