@@ -12,7 +12,7 @@ from drd.sim import Simulation
 class SimDrive(SimDriver):
     """A simulated wheeled base. Options: `max_speed` (m/s; without it, only the simulator's wheels limit)."""
 
-    READINGS = frozenset({"odometry", "max_speed"})
+    READINGS = frozenset({"odometry", "origin", "max_speed"})
     SETPOINTS = ("set_velocity", "stop")
     STOP = "stop"
 
@@ -41,4 +41,10 @@ class SimDrive(SimDriver):
         """x, y (m) and heading (rad) from wheel odometry."""
         with self.sim_errors():
             p = self.sim.odometry(self.robot_id)
+        return p.x, p.y, p.heading
+
+    def origin(self) -> tuple[float, float, float]:
+        """Where the odometry began: x, y (m) and heading (rad) of the robot's start pose."""
+        with self.sim_errors():
+            p = self.sim.origin(self.robot_id)
         return p.x, p.y, p.heading

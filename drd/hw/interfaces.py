@@ -142,6 +142,10 @@ class Drive(Protocol):
         """The pose the wheels believe in: x, y in metres, heading in radians (start pose plus noisy motion)."""
         ...
 
+    def origin(self) -> tuple[float, float, float]:
+        """Where the odometry began (the pose at power-on, or the simulation's start pose)."""
+        ...
+
 
 @runtime_checkable
 class RangeSensor(Protocol):

@@ -114,7 +114,8 @@ class Simulation:
         shape.friction, shape.elasticity = 0.0, 0.0
         group = len(self._robots) + 1
         shape.filter = pymunk.ShapeFilter(group=group, categories=RANGER if kind == "ranger" else SCOUT)
-        robot = RobotBody(rid, kind, body, shape, group, speed, base, state, odom=(x, y, heading), last=(x, y, heading))
+        robot = RobotBody(rid, kind, body, shape, group, speed, base, state, odom=(x, y, heading), last=(x, y, heading),
+                          origin=(x, y, heading))
         robot.wheels_changed()
         if state is RobotState.FLOOR:
             self.space.add(body, shape)
@@ -203,6 +204,11 @@ class Simulation:
         if r.state is RobotState.MAGAZINE and r.carrier:
             return self.odometry(r.carrier)
         return Pose(*r.odom)
+
+    def origin(self, robot_id: str) -> Pose:
+        """Where the robot's odometry began: its start pose in the world (a real robot's is where it was switched
+        on). Known even once the robot is lost."""
+        return Pose(*self._robot(robot_id, alive=False).origin)
 
     def magazine(self, ranger_id: str) -> tuple[str, ...]:
         """The Scouts still in a Ranger's magazine, in launch order."""

@@ -112,6 +112,7 @@ class RobotBody:
     v: float = 0.0
     omega: float = 0.0
     odom: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    origin: tuple[float, float, float] = (0.0, 0.0, 0.0)  # where its odometry began (the world's start pose)
     last: tuple[float, float, float] = (0.0, 0.0, 0.0)  # the true pose at the end of the previous step
     flight: Flight | None = None
     magazine: list[str] = field(default_factory=list)
