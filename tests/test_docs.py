@@ -34,3 +34,41 @@ def test_doc_snippet(where: str, kind: str, text: str, catalog: Catalog) -> None
         assert result.ok, "\n".join(d.render(result.sources) for d in result.diagnostics)
     else:
         assert not result.ok and result.diagnostics
+
+
+# ---------------------------------------------------------------- every docs mission runs to its stated outcome
+
+RUN = re.compile(r"<!-- dry-run: (success|failure|stopped) -->\n```mission\n(.*?)```", re.S)
+COMPLETE = re.compile(r"^mission \w+", re.M)
+
+
+def _missions() -> list[tuple[str, str, str]]:
+    out = []
+    for path in sorted(DOCS.glob("*.md")):
+        text = path.read_text(encoding="utf-8")
+        for m in RUN.finditer(text):
+            out.append((f"{path.name}:{text.count(chr(10), 0, m.start()) + 2}", m[1], m[2]))
+    return out
+
+
+def test_every_complete_mission_in_the_docs_states_its_dry_run_outcome() -> None:
+    stated = {text for _, _, text in _missions()}
+    missing = [where for where, kind, text in _blocks() if kind == "mission" and COMPLETE.search(text)
+               and text not in stated]
+    assert not missing, f"complete missions without a `<!-- dry-run: OUTCOME -->` line before them: {missing}"
+
+
+@pytest.mark.parametrize(("where", "outcome", "text"), _missions(), ids=[m[0] for m in _missions()])
+def test_docs_mission_runs_to_its_stated_outcome(where: str, outcome: str, text: str, catalog: Catalog) -> None:
+    """The dry-run a reader would do (`missionctl dry-run` with the repository's hosts.yaml and corridor world);
+    a mission said to run to its time limit is given 300 s of sim time."""
+    from drd.dryrun import run
+    from drd.hosts import load_hosts
+    from drd.sim.world import load_world
+
+    result = compile_text(text, catalog, where)
+    assert result.ok and result.statechart is not None
+    root = DOCS.parent
+    report = run(result.statechart, load_hosts(root / "hosts.yaml", catalog), load_world(root / "worlds" /
+                 "corridor.yaml"), catalog, until=300.0 if outcome == "stopped" else 1800.0)
+    assert report.outcome == outcome, f"{where}: {report.outcome} ({report.reason})"
