@@ -232,3 +232,16 @@ def test_no_standard_component_reads_data_by_a_hidden_name() -> None:
         text = path.read_text()
         for hidden in ("sibling_output", ".shared(", 'services.get("shared")', 'services.get("siblings")'):
             assert hidden not in text, f"{path.name} uses {hidden}"
+
+
+def test_plan_shows_each_inputs_binding_and_dot_draws_the_connections() -> None:
+    mission = "missions/corridor_surveillance.mission"
+    r = subprocess.run([*MISSIONCTL, "plan", mission], cwd=ROOT, capture_output=True, text=True, timeout=60,
+                       check=False)
+    assert r.returncode == 0, r.stderr
+    assert "door ← FindNewDoor.door" in r.stdout and "goal ← LocateDarkCorner.goal" in r.stdout
+    assert "visited ← shared visited (CorridorSurveillance)" in r.stdout
+    r = subprocess.run([*MISSIONCTL, "plan", mission, "-f", "dot"], cwd=ROOT, capture_output=True, text=True,
+                       timeout=60, check=False)
+    assert r.returncode == 0, r.stderr
+    assert 'label="door", style=dotted' in r.stdout and 'label="goal", style=dotted' in r.stdout

@@ -176,7 +176,7 @@ def _tree(chart: Statechart) -> Tree:
 
 
 def _grow(chart: Statechart, state: State, node: Tree) -> None:
-    from dsl.export import need_label, trigger_label
+    from dsl.export import input_label, need_label, trigger_label
 
     for t in state.starts:
         node.add(Text.assemble(("start → ", "green"), t.target.rsplit("/", 1)[-1], f"  {trigger_label(t)}"))
@@ -187,6 +187,8 @@ def _grow(chart: Statechart, state: State, node: Tree) -> None:
         for n in child.needs:
             style = "cyan" if n.requested else "dim cyan"
             branch.add(Text("⚙ " + need_label(n), style=style))
+        for b in child.inputs:
+            branch.add(Text("◂ " + input_label(b), style="green"))
         for t in child.transitions:
             label = trigger_label(t)
             arrow = Text.assemble(("→ ", "dim" if t.generated else "green"), t.target.rsplit("/", 1)[-1],
