@@ -58,11 +58,32 @@ def _read(path: Path, name: str, report: Reporter, at: Span | None) -> str | Non
     return decode(data, name, report)
 
 
-def _add(program: Program, text: str, name: str, base: Path, report: Reporter) -> None:
+#: What a file that is not a mission usually is, by its suffix (a user passing hosts.yaml or a README).
+_NOT_MISSIONS = {".yaml": "a YAML file", ".yml": "a YAML file", ".json": "a JSON file", ".md": "a Markdown file",
+                 ".txt": "a text file", ".py": "a Python file"}
+
+
+def _not_a_mission(name: str, report: Reporter) -> bool:
+    """A main file of a known other format (by its suffix) gets one clear error instead of a syntax error at its
+    first line."""
+    kind = _NOT_MISSIONS.get(Path(name).suffix.lower())
+    if kind is not None:
+        report.error("not-a-mission", f"{name} is {kind}, not a mission", Span(name, 1, 1, 1, 1),
+                     "give a .mission file (`mission Name { ... }`); a hosts file goes to --config")
+    return kind is not None
+
+
+def _add(program: Program, text: str, name: str, base: Path, report: Reporter, main: bool = True) -> None:
     program.sources[name] = text
+    if main and _not_a_mission(name, report):
+        return
     tree, errors = parse(text, name)
     report.diagnostics.extend(errors)
     if tree is None:
+        return
+    if main and not errors and not tree.imports and not tree.behaviors:
+        report.error("empty", f"{name} declares no mission: it is empty or only comments", Span(name, 1, 1, 1, 1),
+                     "write `mission Name { ... }` (docs/language.md, section 1)")
         return
     program.files[name] = tree
     for imp in tree.imports:
@@ -74,4 +95,4 @@ def _add(program: Program, text: str, name: str, base: Path, report: Reporter) -
         if sub is None:
             program.sources[key] = ""
             continue
-        _add(program, sub, key, target.parent, report)
+        _add(program, sub, key, target.parent, report, main=False)

@@ -358,8 +358,10 @@ def test_excerpt_shows_the_line_of_the_error(catalog: Catalog, text: str) -> Non
 @pytest.mark.parametrize("text", ["", "\n\n", "   \t", "# only a comment", "# one\n# two\n\n#three",
                                   "#\r\n#\r\n", ";;\n;"])
 def test_empty_and_comment_only_files(catalog: Catalog, text: str) -> None:
+    """Nothing to run is an error that says so (issue #12: it used to pass as valid)."""
     c = compile_text(text, catalog)
-    assert c.ok and c.diagnostics == [] and c.statechart is None
+    [d] = c.diagnostics
+    assert not c.ok and d.code == "empty" and "declares no mission" in d.message and c.statechart is None
 
 
 @needs_examples

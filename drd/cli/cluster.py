@@ -319,7 +319,7 @@ def run(mission: Path = typer.Argument(..., help="The mission file.", show_defau
                                   help="The simulator's world (a name under worlds/) [default: the controller's"
                                        " hosts.yaml cluster.world, else corridor]."),
         speed: float = typer.Option(1.0, "--speed", min=0.01, help="Run at most this multiple of real time."),
-        until: float = typer.Option(1800.0, "--until", help="Stop after this much sim time, in seconds."),
+        until: float = typer.Option(1800.0, "--until", min=0.1, help="Stop after this much sim time, in seconds."),
         seed: int = typer.Option(0, "--seed", help="Seed of the simulation."),
         param: list[str] = typer.Option([], "--param", "-p", show_default=False,
                                         help="NAME=VALUE: start the mission's variable NAME at VALUE (repeatable)."),

@@ -116,6 +116,17 @@ def render_diagnostic(d: Diagnostic, sources: Mapping[str, str], console: Consol
         console.print(Text.assemble(("  hint: ", "cyan"), d.hint))
 
 
+def version() -> str:
+    """The installed distribution's version (the source tree's pyproject.toml says the same)."""
+    from importlib.metadata import PackageNotFoundError
+    from importlib.metadata import version as installed
+
+    try:
+        return installed("drd")
+    except PackageNotFoundError:  # run from a source tree that was never installed
+        return "unknown (not installed)"
+
+
 def run_app(app: Callable[..., object], prog: str,
             fast: Callable[[Sequence[str]], Callable[[], object] | None] | None = None) -> NoReturn:
     """Run a typer app with the safety net: clean errors, documented exit codes.
@@ -123,6 +134,9 @@ def run_app(app: Callable[..., object], prog: str,
     `fast(argv)` may return the call of a command it parsed itself (see `drd.cli.cluster.fast_command`):
     it then runs without typer building its parameters; otherwise (None) typer parses as usual.
     """
+    if sys.argv[1:] == ["--version"]:  # before typer: a callback would cost every command its fast path
+        out.print(f"{prog} (drd) {version()}", highlight=False)
+        sys.exit(OK)
     try:
         call = fast(sys.argv[1:]) if fast is not None else None
         if call is not None:

@@ -232,9 +232,9 @@ def dry_run(
     hosts: Path = typer.Option(Path("hosts.yaml"), "--config", "-c", "--hosts",
                                help="The cluster's hosts file (its robots and devices; `--hosts` is an alias)."),
     seed: int = typer.Option(0, "--seed", help="Seed of the simulation (same seed, same run)."),
-    speed: float = typer.Option(None, "--speed", help="Run at this multiple of real time (default: as fast "
-                                                      "as the CPU allows).", show_default=False),
-    until: float = typer.Option(1800.0, "--until", help="Stop after this much sim time, in seconds."),
+    speed: float = typer.Option(None, "--speed", min=0.01, help="Run at this multiple of real time (default: as"
+                                                                " fast as the CPU allows).", show_default=False),
+    until: float = typer.Option(1800.0, "--until", min=0.1, help="Stop after this much sim time, in seconds."),
     trace: Path = typer.Option(None, "--trace", help="Write every record as JSON lines to this file.",
                                show_default=False),
     render: Path = typer.Option(None, "--render", help="Draw the world, trajectories, placed Scouts and detections "

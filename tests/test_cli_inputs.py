@@ -1,0 +1,58 @@
+"""CLI traps a newcomer met (issue #12), each through the real command: a file that is not a mission, an empty
+one, values that make no sense, `--version`."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from tests.conftest import ROOT
+
+MISSIONCTL = [sys.executable, "-c", "from drd.cli.missionctl import main; main()"]
+DRD = [sys.executable, "-m", "drd.cli.drd"]
+
+
+def missionctl(*args: str) -> subprocess.CompletedProcess[str]:
+    return subprocess.run([*MISSIONCTL, *args], cwd=ROOT, capture_output=True, text=True, timeout=120, check=False)
+
+
+@pytest.mark.parametrize("command", ["validate", "plan", "dry-run"])
+def test_a_yaml_or_markdown_file_given_as_a_mission_says_so(command: str) -> None:
+    r = missionctl(command, "hosts.yaml")
+    assert r.returncode == 2, r.stdout + r.stderr
+    assert "hosts.yaml is a YAML file, not a mission" in r.stderr and "--config" in r.stderr
+    assert "Traceback" not in r.stderr
+    r = missionctl(command, "README.md")
+    assert r.returncode == 2 and "README.md is a Markdown file, not a mission" in r.stderr
+
+
+@pytest.mark.parametrize("text", ["", "\n\n", "# only a comment\n   # and another\n"])
+def test_an_empty_or_comment_only_file_declares_no_mission(text: str, tmp_path: Path) -> None:
+    empty = tmp_path / "empty.mission"
+    empty.write_text(text)
+    for command in ("validate", "dry-run"):
+        r = missionctl(command, str(empty))
+        assert r.returncode == 2, r.stdout + r.stderr
+        assert "declares no mission" in r.stderr and "empty.mission:1:1" in r.stderr
+
+
+@pytest.mark.parametrize(("option", "value"), [("--speed", "0"), ("--speed", "-1"), ("--until", "-5"),
+                                               ("--until", "0")])
+@pytest.mark.parametrize("command", ["dry-run", "run"])
+def test_values_that_make_no_sense_are_refused_before_anything_runs(command: str, option: str, value: str) -> None:
+    r = missionctl(command, "missions/corridor_surveillance.mission", option, value)
+    assert r.returncode == 2, r.stdout + r.stderr
+    assert f"Invalid value for '{option}'" in r.stderr
+    assert "mission" not in r.stdout.lower(), "nothing ran"
+
+
+def test_both_tools_say_their_version() -> None:
+    from importlib.metadata import version
+
+    r = missionctl("--version")
+    assert r.returncode == 0 and r.stdout.strip() == f"missionctl (drd) {version('drd')}"
+    r = subprocess.run([*DRD, "--version"], cwd=ROOT, capture_output=True, text=True, timeout=60, check=False)
+    assert r.returncode == 0 and r.stdout.strip() == f"drd (drd) {version('drd')}"
