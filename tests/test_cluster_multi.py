@@ -89,10 +89,16 @@ def test_two_missions_share_one_ranger_by_priority(cluster: DaemonCluster, tmp_p
 
         eventually(patrolling, "the low-priority patrol to run", 30, poll=0.1)
         with running(high_cmd) as high:
+            eventually(lambda: sum(m.get("outcome") is None for m in client.missions()) == 2, "both to run", 30,
+                       poll=0.05)
+            ambiguous = cluster.missionctl("stop", "--config", str(cluster.hosts_file), timeout=30)
             high_out, high_err = high.communicate(timeout=90)
         low_out, low_err = low.communicate(timeout=90)
     assert high.returncode == 0, (high_err[-2000:], cluster.log("controller")[-3000:])
     assert low.returncode == 0, (low_err[-2000:], cluster.log("controller")[-3000:])
+    # `missionctl stop` without an id, two missions running: it names them and stops neither
+    assert ambiguous.returncode == 2 and "2 missions run" in ambiguous.stderr, ambiguous.stderr
+    assert "--all" in ambiguous.stderr
     high_report, low_report = json.loads(high_out), json.loads(low_out)
     assert high_report["outcome"] == low_report["outcome"] == "success"
     assert "priority 1" in high_err and "priority 2" in low_err  # each run says the rank it got

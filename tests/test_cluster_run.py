@@ -122,7 +122,7 @@ def test_ctrl_c_on_run_stops_the_mission_and_prints_how_it_ended(cluster: Daemon
             proc.kill()
             proc.communicate(timeout=10)
         if any(m.get("outcome") is None for m in cluster.client().missions()):
-            missionctl(cluster, "stop")  # so that a failure here does not fail the next test too
+            missionctl(cluster, "stop", "--all")  # so that a failure here does not fail the next test too
     assert proc.returncode == 1, err[-2000:]
     assert "Ctrl-C: stopping mission" in err and "Traceback" not in err
     report = json.loads(out)

@@ -432,12 +432,19 @@ def _stop_on_interrupt(client: ClusterClient, watch: _RecordWatch, mission: str,
         fail(f"mission {mission}: could not confirm the stop ({e}); see `missionctl status`", code=1)
 
 
-def stop(mission: str = typer.Argument("", help="The mission id (default: every mission).", show_default=False),
+def stop(mission: str = typer.Argument("", help="The mission id (default: the one running).", show_default=False),
+         every: bool = typer.Option(False, "--all", help="Stop every running mission."),
          config: Path = ConfigOption, connect: list[str] = ConnectOption, timeout: float = TimeoutOption) -> int:
-    """Stop a running mission (its behaviors are terminated, its resources released)."""
+    """Stop a running mission (its behaviors are terminated, its resources released). Without an id it stops the
+    one mission that runs; with several running it names them and stops none (`--all` stops them all)."""
     from drd.executive_messages import MissionCommand, MissionStatus
 
     with _cluster(config, connect, timeout) as client:
+        if not mission and not every:
+            running = [str(m.get("id")) for m in client.missions() if m.get("outcome") is None]
+            if len(running) > 1:
+                fail(f"{len(running)} missions run ({', '.join(running)}): say which to stop", hint="missionctl"
+                     f" stop {running[0]}, or missionctl stop --all")
         reply = client.bus.call(client.keys.executive, MissionCommand("stop", mission), timeout=max(timeout, 5.0))
     if isinstance(reply, MissionStatus):
         for m in reply.missions:
