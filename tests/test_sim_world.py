@@ -155,7 +155,7 @@ DELETE = object()
 
 BAD: list[tuple[str, Callable[[dict[str, Any]], object], list[str]]] = [
     ("not a mapping", lambda d: [d], ["expected a mapping with keys name, description, light, walls, rooms, doors,"
-                                      " obstacles, intruders, rangers, scouts, got a list"]),
+                                      " obstacles, intruders, rangers, scouts, battery, got a list"]),
     ("no name", edit("name", DELETE), ["name: required key missing"]),
     ("unknown top key", edit("ligth", {}), ["ligth: unknown key (did you mean light?)"]),
     ("width not a number", edit("doors/2/width", "wide"), ["doors[2].width: expected a number, got 'wide'"]),

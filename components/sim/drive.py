@@ -12,7 +12,7 @@ from drd.sim import Simulation
 class SimDrive(SimDriver):
     """A simulated wheeled base. Options: `max_speed` (m/s; without it, only the simulator's wheels limit)."""
 
-    READINGS = frozenset({"odometry", "origin", "max_speed"})
+    READINGS = frozenset({"odometry", "origin", "battery", "max_speed"})
     SETPOINTS = ("set_velocity", "stop")
     STOP = "stop"
 
@@ -48,3 +48,8 @@ class SimDrive(SimDriver):
         with self.sim_errors():
             p = self.sim.origin(self.robot_id)
         return p.x, p.y, p.heading
+
+    def battery(self) -> float:
+        """The charge left, 0 (empty: the wheels stop) .. 1 (full); the world's battery model drains it."""
+        with self.sim_errors():
+            return self.sim.battery(self.robot_id)

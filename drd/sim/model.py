@@ -151,6 +151,16 @@ class ScoutSpawn:
 
 
 @dataclass(frozen=True, slots=True)
+class Battery:
+    """How robots' charge (0 empty .. 1 full) runs down: `idle` per second while switched on, `per_meter` per metre
+    driven; `start` the charge of named robots at the start (others start full). The default drains nothing."""
+
+    idle: float = 0.0
+    per_meter: float = 0.0
+    start: tuple[tuple[str, float], ...] = ()
+
+
+@dataclass(frozen=True, slots=True)
 class World:
     """A loaded world. `source` names the file, so later problems (hosts matching) can point at it."""
 
@@ -166,6 +176,7 @@ class World:
     scouts: tuple[ScoutSpawn, ...] = ()
     description: str = ""
     source: str = "<world>"
+    battery: Battery = Battery()
     _light_cells: dict[tuple[int, int], tuple[tuple[Room, ...], tuple[LightZone, ...]]] | None = field(
         default=None, init=False, repr=False, compare=False)
 

@@ -78,6 +78,7 @@ class Simulation:
             self._intruders[intruder.id] = body
             self._intruder_trails[intruder.id] = [(0.0, *body.position)]
         self._robots: dict[str, RobotBody] = {}
+        self._start_charge = dict(world.battery.start)
         for r in world.rangers:
             robot = self._make(r.id, "ranger", r.x, r.y, r.heading, ranger_speed, RobotState.FLOOR)
             robot.magazine = list(r.magazine)
@@ -115,7 +116,7 @@ class Simulation:
         group = len(self._robots) + 1
         shape.filter = pymunk.ShapeFilter(group=group, categories=RANGER if kind == "ranger" else SCOUT)
         robot = RobotBody(rid, kind, body, shape, group, speed, base, state, odom=(x, y, heading), last=(x, y, heading),
-                          origin=(x, y, heading))
+                          origin=(x, y, heading), charge=self._start_charge.get(rid, 1.0))
         robot.wheels_changed()
         if state is RobotState.FLOOR:
             self.space.add(body, shape)
@@ -155,9 +156,12 @@ class Simulation:
             set_position(body, x1, y1)  # exact, whatever the integrator's rounding
             self._walking[iid] = (x1, y1)
             self._record(self._intruder_trails[iid], x1, y1)
+        battery = self.world.battery
         for r in self._robots.values():
             if r.state is RobotState.FLOOR:
                 x, y, a = placement(r.body)
+                if battery.per_meter or battery.idle:
+                    self._drain(r, h, math.hypot(x - r.last[0], y - r.last[1]))
                 r.integrate_odometry(x, y, a, self._rng, self.noise.odometry)
                 self._record(r.trail, x, y)
             elif r.state is RobotState.FLYING and r.flight is not None:
@@ -165,6 +169,19 @@ class Simulation:
                     self._land(r)
                 else:
                     self._record(r.trail, *self._flight_point(r.flight))
+
+    def _drain(self, r: RobotBody, h: float, moved: float) -> None:
+        """The battery runs down with time switched on and distance driven; empty, the wheels stop for good."""
+        if r.charge <= 0.0:
+            return
+        battery = self.world.battery
+        r.charge = max(0.0, r.charge - battery.idle * h - battery.per_meter * moved)
+        if r.charge <= 0.0:
+            self.set_wheels(r.id, 0.0, 0.0)
+
+    def battery(self, robot_id: str) -> float:
+        """The robot's charge, 0 (empty) .. 1 (full): the world's `battery` model (it never drains by default)."""
+        return self._robot(robot_id, alive=False).charge
 
     def _record(self, trail: list[tuple[float, float, float]], x: float, y: float, force: bool = False) -> None:
         if force or not trail:
@@ -223,6 +240,8 @@ class Simulation:
     def set_wheels(self, robot_id: str, v_left: float, v_right: float) -> None:
         """Differential drive: wheel speeds in m/s, scaled down together (same curvature) to the max speed."""
         r = self._robot(robot_id)
+        if r.charge <= 0.0:  # an empty battery turns no wheel
+            v_left = v_right = 0.0
         top = max(abs(v_left), abs(v_right))
         if top > r.max_speed:
             v_left, v_right = v_left * r.max_speed / top, v_right * r.max_speed / top

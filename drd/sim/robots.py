@@ -113,6 +113,7 @@ class RobotBody:
     omega: float = 0.0
     odom: tuple[float, float, float] = (0.0, 0.0, 0.0)
     origin: tuple[float, float, float] = (0.0, 0.0, 0.0)  # where its odometry began (the world's start pose)
+    charge: float = 1.0  # battery, 0 (empty: the wheels stop) .. 1 (full)
     last: tuple[float, float, float] = (0.0, 0.0, 0.0)  # the true pose at the end of the previous step
     flight: Flight | None = None
     magazine: list[str] = field(default_factory=list)

@@ -37,7 +37,8 @@ from drd.bus import Bus, Message, Query, Reply, message
 
 #: The Simulation methods a remote driver may call (what components/sim/* use), and their arity bounds.
 ALLOWED_METHODS: dict[str, tuple[int, int]] = {
-    "ranges": (2, 4), "camera": (3, 4), "brightness": (3, 4), "odometry": (1, 1), "origin": (1, 1), "magazine": (1, 1),
+    "ranges": (2, 4), "camera": (3, 4), "brightness": (3, 4), "odometry": (1, 1), "origin": (1, 1),
+    "battery": (1, 1), "magazine": (1, 1),
     "set_max_speed": (2, 2), "set_velocity": (3, 3), "stop": (1, 1), "launch": (3, 3), "jump": (2, 2),
     "radio_ok": (3, 3), "pose": (1, 1), "command": (1, 1), "set_wheels": (3, 3), "light": (2, 2),
 }
@@ -45,7 +46,7 @@ ALLOWED_METHODS: dict[str, tuple[int, int]] = {
 #: and sends them together (`multi`) at the end of the Creator's call, before the controller steps the physics.
 DEFERRED = frozenset({"set_velocity", "stop", "set_wheels"})
 #: Readings that change only with `Simulation.version` (no noise drawn): a `RemoteSimulation` keeps them per version.
-PER_VERSION = frozenset({"odometry", "origin", "magazine", "pose"})
+PER_VERSION = frozenset({"odometry", "origin", "battery", "magazine", "pose"})
 #: At most this many calls in one `multi` request.
 MAX_MULTI = 64
 #: The error of a `multi` call not made because a guarded call before it (`[method, [args], true]`) was refused.

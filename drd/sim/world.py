@@ -23,6 +23,7 @@ from drd.sim.model import (
     INTRUDER_RADIUS,
     RANGER_RADIUS,
     SCOUT_RADIUS,
+    Battery,
     Door,
     DoorState,
     Intruder,
@@ -48,7 +49,9 @@ __all__ = [
 ]
 
 _ID = re.compile(r"[A-Za-z_][A-Za-z0-9_]*", re.ASCII)
-_TOP = ("name", "description", "light", "walls", "rooms", "doors", "obstacles", "intruders", "rangers", "scouts")
+_TOP = ("name", "description", "light", "walls", "rooms", "doors", "obstacles", "intruders", "rangers", "scouts",
+        "battery")
+_BATTERY = ("idle", "per_meter", "start")
 _LIGHT = ("ambient", "dark")
 _DARK = ("at", "radius", "level")
 _WALL = ("from", "to")
@@ -146,8 +149,27 @@ class _Reader(ConfigReader):
         blocking = [(w.a, w.b) for w in solid] + [(d.a, d.b) for d in doors if d.state is not DoorState.OPEN]
         rangers = [ranger for _, v, k in self.entries(data, "rangers") if (ranger := self.ranger(v, k, blocking))]
         scouts = [scout for _, v, k in self.entries(data, "scouts") if (scout := self.scout(v, k, blocking))]
+        battery = self.battery(data["battery"], "battery") if "battery" in data else Battery()
+        robots = {r.id for r in rangers} | {s.id for s in scouts} | {sid for r in rangers for sid in r.magazine}
+        for rid, _ in battery.start:
+            if rid not in robots:
+                self.fail(f"battery.start.{rid}", f"no robot {rid!r} in this world")
         return World(name or "", tuple(solid), tuple(doors), tuple(rooms), ambient, tuple(dark), tuple(obstacles),
-                     tuple(intruders), tuple(rangers), tuple(scouts), description, self.source)
+                     tuple(intruders), tuple(rangers), tuple(scouts), description, self.source, battery)
+
+    def battery(self, value: object, key: str) -> Battery:
+        data = self.mapping(value, key)
+        self.keys(data, key, _BATTERY)
+        idle = self.number(data["idle"], f"{key}.idle", zero=True) if "idle" in data else 0.0
+        per_meter = self.number(data["per_meter"], f"{key}.per_meter", zero=True) if "per_meter" in data else 0.0
+        start = []
+        for robot, charge in self.mapping(data.get("start", {}), f"{key}.start").items():
+            level = self.number(charge, f"{key}.start.{robot}", zero=True)
+            if level is not None and level > 1:
+                self.fail(f"{key}.start.{robot}", f"expected a charge from 0 (empty) to 1 (full), got {_num(level)}")
+            elif level is not None:
+                start.append((str(robot), level))
+        return Battery(idle or 0.0, per_meter or 0.0, tuple(start))
 
     def light(self, value: object, key: str) -> tuple[float, list[LightZone]]:
         data = self.mapping(value, key)

@@ -1,0 +1,102 @@
+"""The simulator's battery model (issue #11's battery floor): charge drains with time switched on and distance
+driven, an empty robot stops for good, the Drive reports it, and a mission's battery floor fires as it drains.
+
+Positions and charges are read on the simulated robot (ground truth); the mission's outcome from its report.
+"""
+
+from __future__ import annotations
+
+import io
+import json
+import math
+from pathlib import Path
+
+import pytest
+import yaml
+
+from components.sim.drive import SimDrive
+from drd.dryrun import Mission, run_many
+from drd.hosts import load_hosts
+from drd.sim.physics import Simulation
+from drd.sim.world import WorldError, load_world
+from dsl import compile_text
+from dsl.catalog import Catalog
+from tests.conftest import ROOT
+
+
+def world_with(tmp_path: Path, battery: object) -> Path:
+    data = yaml.safe_load((ROOT / "worlds" / "corridor.yaml").read_text())
+    data["battery"] = battery
+    path = tmp_path / "drained.yaml"
+    path.write_text(yaml.safe_dump(data))
+    return path
+
+
+def drive(sim: Simulation, seconds: float, v: float = 0.5) -> None:
+    sim.set_velocity("ranger1", v, 0.0)
+    sim.run_until(sim.time + seconds)
+
+
+def test_charge_drains_with_time_and_distance_as_the_world_says(tmp_path: Path) -> None:
+    sim = Simulation(load_world(world_with(tmp_path, {"idle": 0.001, "per_meter": 0.02, "start": {"ranger1": 0.8}})))
+    assert sim.battery("ranger1") == 0.8 and sim.battery("scout1") == 1.0
+    x0 = sim.pose("ranger1").x
+    drive(sim, 6.0)
+    moved = sim.pose("ranger1").x - x0
+    assert moved > 2.0
+    expected = 0.8 - 0.001 * 6.0 - 0.02 * moved
+    assert math.isclose(sim.battery("ranger1"), expected, abs_tol=0.002), (sim.battery("ranger1"), expected)
+
+
+def test_an_empty_robot_stops_for_good_and_never_reads_below_zero(tmp_path: Path) -> None:
+    sim = Simulation(load_world(world_with(tmp_path, {"per_meter": 0.5})))  # 2 m of charge
+    drive(sim, 10.0)
+    assert sim.battery("ranger1") == 0.0
+    x = sim.pose("ranger1").x
+    assert 2.5 < x < 3.3, x  # started at 1.0: 2 m, and no farther
+    drive(sim, 3.0)  # commands to an empty robot turn no wheel
+    assert sim.pose("ranger1").x == pytest.approx(x, abs=1e-6) and sim.battery("ranger1") == 0.0
+
+
+def test_the_shipped_worlds_never_drain() -> None:
+    sim = Simulation(load_world(ROOT / "worlds" / "corridor.yaml"))
+    drive(sim, 20.0)
+    assert sim.battery("ranger1") == 1.0
+
+
+def test_a_bad_battery_section_names_the_key(tmp_path: Path) -> None:
+    with pytest.raises(WorldError) as e:
+        load_world(world_with(tmp_path, {"idle": -1, "start": {"ranger9": 0.5, "scout1": 2}}))
+    text = "\n".join(map(str, e.value.problems))
+    assert "battery.idle: expected a non-negative number" in text
+    assert "battery.start.ranger9: no robot 'ranger9'" in text
+    assert "battery.start.scout1: expected a charge from 0 (empty) to 1 (full)" in text
+
+
+def test_the_drive_reports_the_charge(tmp_path: Path, catalog: Catalog) -> None:
+    sim = Simulation(load_world(world_with(tmp_path, {"start": {"ranger1": 0.42}})))
+    cluster = load_hosts(ROOT / "hosts.yaml", catalog)
+    device = next(d for d in cluster.devices if d.id == "ranger1.drive")
+    assert SimDrive(device, "ranger1", sim).battery() == 0.42
+
+
+def test_a_battery_floor_fires_as_the_battery_drains(tmp_path: Path, catalog: Catalog) -> None:
+    text = """
+mission Charged {
+    needs ranger: Ranger
+    constraint charged: ranger.battery >= 0.9
+    FollowCorridor(speed: 0.5)
+}
+"""
+    r = compile_text(text, catalog, "c.mission")
+    assert r.ok and r.statechart is not None
+    trace = io.StringIO()
+    world = load_world(world_with(tmp_path, {"per_meter": 0.05}))  # 0.1 of charge = 2 m
+    (report,) = run_many([Mission(r.statechart)], load_hosts(ROOT / "hosts.yaml", catalog), world, catalog,
+                         until=40.0, trace=trace)
+    assert report.outcome == "failure" and "constraint charged violated" in report.reason
+    records = [json.loads(line) for line in trace.getvalue().splitlines()]
+    [violation] = [x for x in records if x["kind"] == "event" and x["name"] == "violation"][:1]
+    assert violation["fields"]["name"] == "charged" and violation["fields"]["value"] < 0.9
+    x = report.tracks["ranger1"][-1][1]
+    assert 2.5 < x < 3.5, x  # stopped about 2 m from its start (1.0), with charge still left
