@@ -152,8 +152,14 @@ class ScoutSpawn:
 
 @dataclass(frozen=True, slots=True)
 class Battery:
-    """How robots' charge (0 empty .. 1 full) runs down: `idle` per second while switched on, `per_meter` per metre
-    driven; `start` the charge of named robots at the start (others start full). The default drains nothing."""
+    """How robots' charge (0 empty .. 1 full) runs down: `idle` per second while on the floor (computer, sensors),
+    `per_meter` per metre driven (the wheels); `start` the charge of named robots at the start (others start full).
+
+    A fraction, not a percent, because it is what a mission compares: hosts.yaml's static `battery: 1.0` and the
+    manifests' "charge left (0 to 1)" use that scale, so `ranger.battery >= 0.2` means the same read from the
+    simulator or from hosts.yaml. The default drains nothing: the shipped worlds and missions were written against
+    a battery that never changes, and any other default would be an invented figure that moves every dry-run's
+    outcome (a 30-minute mission keeps its full charge). A world that wants a floor to bite sets a rate."""
 
     idle: float = 0.0
     per_meter: float = 0.0

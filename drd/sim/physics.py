@@ -7,7 +7,7 @@ function of the world at one instant: its noise is seeded by (seed, robot, senso
 again at the same instant gives the same answer, and asking ahead of need, or not at all, changes no
 other reading (the cluster's Creator reads ahead of a component's step: `drd.daemon.creator`). Drivers
 command robots (`set_velocity`, `launch`, `jump`) and read sensors (`ranges`, `camera`,
-`brightness`, `radio_ok`, `odometry`); `pose`, `intruders` and `trajectory` are ground truth,
+`brightness`, `radio_ok`, `odometry`, `battery`); `pose`, `intruders` and `trajectory` are ground truth,
 for the report and the picture only.
 """
 
@@ -171,7 +171,8 @@ class Simulation:
                     self._record(r.trail, *self._flight_point(r.flight))
 
     def _drain(self, r: RobotBody, h: float, moved: float) -> None:
-        """The battery runs down with time switched on and distance driven; empty, the wheels stop for good."""
+        """The battery runs down linearly with time on the floor and distance moved in this sub-step (the world's
+        `battery`: no randomness, so a run stays reproducible); empty, the wheels stop for good (`set_wheels`)."""
         if r.charge <= 0.0:
             return
         battery = self.world.battery
@@ -180,8 +181,17 @@ class Simulation:
             self.set_wheels(r.id, 0.0, 0.0)
 
     def battery(self, robot_id: str) -> float:
-        """The robot's charge, 0 (empty) .. 1 (full): the world's `battery` model (it never drains by default)."""
+        """The robot's charge, 0 (empty) .. 1 (full), the scale of hosts.yaml's static `battery`: the world's
+        `battery` model (`drd.sim.model.Battery`; it never drains by default). An empty robot is not lost: it
+        still senses and reports, but its wheels, foot and launcher do nothing (see `RobotState.LOST`). Readable
+        for a lost robot too (what it had left)."""
         return self._robot(robot_id, alive=False).charge
+
+    def _powered(self, r: RobotBody, what: str) -> None:
+        """Refuse an action of an empty robot: unlike a setpoint, which can hold at zero, an action reports a result
+        (a landing, a hop) that would be a lie."""
+        if r.charge <= 0.0:
+            raise SimError(f"{r.id}'s battery is empty: it cannot {what}")
 
     def _record(self, trail: list[tuple[float, float, float]], x: float, y: float, force: bool = False) -> None:
         if force or not trail:
@@ -238,7 +248,8 @@ class Simulation:
         self._robot(robot_id).max_speed = speed
 
     def set_wheels(self, robot_id: str, v_left: float, v_right: float) -> None:
-        """Differential drive: wheel speeds in m/s, scaled down together (same curvature) to the max speed."""
+        """Differential drive: wheel speeds in m/s, scaled down together (same curvature) to the max speed. An empty
+        robot takes the command and turns no wheel (`command` reads 0, 0), as motors behind a cut-off would."""
         r = self._robot(robot_id)
         if r.charge <= 0.0:  # an empty battery turns no wheel
             v_left = v_right = 0.0
@@ -269,7 +280,7 @@ class Simulation:
         people and obstacles, but a wall or closed door stops it short and it drops there.
 
         Raises:
-            SimError: the Scout is not in a magazine, or the distance is out of range.
+            SimError: the Scout is not in a magazine, the distance is out of range, or the Ranger's battery is empty.
         """
         s = self._robot(scout_id)
         if s.state is not RobotState.MAGAZINE or s.carrier is None:
@@ -277,6 +288,7 @@ class Simulation:
         if not 0 < distance <= MAX_LAUNCH:
             raise SimError(f"launch distance must be in (0, {MAX_LAUNCH:g}] m, got {distance}")
         ranger = self._robot(s.carrier)
+        self._powered(ranger, "launch")  # the launcher runs on its Ranger's battery
         rng = self._rng(scout_id, "launch")
         aim = ranger.body.angle + heading
         a = aim + rng.gauss(0.0, self.noise.launch_heading)
@@ -295,13 +307,14 @@ class Simulation:
         Walls, doors, robots, people and higher obstacles stop the hop short.
 
         Raises:
-            SimError: the Scout is not on the floor, or `dx` is not in (0, max_jump].
+            SimError: the Scout is not on the floor, `dx` is not in (0, max_jump], or its battery is empty.
         """
         s = self._robot(scout_id)
         if s.kind != "scout" or s.state is not RobotState.FLOOR:
             raise SimError(f"{scout_id} cannot jump: it is not a Scout on the floor ({s.state})")
         if not 0 < dx <= self.max_jump:
             raise SimError(f"jump distance must be in (0, {self.max_jump:g}] m, got {dx}")
+        self._powered(s, "jump")
         start = (s.body.position.x, s.body.position.y)
         travel, blocked = self._path(start, s.body.angle, dx, s.group, EVERYTHING,
                                      lambda shape: self._heights.get(shape, math.inf) > self.jump_height)

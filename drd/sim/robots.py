@@ -68,7 +68,10 @@ class RobotState(StrEnum):
     FLOOR = "floor"
     """A body in the space: it drives, collides and is seen."""
     LOST = "lost"
-    """Gone (destroyed, out of battery, injected loss): every command and sensor fails."""
+    """Gone (destroyed, dead, an injected loss: `Simulation.lose`): every command and sensor fails. A battery the
+    world's model runs flat does not lose the robot: like a real one's low-voltage cut-off, it stops the actuators
+    and leaves the robot on the floor, reporting (`Simulation.battery` reads 0), so a mission sees an empty robot,
+    not a vanished one."""
 
 
 class SimError(Exception):
@@ -113,7 +116,7 @@ class RobotBody:
     omega: float = 0.0
     odom: tuple[float, float, float] = (0.0, 0.0, 0.0)
     origin: tuple[float, float, float] = (0.0, 0.0, 0.0)  # where its odometry began (the world's start pose)
-    charge: float = 1.0  # battery, 0 (empty: the wheels stop) .. 1 (full)
+    charge: float = 1.0  # battery, 0 (empty: wheels, foot and launcher stop) .. 1 (full)
     last: tuple[float, float, float] = (0.0, 0.0, 0.0)  # the true pose at the end of the previous step
     flight: Flight | None = None
     magazine: list[str] = field(default_factory=list)
