@@ -10,8 +10,10 @@ CLI renders it.
 from __future__ import annotations
 
 import functools
+import re
+import threading
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import IO, Any
@@ -133,14 +135,241 @@ class DryRun:
                  for p, w in since.items()]
         return sorted(rows, key=lambda w: (w["from"], w["path"]))
 
+    def logs(self) -> list[dict[str, Any]]:
+        """Every `log` line of the run (the mission's `log` actions, the components' and the runtime's own), in
+        order: what the mission said about itself is part of what happened."""
+        return [{"at": round(r.at, 6), "path": r.path, "text": r.text} for r in self.records if isinstance(r, rec.Log)]
+
+    def failure_chain(self) -> list[dict[str, Any]]:
+        """Why the mission failed, from the mission down to each leaf that failed, each with its own reason
+        (`[{path, reason, leaf}]`, parents before their children; empty unless the outcome is a failure).
+
+        Built from the records alone (so a cluster's `missionctl run` explains the same way): a transition to
+        `fail` (a timeout says `timed out after 2min`, an event its trigger), a child's failure, each failed
+        instance of a multiplicity, and at the bottom the leaf's own words (its last `log` line, or the
+        resource it lost)."""
+        if self.outcome != "failure":
+            return []
+        return _Explainer(self.records).chain(self.reason)
+
+    def still_active(self) -> list[dict[str, Any]]:
+        """The leaves still active when a run was stopped (`--until`, the time limit, Ctrl-C, `missionctl stop`):
+        `[{path, since, state}]`, `state` running, waiting (for resources) or suspended (preempted)."""
+        if self.outcome != "stopped":
+            return []
+        return _Explainer(self.records).still_active()
+
+    def waiting(self) -> list[dict[str, Any]]:
+        """What each behavior still waiting when the run was stopped waited for: `[{path, since, needs,
+        blocked_by: [{path, holds}]}]`, `holds` what that holder held then (need -> resource id)."""
+        if self.outcome != "stopped":
+            return []
+        return _Explainer(self.records).waiting()
+
     def to_dict(self) -> dict[str, Any]:
         return {"mission": self.mission, "id": self.mission_id, "priority": self.priority,
                 "outcome": self.outcome, "reason": self.reason,
                 "sim_time": self.sim_time, "wall_time": self.wall_time,
                 "real_time_factor": self.real_time_factor, "speed": self.speed,
+                "failure_chain": self.failure_chain(), "still_active": self.still_active(),
+                "waiting": self.waiting(), "logs": self.logs(),
                 "timeline": self.timeline(), "holds": self.holds(), "waits": self.waits(),
                 "injections": self.injections,
                 "doors": self.doors, "scouts": self.scouts, "detections": self.detections}
+
+
+#: Ends of a hold that take a behavior's resources away (it then fails for that reason, not its own).
+_LOST = ("host lost", "resource lost", "expired")
+#: Records the stop of a mission writes as it shuts everything down (`Interpreter.stop`), all at its last instant.
+_SHUTDOWN = (rec.Released, rec.Halted, rec.Command, rec.Revoked, rec.Log)
+
+
+class _Explainer:
+    """Reads a mission's records to say why it ended: the failure chain, or what was still active and waiting."""
+
+    def __init__(self, records: Sequence[rec.Record]):
+        self.records = records
+        self.parent: dict[str, str] = {}
+        self.children: dict[str, list[str]] = {}
+        self.instances: set[str] = set()  # paths of a multiplicity's instances (`lookouts[0]`)
+        for r in records:
+            if isinstance(r, rec.Entered) and r.path not in self.parent:
+                if r.state.endswith("[*]"):
+                    parent = r.path[:r.path.rfind("[")]
+                    self.instances.add(r.path)
+                else:
+                    parent = r.path.rpartition("/")[0]
+                self.parent[r.path] = parent
+                self.children.setdefault(parent, []).append(r.path)
+
+    # --- the failure chain -------------------------------------------------------------------------------
+    def chain(self, reason: str) -> list[dict[str, Any]]:
+        finished = next((r for r in reversed(self.records) if isinstance(r, rec.Finished)), None)
+        root = finished.path if finished is not None else next(
+            (r.path for r in self.records if isinstance(r, rec.Entered)), "")
+        end = self._last(rec.Exited, root, len(self.records), status="failure")
+        rows = self._explain(root, len(self.records) if end is None else end, reason)
+        for row in rows:
+            path = row["path"]
+            row["leaf"] = not any(o["path"].startswith((path + "/", path + "[")) for o in rows)
+        return rows
+
+    def _explain(self, node: str, end: int, reason: str = "") -> list[dict[str, Any]]:
+        """`node` failed at record `end` (its `exited`): its row, then the rows of what made it fail."""
+        start = self._last(rec.Entered, node, end) or 0
+        records = self.records
+        for i in range(end - 1, start, -1):
+            r = records[i]
+            if isinstance(r, rec.Taken) and r.target == f"{node}/fail" and self.parent.get(r.path) == node:
+                child, label = r.path, r.label.split(" / ")[0].strip()
+                name = _name(child)
+                if r.trigger == "error":
+                    j = self._last(rec.Exited, child, i, status="failure", after=start)
+                    if j is not None:
+                        return [self._row(node, reason or f"{name} failed"), *self._explain(child, j)]
+                    return [self._row(node, reason or f"{name} failed"), self._row(child, self._own(child, start, i))]
+                if r.trigger == "timeout":
+                    ran = self._active_below(child, i)
+                    why = f"timed out {label}" + (f" (while {', '.join(_name(p) for p in ran)} ran)" if ran else "")
+                    return [self._row(node, reason or f"{name} timed out"), self._row(child, why)]
+                why = f"{label} -> fail" if label else "completed, then -> fail"
+                return [self._row(node, reason or f"{name}: {why}"), self._row(child, why)]
+        failed = [(c, j) for c in self.children.get(node, ())
+                  if (j := self._last(rec.Exited, c, end, status="failure", after=start)) is not None]
+        if failed and any(c in self.instances for c, _ in failed):
+            instances = [c for c in self.children.get(node, ()) if c in self.instances]
+            name = _name(node)
+            found = re.search(rf"only \d+ of at least \d+ instances of {re.escape(name)} can succeed", self.reason_text)
+            why = (found.group(0) + f" ({len(failed)} failed)") if found else (
+                f"{len(failed)} of {len(instances)} instances failed")
+            rows = [self._row(node, reason or why)]
+            for c, j in failed:
+                rows += self._explain(c, j)
+            return rows
+        if failed:
+            c, j = max(failed, key=lambda f: f[1])
+            return [self._row(node, reason or f"{_name(c)} failed"), *self._explain(c, j)]
+        return [self._row(node, reason or self._own(node, start, end))]
+
+    @functools.cached_property
+    def reason_text(self) -> str:
+        finished = next((r for r in reversed(self.records) if isinstance(r, rec.Finished)), None)
+        return finished.reason if finished is not None else ""
+
+    def _own(self, node: str, start: int, end: int) -> str:
+        """A behavior's own reason for failing: the resources it lost, else its last log line, else what its
+        multiplicity logged about it."""
+        window = self.records[start:end + 1]
+        lost = next((r for r in window if isinstance(r, rec.Released) and r.path == node and r.reason in _LOST), None)
+        if lost is not None:
+            return f"lost {lost.resources[0] if lost.resources else 'its resources'} ({lost.reason})"
+        said = next((r.text for r in reversed(window) if isinstance(r, rec.Log) and r.path == node), None)
+        if said is not None:
+            return said
+        parent = self.parent.get(node, "")
+        for r in self.records[end + 1:end + 4]:
+            if isinstance(r, rec.Log) and r.path == parent and r.text.startswith("an instance failed: "):
+                return r.text.removeprefix("an instance failed: ")
+        return "failed"
+
+    def _active_below(self, node: str, at: int) -> list[str]:
+        """The leaves under `node` active at record `at`."""
+        active: dict[str, None] = {}
+        for r in self.records[:at]:
+            if r.path.startswith((node + "/", node + "[")):
+                if isinstance(r, rec.Entered):
+                    active[r.path] = None
+                elif isinstance(r, rec.Exited):
+                    active.pop(r.path, None)
+        return _leaves(active)
+
+    def _last(self, kind: type[rec.Record], path: str, before: int, status: str | None = None,
+              after: int = -1) -> int | None:
+        """The index of the last record of `kind` about `path` before index `before` (and after `after`)."""
+        for i in range(min(before, len(self.records)) - 1, after, -1):
+            r = self.records[i]
+            if isinstance(r, kind) and r.path == path and (status is None or getattr(r, "status", None) == status):
+                return i
+        return None
+
+    @staticmethod
+    def _row(path: str, reason: str) -> dict[str, Any]:
+        return {"path": path, "reason": reason}
+
+    # --- what a stopped run left behind ------------------------------------------------------------------
+    def _cut(self) -> int:
+        """Where the stop's shutdown begins: the records before it are the run as it was when stopped."""
+        records = self.records
+        end = next((i for i in range(len(records) - 1, -1, -1) if isinstance(records[i], rec.Finished)),
+                   len(records))
+        at = records[end].at if end < len(records) else (records[-1].at if records else 0.0)
+        i = end
+        while i > 0:
+            r = records[i - 1]
+            if abs(r.at - at) > 1e-9 or not (isinstance(r, _SHUTDOWN) or (isinstance(r, rec.Exited)
+                                                                          and r.status == "stopped")):
+                break
+            i -= 1
+        return i
+
+    def _replay(self) -> Iterator[rec.Record]:
+        return iter(self.records[:self._cut()])
+
+    def still_active(self) -> list[dict[str, Any]]:
+        active: dict[str, float] = {}
+        suspended: set[str] = set()
+        waiting = {w["path"] for w in self.waiting()}
+        for r in self._replay():
+            if isinstance(r, rec.Entered):
+                active[r.path] = r.at
+            elif isinstance(r, rec.Exited):
+                active.pop(r.path, None)
+                suspended.discard(r.path)
+            elif isinstance(r, rec.Suspended):
+                suspended.add(r.path)
+            elif isinstance(r, rec.Resumed):
+                suspended.discard(r.path)
+
+        def state(path: str) -> str:
+            if path in waiting:
+                return "waiting"
+            frozen = any(path == s or path.startswith((s + "/", s + "[")) for s in suspended)
+            return "suspended" if frozen else "running"
+
+        return [{"path": p, "since": round(active[p], 6), "state": state(p)} for p in _leaves(active)]
+
+    def waiting(self) -> list[dict[str, Any]]:
+        waits: dict[str, dict[str, Any]] = {}
+        holds: dict[str, dict[str, str]] = {}
+        for r in self._replay():
+            if isinstance(r, rec.Waiting):
+                w = waits.setdefault(r.path, {"path": r.path, "since": round(r.at, 6), "needs": [], "blocked_by": []})
+                if r.needs:
+                    w["needs"] = list(r.needs)
+                if r.blocked_by:
+                    w["blocked_by"] = list(r.blocked_by)
+            elif isinstance(r, rec.Granted):
+                waits.pop(r.path, None)
+                holds[r.path] = {k: v for k, v in r.resources.items() if "." not in k}
+            elif isinstance(r, rec.Released):
+                gone = set(r.resources)
+                holds[r.path] = {k: v for k, v in holds.get(r.path, {}).items() if v not in gone}
+            elif isinstance(r, rec.Exited):
+                waits.pop(r.path, None)
+                holds.pop(r.path, None)
+        return [{**w, "blocked_by": [{"path": b, "holds": holds.get(b, {})} for b in w["blocked_by"]]}
+                for w in waits.values()]
+
+
+def _name(path: str) -> str:
+    """The last step of a path: `Pair/lookouts[0]/Go` -> `Go`."""
+    return path.rsplit("/", 1)[-1]
+
+
+def _leaves(paths: Iterator[str] | dict[str, Any]) -> list[str]:
+    """The paths with no other path below them, in their order."""
+    every = list(paths)
+    return [p for p in every if not any(q.startswith((p + "/", p + "[")) for q in every)]
 
 
 #: How the report words the end of a hold (the trace's `released` reasons).
@@ -174,12 +403,14 @@ def run(chart: Statechart, cluster: Cluster, world: World, catalog: Catalog, **o
 def run_many(missions: Sequence[Mission], cluster: Cluster, world: World, catalog: Catalog, *, seed: int = 0,
              until: float = 1800.0, speed: float | None = None, trace: IO[str] | None = None,
              registry: Any = None, progress: Callable[[Simulation, Executive], None] | None = None,
-             progress_every: float = 1.0, injections: Sequence[Injection] = ()) -> list[DryRun]:
+             progress_every: float = 1.0, injections: Sequence[Injection] = (),
+             stop: threading.Event | None = None) -> list[DryRun]:
     """Run missions together on one team until all have ended (or `until` seconds of sim time), one report each.
 
     They share the world, the robots and the one Resource Controller Manager, which ranks their requests by the
     missions' priorities, then their behaviors'. `injections` happen on the way; `trace` gets every mission's
-    records, each with its mission's id."""
+    records, each with its mission's id. Setting `stop` (the operator's Ctrl-C) stops the missions still running
+    between two control cycles, never inside one, and the reports say what ran so far."""
     if not missions:
         raise ValueError("no mission to run")
     problems = check_hosts(world, cluster)
@@ -210,7 +441,9 @@ def run_many(missions: Sequence[Mission], cluster: Cluster, world: World, catalo
     running = [executive.missions[mid] for mid in ids]  # the interpreters
     next_progress = 0.0
     pending = sorted(injections)
-    while not all(interp.finished for interp in running) and sim.time < until:
+    while not all(interp.finished for interp in running) and sim.time < until - 1e-6:  # 0.1 s steps add up
+        if stop is not None and stop.is_set():
+            break
         sim.step(CONTROL_PERIOD)
         while pending and pending[0].at <= sim.time + 1e-9:
             effect = _inject(pending.pop(0), sim, executive, cluster)
@@ -224,9 +457,10 @@ def run_many(missions: Sequence[Mission], cluster: Cluster, world: World, catalo
         if progress is not None and sim.time >= next_progress:
             progress(sim, executive)
             next_progress = sim.time + progress_every
+    why = "stopped by operator" if stop is not None and stop.is_set() else f"sim time limit of {until:g} s reached"
     for interp in running:
         if not interp.finished:
-            interp.stop(f"sim time limit of {until:g} s reached")
+            interp.stop(why)
     tracks = {rid: sim.trajectory(rid) for rid in (*sim.robots, *sim.intruders())}
     wall = time.perf_counter() - start
     for interp, result in zip(running, results, strict=True):
@@ -302,14 +536,31 @@ def merged(reports: Sequence[DryRun]) -> DryRun:
     return out
 
 
-def world_path(name: str, root: Path) -> Path:
-    """`corridor` or `worlds/corridor.yaml` or any path: a file as given, else `<root>/worlds/<name>.yaml` (root:
-    the folder of the hosts file that names the world), else the worlds that ship with drd."""
+#: The worlds that come with drd (beside the packages, in a source tree or an editable install).
+SHIPPED_WORLDS = Path(__file__).resolve().parents[1] / "worlds"
+
+
+def locate_world(name: str, roots: Sequence[Path]) -> tuple[Path | None, list[Path]]:
+    """Where the world `name` is, and every path tried, in order (for an error that says where it looked).
+
+    A name (`corridor`) is `<root>/worlds/<name>.yaml` for each root (the folder of the hosts file that names
+    it, and for `--world` first the working directory), else the worlds that ship with drd; a path (`x.yaml`,
+    `worlds/corridor.yaml`) is itself when absolute, else relative to each root, else a shipped world of
+    that file name. So a dry-run finds its world from any directory."""
     p = Path(name)
-    if p.suffix in (".yaml", ".yml") or p.exists():
-        return p
-    found = root / "worlds" / f"{name}.yaml"
-    if found.exists():
-        return found
-    shipped = Path(__file__).resolve().parents[1] / "worlds" / f"{name}.yaml"
-    return shipped if shipped.exists() else found
+    if p.suffix in (".yaml", ".yml") or "/" in name or p.is_absolute():
+        tried = [p] if p.is_absolute() else [root / p for root in roots] + [SHIPPED_WORLDS / p.name]
+    else:
+        tried = [root / "worlds" / f"{name}.yaml" for root in roots] + [SHIPPED_WORLDS / f"{name}.yaml"]
+    unique: list[Path] = []
+    for path in tried:
+        if not any(path.absolute() == u.absolute() for u in unique):
+            unique.append(path)
+    return next((path for path in unique if path.is_file()), None), unique
+
+
+def world_path(name: str, root: Path) -> Path:
+    """`corridor` or `worlds/corridor.yaml` or any path, as `locate_world` finds it from `root` (the first path
+    tried when it is nowhere, for the error to name)."""
+    found, tried = locate_world(name, [root])
+    return found or tried[0]

@@ -25,7 +25,7 @@ from rich.text import Text
 from typer.core import TyperCommand
 from typer.models import CommandInfo, OptionInfo
 
-from drd.cli.common import INVALID, OK, err, fail, out, print_json
+from drd.cli.common import INVALID, OK, duration_text, err, fail, fail_all, out, print_json, shorten
 
 if TYPE_CHECKING:
     from rich.console import RenderableType
@@ -33,8 +33,9 @@ if TYPE_CHECKING:
 
     from drd.daemon.client import ClusterClient
 
-ConfigOption = typer.Option(Path("hosts.yaml"), "--config", "-c",
-                            help="The cluster's hosts file: connect to every host, with its security settings.")
+ConfigOption = typer.Option(Path("hosts.yaml"), "--config", "-c", "--hosts",
+                            help="The cluster's hosts file: connect to every host, with its security settings "
+                                 "(`--hosts` is an alias).")
 ConnectOption = typer.Option(None, "--connect", show_default=False,
                              help="Connect to this endpoint instead (tcp/HOST:PORT; repeatable).")
 JsonOption = typer.Option(False, "--json", help="Print JSON.")
@@ -192,15 +193,14 @@ def _endpoints(config: Path, connect: list[str] | None) -> tuple[list[str], dict
     from drd.daemon.security import SecurityError, transport
     from drd.hosts import HostsError, load_endpoints
 
-    if not config.exists():
-        fail(f"{config}: no such file", hint="pass --config FILE, or --connect tcp/HOST:PORT")
+    if not config.is_file():
+        fail(f"{config}: no such file (looked at {config.absolute()})",
+             hint="pass --config FILE, or --connect tcp/HOST:PORT")
     try:
         cluster = load_endpoints(config)  # endpoints, roles and security: no hardware, so no component catalog
         tr = transport(cluster)
     except (HostsError, SecurityError) as e:
-        for p in e.problems:
-            err.print(Text.assemble(("error: ", "bold red"), str(p)))
-        raise typer.Exit(INVALID) from None
+        fail_all(e.problems)
     prefer = [cluster.controller.name] + [h.name for h in cluster.hosts if h.name != cluster.controller.name]
     return list(tr.endpoints.values()), dict(tr.options), cluster.name, prefer
 
@@ -294,9 +294,7 @@ def query(text: str = typer.Argument(..., metavar="QUERY", show_default=False,
         try:
             reply = client.query(text, seed)
         except RemoteError as e:
-            err.print(Text.assemble(("error: ", "bold red"), "invalid query"))
-            err.print(Text(e.reason))
-            raise typer.Exit(INVALID) from None
+            fail_all(["invalid query", *e.reason.splitlines()])
     if as_json:
         print_json(reply.offers)
         return OK
@@ -339,7 +337,8 @@ def run(mission: Path = typer.Argument(..., help="The mission file.", show_defau
     from dsl.params import ParamError, parse_assignments
 
     if not mission.is_file():
-        fail(f"{mission}: no such file")
+        fail(f"{mission}: no such file (looked at {mission.absolute()})")
+    _not_a_mission(mission)
     try:
         source = mission.read_text(encoding="utf-8")
     except (OSError, UnicodeDecodeError) as e:
@@ -392,10 +391,25 @@ def run(mission: Path = typer.Argument(..., help="The mission file.", show_defau
     if as_json:
         print_json(report.to_dict(), default=str)
     else:
-        from drd.cli.missionctl import _print_report
+        from drd.cli.missionctl import print_report
 
-        _print_report(report)
+        print_report(report)
     return OK if report.outcome == "success" else MISSION_FAILED
+
+
+def _not_a_mission(mission: Path) -> None:
+    """Refuse here, before asking the cluster, a file that is no mission at all (a hosts file, a README, an empty
+    or comment-only file), as `validate` and `dry-run` do; the controller checks the rest."""
+    from dsl.errors import Reporter
+    from dsl.loader import load_file
+
+    report = Reporter()
+    program = load_file(mission, report)
+    early = [d for d in report.diagnostics if d.code in ("not-a-mission", "empty", "io", "encoding")]
+    if early:
+        from drd.cli.common import fail_diagnostics
+
+        fail_diagnostics(early, program.sources)
 
 
 @contextmanager
@@ -434,27 +448,64 @@ def _stop_on_interrupt(client: ClusterClient, watch: _RecordWatch, mission: str,
 
 def stop(mission: str = typer.Argument("", help="The mission id (default: the one running).", show_default=False),
          every: bool = typer.Option(False, "--all", help="Stop every running mission."),
-         config: Path = ConfigOption, connect: list[str] = ConnectOption, timeout: float = TimeoutOption) -> int:
+         config: Path = ConfigOption, connect: list[str] = ConnectOption, as_json: bool = JsonOption,
+         timeout: float = TimeoutOption) -> int:
     """Stop a running mission (its behaviors are terminated, its resources released). Without an id it stops the
     one mission that runs; with several running it names them and stops none (`--all` stops them all)."""
+    with _cluster(config, connect, timeout) as client:
+        missions = stop_missions(client, mission, every, timeout)
+    if as_json:
+        print_json({"stopped": missions})
+        return OK
+    if not missions:
+        out.print("no mission is running: nothing to stop")
+    for m in missions:
+        out.print(f"{m.get('id')}: {m.get('outcome') or 'running'} {m.get('reason') or ''}".rstrip())
+    return OK
+
+
+def stop_missions(client: Any, mission: str, every: bool, timeout: float) -> list[dict[str, Any]]:
+    """Ask the executive to stop `mission`, or every mission (`every`), or the only one running (none given): the
+    status of each mission stopped. Refuses (exit 2, naming them) to guess between several running missions: a
+    bare `missionctl stop` must never stop the wrong one."""
     from drd.executive_messages import MissionCommand, MissionStatus
 
-    with _cluster(config, connect, timeout) as client:
-        if not mission and not every:
-            running = [str(m.get("id")) for m in client.missions() if m.get("outcome") is None]
-            if len(running) > 1:
-                fail(f"{len(running)} missions run ({', '.join(running)}): say which to stop", hint="missionctl"
-                     f" stop {running[0]}, or missionctl stop --all")
-        reply = client.bus.call(client.keys.executive, MissionCommand("stop", mission), timeout=max(timeout, 5.0))
-    if isinstance(reply, MissionStatus):
-        for m in reply.missions:
-            if not mission or m.get("id") == mission:
-                out.print(f"{m.get('id')}: {m.get('outcome') or 'running'} {m.get('reason') or ''}".rstrip())
-    return OK
+    targets = [mission]
+    if not mission:
+        running = [str(m.get("id")) for m in client.missions() if m.get("outcome") is None]
+        if not running:
+            return []
+        if len(running) > 1 and not every:
+            fail(f"{len(running)} missions run ({', '.join(running)}): say which to stop",
+                 hint=f"missionctl stop {running[0]}, or missionctl stop --all", running=running)
+        targets = running if every else running[:1]
+    stopped: list[dict[str, Any]] = []
+    for target in targets:
+        reply = client.bus.call(client.keys.executive, MissionCommand("stop", target), timeout=max(timeout, 5.0))
+        if isinstance(reply, MissionStatus):
+            stopped += [m for m in reply.missions if m.get("id") == target]
+    return stopped
+
+
+def progress_line(sim_time: float, active: list[str], width: int = 80) -> Text:
+    """`missionctl run`'s line each second: the sim time (the executive's, so it moves even when no record comes)
+    and the active leaves, fitted to `width`."""
+    leaves = [p for p in active if not any(q.startswith((p + "/", p + "[")) for q in active)]
+    names = ", ".join(p.rsplit("/", 1)[-1] for p in leaves[:6]) or "—"
+    if len(leaves) > 6:
+        names += f" +{len(leaves) - 6}"
+    head = f"sim {sim_time:7.1f} s  active "
+    room = max(10, width - len(head) - 1)
+    if len(names) > room:
+        names = names[:room - 1] + "…"
+    return Text.assemble(("sim ", "dim"), f"{sim_time:7.1f} s  ", ("active ", "dim"), names)
 
 
 class _RecordWatch:
     """The records of the cluster's missions, from the moment `missionctl run` subscribed; then a report."""
+
+    #: Seconds between progress lines (and between asking the executive how the mission is).
+    every = 1.0
 
     def __init__(self, client: ClusterClient, trace: IO[str] | None = None) -> None:
         import queue
@@ -485,8 +536,9 @@ class _RecordWatch:
             self.seen[mission] = (DryRun(mission, None, "", 0.0, 0.0), {})
         result, active = self.seen[mission]
         start = time.monotonic()
-        next_print = next_poll = start + 1.0
+        next_print = next_poll = start + self.every
         finished = None
+        clock = 0.0  # the mission's time as the executive last said it (records may not come for a long while)
         while finished is None:
             now = time.monotonic()
             if now - start > limit:
@@ -504,14 +556,11 @@ class _RecordWatch:
                 elif isinstance(r, rec.Finished):
                     finished = (r.outcome, r.reason)
             now = time.monotonic()
-            if now >= next_print and finished is None:
-                next_print = now + 1.0
-                leaves = [p for p in active if not any(q.startswith(p + "/") or q.startswith(p + "[") for q in active)]
-                err.print(Text.assemble(("sim ", "dim"), f"{result.sim_time:7.1f} s  ", ("active ", "dim"),
-                                        ", ".join(p.rsplit("/", 1)[-1] for p in leaves[:6]) or "—"))
             if now >= next_poll and finished is None:  # a missed record must not hang us: ask the executive
-                next_poll = now + 2.0
+                next_poll = now + self.every
                 for m in self.client.missions():
+                    if m.get("id") == mission and isinstance(m.get("time"), int | float):
+                        clock = max(clock, float(m["time"]) - base)
                     if m.get("id") == mission and m.get("outcome"):
                         time.sleep(0.5)  # the records in flight come first
                         while not self.queue.empty():
@@ -519,6 +568,9 @@ class _RecordWatch:
                             if extra.mission == mission:
                                 self._take(extra, result, base)
                         finished = (m["outcome"], m.get("reason") or "")
+            if now >= next_print and finished is None:
+                next_print = now + self.every
+                err.print(progress_line(max(result.sim_time, clock), list(active), err.width))
         result.outcome, result.reason = finished
         result.wall_time = time.monotonic() - (start if began is None else began)
         return result
@@ -575,36 +627,42 @@ def _watch(fetch: Callable[[], dict[str, Any]], as_json: bool, interval: float) 
         return
 
 
-def _status_view(data: dict[str, Any]) -> RenderableType:
+def _status_view(data: dict[str, Any], width: int | None = None) -> RenderableType:
+    """The cluster at a glance, what matters first (a terminal of 24 rows shows the top): the missions and their
+    active trees, the hosts, the resources grouped by robot, then instances and recent events; long paths are cut
+    from the middle to fit `width` (default: the console's)."""
     from rich.console import Group
     from rich.table import Table
 
+    width = width or out.width
     parts: list[RenderableType] = [
-        Text.assemble(("cluster ", "bold"), data["cluster"], (f"  (answered by {data['answered_by']})", "dim")),
-        _hosts_table(data["hosts"], data["at"]),
-    ]
-    if data["instances"]:
-        t = Table(title="instances", title_justify="left")
-        for col in ("name", "component", "host", "state", "pid"):
-            t.add_column(col)
-        for i in data["instances"]:
-            t.add_row(i["name"], i["component"], i["host"], i["state"], str(i.get("pid") or "—"))
-        parts.append(t)
-    else:
-        parts.append(Text("instances: none", style="dim"))
+        Text.assemble(("cluster ", "bold"), data["cluster"], (f"  (answered by {data['answered_by']})", "dim"))]
+    if data["missions"] is not None:
+        parts += _missions_view(data["missions"], width)
+    parts.append(_hosts_table(data["hosts"], data["at"]))
     if data["resources"] is not None:
-        parts += _resources_view(data["resources"], with_parts=False)
+        parts += _resources_view(data["resources"], width, compact=True)
     daemon = data.get("daemon") or {}
     for host, why in daemon.get("unreachable", {}).items():
         parts.append(Text.assemble((f"{host} unreachable from {daemon['host']}: ", "bold yellow"), why))
     for what, message in data["errors"].items():
         parts.append(Text.assemble((f"{what}: ", "bold yellow"), message))
-    if data["missions"] is not None:
-        parts.append(_missions_view(data["missions"]))
+    if data["instances"]:
+        t = Table(title="instances", title_justify="left")
+        for col in ("name", "component", "host", "state", "pid"):
+            t.add_column(col, no_wrap=True)
+        rows = [(i["component"], i["host"], i["state"], str(i.get("pid") or "—")) for i in data["instances"]]
+        fixed = sum(max(len(col), *(len(r[k]) for r in rows)) for k, col in enumerate(("component", "host", "state",
+                                                                                          "pid"))) + 16
+        for i, row in zip(data["instances"], rows, strict=True):
+            t.add_row(shorten(i["name"], max(16, width - fixed)), *row)
+        parts.append(t)
+    else:
+        parts.append(Text("instances: none", style="dim"))
     if data["events"]:
         t = Table(title="recent events", title_justify="left")
         for col in ("at", "host", "event", "detail"):
-            t.add_column(col)
+            t.add_column(col, no_wrap=col != "detail")
         for e in data["events"]:
             t.add_row(time.strftime("%H:%M:%S", time.localtime(e["at"])) + f".{int(e['at'] % 1 * 1000):03d}",
                       e["host"], e["kind"], e["detail"])
@@ -637,52 +695,132 @@ def _ago(seconds: float) -> str:
     return f"{seconds / 60:.0f}min ago" if seconds < 7200 else f"{seconds / 3600:.0f}h ago"
 
 
-def _resources_view(data: dict[str, Any], with_parts: bool = True) -> list[RenderableType]:
+def _resources_view(data: dict[str, Any], width: int | None = None, compact: bool = False) -> list[RenderableType]:
+    """The manager's resources grouped by robot: each robot with its holders and waiters, then its parts (`compact`:
+    only those held apart from their robot), then the units of several robots (a shared radio) and of none."""
     from rich.table import Table
 
-    units = Table(title="resources", title_justify="left")
-    for col in ("id", "type", "host", "holders", "queue", "epoch", "use"):
-        units.add_column(col)
-    for u in data["units"]:
-        use = f"{u['load']:g}/{u['capacity']:g}"
-        units.add_row(u["id"], u["type"], u["host"], ", ".join(u["holders"]) or "—", ", ".join(u["queue"]) or "—",
-                      str(u["epoch"]), use)
-    parts: list[RenderableType] = [units]
-    if data["robots"]:
-        robots = Table(title="robots", title_justify="left")
-        for col in ("id", "type", "host", "holders", *(["parts"] if with_parts else [])):
-            robots.add_column(col)
-        for r in data["robots"]:
-            row = [r["id"], r["type"], r["host"], ", ".join(r["holders"]) or "—"]
-            robots.add_row(*row, *([", ".join(f"{k}={v}" for k, v in r["parts"].items())] if with_parts else []))
-        parts.append(robots)
+    width = width or out.width
+    units = {u["id"]: u for u in data["units"]}
+    owners: dict[str, list[str]] = {}
+    for r in data["robots"]:
+        for unit in r["parts"].values():
+            owners.setdefault(unit, []).append(r["id"])
+    columns = ("resource", "holders", "queue", "use") if compact else ("resource", "holders", "queue", "epoch", "use")
+    labels = [len(r["id"]) + len(r["type"]) + 1 for r in data["robots"]] + [
+        len(u) + 2 for u in units if len(owners.get(u, [])) != 1] + [
+        len(part) + 2 for r in data["robots"] for part in r["parts"]]
+    fixed = min(max(labels, default=8), 24) + 5 + (0 if compact else 5) + 3 * len(columns) + 1  # and the borders
+    room = max(12, (width - fixed) // 2)
+
+    everyone = [h for u in data["units"] for h in (*u["holders"], *u["queue"])] + [w["holder"] for w in data["queue"]]
+    one_mission = len({h.split("/", 1)[0] for h in everyone}) <= 1
+
+    def name(holder: str) -> str:
+        """`Mission-1/Mission/RoomSurveillance[4]`: below its mission's root when one mission holds everything."""
+        steps = holder.split("/", 2)
+        return shorten(steps[2] if one_mission and len(steps) == 3 else holder, room)
+
+    def who(paths: list[str]) -> str:
+        return ", ".join(name(p) for p in paths[:2]) + (f" +{len(paths) - 2}" if len(paths) > 2 else "") \
+            if paths else "—"
+
+    table = Table(title="resources by robot", title_justify="left")
+    for col in columns:
+        table.add_column(col, no_wrap=col in ("use", "epoch"))
+
+    def unit_row(label: str, u: dict[str, Any]) -> None:
+        cells = [label, who(u["holders"]), who(u["queue"])] + ([] if compact else [str(u["epoch"])])
+        table.add_row(*cells, f"{u['load']:g}/{u['capacity']:g}")
+
+    for r in data["robots"]:
+        mine = [(part, units[unit]) for part, unit in r["parts"].items() if unit in units and len(owners[unit]) == 1]
+        queue = sorted({q for _, u in mine for q in u["queue"]})
+        label = Text.assemble((r["id"], "bold"), (f" {r['type']}", "dim"))
+        table.add_row(label, who(r["holders"]), who(queue), *([""] * (len(columns) - 3)))
+        for part, u in mine:
+            if not compact or sorted(u["holders"]) != sorted(r["holders"]):
+                unit_row(f"  {part}", u)
+    shared = [u for uid, u in units.items() if len(owners.get(uid, [])) > 1]
+    alone = [u for uid, u in units.items() if uid not in owners]
+    for title, group in (("shared", shared), ("not in a robot", alone)):
+        if group:
+            table.add_row(Text(title, style="bold"), *([""] * (len(columns) - 1)))
+            for u in group:
+                unit_row(f"  {u['id']}", u)
+    parts: list[RenderableType] = [table]
     if data["queue"]:
-        parts.append(Text("waiting: " + ", ".join(f"{w['holder']} (priority {w['priority']})" for w in data["queue"])))
+        parts.append(Text("waiting: " + ", ".join(f"{name(w['holder'])} (priority {w['priority']})"
+                                                  for w in data["queue"])))
     for host, left in data["removing"].items():
         parts.append(Text(f"{host} is down: its resources leave the manager in {left:.1f} s", style="yellow"))
     return parts
 
 
-def _missions_view(missions: list[dict[str, Any]]) -> RenderableType:
-    from rich.table import Table
+#: How many nodes of a mission's active tree `status` shows (the rest is counted; `--json` has them all).
+TREE_NODES = 12
+
+
+def _missions_view(missions: list[dict[str, Any]], width: int = 80) -> list[RenderableType]:
+    """Each mission with its active tree: chains of single children in one line (`RoomSurveillance[2]/
+    HideInCorner/Watch`), the resources each holds beside it."""
+    from rich.tree import Tree
 
     if not missions:
-        return Text("missions: none", style="dim")
-    t = Table(title="missions", title_justify="left")
-    for col in ("id", "outcome", "active"):
-        t.add_column(col)
+        return [Text("missions: none", style="dim")]
+    parts: list[RenderableType] = [Text("missions", style="bold")]
     for m in missions:
-        t.add_row(str(m.get("id")), str(m.get("outcome") or "running"), ", ".join(_active_leaves(m.get("tree"))) or "—")
-    return t
+        outcome = m.get("outcome") or "running"
+        colour = {"running": "cyan", "success": "green"}.get(outcome, "red")
+        head = Text.assemble((str(m.get("id")), "bold"), "  ", (outcome, colour))
+        if isinstance(m.get("time"), int | float) and m.get("outcome") is None:
+            head.append(f"  {duration_text(round(float(m['time']), 1))}", style="dim")
+        if m.get("outcome") and m.get("reason"):
+            head.append(f"  {m['reason']}", style="dim")
+        tree = Tree(head)
+        root = m.get("tree")
+        if root and m.get("outcome") is None:
+            shown = [0]
+            for child in root.get("children") or []:
+                _grow_active(tree, child, root.get("path", ""), 1, width, shown)
+            if shown[0] > TREE_NODES:
+                tree.add(Text(f"… {shown[0] - TREE_NODES} more active (missionctl status --json)", style="dim"))
+        parts.append(tree)
+    return parts
 
 
-def _active_leaves(tree: dict[str, Any] | None) -> list[str]:
-    if not tree:
-        return []
-    children = tree.get("children") or []
-    if not children:
-        return [str(tree.get("path", "")).rsplit("/", 1)[-1]]
-    return [leaf for c in children for leaf in _active_leaves(c)]
+def _grow_active(tree: Any, node: dict[str, Any], above: str, depth: int, width: int, shown: list[int]) -> None:
+    """Add `node` (and its chain of single children, in one label) under `tree`; count what is left out."""
+    held: list[str] = []
+    path = str(node.get("path", ""))
+    phase = str(node.get("phase", "active"))
+    while True:
+        held += [str(v) for k, v in (node.get("resources") or {}).items() if "." not in k]
+        children = node.get("children") or []
+        if len(children) != 1:
+            break
+        node = children[0]
+        path = str(node.get("path", path))
+        phase = str(node.get("phase", phase))
+    rest = path[len(above):] if above and path.startswith(above) else "/" + path.rsplit("/", 1)[-1]
+    # below its parent (`/FindNewDoor`), or an instance, named as its multiplicity (`RoomSurveillance[2]/Watch`)
+    label = rest[1:] if rest.startswith("/") else above.rsplit("/", 1)[-1] + rest
+    shown[0] += 1
+    if shown[0] > TREE_NODES:
+        for child in children:
+            _count(child, shown)
+        return
+    extra = ("  " + ", ".join(held) if held else "") + (f"  {phase}" if phase != "active" else "")
+    room = max(12, width - 4 * depth - len(extra) - 1)
+    branch = tree.add(Text.assemble(shorten(label, room), (extra, "dim")))
+    for child in children:
+        _grow_active(branch, child, path, depth + 1, width, shown)
+
+
+def _count(node: dict[str, Any], shown: list[int]) -> None:
+    shown[0] += 1
+    for child in node.get("children") or []:
+        _count(child, shown)
 
 
 def _pct(value: float | None) -> str:

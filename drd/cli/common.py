@@ -1,7 +1,10 @@
 """What every command shares: consoles, exit codes, error rendering, the safety net.
 
 No traceback reaches a user: `run_app` turns anything unexpected into one clear line and
-exit code 2 (set `DRD_DEBUG=1` to see the traceback instead).
+exit code 70 (2 for a file the system could not read or write; set `DRD_DEBUG=1` to see the
+traceback instead). With `--json` on the command line every error is one JSON object on
+stderr instead (`{"error": ..., "code": ...}`, docs/cli.md), so a script reads stdout as the
+result and stderr as what went wrong, whatever happened.
 """
 
 from __future__ import annotations
@@ -19,11 +22,16 @@ from rich.console import Console
 from rich.text import Text
 
 if TYPE_CHECKING:  # the mission language loads only for the commands that use it
+    from dsl import Compiled
     from dsl.catalog import Catalog
     from dsl.errors import Diagnostic
 
 #: Exit codes, the same for every command.
 OK, MISSION_FAILED, INVALID = 0, 1, 2
+#: A bug of ours, not the user's input (sysexits' EX_SOFTWARE): the one-line error asks for DRD_DEBUG=1.
+INTERNAL = 70
+#: Ctrl-C before anything ran (128 + SIGINT, as a shell tool).
+INTERRUPTED = 130
 #: The reader of our output went away (`missionctl status | head`): 128 + SIGPIPE, as a shell tool killed by it.
 BROKEN_PIPE = 141
 
@@ -55,12 +63,118 @@ def debug() -> bool:
     return os.environ.get("DRD_DEBUG", "") not in ("", "0")
 
 
-def fail(message: str, code: int = INVALID, hint: str | None = None) -> NoReturn:
-    """Print a one-line error (and a hint) to stderr and exit."""
+class _Mode:
+    """How errors are written: set once per command by `run_app` (from `--json` on its command line)."""
+
+    json = False
+
+
+def json_errors(on: bool = True) -> None:
+    """Write errors as JSON objects on stderr (`--json` commands), or as text (the default)."""
+    _Mode.json = on
+
+
+def wants_json(argv: Sequence[str]) -> bool:
+    """Does this command line ask for JSON (`--json` before any `--`)? Then its errors are JSON too."""
+    for word in argv:
+        if word == "--":
+            return False
+        if word == "--json":
+            return True
+    return False
+
+
+def error_json(data: Mapping[str, Any]) -> None:
+    """One error as one JSON line on stderr (what `fail` writes under `--json`)."""
+    sys.stderr.write(json.dumps(dict(data), ensure_ascii=False, default=str) + "\n")
+    sys.stderr.flush()
+
+
+def fail(message: str, code: int = INVALID, hint: str | None = None, **extra: Any) -> NoReturn:
+    """Print a one-line error (and a hint) to stderr and exit; under `--json` the same as one JSON object,
+    `{"error": message, "code": code, "hint": hint, ...extra}`."""
+    if _Mode.json:
+        error_json({"error": message, "code": code, **({"hint": hint} if hint else {}), **extra})
+        raise typer.Exit(code)
     err.print(Text.assemble(("error: ", "bold red"), message))
     if hint:
         err.print(Text.assemble(("  hint: ", "cyan"), hint))
     raise typer.Exit(code)
+
+
+def fail_all(problems: Sequence[object], code: int = INVALID, hint: str | None = None) -> NoReturn:
+    """Several problems found at once (a hosts file's, a world's): each on its line, or one JSON object whose
+    `errors` lists them."""
+    lines = [line for p in problems for line in str(p).splitlines()] or ["invalid input"]
+    if _Mode.json:
+        fail(lines[0] if len(lines) == 1 else f"{len(lines)} problems: {lines[0]}", code, hint, errors=lines)
+    for line in lines[:-1]:
+        err.print(Text.assemble(("error: ", "bold red"), line))
+    fail(lines[-1], code, hint)
+
+
+def show_diagnostics(results: Sequence[Compiled]) -> bool:
+    """Show what the compiler found in each file (errors and warnings): rendered with the source line, or under
+    `--json` as one JSON error with every diagnostic when one is an error (warnings alone say nothing there, as
+    `validate --json` has them). True when every file is valid."""
+    ok = all(r.ok for r in results)
+    if _Mode.json:
+        if not ok:
+            diagnostics = [d.to_dict() for r in results for d in r.diagnostics]
+            bad = [r.file for r in results if not r.ok]
+            first = next(d for r in results for d in r.diagnostics if d.severity.value == "error")
+            error_json({"error": f"{', '.join(bad)}: invalid: {first.span}: {first.message}", "code": INVALID,
+                        "diagnostics": diagnostics})
+        return ok
+    for r in results:
+        for d in r.diagnostics:
+            render_diagnostic(d, r.sources)
+    return ok
+
+
+def fail_diagnostics(diagnostics: Sequence[Diagnostic], sources: Mapping[str, str]) -> NoReturn:
+    """Errors found in a mission before it could be compiled (not a mission, empty, unreadable): rendered, or one
+    JSON error under `--json`; exit 2."""
+    if _Mode.json:
+        first = diagnostics[0]
+        fail(f"{first.span}: {first.message}", INVALID, first.hint, diagnostics=[d.to_dict() for d in diagnostics])
+    for d in diagnostics:
+        render_diagnostic(d, sources)
+    raise typer.Exit(INVALID)
+
+
+def duration_text(seconds: float) -> str:
+    """Seconds as the mission language writes them: `90s`, `2min`, `1h`, `500ms`."""
+    for unit, size in (("h", 3600), ("min", 60), ("s", 1)):
+        if seconds >= size and seconds % size == 0:
+            return f"{int(seconds // size)}{unit}"
+    return f"{seconds * 1000:g}ms" if 0 < seconds < 1 else f"{seconds:g}s"
+
+
+def shorten(path: str, width: int) -> str:
+    """A path in at most `width` characters, cut from the middle: its first step, `…`, and as many of its last
+    steps as fit (`RoomSurveillance[0]/…/FollowCorridor`), else the start of the first step
+    (`CorridorSurveillance/RoomSurveillance[2]/HideInCorner/Watch` -> `Corridor…/Watch`). The leaf is what a
+    reader looks for, the start says which mission or instance."""
+    if len(path) <= width:
+        return path
+    steps = path.split("/")
+    if len(steps) > 2:
+        keep = 0
+        while keep < len(steps) - 2 and len(steps[0]) + 3 + len("/".join(steps[-keep - 1:])) <= width:
+            keep += 1
+        if keep:
+            return steps[0] + "/…/" + "/".join(steps[-keep:])
+    tail = steps[-1]
+    room = width - len(tail) - 2
+    if len(steps) > 1 and room >= 3:
+        return path[:room] + "…/" + tail
+    if len(steps) > 1 and room >= 0:
+        return "…/" + tail
+    if width < 3:
+        return path[:width]
+    half = (width - 1) // 2
+    return path[:width - 1 - half] + "…" + path[len(path) - half:]
 
 
 def catalog(extra: Sequence[Path] | None) -> Catalog:
@@ -74,9 +188,7 @@ def catalog(extra: Sequence[Path] | None) -> Catalog:
     try:
         return load_catalog(dirs)
     except ManifestError as e:
-        for p in e.problems:
-            err.print(Text.assemble(("error: ", "bold red"), str(p)))
-        raise typer.Exit(INVALID) from None
+        fail_all(e.problems)
 
 
 def print_json(data: Any, default: Callable[[Any], Any] | None = None) -> None:
@@ -134,37 +246,55 @@ def run_app(app: Callable[..., object], prog: str,
     `fast(argv)` may return the call of a command it parsed itself (see `drd.cli.cluster.fast_command`):
     it then runs without typer building its parameters; otherwise (None) typer parses as usual.
     """
-    if sys.argv[1:] == ["--version"]:  # before typer: a callback would cost every command its fast path
-        out.print(f"{prog} (drd) {version()}", highlight=False)
+    argv = sys.argv[1:]
+    if argv in (["--version"], ["--version", "--json"], ["--json", "--version"]):  # before typer: a callback
+        if "--json" in argv:                                                      # would cost every command its
+            print_json({"program": prog, "version": version()})                   # fast path
+        else:
+            out.print(f"{prog} (drd) {version()}", highlight=False)
         sys.exit(OK)
+    json_errors(wants_json(argv))
     try:
-        call = fast(sys.argv[1:]) if fast is not None else None
+        call = fast(argv) if fast is not None else None
         if call is not None:
             try:
                 rc = call()
             except KeyboardInterrupt:  # as typer does for a command it runs
-                rc = 130
+                rc = INTERRUPTED
         else:
             rc = app(prog_name=prog, standalone_mode=False)
     except typer.Exit as e:
         sys.exit(e.exit_code)
-    except typer.Abort:
-        err.print("aborted")
-        sys.exit(130)
-    except KeyboardInterrupt:
-        err.print("interrupted")
-        sys.exit(130)
+    except (typer.Abort, KeyboardInterrupt) as e:
+        _error("aborted" if isinstance(e, typer.Abort) else "interrupted", INTERRUPTED)
     except BrokenPipeError:  # a plain print to a reader that went away
         _reader_gone()
     except Exception as e:  # the last line of defence: never a traceback for a user
         show = getattr(e, "show", None)
-        if callable(show) and isinstance(getattr(e, "exit_code", None), int):
-            show()  # a usage error or a bad value: click's (or typer's own click's) message and usage line
-        elif debug():
+        code = getattr(e, "exit_code", None)
+        if callable(show) and isinstance(code, int):  # a usage error or a bad value: click's message (and usage)
+            if _Mode.json:
+                error_json({"error": e.format_message() if hasattr(e, "format_message") else str(e), "code": code})
+            else:
+                show()
+            sys.exit(code)
+        if debug():
             traceback.print_exc()
-        else:
-            err.print(Text.assemble(("error: ", "bold red"), f"{type(e).__name__}: {e}"))
-            err.print(Text("  (set DRD_DEBUG=1 to see the traceback)", style="dim"))
-        sys.exit(INVALID)
+            sys.exit(INTERNAL if not isinstance(e, OSError) else INVALID)
+        if isinstance(e, OSError):  # a file or folder of the user's that cannot be read or written
+            _error(f"{type(e).__name__}: {e}", INVALID, "(set DRD_DEBUG=1 to see the traceback)")
+        _error(f"internal error: {type(e).__name__}: {e}", INTERNAL,
+               "(set DRD_DEBUG=1 to see the traceback, and report it)")
     sys.exit(rc if isinstance(rc, int) else OK)
+
+
+def _error(message: str, code: int, note: str = "") -> NoReturn:
+    """The safety net's own last word: one line (or one JSON object), then exit `code`."""
+    if _Mode.json:
+        error_json({"error": message, "code": code})
+    else:
+        err.print(Text.assemble(("error: ", "bold red"), message) if code != INTERRUPTED else Text(message))
+        if note:
+            err.print(Text(f"  {note}", style="dim"))
+    sys.exit(code)
 

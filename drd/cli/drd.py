@@ -7,7 +7,6 @@ See docs/daemon.md.
 
 from __future__ import annotations
 
-import json
 import logging
 import signal
 import subprocess
@@ -22,14 +21,27 @@ import typer
 from rich.table import Table
 from rich.text import Text
 
-from drd import __version__
-from drd.cli.common import INVALID, OK, ComponentsOption, catalog, err, fail, out, run_app
+from drd.cli.common import (
+    OK,
+    ComponentsOption,
+    catalog,
+    duration_text,
+    err,
+    fail,
+    fail_all,
+    out,
+    print_json,
+    run_app,
+)
+from drd.cli.common import version as installed_version
 from dsl.catalog import Kind
 
 if TYPE_CHECKING:
+    from collections.abc import Sequence
+
     from drd.daemon.security import Transport
     from drd.hosts import Cluster
-    from dsl.catalog import Catalog
+    from dsl.catalog import Catalog, ComponentType, ParamSpec, RecordSpec
 
 app = typer.Typer(help="The Distributed Robotics Daemon: one per host.", no_args_is_help=True,
                   add_completion=False, rich_markup_mode=None)
@@ -42,33 +54,75 @@ def components(
     as_json: bool = typer.Option(False, "--json", help="Print the catalog as JSON."),
     extra: list[Path] = ComponentsOption,
 ) -> int:
-    """List the component types this host knows from its manifests."""
+    """List the component types this host knows from its manifests: parameters, needs, inputs, outputs, events."""
     cat = catalog(extra)
     types = sorted((t for t in cat.components.values() if kind is None or t.kind is kind),
                    key=lambda t: (t.kind.value, t.name))
     if as_json:
-        out.print_json(json.dumps([{
-            "name": t.name, "kind": t.kind.value, "description": t.description, "source": t.source,
-            "params": [{"name": p.name, "type": p.type, "default": p.default, "required": p.required}
-                       for p in t.params],
-            "needs": [{"name": n.name, "type": n.type, "of": list(n.of)} for n in t.needs],
-        } for t in types]))
+        print_json([_component_dict(t) for t in types])
         return OK
     table = Table(title="Component types", title_justify="left")
-    for col in ("name", "kind", "parameters", "needs"):
-        table.add_column(col)
+    table.add_column("name", no_wrap=True)
+    table.add_column("kind", no_wrap=True)
+    table.add_column("interface")
     for t in types:
-        params = ", ".join(f"{p.name}: {p.type}" + ("" if p.required else f" = {p.default}") for p in t.params)
-        needs = ", ".join(f"{n.name}: {n.type}" for n in t.needs) or ", ".join(f"{k}: {v}" for k, v in t.parts.items())
-        table.add_row(t.name, t.kind.value, params, needs)
+        table.add_row(t.name, t.kind.value, Text("\n").join(_interface(t)) or Text("—", style="dim"))
     out.print(table)
     return OK
 
 
+def _component_dict(t: ComponentType) -> dict[str, object]:
+    """A component type as `drd components --json` gives it (durations in seconds, as manifests mean them)."""
+    def records(specs: Sequence[RecordSpec]) -> list[dict[str, object]]:
+        return [{"name": r.name, "type": r.type, "fields": dict(r.fields)} for r in specs]
+
+    return {
+        "name": t.name, "kind": t.kind.value, "description": t.description, "source": t.source,
+        "params": [{"name": p.name, "type": p.type, "default": p.default, "required": p.required} for p in t.params],
+        "needs": [{"name": n.name, "type": n.type, "of": list(n.of)} for n in t.needs],
+        "inputs": [{"name": i.name, "type": i.type, "optional": i.optional} for i in getattr(t, "inputs", ())],
+        "outputs": records(t.outputs), "events": records(t.events),
+        "parts": dict(t.parts), "fields": dict(t.fields),
+    }
+
+
+def _interface(t: ComponentType) -> list[Text]:
+    """One line per kind of thing a component type declares, the way a mission writes it (`duration = 10s`)."""
+    def default(p: ParamSpec) -> str:
+        if p.required:
+            return ""
+        value = duration_text(float(p.default)) if p.type == "duration" and isinstance(p.default, int | float) \
+            else p.default
+        return f" = {value}"
+
+    def fields(r: RecordSpec) -> str:
+        return ", ".join(f"{k}: {v}" for k, v in r.fields.items())
+
+    def output(r: RecordSpec) -> str:  # `door: Door`, or a record of fields: `waited: {seconds: float}`
+        return f"{r.name}: {r.type}" if r.type not in ("record", "event") else f"{r.name}: {{{fields(r)}}}"
+
+    def event(r: RecordSpec) -> str:  # as a mission emits it: `MotionDetected(area: float)`
+        return f"{r.name}({fields(r)})"
+
+    rows = [
+        ("params", [f"{p.name}: {p.type}{default(p)}" for p in t.params]),
+        ("needs", [f"{n.name}: {n.type}" + (f" of [{', '.join(n.of)}]" if n.of else "") for n in t.needs]),
+        ("inputs", [f"{i.name}: {i.type}" + (" (optional)" if i.optional else "") for i in getattr(t, "inputs", ())]),
+        ("outputs", [output(o) for o in t.outputs]),
+        ("events", [event(e) for e in t.events]),
+        ("parts", [f"{k}: {v}" for k, v in t.parts.items()]),
+        ("fields", [f"{k}: {v}" for k, v in t.fields.items()]),
+    ]
+    return [Text.assemble((f"{what} ", "dim"), ", ".join(items)) for what, items in rows if items]
+
+
 @app.command()
-def version() -> int:
-    """Print drd's version."""
-    out.print(f"drd {__version__}")
+def version(as_json: bool = typer.Option(False, "--json", help="Print as JSON.")) -> int:
+    """Print drd's version (also `drd --version`)."""
+    if as_json:
+        print_json({"program": "drd", "version": installed_version()})
+    else:
+        out.print(f"drd {installed_version()}")
     return OK
 
 
@@ -80,7 +134,8 @@ READY_TIMEOUT = 30.0  # how long `drd start --detach` waits for the daemon to de
 @app.command()
 def start(
     host: str = typer.Option(..., "--host", help="This host's name in the hosts file.", show_default=False),
-    config: Path = typer.Option(Path("hosts.yaml"), "--config", "-c", help="The cluster's hosts file."),
+    config: Path = typer.Option(Path("hosts.yaml"), "--config", "-c", "--hosts",
+                                help="The cluster's hosts file (`--hosts` is an alias)."),
     detach: bool = typer.Option(False, "--detach", "-d", help="Run in the background; log to --log-file."),
     log_file: Path = typer.Option(None, "--log-file", show_default=False,
                                   help="Log here instead of stderr (default with --detach: RUN_DIR/HOST.log)."),
@@ -90,6 +145,7 @@ def start(
     peer_grace: float = typer.Option(3.0, "--peer-grace", min=0.0,
                                      help="Seconds to wait for the peers before naming the unreachable ones."),
     log_level: str = typer.Option("info", "--log-level", help="debug, info, warning or error."),
+    as_json: bool = typer.Option(False, "--json", help="With --detach: print the started daemon as JSON."),
     extra: list[Path] = ComponentsOption,
 ) -> int:
     """Start this host's daemon: join the cluster, report load, serve the Component Database (and, on
@@ -109,16 +165,14 @@ def start(
     try:
         tr = transport(cluster)
     except SecurityError as e:
-        for p in e.problems:
-            err.print(Text.assemble(("error: ", "bold red"), str(p)))
-        err.print(Text.assemble(("  hint: ", "cyan"), "security is configured, so drd will not start without it"))
-        return INVALID
+        fail_all(e.problems, hint="security is configured, so drd will not start without it")
     rd = runfiles.run_dir(run_dir_opt)
     running = runfiles.read(runfiles.path_of(rd, host))
     if running is not None and running.running():
         fail(f"drd for host {host} is already running (pid {running.pid})", hint=f"drd stop --host {host}")
     if detach:
-        return _detach(host, config, rd, log_file or rd / f"{host}.log", load_period, peer_grace, log_level, extra)
+        return _detach(host, config, rd, log_file or rd / f"{host}.log", load_period, peer_grace, log_level, extra,
+                       as_json)
     _configure_logging(host, log_file, level)
     return _serve(cluster, host, cat, tr, rd, config, log_file, load_period, peer_grace)
 
@@ -129,9 +183,7 @@ def _load_cluster(config: Path, cat: Catalog) -> Cluster:
     try:
         return load_hosts(config, cat)
     except HostsError as e:
-        for p in e.problems:
-            err.print(Text.assemble(("error: ", "bold red"), str(p)))
-        raise typer.Exit(INVALID) from None
+        fail_all(e.problems)
 
 
 def _serve(cluster: Cluster, host: str, cat: Catalog, tr: Transport, rd: Path, config: Path, log_file: Path | None,
@@ -189,7 +241,7 @@ def _configure_logging(host: str, log_file: Path | None, level: int) -> None:
 
 
 def _detach(host: str, config: Path, rd: Path, log_file: Path, load_period: float, peer_grace: float,
-            log_level: str, extra: list[Path]) -> int:
+            log_level: str, extra: list[Path], as_json: bool = False) -> int:
     """Start the daemon as a new session in the background and wait until it serves (bounded)."""
     from drd.daemon import runfiles
 
@@ -206,7 +258,10 @@ def _detach(host: str, config: Path, rd: Path, log_file: Path, load_period: floa
     while time.monotonic() < deadline:
         info = runfiles.read(runfiles.path_of(rd, host))
         if info is not None and info.pid == proc.pid and info.state == "running":
-            out.print(f"drd {host} started (pid {proc.pid}); log: {log_file}")
+            if as_json:
+                print_json({"host": host, "pid": proc.pid, "log": str(log_file), "state": "running"})
+            else:
+                out.print(f"drd {host} started (pid {proc.pid}); log: {log_file}")
             return OK
         if proc.poll() is not None:
             tail = log_file.read_text(encoding="utf-8", errors="replace").strip().splitlines()[-5:]
@@ -225,6 +280,7 @@ def stop(
     all_: bool = typer.Option(False, "--all", help="Stop every daemon of the run dir."),
     run_dir_opt: Path = RunDirOption,
     timeout: float = typer.Option(10.0, "--timeout", min=0.0, help="Seconds to wait before SIGKILL."),
+    as_json: bool = typer.Option(False, "--json", help="Print what was stopped as JSON."),
 ) -> int:
     """Stop daemons started on this machine: SIGTERM, wait (bounded), then SIGKILL."""
     from drd.daemon import runfiles
@@ -240,22 +296,32 @@ def stop(
             others = ", ".join(i.host for _, i in runfiles.pidfiles(rd) if i is not None) or "none"
             fail(f"no drd for host {host} in {rd} (daemons there: {others})")
     if not found:
-        out.print(f"no drd running in {rd}")
+        if as_json:
+            print_json({"run_dir": str(rd), "daemons": []})
+        else:
+            out.print(f"no drd running in {rd}")
         return OK
     infos = [i for _, i in found if i is not None]
     outcome = runfiles.stop(infos, timeout)
+    rows: list[dict[str, object]] = []
     for path, info in found:
         if info is None:
             path.unlink(missing_ok=True)
-            out.print(f"removed unreadable pidfile {path}")
+            rows.append({"host": None, "pid": None, "outcome": "unreadable pidfile removed", "pidfile": str(path)})
+            if not as_json:
+                out.print(f"removed unreadable pidfile {path}")
             continue
         what = outcome[info.pid]
         if what != "stopped" or path.exists():
             runfiles.release(rd, info)  # the daemon removes its own on a clean stop
+        rows.append({"host": info.host, "pid": info.pid, "outcome": what, "pidfile": str(path)})
         text = {"stopped": f"stopped {info.host} (pid {info.pid})",
                 "killed": f"killed {info.host} (pid {info.pid}): it did not stop within {timeout:g} s",
                 "not running": f"{info.host} was not running (stale pidfile removed)"}[what]
-        out.print(text)
+        if not as_json:
+            out.print(text)
+    if as_json:
+        print_json({"run_dir": str(rd), "daemons": rows})
     return OK
 
 
@@ -272,7 +338,7 @@ def status(
     rd = runfiles.run_dir(run_dir_opt)
     rows = [(i, i.running()) for _, i in runfiles.pidfiles(rd) if i is not None]
     if as_json:
-        out.print_json(json.dumps([{**asdict(i), "alive": alive} for i, alive in rows]))
+        print_json([{**asdict(i), "alive": alive} for i, alive in rows])
         return OK
     if not rows:
         out.print(f"no drd in {rd}")

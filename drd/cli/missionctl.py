@@ -5,6 +5,8 @@ from __future__ import annotations
 import json
 import shutil
 import subprocess
+from collections.abc import Iterator
+from contextlib import contextmanager
 from enum import StrEnum
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -21,16 +23,23 @@ from drd.cli.common import (
     catalog,
     err,
     fail,
+    fail_all,
     out,
     print_json,
     render_diagnostic,
     run_app,
+    shorten,
+    show_diagnostics,
 )
 from dsl import Compiled, compile_file
 from dsl.catalog import Catalog
 from dsl.statechart import State, Statechart, StateKind
 
 if TYPE_CHECKING:  # rich's tables and trees, and the exporters, load only for the commands that draw them
+    import threading
+    from types import FrameType
+
+    from rich.console import Console, RenderableType
     from rich.table import Table
     from rich.tree import Tree
 
@@ -107,15 +116,18 @@ def plan(
     output: Path = typer.Option(None, "--output", "-o", show_default=False,
                                 help="Write to a file: .svg/.png/.pdf are drawn with Graphviz's dot; "
                                      ".json/.dot/.mmd/.txt pick the format."),
+    as_json: bool = typer.Option(False, "--json", help="Print the statechart as JSON (the same as --format json)."),
     components: list[Path] = ComponentsOption,
 ) -> int:
     """Show the compiled statechart: states, transitions, resources and how they are bound."""
     from dsl.export import to_dict, to_dot, to_mermaid
 
+    if as_json and fmt not in (None, Format.json):
+        fail(f"--json and --format {fmt.value} ask for two formats: give one")
+    if as_json:
+        fmt = Format.json
     result = _compile(file, catalog(components))
-    for d in result.diagnostics:
-        render_diagnostic(d, result.sources)
-    if not result.ok:
+    if not show_diagnostics([result]):
         return INVALID
     chart = result.statechart
     if chart is None:
@@ -227,8 +239,8 @@ def dry_run(
                                     help="NAME=VALUE: start the mission's variable NAME at VALUE (repeatable; with "
                                          "several missions, in each that declares NAME)."),
     world: str = typer.Option(None, "--world", "-w", show_default=False,
-                              help="A world name (worlds/NAME.yaml) or a path [default: hosts.yaml's cluster.world,"
-                                   " else corridor]."),
+                              help="A world name (worlds/NAME.yaml beside the hosts file, else drd's own) or a "
+                                   "path [default: the hosts file's cluster.world, else corridor]."),
     hosts: Path = typer.Option(Path("hosts.yaml"), "--config", "-c", "--hosts",
                                help="The cluster's hosts file (its robots and devices; `--hosts` is an alias)."),
     seed: int = typer.Option(0, "--seed", help="Seed of the simulation (same seed, same run)."),
@@ -246,10 +258,13 @@ def dry_run(
                                                        "missions)."),
     components: list[Path] = ComponentsOption,
 ) -> int:
-    """Run missions against the 2D simulation in this process: exit 0 if every one succeeds, 1 if one fails."""
+    """Run missions against the 2D simulation in this process: exit 0 if every one succeeds, 1 if one fails (or
+    is stopped: --until, Ctrl-C, which still prints the report of what ran)."""
+    import threading
+
     from rich.live import Live
 
-    from drd.dryrun import Mission, merged, run_many, world_path
+    from drd.dryrun import Mission, merged, run_many
     from drd.hosts import HostsError, load_hosts
     from drd.inject import InjectionError
     from drd.inject import parse_all as parse_injections
@@ -261,28 +276,24 @@ def dry_run(
     if len(priority) > len(missions):
         fail(f"{len(priority)} --priority for {len(missions)} mission{'s' if len(missions) > 1 else ''}:"
              " give one per mission, in order")
+    results = [_compile(mission, cat) for mission in missions]
+    if not show_diagnostics(results):
+        return INVALID
     charts = []
-    for mission in missions:
-        result = _compile(mission, cat)
-        for d in result.diagnostics:
-            render_diagnostic(d, result.sources)
-        if not result.ok or result.statechart is None:
-            return INVALID if not result.ok else fail(f"{mission} declares no mission to run")
+    for mission, result in zip(missions, results, strict=True):
+        if result.statechart is None:
+            fail(f"{mission} declares no mission to run", hint="dry-run the file that declares `mission Name {...}`")
         charts.append(result.statechart)
     try:
         charts = _with_params(charts, parse_assignments(param))
     except ParamError as e:
-        for line in str(e).splitlines():
-            err.print(Text.assemble(("error: ", "bold red"), line))
-        return INVALID
+        fail_all([str(e)])
+    hosts_file = _hosts_file(hosts)
     try:
-        cluster = load_hosts(hosts, cat)
-        sim_world = load_world(world_path(world, Path.cwd()) if world else
-                               world_path(cluster.world, hosts.resolve().parent))
+        cluster = load_hosts(hosts_file, cat)
+        sim_world = load_world(_world_file(world, cluster.world, hosts_file))
     except (HostsError, WorldError) as e:
-        for p in e.problems:
-            err.print(Text.assemble(("error: ", "bold red"), str(p)))
-        return INVALID
+        fail_all(e.problems)
     if render is not None and render.suffix.lower() not in SUPPORTED_SUFFIXES:
         fail(f"cannot draw {render.name}: --render writes {', '.join(SUPPORTED_SUFFIXES)}")
     try:
@@ -290,30 +301,38 @@ def dry_run(
                                       robots={r.id for r in sim_world.rangers} | set(sim_world.scout_ids),
                                       doors={d.id for d in sim_world.doors})
     except InjectionError as e:
-        for line in str(e).splitlines():
-            err.print(Text.assemble(("error: ", "bold red"), line))
-        return INVALID
+        fail_all([str(e)])
+    try:
+        fh = trace.open("w", encoding="utf-8") if trace else None
+    except OSError as e:
+        fail(f"{trace}: cannot write the trace: {e.strerror or e}")
     live = Live(Text("starting…"), console=err, transient=True) if err.is_terminal and not as_json else None
 
     def progress(sim: Simulation, executive: Executive) -> None:
         if live is not None:
             live.update(_progress_view(sim, executive))
+        if fh is not None:
+            fh.flush()  # a reader of the trace (`tail -f`) sees the run as it goes, every second of sim time
 
-    fh = trace.open("w", encoding="utf-8") if trace else None
+    stop = threading.Event()
     try:
         if live is not None:
             live.start()
-        try:
-            runs = [Mission(chart, priority[i] if i < len(priority) else None) for i, chart in enumerate(charts)]
-            reports = run_many(runs, cluster, sim_world, cat, seed=seed, until=until, speed=speed,
-                               trace=fh, progress=progress, injections=injections)
-        except ValueError as e:
-            fail(str(e))
+        runs = [Mission(chart, priority[i] if i < len(priority) else None) for i, chart in enumerate(charts)]
+        with _ctrl_c_stops(stop):
+            try:
+                reports = run_many(runs, cluster, sim_world, cat, seed=seed, until=until, speed=speed,
+                                   trace=fh, progress=progress, injections=injections, stop=stop)
+            except ValueError as e:
+                fail_all([str(e)])
     finally:
         if live is not None:
             live.stop()
         if fh is not None:
             fh.close()
+    if stop.is_set():  # on stderr, as `missionctl run` says it: stdout keeps the report alone
+        err.print(Text.assemble(("■ ", "bold yellow"), f"Ctrl-C: stopped the dry-run at {reports[0].sim_time:.1f} s"
+                                                       " of sim time; the report says what ran so far"))
     if render is not None:
         from drd.render import render as draw
 
@@ -323,8 +342,57 @@ def dry_run(
         print_json(reports[0].to_dict() if len(reports) == 1 else [r.to_dict() for r in reports], default=str)
     else:
         for report in reports:
-            _print_report(report, several=len(reports) > 1)
+            print_report(report, several=len(reports) > 1)
     return OK if all(r.outcome == "success" for r in reports) else MISSION_FAILED
+
+
+def _hosts_file(hosts: Path) -> Path:
+    """The hosts file as given, or a clear error saying where it was looked for (and where drd's own is)."""
+    if hosts.is_file():
+        return hosts
+    looked = hosts.absolute()
+    what = "is a folder, not a hosts file" if hosts.is_dir() else "no such file"
+    own = Path(__file__).resolve().parents[2] / "hosts.yaml"
+    hint = "pass --config PATH to the cluster's hosts file" + (
+        f" (drd's own example: {own})" if own.is_file() and own != looked else "")
+    fail(f"{hosts}: {what} (looked at {looked})", hint=hint, looked=[str(looked)])
+
+
+def _world_file(world: str | None, configured: str, hosts: Path) -> Path:
+    """The world of a dry-run: `--world` (from the working directory, then beside the hosts file), else the hosts
+    file's `cluster.world` (beside it), each then among drd's own worlds; a clear error listing every path tried."""
+    from drd.dryrun import locate_world
+
+    here = hosts.resolve().parent
+    name, roots = (world, [Path.cwd(), here]) if world else (configured, [here])
+    found, tried = locate_world(name, roots)
+    if found is None:
+        source = "--world" if world else f"{hosts}'s cluster.world"
+        fail(f"world {name!r} ({source}): no such file; looked at {', '.join(map(str, tried))}",
+             hint="give --world a name under worlds/ or a path to a world file (docs/worlds.md)",
+             looked=[str(t) for t in tried])
+    return found
+
+
+@contextmanager
+def _ctrl_c_stops(stop: threading.Event) -> Iterator[None]:
+    """While a dry-run runs, the first Ctrl-C (SIGINT) asks it to stop between two control cycles, so its report
+    says what ran, as `missionctl run` does; a second one interrupts at once (exit 130)."""
+    import signal
+
+    def first(signum: int, frame: FrameType | None) -> None:
+        stop.set()
+        signal.signal(signal.SIGINT, signal.default_int_handler)
+
+    try:
+        previous = signal.signal(signal.SIGINT, first)
+    except ValueError:  # not the main thread: no signal to handle
+        yield
+        return
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, previous)
 
 
 def _with_params(charts: list[Statechart], params: dict[str, str]) -> list[Statechart]:
@@ -368,9 +436,7 @@ def check_trace(
         try:
             shared = {d.id for d in load_hosts(hosts, catalog(components)).devices if d.sharable}
         except HostsError as e:
-            for problem in e.problems:
-                err.print(Text.assemble(("error: ", "bold red"), str(problem)))
-            return INVALID
+            fail_all(e.problems)
     loaded = [(str(path), _trace_records(path)) for path in traces]
     if together and len(loaded) > 1:
         unordered = [name for name, records in loaded if not all(isinstance(r.get("seq"), int) for r in records)]
@@ -427,32 +493,115 @@ def _short(holder: str) -> str:
     return holder.rsplit("/", 1)[-1]
 
 
-def _print_report(r: DryRun, several: bool = False) -> None:
+def print_report(r: DryRun, several: bool = False, console: Console | None = None) -> None:
+    """A dry-run's (or a cluster run's) report as text, fitted to the console's width: on a terminal long lines
+    wrap there, to a file or a pipe they stay whole (for grep); tables fit the width either way."""
+    console = console or out
+    for part in report_view(r, several, console.width):
+        console.print(part, soft_wrap=not console.is_terminal)
+
+
+def report_view(r: DryRun, several: bool = False, width: int = 80) -> list[RenderableType]:
+    """The report, most telling first: the outcome and why (the failure chain down to each failed leaf, or what a
+    stopped run left active and waiting), then the timeline, holds, waits, the mission's log and its facts.
+    Paths are relative to the mission and cut from the middle to fit `width` (80 columns stay readable)."""
+    root = r.mission
     colour = "green" if r.outcome == "success" else "red"
     who = f"{r.mission_id or r.mission} (priority {r.priority})" if several else r.mission
-    out.print(Text.assemble(("mission ", "bold"), who, "  ", (f"{r.outcome}", f"bold {colour}"),
-                            f"  {r.reason}".rstrip()))
+    parts: list[RenderableType] = [Text.assemble(("mission ", "bold"), who, "  ", (f"{r.outcome}", f"bold {colour}"),
+                                                 f"  {r.reason}".rstrip())]
     pace = f"{r.real_time_factor:.0f}x real time"
     if not r.kept_up:  # say so, rather than leave the operator to compare with what they asked
         pace += f" ({r.speed:g}x asked: the {'cluster' if r.on_cluster else 'machine'} could not keep up)"
-    out.print(f"sim time {r.sim_time:.1f} s · wall time {r.wall_time:.2f} s · {pace}")
+    parts.append(Text(f"sim time {r.sim_time:.1f} s · wall time {r.wall_time:.2f} s · {pace}"))
+    parts += _why_view(r, width)
     for row in r.injections:
-        out.print(Text.assemble(("injected ", "bold yellow"), f"at {row['at']:.1f} s: {row['effect']}"))
-    out.print(_table("timeline", ("behavior", "entered", "exited", "status"),
-                     [(row["path"], f"{row['entered']:.1f}", _t(row["exited"]), row["status"])
-                      for row in r.timeline()]))
-    out.print(_table("resource holds", ("holder", "resources", "from", "to", "ended"),
-                     [(h["path"], ", ".join(f"{k}={v}" for k, v in h["resources"].items()), f"{h['from']:.1f}",
-                       _t(h["to"]), h["ended"]) for h in r.holds()]))
+        parts.append(Text.assemble(("injected ", "bold yellow"), f"at {row['at']:.1f} s: {row['effect']}"))
+    path_width = max(20, width - 36)
+
+    def rel(path: str, room: int = path_width) -> str:
+        return shorten(_relative(path, root), room)
+
+    parts.append(_table("timeline", ("behavior", "entered", "exited", "status"),
+                        [(rel(row["path"]), f"{row['entered']:.1f}", _t(row["exited"]), row["status"])
+                         for row in r.timeline()]))
+    holds = r.holds()
+    if holds:
+        parts.append(_table("resource holds", ("holder", "resources", "from", "to", "ended"),
+                            [(rel(h["path"], max(16, width // 3)),
+                              ", ".join(f"{k}={v}" for k, v in h["resources"].items()), f"{h['from']:.1f}",
+                              _t(h["to"]), h["ended"]) for h in holds]))
+    else:
+        parts.append(Text("resource holds: none", style="bold"))
     waits = [w for w in r.waits() if w["to"] - w["from"] >= 0.05]
     if waits:
-        out.print(_table("waits", ("waiter", "needs", "from", "to", "ended"),
-                         [(w["path"], ", ".join(w["needs"]), f"{w['from']:.1f}", _t(w["to"]), w["ended"])
-                          for w in waits]))
+        parts.append(_table("waits", ("waiter", "needs", "from", "to", "ended"),
+                            [(rel(w["path"], max(16, width // 3)), ", ".join(w["needs"]), f"{w['from']:.1f}",
+                              _t(w["to"]), w["ended"]) for w in waits]))
+    logs = r.logs()
+    if logs:
+        parts.append(Text(f"log: {len(logs)} line{'s' if len(logs) != 1 else ''}", style="bold"))
+        for row in logs[:LOG_LINES]:
+            parts.append(Text.assemble((f"{row['at']:7.1f} s  ", "dim"), (rel(row["path"], max(16, width // 3)),
+                                                                          "cyan"), f": {row['text']}"))
+        if len(logs) > LOG_LINES:
+            parts.append(Text(f"  … and {len(logs) - LOG_LINES} more (--json or --trace have them all)", style="dim"))
     for title, rows in (("doors found", r.doors), ("Scouts placed", r.scouts), ("intruders detected", r.detections)):
-        out.print(Text(f"{title}: {len(rows)}", style="bold"))
-        for row in rows[:20]:
-            out.print("  " + ", ".join(f"{k}={v:.2f}" if isinstance(v, float) else f"{k}={v}" for k, v in row.items()))
+        parts.append(Text(f"{title}: {len(rows)}", style="bold"))
+        for fact in rows[:20]:
+            parts.append(Text("  " + ", ".join(_fact(k, v, root) for k, v in fact.items())))
+    return parts
+
+
+#: How many log lines the text report shows (the JSON report has them all).
+LOG_LINES = 30
+
+
+def _why_view(r: DryRun, width: int) -> list[RenderableType]:
+    """Why the run ended as it did: each failed leaf with its own reason, or what a stopped run left behind."""
+    root = r.mission
+    room = max(20, width // 2)
+    chain = r.failure_chain()
+    leaves = [row for row in chain if row["leaf"] and row["path"] != root]
+    parts: list[RenderableType] = []
+    if leaves:
+        parts.append(Text("why it failed", style="bold red"))
+        for row in leaves:
+            parts.append(Text.assemble("  ", (shorten(_relative(row["path"], root), room), "bold"),
+                                       f": {row['reason']}"))
+    active = r.still_active()
+    if active:
+        waiting = {w["path"]: w for w in r.waiting()}
+        parts.append(Text(f"still active when it stopped: {len(active)}", style="bold yellow"))
+        names = [shorten(_relative(row["path"], root), room) for row in active]
+        pad = max(len(n) for n in names)
+        for name, row in zip(names, active, strict=True):
+            line = Text.assemble("  ", (name.ljust(pad), "bold"), f"  {row['state']} since {row['since']:.1f} s")
+            w = waiting.get(row["path"])
+            if w is not None:
+                line.append(f" for {', '.join(w['needs']) or 'its resources'}")
+                held = [shorten(_relative(b["path"], root), room) + f" ({', '.join(b['holds'].values())})"
+                        for b in w["blocked_by"] if b["holds"]]
+                queued = [shorten(_relative(b["path"], root), room) for b in w["blocked_by"] if not b["holds"]]
+                if held:
+                    line.append(f", held by {'; '.join(held)}")
+                if queued:
+                    line.append(f", behind {', '.join(queued)} (waiting first)")
+            parts.append(line)
+    return parts
+
+
+def _relative(path: str, root: str) -> str:
+    """A path below the mission without the mission's name (the report's first line says it)."""
+    return path[len(root) + 1:] if path.startswith(root + "/") else path
+
+
+def _fact(key: str, value: Any, root: str) -> str:
+    if isinstance(value, float):
+        return f"{key}={value:.2f}"
+    if key == "by" and isinstance(value, str):
+        return f"{key}={_relative(value, root)}"
+    return f"{key}={value}"
 
 
 def _t(at: float | None) -> str:
