@@ -25,6 +25,7 @@ from dsl import ast
 from dsl.ast import KEYWORDS
 from dsl.errors import Diagnostic, Span
 from dsl.layout import Layout
+from dsl.unclosed import unclosed_block
 
 #: Expressions nested deeper than this are rejected (they would only come from a generator).
 MAX_EXPR_DEPTH = 100
@@ -35,6 +36,9 @@ MAX_SYNTAX_ERRORS = 10
 # Tokens that can start an item or a declaration: when one is acceptable we are between items.
 ITEM_STARTS = frozenset({"NAME", "NEEDS", "SHARED", "VAR", "PARALLEL", "PLAN", "START", "MISSION",
                          "BEHAVIOR", "IMPORT", "CONSTRAINT"})
+
+# Tokens that start a declaration at the top of a file: inside a block, one means a `}` is missing above.
+DECLARATION_STARTS = frozenset({"MISSION", "BEHAVIOR", "IMPORT"})
 
 _ESCAPES = {"n": "\n", "t": "\t", '"': '"', "\\": "\\", "{": "{", "}": "}"}
 
@@ -436,7 +440,7 @@ class Parser:
             b.file, b.errors, b.depth = file, [], {}
             b.line_offset = b.column_offset = 0
             self.layout.reset()
-            recovery = _Recovery(self, file)
+            recovery = _Recovery(self, file, text)
             try:
                 tree = self.lark.parse(text, start="start", on_error=recovery)
             except UnexpectedInput as e:
@@ -471,9 +475,10 @@ class Parser:
 class _Recovery:
     """lark's on_error hook: record a located error, then repair by insertion or skipping."""
 
-    def __init__(self, parser: Parser, file: str) -> None:
+    def __init__(self, parser: Parser, file: str, text: str = "") -> None:
         self.parser = parser
         self.file = file
+        self.text = text
         self.diagnostics: list[Diagnostic] = []
         self.lines: set[int] = set()
 
@@ -486,7 +491,7 @@ class _Recovery:
         return True
 
     def report(self, e: UnexpectedInput) -> None:
-        d = syntax_diagnostic(e, self.parser.layout.history, self.file)
+        d = syntax_diagnostic(e, self.parser.layout.history, self.file, self.text)
         if d.span.line not in self.lines:  # one error per line: the rest are usually echoes
             self.lines.add(d.span.line)
             self.diagnostics.append(d)
@@ -520,8 +525,9 @@ def _repair_order(name: str) -> tuple[int, str]:
     return (preferred.index(name) if name in preferred else len(preferred), name)
 
 
-def syntax_diagnostic(e: UnexpectedInput, history: Sequence[Token], file: str) -> Diagnostic:
-    """Translate a lark error into a located message in the user's words."""
+def syntax_diagnostic(e: UnexpectedInput, history: Sequence[Token], file: str, text: str = "") -> Diagnostic:
+    """Translate a lark error into a located message in the user's words (`text`, the whole source, lets a
+    missing `}` name the block that was never closed)."""
     if isinstance(e, UnexpectedCharacters):
         ch = e.char if hasattr(e, "char") else "?"
         span = Span(file, e.line, e.column, e.line, e.column + 1)
@@ -533,7 +539,19 @@ def syntax_diagnostic(e: UnexpectedInput, history: Sequence[Token], file: str) -
     prev = earlier[-1] if earlier else None
     at_end = tok.type in ("_SEP", "$END", "RBRACE")
     span = _after(file, prev) if (at_end and prev is not None) else _span(file, tok)
+    if "RBRACE" in e.expected and tok.type in ("$END", *DECLARATION_STARTS) and text:
+        unclosed = _unclosed(file, text, tok)
+        if unclosed is not None:
+            return unclosed
     hint = _keyword_hint(tok, e.expected)
+    if prev is not None and tok.type == "LPAR" and len(earlier) >= 2 and earlier[-2].type == "ARROW":
+        return Diagnostic("syntax", f"syntax: a transition's target is a state's name, not a call: "
+                                    f"`-> {prev.value}(`", _span(file, tok),
+                          f"give the arguments where the state is declared (`{prev.value}(...)`, or "
+                          f"`Type(...) as {prev.value}`) and write `-> {prev.value}`")
+    if prev is not None and prev.type == "NAME" and tok.type == "COLON" and "ARROW" in e.expected:
+        return Diagnostic("syntax", f"syntax: `{prev.value}:` is not how a child is named", _span(file, tok),
+                          f"name a child with as: `Type(...) as {prev.value}`")
     if prev is not None and prev.type in AFTER_TOKEN and tok.type != "$END":
         return Diagnostic("syntax", f"syntax: {AFTER_TOKEN[prev.type]}", span, hint)
     if tok.type == "$END":
@@ -545,6 +563,21 @@ def syntax_diagnostic(e: UnexpectedInput, history: Sequence[Token], file: str) -
         return Diagnostic("syntax", f"syntax: expected a newline or ; after {_show(prev)}", _after(file, prev),
                           hint or f"{_show(tok)} starts a new item: put it on its own line")
     return Diagnostic("syntax", f"syntax: {_describe_token_error(e)}", span, hint)
+
+
+def _unclosed(file: str, text: str, tok: Token) -> Diagnostic | None:
+    """A declaration (or the end of the file) where a `}` was expected: name the block that was never closed,
+    at its own `{`."""
+    at_end = tok.type == "$END"
+    line = len(text.splitlines()) + 1 if at_end else (tok.line or 1)
+    opener = unclosed_block(text, line)
+    if opener is None:
+        return None
+    where = "the file ends" if at_end else f"`{tok.value}` starts a new declaration on line {line}"
+    return Diagnostic("syntax", f"syntax: this `{{` of `{opener.header}` is never closed ({where})",
+                      Span(file, opener.line, opener.column, opener.line, opener.column + 1),
+                      "add the `}` that ends this block"
+                      + (f" before line {before}" if (before := opener.close_before or (0 if at_end else line)) else ""))
 
 
 def _describe_token_error(e: UnexpectedInput) -> str:
