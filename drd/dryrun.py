@@ -10,16 +10,16 @@ CLI renders it.
 from __future__ import annotations
 
 import functools
-import re
 import threading
 import time
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Callable, Collection, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import IO, Any
 
 from drd.bus import LocalNetwork
 from drd.executive import EntryPoints, Executive
+from drd.explain import Explainer
 from drd.hosts import Cluster
 from drd.hw.drivers import HostDrivers, drivers_for
 from drd.inject import Action, Injection
@@ -150,21 +150,21 @@ class DryRun:
         resource it lost)."""
         if self.outcome != "failure":
             return []
-        return _Explainer(self.records).chain(self.reason)
+        return Explainer(self.records).chain(self.reason)
 
     def still_active(self) -> list[dict[str, Any]]:
         """The leaves still active when a run was stopped (`--until`, the time limit, Ctrl-C, `missionctl stop`):
         `[{path, since, state}]`, `state` running, waiting (for resources) or suspended (preempted)."""
         if self.outcome != "stopped":
             return []
-        return _Explainer(self.records).still_active()
+        return Explainer(self.records).still_active()
 
     def waiting(self) -> list[dict[str, Any]]:
         """What each behavior still waiting when the run was stopped waited for: `[{path, since, needs,
         blocked_by: [{path, holds}]}]`, `holds` what that holder held then (need -> resource id)."""
         if self.outcome != "stopped":
             return []
-        return _Explainer(self.records).waiting()
+        return Explainer(self.records).waiting()
 
     def to_dict(self) -> dict[str, Any]:
         return {"mission": self.mission, "id": self.mission_id, "priority": self.priority,
@@ -176,200 +176,6 @@ class DryRun:
                 "timeline": self.timeline(), "holds": self.holds(), "waits": self.waits(),
                 "injections": self.injections,
                 "doors": self.doors, "scouts": self.scouts, "detections": self.detections}
-
-
-#: Ends of a hold that take a behavior's resources away (it then fails for that reason, not its own).
-_LOST = ("host lost", "resource lost", "expired")
-#: Records the stop of a mission writes as it shuts everything down (`Interpreter.stop`), all at its last instant.
-_SHUTDOWN = (rec.Released, rec.Halted, rec.Command, rec.Revoked, rec.Log)
-
-
-class _Explainer:
-    """Reads a mission's records to say why it ended: the failure chain, or what was still active and waiting."""
-
-    def __init__(self, records: Sequence[rec.Record]):
-        self.records = records
-        self.parent: dict[str, str] = {}
-        self.children: dict[str, list[str]] = {}
-        self.instances: set[str] = set()  # paths of a multiplicity's instances (`lookouts[0]`)
-        for r in records:
-            if isinstance(r, rec.Entered) and r.path not in self.parent:
-                if r.state.endswith("[*]"):
-                    parent = r.path[:r.path.rfind("[")]
-                    self.instances.add(r.path)
-                else:
-                    parent = r.path.rpartition("/")[0]
-                self.parent[r.path] = parent
-                self.children.setdefault(parent, []).append(r.path)
-
-    # --- the failure chain -------------------------------------------------------------------------------
-    def chain(self, reason: str) -> list[dict[str, Any]]:
-        finished = next((r for r in reversed(self.records) if isinstance(r, rec.Finished)), None)
-        root = finished.path if finished is not None else next(
-            (r.path for r in self.records if isinstance(r, rec.Entered)), "")
-        end = self._last(rec.Exited, root, len(self.records), status="failure")
-        rows = self._explain(root, len(self.records) if end is None else end, reason)
-        for row in rows:
-            path = row["path"]
-            row["leaf"] = not any(o["path"].startswith((path + "/", path + "[")) for o in rows)
-        return rows
-
-    def _explain(self, node: str, end: int, reason: str = "") -> list[dict[str, Any]]:
-        """`node` failed at record `end` (its `exited`): its row, then the rows of what made it fail."""
-        start = self._last(rec.Entered, node, end) or 0
-        records = self.records
-        for i in range(end - 1, start, -1):
-            r = records[i]
-            if isinstance(r, rec.Taken) and r.target == f"{node}/fail" and self.parent.get(r.path) == node:
-                child, label = r.path, r.label.split(" / ")[0].strip()
-                name = _name(child)
-                if r.trigger == "error":
-                    j = self._last(rec.Exited, child, i, status="failure", after=start)
-                    if j is not None:
-                        return [self._row(node, reason or f"{name} failed"), *self._explain(child, j)]
-                    return [self._row(node, reason or f"{name} failed"), self._row(child, self._own(child, start, i))]
-                if r.trigger == "timeout":
-                    ran = self._active_below(child, i)
-                    why = f"timed out {label}" + (f" (while {', '.join(_name(p) for p in ran)} ran)" if ran else "")
-                    return [self._row(node, reason or f"{name} timed out"), self._row(child, why)]
-                why = f"{label} -> fail" if label else "completed, then -> fail"
-                return [self._row(node, reason or f"{name}: {why}"), self._row(child, why)]
-        failed = [(c, j) for c in self.children.get(node, ())
-                  if (j := self._last(rec.Exited, c, end, status="failure", after=start)) is not None]
-        if failed and any(c in self.instances for c, _ in failed):
-            instances = [c for c in self.children.get(node, ()) if c in self.instances]
-            name = _name(node)
-            found = re.search(rf"only \d+ of at least \d+ instances of {re.escape(name)} can succeed", self.reason_text)
-            why = (found.group(0) + f" ({len(failed)} failed)") if found else (
-                f"{len(failed)} of {len(instances)} instances failed")
-            rows = [self._row(node, reason or why)]
-            for c, j in failed:
-                rows += self._explain(c, j)
-            return rows
-        if failed:
-            c, j = max(failed, key=lambda f: f[1])
-            return [self._row(node, reason or f"{_name(c)} failed"), *self._explain(c, j)]
-        return [self._row(node, reason or self._own(node, start, end))]
-
-    @functools.cached_property
-    def reason_text(self) -> str:
-        finished = next((r for r in reversed(self.records) if isinstance(r, rec.Finished)), None)
-        return finished.reason if finished is not None else ""
-
-    def _own(self, node: str, start: int, end: int) -> str:
-        """A behavior's own reason for failing: the resources it lost, else its last log line, else what its
-        multiplicity logged about it."""
-        window = self.records[start:end + 1]
-        lost = next((r for r in window if isinstance(r, rec.Released) and r.path == node and r.reason in _LOST), None)
-        if lost is not None:
-            return f"lost {lost.resources[0] if lost.resources else 'its resources'} ({lost.reason})"
-        said = next((r.text for r in reversed(window) if isinstance(r, rec.Log) and r.path == node), None)
-        if said is not None:
-            return said
-        parent = self.parent.get(node, "")
-        for r in self.records[end + 1:end + 4]:
-            if isinstance(r, rec.Log) and r.path == parent and r.text.startswith("an instance failed: "):
-                return r.text.removeprefix("an instance failed: ")
-        return "failed"
-
-    def _active_below(self, node: str, at: int) -> list[str]:
-        """The leaves under `node` active at record `at`."""
-        active: dict[str, None] = {}
-        for r in self.records[:at]:
-            if r.path.startswith((node + "/", node + "[")):
-                if isinstance(r, rec.Entered):
-                    active[r.path] = None
-                elif isinstance(r, rec.Exited):
-                    active.pop(r.path, None)
-        return _leaves(active)
-
-    def _last(self, kind: type[rec.Record], path: str, before: int, status: str | None = None,
-              after: int = -1) -> int | None:
-        """The index of the last record of `kind` about `path` before index `before` (and after `after`)."""
-        for i in range(min(before, len(self.records)) - 1, after, -1):
-            r = self.records[i]
-            if isinstance(r, kind) and r.path == path and (status is None or getattr(r, "status", None) == status):
-                return i
-        return None
-
-    @staticmethod
-    def _row(path: str, reason: str) -> dict[str, Any]:
-        return {"path": path, "reason": reason}
-
-    # --- what a stopped run left behind ------------------------------------------------------------------
-    def _cut(self) -> int:
-        """Where the stop's shutdown begins: the records before it are the run as it was when stopped."""
-        records = self.records
-        end = next((i for i in range(len(records) - 1, -1, -1) if isinstance(records[i], rec.Finished)),
-                   len(records))
-        at = records[end].at if end < len(records) else (records[-1].at if records else 0.0)
-        i = end
-        while i > 0:
-            r = records[i - 1]
-            if abs(r.at - at) > 1e-9 or not (isinstance(r, _SHUTDOWN) or (isinstance(r, rec.Exited)
-                                                                          and r.status == "stopped")):
-                break
-            i -= 1
-        return i
-
-    def _replay(self) -> Iterator[rec.Record]:
-        return iter(self.records[:self._cut()])
-
-    def still_active(self) -> list[dict[str, Any]]:
-        active: dict[str, float] = {}
-        suspended: set[str] = set()
-        waiting = {w["path"] for w in self.waiting()}
-        for r in self._replay():
-            if isinstance(r, rec.Entered):
-                active[r.path] = r.at
-            elif isinstance(r, rec.Exited):
-                active.pop(r.path, None)
-                suspended.discard(r.path)
-            elif isinstance(r, rec.Suspended):
-                suspended.add(r.path)
-            elif isinstance(r, rec.Resumed):
-                suspended.discard(r.path)
-
-        def state(path: str) -> str:
-            if path in waiting:
-                return "waiting"
-            frozen = any(path == s or path.startswith((s + "/", s + "[")) for s in suspended)
-            return "suspended" if frozen else "running"
-
-        return [{"path": p, "since": round(active[p], 6), "state": state(p)} for p in _leaves(active)]
-
-    def waiting(self) -> list[dict[str, Any]]:
-        waits: dict[str, dict[str, Any]] = {}
-        holds: dict[str, dict[str, str]] = {}
-        for r in self._replay():
-            if isinstance(r, rec.Waiting):
-                w = waits.setdefault(r.path, {"path": r.path, "since": round(r.at, 6), "needs": [], "blocked_by": []})
-                if r.needs:
-                    w["needs"] = list(r.needs)
-                if r.blocked_by:
-                    w["blocked_by"] = list(r.blocked_by)
-            elif isinstance(r, rec.Granted):
-                waits.pop(r.path, None)
-                holds[r.path] = {k: v for k, v in r.resources.items() if "." not in k}
-            elif isinstance(r, rec.Released):
-                gone = set(r.resources)
-                holds[r.path] = {k: v for k, v in holds.get(r.path, {}).items() if v not in gone}
-            elif isinstance(r, rec.Exited):
-                waits.pop(r.path, None)
-                holds.pop(r.path, None)
-        return [{**w, "blocked_by": [{"path": b, "holds": holds.get(b, {})} for b in w["blocked_by"]]}
-                for w in waits.values()]
-
-
-def _name(path: str) -> str:
-    """The last step of a path: `Pair/lookouts[0]/Go` -> `Go`."""
-    return path.rsplit("/", 1)[-1]
-
-
-def _leaves(paths: Iterator[str] | dict[str, Any]) -> list[str]:
-    """The paths with no other path below them, in their order."""
-    every = list(paths)
-    return [p for p in every if not any(q.startswith((p + "/", p + "[")) for q in every)]
 
 
 #: How the report words the end of a hold (the trace's `released` reasons).
@@ -395,6 +201,19 @@ class Mission:
     priority: int | None = None
 
 
+def team(cluster: Cluster, world: World, catalog: Catalog, *, seed: int = 0, registry: Any = None,
+         late: Collection[str] = ()) -> tuple[Simulation, Executive]:
+    """The world simulated and one executive over the team of `cluster` (its hosts' devices driven in the
+    simulation), in this process: what a dry-run runs missions on. `late`: hosts whose devices join later."""
+    sim = Simulation(world, seed=seed)
+    drivers = merged_drivers(cluster, sim, catalog)
+    places = {room.id: (room.x0, room.y0, room.x1, room.y1) for room in world.rooms}
+    executive = Executive(LocalNetwork().session("controller"), SimulationClock(sim), registry or EntryPoints(catalog),
+                          cluster=cluster.name, resources=[r for r in cluster.resources() if r.host not in late],
+                          lease=cluster.lease, services={"drivers": drivers, "places": places})
+    return sim, executive
+
+
 def run(chart: Statechart, cluster: Cluster, world: World, catalog: Catalog, **options: Any) -> DryRun:
     """Run `chart` to its end (or `until` seconds of sim time) and report (options as `run_many`)."""
     return run_many([Mission(chart)], cluster, world, catalog, **options)[0]
@@ -416,15 +235,8 @@ def run_many(missions: Sequence[Mission], cluster: Cluster, world: World, catalo
     problems = check_hosts(world, cluster)
     if problems:
         raise ValueError("\n".join(map(str, problems)))
-    sim = Simulation(world, seed=seed)
-    clock = SimulationClock(sim)
-    drivers = merged_drivers(cluster, sim, catalog)
-    bus = LocalNetwork().session("controller")
     late = {i.target for i in injections if i.action is Action.JOIN}  # hosts whose daemon starts later
-    places = {room.id: (room.x0, room.y0, room.x1, room.y1) for room in world.rooms}
-    executive = Executive(bus, clock, registry or EntryPoints(catalog), cluster=cluster.name,
-                          resources=[r for r in cluster.resources() if r.host not in late], lease=cluster.lease,
-                          services={"drivers": drivers, "places": places})
+    sim, executive = team(cluster, world, catalog, seed=seed, registry=registry, late=late)
     results: list[DryRun] = []
     ids: list[str] = []
     start = time.perf_counter()

@@ -45,6 +45,7 @@ if TYPE_CHECKING:  # rich's tables and trees, and the exporters, load only for t
 
     from drd.dryrun import DryRun
     from drd.executive import Executive
+    from drd.preview import Preview
     from drd.sim.physics import Simulation
 
 app = typer.Typer(
@@ -117,9 +118,16 @@ def plan(
                                 help="Write to a file: .svg/.png/.pdf are drawn with Graphviz's dot; "
                                      ".json/.dot/.mmd/.txt pick the format."),
     as_json: bool = typer.Option(False, "--json", help="Print the statechart as JSON (the same as --format json)."),
+    config: Path = typer.Option(None, "--config", "-c", "--hosts", show_default=False,
+                                help="Preview the start on this cluster's hosts file: which robot and device each "
+                                     "need gets, which host runs each component, who waits for whom, what cannot "
+                                     "hold (exit 1 then). Nothing runs."),
+    world: str = typer.Option(None, "--world", "-w", show_default=False,
+                              help="With --config: the world the robots start in [default: the hosts file's]."),
     components: list[Path] = ComponentsOption,
 ) -> int:
-    """Show the compiled statechart: states, transitions, resources and how they are bound."""
+    """Show the compiled statechart: states, transitions, resources and how they are bound; with --config, also
+    what the mission would get at start on that cluster, without running it."""
     from dsl.export import to_dict, to_dot, to_mermaid
 
     if as_json and fmt not in (None, Format.json):
@@ -133,6 +141,8 @@ def plan(
     if chart is None:
         fail(f"{file} declares no mission, so there is nothing to plan",
              hint="add `mission Name { ... }` or plan the file that imports this one")
+    if config is not None:
+        return _preview(chart, config, world, components, as_json or fmt is Format.json)
     suffix = output.suffix.lower() if output else ""
     if suffix in IMAGE_SUFFIXES:
         _draw(chart, output, IMAGE_SUFFIXES[suffix])
@@ -157,6 +167,74 @@ def plan(
     if output:
         err.print(Text.assemble(("✓ ", "bold green"), f"wrote {output}"))
     return OK
+
+
+def _preview(chart: Statechart, config: Path, world: str | None, components: list[Path], as_json: bool) -> int:
+    """`plan --config`: the statechart, then what it gets at start on the cluster (`drd.preview`)."""
+    from drd.hosts import HostsError, load_hosts
+    from drd.preview import preview
+    from drd.sim.world import WorldError, load_world
+    from dsl.export import to_dict
+
+    cat = catalog(components)
+    hosts_file = _hosts_file(config)
+    try:
+        cluster = load_hosts(hosts_file, cat)
+        sim_world = load_world(_world_file(world, cluster.world, hosts_file))
+        [p] = preview([(chart, None)], cluster, sim_world, cat)
+    except (HostsError, WorldError) as e:
+        fail_all(e.problems)
+    except ValueError as e:  # the world and the hosts file disagree (check_hosts)
+        fail_all(str(e).splitlines())
+    if as_json:
+        print_json({**to_dict(chart), "preview": p.to_dict()})
+    else:
+        out.print(_tree(chart))
+        print_preview(p, hosts_file, chart.name)
+    return MISSION_FAILED if p.problems else OK
+
+
+def print_preview(p: Preview, hosts_file: Path, root: str, console: Console | None = None) -> None:
+    """A preview as text: holds, components and their hosts, waits, and what cannot hold."""
+    from rich.table import Table
+
+    console = console or out
+
+    def short(path: str) -> str:
+        return shorten(path.removeprefix(root + "/") if path != root else path, max(20, console.width // 3))
+
+    def units(resources: dict[str, str]) -> str:
+        return ", ".join(f"{k}={v}" for k, v in resources.items()) or "—"
+
+    console.print(Text.assemble(("at start on cluster ", "bold"), (p.cluster, "bold"), f" ({hosts_file})",
+                                (" — nothing runs", "dim")))
+    if p.holds:
+        t = Table(title="holds", title_justify="left")
+        for col in ("behavior", "resources"):
+            t.add_column(col)
+        for h in p.holds:
+            t.add_row(short(h["path"]), units(h["resources"]))
+        console.print(t)
+    if p.components:
+        t = Table(title="components", title_justify="left")
+        for col in ("behavior", "component", "host", "devices"):
+            t.add_column(col, no_wrap=col != "devices")
+        for c in p.components:
+            t.add_row(short(c["path"]), c["component"], c["host"] or "—", units(c["devices"]))
+        console.print(t)
+    if p.waits:
+        t = Table(title="waits", title_justify="left")
+        for col in ("behavior", "needs", "behind"):
+            t.add_column(col)
+        for w in p.waits:
+            behind = "; ".join(f"{short(b['path'])} ({units(b['holds'])})" if b["holds"] else short(b["path"])
+                               for b in w["blocked_by"]) or "nothing grants it"
+            t.add_row(short(w["path"]), ", ".join(w["needs"]), behind)
+        console.print(t)
+    for problem in p.problems:
+        console.print(Text.assemble(("cannot hold: ", "bold red"), problem))
+    if not p.problems:
+        console.print(Text.assemble(("✓ ", "bold green"), "every need at start is granted or waits behind a holder"))
 
 
 def _draw(chart: Statechart, output: Path, kind: str) -> None:

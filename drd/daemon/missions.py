@@ -34,6 +34,7 @@ from drd.cluster.gates import GateUpdate, GateUpdateReply, RemoteGates, deliver
 from drd.cluster.remote import ComponentCall, ComponentError, ComponentRouter, SimCycle
 from drd.hosts import Cluster, Role
 from drd.placement import HostView
+from drd.preview import cluster_unsupported
 from drd.sim.service import SimReply, SimRequest, SimulationService
 from drd.sim.service import key as sim_key
 from dsl.catalog import Catalog
@@ -93,18 +94,6 @@ class SimTimeClock:
 
 def run_key(cluster: str) -> str:
     return f"drd/{cluster}/missions/run"
-
-
-def cluster_unsupported(chart: Any) -> list[Any]:
-    """What a cluster cannot run yet, as diagnostics at the place in the mission: constraints are measured and
-    enforced in the dry-run only (a cluster's controller does not read its robots' pose and battery each cycle);
-    running such a mission unguarded would promise a safety it does not give."""
-    from dsl.errors import Diagnostic
-
-    return [Diagnostic("cluster-constraint", f"constraint {c.name}: constraints are enforced in the dry-run only, not"
-                       " yet on a cluster", c.span, hint="dry-run it (`missionctl dry-run`), or remove the"
-                       " constraint to run it on the cluster without that guard")
-            for state in chart.states.values() for c in state.constraints]
 
 
 def render(diagnostics: list[Any], sources: dict[str, str]) -> list[str]:

@@ -1,0 +1,170 @@
+"""What a mission would get at start on a cluster, without running it (`missionctl plan --config hosts.yaml`).
+
+As `nomad plan` does for a job: the mission is entered on an executive over the hosts file's team, exactly as a
+run starts it, and read back at that instant, before any control cycle (so no component steps and no robot
+moves). The preview says which robot and device each need gets, which host would run each component (the host
+of its devices, else the Load Balancer's policy over idle hosts), who waits and behind whom, and what cannot
+hold: a need nothing in the hosts file satisfies, a binding or a `var` that fails at entry, a constraint (a
+cluster does not enforce them yet, so `missionctl run` refuses the mission).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+from drd.explain import Explainer
+from drd.hosts import Cluster, Role
+from drd.placement import HostView, Placed, place, view_of
+from drd.runtime import records as rec
+from drd.sim.world import World
+from dsl.catalog import Catalog, Kind
+from dsl.errors import Diagnostic
+from dsl.statechart import State, Statechart
+
+
+@dataclass
+class Preview:
+    """One mission at start: `holds` (path -> need -> unit), `components` (one row per component that would
+    start), `waits` (as `Explainer.waiting`), `problems` (what cannot hold, each a sentence)."""
+
+    mission: str
+    cluster: str
+    holds: list[dict[str, Any]] = field(default_factory=list)
+    components: list[dict[str, Any]] = field(default_factory=list)
+    waits: list[dict[str, Any]] = field(default_factory=list)
+    problems: list[str] = field(default_factory=list)
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"mission": self.mission, "cluster": self.cluster, "holds": self.holds,
+                "components": self.components, "waits": self.waits, "problems": self.problems}
+
+
+def cluster_unsupported(chart: Statechart) -> list[Diagnostic]:
+    """What a cluster cannot run yet, as diagnostics at the place in the mission: constraints are measured and
+    enforced in the dry-run only (a cluster's controller does not read its robots' pose and battery each cycle);
+    running such a mission unguarded would promise a safety it does not give."""
+    return [Diagnostic("cluster-constraint", f"constraint {c.name}: constraints are enforced in the dry-run only, not"
+                       " yet on a cluster", c.span, hint="dry-run it (`missionctl dry-run`), or remove the"
+                       " constraint to run it on the cluster without that guard")
+            for state in chart.states.values() for c in state.constraints]
+
+
+def preview(charts: Sequence[tuple[Statechart, int | None]], cluster: Cluster, world: World,
+            catalog: Catalog) -> list[Preview]:
+    """Enter each mission (with its priority, or its own) on one team and read what each got at start."""
+    from drd.dryrun import team  # the dry-run's team: the same executive, resources and drivers
+
+    _sim, executive = team(cluster, world, catalog)
+    runs: list[tuple[Statechart, str, list[rec.Record]]] = []
+    for n, (chart, priority) in enumerate(charts, 1):
+        records: list[rec.Record] = []
+        mid = executive.submit(chart, f"{chart.name}-{n}", listeners=[records.append],
+                               priority=priority or chart.priority)
+        runs.append((chart, mid, records))
+    hosts_of = {r.id: r.host for r in cluster.resources()}
+    workers = [h.name for h in cluster.hosts if Role.WORKER in h.roles] or None
+    views = {h.name: view_of(h) for h in cluster.hosts}
+    previews = []
+    for chart, mid, records in runs:
+        interp = executive.missions[mid]
+        at_start = [r for r in records if r.at <= 0.0]
+        p = Preview(mid, cluster.name)
+        states = {r.path: chart.states[r.state] for r in at_start if isinstance(r, rec.Entered)}
+        active = _active(at_start)
+        grants = {path: dict(g) for path, g in _grants(at_start).items() if path in active}
+        p.holds = [{"path": path, "resources": {k: v for k, v in g.items() if "." not in k}}
+                   for path, g in grants.items()]
+        for path in active:
+            state = states[path]
+            component = catalog.get(state.component or "") if state.component else None
+            if component is None or component.kind is not Kind.BEHAVIOR or any(
+                    q.startswith((path + "/", path + "[")) for q in active):
+                continue
+            devices = _devices(path, state, states, grants)
+            if len(devices) < len(state.needs):
+                continue  # it waits for its needs: it starts only once they are granted
+            row: dict[str, Any] = {"path": path, "component": component.name, "devices": devices}
+            hosts = sorted({hosts_of.get(u, "") for u in devices.values()} - {""})
+            if hosts:
+                row["host"], row["why"] = ", ".join(hosts), "its devices are there"
+            else:
+                node = interp.find(path)
+                names = {spec.name for spec in component.params}
+                params = {k: v for k, v in (node.scope.items() if node is not None else ()) if k in names}
+                decision = place(component, list(views.values()), cluster.placement, params=params,
+                                 affinity=workers)
+                if isinstance(decision, Placed):
+                    row["host"], row["why"] = decision.host, "placement: " + "; ".join(decision.reasons[:1])
+                    views[decision.host] = _one_more(views[decision.host], component.name)
+                else:
+                    row["host"], row["why"] = None, decision.reason
+                    p.problems.append(f"{path}: {component.name} cannot be placed: {decision.reason}")
+            p.components.append(row)
+        p.waits = Explainer(at_start).waiting_now()
+        for w in p.waits:
+            if not w["blocked_by"]:
+                p.problems.append(f"{w['path']}: nothing in the hosts file can grant {', '.join(w['needs'])}")
+        for r in at_start:
+            if isinstance(r, rec.Finished) and r.outcome != "success":
+                p.problems.append(f"{r.path} would end at start: {r.outcome}: {r.reason}")
+        p.problems += [f"{d.span}: {d.message}" for d in cluster_unsupported(chart)]
+        previews.append(p)
+    for interp in executive.missions.values():
+        if not interp.finished:
+            interp.stop("preview only")
+    return previews
+
+
+def _active(records: Sequence[rec.Record]) -> list[str]:
+    """The paths entered and not exited, in entry order."""
+    active: dict[str, None] = {}
+    for r in records:
+        if isinstance(r, rec.Entered):
+            active[r.path] = None
+        elif isinstance(r, rec.Exited):
+            active.pop(r.path, None)
+    return list(active)
+
+
+def _grants(records: Sequence[rec.Record]) -> dict[str, Mapping[str, str]]:
+    """What each path holds (need, and `need.part`, -> unit id)."""
+    held: dict[str, Mapping[str, str]] = {}
+    for r in records:
+        if isinstance(r, rec.Granted):
+            held[r.path] = {**held.get(r.path, {}), **r.resources}
+        elif isinstance(r, rec.Released):
+            held.pop(r.path, None)
+    return held
+
+
+def _devices(path: str, state: State, states: Mapping[str, State],
+             grants: Mapping[str, Mapping[str, str]]) -> dict[str, str]:
+    """The unit each need of the leaf at `path` is bound to: its own grant, or its binding's ancestor's."""
+    out: dict[str, str] = {}
+    for need in state.needs:
+        if need.bound_to is None:
+            unit = grants.get(path, {}).get(need.name)
+        else:
+            holder_state, name, part = need.bound_to
+            key = f"{name}.{part}" if part else name
+            holder = _ancestor(path, holder_state, states)
+            unit = grants.get(holder, {}).get(key) if holder is not None else None
+        if unit is not None:
+            out[need.name] = unit
+    return out
+
+
+def _ancestor(path: str, state_id: str, states: Mapping[str, State]) -> str | None:
+    """The nearest path above `path` (or itself) that is an instance of the state `state_id`."""
+    for candidate, state in sorted(states.items(), key=lambda kv: -len(kv[0])):
+        if state.id == state_id and (path == candidate or path.startswith((candidate + "/", candidate + "["))):
+            return candidate
+    return None
+
+
+def _one_more(view: HostView, component: str) -> HostView:
+    """The host's view with one more instance of `component`, so the next placement spreads as the daemon's."""
+    running = {**view.running, component: view.running.get(component, 0) + 1}
+    return HostView(view.name, view.cpu, view.memory, view.instances + 1, view.up, view.devices, running, view.cores)
