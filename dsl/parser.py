@@ -574,10 +574,10 @@ def _unclosed(file: str, text: str, tok: Token) -> Diagnostic | None:
     if opener is None:
         return None
     where = "the file ends" if at_end else f"`{tok.value}` starts a new declaration on line {line}"
+    before = opener.close_before or (0 if at_end else line)
     return Diagnostic("syntax", f"syntax: this `{{` of `{opener.header}` is never closed ({where})",
                       Span(file, opener.line, opener.column, opener.line, opener.column + 1),
-                      "add the `}` that ends this block"
-                      + (f" before line {before}" if (before := opener.close_before or (0 if at_end else line)) else ""))
+                      "add the `}` that ends this block" + (f" before line {before}" if before else ""))
 
 
 def _describe_token_error(e: UnexpectedInput) -> str:

@@ -45,8 +45,8 @@ def unclosed_block(text: str, before_line: int) -> Opener | None:
                 stack.append((Opener(number, column, code[:column - 1].strip() or "{"), indent))
             elif ch == "}" and stack:
                 opener, own = stack.pop()
-                if code[:column - 1].strip() == "" and indent < own:
-                    suspects.append(replace(opener, close_before=number))  # closed by a brace less indented than its own line
+                if code[:column - 1].strip() == "" and indent < own:  # closed by a brace less indented than it
+                    suspects.append(replace(opener, close_before=number))
     if not stack:
         return None
     return suspects[0] if suspects else stack[-1][0]
