@@ -431,3 +431,15 @@ def test_ctrl_c_on_a_dry_run_prints_the_report_of_what_ran_and_exits_1(tmp_path:
     else:
         assert out.startswith("mission Long  stopped  stopped by operator")
         assert "still active when it stopped: 1" in out and "Wait  running since 0.0 s" in out
+
+
+def test_a_missing_brace_names_the_block_never_closed_at_the_command_line(tmp_path: Path) -> None:
+    (tmp_path / "open.mission").write_text("mission Patrol {\n    parallel all {\n        Observe\n"
+                                           "    Calibrate\n}\n\nbehavior Later {\n    Observe\n}\n",
+                                           encoding="utf-8")
+    done = missionctl("validate", "open.mission", cwd=tmp_path)
+    assert done.returncode == 2
+    assert "open.mission:2:18: error: syntax: this `{` of `parallel all` is never closed" in done.stdout + done.stderr
+    assert "    2 |     parallel all {" in done.stdout + done.stderr
+    assert "before line 4" in done.stdout + done.stderr
+    assert "reserved word" not in done.stdout + done.stderr
