@@ -119,13 +119,13 @@ def test_shared_camera_from_the_command_line_alternates_with_the_real_observe() 
 
 
 def test_live_progress_shows_time_active_behaviors_holds_and_waiters(catalog: Catalog) -> None:
-    from drd.cli.missionctl import _progress_view
+    from drd.cli.report import progress_view
 
     chart = compile_file(ROOT / "missions" / "corridor_surveillance.mission", catalog).statechart
     assert chart is not None
     lines: list[str] = []
     run(chart, load_hosts(ROOT / "hosts.yaml", catalog), load_world(ROOT / "worlds" / "corridor.yaml"), catalog,
-        until=12, progress=lambda sim, ex: lines.append(_progress_view(sim, ex).plain), progress_every=10)
+        until=12, progress=lambda sim, ex: lines.append(progress_view(sim, ex).plain), progress_every=10)
     first, later = lines[0], lines[1]
     assert first.startswith("sim     0.1 s") and "FollowCorridor" in first and "DetectDoor" in first
     assert "holds RoomSurveillance[0]→ranger1+scout1" in first and "waiting 5 (RoomSurveillance[1]" in first

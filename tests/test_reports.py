@@ -14,7 +14,7 @@ from typing import Any
 
 from rich.console import Console  # noqa: TID251 - rendering the text report at a chosen width
 
-from drd.cli.missionctl import print_report
+from drd.cli.report import print_report
 from drd.dryrun import DryRun, run
 from drd.hosts import load_hosts
 from drd.runtime.component import Component, Status

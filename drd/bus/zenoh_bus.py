@@ -55,6 +55,11 @@ def zenoh_version() -> str:
         return "unknown"
 
 
+def zenoh_logs_from_env() -> None:
+    """Let `RUST_LOG` (e.g. `RUST_LOG=zenoh=debug`) turn on zenoh's own logs, for a daemon being debugged."""
+    zenoh.try_init_log_from_env()  # type: ignore[no-untyped-call]
+
+
 def __getattr__(name: str) -> str:
     """``ZENOH_VERSION``, read from the package metadata on first use (a CLI call never needs it)."""
     if name == "ZENOH_VERSION":

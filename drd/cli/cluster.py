@@ -33,13 +33,7 @@ if TYPE_CHECKING:
 
     from drd.daemon.client import ClusterClient
 
-ConfigOption = typer.Option(Path("hosts.yaml"), "--config", "-c", "--hosts",
-                            help="The cluster's hosts file: connect to every host, with its security settings "
-                                 "(`--hosts` is an alias).")
-ConnectOption = typer.Option(None, "--connect", show_default=False,
-                             help="Connect to this endpoint instead (tcp/HOST:PORT; repeatable).")
-JsonOption = typer.Option(False, "--json", help="Print JSON.")
-TimeoutOption = typer.Option(2.0, "--timeout", min=0.05, help="Seconds to wait for a daemon to answer.")
+from drd.cli.options import ConfigOption, ConnectOption, JsonOption, TimeoutOption
 
 
 def register(app: typer.Typer) -> None:
@@ -164,7 +158,7 @@ def _plain_value(text: str, kind: Any, minimum: float | None) -> Any:
 
 
 @contextmanager
-def _cluster(config: Path, connect: list[str] | None, timeout: float) -> Iterator[ClusterClient]:
+def cluster_client(config: Path, connect: list[str] | None, timeout: float) -> Iterator[ClusterClient]:
     """A client of the cluster, or a clean exit 2; request errors become one-line errors too."""
     from drd.bus import BusError, RemoteError
     from drd.daemon.client import ClientError, ClusterClient
@@ -211,7 +205,7 @@ def _endpoints(config: Path, connect: list[str] | None) -> tuple[list[str], dict
 def hosts(config: Path = ConfigOption, connect: list[str] = ConnectOption, as_json: bool = JsonOption,
           timeout: float = TimeoutOption) -> int:
     """The cluster's hosts: up or down, since when and why, with their load."""
-    with _cluster(config, connect, timeout) as client:
+    with cluster_client(config, connect, timeout) as client:
         reply = client.hosts()
     data = [asdict(h) for h in reply.hosts]
     if as_json:
@@ -227,7 +221,7 @@ def status(config: Path = ConfigOption, connect: list[str] = ConnectOption, as_j
            interval: float = typer.Option(1.0, "--interval", min=0.1, help="Seconds between refreshes with --watch."),
            events: int = typer.Option(20, "--events", min=0, help="How many recent events to show.")) -> int:
     """One view of the cluster: hosts, instances, resources, missions and recent events."""
-    with _cluster(config, connect, timeout) as client:
+    with cluster_client(config, connect, timeout) as client:
         if not watch:
             data = client.status(events)
             if as_json:
@@ -242,7 +236,7 @@ def status(config: Path = ConfigOption, connect: list[str] = ConnectOption, as_j
 def components(config: Path = ConfigOption, connect: list[str] = ConnectOption, as_json: bool = JsonOption,
                timeout: float = TimeoutOption) -> int:
     """Component types with the hosts that can run them, running instances and the daemons' services."""
-    with _cluster(config, connect, timeout) as client:
+    with cluster_client(config, connect, timeout) as client:
         reply = client.components()
     if as_json:
         print_json({"types": reply.types, "instances": [asdict(i) for i in reply.instances],
@@ -269,7 +263,7 @@ def components(config: Path = ConfigOption, connect: list[str] = ConnectOption, 
 def resources(config: Path = ConfigOption, connect: list[str] = ConnectOption, as_json: bool = JsonOption,
               timeout: float = TimeoutOption) -> int:
     """The Resource Controller Manager: each resource with its holders, queue and fencing epoch."""
-    with _cluster(config, connect, timeout) as client:
+    with cluster_client(config, connect, timeout) as client:
         reply = client.resources()
     data = {"units": [asdict(u) for u in reply.units], "robots": [asdict(r) for r in reply.robots],
             "queue": [asdict(w) for w in reply.queue], "removing": reply.removing}
@@ -290,7 +284,7 @@ def query(text: str = typer.Argument(..., metavar="QUERY", show_default=False,
     """Ask the trader: `Camera where resolution >= 640 prefer min(host.load)`."""
     from drd.bus import RemoteError
 
-    with _cluster(config, connect, timeout) as client:
+    with cluster_client(config, connect, timeout) as client:
         try:
             reply = client.query(text, seed)
         except RemoteError as e:
@@ -353,7 +347,7 @@ def run(mission: Path = typer.Argument(..., help="The mission file.", show_defau
         trace_out = trace.open("w", encoding="utf-8") if trace is not None else None
     except OSError as e:
         fail(f"{trace}: cannot write the trace: {e}")
-    with _cluster(config, connect, timeout) as client:
+    with cluster_client(config, connect, timeout) as client:
         watch = _RecordWatch(client, trace_out)
         try:
             request = RunMission(source, str(mission), world, speed, until, seed, params or None, priority)
@@ -391,7 +385,7 @@ def run(mission: Path = typer.Argument(..., help="The mission file.", show_defau
     if as_json:
         print_json(report.to_dict(), default=str)
     else:
-        from drd.cli.missionctl import print_report
+        from drd.cli.report import print_report
 
         print_report(report)
     return OK if report.outcome == "success" else MISSION_FAILED
@@ -452,7 +446,7 @@ def stop(mission: str = typer.Argument("", help="The mission id (default: the on
          timeout: float = TimeoutOption) -> int:
     """Stop a running mission (its behaviors are terminated, its resources released). Without an id it stops the
     one mission that runs; with several running it names them and stops none (`--all` stops them all)."""
-    with _cluster(config, connect, timeout) as client:
+    with cluster_client(config, connect, timeout) as client:
         missions = stop_missions(client, mission, every, timeout)
     if as_json:
         print_json({"stopped": missions})

@@ -54,9 +54,6 @@ class _Console(Console):
 out = _Console(highlight=False, soft_wrap=True)
 err = _Console(stderr=True, highlight=False, soft_wrap=True)
 
-ComponentsOption = typer.Option(
-    None, "--components", "-C", help="Extra folder of component manifests (repeatable; also $DRD_COMPONENTS).",
-    show_default=False)
 
 
 def debug() -> bool:

@@ -23,7 +23,6 @@ from rich.text import Text
 
 from drd.cli.common import (
     OK,
-    ComponentsOption,
     catalog,
     duration_text,
     err,
@@ -34,6 +33,7 @@ from drd.cli.common import (
     run_app,
 )
 from drd.cli.common import version as installed_version
+from drd.cli.options import ComponentsOption
 from dsl.catalog import Kind
 
 if TYPE_CHECKING:
@@ -208,9 +208,9 @@ def _serve(cluster: Cluster, host: str, cat: Catalog, tr: Transport, rd: Path, c
     signal.signal(signal.SIGTERM, on_signal)
     signal.signal(signal.SIGINT, on_signal)
     try:
-        import zenoh
+        from drd.bus.zenoh_bus import zenoh_logs_from_env
 
-        zenoh.try_init_log_from_env()  # type: ignore[no-untyped-call]  # RUST_LOG=zenoh=debug: zenoh's own logs
+        zenoh_logs_from_env()
         daemon.run(stop, ready=lambda: runfiles.mark(rd, info, "running"))
     except BusError as e:
         endpoint = tr.endpoints.get(host, cluster.host(host).endpoint)

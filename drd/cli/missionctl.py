@@ -19,7 +19,6 @@ from drd.cli.common import (
     INVALID,
     MISSION_FAILED,
     OK,
-    ComponentsOption,
     catalog,
     err,
     fail,
@@ -28,9 +27,9 @@ from drd.cli.common import (
     print_json,
     render_diagnostic,
     run_app,
-    shorten,
     show_diagnostics,
 )
+from drd.cli.options import ComponentsOption
 from dsl import Compiled, compile_file
 from dsl.catalog import Catalog
 from dsl.statechart import State, Statechart, StateKind
@@ -39,13 +38,9 @@ if TYPE_CHECKING:  # rich's tables and trees, and the exporters, load only for t
     import threading
     from types import FrameType
 
-    from rich.console import Console, RenderableType
-    from rich.table import Table
     from rich.tree import Tree
 
-    from drd.dryrun import DryRun
     from drd.executive import Executive
-    from drd.preview import Preview
     from drd.sim.physics import Simulation
 
 app = typer.Typer(
@@ -189,52 +184,11 @@ def _preview(chart: Statechart, config: Path, world: str | None, components: lis
     if as_json:
         print_json({**to_dict(chart), "preview": p.to_dict()})
     else:
+        from drd.cli.report import print_preview
+
         out.print(_tree(chart))
         print_preview(p, hosts_file, chart.name)
     return MISSION_FAILED if p.problems else OK
-
-
-def print_preview(p: Preview, hosts_file: Path, root: str, console: Console | None = None) -> None:
-    """A preview as text: holds, components and their hosts, waits, and what cannot hold."""
-    from rich.table import Table
-
-    console = console or out
-
-    def short(path: str) -> str:
-        return shorten(path.removeprefix(root + "/") if path != root else path, max(20, console.width // 3))
-
-    def units(resources: dict[str, str]) -> str:
-        return ", ".join(f"{k}={v}" for k, v in resources.items()) or "—"
-
-    console.print(Text.assemble(("at start on cluster ", "bold"), (p.cluster, "bold"), f" ({hosts_file})",
-                                (" — nothing runs", "dim")))
-    if p.holds:
-        t = Table(title="holds", title_justify="left")
-        for col in ("behavior", "resources"):
-            t.add_column(col)
-        for h in p.holds:
-            t.add_row(short(h["path"]), units(h["resources"]))
-        console.print(t)
-    if p.components:
-        t = Table(title="components", title_justify="left")
-        for col in ("behavior", "component", "host", "devices"):
-            t.add_column(col, no_wrap=col != "devices")
-        for c in p.components:
-            t.add_row(short(c["path"]), c["component"], c["host"] or "—", units(c["devices"]))
-        console.print(t)
-    if p.waits:
-        t = Table(title="waits", title_justify="left")
-        for col in ("behavior", "needs", "behind"):
-            t.add_column(col)
-        for w in p.waits:
-            behind = "; ".join(f"{short(b['path'])} ({units(b['holds'])})" if b["holds"] else short(b["path"])
-                               for b in w["blocked_by"]) or "nothing grants it"
-            t.add_row(short(w["path"]), ", ".join(w["needs"]), behind)
-        console.print(t)
-    for problem in p.problems:
-        console.print(Text.assemble(("cannot hold: ", "bold red"), problem))
-    if not p.problems:
-        console.print(Text.assemble(("✓ ", "bold green"), "every need at start is granted or waits behind a holder"))
 
 
 def _draw(chart: Statechart, output: Path, kind: str) -> None:
@@ -342,6 +296,7 @@ def dry_run(
 
     from rich.live import Live
 
+    from drd.cli.report import print_report, progress_view
     from drd.dryrun import Mission, merged, run_many
     from drd.hosts import HostsError, load_hosts
     from drd.inject import InjectionError
@@ -388,7 +343,7 @@ def dry_run(
 
     def progress(sim: Simulation, executive: Executive) -> None:
         if live is not None:
-            live.update(_progress_view(sim, executive))
+            live.update(progress_view(sim, executive))
         if fh is not None:
             fh.flush()  # a reader of the trace (`tail -f`) sees the run as it goes, every second of sim time
 
@@ -552,149 +507,6 @@ def _trace_records(path: Path) -> list[dict[str, Any]]:
     if not all(isinstance(r, dict) for r in records):
         fail(f"{path}: every line of a trace is a JSON object")
     return records
-
-
-def _progress_view(sim: Simulation, executive: Executive) -> Text:
-    """One live line: sim time, the active behaviors, who holds what and who waits."""
-    active = [n.path for m in executive.missions.values() for n in m.active() if n.state.kind is StateKind.LEAF]
-    snap = executive.broker.snapshot()
-    holds = [f"{_short(h)}→{'+'.join(d['assignment'].values())}" for h, d in snap["holds"].items() if d["assignment"]]
-    waiting = [_short(w["holder"]) for w in snap["queue"]]
-    return Text.assemble(("sim ", "dim"), f"{sim.time:7.1f} s  ", ("active ", "dim"),
-                         ", ".join(p.rsplit("/", 1)[-1] for p in active[:6]) or "—",
-                         ("  holds ", "dim"), "; ".join(holds[:4]) or "—",
-                         ("  waiting ", "dim"), f"{len(waiting)}" + (f" ({', '.join(waiting[:3])})" if waiting else ""))
-
-
-def _short(holder: str) -> str:
-    """`CorridorSurveillance-1/CorridorSurveillance/RoomSurveillance[2]` -> `RoomSurveillance[2]`."""
-    return holder.rsplit("/", 1)[-1]
-
-
-def print_report(r: DryRun, several: bool = False, console: Console | None = None) -> None:
-    """A dry-run's (or a cluster run's) report as text, fitted to the console's width: on a terminal long lines
-    wrap there, to a file or a pipe they stay whole (for grep); tables fit the width either way."""
-    console = console or out
-    for part in report_view(r, several, console.width):
-        console.print(part, soft_wrap=not console.is_terminal)
-
-
-def report_view(r: DryRun, several: bool = False, width: int = 80) -> list[RenderableType]:
-    """The report, most telling first: the outcome and why (the failure chain down to each failed leaf, or what a
-    stopped run left active and waiting), then the timeline, holds, waits, the mission's log and its facts.
-    Paths are relative to the mission and cut from the middle to fit `width` (80 columns stay readable)."""
-    root = r.mission
-    colour = "green" if r.outcome == "success" else "red"
-    who = f"{r.mission_id or r.mission} (priority {r.priority})" if several else r.mission
-    parts: list[RenderableType] = [Text.assemble(("mission ", "bold"), who, "  ", (f"{r.outcome}", f"bold {colour}"),
-                                                 f"  {r.reason}".rstrip())]
-    pace = f"{r.real_time_factor:.0f}x real time"
-    if not r.kept_up:  # say so, rather than leave the operator to compare with what they asked
-        pace += f" ({r.speed:g}x asked: the {'cluster' if r.on_cluster else 'machine'} could not keep up)"
-    parts.append(Text(f"sim time {r.sim_time:.1f} s · wall time {r.wall_time:.2f} s · {pace}"))
-    parts += _why_view(r, width)
-    for row in r.injections:
-        parts.append(Text.assemble(("injected ", "bold yellow"), f"at {row['at']:.1f} s: {row['effect']}"))
-    path_width = max(20, width - 36)
-
-    def rel(path: str, room: int = path_width) -> str:
-        return shorten(_relative(path, root), room)
-
-    parts.append(_table("timeline", ("behavior", "entered", "exited", "status"),
-                        [(rel(row["path"]), f"{row['entered']:.1f}", _t(row["exited"]), row["status"])
-                         for row in r.timeline()]))
-    holds = r.holds()
-    if holds:
-        parts.append(_table("resource holds", ("holder", "resources", "from", "to", "ended"),
-                            [(rel(h["path"], max(16, width // 3)),
-                              ", ".join(f"{k}={v}" for k, v in h["resources"].items()), f"{h['from']:.1f}",
-                              _t(h["to"]), h["ended"]) for h in holds]))
-    else:
-        parts.append(Text("resource holds: none", style="bold"))
-    waits = [w for w in r.waits() if w["to"] - w["from"] >= 0.05]
-    if waits:
-        parts.append(_table("waits", ("waiter", "needs", "from", "to", "ended"),
-                            [(rel(w["path"], max(16, width // 3)), ", ".join(w["needs"]), f"{w['from']:.1f}",
-                              _t(w["to"]), w["ended"]) for w in waits]))
-    logs = r.logs()
-    if logs:
-        parts.append(Text(f"log: {len(logs)} line{'s' if len(logs) != 1 else ''}", style="bold"))
-        for row in logs[:LOG_LINES]:
-            parts.append(Text.assemble((f"{row['at']:7.1f} s  ", "dim"), (rel(row["path"], max(16, width // 3)),
-                                                                          "cyan"), f": {row['text']}"))
-        if len(logs) > LOG_LINES:
-            parts.append(Text(f"  … and {len(logs) - LOG_LINES} more (--json or --trace have them all)", style="dim"))
-    for title, rows in (("doors found", r.doors), ("Scouts placed", r.scouts), ("intruders detected", r.detections)):
-        parts.append(Text(f"{title}: {len(rows)}", style="bold"))
-        for fact in rows[:20]:
-            parts.append(Text("  " + ", ".join(_fact(k, v, root) for k, v in fact.items())))
-    return parts
-
-
-#: How many log lines the text report shows (the JSON report has them all).
-LOG_LINES = 30
-
-
-def _why_view(r: DryRun, width: int) -> list[RenderableType]:
-    """Why the run ended as it did: each failed leaf with its own reason, or what a stopped run left behind."""
-    root = r.mission
-    room = max(20, width // 2)
-    chain = r.failure_chain()
-    leaves = [row for row in chain if row["leaf"] and row["path"] != root]
-    parts: list[RenderableType] = []
-    if leaves:
-        parts.append(Text("why it failed", style="bold red"))
-        for row in leaves:
-            parts.append(Text.assemble("  ", (shorten(_relative(row["path"], root), room), "bold"),
-                                       f": {row['reason']}"))
-    active = r.still_active()
-    if active:
-        waiting = {w["path"]: w for w in r.waiting()}
-        parts.append(Text(f"still active when it stopped: {len(active)}", style="bold yellow"))
-        names = [shorten(_relative(row["path"], root), room) for row in active]
-        pad = max(len(n) for n in names)
-        for name, row in zip(names, active, strict=True):
-            line = Text.assemble("  ", (name.ljust(pad), "bold"), f"  {row['state']} since {row['since']:.1f} s")
-            w = waiting.get(row["path"])
-            if w is not None:
-                line.append(f" for {', '.join(w['needs']) or 'its resources'}")
-                held = [shorten(_relative(b["path"], root), room) + f" ({', '.join(b['holds'].values())})"
-                        for b in w["blocked_by"] if b["holds"]]
-                queued = [shorten(_relative(b["path"], root), room) for b in w["blocked_by"] if not b["holds"]]
-                if held:
-                    line.append(f", held by {'; '.join(held)}")
-                if queued:
-                    line.append(f", behind {', '.join(queued)} (waiting first)")
-            parts.append(line)
-    return parts
-
-
-def _relative(path: str, root: str) -> str:
-    """A path below the mission without the mission's name (the report's first line says it)."""
-    return path[len(root) + 1:] if path.startswith(root + "/") else path
-
-
-def _fact(key: str, value: Any, root: str) -> str:
-    if isinstance(value, float):
-        return f"{key}={value:.2f}"
-    if key == "by" and isinstance(value, str):
-        return f"{key}={_relative(value, root)}"
-    return f"{key}={value}"
-
-
-def _t(at: float | None) -> str:
-    return "" if at is None else f"{at:.1f}"
-
-
-def _table(title: str, columns: tuple[str, ...], rows: list[tuple[str, ...]]) -> Table:
-    from rich.table import Table
-
-    table = Table(title=title, title_justify="left")
-    for col in columns:
-        table.add_column(col)
-    for row in rows:
-        table.add_row(*row)
-    return table
 
 
 from drd.cli import cluster  # noqa: E402  # the commands that look at a running cluster

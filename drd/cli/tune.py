@@ -16,8 +16,9 @@ from pathlib import Path
 import typer
 from rich.text import Text
 
-from drd.cli.cluster import ConfigOption, ConnectOption, JsonOption, TimeoutOption, _cluster
+from drd.cli.cluster import cluster_client
 from drd.cli.common import OK, fail, out
+from drd.cli.options import ConfigOption, ConnectOption, JsonOption, TimeoutOption
 
 
 def register(app: typer.Typer) -> None:
@@ -58,7 +59,7 @@ def tune(instance: str = typer.Argument(..., metavar="INSTANCE", show_default=Fa
         wanted = parse_cores(cores) if cores is not None else None
     except ValueError as e:
         fail(f"--cores {cores}: {e}")
-    with _cluster(config, connect, timeout) as client:
+    with cluster_client(config, connect, timeout) as client:
         try:
             where = client.lookup(instance)
         except RemoteError:

@@ -1,0 +1,19 @@
+"""The options several commands share, one definition each, so one concept has one name and one help text
+everywhere (docs/cli.md: `--config`/`-c`/`--hosts`, `--json`, `--components`/`-C`, `--connect`, `--timeout`)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import typer
+
+ComponentsOption = typer.Option(
+    None, "--components", "-C", help="Extra folder of component manifests (repeatable; also $DRD_COMPONENTS).",
+    show_default=False)
+ConfigOption = typer.Option(Path("hosts.yaml"), "--config", "-c", "--hosts",
+                            help="The cluster's hosts file: connect to every host, with its security settings "
+                                 "(`--hosts` is an alias).")
+ConnectOption = typer.Option(None, "--connect", show_default=False,
+                             help="Connect to this endpoint instead (tcp/HOST:PORT; repeatable).")
+JsonOption = typer.Option(False, "--json", help="Print JSON.")
+TimeoutOption = typer.Option(2.0, "--timeout", min=0.05, help="Seconds to wait for a daemon to answer.")
