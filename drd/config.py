@@ -13,6 +13,7 @@ from typing import Any, TypeVar
 
 import yaml
 
+from drd.errors import ConfigurationError
 from dsl.errors import did_you_mean
 
 
@@ -30,7 +31,7 @@ class ConfigProblem:
         return ": ".join(part for part in (where, self.key, self.message) if part)
 
 
-class ConfigError(Exception):
+class ConfigError(ConfigurationError):
     """A configuration has problems; carries all of them."""
 
     def __init__(self, problems: Iterable[ConfigProblem]) -> None:

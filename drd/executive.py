@@ -11,12 +11,13 @@ default one imports a component's entry point, from its manifest, the first time
 
 from __future__ import annotations
 
-import importlib
 import itertools
 from collections.abc import Callable, Iterable, Mapping
 from typing import Any
 
+from drd import entrypoints
 from drd.bus import Bus, Message, Query, Reply
+from drd.entrypoints import EntryPointError
 from drd.executive_messages import MissionCommand, MissionRecord, MissionStatus
 from drd.rcm import ReleaseReason, ResourceManager, Unit
 from drd.runtime import records as rec
@@ -48,10 +49,9 @@ class EntryPoints(Mapping[str, Callable[[], Component]]):
             ct = self.catalog.get(name)
             if ct is None or not ct.entry_point:
                 raise KeyError(name)
-            module, _, cls = ct.entry_point.partition(":")
             try:
-                self._cache[name] = getattr(importlib.import_module(module), cls)
-            except (ImportError, AttributeError) as e:
+                self._cache[name] = entrypoints.load(ct.entry_point)
+            except EntryPointError as e:
                 raise KeyError(name) from e
         return self._cache[name]
 

@@ -19,6 +19,7 @@ from collections.abc import Iterable
 from dataclasses import dataclass
 from enum import StrEnum
 
+from drd.errors import MissionInputError
 from dsl.ast import parse_duration
 from dsl.errors import did_you_mean
 
@@ -40,7 +41,7 @@ _FORM = re.compile(r"^\s*(?P<action>\w+)\s+(?P<target>[\w.\-]+)\s+at\s+(?P<at>\S
 USAGE = "write ACTION TARGET at TIME, e.g. 'kill ranger1 at 90s', 'lose scout3 at 2min', 'block door_n3 at 60s'"
 
 
-class InjectionError(ValueError):
+class InjectionError(MissionInputError, ValueError):
     """An injection that cannot be understood or names nothing that exists; the message says which and why."""
 
 

@@ -21,6 +21,7 @@ import yaml
 
 import components
 from drd.config import ConfigError, ConfigProblem, ConfigReader, StrictLoader, display_path
+from drd.entrypoints import ENTRY_POINT
 from dsl.ast import KEYWORDS, parse_duration
 from dsl.catalog import (
     BUILTIN_PROPERTIES,
@@ -60,7 +61,6 @@ REQUIRED: Mapping[Kind, tuple[str, ...]] = {
 KEY_ORDER: tuple[str, ...] = tuple(dict.fromkeys(k for keys in KEYS.values() for k in keys))
 
 _NAME = re.compile(r"[A-Za-z_][A-Za-z0-9_]*")
-_ENTRY_POINT = re.compile(r"[A-Za-z_]\w*(\.[A-Za-z_]\w*)*:[A-Za-z_]\w*", re.ASCII)
 _A = {Kind.BEHAVIOR: "a behavior", Kind.RC: "an rc", Kind.ARC: "an arc", Kind.DATA: "a data type"}
 _PYTYPES: Mapping[str, Any] = {"int": int, "float": (int, float), "bool": bool, "str": str}
 _E = TypeVar("_E", bound=Enum)
@@ -182,7 +182,7 @@ class _Checker(ConfigReader):
 
 def _entry_point(c: _Checker, value: object, key: str) -> str | None:
     text = c.text(value, key)
-    if text and not _ENTRY_POINT.fullmatch(text):
+    if text and not ENTRY_POINT.fullmatch(text):
         c.fail(key, f"expected 'package.module:Class', got {text!r}")
     return text or None
 

@@ -20,6 +20,7 @@ from dataclasses import dataclass, field
 from enum import StrEnum
 from typing import TYPE_CHECKING, NoReturn
 
+from drd.errors import MissionInputError
 from dsl import ast
 from dsl.catalog import SCALAR_TYPES, Catalog, Kind, RecordSpec
 from dsl.errors import Reporter, did_you_mean
@@ -37,7 +38,7 @@ _FUNCTIONS = ("abs", "len", "min", "max")
 _OPERATORS = frozenset({"CMP", "LT", "PLUS", "MINUS", "STAR", "SLASH", "PERCENT", "AND", "OR", "DOT"})
 
 
-class TraderError(Exception):
+class TraderError(MissionInputError):
     """A query that cannot run: a syntax error, an unknown type or property, a type mismatch.
 
     `column` is 1-based in the query's text, for a caret under it (`render`).

@@ -11,6 +11,8 @@ from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from enum import StrEnum
 
+from drd.errors import MissionInputError
+
 
 @dataclass(frozen=True, slots=True)
 class Span:
@@ -104,7 +106,7 @@ def _excerpt(span: Span, sources: Mapping[str, str] | None) -> list[str]:
     return [gutter + line, " " * (len(gutter) - 2) + "| " + " " * start + "^" * width]
 
 
-class MissionError(Exception):
+class MissionError(MissionInputError):
     """A mission (or one of its imports) has errors. Carries every diagnostic found."""
 
     def __init__(self, diagnostics: Sequence[Diagnostic], sources: Mapping[str, str] | None = None):

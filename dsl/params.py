@@ -12,6 +12,7 @@ import dataclasses
 import re
 from collections.abc import Iterable, Mapping
 
+from drd.errors import MissionInputError
 from dsl import ast
 from dsl.ast import parse_duration
 from dsl.errors import did_you_mean
@@ -20,7 +21,7 @@ from dsl.statechart import Statechart
 _ASSIGN = re.compile(r"^\s*(?P<name>[A-Za-z_][A-Za-z0-9_]*)\s*=(?P<value>.*)$", re.S)
 
 
-class ParamError(ValueError):
+class ParamError(MissionInputError, ValueError):
     """A `--param` that cannot be applied; the message says which and why (all problems, one per line)."""
 
 

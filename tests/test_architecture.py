@@ -62,9 +62,10 @@ EVERYTHING = list(PACKAGES)
 
 # (rule, modules under, except those under, may not import from under, except from under)
 RULES: list[tuple[str, list[str], tuple[str, ...], tuple[str, ...], tuple[str, ...]]] = [
-    ("the language is pure", ["dsl"], (), ("drd", "components", *IO_LIBRARIES), ()),
+    ("the error root depends on nothing", ["drd.errors"], (), ("drd", "dsl", "components"), ()),
+    ("the language is pure", ["dsl"], (), ("drd", "components", *IO_LIBRARIES), ("drd.errors",)),
     ("decision cores are pure", PURE_CORES, (), ("drd", "components", *IO_LIBRARIES),
-     ("drd.hosts", "drd.config", "drd.manifests", "drd.rcm", "drd.runtime.records")),
+     ("drd.errors", "drd.hosts", "drd.config", "drd.manifests", "drd.rcm", "drd.runtime.records")),
     ("the interpreter runs anywhere", ["drd.runtime"], (),
      ("drd.bus", "drd.daemon", "drd.cluster", "drd.cli", "drd.dryrun", "drd.sim"), ()),
     ("cluster execution uses the interpreter's public API", ["drd.cluster"], (), ("drd.daemon", "drd.cli"), ()),
@@ -73,7 +74,7 @@ RULES: list[tuple[str, list[str], tuple[str, ...], tuple[str, ...], tuple[str, .
     ("one place prints", EVERYTHING, ("drd.cli",), ("rich", "typer"), ()),
     ("one transport seam", EVERYTHING, ("drd.bus",), ("zenoh",), ()),
     ("components are plug-ins", ["components"], (), ("drd", "dsl"),
-     ("drd.runtime", "drd.hw", "drd.sim", "drd.hosts")),
+     ("drd.errors", "drd.runtime", "drd.hw", "drd.sim", "drd.hosts")),
 ]
 
 

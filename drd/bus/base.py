@@ -17,6 +17,8 @@ from dataclasses import dataclass, fields
 from types import TracebackType
 from typing import NamedTuple, Self
 
+from drd.errors import BusFailure
+
 from .keys import intersects, valid_key
 from .messages import ErrorReply, MalformedMessage, Message, decode, encode
 
@@ -25,7 +27,7 @@ log = logging.getLogger("drd.bus")
 DEFAULT_TIMEOUT = 2.0
 
 
-class BusError(Exception):
+class BusError(BusFailure):
     """Base of the bus's own errors."""
 
 

@@ -21,6 +21,8 @@ import typer
 from rich.console import Console
 from rich.text import Text
 
+from drd.errors import DrdError
+
 if TYPE_CHECKING:  # the mission language loads only for the commands that use it
     from dsl import Compiled
     from dsl.catalog import Catalog
@@ -266,6 +268,11 @@ def run_app(app: Callable[..., object], prog: str,
         _error("aborted" if isinstance(e, typer.Abort) else "interrupted", INTERRUPTED)
     except BrokenPipeError:  # a plain print to a reader that went away
         _reader_gone()
+    except DrdError as e:  # ours, on purpose: the input or the cluster is wrong, not the code
+        if debug():
+            traceback.print_exc()
+        where = f"{e.where}: " if e.where else ""
+        _error(f"{where}{e}", INVALID, f"hint: {e.hint}" if e.hint else "")
     except Exception as e:  # the last line of defence: never a traceback for a user
         show = getattr(e, "show", None)
         code = getattr(e, "exit_code", None)

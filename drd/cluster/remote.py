@@ -38,6 +38,7 @@ from typing import Any
 
 from drd.bus import Bus, BusError, Message, RemoteError, message
 from drd.cluster.gates import RemoteGates, deliver
+from drd.errors import ComponentFailure
 from drd.runtime.component import Component, Context, Status
 from drd.runtime.records import Record, plain
 
@@ -117,7 +118,7 @@ class ComponentBatchReply(Message):
     records: list[dict[str, Any]] | None = None
 
 
-class ComponentError(Exception):
+class ComponentError(ComponentFailure):
     """The remote component raised, or its host did not answer: the state fails with this message."""
 
 

@@ -27,12 +27,13 @@ from drd.daemon.messages import (
     TraderRequest,
     ViewRequest,
 )
+from drd.errors import BusFailure
 
 M = TypeVar("M", bound=Message)
 PREFER_WAIT = 0.5  # seconds to wait for the preferred daemon (the controller) once another one answered
 
 
-class ClientError(Exception):
+class ClientError(BusFailure):
     """The cluster cannot answer (no daemon, no controller, several clusters): one line for the user."""
 
 

@@ -20,10 +20,8 @@ when its last mission ends, and each ended mission's processes are retired on ev
 
 from __future__ import annotations
 
-import cProfile
 import functools
 import logging
-import os
 import threading
 import time
 from collections.abc import Callable, Mapping
@@ -35,6 +33,7 @@ from drd.cluster.remote import ComponentCall, ComponentError, ComponentRouter, S
 from drd.hosts import Cluster, Role
 from drd.placement import HostView
 from drd.preview import cluster_unsupported
+from drd.profiling import Sampler
 from drd.sim.service import SimReply, SimRequest, SimulationService
 from drd.sim.service import key as sim_key
 from dsl.catalog import Catalog
@@ -382,13 +381,13 @@ class WorldRun:
         return [m for m in self.routers if m in missions and not missions[m].finished]
 
     def _loop(self) -> None:
+        with Sampler("controller", every=1).run():  # DRD_PROFILE: this whole loop, dumped when it ends
+            self._run()
+
+    def _run(self) -> None:
         runner = self.runner
         start = time.perf_counter()
         sim_time = max(0.0, self.cycle.sim_time)
-        profile_path = os.environ.get("DRD_PROFILE", "")  # cProfile of this loop, dumped to path.controller
-        prof = cProfile.Profile() if profile_path else None
-        if prof is not None:
-            prof.enable()
         executive = runner.controller.executive
         try:
             while not self.stopping.is_set():
@@ -447,9 +446,6 @@ class WorldRun:
         runner.flush_gates(self)
         self._retire_finished(everyone=True)
         wall = time.perf_counter() - start
-        if prof is not None:
-            prof.disable()
-            prof.dump_stats(f"{profile_path}.controller")
         log.info("world %s ended: %.1f s sim in %.2f s wall (%.1fx), %d cycles (%.2f ms each), sim steps not "
                  "carried by a batch %s", self.name, sim_time, wall, sim_time / wall if wall else 0.0, self.cycles,
                  1000 * wall / max(1, self.cycles), self.cycle.steps_alone.as_dict())

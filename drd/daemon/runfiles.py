@@ -18,6 +18,8 @@ from pathlib import Path
 
 import psutil
 
+from drd.errors import DrdError
+
 ENV = "DRD_RUN_DIR"
 
 
@@ -51,7 +53,7 @@ class PidFile:
             return False
 
 
-class AlreadyRunning(Exception):
+class AlreadyRunning(DrdError):
     """A daemon for this host already runs from this run dir."""
 
     def __init__(self, info: PidFile, path: Path) -> None:

@@ -15,10 +15,12 @@ import inspect
 from dataclasses import dataclass
 from typing import Any
 
+from drd.errors import ComponentFailure
+
 __all__ = ["DriverDeclarationError", "DriverSpec", "spec_of"]
 
 
-class DriverDeclarationError(TypeError):
+class DriverDeclarationError(ComponentFailure, TypeError):
     """A driver class declares commands it does not have, or has commands it does not declare."""
 
 

@@ -15,12 +15,14 @@ names.
 
 from __future__ import annotations
 
-import importlib
 import re
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
+from drd import entrypoints
+from drd.entrypoints import EntryPointError
+from drd.errors import HardwareFailure
 from drd.hosts import Cluster, Device
 from drd.hw.commands import DriverDeclarationError, spec_of
 from dsl.catalog import Catalog
@@ -34,7 +36,7 @@ SIM = "sim"
 _SIM_PACKAGE = "components.sim"
 
 
-class DriverError(Exception):
+class DriverError(HardwareFailure):
     """A device's driver cannot be found or built; the message names device, driver and module."""
 
 
@@ -70,18 +72,13 @@ def load_driver(device: Device, robot_id: str, services: Mapping[str, Any]) -> o
         DriverError: the module or class is missing, the backend is missing, or construction failed.
     """
     entry = driver_entry_point(device, services.get("catalog"))
-    module_name, _, class_name = entry.partition(":")
     where = f"device {device.id} (type {device.type}, driver {device.driver!r})"
     try:
-        module = importlib.import_module(module_name)
-    except ModuleNotFoundError as e:
-        if e.name is not None and module_name.startswith(e.name):  # the driver module itself, not its imports
-            raise DriverError(f"{where}: no module {module_name} (looked for {entry});"
-                              f" see docs/drivers.md to add a driver") from e
-        raise DriverError(f"{where}: module {module_name} failed to import: {e}") from e
-    cls = getattr(module, class_name, None)
+        cls = entrypoints.load(entry)
+    except EntryPointError as e:
+        raise DriverError(f"{where}: {e}; see docs/drivers.md to add a driver") from e
     if not callable(cls):
-        raise DriverError(f"{where}: module {module_name} has no class {class_name}")
+        raise DriverError(f"{where}: {entry} is not a class")
     backend = services.get(device.driver)
     if device.driver == SIM and backend is None:
         raise DriverError(f"{where}: the sim driver needs a Simulation in services['sim'], got {backend!r}")

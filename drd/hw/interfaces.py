@@ -17,13 +17,15 @@ import math
 from dataclasses import dataclass
 from typing import Protocol, runtime_checkable
 
+from drd.errors import HardwareFailure
+
 __all__ = [
     "INTERFACES", "Beams", "Camera", "DetectionLike", "Drive", "Fence", "HardwareError", "Jump", "Landing", "Launcher",
     "RadioChannel", "RangeSensor", "Scan", "StaleCommand",
 ]
 
 
-class HardwareError(Exception):
+class HardwareError(HardwareFailure):
     """The hardware cannot carry out a command (a lost robot, no such Scout in the magazine...)."""
 
 

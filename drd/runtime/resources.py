@@ -16,6 +16,7 @@ from __future__ import annotations
 from collections.abc import Callable, Iterable, Mapping
 from typing import Any
 
+from drd.errors import MissionInputError
 from drd.rcm import Aggregate, NeedRequest, Request
 from drd.runtime.broker import ResourceBroker
 from drd.runtime.ownership import Arbiter, Binding, Gates, LocalGates
@@ -28,7 +29,7 @@ from dsl.statechart import ResourceNeed
 Names = Callable[[Node], dict[str, Any]]
 
 
-class BindingError(Exception):
+class BindingError(MissionInputError):
     """A need cannot be bound: what the binding chain leads to is not held (released, or never granted)."""
 
 

@@ -15,6 +15,7 @@ from typing import Any
 
 import pymunk
 
+from drd.errors import HardwareFailure
 from drd.sim.geometry import Point
 
 
@@ -74,7 +75,7 @@ class RobotState(StrEnum):
     not a vanished one."""
 
 
-class SimError(Exception):
+class SimError(HardwareFailure):
     """A command the simulated hardware cannot carry out (a lost robot, a Scout not in a magazine...)."""
 
 

@@ -22,10 +22,8 @@ so the drivers report a `HardwareError` exactly as they do in the dry-run.
 
 from __future__ import annotations
 
-import cProfile
 import dataclasses
 import math
-import os
 import re
 import threading
 import time
@@ -34,6 +32,7 @@ from pathlib import Path
 from typing import Any
 
 from drd.bus import Bus, Message, Query, Reply, message
+from drd.profiling import Sampler
 
 #: The Simulation methods a remote driver may call (what components/sim/* use), and their arity bounds.
 ALLOWED_METHODS: dict[str, tuple[int, int]] = {
@@ -182,8 +181,7 @@ class SimulationService:
         self.world_name = ""
         self.calls = 0
         self._lock = threading.Lock()
-        self._profile = cProfile.Profile() if os.environ.get("DRD_PROFILE") else None  # see drd.daemon.creator
-        self._profiled = 0
+        self._sampler = Sampler("sim", every=500)  # DRD_PROFILE: requests from other hosts only
         self._queryable = bus.serve(key(cluster), self._serve) if bus is not None else None
 
     def local(self, world: str) -> LocalSimulation | None:
@@ -280,19 +278,11 @@ class SimulationService:
     def _serve(self, query: Query) -> Message | Reply:
         if not isinstance(query.payload, SimRequest):
             return query.error("expected a drd.sim.request")
-        prof = self._profile  # requests from other hosts only (the controller's own run in its profile)
-        if prof is not None:
-            prof.enable()
-        try:
-            return self.handle(query.payload)
-        except ValueError as e:
-            return query.error(str(e))
-        finally:
-            if prof is not None:
-                prof.disable()
-                self._profiled += 1
-                if self._profiled % 500 == 0:
-                    prof.dump_stats(f"{os.environ.get('DRD_PROFILE')}.sim")
+        with self._sampler.run():  # the controller's own requests are in its own profile
+            try:
+                return self.handle(query.payload)
+            except ValueError as e:
+                return query.error(str(e))
 
 
 # -- the proxy ---------------------------------------------------------------------------------------

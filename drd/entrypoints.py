@@ -1,0 +1,47 @@
+"""The one loader of `package.module:Name` entry points (components' and drivers' classes, from manifests).
+
+Everything that turns a manifest's `entry_point` into a class comes here, so the format is checked one way and
+a failure says which of the three things went wrong: the module is not there, it is there but its own import
+failed, or it has no such name.
+"""
+
+from __future__ import annotations
+
+import importlib
+import re
+from typing import Any
+
+from drd.errors import ComponentFailure
+
+#: `package.module:Name` (what a manifest's `entry_point` must look like).
+ENTRY_POINT = re.compile(r"[A-Za-z_]\w*(\.[A-Za-z_]\w*)*:[A-Za-z_]\w*", re.ASCII)
+
+
+class EntryPointError(ComponentFailure):
+    """An entry point cannot be loaded; the message says whether the module is missing, broken, or lacks the
+    name."""
+
+
+def split(entry: str) -> tuple[str, str]:
+    """`package.module:Name` -> (`package.module`, `Name`), or EntryPointError for anything else."""
+    if not ENTRY_POINT.fullmatch(entry):
+        raise EntryPointError(f"expected 'package.module:Name', got {entry!r}")
+    module, _, name = entry.partition(":")
+    return module, name
+
+
+def load(entry: str) -> Any:
+    """Import the module of `entry` (once: Python caches it) and return its attribute."""
+    module_name, name = split(entry)
+    try:
+        module = importlib.import_module(module_name)
+    except ModuleNotFoundError as e:
+        if e.name is not None and module_name.startswith(e.name):  # the module itself, not one of its imports
+            raise EntryPointError(f"no module {module_name} (for {entry})") from e
+        raise EntryPointError(f"module {module_name} failed to import: {e}") from e
+    except Exception as e:  # a module that raises at import is broken, not missing
+        raise EntryPointError(f"module {module_name} failed to import: {type(e).__name__}: {e}") from e
+    try:
+        return getattr(module, name)
+    except AttributeError:
+        raise EntryPointError(f"module {module_name} has no {name} (for {entry})") from None

@@ -1,0 +1,59 @@
+"""The root of drd's own errors: something a user can act on, never a bug of ours.
+
+Every error drd raises on purpose descends from `DrdError`, by what it is about: the configuration (hosts file,
+manifests, worlds, security), a mission (its text, its parameters, an injection, a query), a component (it
+raised, its host is gone, it is declared wrong), the bus (no daemon answers, a call timed out) or the hardware (a
+driver cannot be built, a device refused a command). The CLI turns any `DrdError` into one line and exit 2; an
+exception that is not one is a bug of ours: exit 70 (sysexits' EX_SOFTWARE), `DRD_DEBUG=1` for the traceback.
+
+Depends on nothing, so every layer (the mission language included) may raise from it.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+
+class DrdError(Exception):
+    """A drd error, with what it is about (`kind`), where (`where`: a file and line, a key, a host) and a hint."""
+
+    kind = "error"
+    where: str | None = None
+    hint: str | None = None
+
+    def __init__(self, *args: Any, where: str | None = None, hint: str | None = None) -> None:
+        super().__init__(*args)
+        if where is not None:
+            self.where = where
+        if hint is not None:
+            self.hint = hint
+
+
+class ConfigurationError(DrdError):
+    """A hosts file, a manifest, a world or a security setting is wrong."""
+
+    kind = "configuration"
+
+
+class MissionInputError(DrdError):
+    """A mission, its parameters, an injection or a query is wrong."""
+
+    kind = "mission"
+
+
+class ComponentFailure(DrdError):
+    """A component raised, is declared wrong, or its host or process went away."""
+
+    kind = "component"
+
+
+class BusFailure(DrdError):
+    """No daemon answered, a call timed out or was refused, a session closed."""
+
+    kind = "bus"
+
+
+class HardwareFailure(DrdError):
+    """A driver cannot be built or a device cannot carry out a command."""
+
+    kind = "hardware"
