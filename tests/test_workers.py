@@ -312,8 +312,8 @@ def simulated(cluster_: Cluster, catalog_: Catalog, pool: WorkerPool) -> Iterato
     asked: list[Any] = []
     serve = c._device_request
 
-    def spy(worker: Any, req: tuple[Any, ...], answer: bool = True) -> Exception | None:
-        asked.append(req[3])
+    def spy(worker: Any, req: Any, answer: bool = True) -> Exception | None:
+        asked.append(req.name)
         return serve(worker, req, answer)
     c._device_request = spy  # type: ignore[method-assign]
     try:

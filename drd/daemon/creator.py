@@ -52,6 +52,23 @@ from drd.cluster.gates import GateUpdate, GateUpdateReply, wire_record
 from drd.cluster.remote import ComponentBatch, ComponentBatchReply, ComponentCall, ComponentReply
 from drd.daemon.keys import ClusterKeys
 from drd.daemon.messages import InstanceInfo
+from drd.daemon.pipe import (
+    AttrRead,
+    Call,
+    CallReply,
+    Command,
+    DeviceCall,
+    DeviceRequest,
+    Done,
+    Drop,
+    Ok,
+    Raise,
+    ReadingKey,
+    Run,
+    Setup,
+    reading_key,
+    reading_request,
+)
 from drd.daemon.workers import (
     DEFAULT_SIZE,
     Tune,
@@ -61,9 +78,9 @@ from drd.daemon.workers import (
     WorkerPool,
     apply_scheduling,
     device_methods,
-    reading_key,
     scheduling_of,
 )
+from drd.errors import ComponentFailure
 from drd.hosts import Cluster
 from drd.hw.commands import spec_of
 from drd.runtime import records as rec
@@ -117,16 +134,16 @@ class Instance:
     worker: Worker
     devices: dict[str, BoundDevice] = field(default_factory=dict)
     bound: dict[str, Binding] = field(default_factory=dict)  # need -> its binding (epoch from each call)
-    setup: tuple[Any, ...] | None = None  # sent with its first call (entry point, resources, device methods)
+    setup: Setup | None = None  # sent with its first call (entry point, resources, device methods)
     state: str = "starting"
     dead: str = ""  # how its process went, once it has
     notes: list[str] = field(default_factory=list)  # scheduling not applied: told in the start reply's logs
     readings: dict[str, frozenset[str]] = field(default_factory=dict)  # need -> its driver's `READINGS`
-    reads: list[tuple[Any, ...]] = field(default_factory=list)  # readings of its last step: read ahead of the next
-    asked: list[tuple[Any, ...]] = field(default_factory=list)  # readings it asked over the pipe in this step
+    reads: list[ReadingKey] = field(default_factory=list)  # readings of its last step: read ahead of the next
+    asked: list[ReadingKey] = field(default_factory=list)  # readings it asked over the pipe in this step
 
 
-class CreatorError(ValueError):
+class CreatorError(ComponentFailure, ValueError):
     """A call refused outright (unknown component, bad parameter, a device of another host)."""
 
 
@@ -390,123 +407,131 @@ class Creator:
         first, inst0 = run[0]
         if inst0.dead:
             return [ComponentReply(error=f"component process of {first.path} {inst0.dead}")]
-        msgs = []
-        aheads: list[dict[tuple[Any, ...], Any] | None] = []
+        calls: list[Call] = []
+        aheads: list[dict[ReadingKey, Any] | None] = []
         self._ahead_version = getattr(self._world, "version", None)
         for call, inst in run:
             self.calls += 1
             ahead = self._read_ahead(inst) if call.op == "step" else None
             aheads.append(ahead)
-            msgs.append((call.path, call.op, call.now, call.status, call.shared, call.shared_ids, call.inputs,
-                         call.params if call.op == "start" else None, inst.setup, ahead))
+            calls.append(Call(call.path, call.op, call.now, call.status, call.shared, call.shared_ids, call.inputs,
+                              call.params if call.op == "start" else None, inst.setup, ahead))
             inst.setup = None
         try:
-            raw = self._exchange(worker, ("run", msgs, latest))
+            got = self._exchange(worker, Run(tuple(calls), latest))
         except WorkerDied as e:
             self._worker_died(worker, str(e))
             return [ComponentReply(error=f"component process of {first.path} {e}")]
         replies = []
-        for (call, inst), ahead, (status, outputs, events, logs, shared, deps, error, setup_failed, unused) in zip(
-                run, aheads, raw, strict=False):
-            if ahead is not None or inst.asked:
-                inst.reads = _reads_next(ahead, unused, inst.asked)
-            if setup_failed:  # setup raised: the start fails and the instance is forgotten
-                self._forget(_key(call))
-                replies.append(ComponentReply(error=error))
+        for (call, inst), ahead, reply in zip(run, aheads, got, strict=False):
+            replies.append(self._replied(call, inst, ahead, reply))
+            if reply.setup_failed:
                 continue
-            if inst.notes:
-                logs, inst.notes = [*inst.notes, *logs], []
-            state = _STATE_AFTER.get(call.op)
-            if state is not None and state != inst.state:
-                inst.state = state
-                self._dirty = True
-            replies.append(ComponentReply(status, outputs, events, logs, shared, deps, error))
+            shared = reply.shared
             if shared is not None and call.shared_ids:
                 for name, ref in call.shared_ids.items():
                     if name in shared:
                         latest[ref] = shared[name]
         return replies
 
-    def _exchange(self, worker: Worker, msg: tuple[Any, ...]) -> Any:
-        """Send `msg`, serve the worker's driver requests until its final `done`; WorkerDied if it goes."""
-        worker.send(msg)
-        while True:
-            got = worker.recv(self.pool.call_timeout)
-            kind = got[0] if isinstance(got, tuple) and got else None
-            if kind == "done":
-                return got[1]
-            if kind in ("dev", "attr") and len(got) >= 4:
-                self._device_request(worker, got)
-                continue
-            if kind == "cmd" and len(got) >= 6:  # a setpoint: no answer awaited, a refusal fails the step after
-                error = self._device_request(worker, got, answer=False)
-                if error is not None:
-                    self._command_errors.append((f"{worker.mission}/{got[1]}",
-                                                 f"component raised {type(error).__name__}: {error}"))
-                continue
-            worker.kill()
-            raise WorkerDied(f"sent an unexpected message ({str(kind)[:40]}): killed")
+    def _replied(self, call: ComponentCall, inst: Instance, ahead: dict[ReadingKey, Any] | None,
+                 reply: CallReply) -> ComponentReply:
+        """What the worker's reply to `call` means here: the instance's state, what to read ahead of its next step;
+        the reply for the controller."""
+        if ahead is not None or inst.asked:
+            inst.reads = _reads_next(ahead, reply.unused, inst.asked)
+        if reply.setup_failed:  # setup raised: the start fails and the instance is forgotten
+            self._forget(_key(call))
+            return ComponentReply(error=reply.error)
+        logs = reply.logs
+        if inst.notes:
+            logs, inst.notes = [*inst.notes, *logs], []
+        state = _STATE_AFTER.get(call.op)
+        if state is not None and state != inst.state:
+            inst.state = state
+            self._dirty = True
+        return ComponentReply(reply.status, reply.outputs, reply.events, logs, reply.shared, reply.dependencies,
+                              reply.error)
 
-    def _device_request(self, worker: Worker, req: tuple[Any, ...], answer: bool = True) -> Exception | None:
+    def _exchange(self, worker: Worker, run: Run) -> tuple[CallReply, ...]:
+        """Send `run`, serve the worker's driver requests until its final `Done`; WorkerDied if it goes."""
+        worker.send(run)
+        while True:
+            match worker.recv(self.pool.call_timeout):
+                case Done(replies):
+                    return replies
+                case DeviceCall() | AttrRead() as req:
+                    self._device_request(worker, req)
+                case Command() as req:  # a setpoint: no answer awaited, a refusal fails the step after
+                    error = self._device_request(worker, req, answer=False)
+                    if error is not None:
+                        self._command_errors.append((f"{worker.mission}/{req.path}",
+                                                     f"component raised {type(error).__name__}: {error}"))
+                case other:
+                    worker.kill()
+                    raise WorkerDied(f"sent an unexpected message ({type(other).__name__}): killed")
+
+    def _device_request(self, worker: Worker, req: DeviceRequest, answer: bool = True) -> Exception | None:
         """Run one driver call (or attribute read) of a component in `worker` on its gated device; answer it
-        (or, for a setpoint command, return what it raised). An answer tells the worker when the world changed
+        (or, for a setpoint `Command`, return what it raised). An answer tells the worker when the world changed
         since its readings were read ahead (a launch): it then asks for the rest of the run's readings."""
-        kind, path, need, name = req[:4]
-        args, kwargs = (req[4], req[5]) if len(req) >= 6 else ((), {})
+        value: Any = None
+        error: Exception | None = None
         try:
-            inst = self.instances.get(f"{worker.mission}/{path}") if isinstance(path, str) else None
+            inst = self.instances.get(f"{worker.mission}/{req.path}")
             if inst is None or inst.worker is not worker:
-                raise LookupError(f"no instance {path!r} in this process")
-            if kind != "cmd" and isinstance(need, str) and name in inst.readings.get(need, ()):
-                key = reading_key(kind, need, name, args, kwargs)
+                raise LookupError(f"no instance {req.path!r} in this process")
+            if not isinstance(req, Command) and req.name in inst.readings.get(req.need, ()):
+                key = reading_key(req)
                 if key is not None and key not in inst.asked:
                     inst.asked.append(key)
-            result: tuple[Any, ...] = ("ok", self._device_value(inst, kind, need, name, args, kwargs))
+            value = self._device_value(inst, req)
         except Exception as e:  # the component sees the driver's exception, as it would in process
             if not answer:
                 return e
-            result = ("raise", e)
+            error = e
         if not answer:
             return None
-        changed: tuple[str, ...] = ()
+        changed = False
         if self._ahead_version is not None and getattr(self._world, "version", None) != self._ahead_version:
-            changed, self._ahead_version = ("changed",), None
+            changed, self._ahead_version = True, None
         try:
-            worker.send((*result, *changed))
+            worker.send(Ok(value, changed) if error is None else Raise(error, changed))
         except (pickle.PicklingError, TypeError, AttributeError) as e:
-            what = f"{type(result[1]).__name__}: {result[1]}" if result[0] == "raise" else "its result"
-            worker.send(("raise", RuntimeError(f"{need}.{name}: {what} cannot be sent to the component process"
-                                               f" ({e})"), *changed))
+            what = f"{type(error).__name__}: {error}" if error is not None else "its result"
+            worker.send(Raise(RuntimeError(f"{req.need}.{req.name}: {what} cannot be sent to the component process"
+                                           f" ({e})"), changed))
         return None
 
-    def _device_value(self, inst: Instance, kind: str, need: Any, name: Any, args: Any, kwargs: Any) -> Any:
-        """A driver call (`dev`, `cmd`) or attribute read (`attr`) of an instance on its gated device."""
-        device = inst.devices.get(need) if isinstance(need, str) else None
+    def _device_value(self, inst: Instance, req: DeviceRequest) -> Any:
+        """A driver call (`DeviceCall`, `Command`) or attribute read (`AttrRead`) of an instance on its gated
+        device."""
+        need, name = req.need, req.name
+        device = inst.devices.get(need)
         if device is None:
             raise LookupError(f"{inst.path}: no device for need {need!r} (have: {', '.join(inst.devices) or 'none'})")
-        if not isinstance(name, str) or name.startswith("_"):
+        if name.startswith("_"):
             raise AttributeError(f"{need}: no public attribute {name!r}")
         if self._sim is not None:
             self._sim.owner = f"{inst.mission}/{inst.path}"
         target = getattr(device, name)
-        if kind in ("dev", "cmd"):
-            return target(*args, **kwargs)
+        if not isinstance(req, AttrRead):
+            return target(*req.args, **req.kwargs)
         if callable(target):
             raise TypeError(f"{need}.{name} is a method: call it")
         return target
 
-    def _read_ahead(self, inst: Instance) -> dict[tuple[Any, ...], Any] | None:
+    def _read_ahead(self, inst: Instance) -> dict[ReadingKey, Any] | None:
         """The readings `inst` made in its last step, read now for this one (`READINGS` of the `sim` drivers: a
         function of the world's instant, so reading ahead changes nothing); each saves a pipe round trip. One
         that raises is left out: asked over the pipe, it raises there as it would have."""
         inst.asked = []
         if not inst.reads or self._ahead_version is None:
             return None
-        ahead: dict[tuple[Any, ...], Any] = {}
+        ahead: dict[ReadingKey, Any] = {}
         for key in inst.reads:
-            kind, need, name, args, kwargs = key
             try:
-                ahead[key] = self._device_value(inst, kind, need, name, args, dict(kwargs))
+                ahead[key] = self._device_value(inst, reading_request(inst.path, key))
             except Exception:
                 continue
         return ahead or None
@@ -573,7 +598,7 @@ class Creator:
             self.pool.release(w)
             return
         try:
-            w.send(("drop", [inst.path]))
+            w.send(Drop((inst.path,)))
         except WorkerDied:
             self._worker_died(w, w.died)
 
@@ -731,7 +756,7 @@ class Creator:
         assert ct.entry_point is not None
         new = Instance(call.component, call.mission, call.path, {}, worker, notes=notes)
         methods, commands = self._rebind(new, bindings, _rank(call))
-        new.setup = (ct.entry_point, {n: b[0] for n, b in bindings.items()}, methods, commands)
+        new.setup = Setup(ct.entry_point, {n: b[0] for n, b in bindings.items()}, methods, commands)
         self.instances[key] = new
         worker.instances.add(call.path)
         return new
@@ -801,8 +826,7 @@ def _rank(call: ComponentCall) -> tuple[int, int]:
 MAX_AHEAD = 32
 
 
-def _reads_next(ahead: dict[tuple[Any, ...], Any] | None, unused: Any,
-                asked: list[tuple[Any, ...]]) -> list[tuple[Any, ...]]:
+def _reads_next(ahead: dict[ReadingKey, Any] | None, unused: Any, asked: list[ReadingKey]) -> list[ReadingKey]:
     """What to read ahead of an instance's next step: what it read in this one, from ahead (all but `unused`)
     or over the pipe (`asked`)."""
     left = {tuple(k) for k in unused} if isinstance(unused, list) else set()

@@ -13,16 +13,19 @@ arbitration of actuator commands and the simulator.
   fork of a warm process (a few ms) and a first placement finds its module already imported.
 - A worker taken by the Creator becomes a **container** (hosting every instance whose manifest says
   `process: container` with the same `scheduling`) or a **dedicated** process (one instance, never shared).
-- The protocol is duplex, over one `multiprocessing` pipe per worker, pickled tuples: the Creator sends
-  `("run", calls, latest)` (one or several calls, see `run_calls`), the worker may answer with any number
-  of driver requests `("dev", path, need, method, args, kwargs)` / `("attr", path, need, name)`, each
-  answered `("ok", value)` or `("raise", exception)`, and ends with `("done", replies)`. `("drop", paths)`
-  forgets instances (no answer). What comes from a worker is unpickled with `PlainUnpickler`: plain data
-  only (no class is ever looked up), so a component cannot make the Creator build an object.
+- The protocol is duplex, over one `multiprocessing` pipe per worker; its messages are the typed records of
+  `drd.daemon.pipe` (one `encode`, one `decode`). A new worker says `Ready`. The Creator sends `Run` (one or
+  several `Call`s, see `run_calls`); the worker may send any number of driver requests, `DeviceCall` /
+  `AttrRead`, each answered `Ok` or `Raise`, and setpoints, `Command` (not answered), and ends with `Done`
+  (a `CallReply` per call run). `Drop` forgets instances (no answer). What comes from a worker is decoded as plain
+  data only (`pipe.PlainUnpickler`: no class is ever looked up), so a component cannot make the Creator build
+  an object, and a malformed message (`pipe.ProtocolError`) gets its worker killed. The worker reads the
+  Creator's messages with the normal unpickler (`decode(..., trusted=True)`): a `Raise` carries the driver's
+  exception.
 - Readings ahead: a step call may carry the readings its instance made in its previous step, read again by
   the Creator just before (the `READINGS` of the `sim` drivers, a function of the world's instant); the
-  proxy serves those without a round trip. An answer with a third element (`"changed"`) says the world
-  changed since (a launch): the rest of the run asks for every reading.
+  proxy serves those without a round trip (`pipe.reading_key` names them). An answer whose `changed` is set
+  says the world changed since (a launch): the rest of the run asks for every reading.
 - A worker that dies, or does not answer within `call_timeout` (it is then killed), raises `WorkerDied`
   with its exit code; the Creator fails the calls of its instances and takes another worker.
 
@@ -34,7 +37,6 @@ from __future__ import annotations
 import collections
 import functools
 import importlib
-import io
 import logging
 import multiprocessing
 import os
@@ -53,6 +55,26 @@ from typing import Any
 import psutil
 
 from drd.bus import Message, message
+from drd.daemon.pipe import (
+    AttrRead,
+    Call,
+    CallReply,
+    Command,
+    DeviceCall,
+    Done,
+    Drop,
+    Ok,
+    ProtocolError,
+    Raise,
+    Ready,
+    Run,
+    Setup,
+    decode,
+    encode,
+    reading_key,
+)
+from drd.daemon.pipe import Message as PipeMessage
+from drd.errors import ComponentFailure
 
 log = logging.getLogger("drd.daemon.workers")
 
@@ -70,8 +92,6 @@ warnings.filterwarnings("ignore", message=r".* found in sys\.modules after impor
 
 #: Modules every worker needs, imported once by the fork server.
 BASE_PRELOAD = ("drd.daemon.workers", "drd.runtime.component", "drd.runtime.records", "drd.hw.interfaces")
-
-_PROTOCOL = pickle.HIGHEST_PROTOCOL
 
 
 @message("drd.creator.tune", 1)
@@ -97,19 +117,8 @@ class Tuned(Message):
     shared_with: list[str]
 
 
-class WorkerDied(Exception):
+class WorkerDied(ComponentFailure):
     """The worker process is gone (crashed, killed, or stuck and killed by us); the message says how."""
-
-
-class PlainUnpickler(pickle.Unpickler):
-    """Unpickles plain data only (str, numbers, None, bool, lists, tuples, dicts, sets): never looks a class up."""
-
-    def find_class(self, module: str, name: str) -> Any:
-        raise pickle.UnpicklingError(f"{module}.{name}: a component process may send plain data only")
-
-
-def loads_plain(data: bytes) -> Any:
-    return PlainUnpickler(io.BytesIO(data)).load()
 
 
 # -- the Creator's side ---------------------------------------------------------------------------------
@@ -140,14 +149,15 @@ class Worker:
     def __repr__(self) -> str:
         return f"Worker(pid={self.pid}, {self.kind}, {sorted(self.instances)})"
 
-    def send(self, msg: Any) -> None:
+    def send(self, msg: PipeMessage) -> None:
         try:
-            self.conn.send_bytes(pickle.dumps(msg, _PROTOCOL))
+            self.conn.send_bytes(encode(msg))
         except (BrokenPipeError, ConnectionResetError, EOFError) as e:
             raise self._gone() from e
 
-    def recv(self, timeout: float) -> Any:
-        """The worker's next message; WorkerDied if it dies or stays silent for `timeout` seconds (killed)."""
+    def recv(self, timeout: float) -> PipeMessage:
+        """The worker's next message (plain data only); WorkerDied if it dies, stays silent for `timeout` seconds
+        or sends something malformed (killed)."""
         try:
             events = _spin(self._poll) or self._poll.poll(max(0, int(timeout * 1000)))
         except (OSError, ValueError):  # the pipe is closed
@@ -155,12 +165,15 @@ class Worker:
         fds = {fd for fd, _ in events}
         if not self.conn.closed and self.conn.fileno() in fds:
             try:
-                return loads_plain(self.conn.recv_bytes())
+                return decode(self.conn.recv_bytes())
             except (EOFError, OSError):
                 pass
             except pickle.UnpicklingError as e:
                 self.kill()
                 raise WorkerDied(f"sent something that is not plain data ({e}): killed") from None
+            except ProtocolError as e:
+                self.kill()
+                raise WorkerDied(f"sent an unexpected message ({e}): killed") from None
         elif not events:
             self.kill()
             self.died = f"did not answer within {timeout:g} s (killed)"
@@ -312,7 +325,7 @@ class WorkerPool:
             with self._cond:
                 self._forget(w)
             raise
-        if not (isinstance(hello, tuple) and hello[:1] == ("ready",)):
+        if not isinstance(hello, Ready):
             self.release(w)
             raise WorkerDied(f"a new worker said {hello!r} instead of hello")
         return w
@@ -404,18 +417,6 @@ def device_methods(driver: object) -> list[str]:
 # -- the worker's side ----------------------------------------------------------------------------------
 
 
-def reading_key(kind: str, need: str, name: str, args: Sequence[Any] = (),
-                kwargs: dict[str, Any] | None = None) -> tuple[Any, ...] | None:
-    """How a reading read ahead is named, the same on both ends of the pipe; None if its arguments are not
-    hashable (it is then always asked)."""
-    key = (kind, need, name, tuple(args), tuple(sorted(kwargs.items())) if kwargs else ())
-    try:
-        hash(key)
-    except TypeError:
-        return None
-    return key
-
-
 class _Link:
     """The worker's end of the pipe, for driver requests made from inside a call, and the readings the Creator
     read ahead of the call (`ahead`, see `drd.daemon.creator.Creator._read_ahead`)."""
@@ -445,40 +446,44 @@ class _Link:
         self.used.add(key)
         return True, self.ahead.pop(key) if once else self.ahead[key]
 
-    def send(self, msg: Any) -> None:
-        self.conn.send_bytes(pickle.dumps(msg, _PROTOCOL))
+    def send(self, msg: PipeMessage) -> None:
+        self.conn.send_bytes(encode(msg))
 
-    def request(self, msg: tuple[Any, ...]) -> Any:
+    def request(self, req: DeviceCall | AttrRead) -> Any:
         try:
-            self.send(msg)
+            self.send(req)
         except (pickle.PicklingError, TypeError, AttributeError) as e:
             raise TypeError(f"a driver call takes plain data only: {e}") from None
         _spin(self._poll)  # the Creator answers a reading in ~0.1 ms: do not fall asleep for it
-        kind, value, *changed = pickle.loads(self.conn.recv_bytes())
-        if changed:
+        answer = decode(self.conn.recv_bytes(), trusted=True)  # from the Creator: a Raise carries an exception
+        if not isinstance(answer, Ok | Raise):
+            raise ProtocolError(f"a driver request answered by {type(answer).__name__}, not Ok or Raise")
+        if answer.changed:
             self.changed, self.ahead = True, {}
-        if kind == "raise":
-            raise value
-        return value
+        if isinstance(answer, Raise):
+            raise answer.error
+        return answer.value
 
     def call(self, path: str, need: str, method: str, *args: Any, **kwargs: Any) -> Any:
+        req = DeviceCall(path, need, method, args, kwargs)
         if self.ahead:  # a method's result is used once (the component may change it); the next call asks
-            found, value = self._ahead(reading_key("dev", need, method, args, kwargs), once=True)
+            found, value = self._ahead(reading_key(req), once=True)
             if found:
                 return value
-        return self.request(("dev", path, need, method, args, kwargs))
+        return self.request(req)
 
     def attr(self, path: str, need: str, name: str) -> Any:
+        req = AttrRead(path, need, name)
         if self.ahead:
-            found, value = self._ahead(reading_key("attr", need, name), once=False)
+            found, value = self._ahead(reading_key(req), once=False)
             if found:
                 return value
-        return self.request(("attr", path, need, name))
+        return self.request(req)
 
     def command(self, path: str, need: str, method: str, *args: Any, **kwargs: Any) -> None:
         """A setpoint: sent without waiting (it returns nothing; a refusal fails the step when it ends)."""
         try:
-            self.send(("cmd", path, need, method, args, kwargs))
+            self.send(Command(path, need, method, args, kwargs))
         except (pickle.PicklingError, TypeError, AttributeError) as e:
             raise TypeError(f"a driver call takes plain data only: {e}") from None
 
@@ -529,15 +534,17 @@ def worker_main(conn: Connection) -> None:
     _die_with_parent()
     link = _Link(conn)
     hosted: dict[str, _Hosted] = {}
-    link.send(("ready", os.getpid()))
+    link.send(Ready(os.getpid()))
     try:
         while True:
-            msg = pickle.loads(conn.recv_bytes())
-            if msg[0] == "run":
-                link.send(("done", run_calls(msg[1], msg[2], link, hosted)))
-            elif msg[0] == "drop":
-                for path in msg[1]:
-                    hosted.pop(path, None)
+            match decode(conn.recv_bytes(), trusted=True):  # the Creator is the trusted side (see drd.daemon.pipe)
+                case Run(calls, latest):
+                    link.send(Done(tuple(run_calls(calls, latest, link, hosted))))
+                case Drop(paths):
+                    for path in paths:
+                        hosted.pop(path, None)
+                case _:  # nothing else comes unasked
+                    pass
     except (EOFError, OSError):  # the Creator retired this worker (or died): its end of the pipe is closed
         pass
     os._exit(0)
@@ -554,84 +561,97 @@ def _die_with_parent() -> None:
             pass
 
 
-def run_calls(calls: Sequence[tuple[Any, ...]], latest: dict[str, Any], link: _Link,
-              hosted: dict[str, _Hosted]) -> list[tuple[Any, ...]]:
+def run_calls(calls: Sequence[Call], latest: dict[str, Any], link: _Link,
+              hosted: dict[str, _Hosted]) -> list[CallReply]:
     """Run calls in order, as `Creator.handle_batch` did in process: stop after one that emitted events,
     changed dependencies or failed; chain shared dicts (`shared_ids`) through `latest`.
 
-    A call is `(path, op, now, status, shared, shared_ids, inputs, params, setup, ahead)`; `setup` is
-    `(entry_point, resources, {need: methods})` for a new instance, `ahead` the readings read ahead of it
-    (`{reading_key: value}`, or None). A reply is
-    `(status, outputs, events, logs, shared, dependencies, error, setup_failed, unused)`, `unused` the keys of
-    `ahead` the call did not use."""
-    from drd.runtime.component import Status
-    from drd.runtime.records import plain
-
-    replies: list[tuple[Any, ...]] = []
+    A call's `setup` builds a new instance, its `ahead` holds the readings read ahead of it (`{reading_key:
+    value}`, or None); a reply's `unused` are the keys of `ahead` the call did not use."""
+    replies: list[CallReply] = []
     link.changed = False
-    for path, op, now, status, shared, ids, inputs, params, setup, ahead in calls:
-        if shared is not None and ids:
-            for name, ref in ids.items():
-                if ref in latest and name in shared:
-                    shared[name] = plain(latest[ref])  # a copy: the earlier reply keeps its own
-        h = hosted.get(path)
-        if setup is not None:
+    for call in calls:
+        _chain_in(call, latest)
+        h = hosted.get(call.path)
+        if call.setup is not None:
             try:
-                h = _setup(path, setup, params, link)
+                h = _setup(call.path, call.setup, call.params, link)
             except Exception as e:  # a failed start: the Creator forgets the instance
-                replies.append(("", None, [], [], None, [], f"{type(e).__name__}: {e}", True, []))
+                replies.append(CallReply(error=f"{type(e).__name__}: {e}", setup_failed=True))
                 break
-            hosted[path] = h
-        elif op == "start" and h is not None:
-            h.ctx.params, h.ctx.outputs = dict(params or {}), {}
+            hosted[call.path] = h
+        elif call.op == "start" and h is not None:
+            h.ctx.params, h.ctx.outputs = dict(call.params or {}), {}
         if h is None:
-            replies.append(("", None, [], [], None, [], f"no instance {path} in worker {os.getpid()}", False, []))
+            replies.append(CallReply(error=f"no instance {call.path} in worker {os.getpid()}"))
             break
-        h.now = now
-        services = h.ctx.services
-        services["shared"] = shared if shared is not None else {}
-        h.ctx.inputs = {**(inputs or {}), **services["shared"]}  # shared data: the objects sent back
-        result = ""
-        error = ""
-        link.begin(ahead)
-        try:
-            if op == "step":
-                result = str(h.comp.step(now))
-            elif op == "start":
-                h.comp.start()
-            elif op == "suspend":
-                h.comp.suspend()
-            elif op == "resume":
-                h.comp.resume()
-            elif op == "terminate":
-                h.comp.terminate(Status(status) if status in Status.__members__.values() else Status.RUNNING)
-            else:
-                error = f"unknown op {op!r}"
-        except Exception as e:  # component code is not ours to trust: the state fails, the worker goes on
-            error = f"component raised {type(e).__name__}: {e}"
-        out_shared = plain(services["shared"])
-        reply = (result, plain(h.ctx.outputs), h.events, h.logs, out_shared, h.deps, error, False, link.unused())
-        h.events, h.logs, h.deps = [], [], []
+        reply = _run_call(h, call, link)
         replies.append(reply)
-        if ids:
-            for name, ref in ids.items():
-                if name in out_shared:
-                    latest[ref] = out_shared[name]
-        if reply[2] or reply[5] or error:
+        if call.shared_ids:
+            for name, ref in call.shared_ids.items():
+                if reply.shared is not None and name in reply.shared:
+                    latest[ref] = reply.shared[name]
+        if reply.events or reply.dependencies or reply.error:
             break  # the controller reacts to this before the next step
     return replies
 
 
-def _setup(path: str, setup: tuple[Any, ...], params: dict[str, Any] | None, link: _Link) -> _Hosted:
+def _chain_in(call: Call, latest: dict[str, Any]) -> None:
+    """The shared dicts of `call` that an earlier call of the batch changed: their latest values (copies)."""
+    from drd.runtime.records import plain
+
+    shared, ids = call.shared, call.shared_ids
+    if shared is not None and ids:
+        for name, ref in ids.items():
+            if ref in latest and name in shared:
+                shared[name] = plain(latest[ref])  # a copy: the earlier reply keeps its own
+
+
+def _run_call(h: _Hosted, call: Call, link: _Link) -> CallReply:
+    """One lifecycle call of a hosted instance; what it did, and what it emitted since the last reply."""
+    from drd.runtime.component import Status
+    from drd.runtime.records import plain
+
+    h.now = call.now
+    services = h.ctx.services
+    services["shared"] = call.shared if call.shared is not None else {}
+    h.ctx.inputs = {**(call.inputs or {}), **services["shared"]}  # shared data: the objects sent back
+    result = ""
+    error = ""
+    link.begin(call.ahead)
+    try:
+        op = call.op
+        if op == "step":
+            result = str(h.comp.step(call.now))
+        elif op == "start":
+            h.comp.start()
+        elif op == "suspend":
+            h.comp.suspend()
+        elif op == "resume":
+            h.comp.resume()
+        elif op == "terminate":
+            status = call.status
+            h.comp.terminate(Status(status) if status in Status.__members__.values() else Status.RUNNING)
+        else:
+            error = f"unknown op {op!r}"
+    except Exception as e:  # component code is not ours to trust: the state fails, the worker goes on
+        error = f"component raised {type(e).__name__}: {e}"
+    reply = CallReply(result, plain(h.ctx.outputs), h.events, h.logs, plain(services["shared"]), h.deps, error, False,
+                  link.unused())
+    h.events, h.logs, h.deps = [], [], []
+    return reply
+
+
+def _setup(path: str, setup: Setup, params: dict[str, Any] | None, link: _Link) -> _Hosted:
     from drd.runtime.component import Context
     from drd.runtime.records import plain
 
-    entry, resources, methods, commands = setup
-    module, _, cls_name = entry.partition(":")
+    module, _, cls_name = setup.entry_point.partition(":")
     factory = getattr(importlib.import_module(module), cls_name)
     h = _Hosted()
-    devices = {need: DeviceProxy(link, path, need, names, commands.get(need, ())) for need, names in methods.items()}
-    ctx = Context(path, dict(params or {}), dict(resources),
+    devices = {need: DeviceProxy(link, path, need, names, setup.commands.get(need, ()))
+               for need, names in setup.methods.items()}
+    ctx = Context(path, dict(params or {}), dict(setup.resources),
                   lambda ev, **f: h.events.append([ev, plain(f)]),
                   lambda text: h.logs.append(str(text)),
                   lambda: h.now, devices=devices,
