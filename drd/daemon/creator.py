@@ -35,7 +35,6 @@ world the call names; on the simulator host itself they call the simulation dire
 
 from __future__ import annotations
 
-import cProfile
 import dataclasses
 import logging
 import os
@@ -83,6 +82,7 @@ from drd.daemon.workers import (
 from drd.errors import ComponentFailure
 from drd.hosts import Cluster
 from drd.hw.commands import spec_of
+from drd.profiling import Sampler
 from drd.runtime import records as rec
 from drd.runtime.ownership import Arbiter, Binding, BoundDevice, LocalGates, Proposal
 from dsl.catalog import Catalog, ComponentType, Kind, Process
@@ -187,10 +187,7 @@ class Creator:
         self.key = f"drd/{cluster.name}/host/{host}/creator"
         self._keys = ClusterKeys(cluster.name)
         self._tokens: dict[str, Any] = {}  # instance key -> its liveliness token
-        # DRD_PROFILE=path: profile the step batches (cProfile), dumped to path.<host> every 200 batches
-        self._profile_path = os.environ.get("DRD_PROFILE", "")
-        self._profile = cProfile.Profile() if self._profile_path else None
-        self._profiled = 0
+        self._sampler = Sampler(host, every=200)  # DRD_PROFILE: the step batches, in <DRD_PROFILE>.<host>
         self._queryable = bus.serve(self.key, self._serve) if bus else None
 
     def close(self) -> None:
@@ -251,17 +248,8 @@ class Creator:
 
     def handle_batch(self, batch: ComponentBatch) -> ComponentBatchReply:
         """The steps of one cycle in order, up to the first the controller must see first (`ComponentBatch`)."""
-        prof = self._profile
-        if prof is None:
+        with self._sampler.run():
             return self._handle_batch(batch)
-        prof.enable()
-        try:
-            return self._handle_batch(batch)
-        finally:
-            prof.disable()
-            self._profiled += 1
-            if self._profiled % 200 == 0:
-                prof.dump_stats(f"{self._profile_path}.{self.host}")
 
     def _handle_batch(self, batch: ComponentBatch) -> ComponentBatchReply:
         """Consecutive steps whose instances share a process go to it in one round trip (a run); the worker
