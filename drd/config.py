@@ -6,6 +6,7 @@ raised once, so a broken configuration is fixed in one pass.
 
 from __future__ import annotations
 
+import stat
 from collections.abc import Hashable, Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -121,16 +122,56 @@ def display_path(path: Path, cwd: Path | None = None) -> str:
 E = TypeVar("E", bound=ConfigError)
 
 
+#: A configuration file larger than this is refused unread (hosts files of 1,000 robots are about 400 KiB).
+MAX_CONFIG_BYTES = 4 * 1024 * 1024
+#: YAML aliases and nesting a configuration may use: a few anchors are handy, thousands are an attack (each alias
+#: is one more reference a checker walks: "billion laughs").
+MAX_ALIASES, MAX_DEPTH = 100, 32
+
+
+def read_config_text(path: Path) -> str:
+    """A configuration file's text: a regular file only (a FIFO would block, a device never end), at most
+    `MAX_CONFIG_BYTES`. OSError (FileNotFoundError for a missing one) or ValueError saying what is wrong."""
+    mode = path.stat().st_mode
+    if not stat.S_ISREG(mode):
+        raise ValueError("a directory, not a file" if stat.S_ISDIR(mode) else "not a regular file (a FIFO, a device?)")
+    with path.open("rb") as fh:
+        data = fh.read(MAX_CONFIG_BYTES + 1)
+    if len(data) > MAX_CONFIG_BYTES:
+        raise ValueError(f"larger than {MAX_CONFIG_BYTES // 2**20} MiB")
+    return data.decode("utf-8")
+
+
+def load_yaml(text: str) -> object:
+    """YAML in the one dialect of every configuration file (`StrictLoader`), with aliases and nesting bounded
+    (yaml.YAMLError, with a mark where it can, for anything else)."""
+    aliases = depth = 0
+    for event in yaml.parse(text, Loader=StrictLoader):
+        if isinstance(event, yaml.AliasEvent):
+            aliases += 1
+            if aliases > MAX_ALIASES:
+                raise yaml.MarkedYAMLError(problem=f"more than {MAX_ALIASES} aliases (*name)",
+                                           problem_mark=event.start_mark)  # type: ignore[arg-type]
+        elif isinstance(event, yaml.CollectionStartEvent):
+            depth += 1
+            if depth > MAX_DEPTH:
+                raise yaml.MarkedYAMLError(problem=f"nested deeper than {MAX_DEPTH} levels",
+                                           problem_mark=event.start_mark)  # type: ignore[arg-type]
+        elif isinstance(event, yaml.CollectionEndEvent):
+            depth -= 1
+    return yaml.load(text, Loader=StrictLoader)
+
+
 def read_yaml(path: Path, source: str, error: type[E]) -> object:
     """A configuration file's YAML, or `error` naming the file: missing, unreadable, or invalid (with the line)."""
     try:
-        text = path.read_text(encoding="utf-8")
+        text = read_config_text(path)
     except FileNotFoundError:
         raise error([ConfigProblem(source, "", "no such file")]) from None
-    except (OSError, UnicodeDecodeError) as e:
+    except (OSError, ValueError) as e:  # UnicodeDecodeError is a ValueError
         raise error([ConfigProblem(source, "", f"cannot read: {e}")]) from e
     try:
-        return yaml.load(text, Loader=StrictLoader)
+        return load_yaml(text)
     except yaml.YAMLError as e:
         mark = getattr(e, "problem_mark", None) or getattr(e, "context_mark", None)
         message = getattr(e, "problem", None) or getattr(e, "context", None) or str(e)

@@ -20,7 +20,7 @@ from typing import Any, TypeVar
 import yaml
 
 import components
-from drd.config import ConfigError, ConfigProblem, ConfigReader, StrictLoader, display_path
+from drd.config import ConfigError, ConfigProblem, ConfigReader, display_path, load_yaml, read_config_text
 from drd.entrypoints import ENTRY_POINT
 from dsl.ast import KEYWORDS, parse_duration
 from dsl.catalog import (
@@ -452,12 +452,12 @@ def _read_stamped(path: Path, source: str, mtime_ns: int, size: int,
                   ) -> tuple[ComponentType | None, tuple[ManifestProblem, ...]]:
     """Parse one file, cached on its stamp: daemons and tests reload unchanged manifests often."""
     try:
-        data = yaml.load(path.read_text(encoding="utf-8"), Loader=StrictLoader)  # a SafeLoader
+        data = load_yaml(read_config_text(path))
     except yaml.MarkedYAMLError as e:
         mark = e.problem_mark or e.context_mark
         line = mark.line + 1 if mark else None
         return None, (ManifestProblem(source, "", f"invalid YAML: {e.problem or e.context}", line),)
-    except (OSError, UnicodeDecodeError, yaml.YAMLError) as e:
+    except (OSError, ValueError, yaml.YAMLError) as e:  # UnicodeDecodeError is a ValueError
         return None, (ManifestProblem(source, "", f"cannot read: {e}"),)
     t, problems = parse_manifest(data, source)
     return t, tuple(problems)

@@ -96,14 +96,45 @@ def caret(span: Span, line: str) -> tuple[int, int]:
     return start, max(1, min(end, len(line)) - start)
 
 
-def _excerpt(span: Span, sources: Mapping[str, str] | None) -> list[str]:
+#: Source lines longer than this are shown as a window around the caret (a generated one-line file is megabytes).
+EXCERPT_WIDTH = 100
+
+
+@dataclass(frozen=True, slots=True)
+class Excerpt:
+    """The source line of a span as shown under its message: `gutter` (`   12 | `), the line's `text` (a window
+    around the span when the line is long, cut ends marked `…`), and the caret under the span (`pad` spaces,
+    then `width` carets)."""
+
+    gutter: str
+    text: str
+    pad: int
+    width: int
+
+    def lines(self) -> list[str]:
+        return [self.gutter + self.text, " " * (len(self.gutter) - 2) + "| " + " " * self.pad + "^" * self.width]
+
+
+def excerpt(span: Span, sources: Mapping[str, str] | None) -> Excerpt | None:
+    """The excerpt every renderer shows (plain text, `missionctl`, the controller's replies), or None when the
+    source is not known."""
     line = source_line(span, sources)
     if line is None:
-        return []
+        return None
     line = "".join(ch if ch.isprintable() else "\ufffd" for ch in line.expandtabs(1))
     start, width = caret(span, line)
-    gutter = f"{span.line:>5} | "
-    return [gutter + line, " " * (len(gutter) - 2) + "| " + " " * start + "^" * width]
+    if len(line) > EXCERPT_WIDTH:
+        width = min(width, EXCERPT_WIDTH // 2)
+        begin = max(0, min(start - EXCERPT_WIDTH // 4, len(line) - EXCERPT_WIDTH))
+        end = begin + EXCERPT_WIDTH
+        head, tail = ("…" if begin else ""), ("…" if end < len(line) else "")
+        line, start = head + line[begin:end] + tail, start - begin + len(head)
+    return Excerpt(f"{span.line:>5} | ", line, start, width)
+
+
+def _excerpt(span: Span, sources: Mapping[str, str] | None) -> list[str]:
+    shown = excerpt(span, sources)
+    return [] if shown is None else shown.lines()
 
 
 class MissionError(MissionInputError):

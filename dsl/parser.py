@@ -31,6 +31,8 @@ from dsl.unclosed import unclosed_block
 MAX_EXPR_DEPTH = 100
 #: After this many syntax errors in one file the parser stops trying to recover.
 MAX_SYNTAX_ERRORS = 10
+#: ... and after this many errors met, reported or not (one line of garbage reports one): recovery is bounded.
+MAX_RECOVERIES = 50
 
 
 # Tokens that can start an item or a declaration: when one is acceptable we are between items.
@@ -481,10 +483,12 @@ class _Recovery:
         self.text = text
         self.diagnostics: list[Diagnostic] = []
         self.lines: set[int] = set()
+        self.seen = 0
 
     def __call__(self, e: UnexpectedInput) -> bool:
         self.report(e)
-        if len(self.diagnostics) >= MAX_SYNTAX_ERRORS:
+        self.seen += 1  # every error, also those not reported (one per line): garbage on one line stops too
+        if len(self.diagnostics) >= MAX_SYNTAX_ERRORS or self.seen >= MAX_RECOVERIES:
             return False
         if isinstance(e, UnexpectedToken) and e.interactive_parser is not None:
             self._repair(e)
@@ -500,7 +504,7 @@ class _Recovery:
         """Insert the one missing token that lets the parser accept the bad one, if any."""
         ip = e.interactive_parser
         for name in sorted(ip.accepts() - {"$END"}, key=_repair_order):  # type: ignore[no-untyped-call]
-            trial = ip.copy()  # type: ignore[no-untyped-call]
+            trial = ip.copy(deepcopy_values=False)  # type: ignore[no-untyped-call]  # a deep copy costs the AST so far
             try:
                 trial.feed_token(self._dummy(name, e.token))
                 if e.token.type == "$END" or e.token.type in trial.accepts():

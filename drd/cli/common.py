@@ -126,8 +126,7 @@ def show_diagnostics(results: Sequence[Compiled]) -> bool:
                         "diagnostics": diagnostics})
         return ok
     for r in results:
-        for d in r.diagnostics:
-            render_diagnostic(d, r.sources)
+        render_diagnostics(r.diagnostics, r.sources)
     return ok
 
 
@@ -137,8 +136,7 @@ def fail_diagnostics(diagnostics: Sequence[Diagnostic], sources: Mapping[str, st
     if _Mode.json:
         first = diagnostics[0]
         fail(f"{first.span}: {first.message}", INVALID, first.hint, diagnostics=[d.to_dict() for d in diagnostics])
-    for d in diagnostics:
-        render_diagnostic(d, sources)
+    render_diagnostics(diagnostics, sources)
     raise typer.Exit(INVALID)
 
 
@@ -207,20 +205,30 @@ def print_json(data: Any, default: Callable[[Any], Any] | None = None) -> None:
         _reader_gone()
 
 
+#: Diagnostics shown per file (the rest are counted; `--json` has them all).
+SHOWN_ERRORS = 20
+
+
+def render_diagnostics(diagnostics: Sequence[Diagnostic], sources: Mapping[str, str], console: Console = err,
+                       limit: int = SHOWN_ERRORS) -> None:
+    """The first `limit` diagnostics rendered, then how many more there are."""
+    for d in diagnostics[:limit]:
+        render_diagnostic(d, sources, console)
+    if len(diagnostics) > limit:
+        console.print(Text(f"… and {len(diagnostics) - limit} more (validate --json lists them all)", style="dim"))
+
+
 def render_diagnostic(d: Diagnostic, sources: Mapping[str, str], console: Console = err) -> None:
-    """file:line:col, the message, the source line with a caret, notes and the hint."""
-    from dsl.errors import Severity, caret, source_line
+    """file:line:col, the message, the source line with a caret (`dsl.errors.excerpt`), notes and the hint."""
+    from dsl.errors import Severity, excerpt
 
     colour = "red" if d.severity is Severity.ERROR else "yellow"
     console.print(Text.assemble((f"{d.span}: ", "bold"), (f"{d.severity.value}: ", f"bold {colour}"), d.message))
-    line = source_line(d.span, sources)
-    if line is not None:
-        line = "".join(ch if ch.isprintable() else "\ufffd" for ch in line.expandtabs(1))
-        start, width = caret(d.span, line)
-        gutter = f"{d.span.line:>5} | "
-        console.print(Text(gutter, style="dim") + Text(line))
-        console.print(Text(" " * (len(gutter) - 2) + "| ", style="dim") + Text(" " * start + "^" * width,
-                                                                                  style=f"bold {colour}"))
+    shown = excerpt(d.span, sources)
+    if shown is not None:
+        console.print(Text(shown.gutter, style="dim") + Text(shown.text))
+        console.print(Text(" " * (len(shown.gutter) - 2) + "| ", style="dim")
+                      + Text(" " * shown.pad + "^" * shown.width, style=f"bold {colour}"))
     for text, where in d.notes:
         console.print(Text.assemble(("  note: ", "dim"), f"{where}: {text}"))
     if d.hint:

@@ -25,7 +25,7 @@ from drd.cli.common import (
     fail_all,
     out,
     print_json,
-    render_diagnostic,
+    render_diagnostics,
     run_app,
     show_diagnostics,
 )
@@ -82,8 +82,7 @@ def validate(
         print_json([_result_dict(r) for r in results])
     else:
         for r in results:
-            for d in r.diagnostics:
-                render_diagnostic(d, r.sources)
+            render_diagnostics(r.diagnostics, r.sources)
             if r.ok:
                 what = (f"mission {r.statechart.name}, {len(r.statechart.states)} states" if r.statechart
                         else "behaviors only, no mission")
@@ -384,7 +383,8 @@ def _hosts_file(hosts: Path) -> Path:
     if hosts.is_file():
         return hosts
     looked = hosts.absolute()
-    what = "is a folder, not a hosts file" if hosts.is_dir() else "no such file"
+    what = ("is a folder, not a hosts file" if hosts.is_dir() else
+            "is not a regular file (a FIFO, a device?)" if hosts.exists() else "no such file")
     own = Path(__file__).resolve().parents[2] / "hosts.yaml"
     hint = "pass --config PATH to the cluster's hosts file" + (
         f" (drd's own example: {own})" if own.is_file() and own != looked else "")

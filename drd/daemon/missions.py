@@ -97,22 +97,7 @@ def run_key(cluster: str) -> str:
 
 def render(diagnostics: list[Any], sources: dict[str, str]) -> list[str]:
     """Diagnostics as `missionctl validate` prints them (file:line:col, message, source line, caret), plain text."""
-    from dsl.errors import caret, source_line
-
-    out = []
-    for d in diagnostics:
-        lines = [f"{d.span}: {d.severity.value}: {d.message}"]
-        line = source_line(d.span, sources)
-        if line is not None:
-            line = "".join(ch if ch.isprintable() else "\ufffd" for ch in line.expandtabs(1))
-            start, width = caret(d.span, line)
-            gutter = f"{d.span.line:>5} | "
-            lines += [gutter + line, " " * (len(gutter) - 2) + "| " + " " * start + "^" * width]
-        lines += [f"  note: {where}: {text}" for text, where in d.notes]
-        if d.hint:
-            lines.append(f"  hint: {d.hint}")
-        out.append("\n".join(lines))
-    return out
+    return [d.render(sources) for d in diagnostics]
 
 
 class MissionRunner:

@@ -1,0 +1,119 @@
+"""Bad input costs little and says where (issue #18): files that are not regular files, files too large, garbage
+that once made the parser's recovery quadratic, string literals that once cost 370 bytes a byte, YAML alias
+bombs. Bounds are checked structurally (recoveries counted, memory traced); a subprocess timeout only guards
+against a hang, it measures nothing."""
+
+from __future__ import annotations
+
+import os
+import random
+import subprocess
+import sys
+import tracemalloc
+from pathlib import Path
+
+import pytest
+
+from drd.cli.common import SHOWN_ERRORS
+from dsl import parser as mission_parser
+from dsl.loader import MAX_FILE_BYTES
+
+MISSIONCTL = [sys.executable, "-c", "from drd.cli.missionctl import main; main()"]
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def missionctl(*args: str, cwd: Path) -> subprocess.CompletedProcess[str]:
+    return subprocess.run([*MISSIONCTL, *args], cwd=cwd, capture_output=True, text=True, timeout=120, check=False)
+
+
+@pytest.mark.parametrize("kind", ["fifo", "directory", "device-import"])
+def test_a_mission_that_is_not_a_regular_file_is_refused_unread(tmp_path: Path, kind: str) -> None:
+    if kind == "fifo":
+        os.mkfifo(tmp_path / "m.mission")
+        target, what = "m.mission", "m.mission is a FIFO, not a regular file"
+    elif kind == "directory":
+        (tmp_path / "m.mission").mkdir()
+        target, what = "m.mission", "m.mission is a directory, not a regular file"
+    else:
+        (tmp_path / "m.mission").write_text('import "/dev/zero"\nmission M {\n    Wait(duration: 1s)\n}\n')
+        target, what = "m.mission", "m.mission:1:1: error: /dev/zero is a character device, not a regular file"
+    done = missionctl("validate", target, cwd=tmp_path)
+    assert done.returncode == 2 and what in done.stdout + done.stderr
+
+
+def test_a_mission_over_the_size_limit_is_refused(tmp_path: Path) -> None:
+    (tmp_path / "big.mission").write_text("# " + "x" * MAX_FILE_BYTES + "\nmission M {\n    Wait(duration: 1s)\n}\n")
+    done = missionctl("validate", "big.mission", cwd=tmp_path)
+    assert done.returncode == 2 and "big.mission is larger than 1 MiB" in done.stdout + done.stderr
+
+
+def garbage(n: int, newlines: bool) -> str:
+    rng = random.Random(n)
+    text = "".join(rng.choice('abc{}()[]:;=<>-+ 0123"\n') for _ in range(n))
+    return text if newlines else text.replace("\n", " ")
+
+
+@pytest.mark.parametrize("newlines", [False, True])
+def test_recovery_from_garbage_is_bounded(monkeypatch: pytest.MonkeyPatch, newlines: bool) -> None:
+    seen: list[int] = []
+    original = mission_parser._Recovery.__call__
+
+    def counting(self: mission_parser._Recovery, e: object) -> bool:
+        seen.append(1)
+        return original(self, e)  # type: ignore[arg-type]
+
+    monkeypatch.setattr(mission_parser._Recovery, "__call__", counting)
+    _tree, errors = mission_parser.Parser().parse(garbage(20_000, newlines), "garbage.mission")
+    assert errors and all(e.span.file == "garbage.mission" for e in errors)
+    assert len(seen) <= mission_parser.MAX_RECOVERIES
+
+
+def test_a_string_literal_costs_memory_in_proportion_to_its_size() -> None:
+    text = 'mission M {\n    Wait(duration: 1s) as w\n    w -> done / log "' + "a" * 1_000_000 + '"\n}\n'
+    parser = mission_parser.Parser()
+    parser.parse("mission W {\n    Wait(duration: 1s)\n}\n", "warm.mission")
+    tracemalloc.start()
+    try:
+        tree, errors = parser.parse(text, "long.mission")
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    assert tree is not None and errors == []
+    assert peak < 40 * len(text), f"{peak / len(text):.0f} bytes of memory per byte of text"
+
+
+def test_garbage_at_the_command_line_is_one_located_error_and_exit_2(tmp_path: Path) -> None:
+    (tmp_path / "g.mission").write_text(garbage(300_000, newlines=False), encoding="utf-8")
+    done = missionctl("validate", "g.mission", cwd=tmp_path)
+    shown = done.stdout + done.stderr
+    assert done.returncode == 2 and "g.mission:1:" in shown and "Traceback" not in shown
+    assert shown.count(": error: ") <= SHOWN_ERRORS
+
+
+def test_a_yaml_alias_bomb_in_a_hosts_file_is_refused_with_its_line(tmp_path: Path) -> None:
+    lines = ['a0: &a0 ["x", "x", "x", "x", "x", "x", "x", "x", "x", "x"]']
+    lines += [f"a{i}: &a{i} [" + ", ".join([f"*a{i - 1}"] * 10) + "]" for i in range(1, 12)]
+    (tmp_path / "hosts.yaml").write_text("\n".join(lines) + "\n", encoding="utf-8")
+    (tmp_path / "m.mission").write_text("mission M {\n    Wait(duration: 1s)\n}\n", encoding="utf-8")
+    done = missionctl("dry-run", "m.mission", "--config", "hosts.yaml", cwd=tmp_path)
+    assert done.returncode == 2
+    assert "hosts.yaml:12: invalid YAML: more than 100 aliases (*name)" in done.stderr
+
+
+def test_a_hosts_file_that_is_a_fifo_is_refused(tmp_path: Path) -> None:
+    os.mkfifo(tmp_path / "hosts.yaml")
+    (tmp_path / "m.mission").write_text("mission M {\n    Wait(duration: 1s)\n}\n", encoding="utf-8")
+    done = missionctl("dry-run", "m.mission", "--config", "hosts.yaml", cwd=tmp_path)
+    assert done.returncode == 2 and "not a regular file" in done.stderr
+
+
+def test_a_long_source_line_is_shown_as_a_window_with_the_caret_under_the_span() -> None:
+    from dsl.errors import EXCERPT_WIDTH, Span, excerpt
+
+    line = "x" * 5000 + "BAD" + "y" * 5000
+    shown = excerpt(Span("f.mission", 1, 5001, 1, 5004), {"f.mission": line})
+    assert shown is not None
+    assert len(shown.text) <= EXCERPT_WIDTH + 2 and shown.text.startswith("…") and shown.text.endswith("…")
+    assert shown.text[shown.pad:shown.pad + shown.width] == "BAD"
+    short = excerpt(Span("f.mission", 1, 3, 1, 6), {"f.mission": "a  BAD b"})
+    assert short is not None and short.text == "a  BAD b" and (short.pad, short.width) == (2, 3)
