@@ -17,11 +17,14 @@ import networkx as nx
 from dsl import ast
 from dsl.catalog import SCALAR_TYPES, Catalog, ComponentType, Kind, ParamSpec, RecordSpec
 from dsl.errors import Reporter, Span, did_you_mean
-from dsl.exprtypes import ANY, Scope, Type, Typer, assignable, show
+from dsl.exprtypes import ANY, Scope, Type, Typer, assignable, constant, show
 from dsl.linearize import find_cycle, plan_graph
 
 #: Deeper chains of behaviors calling behaviors are rejected (they only come from generators).
 MAX_BEHAVIOR_DEPTH = 64
+#: The most instances a multiplicity may create (written as a constant, or evaluated when it starts): each is a
+#: statechart and components; a mission of more is a mistake or an attack (`Wait[1000000000]`).
+MAX_INSTANCES = 1000
 
 
 @dataclass
@@ -295,6 +298,13 @@ class Checker:
             t = self.typer.infer(n.quantity, scope)
             if not assignable("float", t):
                 self.report.error("type", f"quantity expects a number, got {show(t)}", n.quantity.span)
+            q = constant(n.quantity)
+            if q is not None and not q > 0:
+                self.report.error("quantity", f"quantity {q:g} asks for nothing: it must be above 0", n.quantity.span,
+                                  "leave quantity out to take the whole resource")
+        if n.slice is not None and not n.slice.seconds > 0:
+            self.report.error("slice", f"a time slice of {n.slice.text} never lets the holder run: it must be longer"
+                              " than 0s", n.slice.span, "leave `for` out to hold the resource until released")
 
     # ------------------------------------------------------------- children
     def _children(self, b: ast.Behavior, body: Body, scope: Scope, seen: dict[str, Span]) -> None:
@@ -336,6 +346,9 @@ class Checker:
                                   + (f"; its inputs: {', '.join(inputs)}" if inputs else ""))
                 continue
             self.typer.expect(arg.value, spec.type, scope, arg.name)
+            value = constant(arg.value) if spec.type == "duration" else None
+            if value is not None and value < 0:
+                self.report.error("duration", f"{arg.name}: a duration cannot be negative ({value:g} s)", arg.span)
         for spec in params.values():
             if spec.required and spec.name not in given:
                 self.report.error("missing-parameter", f"{child.name} needs parameter {spec.name}", child.span,
@@ -367,6 +380,11 @@ class Checker:
             if bound is not None:
                 self.typer.expect(bound, "int", scope, "multiplicity")
         low, high = _const(m.low), _const(m.high) if m.high is not None else None
+        for value in (low, high):
+            if isinstance(value, int) and value > MAX_INSTANCES:
+                self.report.error("multiplicity", f"multiplicity {value} is above the limit of {MAX_INSTANCES} "
+                                  "instances", m.span, "an instance per robot or task: use [1..*] to create as many "
+                                  "as the resources allow")
         if isinstance(low, int) and low < 0:
             self.report.error("multiplicity", f"multiplicity {low} can never hold: it must be 0 or more", m.span)
         if m.exact and low == 0:

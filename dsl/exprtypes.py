@@ -264,6 +264,9 @@ class Typer:
 
     def _arith(self, expr: ast.Binary, lt: Type, rt: Type) -> Type:
         op = expr.op
+        if op in ("/", "%") and constant(expr.right) == 0:
+            self.report.error("division", f"{'division' if op == '/' else 'remainder'} by zero", expr.right.span,
+                              "the divisor is 0 whatever the mission does")
         if lt in NUMBERS and rt in NUMBERS:
             if op == "/":
                 return "float"
@@ -278,6 +281,18 @@ class Typer:
             return "duration"
         self.report.error("type", f"cannot apply {op} to {show(lt)} and {show(rt)}", expr.span)
         return ANY
+
+
+def constant(e: ast.Expr | None) -> float | None:
+    """The value of a constant number or duration (`5`, `-0.5`, `30s`), else None: checked where written."""
+    if isinstance(e, ast.Literal) and isinstance(e.value, int | float) and not isinstance(e.value, bool):
+        return float(e.value)
+    if isinstance(e, ast.Duration):
+        return e.seconds
+    if isinstance(e, ast.Unary) and e.op == "-":
+        v = constant(e.operand)
+        return -v if v is not None else None
+    return None
 
 
 def declared_type(name: str, catalog: Catalog) -> str | None:

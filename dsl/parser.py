@@ -11,6 +11,7 @@ bad one, so several syntax errors of a file are reported in one run.
 from __future__ import annotations
 
 import hashlib
+import math
 import os
 import threading
 from collections.abc import Callable, Sequence
@@ -26,6 +27,12 @@ from dsl.ast import KEYWORDS
 from dsl.errors import Diagnostic, Span
 from dsl.layout import Layout
 from dsl.unclosed import unclosed_block
+
+#: Literals beyond these are errors: no robot mission means them, and Python's own limits (4,300 digits for an
+#: int, inf for a float) would otherwise escape as an uncaught error or a silent infinity.
+MAX_INT_DIGITS = 18
+MAX_NUMBER = 1e15
+MAX_DURATION = 365 * 86400.0
 
 #: Expressions nested deeper than this are rejected (they would only come from a generator).
 MAX_EXPR_DEPTH = 100
@@ -158,7 +165,7 @@ class _Builder(Transformer):  # type: ignore[type-arg]
         return ast.Param(str(c[0]), self.typeref(c[1]), c[2], span=self.cover(c[0], last))
 
     def priority(self, c: list[Any]) -> int:
-        return int(c[0])
+        return self._int(c[0])
 
     def block(self, c: list[Any]) -> tuple[tuple[ast.Item, ...], Token]:
         return tuple(c[:-1]), c[-1]
@@ -310,10 +317,25 @@ class _Builder(Transformer):  # type: ignore[type-arg]
         return self.expr(ast.Attr(c[0], str(c[1]), span=self.cover(c[0], c[1])), c[0])
 
     def int_lit(self, c: list[Any]) -> ast.Expr:
-        return ast.Literal(int(c[0]), span=self.tspan(c[0]))
+        return ast.Literal(self._int(c[0]), span=self.tspan(c[0]))
 
     def float_lit(self, c: list[Any]) -> ast.Expr:
-        return ast.Literal(float(c[0]), span=self.tspan(c[0]))
+        value = float(c[0])
+        if not math.isfinite(value) or abs(value) > MAX_NUMBER:
+            self._too_large(c[0], f"number {_cut(str(c[0]))} is too large (at most {MAX_NUMBER:g})")
+            value = 0.0
+        return ast.Literal(value, span=self.tspan(c[0]))
+
+    def _int(self, tok: Token) -> int:
+        """An integer literal's value, or 0 and a located error for one too long to mean anything."""
+        if len(tok.value.lstrip("0")) > MAX_INT_DIGITS:
+            self._too_large(tok, f"integer {_cut(tok.value)} is too large ({len(tok.value)} digits, at most "
+                                 f"{MAX_INT_DIGITS})")
+            return 0
+        return int(tok.value)
+
+    def _too_large(self, tok: Token, message: str) -> None:
+        self.errors.append(Diagnostic("literal", message, self.tspan(tok)))
 
     def true_lit(self, c: list[Any]) -> ast.Expr:
         return ast.Literal(True, span=self.tspan(c[0]))
@@ -324,6 +346,9 @@ class _Builder(Transformer):  # type: ignore[type-arg]
     def duration(self, c: list[Any]) -> ast.Expr:
         text = str(c[0])
         seconds = ast.parse_duration(text)
+        if seconds is not None and not seconds <= MAX_DURATION:
+            self._too_large(c[0], f"duration {_cut(text)} is too long (at most {MAX_DURATION // 86400:g} days)")
+            seconds = 0.0
         return ast.Duration(seconds if seconds is not None else 0.0, text, span=self.tspan(c[0]))
 
     def name(self, c: list[Any]) -> ast.Expr:
@@ -582,6 +607,11 @@ def _unclosed(file: str, text: str, tok: Token) -> Diagnostic | None:
     return Diagnostic("syntax", f"syntax: this `{{` of `{opener.header}` is never closed ({where})",
                       Span(file, opener.line, opener.column, opener.line, opener.column + 1),
                       "add the `}` that ends this block" + (f" before line {before}" if before else ""))
+
+
+def _cut(text: str, width: int = 24) -> str:
+    """A long literal, shortened for a message (its length is said there)."""
+    return text if len(text) <= width else text[:width - 1] + "…"
 
 
 def _describe_token_error(e: UnexpectedInput) -> str:

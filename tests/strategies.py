@@ -46,13 +46,14 @@ type_names = st.one_of(
     names,
 )
 
-ints = st.integers(min_value=0, max_value=10**30)
-floats = st.floats(min_value=0.0, allow_nan=False, allow_infinity=False)
+# Within the language's literal limits (dsl.parser: MAX_INT_DIGITS, MAX_NUMBER, MAX_DURATION).
+ints = st.integers(min_value=0, max_value=10**18 - 1)
+floats = st.floats(min_value=0.0, max_value=1e15, allow_nan=False, allow_infinity=False)
 
 #: Durations as written: `250ms 30s 5min 2h 1.5s`, with their value in seconds.
 duration_texts = st.builds(
     lambda whole, frac, unit: f"{whole}{'.' + frac if frac else ''}{unit}",
-    st.text("0123456789", min_size=1, max_size=5),
+    st.text("0123456789", min_size=1, max_size=3),  # 999h: below the 365-day limit
     st.one_of(st.none(), st.text("0123456789", min_size=1, max_size=3)),
     st.sampled_from(["ms", "s", "min", "h"]),
 )

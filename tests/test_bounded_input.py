@@ -117,3 +117,20 @@ def test_a_long_source_line_is_shown_as_a_window_with_the_caret_under_the_span()
     assert shown.text[shown.pad:shown.pad + shown.width] == "BAD"
     short = excerpt(Span("f.mission", 1, 3, 1, 6), {"f.mission": "a  BAD b"})
     assert short is not None and short.text == "a  BAD b" and (short.pad, short.width) == (2, 3)
+
+
+def test_a_multiplicity_evaluated_above_the_limit_fails_at_its_start_without_creating_instances(
+        tmp_path: Path) -> None:
+    (tmp_path / "many.mission").write_text("mission Many {\n    var n: int = 5000\n    Wait(duration: 1s)[n]\n}\n",
+                                           encoding="utf-8")
+    (tmp_path / "trace.jsonl").touch()
+    done = missionctl("dry-run", "many.mission", "--config", str(ROOT / "hosts.yaml"), "--json",
+                      "--trace", "trace.jsonl", cwd=tmp_path)
+    import json
+
+    report = json.loads(done.stdout)
+    assert done.returncode == 1 and report["outcome"] == "failure"
+    assert report["reason"] == "Wait would create 5000 instances, above the limit of 1000"
+    entered = [json.loads(line)["path"] for line in (tmp_path / "trace.jsonl").read_text().splitlines()
+               if json.loads(line)["kind"] == "entered"]
+    assert not any("[" in path for path in entered), "no instance may be created"

@@ -54,6 +54,24 @@ ERRORS: list[tuple[str, str, str, str | None]] = [
     ("bad-interpolation", m('  Observe\n  Observe -> done / log "a{1 +}"'),
      "3:30 bad expression in string interpolation: expected `(`, `-`, a duration (e.g. 30s), a name, a number, "
      "a string (\"...\"), an integer, event, false or true, got the end of the expression", None),
+    # ---- values checked where they are written (issue #18)
+    ("integer-too-long", m("  var n: int = " + "9" * 5000 + "\n  Observe"), "2:16 integer 99999999999999999999999… is "
+     "too large (5000 digits, at most 18)", None),
+    ("float-too-large", m("  var f: float = 1e400\n  Observe"), "2:18 number 1e400 is too large (at most 1e+15)", None),
+    ("duration-too-long", m("  Observe -> done after 999999999h\n  Observe"),
+     "2:25 duration 999999999h is too long (at most 365 days)", None),
+    ("quantity-negative", m("  needs r: RadioChannel quantity -5\n  Observe"),
+     "2:34 quantity -5 asks for nothing: it must be above 0", "leave quantity out"),
+    ("quantity-zero", m("  needs r: RadioChannel quantity 0.0\n  Observe"),
+     "2:34 quantity 0 asks for nothing: it must be above 0", None),
+    ("slice-zero", m("  needs r: Ranger for 0s\n  Observe"),
+     "2:23 a time slice of 0s never lets the holder run: it must be longer than 0s", "leave `for` out"),
+    ("negative-duration", m("  Wait(duration: -1s)"), "2:8 duration: a duration cannot be negative (-1 s)", None),
+    ("remainder-by-zero", m("  var n: int = 1\n  Observe\n  Observe -> done / set n = n % 0"),
+     "4:33 remainder by zero", "divisor is 0"),
+    ("division-by-zero", m("  var x: float = 1.0 / 0\n  Observe"), "2:24 division by zero", None),
+    ("too-many-instances", m("  Wait(duration: 1s)[1000000000]"),
+     "2:21 multiplicity 1000000000 is above the limit of 1000 instances", "[1..*]"),
     # ---- names
     ("unknown-behavior", m("  DetectDor(min_width: 0.7)"), "2:3 unknown behavior DetectDor",
      "did you mean DetectDoor?"),

@@ -51,6 +51,7 @@ from drd.runtime.tree import (
     StatePlan,
 )
 from dsl import ast
+from dsl.checker import MAX_INSTANCES
 from dsl.evaluate import EvalError, evaluate, format_value, truthy
 from dsl.export import trigger_label
 from dsl.statechart import ResourceNeed, State, Statechart, Transition
@@ -443,6 +444,10 @@ class Interpreter:
         except (EvalError, TypeError, ValueError) as e:
             self._finish(node, False, f"multiplicity: {e}")
             return
+        if max(low, high) > MAX_INSTANCES:
+            self._finish(node, False, f"{node.state.name} would create {max(low, high)} instances, above the limit "
+                                      f"of {MAX_INSTANCES}")
+            return
         node.bounds = (low, high)
         if high < low:
             self._finish(node, False, f"{node.state.name} needs at least {low} instances, only {high} possible")
@@ -486,7 +491,7 @@ class Interpreter:
             except (EvalError, TypeError, ValueError):
                 continue
             if high > node.bounds[1]:
-                node.bounds = (node.bounds[0], high)
+                node.bounds = (node.bounds[0], min(high, MAX_INSTANCES))
                 self._grow_multi(node)
 
     def _flush(self) -> None:
