@@ -1,4 +1,4 @@
-"""The code stays as clean as the issue asks: ruff over the tree, mypy --strict over dsl/."""
+"""The code stays as clean as the issue asks: ruff over the tree, mypy --strict over every package."""
 
 from __future__ import annotations
 
@@ -19,7 +19,7 @@ def test_ruff_is_clean() -> None:
     assert r.returncode == 0, r.stdout + r.stderr
 
 
-def test_mypy_strict_on_dsl() -> None:
+def test_mypy_strict_on_every_package() -> None:
     pytest.importorskip("mypy", reason="mypy is not installed (pip install -e '.[test]')")
     r = subprocess.run([sys.executable, "-m", "mypy"], cwd=ROOT, capture_output=True, text=True, timeout=300,
                        check=False)

@@ -8,12 +8,13 @@ from __future__ import annotations
 
 import math
 import statistics
+from typing import Any
 
-from components.behaviors.follow_corridor import fit_wall, points
+from components.behaviors.follow_corridor import Wall, fit_wall, points
 from drd.runtime.component import Component, Status
 
 
-def residuals(scan, wall, side: int) -> list[float]:
+def residuals(scan: Any, wall: Wall, side: int) -> list[float]:
     """Distances of the beams near a fitted wall to its line (the range noise, seen along the wall)."""
     m = math.tan(side * wall.angle)
     c = wall.distance / math.cos(wall.angle)

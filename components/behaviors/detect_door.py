@@ -47,7 +47,8 @@ def known(log: Any, x: float, y: float, side: str, width: float) -> bool:
     return False
 
 
-def find_gaps(scan: Any, min_width: float, expect=(None, None)) -> list[dict[str, float | str]]:
+def find_gaps(scan: Any, min_width: float, expect: tuple[float | None, float | None] = (None, None),
+              ) -> list[dict[str, float | str]]:
     """Door gaps in one scan, in the robot frame: {width, x, y, side, bearing}."""
     walls = corridor(scan, expect)
     b = scan.beams()
@@ -99,7 +100,8 @@ class DetectDoor(Component):
         """Odometry, from the robot's Drive if this component was given one (the runtime may add it), else from
         a `pose` service; without either the door is reported in the robot frame."""
         if "drive" in self.ctx.devices:
-            return self.device("drive").odometry()
+            x, y, heading = self.device("drive").odometry()
+            return float(x), float(y), float(heading)
         odo = self.ctx.services.get("odometry")
         return odo() if callable(odo) else None
 
@@ -115,8 +117,9 @@ class DetectDoor(Component):
         log = self.input("visited")
         for gap in find_gaps(scan, min_width, self.expect):
             px, py, pa = pose
-            x = px + gap["x"] * math.cos(pa) - gap["y"] * math.sin(pa)
-            y = py + gap["x"] * math.sin(pa) + gap["y"] * math.cos(pa)
+            gx, gy = float(gap["x"]), float(gap["y"])
+            x = px + gx * math.cos(pa) - gy * math.sin(pa)
+            y = py + gx * math.sin(pa) + gy * math.cos(pa)
             width, side = float(gap["width"]), str(gap["side"])
             if known(log, x, y, side, max(width, 1.0)):
                 continue

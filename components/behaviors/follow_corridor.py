@@ -93,10 +93,10 @@ def _fit(scan: Scan, side: int, expect: float | None, memo: dict[Any, Any]) -> W
             else support[j]
     # first pass: the points within 0.25 m of the line y = d0; the rest depends on d0 only through them
     first = tuple([i for i, y in enumerate(ys) if -0.25 < y - d0 < 0.25])
-    key = ("refine", side, first)
-    if key not in memo:
-        memo[key] = _refine(xs, ys, first, side)
-    wall: Wall | None = memo[key]
+    refined = ("refine", side, first)
+    if refined not in memo:
+        memo[refined] = _refine(xs, ys, first, side)
+    wall: Wall | None = memo[refined]
     return wall
 
 

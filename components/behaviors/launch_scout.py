@@ -38,7 +38,7 @@ class LaunchScout(Component):
         landing = launcher.launch(scout, 0.0, distance)
         self.ctx.outputs["scout"] = scout
         try:  # it left the magazine: the Static Dependency Database must say so
-            self.update_dependency(scout, "carrier", "")
+            self.update_dependency(str(scout), "carrier", "")
         except LookupError:
             pass  # run outside an executive (a test rig): nobody keeps the database
         self.ctx.outputs["landing"] = (landing.x, landing.y)

@@ -421,7 +421,7 @@ class RemoteComponent(Component):
     # -- lifecycle ------------------------------------------------------------------------------------
 
     def setup(self, ctx: Context) -> None:
-        self.ctx = ctx  # the remote instance is set up at its first start, once its host is known
+        super().setup(ctx)  # the remote instance is set up at its first start, once its host is known
 
     def start(self) -> None:
         self._resolve()
@@ -479,7 +479,6 @@ class RemoteComponent(Component):
 
     @property
     def _ctx(self) -> Context:
-        assert self.ctx is not None, "start() before setup()"
         return self.ctx
 
     def _lifecycle(self, op: str) -> None:

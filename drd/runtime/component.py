@@ -49,16 +49,26 @@ class Context:
 class Component:
     """Base class of every elementary behavior. Override what you need; defaults do nothing."""
 
-    def __init__(self) -> None:
-        self.ctx: Context | None = None
+    _context: Context | None = None
+
+    @property
+    def ctx(self) -> Context:
+        """The context `setup` was given (its parameters, resources, devices, inputs); always there once set up,
+        so a component never tests for None."""
+        if self._context is None:
+            raise RuntimeError(f"{type(self).__name__}: its context is used before setup()")
+        return self._context
 
     def setup(self, ctx: Context) -> None:
         """Once, before start: keep the context, open drivers."""
-        self.ctx = ctx
+        self._context = ctx
+
+    @property
+    def is_set_up(self) -> bool:
+        return self._context is not None
 
     def device(self, need: str) -> Any:
         """The driver behind one of this component's needs, through its interface (drd.hw)."""
-        assert self.ctx is not None, "device() before setup()"
         try:
             return self.ctx.devices[need]
         except KeyError:
@@ -67,7 +77,6 @@ class Component:
 
     def update_dependency(self, resource: str, key: str, value: object) -> None:
         """Change the Static Dependency Database (a launched Scout: `carrier` becomes "")."""
-        assert self.ctx is not None
         update = self.ctx.services.get("dependencies")
         if update is None:
             raise LookupError(f"{self.ctx.path}: no dependency database in this context")
@@ -77,7 +86,6 @@ class Component:
         """The value of one of the inputs the manifest declares (`door`), as the mission bound it, or None (an
         optional input bound to nothing, or an output not produced yet). A component never reads a sibling or an
         ancestor's data by name: the mission says which datum an input reads."""
-        assert self.ctx is not None, "input() before setup()"
         return self.ctx.inputs.get(name)
 
     def start(self) -> None:
