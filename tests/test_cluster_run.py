@@ -62,6 +62,26 @@ def test_an_invalid_mission_is_refused_by_the_controller_with_a_located_error(cl
     assert "not run" in r.stderr
 
 
+def test_a_submission_its_client_gave_up_on_never_starts(cluster: DaemonCluster) -> None:
+    """All or nothing (issue #18): a request whose client stopped waiting is refused, and nothing runs later."""
+    from drd.daemon.missions import RunMission, RunReply, run_key
+
+    client = cluster.client(timeout=5.0)
+    source = (ROOT / MISSION).read_text(encoding="utf-8")
+    late = RunMission(source, "late.mission", speed=10.0, give_up_at=time.time() - 1.0)
+    reply = client.bus.call(run_key(cluster.name), late, timeout=15.0)
+    assert isinstance(reply, RunReply) and not reply.ok and reply.mission == ""
+    assert "not started: the client stopped waiting" in reply.diagnostics[0]
+    time.sleep(2.0)  # a mission started behind the refusal would show by now
+    assert [m for m in client.missions() if m.get("outcome") is None] == []
+    in_time = RunMission("mission Quick {\n    Wait(duration: 1s)\n}\n", "quick.mission", speed=10.0,
+                         give_up_at=time.time() + 30.0)
+    reply = client.bus.call(run_key(cluster.name), in_time, timeout=15.0)
+    assert isinstance(reply, RunReply) and reply.ok and reply.mission.startswith("Quick-")
+    eventually(lambda: any(m.get("id") == reply.mission and m.get("outcome") == "success"
+                           for m in client.missions()), "the mission sent in time to succeed", timeout=30.0)
+
+
 def test_params_set_the_missions_variables_on_the_controller(cluster: DaemonCluster, tmp_path: Path) -> None:
     choose = tmp_path / "choose.mission"
     choose.write_text("mission Choose {\n    var ok: bool = false\n    Wait(duration: 1s)\n"

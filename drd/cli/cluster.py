@@ -350,12 +350,14 @@ def run(mission: Path = typer.Argument(..., help="The mission file.", show_defau
     with cluster_client(config, connect, timeout) as client:
         watch = _RecordWatch(client, trace_out)
         try:
-            request = RunMission(source, str(mission), world, speed, until, seed, params or None, priority)
+            wait = max(timeout, 15.0)
+            request = RunMission(source, str(mission), world, speed, until, seed, params or None, priority,
+                                 give_up_at=time.time() + wait - 0.5)  # the reply must still reach us after it
             began = time.monotonic()
             reply: RunReply | None = None
             try:
                 with _deferred_interrupt() as interrupted:  # a Ctrl-C before `follow` would leave the mission unseen
-                    answer = client.bus.call(run_key(client.cluster), request, timeout=max(timeout, 15.0))
+                    answer = client.bus.call(run_key(client.cluster), request, timeout=wait)
                     if not isinstance(answer, RunReply):
                         fail(f"the controller answered a {type(answer).TYPE}")
                     if not answer.ok:

@@ -46,7 +46,7 @@ CONTROL_PERIOD = 0.1
 CALL_TIMEOUT = 1.0
 
 
-@message("drd.mission.run", 2)
+@message("drd.mission.run", 3)
 class RunMission(Message):
     """Run this mission source (`file` names it in diagnostics) in world `world` at `speed` x real time."""
 
@@ -58,6 +58,9 @@ class RunMission(Message):
     seed: int = 0
     params: dict[str, str] | None = None  # --param NAME=VALUE: the mission's own variables (dsl.params)
     priority: int | None = None  # the mission's rank against the others (1 first); None: its `mission ... priority`
+    #: The wall-clock time (`time.time()`) the client stops waiting for the reply; 0: it waits as long as it takes.
+    #: The controller never starts a mission after it: a client that gave up never sees its mission start later.
+    give_up_at: float = 0.0
 
 
 @message("drd.mission.run-reply", 2)
@@ -98,6 +101,14 @@ def run_key(cluster: str) -> str:
 def render(diagnostics: list[Any], sources: dict[str, str]) -> list[str]:
     """Diagnostics as `missionctl validate` prints them (file:line:col, message, source line, caret), plain text."""
     return [d.render(sources) for d in diagnostics]
+
+
+def _given_up(req: RunMission) -> RunReply:
+    """The refusal of a mission whose client stopped waiting before it could start (`RunMission.give_up_at`)."""
+    late = time.time() - req.give_up_at
+    log.warning("mission %s not started: its client gave up %.1f s ago", req.file, late)
+    return RunReply("", False, [f"{req.file}: not started: the client stopped waiting {late:.1f} s before the "
+                                "controller could start it"])
 
 
 class MissionRunner:
@@ -229,6 +240,8 @@ class MissionRunner:
             return self._start(req, chart, priority)
 
     def _start(self, req: RunMission, chart: Any, priority: int) -> RunReply:
+        if req.give_up_at and time.time() > req.give_up_at:  # before a world is made for nobody
+            return _given_up(req)
         world = self.current
         if world is not None:  # the mission joins the world that runs
             if req.world and req.world != world.name:
@@ -241,6 +254,8 @@ class MissionRunner:
         with self.lock:
             if world.closed:  # its last mission ended while this one was compiled: start the world again
                 raise ValueError(f"world {world.name} ended just now: run the mission again")
+            if req.give_up_at and time.time() > req.give_up_at:  # all or nothing: nobody would watch it run
+                return _given_up(req)
             executive = self.controller.executive
             mid = f"{chart.name}-{int(time.time() * 1000) % 10_000_000}"
             while mid in executive.missions:
