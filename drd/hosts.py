@@ -363,16 +363,26 @@ class _Parser(ConfigReader):
             elif type_ in _SCALARS:
                 if isinstance(v, bool) == (type_ == "bool") and isinstance(v, _SCALARS[type_]):
                     out[name] = float(v) if type_ == "float" else v
+                    self.within(t, str(name), out[name], path)
                 else:
                     self.fail(path, f"expected {type_}, got {got(v)}")
             elif type_ == "duration":
                 out[name] = self.duration(v, path)
+                self.within(t, str(name), out[name], path)
             elif isinstance(v, str):
                 out[name] = v
                 self.refs.append((path, type_, v))
             else:
                 self.fail(path, f"expected the id of a {type_}, got {got(v)}")
         return out
+
+    def within(self, t: ComponentType, name: str, value: object, path: str) -> None:
+        """A numeric value inside the range its manifest declares (`limits`), else a problem naming the range."""
+        limit = t.limits.get(name)
+        if limit is not None and isinstance(value, int | float) and not isinstance(value, bool):
+            why = limit.refuses(float(value))
+            if why:
+                self.fail(path, f"{why} ({t.name}'s manifest, {t.source})")
 
     def check_cluster(self, hosts: Sequence[Host]) -> None:
         """Across hosts: one controller, at most one simulator, distinct endpoints and robot ids, references."""

@@ -30,6 +30,7 @@ from dsl.catalog import (
     ComponentType,
     InputSpec,
     Kind,
+    Limit,
     NeedSpec,
     ParamSpec,
     Process,
@@ -47,8 +48,8 @@ _RUNNABLE = ("entry_point", "process", "multiplicity", "scheduling", "params")
 #: The keys each kind may use, in the order manifests write them.
 KEYS: Mapping[Kind, tuple[str, ...]] = {
     Kind.BEHAVIOR: (*_COMMON, *_RUNNABLE, "needs", "inputs", "outputs", "events", "interfaces"),
-    Kind.RC: (*_COMMON, *_RUNNABLE, "interfaces", "sharable", "capacity", "properties"),
-    Kind.ARC: (*_COMMON, "properties", "parts"),
+    Kind.RC: (*_COMMON, *_RUNNABLE, "interfaces", "sharable", "capacity", "properties", "limits"),
+    Kind.ARC: (*_COMMON, "properties", "limits", "parts"),
     Kind.DATA: (*_COMMON, "fields"),
 }
 REQUIRED: Mapping[Kind, tuple[str, ...]] = {
@@ -117,6 +118,9 @@ def _check_rules(c: _Checker, kind: Kind, data: Mapping[str, Any], fields: Mappi
         c.fail("capacity", "only a sharable rc has a capacity")
     for clash in fields.get("properties", {}).keys() & fields.get("parts", {}).keys():
         c.fail(f"properties.{clash}", "also the name of a part")
+    for name in fields.get("limits", {}):
+        if fields.get("properties", {}).get(name) not in ("int", "float", "duration"):
+            c.fail(f"limits.{name}", "limits a numeric property (int, float or duration) the manifest declares")
 
 
 class _Checker(ConfigReader):
@@ -276,6 +280,22 @@ def _properties(c: _Checker, value: object, key: str) -> dict[str, str]:
     return props
 
 
+def _limits(c: _Checker, value: object, key: str) -> dict[str, Limit]:
+    """`limits: {beams: {min: 1, max: 4096}, max_range: {min: 0.1, max: 100, unit: m}}`."""
+    out: dict[str, Limit] = {}
+    for name, spec, path in c.entries(value, key, dict):
+        c.keys(spec, path, ("min", "max", "unit"))
+        bounds = [spec.get(b) for b in ("min", "max")]
+        for b, v in zip(("min", "max"), bounds, strict=True):
+            if v is not None and not is_number(v):
+                c.fail(f"{path}.{b}", f"expected a number, got {got(v)}")
+        low, high = (float(v) if is_number(v) else None for v in bounds)
+        if low is not None and high is not None and low > high:
+            c.fail(path, f"min {low:g} is above max {high:g}")
+        out[name] = Limit(low, high, str(spec.get("unit", "")))
+    return out
+
+
 _Parser = Callable[[_Checker, Any, str], Any]
 _PARSERS: dict[str, _Parser] = {
     "description": _Checker.text,
@@ -293,6 +313,7 @@ _PARSERS: dict[str, _Parser] = {
     "sharable": _Checker.flag,
     "capacity": lambda c, v, k: None if v is None else c.positive(v, k),
     "properties": _properties,
+    "limits": _limits,
     "parts": _typemap,
 }
 

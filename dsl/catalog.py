@@ -36,6 +36,25 @@ class Process(StrEnum):
 
 
 @dataclass(frozen=True, slots=True)
+class Limit:
+    """The range a numeric property may take in hosts.yaml (`beams: {min: 1, max: 4096}`), and its unit, for the
+    message that refuses a value outside it."""
+
+    min: float | None = None
+    max: float | None = None
+    unit: str = ""
+
+    def refuses(self, value: float) -> str:
+        """Why `value` is outside the range ('' when it is inside)."""
+        if (self.min is not None and value < self.min) or (self.max is not None and value > self.max):
+            low = "" if self.min is None else f"{self.min:g}"
+            high = "" if self.max is None else f"{self.max:g}"
+            shown = f"{int(value)}" if value.is_integer() and abs(value) < 1e15 else f"{value:g}"
+            return f"{shown} is out of range: {low}..{high}{' ' + self.unit if self.unit else ''}"
+        return ""
+
+
+@dataclass(frozen=True, slots=True)
 class ParamSpec:
     """A typed parameter. `default` is a Python value (durations in seconds)."""
 
@@ -109,6 +128,7 @@ class ComponentType:
     interfaces: tuple[str, ...] = ()
     parts: Mapping[str, str] = field(default_factory=dict)
     properties: Mapping[str, str] = field(default_factory=dict)
+    limits: Mapping[str, Limit] = field(default_factory=dict)  # a numeric property's range in hosts.yaml
     fields: Mapping[str, str] = field(default_factory=dict)  # a data type's (a Door's width, x, y, side)
     sharable: bool = False
     capacity: float | None = None

@@ -390,3 +390,30 @@ def test_check_files_of_a_password_cluster(tmp_path: Path) -> None:
     assert cluster.security.files == {"password_file": str(secret)} and check_files(cluster) == []
     secret.unlink()
     assert [p.key for p in check_files(cluster)] == ["cluster.security.password_file"]
+
+
+def test_a_device_option_outside_its_manifests_range_is_refused_with_the_key_and_range(tmp_path: Path) -> None:
+    """`beams: 1000000000` once made a dry-run reach 3.9 GB (issue #18): the manifest's limits refuse it at load."""
+    from drd.hosts import HostsError, load_hosts
+    from drd.manifests import load_catalog
+
+    root = Path(__file__).resolve().parents[1]
+    bad = (root / "hosts.yaml").read_text(encoding="utf-8").replace("beams: 181", "beams: 1000000000")
+    bad = bad.replace("max_speed: 0.8", "max_speed: -1.0")
+    (tmp_path / "hosts.yaml").write_text(bad, encoding="utf-8")
+    with pytest.raises(HostsError) as refused:
+        load_hosts(tmp_path / "hosts.yaml", load_catalog())
+    problems = [str(p) for p in refused.value.problems]
+    assert any("hosts.ranger1.devices.ranges.options.beams: 1000000000 is out of range: 3..4096" in p for p in problems)
+    assert any("hosts.ranger1.devices.drive.options.max_speed: -1 is out of range: 0..20 m/s" in p for p in problems)
+
+
+def test_a_manifest_limit_must_name_a_numeric_property_and_be_ordered() -> None:
+    from drd.manifests import parse_manifest
+
+    _t, problems = parse_manifest({"name": "Lidar", "kind": "rc", "entry_point": "x.y:Z", "interfaces": ["RangeSensor"],
+                                   "properties": {"beams": "int", "model": "str"},
+                                   "limits": {"beams": {"min": 10, "max": 5}, "model": {"max": 3}}}, "lidar.yaml")
+    text = [str(p) for p in problems]
+    assert "lidar.yaml: limits.beams: min 10 is above max 5" in text
+    assert any(p.startswith("lidar.yaml: limits.model: limits a numeric property") for p in text)

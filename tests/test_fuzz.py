@@ -1,0 +1,82 @@
+"""Fuzzing in CI (issue #18), bounded: mutations of every mission the repository ships and of its hosts file
+always end in success or located diagnostics, never an uncaught error. Hypothesis shrinks a failure to the
+smallest mutation that shows it."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from drd.config import ConfigError
+from drd.hosts import load_hosts
+from dsl import compile_text
+from dsl.catalog import Catalog
+
+ROOT = Path(__file__).resolve().parents[1]
+SEEDS = sorted(ROOT.glob("missions/*.mission")) + sorted((ROOT / "tests" / "missions").glob("*.mission"))
+PIECES = ["{", "}", "(", ")", "[", "]", ":", ";", "\n", "->", "/", "..", "*", '"', '"{', "}", "0", "-1", "1e999",
+          "9" * 30, "mission", "behavior", "needs", "parallel", "plan", "<", "as", "on", "after", "for", "when",
+          "quantity", "where", "import", "emit", "log", "set", "release", "start", "done", "fail", "ms", "#", "\t",
+          "\x00", "é", "Wait", "Ranger", " "]
+
+
+@st.composite
+def mutations(draw: st.DrawFn, seeds: list[str]) -> str:
+    text = draw(st.sampled_from(seeds))
+    for _ in range(draw(st.integers(1, 6))):
+        at = draw(st.integers(0, len(text)))
+        kind = draw(st.sampled_from(["insert", "delete", "duplicate"]))
+        if kind == "insert":
+            text = text[:at] + draw(st.sampled_from(PIECES)) + text[at:]
+        elif kind == "delete":
+            text = text[:at] + text[at + draw(st.integers(1, 12)):]
+        else:
+            end = min(len(text), at + draw(st.integers(1, 40)))
+            text = text[:end] + text[at:end] + text[end:]
+    return text
+
+
+MISSIONS = [p.read_text(encoding="utf-8") for p in SEEDS if p.is_file()]
+
+
+@settings(max_examples=300, deadline=None, suppress_health_check=[HealthCheck.too_slow,
+                                                                  HealthCheck.function_scoped_fixture])
+@given(data=st.data())
+def test_a_mutated_mission_compiles_or_is_refused_with_located_errors(data: st.DataObject, catalog: Catalog) -> None:
+    text = data.draw(mutations(MISSIONS))
+    result = compile_text(text, catalog, "fuzz.mission")  # must not raise
+    lines = text.split("\n")
+    for d in result.diagnostics:
+        assert d.span.file == "fuzz.mission" and d.message
+        assert 1 <= d.span.line <= len(lines) + 1, (d.span, d.message)
+        assert d.span.column >= 1
+    assert result.ok or any(d.severity.value == "error" for d in result.diagnostics)
+
+
+HOSTS = (ROOT / "hosts.yaml").read_text(encoding="utf-8")
+YAML_PIECES = [":", " ", "\n", "-", "{", "}", "[", "]", "&a", "*a", "!!python/object:os.system", "'", '"', "#",
+               "null", "1e999", "-1", "0", "beams: 1000000000", "slice: 0s", "capacity: -3", "\t", "?", "|"]
+
+
+@settings(max_examples=200, deadline=None, suppress_health_check=[HealthCheck.too_slow,
+                                                                  HealthCheck.function_scoped_fixture])
+@given(data=st.data())
+def test_a_mutated_hosts_file_loads_or_is_refused_naming_the_file(data: st.DataObject, catalog: Catalog) -> None:
+    text = HOSTS
+    for _ in range(data.draw(st.integers(1, 4))):
+        at = data.draw(st.integers(0, len(text)))
+        if data.draw(st.booleans()):
+            text = text[:at] + data.draw(st.sampled_from(YAML_PIECES)) + text[at:]
+        else:
+            text = text[:at] + text[at + data.draw(st.integers(1, 20)):]
+    path = ROOT / "tests" / ".fuzz-hosts.yaml"
+    try:
+        path.write_text(text, encoding="utf-8")
+        try:
+            load_hosts(path, catalog)  # must not raise anything but a configuration error
+        except ConfigError as e:
+            assert e.problems and all(".fuzz-hosts.yaml" in str(p) for p in e.problems)
+    finally:
+        path.unlink(missing_ok=True)
