@@ -237,20 +237,9 @@ def run_many(missions: Sequence[Mission], cluster: Cluster, world: World, catalo
         raise ValueError("\n".join(map(str, problems)))
     late = {i.target for i in injections if i.action is Action.JOIN}  # hosts whose daemon starts later
     sim, executive = team(cluster, world, catalog, seed=seed, registry=registry, late=late)
-    results: list[DryRun] = []
-    ids: list[str] = []
     start = time.perf_counter()
-    for n, m in enumerate(missions, 1):
-        result = DryRun(m.chart.name, None, "", 0.0, 0.0, speed=speed, priority=m.priority or m.chart.priority)
-        mid = f"{m.chart.name}-{n}"
-        listeners: list[Callable[[rec.Record], None]] = [result.records.append, functools.partial(facts, result)]
-        if trace is not None:
-            listeners.append(TraceWriter(trace, mid))
-        result.mission_id = mid
-        executive.submit(m.chart, mid, listeners=listeners, priority=result.priority)
-        results.append(result)
-        ids.append(mid)
-    running = [executive.missions[mid] for mid in ids]  # the interpreters
+    results = [_submit(executive, m, n, speed, trace) for n, m in enumerate(missions, 1)]
+    running = [executive.missions[r.mission_id or ""] for r in results]  # the interpreters
     next_progress = 0.0
     pending = sorted(injections)
     while not all(interp.finished for interp in running) and sim.time < until - 1e-6:  # 0.1 s steps add up
@@ -273,8 +262,26 @@ def run_many(missions: Sequence[Mission], cluster: Cluster, world: World, catalo
     for interp in running:
         if not interp.finished:
             interp.stop(why)
+    _conclude(results, running, sim, time.perf_counter() - start)
+    executive.close()
+    return results
+
+
+def _submit(executive: Executive, m: Mission, n: int, speed: float | None, trace: IO[str] | None) -> DryRun:
+    """Start mission number `n` on the executive; its report gathers its records (and the trace gets them)."""
+    result = DryRun(m.chart.name, None, "", 0.0, 0.0, speed=speed, priority=m.priority or m.chart.priority)
+    mid = f"{m.chart.name}-{n}"
+    listeners: list[Callable[[rec.Record], None]] = [result.records.append, functools.partial(facts, result)]
+    if trace is not None:
+        listeners.append(TraceWriter(trace, mid))
+    result.mission_id = mid
+    executive.submit(m.chart, mid, listeners=listeners, priority=result.priority)
+    return result
+
+
+def _conclude(results: list[DryRun], running: list[Any], sim: Simulation, wall: float) -> None:
+    """Each report's outcome, times, the Scouts where they ended, and every robot's track."""
     tracks = {rid: sim.trajectory(rid) for rid in (*sim.robots, *sim.intruders())}
-    wall = time.perf_counter() - start
     for interp, result in zip(running, results, strict=True):
         result.outcome, result.reason = interp.outcome, interp.reason
         result.sim_time, result.wall_time = sim.time, wall
@@ -282,8 +289,6 @@ def run_many(missions: Sequence[Mission], cluster: Cluster, world: World, catalo
             pose = sim.pose(scout["scout"])
             scout.update(x=round(pose.x, 2), y=round(pose.y, 2))
         result.tracks = tracks
-    executive.close()
-    return results
 
 
 def _inject(inj: Injection, sim: Simulation, executive: Executive, cluster: Cluster) -> dict[str, Any]:

@@ -19,7 +19,7 @@ from drd.hosts import Cluster, Role
 from drd.placement import HostView, Placed, place, view_of
 from drd.runtime import records as rec
 from drd.sim.world import World
-from dsl.catalog import Catalog, Kind
+from dsl.catalog import Catalog, ComponentType, Kind
 from dsl.errors import Diagnostic
 from dsl.statechart import State, Statechart
 
@@ -63,58 +63,71 @@ def preview(charts: Sequence[tuple[Statechart, int | None]], cluster: Cluster, w
         mid = executive.submit(chart, f"{chart.name}-{n}", listeners=[records.append],
                                priority=priority or chart.priority)
         runs.append((chart, mid, records))
-    hosts_of = {r.id: r.host for r in cluster.resources()}
-    workers = [h.name for h in cluster.hosts if Role.WORKER in h.roles] or None
-    views = {h.name: view_of(h) for h in cluster.hosts}
-    previews = []
-    for chart, mid, records in runs:
-        interp = executive.missions[mid]
-        at_start = [r for r in records if r.at <= 0.0]
-        p = Preview(mid, cluster.name)
-        states = {r.path: chart.states[r.state] for r in at_start if isinstance(r, rec.Entered)}
-        active = _active(at_start)
-        grants = {path: dict(g) for path, g in _grants(at_start).items() if path in active}
-        p.holds = [{"path": path, "resources": {k: v for k, v in g.items() if "." not in k}}
-                   for path, g in grants.items()]
-        for path in active:
-            state = states[path]
-            component = catalog.get(state.component or "") if state.component else None
-            if component is None or component.kind is not Kind.BEHAVIOR or any(
-                    q.startswith((path + "/", path + "[")) for q in active):
-                continue
-            devices = _devices(path, state, states, grants)
-            if len(devices) < len(state.needs):
-                continue  # it waits for its needs: it starts only once they are granted
-            row: dict[str, Any] = {"path": path, "component": component.name, "devices": devices}
-            hosts = sorted({hosts_of.get(u, "") for u in devices.values()} - {""})
-            if hosts:
-                row["host"], row["why"] = ", ".join(hosts), "its devices are there"
-            else:
-                node = interp.find(path)
-                names = {spec.name for spec in component.params}
-                params = {k: v for k, v in (node.scope.items() if node is not None else ()) if k in names}
-                decision = place(component, list(views.values()), cluster.placement, params=params,
-                                 affinity=workers)
-                if isinstance(decision, Placed):
-                    row["host"], row["why"] = decision.host, "placement: " + "; ".join(decision.reasons[:1])
-                    views[decision.host] = _one_more(views[decision.host], component.name)
-                else:
-                    row["host"], row["why"] = None, decision.reason
-                    p.problems.append(f"{path}: {component.name} cannot be placed: {decision.reason}")
-            p.components.append(row)
-        p.waits = Explainer(at_start).waiting_now()
-        for w in p.waits:
-            if not w["blocked_by"]:
-                p.problems.append(f"{w['path']}: nothing in the hosts file can grant {', '.join(w['needs'])}")
-        for r in at_start:
-            if isinstance(r, rec.Finished) and r.outcome != "success":
-                p.problems.append(f"{r.path} would end at start: {r.outcome}: {r.reason}")
-        p.problems += [f"{d.span}: {d.message}" for d in cluster_unsupported(chart)]
-        previews.append(p)
+    placer = _Placer(cluster)
+    previews = [_at_start(chart, mid, [r for r in records if r.at <= 0.0], executive.missions[mid], catalog, placer)
+                for chart, mid, records in runs]
     for interp in executive.missions.values():
         if not interp.finished:
             interp.stop("preview only")
     return previews
+
+
+class _Placer:
+    """Where each component would run: its devices' host, else the policy over idle worker hosts (counting the
+    preview's own placements, so a second instance spreads as the daemon's would)."""
+
+    def __init__(self, cluster: Cluster) -> None:
+        self.cluster = cluster
+        self.hosts_of = {r.id: r.host for r in cluster.resources()}
+        self.workers = [h.name for h in cluster.hosts if Role.WORKER in h.roles] or None
+        self.views = {h.name: view_of(h) for h in cluster.hosts}
+
+    def host(self, component: ComponentType, devices: Mapping[str, str],
+             params: Mapping[str, Any]) -> tuple[str | None, str]:
+        """(host, why), or (None, why not)."""
+        hosts = sorted({self.hosts_of.get(u, "") for u in devices.values()} - {""})
+        if hosts:
+            return ", ".join(hosts), "its devices are there"
+        decision = place(component, list(self.views.values()), self.cluster.placement, params=params,
+                         affinity=self.workers)
+        if not isinstance(decision, Placed):
+            return None, decision.reason
+        self.views[decision.host] = _one_more(self.views[decision.host], component.name)
+        return decision.host, "placement: " + "; ".join(decision.reasons[:1])
+
+
+def _at_start(chart: Statechart, mid: str, at_start: list[rec.Record], interp: Any, catalog: Catalog,
+              placer: _Placer) -> Preview:
+    """One mission's preview, from its records at t=0 (and its live nodes' parameters, for the placement)."""
+    p = Preview(mid, placer.cluster.name)
+    states = {r.path: chart.states[r.state] for r in at_start if isinstance(r, rec.Entered)}
+    active = _active(at_start)
+    grants = {path: dict(g) for path, g in _grants(at_start).items() if path in active}
+    p.holds = [{"path": path, "resources": {k: v for k, v in g.items() if "." not in k}} for path, g in grants.items()]
+    for path in active:
+        state = states[path]
+        component = catalog.get(state.component or "") if state.component else None
+        if component is None or component.kind is not Kind.BEHAVIOR or any(
+                q.startswith((path + "/", path + "[")) for q in active):
+            continue
+        devices = _devices(path, state, states, grants)
+        if len(devices) < len(state.needs):
+            continue  # it waits for its needs: it starts only once they are granted
+        node = interp.find(path)
+        names = {spec.name for spec in component.params}
+        params = {k: v for k, v in (node.scope.items() if node is not None else ()) if k in names}
+        host, why = placer.host(component, devices, params)
+        if host is None:
+            p.problems.append(f"{path}: {component.name} cannot be placed: {why}")
+        p.components.append({"path": path, "component": component.name, "devices": devices, "host": host,
+                             "why": why})
+    p.waits = Explainer(at_start).waiting_now()
+    p.problems += [f"{w['path']}: nothing in the hosts file can grant {', '.join(w['needs'])}"
+                   for w in p.waits if not w["blocked_by"]]
+    p.problems += [f"{r.path} would end at start: {r.outcome}: {r.reason}"
+                   for r in at_start if isinstance(r, rec.Finished) and r.outcome != "success"]
+    p.problems += [f"{d.span}: {d.message}" for d in cluster_unsupported(chart)]
+    return p
 
 
 def _active(records: Sequence[rec.Record]) -> list[str]:

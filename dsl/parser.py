@@ -598,7 +598,7 @@ def _unclosed(file: str, text: str, tok: Token) -> Diagnostic | None:
     """A declaration (or the end of the file) where a `}` was expected: name the block that was never closed,
     at its own `{`."""
     at_end = tok.type == "$END"
-    line = len(text.splitlines()) + 1 if at_end else (tok.line or 1)
+    line = text.count("\n") + 2 if at_end else (tok.line or 1)  # at the end: every line is before it
     opener = unclosed_block(text, line)
     if opener is None:
         return None

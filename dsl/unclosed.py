@@ -26,7 +26,7 @@ class Opener:
 def unclosed_block(text: str, before_line: int) -> Opener | None:
     """The block most likely left open by the line `before_line` (where the parser noticed), or None if every
     `{` before it is closed."""
-    lines = text.splitlines()
+    lines = [line.removesuffix("\r") for line in text.split("\n")]  # as the lexer counts lines: \n only
     stack: list[tuple[Opener, int]] = []  # the open blocks, innermost last, with their line's indentation
     suspects: list[Opener] = []
     for number, raw in enumerate(lines[:max(0, before_line - 1)], start=1):

@@ -42,3 +42,9 @@ def test_a_removed_closing_brace_is_named_at_its_own_block(tree: list[object], d
     text = "\n".join(lines[:gone] + lines[gone + 1:])
     found = unclosed_block(text, len(lines))
     assert found is not None and found.line == opener + 1
+
+
+def test_lines_are_counted_as_the_lexer_counts_them() -> None:
+    """Only \\n ends a line (a vertical tab or form feed does not): the block is named on the lexer's line."""
+    found = unclosed_block("\x0bA {\n  B\n", 4)
+    assert found is not None and (found.line, found.column) == (1, 4)

@@ -25,13 +25,14 @@ from rich.text import Text
 from typer.core import TyperCommand
 from typer.models import CommandInfo, OptionInfo
 
-from drd.cli.common import INVALID, OK, duration_text, err, fail, fail_all, out, print_json, shorten
+from drd.cli.common import INVALID, OK, duration_text, err, fail, fail_all, open_trace, out, print_json, shorten
 
 if TYPE_CHECKING:
     from rich.console import RenderableType
     from rich.table import Table
 
     from drd.daemon.client import ClusterClient
+    from drd.dryrun import DryRun
 
 from drd.cli.options import ConfigOption, ConnectOption, JsonOption, TimeoutOption
 
@@ -327,62 +328,30 @@ def run(mission: Path = typer.Argument(..., help="The mission file.", show_defau
     """Run a mission on the cluster: the controller compiles and runs it; exit 0 if it succeeds, 1 if it fails,
     2 if it is invalid. A mission started while others run joins them: they share the team by priority."""
     from drd.cli.common import MISSION_FAILED
-    from drd.daemon.missions import RunMission, RunReply, run_key
+    from drd.daemon.missions import RunMission
     from dsl.params import ParamError, parse_assignments
 
-    if not mission.is_file():
-        fail(f"{mission}: no such file (looked at {mission.absolute()})")
-    _not_a_mission(mission)
-    try:
-        source = mission.read_text(encoding="utf-8")
-    except (OSError, UnicodeDecodeError) as e:
-        fail(f"{mission}: cannot read it: {e}")
+    source = _mission_source(mission)
     try:
         params = parse_assignments(param)
     except ParamError as e:
         fail(str(e))
     if trace is not None and detach:
         fail("--trace needs the records as they come: it cannot be used with --detach")
-    try:
-        trace_out = trace.open("w", encoding="utf-8") if trace is not None else None
-    except OSError as e:
-        fail(f"{trace}: cannot write the trace: {e}")
+    trace_out = open_trace(trace)
+    wait = max(timeout, 15.0)
+    request = RunMission(source, str(mission), world, speed, until, seed, params or None, priority,
+                         give_up_at=time.time() + wait - 0.5)  # the reply must still reach us after it
     with cluster_client(config, connect, timeout) as client:
         watch = _RecordWatch(client, trace_out)
         try:
-            wait = max(timeout, 15.0)
-            request = RunMission(source, str(mission), world, speed, until, seed, params or None, priority,
-                                 give_up_at=time.time() + wait - 0.5)  # the reply must still reach us after it
-            began = time.monotonic()
-            reply: RunReply | None = None
-            try:
-                with _deferred_interrupt() as interrupted:  # a Ctrl-C before `follow` would leave the mission unseen
-                    answer = client.bus.call(run_key(client.cluster), request, timeout=wait)
-                    if not isinstance(answer, RunReply):
-                        fail(f"the controller answered a {type(answer).TYPE}")
-                    if not answer.ok:
-                        for text in answer.diagnostics:
-                            err.print(Text(text))
-                        err.print(Text.assemble(("✗ ", "bold red"), f"{mission}: invalid, not run"))
-                        raise typer.Exit(INVALID)
-                    reply = answer
-                    if detach:
-                        out.print(reply.mission)
-                        return OK
-                    err.print(Text.assemble(("▶ ", "bold green"), f"mission {reply.mission} started on the cluster "
-                                            f"(world {reply.world}, {reply.speed:g}x real time, priority "
-                                            f"{reply.priority})"))
-                if interrupted:
-                    raise KeyboardInterrupt
-                report = watch.follow(reply.mission, until / speed + 120.0, reply.base, began)
-            except KeyboardInterrupt:  # the operator's Ctrl-C stops the mission, not just this command
-                if reply is None:  # before the controller took it: nothing runs
-                    raise
-                report = _stop_on_interrupt(client, watch, reply.mission, reply.base, began)
+            report = _run_and_follow(client, watch, request, wait, detach)
         finally:
             watch.close()
             if trace_out is not None:
                 trace_out.close()
+    if report is None:  # detached
+        return OK
     report.speed, report.on_cluster = speed, True
     if as_json:
         print_json(report.to_dict(), default=str)
@@ -391,6 +360,50 @@ def run(mission: Path = typer.Argument(..., help="The mission file.", show_defau
 
         print_report(report)
     return OK if report.outcome == "success" else MISSION_FAILED
+
+
+def _run_and_follow(client: ClusterClient, watch: _RecordWatch, request: Any, wait: float,
+                    detach: bool) -> DryRun | None:
+    """Submit the mission, then follow it to its end (None when detached: its id is printed). Ctrl-C before the
+    controller took it stops nothing; after, it stops the mission and the report says how it ended."""
+    from drd.daemon.missions import RunReply, run_key
+
+    began = time.monotonic()
+    reply: RunReply | None = None
+    try:
+        with _deferred_interrupt() as interrupted:  # a Ctrl-C before `follow` would leave the mission unseen
+            answer = client.bus.call(run_key(client.cluster), request, timeout=wait)
+            if not isinstance(answer, RunReply):
+                fail(f"the controller answered a {type(answer).TYPE}")
+            if not answer.ok:
+                for text in answer.diagnostics:
+                    err.print(Text(text))
+                err.print(Text.assemble(("✗ ", "bold red"), f"{request.file}: invalid, not run"))
+                raise typer.Exit(INVALID)
+            reply = answer
+            if detach:
+                out.print(reply.mission)
+                return None
+            err.print(Text.assemble(("▶ ", "bold green"), f"mission {reply.mission} started on the cluster (world "
+                                    f"{reply.world}, {reply.speed:g}x real time, priority {reply.priority})"))
+        if interrupted:
+            raise KeyboardInterrupt
+        return watch.follow(reply.mission, request.until / request.speed + 120.0, reply.base, began)
+    except KeyboardInterrupt:  # the operator's Ctrl-C stops the mission, not just this command
+        if reply is None:  # before the controller took it: nothing runs
+            raise
+        return _stop_on_interrupt(client, watch, reply.mission, reply.base, began)
+
+
+def _mission_source(mission: Path) -> str:
+    """The mission's text, once it is known to be a mission file (the controller compiles it)."""
+    if not mission.is_file():
+        fail(f"{mission}: no such file (looked at {mission.absolute()})")
+    _not_a_mission(mission)
+    try:
+        return mission.read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError) as e:
+        fail(f"{mission}: cannot read it: {e}")
 
 
 def _not_a_mission(mission: Path) -> None:
@@ -425,7 +438,7 @@ def _deferred_interrupt() -> Iterator[list[int]]:
         signal.signal(signal.SIGINT, previous)
 
 
-def _stop_on_interrupt(client: ClusterClient, watch: _RecordWatch, mission: str, base: float, began: float) -> Any:
+def _stop_on_interrupt(client: ClusterClient, watch: _RecordWatch, mission: str, base: float, began: float) -> DryRun:
     """Ask the executive to stop `mission`, then wait (bounded) for its last records, so the report says how it
     ended; a second Ctrl-C gives up waiting (the mission is stopped either way)."""
     from drd.executive_messages import MissionCommand
@@ -511,7 +524,7 @@ class _RecordWatch:
         self.client = client
         self.trace = trace  # --trace: the followed mission's records, as docs/trace.md lines
         self.queue: queue.Queue[object] = queue.Queue()
-        self.seen: dict[str, tuple[Any, dict[str, None]]] = {}  # mission -> (its report so far, active paths)
+        self.seen: dict[str, tuple[DryRun, dict[str, None]]] = {}  # mission -> (its report so far, active paths)
 
         def on_record(sample: Any) -> None:
             if isinstance(sample.payload, MissionRecord):
@@ -521,7 +534,7 @@ class _RecordWatch:
     def close(self) -> None:
         self.sub.close()
 
-    def follow(self, mission: str, limit: float, base: float = 0.0, began: float | None = None) -> Any:
+    def follow(self, mission: str, limit: float, base: float = 0.0, began: float | None = None) -> DryRun:
         """Print progress until the mission's `finished` record (or its outcome in the status); the report."""
         import queue
 

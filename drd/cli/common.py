@@ -15,7 +15,7 @@ import sys
 import traceback
 from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, NoReturn
+from typing import IO, TYPE_CHECKING, Any, NoReturn
 
 import typer
 from rich.console import Console
@@ -172,6 +172,14 @@ def shorten(path: str, width: int) -> str:
         return path[:width]
     half = (width - 1) // 2
     return path[:width - 1 - half] + "…" + path[len(path) - half:]
+
+
+def open_trace(trace: Path | None) -> IO[str] | None:
+    """The `--trace` file opened for writing, or a clear exit when it cannot be (None when not asked)."""
+    try:
+        return trace.open("w", encoding="utf-8") if trace is not None else None
+    except OSError as e:
+        fail(f"{trace}: cannot write the trace: {e.strerror or e}")
 
 
 def catalog(extra: Sequence[Path] | None) -> Catalog:

@@ -23,6 +23,7 @@ from drd.cli.common import (
     err,
     fail,
     fail_all,
+    open_trace,
     out,
     print_json,
     render_diagnostics,
@@ -37,11 +38,16 @@ from dsl.statechart import State, Statechart, StateKind
 if TYPE_CHECKING:  # rich's tables and trees, and the exporters, load only for the commands that draw them
     import threading
     from types import FrameType
+    from typing import IO
 
     from rich.tree import Tree
 
+    from drd.dryrun import DryRun, Mission
     from drd.executive import Executive
+    from drd.hosts import Cluster
+    from drd.inject import Injection
     from drd.sim.physics import Simulation
+    from drd.sim.world import World
 
 app = typer.Typer(
     help="Write, check and run robot-team missions.",
@@ -293,52 +299,86 @@ def dry_run(
     is stopped: --until, Ctrl-C, which still prints the report of what ran)."""
     import threading
 
-    from rich.live import Live
-
-    from drd.cli.report import print_report, progress_view
-    from drd.dryrun import Mission, merged, run_many
-    from drd.hosts import HostsError, load_hosts
-    from drd.inject import InjectionError
-    from drd.inject import parse_all as parse_injections
-    from drd.render import SUPPORTED_SUFFIXES
-    from drd.sim.world import WorldError, load_world
-    from dsl.params import ParamError, parse_assignments
+    from drd.dryrun import Mission
 
     cat = catalog(components)
     if len(priority) > len(missions):
         fail(f"{len(priority)} --priority for {len(missions)} mission{'s' if len(missions) > 1 else ''}:"
              " give one per mission, in order")
+    charts = _charts(missions, param, cat)
+    if charts is None:
+        return INVALID
+    cluster, sim_world = _team_files(hosts, world, cat)
+    injections = _injections(inject, cluster, sim_world)
+    if render is not None:
+        from drd.render import SUPPORTED_SUFFIXES
+
+        if render.suffix.lower() not in SUPPORTED_SUFFIXES:
+            fail(f"cannot draw {render.name}: --render writes {', '.join(SUPPORTED_SUFFIXES)}")
+    fh = open_trace(trace)
+    stop = threading.Event()
+    runs = [Mission(chart, priority[i] if i < len(priority) else None) for i, chart in enumerate(charts)]
+    reports = _run_live(runs, cluster, sim_world, cat, fh, stop, not as_json, seed=seed, until=until, speed=speed,
+                        injections=injections)
+    if stop.is_set():  # on stderr, as `missionctl run` says it: stdout keeps the report alone
+        err.print(Text.assemble(("■ ", "bold yellow"), f"Ctrl-C: stopped the dry-run at {reports[0].sim_time:.1f} s"
+                                                       " of sim time; the report says what ran so far"))
+    _show_reports(reports, sim_world, render, as_json)
+    return OK if all(r.outcome == "success" for r in reports) else MISSION_FAILED
+
+
+def _charts(missions: list[Path], param: list[str], cat: Catalog) -> list[Statechart] | None:
+    """The missions compiled, their `--param`s applied; None when one has errors (shown)."""
+    from dsl.params import ParamError, parse_assignments
+
     results = [_compile(mission, cat) for mission in missions]
     if not show_diagnostics(results):
-        return INVALID
+        return None
     charts = []
     for mission, result in zip(missions, results, strict=True):
         if result.statechart is None:
             fail(f"{mission} declares no mission to run", hint="dry-run the file that declares `mission Name {...}`")
         charts.append(result.statechart)
     try:
-        charts = _with_params(charts, parse_assignments(param))
+        return _with_params(charts, parse_assignments(param))
     except ParamError as e:
         fail_all([str(e)])
+
+
+def _team_files(hosts: Path, world: str | None, cat: Catalog) -> tuple[Cluster, World]:
+    """The hosts file and the world it (or `--world`) names, loaded, or a clear exit naming file and key."""
+    from drd.hosts import HostsError, load_hosts
+    from drd.sim.world import WorldError, load_world
+
     hosts_file = _hosts_file(hosts)
     try:
         cluster = load_hosts(hosts_file, cat)
-        sim_world = load_world(_world_file(world, cluster.world, hosts_file))
+        return cluster, load_world(_world_file(world, cluster.world, hosts_file))
     except (HostsError, WorldError) as e:
         fail_all(e.problems)
-    if render is not None and render.suffix.lower() not in SUPPORTED_SUFFIXES:
-        fail(f"cannot draw {render.name}: --render writes {', '.join(SUPPORTED_SUFFIXES)}")
+
+
+def _injections(inject: list[str], cluster: Cluster, sim_world: World) -> list[Injection]:
+    from drd.inject import InjectionError
+    from drd.inject import parse_all as parse_injections
+
     try:
-        injections = parse_injections(inject, hosts={h.name for h in cluster.hosts},
-                                      robots={r.id for r in sim_world.rangers} | set(sim_world.scout_ids),
-                                      doors={d.id for d in sim_world.doors})
+        return parse_injections(inject, hosts={h.name for h in cluster.hosts},
+                                robots={r.id for r in sim_world.rangers} | set(sim_world.scout_ids),
+                                doors={d.id for d in sim_world.doors})
     except InjectionError as e:
         fail_all([str(e)])
-    try:
-        fh = trace.open("w", encoding="utf-8") if trace else None
-    except OSError as e:
-        fail(f"{trace}: cannot write the trace: {e.strerror or e}")
-    live = Live(Text("starting…"), console=err, transient=True) if err.is_terminal and not as_json else None
+
+
+def _run_live(runs: list[Mission], cluster: Cluster, sim_world: World, cat: Catalog, fh: IO[str] | None,
+              stop: threading.Event, live_view: bool, **options: Any) -> list[DryRun]:
+    """`run_many` with a live line on a terminal, the trace flushed each second of sim time, Ctrl-C stopping."""
+    from rich.live import Live
+
+    from drd.cli.report import progress_view
+    from drd.dryrun import run_many
+
+    live = Live(Text("starting…"), console=err, transient=True) if err.is_terminal and live_view else None
 
     def progress(sim: Simulation, executive: Executive) -> None:
         if live is not None:
@@ -346,15 +386,12 @@ def dry_run(
         if fh is not None:
             fh.flush()  # a reader of the trace (`tail -f`) sees the run as it goes, every second of sim time
 
-    stop = threading.Event()
     try:
         if live is not None:
             live.start()
-        runs = [Mission(chart, priority[i] if i < len(priority) else None) for i, chart in enumerate(charts)]
         with _ctrl_c_stops(stop):
             try:
-                reports = run_many(runs, cluster, sim_world, cat, seed=seed, until=until, speed=speed,
-                                   trace=fh, progress=progress, injections=injections, stop=stop)
+                return run_many(runs, cluster, sim_world, cat, trace=fh, progress=progress, stop=stop, **options)
             except ValueError as e:
                 fail_all([str(e)])
     finally:
@@ -362,9 +399,12 @@ def dry_run(
             live.stop()
         if fh is not None:
             fh.close()
-    if stop.is_set():  # on stderr, as `missionctl run` says it: stdout keeps the report alone
-        err.print(Text.assemble(("■ ", "bold yellow"), f"Ctrl-C: stopped the dry-run at {reports[0].sim_time:.1f} s"
-                                                       " of sim time; the report says what ran so far"))
+
+
+def _show_reports(reports: list[DryRun], sim_world: World, render: Path | None, as_json: bool) -> None:
+    from drd.cli.report import print_report
+    from drd.dryrun import merged
+
     if render is not None:
         from drd.render import render as draw
 
@@ -375,7 +415,6 @@ def dry_run(
     else:
         for report in reports:
             print_report(report, several=len(reports) > 1)
-    return OK if all(r.outcome == "success" for r in reports) else MISSION_FAILED
 
 
 def _hosts_file(hosts: Path) -> Path:

@@ -388,7 +388,6 @@ class WorldRun:
         runner = self.runner
         start = time.perf_counter()
         sim_time = max(0.0, self.cycle.sim_time)
-        executive = runner.controller.executive
         try:
             while not self.stopping.is_set():
                 with runner.lock:
@@ -398,34 +397,10 @@ class WorldRun:
                 if runner.lost:
                     runner._lose_robots()
                 with runner.lock:
-                    # the world steps before the cycle's first call (carried by a batch to the simulator host,
-                    # see ComponentRouter.step_first); the executive's clock reads the time it will then have
-                    self.cycle.pending_step = CONTROL_PERIOD
-                    runner.clock.set_sim(sim_time + CONTROL_PERIOD)  # exactly the world's (Simulation.step)
-                    try:
-                        executive.step()
-                    except BaseException:
-                        self.cycle.pending_step = 0.0  # the stop that follows must not step the world
-                        raise
-                    router = next(iter(self.routers.values()))
-                    if self.cycle.pending_step and self.cycle.sim_error is None:  # no call this cycle
-                        try:
-                            router.step_first(None)
-                        except ComponentError:
-                            pass
-                    if self.cycle.sim_error is not None:
-                        self.closed = True
-                        for mid in self._unfinished():
-                            executive.missions[mid].stop(
-                                f"the simulator on {runner.simulator} stopped answering: {self.cycle.sim_error}")
-                        break
-                    sim_time = self.cycle.sim_time
-                    runner.clock.set_sim(sim_time)
-                    now = runner.clock.now()
-                    for mid in self._unfinished():
-                        deadline, until = self.deadlines[mid]
-                        if now >= deadline - 1e-9:
-                            executive.missions[mid].stop(f"sim time limit of {until:g} s reached")
+                    stepped = self._cycle(sim_time)
+                if stepped is None:
+                    break
+                sim_time = stepped
                 runner.flush_gates(self)
                 self._retire_finished()
                 self.cycles += 1
@@ -433,22 +408,57 @@ class WorldRun:
                 if lag > 0:
                     self.stopping.wait(lag)
             else:
-                with runner.lock:
-                    self.closed = True
-                    for mid in self._unfinished():
-                        executive.missions[mid].stop("the controller's daemon is stopping")
+                self._stop_all("the controller's daemon is stopping")
         except Exception:  # never leave a mission hanging silently
             log.exception("world %s: the run loop failed", self.name)
-            with runner.lock:
-                self.closed = True
-                for mid in self._unfinished():
-                    executive.missions[mid].stop("internal error in the controller's run loop (see its log)")
+            self._stop_all("internal error in the controller's run loop (see its log)")
         runner.flush_gates(self)
         self._retire_finished(everyone=True)
         wall = time.perf_counter() - start
         log.info("world %s ended: %.1f s sim in %.2f s wall (%.1fx), %d cycles (%.2f ms each), sim steps not "
                  "carried by a batch %s", self.name, sim_time, wall, sim_time / wall if wall else 0.0, self.cycles,
                  1000 * wall / max(1, self.cycles), self.cycle.steps_alone.as_dict())
+
+    def _cycle(self, sim_time: float) -> float | None:
+        """One control cycle (the runner's lock held): the world's step, the executive's, the time limits. The
+        world's time after it, or None when the simulator stopped answering (every mission is then stopped)."""
+        runner, executive = self.runner, self.runner.controller.executive
+        # the world steps before the cycle's first call (carried by a batch to the simulator host, see
+        # ComponentRouter.step_first); the executive's clock reads the time it will then have
+        self.cycle.pending_step = CONTROL_PERIOD
+        runner.clock.set_sim(sim_time + CONTROL_PERIOD)  # exactly the world's (Simulation.step)
+        try:
+            executive.step()
+        except BaseException:
+            self.cycle.pending_step = 0.0  # the stop that follows must not step the world
+            raise
+        router = next(iter(self.routers.values()))
+        if self.cycle.pending_step and self.cycle.sim_error is None:  # no call this cycle
+            try:
+                router.step_first(None)
+            except ComponentError:
+                pass
+        if self.cycle.sim_error is not None:
+            self.closed = True
+            for mid in self._unfinished():
+                executive.missions[mid].stop(
+                    f"the simulator on {runner.simulator} stopped answering: {self.cycle.sim_error}")
+            return None
+        sim_time = self.cycle.sim_time
+        runner.clock.set_sim(sim_time)
+        now = runner.clock.now()
+        for mid in self._unfinished():
+            deadline, until = self.deadlines[mid]
+            if now >= deadline - 1e-9:
+                executive.missions[mid].stop(f"sim time limit of {until:g} s reached")
+        return sim_time
+
+    def _stop_all(self, reason: str) -> None:
+        """Close this world and stop every mission still running in it, saying why."""
+        with self.runner.lock:
+            self.closed = True
+            for mid in self._unfinished():
+                self.runner.controller.executive.missions[mid].stop(reason)
 
     def _retire_finished(self, everyone: bool = False) -> None:
         """Tell the hosts of each finished mission to retire its instances and processes, and log its figures."""
