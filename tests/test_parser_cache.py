@@ -51,10 +51,25 @@ def test_a_damaged_table_file_is_rebuilt_and_parsing_is_unchanged(tables_dir: Pa
     assert path.stat().st_mtime_ns == rebuilt
 
 
-def test_without_a_cache_directory_nothing_is_written(tmp_path: Path) -> None:
-    parser.cache_tables(None)
-    parser.Parser()
-    assert list(tmp_path.iterdir()) == []
+def test_without_a_cache_directory_nothing_is_written(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """Nowhere: not the temporary folder (where lark's own `cache=True` would write), the cache home or the
+    working directory, all pointed at one folder that must stay empty; the same set-up with a cache directory
+    does write there, so the observation can see a write."""
+    import tempfile
+
+    for var in ("XDG_CACHE_HOME", "HOME", "TMPDIR"):
+        monkeypatch.setenv(var, str(tmp_path))
+    monkeypatch.setattr(tempfile, "tempdir", str(tmp_path))
+    monkeypatch.chdir(tmp_path)
+    try:
+        parser.cache_tables(None)
+        parser.Parser()
+        assert list(tmp_path.rglob("*")) == []
+        parser.cache_tables(str(tmp_path))
+        parser.Parser()
+        assert [p.name for p in tmp_path.iterdir()] != []
+    finally:
+        parser.cache_tables(None)
 
 
 def test_cache_dir_is_private_to_the_user(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
