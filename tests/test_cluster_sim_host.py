@@ -56,3 +56,32 @@ def test_the_corridor_mission_runs_on_the_cluster_as_in_the_dry_run(cluster: Dae
     cycles, alone = int(found[1]), int(found[2])
     # a cycle whose first call is a start (a timer's transition) steps the world alone; the others carry it
     assert cycles > 1000 and alone <= cycles // 10, f"{alone} of {cycles} steps went alone"
+
+
+def test_the_robots_stop_when_the_controller_dies(cluster: DaemonCluster) -> None:
+    """Issue #16: with the controller gone nobody may grant a device, so ranger1's host stops every actuator and
+    retires the instances. Seen from the robot's side: the simulator (on ranger1) reports what the Ranger
+    executes. Last in this module: it kills the controller."""
+    import os
+    import signal
+
+    from cluster_support import eventually
+
+    from drd.sim.service import SimReply, SimRequest
+    from drd.sim.service import key as sim_key
+
+    client = cluster.client(timeout=5.0)
+
+    def executing() -> tuple[float, float]:
+        reply = client.bus.call(sim_key(cluster.name), SimRequest("call", "command", ["ranger1"]), timeout=5.0)
+        assert isinstance(reply, SimReply) and not reply.error, reply
+        v, omega = reply.value
+        return float(v), float(omega)
+
+    r = missionctl(cluster, "run", MISSION, "--speed", "2", "--detach")
+    assert r.returncode == 0, r.stderr[-2000:]
+    eventually(lambda: executing()[0] > 0.1, "the Ranger driving down the corridor", timeout=30.0)
+    os.kill(cluster.pid("controller"), signal.SIGKILL)
+    eventually(lambda: executing() == (0.0, 0.0), "the Ranger stopped by its own host", timeout=10.0)
+    eventually(lambda: "every device stopped, every instance retired" in cluster.log("ranger1"),
+               "ranger1 saying why", timeout=10.0)

@@ -209,3 +209,42 @@ def test_a_redeclared_need_whose_where_the_ancestors_grant_fails_is_a_clear_fail
     (report,), _, _ = dry(cat, REDECLARED.replace("WHERE", 'where ranger.id == "ranger9"'))
     assert report.outcome == "failure"
     assert "ranger" in report.reason and "where" in report.reason and "ranger1" in report.reason
+
+
+def test_an_orphaned_gate_stops_its_device_and_refuses_everyone_until_granted_again() -> None:
+    """What a host does when its controller is lost (`LocalGates.orphan_all`), seen on the driver and the records."""
+    from drd.hw.interfaces import Fence
+    from drd.runtime import records as rec
+    from drd.runtime.ownership import LocalGates, NotHolder
+
+    class Wheels:
+        SETPOINTS = ("set_velocity", "stop")
+        STOP = "stop"
+
+        def __init__(self) -> None:
+            self.fence = Fence("wheels")
+            self.v = 0.0
+
+        def set_velocity(self, v: float, epoch: int | None = None) -> None:
+            self.v = v
+
+        def stop(self, epoch: int | None = None) -> None:
+            self.v = 0.0
+
+    records: list[tuple[str, rec.Record]] = []
+    wheels = Wheels()
+    gates = LocalGates.of({"r1.drive": wheels}, sink=lambda mission, record: records.append((mission, record)))
+    gates.grant("r1.drive", "M-1/M/Go", 3, 0.0)
+    gate = gates.get("r1.drive")
+    assert gate is not None
+    gate.execute(wheels, "M-1/M/Go/Drive", 3, "set_velocity", (0.5,), {}, 1.0)
+    assert wheels.v == 0.5
+    gates.orphan_all(2.0, "controller lost")
+    assert wheels.v == 0.0
+    assert any(isinstance(r, rec.Halted) and r.reason == "controller lost" for _, r in records)
+    with pytest.raises(NotHolder, match="nobody holds the device"):
+        gate.execute(wheels, "M-1/M/Go/Drive", 3, "set_velocity", (0.5,), {}, 3.0)
+    assert wheels.v == 0.0
+    gates.grant("r1.drive", "M-1/M/Go", 4, 4.0)  # a controller grants it again
+    gate.execute(wheels, "M-1/M/Go/Drive", 4, "set_velocity", (0.2,), {}, 5.0)
+    assert wheels.v == 0.2

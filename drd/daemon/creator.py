@@ -203,6 +203,17 @@ class Creator:
         if self._own_pool:
             self.pool.close()
 
+    def controller_lost(self, reason: str) -> None:
+        """The controller is gone (its liveliness token vanished, or its lease ran out): nobody may grant this
+        host's devices any more, so every actuator stops now and refuses commands until a controller grants it
+        again, and every instance here is retired (it would run for a mission nobody executes)."""
+        with self._lock:
+            self._gates.orphan_all(self._now, reason)
+            self.instances.clear()
+            self._retire_all()
+            self._dirty = True
+        log.warning("creator %s: %s: every device stopped, every instance retired", self.host, reason)
+
     @property
     def missions(self) -> list[str]:
         """The missions with instances here."""

@@ -341,6 +341,9 @@ class Daemon:
                     self.controller.host_up(change.host)
             elif change.kind == HostState.DOWN and self.controller is not None:
                 self.controller.host_down(change.host)
+            elif (change.kind == HostState.DOWN and self.creator is not None
+                  and change.host == self.cluster.controller.name):
+                self.creator.controller_lost(f"controller {change.host} lost ({change.detail})")
 
     def _controller_change(self, kind: str, host: str, detail: str) -> None:
         """The controller's news: recorded; a host whose resources left the manager (its lease ran out, so it

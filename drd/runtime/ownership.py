@@ -121,6 +121,12 @@ class DeviceGate:
         if self.commander is not None and under(self.commander, issuer):
             self.halt(at, self.commander, reason)
 
+    def orphan(self, at: float, reason: str) -> None:
+        """Nobody may hold the device any more (its controller is gone): every grant ends and the device stops,
+        so no command passes until a controller grants it again."""
+        self.holders.clear()
+        self.halt(at, self.commander or "/", reason)
+
     def halt(self, at: float, whose: str, reason: str) -> None:
         """Bring the device to its safe stop (when it has one), outside any grant; the setpoint in force ends."""
         self.commander = None
@@ -234,6 +240,11 @@ class LocalGates:
         gate = self.gates.get(device)
         if gate is not None:
             gate.unbind(issuer, at, reason)
+
+    def orphan_all(self, at: float, reason: str) -> None:
+        """Every device here loses every grant and stops (`DeviceGate.orphan`)."""
+        for gate in self.gates.values():
+            gate.orphan(at, reason)
 
 
 class NoGates:
