@@ -74,7 +74,7 @@ class Executive:
     def __init__(self, bus: Bus, clock: Clock, registry: Mapping[str, Callable[[], Component]], *,
                  cluster: str = "local", resources: Iterable[Any] = (), lease: float = 3.0,
                  default_slice: float = 5.0, services: Mapping[str, Any] | None = None, preallocate: bool = False,
-                 gates: Gates | None = None):
+                 gates: Gates | None = None, history: int = 100):
         """`gates`: the devices' gates; by default, gates over the in-process drivers of `services["drivers"]`
         (the dry-run), shared by every mission so that ownership holds across missions."""
         self.bus = bus
@@ -87,6 +87,7 @@ class Executive:
         self.pool = ResourcePool(self.broker)
         self.pool.add(resources, clock.now())
         self.missions: dict[str, Interpreter] = {}
+        self.history = history  # finished missions kept (the oldest finished go first)
         self.guard = ConstraintGuard(self.pool)  # the constraints in force, of every mission
         self.gates: Gates = self._gates(gates)
         self.pool.places = dict(self.services.get("places", {}))  # the world's rooms: `inside(ranger, "n1")`
@@ -120,6 +121,7 @@ class Executive:
         `registry` replaces the executive's own for this mission (a cluster mission's `RemoteRegistry`);
         `priority` ranks the mission against the others sharing the team (1 first)."""
         mid = mission_id or f"{chart.name}-{next(self._ids)}"
+        self.forget_finished()
         if mid in self.missions:
             raise ValueError(f"a mission {mid} is already running")
         if "/" in mid:
@@ -138,6 +140,16 @@ class Executive:
     def step(self) -> None:
         for interp in list(self.missions.values()):
             interp.step()
+        if len(self.missions) > self.history:
+            self.forget_finished()
+
+    def forget_finished(self) -> list[str]:
+        """Drop the oldest finished missions beyond `history` (running ones are never dropped); their ids."""
+        finished = [mid for mid, interp in self.missions.items() if interp.finished]
+        dropped = finished[:max(0, len(finished) - self.history)]
+        for mid in dropped:
+            del self.missions[mid]
+        return dropped
 
     def run(self, advance: Callable[[], None], until: float, *, done: Callable[[], bool] | None = None) -> None:
         """Step until every mission finished (or `done()`), calling `advance` to move time."""

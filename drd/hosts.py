@@ -26,6 +26,9 @@ from dsl.catalog import Catalog, ComponentType, Kind
 from dsl.errors import did_you_mean
 
 DEFAULT_LEASE = 3.0
+#: Finished missions a controller keeps for `status` and `stop` (each is its statechart and its records' facts,
+#: tens of KB): 3,800 kept made a status reply outgrow the transport.
+DEFAULT_HISTORY, MAX_HISTORY = 100, 1000
 _NAME = re.compile(r"[A-Za-z_][A-Za-z0-9_]*", re.ASCII)
 #: Device ids may be dotted (`scout1.wheels`): a robot's own devices are prefixed with its id.
 _DEVICE_ID = re.compile(r"[A-Za-z_]\w*(?:\.[A-Za-z_]\w*)*", re.ASCII)
@@ -58,7 +61,7 @@ SECURITY_KEYS: Mapping[SecurityMode, tuple[str, ...]] = {
     SecurityMode.TLS: ("ca", "cert", "key"),
 }
 _TOP_KEYS = ("cluster", "hosts")
-_CLUSTER_KEYS = ("name", "security", "lease", "placement", "world")
+_CLUSTER_KEYS = ("name", "security", "lease", "placement", "world", "history")
 #: The simulated world when hosts.yaml names none (`sim` drivers need one: worlds/NAME.yaml).
 DEFAULT_WORLD = "corridor"
 _HOST_KEYS = ("endpoint", "roles", "cores", "devices", "robots")
@@ -156,6 +159,7 @@ class Cluster:
     hosts: tuple[Host, ...]
     source: str = "hosts.yaml"
     world: str = DEFAULT_WORLD  # the world its `sim` drivers live in (worlds/NAME.yaml), unless a command says
+    history: int = DEFAULT_HISTORY  # finished missions the controller keeps (status, stop); older ones are dropped
 
     @property
     def controller(self) -> Host:
@@ -244,11 +248,18 @@ class _Parser(ConfigReader):
         lease = self.duration(c["lease"], "cluster.lease") if "lease" in c else DEFAULT_LEASE
         placement = self.placement(c.get("placement", {}), "cluster.placement")
         world = self.name(c["world"], "cluster.world") if "world" in c else DEFAULT_WORLD
+        history = self.history(c["history"], "cluster.history") if "history" in c else DEFAULT_HISTORY
         hosts = tuple(self.host(n, h, p) for n, h, p in self.entries(data.get("hosts", {}), "hosts"))
         if data.get("hosts") == {}:
             self.fail("hosts", "expected at least one host")
         self.check_cluster(hosts)
-        return Cluster(name or "", security, lease, placement, hosts, self.source, world or DEFAULT_WORLD)
+        return Cluster(name or "", security, lease, placement, hosts, self.source, world or DEFAULT_WORLD, history)
+
+    def history(self, value: object, key: str) -> int:
+        if isinstance(value, int) and not isinstance(value, bool) and 1 <= value <= MAX_HISTORY:
+            return value
+        self.fail(key, f"expected a count of finished missions to keep, 1 to {MAX_HISTORY}, got {got(value)}")
+        return DEFAULT_HISTORY
 
     def security(self, value: object, key: str) -> Security:
         data = self.mapping(value, key)

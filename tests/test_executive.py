@@ -77,3 +77,24 @@ def test_missing_implementation_fails_the_state_clearly(catalog: Catalog) -> Non
     ex.run(lambda: clock.advance(0.5), until=5)
     assert ex.missions[mid].outcome == "failure"
     assert "no implementation of component Calibrate" in ex.missions[mid].reason
+
+
+def test_the_executive_keeps_a_bounded_history_of_finished_missions() -> None:
+    """Issue #16: 3,800 finished missions once made a status reply outgrow the transport; the oldest finished go,
+    a running one never does."""
+    from drd.manifests import load_catalog
+
+    cat = load_catalog()
+    clock = SimClock()
+    ex = Executive(LocalNetwork().session("c"), clock, EntryPoints(cat), history=3)
+    quick = compile_text("mission Quick {\n    Wait(duration: 1s)\n}\n", cat, "q.mission").statechart
+    slow = compile_text("mission Slow {\n    Wait(duration: 1h)\n}\n", cat, "s.mission").statechart
+    assert quick is not None and slow is not None
+    ex.submit(slow, "Slow-1")
+    for n in range(1, 8):
+        ex.submit(quick, f"Quick-{n}")
+        for _ in range(15):
+            clock.advance(0.1)
+            ex.step()
+    assert ex.missions["Quick-7"].finished
+    assert list(ex.missions) == ["Slow-1", "Quick-5", "Quick-6", "Quick-7"]  # 3 finished kept, the running one too

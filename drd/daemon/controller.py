@@ -192,7 +192,8 @@ class Controller:
 
         self.mission_clock = SimTimeClock()
         self.executive = Executive(serialized, clock or self.mission_clock, EntryPoints(catalog), cluster=cluster.name,
-                                   resources=host_resources(cluster, me), lease=cluster.lease)
+                                   resources=host_resources(cluster, me), lease=cluster.lease,
+                                   history=cluster.history)
         self.membership = Membership(cluster.lease, {me})
         self._queryable = serialized.serve(self.keys.resources, self._resources)
 
