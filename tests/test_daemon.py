@@ -194,6 +194,12 @@ def test_a_frozen_host_is_seen_down_within_the_lease_and_up_again_when_it_resume
     os.kill(pid, signal.SIGSTOP)
     try:
         eventually(lambda: cluster.states(client)["ranger2"] == "down", "ranger2 to be seen down", STOP_BOUND + 5)
+        began = time.monotonic()  # a client is not held up by the frozen peer (issue #16): it answers, and exits 0
+        r = cluster.missionctl("status", "--json", "--config", str(cluster.hosts_file), "--timeout", "1",
+                               timeout=60)
+        print(f"\nstatus with a frozen peer: {time.monotonic() - began:.2f} s")
+        assert r.returncode == 0, r.stderr[-2000:]
+        assert {h["name"]: h["state"] for h in json.loads(r.stdout)["hosts"]}["ranger2"] == "down"
     finally:
         resumed_at = time.time()
         os.kill(pid, signal.SIGCONT)

@@ -43,6 +43,9 @@ from .base import (
 )
 from .keys import check_key_expr
 
+#: Seconds a bus waits for its zenoh session to close (a frozen peer would hold it 10 s).
+CLOSE_WAIT = 1.0
+
 
 @functools.cache
 def zenoh_version() -> str:
@@ -223,7 +226,19 @@ class ZenohBus(Bus):
                 entity.undeclare()
             except zenoh.ZError:
                 pass  # already undeclared, or the session went first
-        self.session.close()  # type: ignore[no-untyped-call]
+        # zenoh's close waits on every peer (10 s, then ZError, for a frozen one): bounded here, so no command and
+        # no daemon's stop is held up by a peer that does not answer; the session goes with the process anyway
+        closer = threading.Thread(target=self._close_session, name=f"close {self.name}", daemon=True)
+        closer.start()
+        closer.join(CLOSE_WAIT)
+        if closer.is_alive():
+            log.info("bus %s: the session's close still waits on a peer after %g s: going on", self.name, CLOSE_WAIT)
+
+    def _close_session(self) -> None:
+        try:
+            self.session.close()  # type: ignore[no-untyped-call]
+        except zenoh.ZError as e:  # a peer that never answered: nothing left to do
+            log.info("bus %s: closing the session: %s", self.name, e)
 
     def __repr__(self) -> str:
         return f"ZenohBus({self.name!r}{', closed' if self._closed else ''})"
