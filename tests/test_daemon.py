@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import json
 import os
+import subprocess
 import signal
 import threading
 import time
@@ -185,6 +186,25 @@ def test_malformed_messages_at_every_queryable_are_refused_and_cost_no_memory(cl
     log = cluster.log("controller")
     assert log.count("rejected") < 500, "rejections must be logged rate-limited"
     print(f"\n{FLOOD * len(queryables)} malformed requests in {elapsed:.1f} s, RSS {growth / 2**20:+.1f} MB")
+
+
+def test_a_second_controller_for_the_cluster_refuses_to_start(cluster: DaemonCluster, tmp_path: Path) -> None:
+    """Issue #16: exactly one controller acts. A second `drd start --host controller` elsewhere (its own endpoint
+    and run directory, the same cluster) sees the first one's token and refuses, naming it; nothing else changes."""
+    from cluster_support import DRD, ROOT, free_ports
+
+    port = free_ports(1)[0]
+    text = cluster.hosts_file.read_text(encoding="utf-8")
+    first = f"tcp/127.0.0.1:{cluster.ports[0]}"
+    assert first in text
+    other = tmp_path / "hosts.yaml"
+    other.write_text(text.replace(first, f"tcp/127.0.0.1:{port}"), encoding="utf-8")
+    r = subprocess.run([*DRD, "start", "--host", "controller", "--config", str(other), "--run-dir",
+                        str(tmp_path / "run")], cwd=ROOT, capture_output=True, text=True, timeout=60, check=False)
+    assert r.returncode == 2, r.stderr[-2000:]
+    assert "another drd already runs as host controller in cluster" in r.stderr
+    assert "Traceback" not in r.stderr
+    assert cluster.procs["controller"].poll() is None  # the first one runs on
 
 
 def test_a_frozen_host_is_seen_down_within_the_lease_and_up_again_when_it_resumes(cluster: DaemonCluster,

@@ -220,6 +220,9 @@ def _serve(cluster: Cluster, host: str, cat: Catalog, tr: Transport, rd: Path, c
              "check the endpoint in hosts.yaml and, with security, its files")
     finally:
         runfiles.release(rd, info)
+    if daemon.stop_reason.startswith("conflict"):  # met another drd of this host name, which started first
+        fail(f"drd {host} stopped: {daemon.stop_reason.removeprefix('conflict: ')}",
+             hint="host names are unique in a cluster: stop one of them, or start this one as another host")
     return OK
 
 

@@ -55,6 +55,7 @@ from drd.daemon.messages import (
 from drd.daemon.peers import REFUSED, diagnose
 from drd.daemon.security import Transport, describe, transport
 from drd.daemon.view import Change, ClusterView, HostState, runnable_components
+from drd.errors import ConfigurationError
 from drd.hosts import Cluster, Role
 from drd.runtime.clock import Clock
 from drd.trader import TraderError, compile_query
@@ -106,6 +107,10 @@ def open_bus(config: DaemonConfig, tr: Transport) -> Bus:
                     lease_ms=lease_ms, options=dict(tr.options), name=config.host)
 
 
+class HostTaken(ConfigurationError):
+    """Another daemon already runs as this host in this cluster (seen on the bus): this one must not start."""
+
+
 class Daemon:
     """One host's daemon. `run(stop)` serves until `stop` is set; `start`/`step`/`close` for tests."""
 
@@ -141,6 +146,7 @@ class Daemon:
         self._closed = False
         self._controller_clock = controller_clock
         self.stop_reason = "stopped"
+        self._stop: threading.Event | None = None  # the event `run` serves until (set by a conflict too)
 
     @property
     def bus(self) -> Bus:
@@ -159,6 +165,11 @@ class Daemon:
         if self._bus is None:
             self._bus = open_bus(self.config, self.transport)
         bus, keys, me = self.bus, self.keys, self.host
+        if bus.alive(keys.host(me), timeout=1.0):  # before anything is declared: the first one stays in charge
+            raise HostTaken(f"another drd already runs as host {me} in cluster {self.cluster.name} (its token is on "
+                            "the bus): host names are unique in a cluster, and one controller acts",
+                            hint=f"stop that one first (drd stop --host {me} where it runs), or start this one as"
+                                 " another host")
         self._declared += [bus.subscribe(keys.loads, self._on_load), bus.subscribe(keys.announces, self._on_announce)]
         self._serve(keys.ping(me), self._ping, Ping)
         self._serve(keys.status(me), self._status, ViewRequest, type(None))
@@ -200,6 +211,7 @@ class Daemon:
 
     def run(self, stop: threading.Event, ready: Callable[[], object] | None = None) -> None:
         """Start, call `ready()`, then serve until `stop` is set; always closes."""
+        self._stop = stop
         try:
             self.start()
             if ready is not None:
@@ -312,9 +324,14 @@ class Daemon:
         msg, host = sample.payload, _host_of(sample.key)
         if isinstance(msg, Announcement):
             if msg.host == self.host and (msg.pid, msg.started) != (os.getpid(), self.started):
-                with self._lock:  # two daemons claim this host: say so, keep our own view of it
+                newer = (self.started, os.getpid()) > (msg.started, msg.pid)  # the later one gives way
+                with self._lock:  # two daemons claim this host (they met after both started): say so
                     self._record("conflict", self.host, f"another drd (pid {msg.pid}) runs as host {self.host};"
-                                 " host names must be unique in the cluster")
+                                 " host names must be unique in the cluster" + ("; this one, started later, stops"
+                                                                                 if newer else ""))
+                if newer and self._stop is not None:
+                    self.stop_reason = f"conflict: another drd (pid {msg.pid}) runs as host {self.host}"
+                    self._stop.set()
                 return
             self._apply(lambda now: self.view.announce(msg, now, host))
         elif isinstance(msg, Leaving) and msg.host == host:
