@@ -20,7 +20,7 @@ from typing import IO, Any
 from drd.bus import LocalNetwork
 from drd.executive import EntryPoints, Executive
 from drd.explain import Explainer
-from drd.hosts import Cluster
+from drd.hosts import Cluster, Role
 from drd.hw.drivers import HostDrivers, drivers_for
 from drd.inject import Action, Injection
 from drd.runtime import records as rec
@@ -298,6 +298,13 @@ def _inject(inj: Injection, sim: Simulation, executive: Executive, cluster: Clus
         found = [r for r in cluster.resources() if r.host == inj.target]
         executive.add_resources(found)
         what += f": {len(found)} resources joined the manager"
+    elif inj.action is Action.KILL and Role.CONTROLLER in cluster.host(inj.target).roles:
+        # as on a cluster: the hosts stop their robots, and a mission does not outlive its controller (no journal)
+        for interp in executive.missions.values():
+            if not interp.finished:
+                interp.stop(f"the controller ({inj.target}) was lost: every host stopped its robots; the mission cannot "
+                            "resume (no journal yet)")
+        what += ": every mission stopped, every robot with it"
     elif inj.action is Action.KILL:
         robots = [r.id for r in cluster.host(inj.target).robots if r.id in sim.robots]
         for rid in robots:

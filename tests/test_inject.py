@@ -62,6 +62,16 @@ def test_killing_the_host_of_the_camera_fails_the_mission_at_that_time() -> None
     assert "host lost" in ends and report["sim_time"] == pytest.approx(12.0, abs=0.11)
 
 
+def test_killing_the_controller_ends_the_mission_as_on_a_cluster() -> None:
+    """Issue #16: the dry-run predicted success where a cluster loses the mission (no journal yet): now both stop
+    it at that time, and every device the mission held is halted."""
+    code, report, _ = dry_run("missions/corridor_surveillance.mission", "--inject", "kill controller at 30s")
+    assert code == 1 and report["outcome"] == "stopped"
+    assert report["reason"].startswith("the controller (controller) was lost: every host stopped its robots")
+    assert report["sim_time"] == pytest.approx(30.0, abs=0.11)
+    assert all(h["to"] is not None and h["to"] <= 30.1 for h in report["holds"])  # type: ignore[union-attr]
+
+
 def test_a_lost_scout_fails_its_own_instance_not_the_mission() -> None:
     code, report, err = dry_run("missions/corridor_surveillance.mission", "--inject", "lose scout1 at 30s",
                                 "--until", "60")
