@@ -120,7 +120,7 @@ class DaemonCluster:
 
     def pidfile(self, name: str) -> dict[str, object] | None:
         try:
-            data: dict[str, object] = json.loads((self.run_dir / f"{name}.pid").read_text())
+            data: dict[str, object] = json.loads((self.run_dir / self.name / f"{name}.pid").read_text())
         except (OSError, ValueError):
             return None
         return data

@@ -260,7 +260,7 @@ def test_stop_all_stops_every_daemon_cleanly(cluster: DaemonCluster, client: Clu
     for name in ("controller", "ranger2"):
         assert cluster.procs[name].wait(timeout=10) == 0
         assert f"drd {name} stopped" in cluster.log(name)
-    assert list(cluster.run_dir.glob("*.pid")) == []
+    assert list(cluster.run_dir.rglob("*.pid")) == []
     assert "Traceback" not in cluster.log("controller") + cluster.log("ranger2")
 
 
@@ -298,7 +298,7 @@ def test_a_missing_security_file_refuses_to_start(tmp_path: Path, security: str,
         assert r.returncode == 2
         assert missing in r.stderr and str(tmp_path) in r.stderr
         assert "will not start without it" in r.stderr and "Traceback" not in r.stderr
-        assert not (tmp_path / "run" / "controller.pid").exists()
+        assert not list((tmp_path / "run").rglob("*.pid"))
     finally:
         c.close()
 

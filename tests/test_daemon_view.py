@@ -278,12 +278,16 @@ def test_pidfiles_claim_refuse_and_forget_stale_ones(tmp_path: Path, monkeypatch
     assert info.pid == os.getpid() and info.running()
     assert runfiles.mark(tmp_path, info, "running").state == "running"
     stale = runfiles.PidFile(2**22 + 7, "ranger2", "lab", "h", 0.0, 0.0)
-    runfiles.write(runfiles.path_of(tmp_path, "ranger2"), stale)
+    runfiles.write(runfiles.path_of(tmp_path, "lab", "ranger2"), stale)
     assert not stale.running()
     assert runfiles.stop([stale]) == {stale.pid: "not running"}
-    assert [p.name for p, _ in runfiles.pidfiles(tmp_path)] == ["ranger1.pid", "ranger2.pid"]
+    assert [p.relative_to(tmp_path).as_posix() for p, _ in runfiles.pidfiles(tmp_path)] == [
+        "lab/ranger1.pid", "lab/ranger2.pid"]
+    other = runfiles.claim(tmp_path, "ranger1", "other-lab", "elsewhere/hosts.yaml")  # another cluster: no clash
+    assert runfiles.path_of(tmp_path, "other-lab", "ranger1").exists()
+    runfiles.release(tmp_path, other)
     runfiles.release(tmp_path, info)
-    assert not runfiles.path_of(tmp_path, "ranger1").exists()
+    assert not runfiles.path_of(tmp_path, "lab", "ranger1").exists()
     monkeypatch.setenv("DRD_RUN_DIR", str(tmp_path / "env"))
     assert runfiles.run_dir(None) == tmp_path / "env" and runfiles.run_dir(tmp_path) == tmp_path
     monkeypatch.delenv("DRD_RUN_DIR")
@@ -392,3 +396,31 @@ def test_the_daemon_refuses_and_counts_what_it_cannot_use(cluster: Cluster, cata
         assert sum(status.rejected.values()) == 8
     finally:
         daemon.close()
+
+
+def test_drd_stop_never_touches_another_clusters_daemons(tmp_path: Path) -> None:
+    """Issue #17: run files are per cluster, and `drd stop --all` with two clusters here names them and stops none
+    until told which (the pidfiles are stale, so no process is signalled)."""
+    import json
+    import subprocess
+    import sys
+
+    from drd.daemon import runfiles
+
+    for cluster, host in (("lab", "controller"), ("lab", "ranger1"), ("field", "controller")):
+        runfiles.write(runfiles.path_of(tmp_path, cluster, host),
+                       runfiles.PidFile(2**22 + 11, host, cluster, f"{cluster}/hosts.yaml", 0.0, 0.0))
+
+    def drd(*args: str) -> subprocess.CompletedProcess[str]:
+        return subprocess.run([sys.executable, "-m", "drd.cli.drd", *args, "--run-dir", str(tmp_path)],
+                              capture_output=True, text=True, timeout=60, check=False)
+
+    refused = drd("stop", "--all")
+    assert refused.returncode == 2 and "daemons of 2 clusters run here (field, lab): say which" in refused.stderr
+    assert len(list(tmp_path.rglob("*.pid"))) == 3
+    refused = drd("stop", "--host", "controller")
+    assert refused.returncode == 2 and "host controller of 2 clusters" in refused.stderr
+    done = drd("stop", "--all", "--cluster", "lab", "--json")
+    assert done.returncode == 0, done.stderr
+    assert sorted(d["host"] for d in json.loads(done.stdout)["daemons"]) == ["controller", "ranger1"]
+    assert [p.relative_to(tmp_path).as_posix() for p in tmp_path.rglob("*.pid")] == ["field/controller.pid"]

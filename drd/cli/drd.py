@@ -15,7 +15,7 @@ import threading
 import time
 from pathlib import Path
 from types import FrameType
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import typer
 from rich.table import Table
@@ -167,12 +167,12 @@ def start(
     except SecurityError as e:
         fail_all(e.problems, hint="security is configured, so drd will not start without it")
     rd = runfiles.run_dir(run_dir_opt)
-    running = runfiles.read(runfiles.path_of(rd, host))
+    running = runfiles.read(runfiles.path_of(rd, cluster.name, host))
     if running is not None and running.running():
         fail(f"drd for host {host} is already running (pid {running.pid})", hint=f"drd stop --host {host}")
     if detach:
-        return _detach(host, config, rd, log_file or rd / f"{host}.log", load_period, peer_grace, log_level, extra,
-                       as_json)
+        return _detach(host, cluster.name, config, rd, log_file or rd / cluster.name / f"{host}.log", load_period,
+                       peer_grace, log_level, extra, as_json)
     _configure_logging(host, log_file, level)
     return _serve(cluster, host, cat, tr, rd, config, log_file, load_period, peer_grace)
 
@@ -243,7 +243,7 @@ def _configure_logging(host: str, log_file: Path | None, level: int) -> None:
     root.setLevel(level)
 
 
-def _detach(host: str, config: Path, rd: Path, log_file: Path, load_period: float, peer_grace: float,
+def _detach(host: str, cluster: str, config: Path, rd: Path, log_file: Path, load_period: float, peer_grace: float,
             log_level: str, extra: list[Path], as_json: bool = False) -> int:
     """Start the daemon as a new session in the background and wait until it serves (bounded)."""
     from drd.daemon import runfiles
@@ -259,7 +259,7 @@ def _detach(host: str, config: Path, rd: Path, log_file: Path, load_period: floa
         proc = subprocess.Popen(args, stdin=subprocess.DEVNULL, stdout=fh, stderr=fh, start_new_session=True)
     deadline = time.monotonic() + READY_TIMEOUT
     while time.monotonic() < deadline:
-        info = runfiles.read(runfiles.path_of(rd, host))
+        info = runfiles.read(runfiles.path_of(rd, cluster, host))
         if info is not None and info.pid == proc.pid and info.state == "running":
             if as_json:
                 print_json({"host": host, "pid": proc.pid, "log": str(log_file), "state": "running"})
@@ -280,24 +280,26 @@ def _detach(host: str, config: Path, rd: Path, log_file: Path, load_period: floa
 @app.command()
 def stop(
     host: str = typer.Option(None, "--host", help="Stop this host's daemon.", show_default=False),
-    all_: bool = typer.Option(False, "--all", help="Stop every daemon of the run dir."),
+    all_: bool = typer.Option(False, "--all", help="Stop every daemon of one cluster (--cluster, or the only one "
+                                                  "in the run dir)."),
+    cluster: str = typer.Option(None, "--cluster", help="The cluster whose daemons to stop, when the run dir holds "
+                                                        "several.", show_default=False),
     run_dir_opt: Path = RunDirOption,
     timeout: float = typer.Option(10.0, "--timeout", min=0.0, help="Seconds to wait before SIGKILL."),
     as_json: bool = typer.Option(False, "--json", help="Print what was stopped as JSON."),
 ) -> int:
-    """Stop daemons started on this machine: SIGTERM, wait (bounded), then SIGKILL."""
+    """Stop daemons started on this machine: SIGTERM, wait (bounded), then SIGKILL. Only one cluster's: two
+    clusters sharing a machine never stop each other's daemons."""
     from drd.daemon import runfiles
 
     if (host is None) == (not all_):
         fail("give either --host NAME or --all")
     rd = runfiles.run_dir(run_dir_opt)
-    found = runfiles.pidfiles(rd)
-    if host is not None:
-        path = runfiles.path_of(rd, host)
-        found = [(p, i) for p, i in found if p == path]
-        if not found:
-            others = ", ".join(i.host for _, i in runfiles.pidfiles(rd) if i is not None) or "none"
-            fail(f"no drd for host {host} in {rd} (daemons there: {others})")
+    found = _one_cluster([(p, i) for p, i in runfiles.pidfiles(rd) if i is None or host is None or i.host == host],
+                         cluster, host)
+    if host is not None and not found:
+        others = ", ".join(f"{i.host} ({i.cluster})" for _, i in runfiles.pidfiles(rd) if i is not None) or "none"
+        fail(f"no drd for host {host} in {rd} (daemons there: {others})")
     if not found:
         if as_json:
             print_json({"run_dir": str(rd), "daemons": []})
@@ -326,6 +328,19 @@ def stop(
     if as_json:
         print_json({"run_dir": str(rd), "daemons": rows})
     return OK
+
+
+def _one_cluster(found: list[tuple[Path, Any]], cluster: str | None, host: str | None) -> list[tuple[Path, Any]]:
+    """The pidfiles of one cluster: `cluster`, else the only one among `found`; several and none named is refused,
+    naming them (a bare `drd stop` must never stop another cluster's daemons)."""
+    names = sorted({i.cluster for _, i in found if i is not None})
+    if cluster is not None:
+        return [(p, i) for p, i in found if i is not None and i.cluster == cluster]
+    if len(names) > 1:
+        what = f"host {host}" if host else "daemons"
+        fail(f"{what} of {len(names)} clusters run here ({', '.join(names)}): say which", hint=f"drd stop "
+             f"{'--host ' + host if host else '--all'} --cluster {names[0]}", clusters=names)
+    return found
 
 
 @app.command()

@@ -1,4 +1,7 @@
-"""Pidfiles of the daemons running on this machine: `<run dir>/<host>.pid`, JSON.
+"""Pidfiles of the daemons running on this machine: `<run dir>/<cluster>/<host>.pid`, JSON.
+
+Keyed by cluster and host, so two clusters on one machine (two checkouts, a test beside a deployment) never
+refuse or stop each other's daemons; `drd stop --all` stops one cluster's.
 
 The run dir is `--run-dir`, else `$DRD_RUN_DIR`, else `~/.drd/run`. A pidfile records the pid and
 the process's creation time, so a stale file whose pid was reused by another program is never
@@ -61,8 +64,8 @@ class AlreadyRunning(DrdError):
         self.info, self.path = info, path
 
 
-def path_of(directory: Path, host: str) -> Path:
-    return directory / f"{host}.pid"
+def path_of(directory: Path, cluster: str, host: str) -> Path:
+    return directory / cluster / f"{host}.pid"
 
 
 def read(path: Path) -> PidFile | None:
@@ -76,6 +79,7 @@ def read(path: Path) -> PidFile | None:
 
 def write(path: Path, info: PidFile) -> None:
     """Write atomically (a reader never sees half a file)."""
+    path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
     tmp.write_text(json.dumps(asdict(info)), encoding="utf-8")
     os.replace(tmp, path)
@@ -87,8 +91,8 @@ def claim(directory: Path, host: str, cluster: str, config: str, log: str = "") 
     Raises:
         AlreadyRunning: a live daemon holds the pidfile.
     """
-    directory.mkdir(parents=True, exist_ok=True)
-    path = path_of(directory, host)
+    path = path_of(directory, cluster, host)
+    path.parent.mkdir(parents=True, exist_ok=True)
     old = read(path)
     if old is not None and old.pid != os.getpid() and old.running():
         raise AlreadyRunning(old, path)
@@ -100,23 +104,24 @@ def claim(directory: Path, host: str, cluster: str, config: str, log: str = "") 
 
 def mark(directory: Path, info: PidFile, state: str) -> PidFile:
     new = replace(info, state=state)
-    write(path_of(directory, info.host), new)
+    write(path_of(directory, info.cluster, info.host), new)
     return new
 
 
 def release(directory: Path, info: PidFile) -> None:
     """Remove our pidfile (only if it is still ours)."""
-    path = path_of(directory, info.host)
+    path = path_of(directory, info.cluster, info.host)
     current = read(path)
     if current is not None and current.pid == info.pid:
         path.unlink(missing_ok=True)
 
 
 def pidfiles(directory: Path) -> list[tuple[Path, PidFile | None]]:
-    """Every pidfile in the run dir, sorted by host; None for one that cannot be read."""
+    """Every pidfile in the run dir (each cluster's folder, and the top level where older versions wrote them),
+    sorted by cluster then host; None for one that cannot be read."""
     if not directory.is_dir():
         return []
-    return [(p, read(p)) for p in sorted(directory.glob("*.pid"))]
+    return [(p, read(p)) for p in sorted([*directory.glob("*/*.pid"), *directory.glob("*.pid")])]
 
 
 def stop(infos: Sequence[PidFile], timeout: float = 10.0, poll: float = 0.05) -> dict[int, str]:
