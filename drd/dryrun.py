@@ -12,7 +12,7 @@ from __future__ import annotations
 import functools
 import threading
 import time
-from collections.abc import Callable, Collection, Sequence
+from collections.abc import Callable, Collection, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import IO, Any
@@ -23,6 +23,7 @@ from drd.explain import Explainer
 from drd.hosts import Cluster, Role
 from drd.hw.drivers import HostDrivers, drivers_for
 from drd.inject import Action, Injection
+from drd.record import Recorder
 from drd.runtime import records as rec
 from drd.runtime.trace import TraceWriter
 from drd.sim.model import DoorState
@@ -223,13 +224,14 @@ def run_many(missions: Sequence[Mission], cluster: Cluster, world: World, catalo
              until: float = 1800.0, speed: float | None = None, trace: IO[str] | None = None,
              registry: Any = None, progress: Callable[[Simulation, Executive], None] | None = None,
              progress_every: float = 1.0, injections: Sequence[Injection] = (),
-             stop: threading.Event | None = None) -> list[DryRun]:
+             stop: threading.Event | None = None, recorder: Recorder | None = None) -> list[DryRun]:
     """Run missions together on one team until all have ended (or `until` seconds of sim time), one report each.
 
     They share the world, the robots and the one Resource Controller Manager, which ranks their requests by the
     missions' priorities, then their behaviors'. `injections` happen on the way; `trace` gets every mission's
     records, each with its mission's id. Setting `stop` (the operator's Ctrl-C) stops the missions still running
-    between two control cycles, never inside one, and the reports say what ran so far."""
+    between two control cycles, never inside one, and the reports say what ran so far. `recorder` gets every
+    record, the robots' poses each cycle and each run's summary (`drd.record`, an MCAP file)."""
     if not missions:
         raise ValueError("no mission to run")
     problems = check_hosts(world, cluster)
@@ -238,7 +240,7 @@ def run_many(missions: Sequence[Mission], cluster: Cluster, world: World, catalo
     late = {i.target for i in injections if i.action is Action.JOIN}  # hosts whose daemon starts later
     sim, executive = team(cluster, world, catalog, seed=seed, registry=registry, late=late)
     start = time.perf_counter()
-    results = [_submit(executive, m, n, speed, trace) for n, m in enumerate(missions, 1)]
+    results = [_submit(executive, m, n, speed, trace, recorder) for n, m in enumerate(missions, 1)]
     running = [executive.missions[r.mission_id or ""] for r in results]  # the interpreters
     next_progress = 0.0
     pending = sorted(injections)
@@ -251,6 +253,8 @@ def run_many(missions: Sequence[Mission], cluster: Cluster, world: World, catalo
             for result in results:
                 result.injections.append(effect)
         executive.step()
+        if recorder is not None:
+            recorder.poses(sim.time, {rid: (p.x, p.y, p.heading) for rid in sim.robots if (p := sim.pose(rid))})
         if speed:
             lag = sim.time / speed - (time.perf_counter() - start)
             if lag > 0:
@@ -264,18 +268,46 @@ def run_many(missions: Sequence[Mission], cluster: Cluster, world: World, catalo
             interp.stop(why)
     _conclude(results, running, sim, time.perf_counter() - start)
     executive.close()
+    if recorder is not None:
+        recorder.end([summary(r) for r in results], sim.time)
     return results
 
 
-def _submit(executive: Executive, m: Mission, n: int, speed: float | None, trace: IO[str] | None) -> DryRun:
+def _submit(executive: Executive, m: Mission, n: int, speed: float | None, trace: IO[str] | None,
+            recorder: Recorder | None = None) -> DryRun:
     """Start mission number `n` on the executive; its report gathers its records (and the trace gets them)."""
     result = DryRun(m.chart.name, None, "", 0.0, 0.0, speed=speed, priority=m.priority or m.chart.priority)
     mid = f"{m.chart.name}-{n}"
     listeners: list[Callable[[rec.Record], None]] = [result.records.append, functools.partial(facts, result)]
     if trace is not None:
         listeners.append(TraceWriter(trace, mid))
+    if recorder is not None:
+        listeners.append(functools.partial(recorder.record, mid))
     result.mission_id = mid
     executive.submit(m.chart, mid, listeners=listeners, priority=result.priority)
+    return result
+
+
+def summary(r: DryRun) -> dict[str, Any]:
+    """What a recording keeps of a run besides its records, for `rebuilt` to give the same report."""
+    return {"mission": r.mission, "id": r.mission_id, "priority": r.priority, "speed": r.speed,
+            "sim_time": r.sim_time, "wall_time": r.wall_time, "on_cluster": r.on_cluster,
+            "injections": r.injections, "scouts": r.scouts}
+
+
+def rebuilt(run: Mapping[str, Any], records: Sequence[rec.Record]) -> DryRun:
+    """The report of a recorded run, from its records (outcome, timeline, holds, waits, logs, doors, detections)
+    and its summary (times, injections, where the Scouts ended)."""
+    finished = next((r for r in reversed(records) if isinstance(r, rec.Finished)), None)
+    result = DryRun(str(run["mission"]), finished.outcome if finished else None, finished.reason if finished else "",
+                    float(run["sim_time"]), float(run["wall_time"]), speed=run.get("speed"),
+                    on_cluster=bool(run.get("on_cluster")), priority=int(run.get("priority") or 1),
+                    mission_id=str(run.get("id") or ""))
+    for r in records:
+        result.records.append(r)
+        facts(result, r)
+    result.injections = list(run.get("injections") or [])
+    result.scouts = list(run.get("scouts") or [])
     return result
 
 
@@ -302,8 +334,8 @@ def _inject(inj: Injection, sim: Simulation, executive: Executive, cluster: Clus
         # as on a cluster: the hosts stop their robots, and a mission does not outlive its controller (no journal)
         for interp in executive.missions.values():
             if not interp.finished:
-                interp.stop(f"the controller ({inj.target}) was lost: every host stopped its robots; the mission cannot "
-                            "resume (no journal yet)")
+                interp.stop(f"the controller ({inj.target}) was lost: every host stopped its robots; the mission "
+                            "cannot resume (no journal yet)")
         what += ": every mission stopped, every robot with it"
     elif inj.action is Action.KILL:
         robots = [r.id for r in cluster.host(inj.target).robots if r.id in sim.robots]

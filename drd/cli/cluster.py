@@ -604,16 +604,7 @@ class _RecordWatch:
 
 def _record(msg: Any, rec: Any, base: float = 0.0) -> Any:
     """A `MissionRecord` from the wire as the runtime's record (what the dry-run's report reads)."""
-    kinds = {cls.__name__.lower(): cls for cls in vars(rec).values()
-             if isinstance(cls, type) and issubclass(cls, rec.Record) and cls is not rec.Record}
-    cls = kinds.get(msg.kind)
-    if cls is None:
-        return None
-    data = {k: tuple(v) if isinstance(v, list) else v for k, v in msg.data.items()}
-    try:
-        return cls(at=round(msg.at - base, 6), path=msg.path, **data)
-    except TypeError:
-        return None
+    return rec.from_dict({**msg.data, "kind": msg.kind, "at": round(msg.at - base, 6), "path": msg.path})
 
 
 # --- rendering -------------------------------------------------------------------------------------

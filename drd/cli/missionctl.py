@@ -46,6 +46,7 @@ if TYPE_CHECKING:  # rich's tables and trees, and the exporters, load only for t
     from drd.executive import Executive
     from drd.hosts import Cluster
     from drd.inject import Injection
+    from drd.record import Recorder
     from drd.sim.physics import Simulation
     from drd.sim.world import World
 
@@ -288,6 +289,8 @@ def dry_run(
                                show_default=False),
     render: Path = typer.Option(None, "--render", help="Draw the world, trajectories, placed Scouts and detections "
                                                        "to this image (.png, .svg or .pdf).", show_default=False),
+    record: Path = typer.Option(None, "--record", help="Record the run as an MCAP file (records, robots' poses; "
+                                                       "`missionctl replay` reads it back).", show_default=False),
     inject: list[str] = typer.Option([], "--inject", help="A failure at a sim time, e.g. 'kill ranger1 at 90s', "
                                                           "'lose scout3 at 2min', 'block door_n3 at 60s' "
                                                           "(also close/open DOOR). Repeatable.", show_default=False),
@@ -310,16 +313,12 @@ def dry_run(
         return INVALID
     cluster, sim_world = _team_files(hosts, world, cat)
     injections = _injections(inject, cluster, sim_world)
-    if render is not None:
-        from drd.render import SUPPORTED_SUFFIXES
-
-        if render.suffix.lower() not in SUPPORTED_SUFFIXES:
-            fail(f"cannot draw {render.name}: --render writes {', '.join(SUPPORTED_SUFFIXES)}")
+    _check_render(render)
     fh = open_trace(trace)
     stop = threading.Event()
     runs = [Mission(chart, priority[i] if i < len(priority) else None) for i, chart in enumerate(charts)]
     reports = _run_live(runs, cluster, sim_world, cat, fh, stop, not as_json, seed=seed, until=until, speed=speed,
-                        injections=injections)
+                        injections=injections, recorder=_recorder(record))
     if stop.is_set():  # on stderr, as `missionctl run` says it: stdout keeps the report alone
         err.print(Text.assemble(("■ ", "bold yellow"), f"Ctrl-C: stopped the dry-run at {reports[0].sim_time:.1f} s"
                                                        " of sim time; the report says what ran so far"))
@@ -401,11 +400,52 @@ def _run_live(runs: list[Mission], cluster: Cluster, sim_world: World, cat: Cata
             fh.close()
 
 
-def _show_reports(reports: list[DryRun], sim_world: World, render: Path | None, as_json: bool) -> None:
+def _check_render(render: Path | None) -> None:
+    """Refuse, before anything runs, a picture in a format the renderer cannot write."""
+    from drd.render import SUPPORTED_SUFFIXES
+
+    if render is not None and render.suffix.lower() not in SUPPORTED_SUFFIXES:
+        fail(f"cannot draw {render.name}: --render writes {', '.join(SUPPORTED_SUFFIXES)}")
+
+
+def _recorder(path: Path | None) -> Recorder | None:
+    """The `--record` file's writer, or a clear exit when it cannot be written."""
+    if path is None:
+        return None
+    from drd.record import Recorder, RecordingError
+
+    try:
+        return Recorder(path)
+    except RecordingError as e:
+        fail(str(e))
+
+
+@app.command()
+def replay(
+    file: Path = typer.Argument(..., help="A recording made with `dry-run --record`.", show_default=False),
+    as_json: bool = typer.Option(False, "--json", help="Print the report as JSON (a list for several missions)."),
+) -> int:
+    """Print the report of a recorded run, rebuilt from the recording alone (no hosts file, no world): exit 0 if
+    every mission succeeded, 1 if one did not."""
+    from drd.dryrun import rebuilt
+    from drd.record import RecordingError, read
+
+    if not file.is_file():
+        fail(f"{file}: no such file (looked at {file.absolute()})")
+    try:
+        recording = read(file)
+    except RecordingError as e:
+        fail(str(e))
+    reports = [rebuilt(run, recording.records.get(str(run.get("id")), [])) for run in recording.runs]
+    _show_reports(reports, None, None, as_json)
+    return OK if all(r.outcome == "success" for r in reports) else MISSION_FAILED
+
+
+def _show_reports(reports: list[DryRun], sim_world: World | None, render: Path | None, as_json: bool) -> None:
     from drd.cli.report import print_report
     from drd.dryrun import merged
 
-    if render is not None:
+    if render is not None and sim_world is not None:
         from drd.render import render as draw
 
         draw(sim_world, reports[0] if len(reports) == 1 else merged(reports), render)

@@ -174,3 +174,24 @@ def plain(value: Any) -> Any:
     if isinstance(value, bool | int | float | str):
         return value
     return getattr(value, "id", None) or str(value)
+
+
+def from_dict(data: Mapping[str, Any]) -> Record | None:
+    """The record a trace line (or a recording's message) describes, `to_dict`'s inverse; None for a kind this
+    version does not know (a newer writer's). Lists become tuples, as the records hold them; extra keys (the
+    `mission` of a trace line) are ignored."""
+    cls = _KINDS.get(str(data.get("kind", "")))
+    if cls is None:
+        return None
+    values: dict[str, Any] = {name: tuple(v) if isinstance(v := data.get(name), list) else v
+                              for name in _fields(cls) if name in data}
+    try:
+        return cls(**values)
+    except TypeError:  # a field missing: not a record of this version
+        return None
+
+
+#: Record classes by kind, from this module's names: `dataclass(slots=True)` makes a new class, so the
+#: subclasses Python remembers of `Record` include the replaced originals.
+_KINDS: dict[str, type[Record]] = {cls.__name__.lower(): cls for cls in list(globals().values())
+                                   if isinstance(cls, type) and issubclass(cls, Record) and cls is not Record}

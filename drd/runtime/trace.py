@@ -13,6 +13,17 @@ def _default(value: Any) -> Any:
     return getattr(value, "id", None) or str(value)
 
 
+def trace_line(record: Record, mission: str = "", exact: bool = False) -> str:
+    """One record as a trace line (`docs/trace.md`), also a recording's message (`drd.record`, `exact`: its time
+    unrounded, so that a replay computes the very durations the run did)."""
+    data = record.to_dict()
+    if not exact:
+        data["at"] = round(data["at"], 6)  # float steps (0.1 s ten times) would read 0.9999999999999999
+    if mission:
+        data["mission"] = mission
+    return json.dumps(data, default=_default, separators=(",", ":"))
+
+
 class TraceWriter:
     """Attach with `interpreter.attach(TraceWriter(fh, mission))`; each record becomes one line, with the mission
     it belongs to (several missions may write one file). The format is `docs/trace.md`."""
@@ -24,11 +35,7 @@ class TraceWriter:
         self.count = 0
 
     def __call__(self, record: Record) -> None:
-        data = record.to_dict()
-        data["at"] = round(data["at"], 6)  # float steps (0.1 s ten times) would read 0.9999999999999999
-        if self.mission:
-            data["mission"] = self.mission
-        self.out.write(json.dumps(data, default=_default, separators=(",", ":")) + "\n")
+        self.out.write(trace_line(record, self.mission) + "\n")
         self.count += 1
         if self.count % self.flush_every == 0:
             self.out.flush()

@@ -1,0 +1,63 @@
+"""`dry-run --record run.mcap` and `missionctl replay run.mcap` (issue #13, first part): the recording is an MCAP
+file any MCAP reader opens (here the `mcap` library's own reader), with sim-time log times and Foxglove's frame
+transforms, and a replay rebuilds the very report the run printed, from the recording alone."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+from mcap.reader import make_reader
+
+ROOT = Path(__file__).resolve().parents[1]
+MISSIONCTL = [sys.executable, "-c", "from drd.cli.missionctl import main; main()"]
+CORRIDOR = ROOT / "missions" / "corridor_surveillance.mission"
+
+
+def missionctl(*args: str, cwd: Path) -> subprocess.CompletedProcess[str]:
+    return subprocess.run([*MISSIONCTL, *args], cwd=cwd, capture_output=True, text=True, timeout=300, check=False)
+
+
+def test_a_replay_prints_the_report_the_run_printed(tmp_path: Path) -> None:
+    run = missionctl("dry-run", str(CORRIDOR), "--config", str(ROOT / "hosts.yaml"), "--inject",
+                     "lose scout1 at 40s", "--record", "run.mcap", "--trace", "run.jsonl", "--json", cwd=tmp_path)
+    assert run.returncode in (0, 1), run.stderr[-2000:]
+    (tmp_path / "elsewhere").mkdir()  # no hosts file, no world: the recording alone
+    replay = missionctl("replay", str(tmp_path / "run.mcap"), "--json", cwd=tmp_path / "elsewhere")
+    assert replay.returncode == run.returncode, replay.stderr[-2000:]
+    assert json.loads(replay.stdout) == json.loads(run.stdout)
+    text_run = missionctl("replay", str(tmp_path / "run.mcap"), cwd=tmp_path / "elsewhere")
+    assert text_run.stdout.startswith("mission CorridorSurveillance  ")
+
+
+def test_the_recording_is_plain_mcap_with_sim_time_and_foxglove_transforms(tmp_path: Path) -> None:
+    run = missionctl("dry-run", str(CORRIDOR), "--config", str(ROOT / "hosts.yaml"), "--until", "20", "--record",
+                     "run.mcap", "--trace", "run.jsonl", cwd=tmp_path)
+    assert run.returncode == 1, run.stderr[-2000:]  # stopped at --until
+    trace = [json.loads(line) for line in (tmp_path / "run.jsonl").read_text().splitlines()]
+    with (tmp_path / "run.mcap").open("rb") as fh:
+        reader = make_reader(fh)
+        summary = reader.get_summary()
+        assert summary is not None
+        topics = {c.topic: c for c in summary.channels.values()}
+        assert topics["/drd/tf"].message_encoding == "protobuf"
+        assert summary.schemas[topics["/drd/tf"].schema_id].name == "foxglove.FrameTransforms"
+        records, tf_times = [], []
+        for _schema, channel, message in reader.iter_messages():
+            if channel.topic == "/drd/records":
+                records.append(json.loads(message.data))
+                assert message.log_time == max(0, int(round(records[-1]["at"] * 1e9)))  # sim time, in ns
+                records[-1]["at"] = round(records[-1]["at"], 6)  # exact in the recording, rounded in a trace
+            elif channel.topic == "/drd/tf":
+                tf_times.append(message.log_time)
+    assert records == trace  # every record, as the trace has it
+    assert len(tf_times) == 200 and tf_times == sorted(tf_times) and tf_times[-1] == 20_000_000_000
+
+
+def test_a_file_that_is_not_a_recording_is_refused_clearly(tmp_path: Path) -> None:
+    (tmp_path / "x.mcap").write_bytes(b"not an mcap file at all")
+    done = missionctl("replay", "x.mcap", cwd=tmp_path)
+    assert done.returncode == 2 and "x.mcap: cannot read it as a drd recording" in done.stderr
+    assert "Traceback" not in done.stderr
