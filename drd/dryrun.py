@@ -290,7 +290,8 @@ def _submit(executive: Executive, m: Mission, n: int, speed: float | None, trace
 
 def summary(r: DryRun) -> dict[str, Any]:
     """What a recording keeps of a run besides its records, for `rebuilt` to give the same report."""
-    return {"mission": r.mission, "id": r.mission_id, "priority": r.priority, "speed": r.speed,
+    return {"mission": r.mission, "id": r.mission_id, "records": r.mission_id or r.mission,  # their mission key
+            "priority": r.priority, "speed": r.speed,
             "sim_time": r.sim_time, "wall_time": r.wall_time, "on_cluster": r.on_cluster,
             "injections": r.injections, "scouts": r.scouts}
 

@@ -92,6 +92,21 @@ def test_params_set_the_missions_variables_on_the_controller(cluster: DaemonClus
     assert r.returncode == 2 and "ok is a bool, and 'maybe' is not one" in r.stderr, r.stderr
 
 
+def test_a_cluster_run_records_and_replays_to_the_same_report(cluster: DaemonCluster, tmp_path: Path) -> None:
+    """`missionctl run --record` (issue #13): the records the client followed, replayed without any cluster."""
+    mission = tmp_path / "short.mission"
+    mission.write_text("mission Short {\n    start -> first\n    Wait(duration: 2s) as first\n"
+                       "    Wait(duration: 1s) as second\n    first -> second\n}\n")
+    r = missionctl(cluster, "run", str(mission), "--speed", "10", "--record", str(tmp_path / "run.mcap"), "--json")
+    assert r.returncode == 0, r.stderr[-2000:]
+    replay = subprocess.run([*MISSIONCTL, "replay", str(tmp_path / "run.mcap"), "--json"], cwd=tmp_path,
+                            capture_output=True, text=True, timeout=60, check=False)
+    assert replay.returncode == 0, replay.stderr[-2000:]
+    ran, replayed = json.loads(r.stdout), json.loads(replay.stdout)
+    assert replayed == ran
+    assert [row["path"] for row in replayed["timeline"]] == ["Short", "Short/first", "Short/second"]
+
+
 def test_detach_then_status_shows_the_active_states_then_stop(cluster: DaemonCluster) -> None:
     r = missionctl(cluster, "run", MISSION, "--detach", "--speed", "5")
     assert r.returncode == 0, r.stderr

@@ -25,7 +25,19 @@ from rich.text import Text
 from typer.core import TyperCommand
 from typer.models import CommandInfo, OptionInfo
 
-from drd.cli.common import INVALID, OK, duration_text, err, fail, fail_all, open_trace, out, print_json, shorten
+from drd.cli.common import (
+    INVALID,
+    OK,
+    duration_text,
+    err,
+    fail,
+    fail_all,
+    open_recorder,
+    open_trace,
+    out,
+    print_json,
+    shorten,
+)
 
 if TYPE_CHECKING:
     from rich.console import RenderableType
@@ -33,6 +45,7 @@ if TYPE_CHECKING:
 
     from drd.daemon.client import ClusterClient
     from drd.dryrun import DryRun
+    from drd.record import Recorder
 
 from drd.cli.options import ConfigOption, ConnectOption, JsonOption, TimeoutOption
 
@@ -322,6 +335,8 @@ def run(mission: Path = typer.Argument(..., help="The mission file.", show_defau
         trace: Path | None = typer.Option(None, "--trace", show_default=False,
                                    help="Write every record of the mission as JSON lines to this file"
                                         " (docs/trace.md)."),
+        record: Path | None = typer.Option(None, "--record", show_default=False,
+                                    help="Record the mission's records as an MCAP file (`missionctl replay`)."),
         detach: bool = typer.Option(False, "--detach", "-d", help="Print the mission id and return at once."),
         as_json: bool = typer.Option(False, "--json", help="Print the report as JSON."),
         timeout: float = TimeoutOption) -> int:
@@ -329,6 +344,7 @@ def run(mission: Path = typer.Argument(..., help="The mission file.", show_defau
     2 if it is invalid. A mission started while others run joins them: they share the team by priority."""
     from drd.cli.common import MISSION_FAILED
     from drd.daemon.missions import RunMission
+    from drd.dryrun import summary
     from dsl.params import ParamError, parse_assignments
 
     source = _mission_source(mission)
@@ -336,14 +352,15 @@ def run(mission: Path = typer.Argument(..., help="The mission file.", show_defau
         params = parse_assignments(param)
     except ParamError as e:
         fail(str(e))
-    if trace is not None and detach:
-        fail("--trace needs the records as they come: it cannot be used with --detach")
-    trace_out = open_trace(trace)
+    if (trace is not None or record is not None) and detach:
+        fail(f"{'--trace' if trace is not None else '--record'} needs the records as they come: it cannot be used "
+             "with --detach")
+    trace_out, recorder = open_trace(trace), open_recorder(record)
     wait = max(timeout, 15.0)
     request = RunMission(source, str(mission), world, speed, until, seed, params or None, priority,
                          give_up_at=time.time() + wait - 0.5)  # the reply must still reach us after it
     with cluster_client(config, connect, timeout) as client:
-        watch = _RecordWatch(client, trace_out)
+        watch = _RecordWatch(client, trace_out, recorder)
         try:
             report = _run_and_follow(client, watch, request, wait, detach)
         finally:
@@ -353,6 +370,8 @@ def run(mission: Path = typer.Argument(..., help="The mission file.", show_defau
     if report is None:  # detached
         return OK
     report.speed, report.on_cluster = speed, True
+    if recorder is not None:
+        recorder.end([summary(report)], report.sim_time)
     if as_json:
         print_json(report.to_dict(), default=str)
     else:
@@ -516,13 +535,14 @@ class _RecordWatch:
     #: Seconds between progress lines (and between asking the executive how the mission is).
     every = 1.0
 
-    def __init__(self, client: ClusterClient, trace: IO[str] | None = None) -> None:
+    def __init__(self, client: ClusterClient, trace: IO[str] | None = None, recorder: Recorder | None = None) -> None:
         import queue
 
         from drd.executive_messages import MissionRecord
 
         self.client = client
         self.trace = trace  # --trace: the followed mission's records, as docs/trace.md lines
+        self.recorder = recorder  # --record: the same records, into an MCAP file
         self.queue: queue.Queue[object] = queue.Queue()
         self.seen: dict[str, tuple[DryRun, dict[str, None]]] = {}  # mission -> (its report so far, active paths)
 
@@ -533,6 +553,8 @@ class _RecordWatch:
 
     def close(self) -> None:
         self.sub.close()
+        if self.recorder is not None and self.recorder.closed is False and not self.seen:
+            self.recorder.close()  # nothing followed (refused, or an error): an empty but valid file
 
     def follow(self, mission: str, limit: float, base: float = 0.0, began: float | None = None) -> DryRun:
         """Print progress until the mission's `finished` record (or its outcome in the status); the report."""
@@ -596,6 +618,8 @@ class _RecordWatch:
             self.trace.write(json.dumps(line, separators=(",", ":"), default=str) + "\n")
         r = _record(msg, rec, base)
         if r is not None:
+            if self.recorder is not None:
+                self.recorder.record(msg.mission, r)
             result.records.append(r)
             facts(result, r)
             result.sim_time = max(result.sim_time, r.at)

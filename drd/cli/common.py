@@ -24,6 +24,7 @@ from rich.text import Text
 from drd.errors import DrdError
 
 if TYPE_CHECKING:  # the mission language loads only for the commands that use it
+    from drd.record import Recorder
     from dsl import Compiled
     from dsl.catalog import Catalog
     from dsl.errors import Diagnostic
@@ -180,6 +181,19 @@ def open_trace(trace: Path | None) -> IO[str] | None:
         return trace.open("w", encoding="utf-8") if trace is not None else None
     except OSError as e:
         fail(f"{trace}: cannot write the trace: {e.strerror or e}")
+
+
+def open_recorder(path: Path | None) -> Recorder | None:
+    """The `--record` file's writer (`drd.record`), or a clear exit when it cannot be written (None when not
+    asked)."""
+    if path is None:
+        return None
+    from drd.record import Recorder, RecordingError
+
+    try:
+        return Recorder(path)
+    except RecordingError as e:
+        fail(str(e))
 
 
 def catalog(extra: Sequence[Path] | None) -> Catalog:

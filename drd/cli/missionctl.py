@@ -23,6 +23,7 @@ from drd.cli.common import (
     err,
     fail,
     fail_all,
+    open_recorder,
     open_trace,
     out,
     print_json,
@@ -46,7 +47,6 @@ if TYPE_CHECKING:  # rich's tables and trees, and the exporters, load only for t
     from drd.executive import Executive
     from drd.hosts import Cluster
     from drd.inject import Injection
-    from drd.record import Recorder
     from drd.sim.physics import Simulation
     from drd.sim.world import World
 
@@ -318,7 +318,7 @@ def dry_run(
     stop = threading.Event()
     runs = [Mission(chart, priority[i] if i < len(priority) else None) for i, chart in enumerate(charts)]
     reports = _run_live(runs, cluster, sim_world, cat, fh, stop, not as_json, seed=seed, until=until, speed=speed,
-                        injections=injections, recorder=_recorder(record))
+                        injections=injections, recorder=open_recorder(record))
     if stop.is_set():  # on stderr, as `missionctl run` says it: stdout keeps the report alone
         err.print(Text.assemble(("■ ", "bold yellow"), f"Ctrl-C: stopped the dry-run at {reports[0].sim_time:.1f} s"
                                                        " of sim time; the report says what ran so far"))
@@ -408,18 +408,6 @@ def _check_render(render: Path | None) -> None:
         fail(f"cannot draw {render.name}: --render writes {', '.join(SUPPORTED_SUFFIXES)}")
 
 
-def _recorder(path: Path | None) -> Recorder | None:
-    """The `--record` file's writer, or a clear exit when it cannot be written."""
-    if path is None:
-        return None
-    from drd.record import Recorder, RecordingError
-
-    try:
-        return Recorder(path)
-    except RecordingError as e:
-        fail(str(e))
-
-
 @app.command()
 def replay(
     file: Path = typer.Argument(..., help="A recording made with `dry-run --record`.", show_default=False),
@@ -436,7 +424,7 @@ def replay(
         recording = read(file)
     except RecordingError as e:
         fail(str(e))
-    reports = [rebuilt(run, recording.records.get(str(run.get("id")), [])) for run in recording.runs]
+    reports = [rebuilt(run, recording.records.get(str(run.get("records")), [])) for run in recording.runs]
     _show_reports(reports, None, None, as_json)
     return OK if all(r.outcome == "success" for r in reports) else MISSION_FAILED
 
