@@ -69,6 +69,13 @@ class Unplaceable:
 Decision = Placed | Unplaceable
 
 
+def with_more(view: HostView, component: str, n: int = 1) -> HostView:
+    """The view with `n` more instances of `component`: placements made since the host last reported, so that
+    several placed in one cycle spread instead of all going to the host that looked emptiest."""
+    running = {**view.running, component: view.running.get(component, 0) + n}
+    return HostView(view.name, view.cpu, view.memory, view.instances + n, view.up, view.devices, running, view.cores)
+
+
 def required_devices(component: ComponentType) -> frozenset[str]:
     """The device types a host must have: an RC's own type, an ARC's part types; none for the others."""
     if component.kind is Kind.RC:
@@ -186,4 +193,4 @@ def _explain(host: HostView, weights: Placement, total: float, preferred: bool) 
 
 
 __all__ = ["INSTANCE_SCALE", "PREFER_BONUS", "Decision", "HostView", "Placed", "Unplaceable", "check_params",
-           "place", "refusals", "required_devices", "running_count", "score", "view_of"]
+           "place", "refusals", "required_devices", "running_count", "score", "view_of", "with_more"]

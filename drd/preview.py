@@ -16,7 +16,7 @@ from typing import Any
 
 from drd.explain import Explainer
 from drd.hosts import Cluster, Role
-from drd.placement import HostView, Placed, place, view_of
+from drd.placement import Placed, place, view_of, with_more
 from drd.runtime import records as rec
 from drd.sim.world import World
 from dsl.catalog import Catalog, ComponentType, Kind
@@ -92,7 +92,7 @@ class _Placer:
                          affinity=self.workers)
         if not isinstance(decision, Placed):
             return None, decision.reason
-        self.views[decision.host] = _one_more(self.views[decision.host], component.name)
+        self.views[decision.host] = with_more(self.views[decision.host], component.name)
         return decision.host, "placement: " + "; ".join(decision.reasons[:1])
 
 
@@ -175,9 +175,3 @@ def _ancestor(path: str, state_id: str, states: Mapping[str, State]) -> str | No
         if state.id == state_id and (path == candidate or path.startswith((candidate + "/", candidate + "["))):
             return candidate
     return None
-
-
-def _one_more(view: HostView, component: str) -> HostView:
-    """The host's view with one more instance of `component`, so the next placement spreads as the daemon's."""
-    running = {**view.running, component: view.running.get(component, 0) + 1}
-    return HostView(view.name, view.cpu, view.memory, view.instances + 1, view.up, view.devices, running, view.cores)

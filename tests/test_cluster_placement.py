@@ -24,12 +24,27 @@ STARTED = re.compile(r"mission Pause-\d+ started")
 @pytest.fixture(scope="module")
 def cluster(tmp_path_factory: pytest.TempPathFactory) -> Iterator[DaemonCluster]:
     # corridor_hosts keeps the simulator on the controller: we kill a worker, not the world
-    with serving_cluster(tmp_path_factory.mktemp("cluster_placement"), NAMES, corridor_hosts) as c:
+    # placement by instances alone: on one machine every host reports the same, noisy, CPU load
+    with serving_cluster(tmp_path_factory.mktemp("cluster_placement"), NAMES, lambda c: corridor_hosts(c).replace(
+            "placement: {cpu: 1.0, memory: 0.5, instances: 0.2}", "placement: {cpu: 0, memory: 0, instances: 1}")) as c:
         yield c
 
 
 def placements(c: DaemonCluster) -> list[str]:
     return PLACED.findall(c.log("controller"))
+
+
+def test_movable_components_started_in_one_cycle_spread_over_the_workers(cluster: DaemonCluster,
+                                                                         tmp_path: Path) -> None:
+    """Issue #15: the hosts' reports lag a cycle's placements, so two started together went to one host."""
+    mission = tmp_path / "pair.mission"
+    mission.write_text("mission Pair {\n    parallel all {\n        Wait(duration: 2s) as a\n"
+                       "        Wait(duration: 2s) as b\n    }\n}\n")
+    before = len(placements(cluster))
+    r = cluster.missionctl("run", str(mission), "--config", str(cluster.hosts_file), "--speed", "8", "--json",
+                           timeout=90)
+    assert r.returncode == 0, r.stderr[-2000:]
+    assert sorted(placements(cluster)[before:]) == ["ranger1", "spare"]
 
 
 def test_a_movable_component_goes_to_a_worker_and_moves_when_its_host_is_killed(cluster: DaemonCluster,

@@ -44,6 +44,8 @@ log = logging.getLogger("drd.daemon.missions")
 CONTROL_PERIOD = 0.1
 #: Seconds a Creator or the simulator may take to answer one call before its host counts as lost.
 CALL_TIMEOUT = 1.0
+#: Seconds a placement counts on its host before the host's own announcements (its instances) show it.
+RECENT_PLACEMENT = 3.0
 
 
 @message("drd.mission.run", 3)
@@ -133,6 +135,7 @@ class MissionRunner:
         self.sim_service = sim_service
         self.host_down = host_down
         self.host_views = host_views
+        self._recent: list[tuple[float, str, str]] = []  # (when, host, component) of placements not yet reported
         self.resource_hosts = {r.id: r.host for r in cluster.resources() if r.host}
         self.simulator = next((h.name for h in cluster.hosts if Role.SIMULATOR in h.roles), None)
         # the devices' gates are on their hosts: every mission's grants reach them through these
@@ -305,16 +308,21 @@ class MissionRunner:
         """The host for one more instance of a movable component (`drd.placement.place` over the Component
         Database's view of the hosts), or ComponentError naming every refused host and why. The hosts with the
         `worker` role take them (every host when none has it): the controller keeps its cycles for the mission."""
-        from drd.placement import Placed, place
+        from drd.placement import Placed, place, with_more
 
         ct = self.catalog.get(component)
         if ct is None or self.host_views is None:
             raise ComponentError(f"{component} is not in the controller's catalog")
         workers = [h.name for h in self.cluster.hosts if Role.WORKER in h.roles]
-        decision = place(ct, self.host_views(), self.cluster.placement, params=params, exclude=exclude,
-                         affinity=workers or None)
+        now = time.monotonic()
+        self._recent = [p for p in self._recent if now - p[0] < RECENT_PLACEMENT]
+        views = self.host_views()
+        for _at, host, name in self._recent:  # not yet in the hosts' reports: counted, so a cycle's starts spread
+            views = [with_more(v, name) if v.name == host else v for v in views]
+        decision = place(ct, views, self.cluster.placement, params=params, exclude=exclude, affinity=workers or None)
         if not isinstance(decision, Placed):
             raise ComponentError(decision.reason)
+        self._recent.append((now, decision.host, component))
         log.info("placement: %s on %s (%s)", component, decision.host, "; ".join(decision.reasons))
         return decision.host
 
