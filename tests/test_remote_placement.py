@@ -33,6 +33,7 @@ class Hosts:
         self.calls: list[tuple[str, str]] = []
         self.dead: set[str] = set()
         self.asked: list[frozenset[str]] = []
+        self.failing: set[str] = set()  # hosts whose Creator answers a start with an error
         self.queryables = {host: bus.serve(f"drd/t/host/{host}/creator", self._creator(host)) for host in serving}
 
     def _creator(self, host: str) -> Any:
@@ -41,7 +42,9 @@ class Hosts:
             calls = msg.calls if isinstance(msg, ComponentBatch) else [msg]
             assert all(isinstance(c, ComponentCall) for c in calls)
             self.calls += [(host, c.op) for c in calls if isinstance(c, ComponentCall)]
-            replies = [ComponentReply(status="running" if c.op == "step" else "") for c in calls]
+            replies = [ComponentReply(status="running" if c.op == "step" else "",
+                                      error="Wait failed to start here: no worker" if host in self.failing
+                                      and c.op == "start" else "") for c in calls]
             return ComponentBatchReply(replies) if isinstance(msg, ComponentBatch) else replies[0]
         return serve
 
@@ -80,6 +83,17 @@ def test_a_host_that_does_not_answer_the_start_is_excluded_and_the_next_one_trie
     assert hosts.asked == [frozenset(), frozenset({"a"})]
     assert hosts.calls == [("b", "start")]
     assert "a" not in comp.router.gone, "a slow start excludes a from this placement only, not from the mission"
+
+
+def test_a_host_whose_start_fails_is_excluded_and_the_next_one_tried() -> None:
+    """Issue #15: a start that fails there (rather than timing out) is retried on the next host by policy."""
+    hosts = Hosts(LocalBus(), ["a", "b"], ["a", "b"])
+    hosts.failing.add("a")
+    comp, _ = movable(hosts)
+    comp.start()
+    assert comp.host == "b"
+    assert hosts.asked == [frozenset(), frozenset({"a"})]
+    assert hosts.calls == [("a", "start"), ("b", "start")]
 
 
 def test_hosts_that_timed_out_in_this_mission_are_not_offered_again() -> None:

@@ -15,7 +15,8 @@ component would have done.
 A component with no device needs is *movable*. With a placer (`ComponentRouter.place`, the Load Balancer's
 policy over the hosts that are up, `drd.placement`), its `start` goes to the host the policy picks; a host that
 does not register it within `START_TIMEOUT` (every `start` may take that long: a first start on a host may
-load the component's module) is excluded and the next best is tried (`PLACE_TRIES` hosts in all). When its
+load the component's module), or whose start fails, is excluded and the next best is tried (`PLACE_TRIES`
+hosts in all). When its
 host is lost later, the instance is started again on another host before its next call: its code state is lost,
 but the mission sees the same component go on (it gets its parameters and inputs again
 with every call). Without a placer (the router of a test), a movable component runs right here, in the
@@ -501,14 +502,14 @@ class RemoteComponent(Component):
         place = self.router.place
         assert place is not None
         path, tried = self._ctx.path, set(avoid)
-        last: HostDown | None = None
+        last: ComponentError | None = None
         for _ in range(PLACE_TRIES):
             self.host = None
             # hosts that timed out in this mission are left out (down ones the policy refuses itself)
             self.host = place(self.name, self._params, frozenset(tried | self.router.gone))  # or ComponentError
             try:
                 self._call("start", params=self._params, bindings={}, rank=self._rank)
-            except HostDown as e:
+            except ComponentError as e:  # it did not answer, or the start failed there: the next host by policy
                 tried.add(self.host)
                 last = e
                 continue
