@@ -240,6 +240,8 @@ def run_many(missions: Sequence[Mission], cluster: Cluster, world: World, catalo
     late = {i.target for i in injections if i.action is Action.JOIN}  # hosts whose daemon starts later
     sim, executive = team(cluster, world, catalog, seed=seed, registry=registry, late=late)
     start = time.perf_counter()
+    if recorder is not None:
+        recorder.scene(world)
     results = [_submit(executive, m, n, speed, trace, recorder) for n, m in enumerate(missions, 1)]
     running = [executive.missions[r.mission_id or ""] for r in results]  # the interpreters
     next_progress = 0.0

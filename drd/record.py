@@ -4,6 +4,8 @@ Written with the Foxglove SDK (its MCAP writer and standard schemas), read back 
 (Foxglove, `ros2 bag`, PlotJuggler, the `mcap` CLI) opens it. Message log times are sim time. Channels:
 
 - `/drd/records`: every trace record, JSON (`docs/trace.md`: `kind`, `at`, `path`, its fields, `mission`);
+- `/drd/world`: `foxglove.SceneUpdate`, once at the start: the walls, each door (its colour its state) and each
+  room's name, in the `world` frame;
 - `/drd/tf`: `foxglove.FrameTransforms`, each robot's pose in the `world` frame, every control cycle;
 - `/drd/runs`: one JSON message per mission when the run ends: what the records cannot say (its id, priority,
   speed, wall time, the injections, where each placed Scout ended), so `replay` rebuilds the same report.
@@ -24,8 +26,9 @@ from typing import Any
 from drd.errors import ConfigurationError
 from drd.runtime import records as rec
 from drd.runtime.trace import trace_line
+from drd.sim.model import World
 
-RECORDS, TF, RUNS = "/drd/records", "/drd/tf", "/drd/runs"
+RECORDS, TF, RUNS, WORLD = "/drd/records", "/drd/tf", "/drd/runs", "/drd/world"
 #: The version of this layout, in the file's metadata (`drd` record `format`).
 FORMAT = "drd-run-1"
 
@@ -43,7 +46,7 @@ class Recorder:
 
     def __init__(self, path: Path) -> None:
         import foxglove
-        from foxglove.channels import FrameTransformsChannel
+        from foxglove.channels import FrameTransformsChannel, SceneUpdateChannel
 
         self.path = path
         self.context = foxglove.Context()  # this run's own: nothing global, several recorders may coexist
@@ -51,10 +54,47 @@ class Recorder:
             self.writer = foxglove.open_mcap(str(path), allow_overwrite=True, context=self.context)
         except Exception as e:  # the SDK's own errors: a folder that does not exist, no permission
             raise RecordingError(f"{path}: cannot write the recording: {e}") from e
-        self.records = foxglove.Channel(RECORDS, message_encoding="json", context=self.context)
-        self.runs = foxglove.Channel(RUNS, message_encoding="json", context=self.context)
+        self.records = foxglove.Channel(RECORDS, message_encoding="json", context=self.context,
+                                        schema=_json_schema(foxglove, "drd.Record", RECORD_SCHEMA))
+        self.runs = foxglove.Channel(RUNS, message_encoding="json", context=self.context,
+                                     schema=_json_schema(foxglove, "drd.Run", RUN_SCHEMA))
         self.tf = FrameTransformsChannel(TF, context=self.context)
+        self.world = SceneUpdateChannel(WORLD, context=self.context)
         self.closed = False
+
+    def scene(self, world: World) -> None:
+        """The world as a scene at time 0: walls, doors (green open, orange closed, red blocked), room names."""
+        from foxglove.messages import (
+            Color,
+            LinePrimitive,
+            LinePrimitiveLineType,
+            Point3,
+            Pose,
+            Quaternion,
+            SceneEntity,
+            SceneUpdate,
+            TextPrimitive,
+            Vector3,
+        )
+
+        def line(points: list[tuple[float, float]], color: Color, width: float) -> LinePrimitive:
+            return LinePrimitive(type=LinePrimitiveLineType.LineList, thickness=width, scale_invariant=False,
+                                 points=[Point3(x=x, y=y, z=0.0) for x, y in points], color=color)
+
+        flat = Quaternion(x=0.0, y=0.0, z=0.0, w=1.0)
+        doors = {"open": Color(r=0.2, g=0.7, b=0.3, a=1.0), "closed": Color(r=0.95, g=0.6, b=0.1, a=1.0),
+                 "blocked": Color(r=0.85, g=0.15, b=0.15, a=1.0)}
+        walls = [p for w in world.walls for p in ((w.a[0], w.a[1]), (w.b[0], w.b[1]))]
+        entities = [SceneEntity(frame_id="world", id="walls", lines=[line(walls, Color(r=0.3, g=0.3, b=0.35, a=1.0),
+                                                                           0.08)])]
+        entities += [SceneEntity(frame_id="world", id=f"door/{d.id}",
+                                 lines=[line([(d.a[0], d.a[1]), (d.b[0], d.b[1])], doors[d.state.value], 0.12)])
+                     for d in world.doors]
+        entities += [SceneEntity(frame_id="world", id=f"room/{r.id}", texts=[TextPrimitive(
+            pose=Pose(position=Vector3(x=(r.x0 + r.x1) / 2, y=(r.y0 + r.y1) / 2, z=0.0), orientation=flat),
+            billboard=True, font_size=0.4, scale_invariant=False, color=Color(r=0.1, g=0.1, b=0.1, a=1.0),
+            text=r.id)]) for r in world.rooms]
+        self.world.log(SceneUpdate(entities=entities), log_time=0)
 
     def record(self, mission: str, r: rec.Record) -> None:
         self.records.log(trace_line(r, mission, exact=True), log_time=_ns(r.at))
@@ -84,6 +124,18 @@ class Recorder:
 
 def _default(value: Any) -> Any:
     return getattr(value, "id", None) or str(value)
+
+
+#: The JSON schemas of the two JSON channels (named, so a viewer lists `drd.Record`, not an anonymous schema).
+RECORD_SCHEMA = {"type": "object", "required": ["kind", "at", "path", "mission"], "properties": {
+    "kind": {"type": "string"}, "at": {"type": "number"}, "path": {"type": "string"}, "mission": {"type": "string"}}}
+RUN_SCHEMA = {"type": "object", "required": ["format", "mission", "records", "sim_time"], "properties": {
+    "format": {"type": "string"}, "mission": {"type": "string"}, "records": {"type": "string"},
+    "sim_time": {"type": "number"}, "wall_time": {"type": "number"}}}
+
+
+def _json_schema(foxglove: Any, name: str, schema: dict[str, Any]) -> Any:
+    return foxglove.Schema(name=name, encoding="jsonschema", data=json.dumps(schema).encode())
 
 
 @dataclass

@@ -44,6 +44,10 @@ def test_the_recording_is_plain_mcap_with_sim_time_and_foxglove_transforms(tmp_p
         topics = {c.topic: c for c in summary.channels.values()}
         assert topics["/drd/tf"].message_encoding == "protobuf"
         assert summary.schemas[topics["/drd/tf"].schema_id].name == "foxglove.FrameTransforms"
+        assert summary.schemas[topics["/drd/world"].schema_id].name == "foxglove.SceneUpdate"
+        assert summary.schemas[topics["/drd/records"].schema_id].name == "drd.Record"
+        counts = {summary.channels[c].topic: n for c, n in summary.statistics.channel_message_counts.items()}
+        assert counts["/drd/world"] == 1 and counts["/drd/runs"] == 1
         records, tf_times = [], []
         for _schema, channel, message in reader.iter_messages():
             if channel.topic == "/drd/records":
