@@ -153,27 +153,25 @@ class Explainer:
         return iter(self.records[:self._cut()])
 
     def still_active(self) -> list[dict[str, Any]]:
-        active: dict[str, float] = {}
-        suspended: set[str] = set()
-        waiting = {w["path"] for w in self.waiting()}
-        for r in self._replay():
-            if isinstance(r, rec.Entered):
-                active[r.path] = r.at
+        """The leaves active when the run was stopped (before the stop's own shutdown), each with its state."""
+        return _active(self._replay(), {w["path"] for w in self.waiting()})
+
+    def active_now(self) -> list[dict[str, Any]]:
+        """The leaves active after the last record (a replay `--at` gives the records up to that time)."""
+        return _active(iter(self.records), {w["path"] for w in self.waiting_now()})
+
+    def holds_now(self) -> dict[str, dict[str, str]]:
+        """What each behavior holds after the last record (need -> unit, robots and devices alike)."""
+        holds: dict[str, dict[str, str]] = {}
+        for r in self.records:
+            if isinstance(r, rec.Granted):
+                holds[r.path] = dict(r.resources)
+            elif isinstance(r, rec.Released):
+                gone = set(r.resources)
+                holds[r.path] = {k: v for k, v in holds.get(r.path, {}).items() if v not in gone}
             elif isinstance(r, rec.Exited):
-                active.pop(r.path, None)
-                suspended.discard(r.path)
-            elif isinstance(r, rec.Suspended):
-                suspended.add(r.path)
-            elif isinstance(r, rec.Resumed):
-                suspended.discard(r.path)
-
-        def state(path: str) -> str:
-            if path in waiting:
-                return "waiting"
-            frozen = any(path == s or path.startswith((s + "/", s + "[")) for s in suspended)
-            return "suspended" if frozen else "running"
-
-        return [{"path": p, "since": round(active[p], 6), "state": state(p)} for p in _leaves(active)]
+                holds.pop(r.path, None)
+        return {path: held for path, held in holds.items() if held}
 
     def waiting(self) -> list[dict[str, Any]]:
         """Who waited when the run was stopped (before the stop's own shutdown), and behind whom."""
@@ -182,6 +180,30 @@ class Explainer:
     def waiting_now(self) -> list[dict[str, Any]]:
         """Who waits after the last record, and behind whom (a preview's records end at start)."""
         return _waiting(iter(self.records))
+
+
+def _active(records: Iterator[rec.Record], waiting: set[str]) -> list[dict[str, Any]]:
+    """The leaves active after `records`, each `running`, `waiting` (for resources) or `suspended` (preempted)."""
+    active: dict[str, float] = {}
+    suspended: set[str] = set()
+    for r in records:
+        if isinstance(r, rec.Entered):
+            active[r.path] = r.at
+        elif isinstance(r, rec.Exited):
+            active.pop(r.path, None)
+            suspended.discard(r.path)
+        elif isinstance(r, rec.Suspended):
+            suspended.add(r.path)
+        elif isinstance(r, rec.Resumed):
+            suspended.discard(r.path)
+
+    def state(path: str) -> str:
+        if path in waiting:
+            return "waiting"
+        frozen = any(path == s or path.startswith((s + "/", s + "[")) for s in suspended)
+        return "suspended" if frozen else "running"
+
+    return [{"path": p, "since": round(active[p], 6), "state": state(p)} for p in _leaves(active)]
 
 
 def _waiting(records: Iterator[rec.Record]) -> list[dict[str, Any]]:

@@ -16,6 +16,7 @@ last chunk.
 
 from __future__ import annotations
 
+import bisect
 import json
 import math
 from collections.abc import Sequence
@@ -140,22 +141,39 @@ def _json_schema(foxglove: Any, name: str, schema: dict[str, Any]) -> Any:
 
 @dataclass
 class Recording:
-    """What a recording holds, read back: each mission's records and its run summary."""
+    """What a recording holds, read back: each mission's records, its run summary, and each robot's track
+    (sim time, x, y, heading), decoded from the Foxglove transforms with `mcap_protobuf`."""
 
     records: dict[str, list[rec.Record]] = field(default_factory=dict)
     runs: list[dict[str, Any]] = field(default_factory=list)
+    tracks: dict[str, list[tuple[float, float, float, float]]] = field(default_factory=dict)
+
+    def pose(self, robot: str, at: float) -> tuple[float, float, float] | None:
+        """Where `robot` was at sim time `at` (its last recorded pose then), or None before its first."""
+        track = self.tracks.get(robot, [])
+        i = bisect.bisect_right([t for t, *_ in track], at + 1e-9)
+        return None if i == 0 else track[i - 1][1:]
 
 
 def read(path: Path) -> Recording:
     """Read a recording written by `Recorder` (RecordingError naming the file when it is not one)."""
     from mcap.exceptions import McapError
     from mcap.reader import make_reader
+    from mcap_protobuf.decoder import DecoderFactory
 
     out = Recording()
     try:
         with path.open("rb") as fh:
             for _schema, channel, message in make_reader(fh).iter_messages(topics=[RECORDS, RUNS]):
                 _take(out, channel.topic, message.data)
+            fh.seek(0)  # the transforms: protobuf, decoded with the schema the file carries
+            reader = make_reader(fh, decoder_factories=[DecoderFactory()])
+            for _schema, _channel, message, decoded in reader.iter_decoded_messages(topics=[TF]):
+                for t in decoded.transforms:
+                    h = 2 * math.atan2(t.rotation.z, t.rotation.w)
+                    heading = math.atan2(math.sin(h), math.cos(h))  # in (-pi, pi]
+                    out.tracks.setdefault(t.child_frame_id, []).append(
+                        (message.log_time / 1e9, t.translation.x, t.translation.y, heading))
     except (OSError, McapError, ValueError) as e:
         raise RecordingError(f"{path}: cannot read it as a drd recording: {e}") from e
     if not out.runs:
@@ -174,4 +192,21 @@ def _take(out: Recording, topic: str, data: bytes) -> None:
         if run.get("format") != FORMAT:
             raise ValueError(f"a run summary of format {run.get('format')!r}, not {FORMAT}")
         out.runs.append(run)
-    # /drd/tf is for viewers (protobuf, Foxglove's schema): a replay's report does not need the tracks
+
+
+def state_at(recording: Recording, at: float) -> dict[str, Any]:
+    """The run at sim time `at`: each mission's active leaves (running, waiting or suspended), what each behavior
+    holds and who waits behind whom, from its records up to then; and where each robot was."""
+    from drd.explain import Explainer
+
+    missions = []
+    for run in recording.runs:
+        upto = [r for r in recording.records.get(str(run.get("records")), []) if r.at <= at + 1e-9]
+        ex = Explainer(upto)
+        ended = next((r for r in reversed(upto) if isinstance(r, rec.Finished)), None)
+        missions.append({"mission": run.get("mission"), "id": run.get("id") or run.get("records"),
+                         "outcome": ended.outcome if ended else None, "active": ex.active_now(),
+                         "holds": ex.holds_now(), "waiting": ex.waiting_now()})
+    robots = {rid: {"x": round(p[0], 3), "y": round(p[1], 3), "heading": round(p[2], 4)}
+              for rid in sorted(recording.tracks) if (p := recording.pose(rid, at)) is not None}
+    return {"at": at, "missions": missions, "robots": robots}

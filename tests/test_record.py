@@ -9,6 +9,7 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
 from mcap.reader import make_reader
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -65,3 +66,30 @@ def test_a_file_that_is_not_a_recording_is_refused_clearly(tmp_path: Path) -> No
     done = missionctl("replay", "x.mcap", cwd=tmp_path)
     assert done.returncode == 2 and "x.mcap: cannot read it as a drd recording" in done.stderr
     assert "Traceback" not in done.stderr
+
+
+def test_replay_at_shows_the_mission_and_every_robot_at_that_time(tmp_path: Path) -> None:
+    run = missionctl("dry-run", str(CORRIDOR), "--config", str(ROOT / "hosts.yaml"), "--until", "30", "--record",
+                     "run.mcap", cwd=tmp_path)
+    assert run.returncode == 1, run.stderr[-2000:]
+
+    def at(when: str) -> dict[str, object]:
+        done = missionctl("replay", "run.mcap", "--at", when, "--json", cwd=tmp_path)
+        assert done.returncode == 0, done.stderr
+        state: dict[str, object] = json.loads(done.stdout)
+        return state
+
+    start, later = at("0.1"), at("10s")
+    robots0, robots10 = start["robots"], later["robots"]
+    assert isinstance(robots0, dict) and isinstance(robots10, dict)
+    assert set(robots0) == {"ranger1", *(f"scout{i}" for i in range(1, 7))}
+    assert robots0["ranger1"]["x"] == pytest.approx(1.0, abs=0.1)  # the world's spawn point
+    assert robots10["ranger1"]["x"] > robots0["ranger1"]["x"] + 1  # it drove east along the corridor
+    [mission] = later["missions"]  # type: ignore[misc]
+    assert mission["outcome"] is None
+    assert any(row["path"].endswith("/FindNewDoor/FollowCorridor") and row["state"] == "running"
+               for row in mission["active"])
+    assert any(held.get("ranger") == "ranger1" for held in mission["holds"].values())  # someone drives it
+    assert at("1h")["missions"][0]["outcome"] == "stopped"  # type: ignore[index]
+    refused = missionctl("replay", "run.mcap", "--at", "soon", cwd=tmp_path)
+    assert refused.returncode == 2 and "expected a time such as 90s" in refused.stderr

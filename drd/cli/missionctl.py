@@ -400,6 +400,21 @@ def _run_live(runs: list[Mission], cluster: Cluster, sim_world: World, cat: Cata
             fh.close()
 
 
+def _seconds(text: str, option: str) -> float:
+    """A time given on the command line: a duration as the language writes it (`90s`, `2min`) or seconds."""
+    from dsl.ast import parse_duration
+
+    seconds = parse_duration(text)
+    if seconds is None:
+        try:
+            seconds = float(text)
+        except ValueError:
+            fail(f"{option} {text!r}: expected a time such as 90s, 2min or 120")
+    if not (seconds >= 0 and seconds < float("inf")):
+        fail(f"{option} {text!r}: expected a time of 0 or more")
+    return seconds
+
+
 def _check_render(render: Path | None) -> None:
     """Refuse, before anything runs, a picture in a format the renderer cannot write."""
     from drd.render import SUPPORTED_SUFFIXES
@@ -411,6 +426,9 @@ def _check_render(render: Path | None) -> None:
 @app.command()
 def replay(
     file: Path = typer.Argument(..., help="A recording made with `dry-run --record`.", show_default=False),
+    at: str = typer.Option(None, "--at", show_default=False,
+                           help="Show the run at this sim time instead (90s, 2min): each mission's active behaviors, "
+                                "holds and waits, and where each robot was."),
     as_json: bool = typer.Option(False, "--json", help="Print the report as JSON (a list for several missions)."),
 ) -> int:
     """Print the report of a recorded run, rebuilt from the recording alone (no hosts file, no world): exit 0 if
@@ -424,6 +442,13 @@ def replay(
         recording = read(file)
     except RecordingError as e:
         fail(str(e))
+    if at is not None:
+        from drd.cli.report import print_state
+        from drd.record import state_at
+
+        state = state_at(recording, _seconds(at, "--at"))
+        print_json(state) if as_json else print_state(state)
+        return OK
     reports = [rebuilt(run, recording.records.get(str(run.get("records")), [])) for run in recording.runs]
     _show_reports(reports, None, None, as_json)
     return OK if all(r.outcome == "success" for r in reports) else MISSION_FAILED

@@ -3,6 +3,7 @@ preview of the start. Pure rendering of the data the run produced, so every comm
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -205,3 +206,29 @@ def print_preview(p: Preview, hosts_file: Path, root: str, console: Console | No
         console.print(Text.assemble(("cannot hold: ", "bold red"), problem))
     if not p.problems:
         console.print(Text.assemble(("✓ ", "bold green"), "every need at start is granted or waits behind a holder"))
+
+
+def print_state(state: dict[str, Any], console: Console | None = None) -> None:
+    """`replay --at`: the run at one instant, each mission's active behaviors, holds and waits, then the robots."""
+    from rich.table import Table
+
+    console = console or out
+    console.print(Text.assemble(("at ", "bold"), f"{state['at']:.1f} s of sim time"))
+    for m in state["missions"]:
+        root = str(m["mission"])
+        head = Text.assemble(("mission ", "bold"), str(m["id"]))
+        if m["outcome"]:
+            head.append(f"  {m['outcome']} (ended)", style="dim")
+        console.print(head)
+        for row in m["active"]:
+            console.print(f"  {shorten(_relative(row['path'], root), 60)}  {row['state']} since {row['since']:.1f} s")
+        for path, held in m["holds"].items():
+            units = ", ".join(f"{k}={v}" for k, v in held.items() if "." not in k)
+            console.print(Text.assemble(("  holds ", "dim"), f"{shorten(_relative(path, root), 50)}: {units}"))
+    if state["robots"]:
+        table = Table(title="robots", title_justify="left")
+        for col in ("robot", "x", "y", "heading"):
+            table.add_column(col)
+        for rid, p in state["robots"].items():
+            table.add_row(rid, f"{p['x']:.2f}", f"{p['y']:.2f}", f"{math.degrees(p['heading']):.0f}°")
+        console.print(table)
