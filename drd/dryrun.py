@@ -23,7 +23,7 @@ from drd.explain import Explainer
 from drd.hosts import Cluster, Role
 from drd.hw.drivers import HostDrivers, drivers_for
 from drd.inject import Action, Injection
-from drd.record import Recorder
+from drd.record import INTRUDER, Recorder
 from drd.runtime import records as rec
 from drd.runtime.trace import TraceWriter
 from drd.sim.model import DoorState
@@ -256,7 +256,8 @@ def run_many(missions: Sequence[Mission], cluster: Cluster, world: World, catalo
                 result.injections.append(effect)
         executive.step()
         if recorder is not None:
-            recorder.poses(sim.time, {rid: (p.x, p.y, p.heading) for rid in sim.robots if (p := sim.pose(rid))})
+            recorder.poses(sim.time, {**{rid: (p.x, p.y, p.heading) for rid in sim.robots if (p := sim.pose(rid))},
+                                      **{INTRUDER + iid: (x, y, 0.0) for iid, (x, y) in sim.intruders().items()}})
         if speed:
             lag = sim.time / speed - (time.perf_counter() - start)
             if lag > 0:

@@ -6,7 +6,8 @@ Written with the Foxglove SDK (its MCAP writer and standard schemas), read back 
 - `/drd/records`: every trace record, JSON (`docs/trace.md`: `kind`, `at`, `path`, its fields, `mission`);
 - `/drd/world`: `foxglove.SceneUpdate`, once at the start: the walls, each door (its colour its state) and each
   room's name, in the `world` frame;
-- `/drd/tf`: `foxglove.FrameTransforms`, each robot's pose in the `world` frame, every control cycle;
+- `/drd/tf`: `foxglove.FrameTransforms`, each robot's pose in the `world` frame every control cycle, and each
+  intruder's (frame `intruder/<id>`);
 - `/drd/runs`: one JSON message per mission when the run ends: what the records cannot say (its id, priority,
   speed, wall time, the injections, where each placed Scout ended), so `replay` rebuilds the same report.
 
@@ -30,6 +31,9 @@ from drd.runtime.trace import trace_line
 from drd.sim.model import World
 
 RECORDS, TF, RUNS, WORLD = "/drd/records", "/drd/tf", "/drd/runs", "/drd/world"
+WORLD_ATTACHMENT = "world.yaml"
+#: The frame of an intruder (a person walking through the world, not a robot): `intruder/<id>`.
+INTRUDER = "intruder/"
 #: The version of this layout, in the file's metadata (`drd` record `format`).
 FORMAT = "drd-run-1"
 
@@ -64,7 +68,12 @@ class Recorder:
         self.closed = False
 
     def scene(self, world: World) -> None:
-        """The world as a scene at time 0: walls, doors (green open, orange closed, red blocked), room names."""
+        """The world as a scene at time 0: walls, doors (green open, orange closed, red blocked), room names; and
+        its file as the attachment `world.yaml`, so a replay can draw the run without it."""
+        source = Path(world.source)
+        if source.is_file():
+            self.writer.attach(log_time=0, create_time=0, name=WORLD_ATTACHMENT, media_type="application/yaml",
+                               data=source.read_bytes())
         from foxglove.messages import (
             Color,
             LinePrimitive,
@@ -147,6 +156,14 @@ class Recording:
     records: dict[str, list[rec.Record]] = field(default_factory=dict)
     runs: list[dict[str, Any]] = field(default_factory=list)
     tracks: dict[str, list[tuple[float, float, float, float]]] = field(default_factory=dict)
+    world: bytes | None = None  # the world file the run used (`world.yaml` attachment), if it was a file
+
+    def load_world(self, name: str) -> World | None:
+        """The recorded world (its problems name `name`), or None when the recording has none."""
+        from drd.config import load_yaml
+        from drd.sim.world import parse_world
+
+        return None if self.world is None else parse_world(load_yaml(self.world.decode("utf-8")), name)
 
     def pose(self, robot: str, at: float) -> tuple[float, float, float] | None:
         """Where `robot` was at sim time `at` (its last recorded pose then), or None before its first."""
@@ -166,6 +183,8 @@ def read(path: Path) -> Recording:
         with path.open("rb") as fh:
             for _schema, channel, message in make_reader(fh).iter_messages(topics=[RECORDS, RUNS]):
                 _take(out, channel.topic, message.data)
+            fh.seek(0)
+            out.world = next((a.data for a in make_reader(fh).iter_attachments() if a.name == WORLD_ATTACHMENT), None)
             fh.seek(0)  # the transforms: protobuf, decoded with the schema the file carries
             reader = make_reader(fh, decoder_factories=[DecoderFactory()])
             for _schema, _channel, message, decoded in reader.iter_decoded_messages(topics=[TF]):
@@ -207,6 +226,8 @@ def state_at(recording: Recording, at: float) -> dict[str, Any]:
         missions.append({"mission": run.get("mission"), "id": run.get("id") or run.get("records"),
                          "outcome": ended.outcome if ended else None, "active": ex.active_now(),
                          "holds": ex.holds_now(), "waiting": ex.waiting_now()})
-    robots = {rid: {"x": round(p[0], 3), "y": round(p[1], 3), "heading": round(p[2], 4)}
-              for rid in sorted(recording.tracks) if (p := recording.pose(rid, at)) is not None}
-    return {"at": at, "missions": missions, "robots": robots}
+    where = {rid: {"x": round(p[0], 3), "y": round(p[1], 3), "heading": round(p[2], 4)}
+             for rid in sorted(recording.tracks) if (p := recording.pose(rid, at)) is not None}
+    return {"at": at, "missions": missions, "robots": {k: v for k, v in where.items() if not k.startswith(INTRUDER)},
+            "intruders": {k.removeprefix(INTRUDER): {"x": v["x"], "y": v["y"]} for k, v in where.items()
+                          if k.startswith(INTRUDER)}}

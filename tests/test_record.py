@@ -93,3 +93,17 @@ def test_replay_at_shows_the_mission_and_every_robot_at_that_time(tmp_path: Path
     assert at("1h")["missions"][0]["outcome"] == "stopped"  # type: ignore[index]
     refused = missionctl("replay", "run.mcap", "--at", "soon", cwd=tmp_path)
     assert refused.returncode == 2 and "expected a time such as 90s" in refused.stderr
+
+
+def test_replay_writes_the_trace_back_out_and_draws_the_run_from_the_recording_alone(tmp_path: Path) -> None:
+    run = missionctl("dry-run", str(CORRIDOR), "--config", str(ROOT / "hosts.yaml"), "--until", "60", "--record",
+                     "run.mcap", "--trace", "run.jsonl", cwd=tmp_path)
+    assert run.returncode == 1, run.stderr[-2000:]
+    (tmp_path / "elsewhere").mkdir()
+    done = missionctl("replay", str(tmp_path / "run.mcap"), "--trace", "again.jsonl", "--render", "run.png",
+                      cwd=tmp_path / "elsewhere")
+    assert done.returncode == 1, done.stderr[-2000:]
+    assert (tmp_path / "elsewhere" / "again.jsonl").read_text() == (tmp_path / "run.jsonl").read_text()
+    png = (tmp_path / "elsewhere" / "run.png").read_bytes()
+    assert png.startswith(b"\x89PNG") and len(png) > 10_000
+    assert "drew run.png" in done.stderr

@@ -47,6 +47,7 @@ if TYPE_CHECKING:  # rich's tables and trees, and the exporters, load only for t
     from drd.executive import Executive
     from drd.hosts import Cluster
     from drd.inject import Injection
+    from drd.record import Recording
     from drd.sim.physics import Simulation
     from drd.sim.world import World
 
@@ -429,12 +430,16 @@ def replay(
     at: str = typer.Option(None, "--at", show_default=False,
                            help="Show the run at this sim time instead (90s, 2min): each mission's active behaviors, "
                                 "holds and waits, and where each robot was."),
+    render: Path = typer.Option(None, "--render", show_default=False,
+                                help="Draw the run to this image (.png, .svg or .pdf), from the recording alone."),
+    trace: Path = typer.Option(None, "--trace", show_default=False, help="Write the records back out as a "
+                                                                         "JSON-lines trace (docs/trace.md)."),
     as_json: bool = typer.Option(False, "--json", help="Print the report as JSON (a list for several missions)."),
 ) -> int:
     """Print the report of a recorded run, rebuilt from the recording alone (no hosts file, no world): exit 0 if
     every mission succeeded, 1 if one did not."""
     from drd.dryrun import rebuilt
-    from drd.record import RecordingError, read
+    from drd.record import INTRUDER, RecordingError, read
 
     if not file.is_file():
         fail(f"{file}: no such file (looked at {file.absolute()})")
@@ -449,9 +454,39 @@ def replay(
         state = state_at(recording, _seconds(at, "--at"))
         print_json(state) if as_json else print_state(state)
         return OK
+    _check_render(render)
     reports = [rebuilt(run, recording.records.get(str(run.get("records")), [])) for run in recording.runs]
-    _show_reports(reports, None, None, as_json)
+    _write_trace(recording, open_trace(trace))
+    world = _recorded_world(recording, file) if render is not None else None
+    for report in reports:
+        report.tracks = {rid.removeprefix(INTRUDER): [(t, x, y) for t, x, y, _h in track]
+                         for rid, track in recording.tracks.items()}
+    _show_reports(reports, world, render, as_json)
     return OK if all(r.outcome == "success" for r in reports) else MISSION_FAILED
+
+
+def _write_trace(recording: Recording, fh: IO[str] | None) -> None:
+    """`replay --trace`: the recorded records as the run's `--trace` wrote them."""
+    from drd.runtime.trace import trace_line
+
+    if fh is None:
+        return
+    with fh:
+        for mission, records in recording.records.items():
+            for r in records:
+                fh.write(trace_line(r, mission) + "\n")
+
+
+def _recorded_world(recording: Recording, file: Path) -> World:
+    from drd.sim.world import WorldError
+
+    try:
+        world: World | None = recording.load_world(f"{file}:world.yaml")
+    except WorldError as e:
+        fail_all(e.problems)
+    if world is None:
+        fail(f"{file} holds no world to draw (a cluster run's recording has none)", hint="draw a dry-run's")
+    return world
 
 
 def _show_reports(reports: list[DryRun], sim_world: World | None, render: Path | None, as_json: bool) -> None:
