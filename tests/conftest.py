@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import functools
 from pathlib import Path
 
 import pytest
@@ -11,6 +12,25 @@ from dsl.catalog import Catalog
 
 ROOT = Path(__file__).resolve().parents[1]
 SHARED_EXAMPLES = ROOT.parent / "shared" / "examples"
+
+
+#: What makes a test module end-to-end: it starts real processes (the CLI, daemons, workers).
+_E2E = ("subprocess", "cluster_support", "MISSIONCTL", "Popen", "WorkerPool")
+
+
+@functools.cache
+def kind_of(path: Path) -> str:
+    """`e2e`, `properties` or `unit`, from what the test module uses (its source, read once)."""
+    source = path.read_text(encoding="utf-8")
+    if any(word in source for word in _E2E):
+        return "e2e"
+    return "properties" if "hypothesis" in source else "unit"
+
+
+def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
+    """Mark every test by its module's kind: `pytest -m unit` runs the fast set, `-m "not e2e"` skips processes."""
+    for item in items:
+        item.add_marker(getattr(pytest.mark, kind_of(Path(str(item.path)))))
 
 
 @pytest.fixture(scope="session")
