@@ -303,7 +303,9 @@ def rebuilt(run: Mapping[str, Any], records: Sequence[rec.Record]) -> DryRun:
     """The report of a recorded run, from its records (outcome, timeline, holds, waits, logs, doors, detections)
     and its summary (times, injections, where the Scouts ended)."""
     finished = next((r for r in reversed(records) if isinstance(r, rec.Finished)), None)
-    result = DryRun(str(run["mission"]), finished.outcome if finished else None, finished.reason if finished else "",
+    end = f"the recording ends at {float(run['sim_time']):.1f} s, before the run did"
+    result = DryRun(str(run["mission"]), finished.outcome if finished else "unfinished",
+                    finished.reason if finished else end,
                     float(run["sim_time"]), float(run["wall_time"]), speed=run.get("speed"),
                     on_cluster=bool(run.get("on_cluster")), priority=int(run.get("priority") or 1),
                     mission_id=str(run.get("id") or ""))

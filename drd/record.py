@@ -20,6 +20,7 @@ from __future__ import annotations
 import bisect
 import json
 import math
+import struct
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -32,6 +33,8 @@ from drd.sim.model import World
 
 RECORDS, TF, RUNS, WORLD = "/drd/records", "/drd/tf", "/drd/runs", "/drd/world"
 WORLD_ATTACHMENT = "world.yaml"
+#: Chunks of this size (uncompressed), and a flush every this many seconds of sim time.
+CHUNK_BYTES, FLUSH_EVERY = 64 * 1024, 1.0
 #: The frame of an intruder (a person walking through the world, not a robot): `intruder/<id>`.
 INTRUDER = "intruder/"
 #: The version of this layout, in the file's metadata (`drd` record `format`).
@@ -55,8 +58,11 @@ class Recorder:
 
         self.path = path
         self.context = foxglove.Context()  # this run's own: nothing global, several recorders may coexist
-        try:
-            self.writer = foxglove.open_mcap(str(path), allow_overwrite=True, context=self.context)
+        from foxglove.mcap import MCAPWriteOptions
+
+        try:  # small chunks, flushed each second of sim time: a run cut short keeps all but its last second
+            self.writer = foxglove.open_mcap(str(path), allow_overwrite=True, context=self.context,
+                                             writer_options=MCAPWriteOptions(chunk_size=CHUNK_BYTES))
         except Exception as e:  # the SDK's own errors: a folder that does not exist, no permission
             raise RecordingError(f"{path}: cannot write the recording: {e}") from e
         self.records = foxglove.Channel(RECORDS, message_encoding="json", context=self.context,
@@ -66,6 +72,7 @@ class Recorder:
         self.tf = FrameTransformsChannel(TF, context=self.context)
         self.world = SceneUpdateChannel(WORLD, context=self.context)
         self.closed = False
+        self.flushed = 0.0  # the sim time of the last flush
 
     def scene(self, world: World) -> None:
         """The world as a scene at time 0: walls, doors (green open, orange closed, red blocked), room names; and
@@ -119,6 +126,9 @@ class Recorder:
                            translation=Vector3(x=x, y=y, z=0.0),
                            rotation=Quaternion(x=0.0, y=0.0, z=math.sin(h / 2), w=math.cos(h / 2)))
             for rid, (x, y, h) in sorted(poses.items())]), log_time=_ns(at))
+        if at - self.flushed >= FLUSH_EVERY:
+            self.flushed = at
+            self.writer.flush()
 
     def end(self, runs: Sequence[dict[str, Any]], at: float) -> None:
         """Each mission's run summary (`summary`), then close the file."""
@@ -157,6 +167,7 @@ class Recording:
     runs: list[dict[str, Any]] = field(default_factory=list)
     tracks: dict[str, list[tuple[float, float, float, float]]] = field(default_factory=dict)
     world: bytes | None = None  # the world file the run used (`world.yaml` attachment), if it was a file
+    cut: bool = False  # the file ends before the run did (a crash): what its complete chunks held
 
     def load_world(self, name: str) -> World | None:
         """The recorded world (its problems name `name`), or None when the recording has none."""
@@ -173,31 +184,54 @@ class Recording:
 
 
 def read(path: Path) -> Recording:
-    """Read a recording written by `Recorder` (RecordingError naming the file when it is not one)."""
+    """Read a recording written by `Recorder`, in one streaming pass: a file cut short (a crash) gives what its
+    complete chunks hold, with `cut` set and a summary made up from the records (RecordingError naming the file
+    when it holds no drd run at all)."""
     from mcap.exceptions import McapError
-    from mcap.reader import make_reader
+    from mcap.reader import NonSeekingReader
     from mcap_protobuf.decoder import DecoderFactory
 
     out = Recording()
+    factory = DecoderFactory()
+    decoders: dict[int, Any] = {}  # a decoder per schema (by id), made from the schema in the file
     try:
         with path.open("rb") as fh:
-            for _schema, channel, message in make_reader(fh).iter_messages(topics=[RECORDS, RUNS]):
-                _take(out, channel.topic, message.data)
+            try:
+                for schema, channel, message in NonSeekingReader(fh).iter_messages(log_time_order=False):
+                    if channel.topic == TF and schema is not None:
+                        decoder = decoders.get(schema.id) or decoders.setdefault(
+                            schema.id, factory.decoder_for(channel.message_encoding, schema))
+                        if decoder is not None:
+                            _take_poses(out, decoder(message.data), message.log_time)
+                    elif channel.topic in (RECORDS, RUNS):
+                        _take(out, channel.topic, message.data)
+            except (McapError, struct.error, EOFError):  # a file cut short: keep what its complete chunks held
+                if not out.records:
+                    raise
+                out.cut = True
             fh.seek(0)
-            out.world = next((a.data for a in make_reader(fh).iter_attachments() if a.name == WORLD_ATTACHMENT), None)
-            fh.seek(0)  # the transforms: protobuf, decoded with the schema the file carries
-            reader = make_reader(fh, decoder_factories=[DecoderFactory()])
-            for _schema, _channel, message, decoded in reader.iter_decoded_messages(topics=[TF]):
-                for t in decoded.transforms:
-                    h = 2 * math.atan2(t.rotation.z, t.rotation.w)
-                    heading = math.atan2(math.sin(h), math.cos(h))  # in (-pi, pi]
-                    out.tracks.setdefault(t.child_frame_id, []).append(
-                        (message.log_time / 1e9, t.translation.x, t.translation.y, heading))
-    except (OSError, McapError, ValueError) as e:
+            try:
+                out.world = next((a.data for a in NonSeekingReader(fh).iter_attachments()
+                                  if a.name == WORLD_ATTACHMENT), None)
+            except (McapError, struct.error, EOFError):
+                pass
+    except (OSError, McapError, ValueError, struct.error, EOFError) as e:
         raise RecordingError(f"{path}: cannot read it as a drd recording: {e}") from e
-    if not out.runs:
-        raise RecordingError(f"{path}: no run summary in it (a recording cut short, or not drd's)")
+    if not out.records and not out.runs:
+        raise RecordingError(f"{path}: no drd run in it")
+    if not out.runs:  # cut before the end: each mission's summary from its records
+        out.cut = True
+        out.runs = [{"format": FORMAT, "mission": records[0].path.split("/", 1)[0], "id": key, "records": key,
+                     "sim_time": max(r.at for r in records), "wall_time": 0.0} for key, records in out.records.items()]
     return out
+
+
+def _take_poses(out: Recording, decoded: Any, log_time: int) -> None:
+    for t in decoded.transforms:
+        h = 2 * math.atan2(t.rotation.z, t.rotation.w)
+        heading = math.atan2(math.sin(h), math.cos(h))  # in (-pi, pi]
+        out.tracks.setdefault(t.child_frame_id, []).append(
+            (log_time / 1e9, t.translation.x, t.translation.y, heading))
 
 
 def _take(out: Recording, topic: str, data: bytes) -> None:

@@ -107,3 +107,20 @@ def test_replay_writes_the_trace_back_out_and_draws_the_run_from_the_recording_a
     png = (tmp_path / "elsewhere" / "run.png").read_bytes()
     assert png.startswith(b"\x89PNG") and len(png) > 10_000
     assert "drew run.png" in done.stderr
+
+
+def test_a_recording_cut_short_by_a_crash_replays_what_it_holds(tmp_path: Path) -> None:
+    """Small chunks, flushed each second of sim time: a file cut at 60 % (a crash mid-write) still reads."""
+    run = missionctl("dry-run", str(CORRIDOR), "--config", str(ROOT / "hosts.yaml"), "--record", "run.mcap",
+                     "--json", cwd=tmp_path)
+    assert run.returncode == 0, run.stderr[-2000:]
+    data = (tmp_path / "run.mcap").read_bytes()
+    (tmp_path / "cut.mcap").write_bytes(data[:len(data) * 6 // 10])
+    replay = missionctl("replay", "cut.mcap", "--json", cwd=tmp_path)
+    assert replay.returncode == 1, replay.stderr[-2000:]
+    report = json.loads(replay.stdout)
+    full = json.loads(run.stdout)
+    assert report["outcome"] == "unfinished" and report["reason"].startswith("the recording ends at ")
+    assert 30 < report["sim_time"] < full["sim_time"]
+    kept = [row for row in full["timeline"] if row["entered"] <= report["sim_time"] - 2]
+    assert {row["path"] for row in kept} <= {row["path"] for row in report["timeline"]}
