@@ -329,6 +329,8 @@ class Daemon:
                     self._record("conflict", self.host, f"another drd (pid {msg.pid}) runs as host {self.host};"
                                  " host names must be unique in the cluster" + ("; this one, started later, stops"
                                                                                  if newer else ""))
+                    if not newer:  # the later one may not have heard us (we announce to newcomers only): tell it
+                        self._announce_due = True
                 if newer and self._stop is not None:
                     self.stop_reason = f"conflict: another drd (pid {msg.pid}) runs as host {self.host}"
                     self._stop.set()
