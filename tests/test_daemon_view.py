@@ -424,3 +424,21 @@ def test_drd_stop_never_touches_another_clusters_daemons(tmp_path: Path) -> None
     assert done.returncode == 0, done.stderr
     assert sorted(d["host"] for d in json.loads(done.stdout)["daemons"]) == ["controller", "ranger1"]
     assert [p.relative_to(tmp_path).as_posix() for p in tmp_path.rglob("*.pid")] == ["field/controller.pid"]
+
+
+def test_drd_start_refuses_a_driver_it_cannot_load_before_any_process_or_pidfile(tmp_path: Path) -> None:
+    """Issue #18: a hosts file naming a driver that does not exist was only refused at the first mission."""
+    import subprocess
+    import sys
+
+    root = Path(__file__).resolve().parents[1]
+    text = (root / "hosts.yaml").read_text(encoding="utf-8").replace(
+        "drive: {type: Drive, driver: sim, slice: 60s", "drive: {type: Drive, driver: serial, slice: 60s")
+    (tmp_path / "hosts.yaml").write_text(text, encoding="utf-8")
+    done = subprocess.run([sys.executable, "-m", "drd.cli.drd", "start", "--host", "ranger1", "--config",
+                           "hosts.yaml", "--run-dir", str(tmp_path / "run")], cwd=tmp_path, capture_output=True,
+                          text=True, timeout=60, check=False)
+    assert done.returncode == 2
+    assert ("hosts.yaml: hosts.ranger1.devices.drive.driver: no module components.serial.drive "
+            "(for components.serial.drive:SerialDrive)") in done.stderr
+    assert not (tmp_path / "run").exists() and "Traceback" not in done.stderr

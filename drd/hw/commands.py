@@ -17,7 +17,7 @@ from typing import Any
 
 from drd.errors import ComponentFailure
 
-__all__ = ["DriverDeclarationError", "DriverSpec", "spec_of"]
+__all__ = ["DriverDeclarationError", "DriverSpec", "declared", "spec_of"]
 
 
 class DriverDeclarationError(ComponentFailure, TypeError):
@@ -47,7 +47,11 @@ def spec_of(driver: object) -> DriverSpec:
         DriverDeclarationError: a declared command is missing or not callable, `STOP` is not a declared command,
             or a public method takes an `epoch` without being declared.
     """
-    cls = type(driver)
+    return declared(type(driver))
+
+
+def declared(cls: type) -> DriverSpec:
+    """`spec_of` for a driver class (checked before any driver is built: `drd start` refuses a bad one)."""
     found = _SPECS.get(cls)
     if found is None:
         found = _SPECS[cls] = _declared(cls)

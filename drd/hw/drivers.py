@@ -24,7 +24,7 @@ from drd import entrypoints
 from drd.entrypoints import EntryPointError
 from drd.errors import HardwareFailure
 from drd.hosts import Cluster, Device
-from drd.hw.commands import DriverDeclarationError, spec_of
+from drd.hw.commands import DriverDeclarationError, declared, spec_of
 from dsl.catalog import Catalog
 
 if TYPE_CHECKING:  # the simulator (pymunk) is imported only by hosts that run sim drivers
@@ -142,3 +142,19 @@ def drivers_for(cluster: Cluster, host_name: str, sim: Simulation | None = None,
             parts[part] = load_driver(devices[device_id], robot.id, backends) if shared else out.devices[device_id]
         out.robots[robot.id] = parts
     return out
+
+
+def check_driver_classes(cluster: Cluster, host: str, catalog: Catalog | None = None) -> list[str]:
+    """Every driver class `host`'s devices name, imported and its declaration checked, without building one:
+    what `drd start` refuses before any process or pidfile appears (each problem names the hosts file's key)."""
+    problems = []
+    for device in cluster.host(host).devices:
+        key = f"{cluster.source}: hosts.{host}.devices.{device.id.removeprefix(host + '.')}.driver"
+        try:
+            cls = entrypoints.load(driver_entry_point(device, catalog))
+            if not isinstance(cls, type):
+                raise DriverError(f"{device.driver}: not a class")
+            declared(cls)
+        except (DriverError, EntryPointError, DriverDeclarationError) as e:
+            problems.append(f"{key}: {e}")
+    return problems
