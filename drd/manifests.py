@@ -508,8 +508,16 @@ def got(value: object) -> str:
     return f"{type(value).__name__} {show(value)}"
 
 
+#: A value echoed in a message is cut to this many characters, its length said (a pasted 1 MB string stays one
+#: readable line).
+SHOWN_CHARS = 60
+
+
 def show(value: object) -> str:
-    return repr(value) if isinstance(value, str) else str(value)
+    text = repr(value) if isinstance(value, str) else str(value)
+    if len(text) <= SHOWN_CHARS:
+        return text
+    return f"{text[:SHOWN_CHARS - 1]}… ({len(text)} characters)"
 
 
 def _hint(value: str, candidates: Iterable[str]) -> str:

@@ -417,3 +417,17 @@ def test_a_manifest_limit_must_name_a_numeric_property_and_be_ordered() -> None:
     text = [str(p) for p in problems]
     assert "lidar.yaml: limits.beams: min 10 is above max 5" in text
     assert any(p.startswith("lidar.yaml: limits.model: limits a numeric property") for p in text)
+
+
+def test_a_huge_value_is_echoed_cut_with_its_length(tmp_path: Path) -> None:
+    """Issue #18: a value pasted by mistake (a megabyte) is named in one readable line, not copied whole."""
+    from drd.hosts import HostsError, load_hosts
+    from drd.manifests import load_catalog
+
+    root = Path(__file__).resolve().parents[1]
+    text = (root / "hosts.yaml").read_text(encoding="utf-8").replace("lease: 3s", "lease: " + "x" * 100_000)
+    (tmp_path / "hosts.yaml").write_text(text, encoding="utf-8")
+    with pytest.raises(HostsError) as refused:
+        load_hosts(tmp_path / "hosts.yaml", load_catalog())
+    [problem] = [str(p) for p in refused.value.problems if "cluster.lease" in str(p)]
+    assert "(100002 characters)" in problem and len(problem) < 300  # the quotes count
