@@ -94,12 +94,15 @@ class Explainer:
         return finished.reason if finished is not None else ""
 
     def _own(self, node: str, start: int, end: int) -> str:
-        """A behavior's own reason for failing: the resources it lost, else its last log line, else what its
-        multiplicity logged about it."""
+        """A behavior's own reason for failing: the resources it lost, else the reason its exit gives, else its last
+        log line, else what its multiplicity logged about it."""
         window = self.records[start:end + 1]
         lost = next((r for r in window if isinstance(r, rec.Released) and r.path == node and r.reason in _LOST), None)
         if lost is not None:
             return f"lost {lost.resources[0] if lost.resources else 'its resources'} ({lost.reason})"
+        exited = self.records[end] if end < len(self.records) else None
+        if isinstance(exited, rec.Exited) and exited.path == node and exited.reason not in ("", "failed"):
+            return exited.reason  # the interpreter's own words (a component's plain failure says only "failed")
         said = next((r.text for r in reversed(window) if isinstance(r, rec.Log) and r.path == node), None)
         if said is not None:
             return said

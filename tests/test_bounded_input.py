@@ -131,6 +131,9 @@ def test_a_multiplicity_evaluated_above_the_limit_fails_at_its_start_without_cre
     report = json.loads(done.stdout)
     assert done.returncode == 1 and report["outcome"] == "failure"
     assert report["reason"] == "Wait would create 5000 instances, above the limit of 1000"
+    leaf = [c for c in report["failure_chain"] if c["leaf"]]  # the leaf says it too (its `exited` carries why)
+    assert leaf == [{"path": "Many/Wait", "reason": "Wait would create 5000 instances, above the limit of 1000",
+                     "leaf": True}]
     entered = [json.loads(line)["path"] for line in (tmp_path / "trace.jsonl").read_text().splitlines()
                if json.loads(line)["kind"] == "entered"]
     assert not any("[" in path for path in entered), "no instance may be created"

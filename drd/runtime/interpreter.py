@@ -539,13 +539,13 @@ class Interpreter:
     def _complete(self, node: Node, ok: bool, why: str) -> None:
         parent = node.parent
         if parent is None:
-            self._exit(node, "success" if ok else "failure")
+            self._exit(node, "success" if ok else "failure", "" if ok else why)
             self._end("success" if ok else "failure", why)
             return
         if parent.closing:
             return  # its parent is being exited: nothing reacts any more
         if node.phase is not DONE:
-            self._exit(node, "success" if ok else "failure")
+            self._exit(node, "success" if ok else "failure", "" if ok else why)
         if node.state.kind is LEAF and node.context is not None:
             parent.outputs[node.state.name] = dict(node.context.outputs)
         elif node.outputs:  # a composite's outputs are its finished children's, merged (FindNewDoor.door)
@@ -707,7 +707,7 @@ class Interpreter:
         resources.release(holder, [name])  # by need name: exact even on shared units
 
     # ------------------------------------------------------------- exiting
-    def _exit(self, node: Node, status: str) -> None:
+    def _exit(self, node: Node, status: str, reason: str = "") -> None:
         """Exit `node` and its subtree, children first: close it (nothing inside is granted, activated or takes a
         transition any more, waiting requests are withdrawn), then per node terminate its component, let its last
         setpoint through and unbind it, give its grant back, and say it exited."""
@@ -720,7 +720,7 @@ class Interpreter:
             if node.requested and node.grant is None:
                 node.closing = True
                 self.resources.cancel(node)  # still waiting (or revoked and queued again)
-            self._leave(node, status)
+            self._leave(node, status, reason)
             return
         order = node.children_first()
         for n in order:
@@ -731,9 +731,9 @@ class Interpreter:
                 resources.cancel(n)  # still waiting (or revoked and queued again): it can no longer be granted
         for n in order:
             if n.phase is not DONE:
-                self._leave(n, status if n is node else "stopped")
+                self._leave(n, status if n is node else "stopped", reason if n is node else "")
 
-    def _leave(self, n: Node, status: str) -> None:
+    def _leave(self, n: Node, status: str, reason: str = "") -> None:
         n.closing = True
         resources = self.resources
         if n.component is not None:
@@ -755,7 +755,7 @@ class Interpreter:
             resources.forget(n)
         n.detach()
         if self.listeners:
-            self._notify(rec.Exited(self.clock.now(), n.path, n.state.id, status))
+            self._notify(rec.Exited(self.clock.now(), n.path, n.state.id, status, reason))
 
     def _end(self, outcome: str, reason: str) -> None:
         self.rcm.detach(self._apply)

@@ -48,6 +48,7 @@ class Entered(Record):
 class Exited(Record):
     state: str
     status: str  # success, failure, stopped
+    reason: str = ""  # why it failed, when it failed on its own (a timeout, a lost resource, an entry that failed)
 
 
 @dataclass(frozen=True, slots=True)
