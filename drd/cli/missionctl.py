@@ -222,12 +222,13 @@ def _tree(chart: Statechart) -> Tree:
 
     root = chart[chart.root]
     tree = Tree(_label(root))
+    _details(root, tree)  # what the mission itself acquires and reads, as for every state below
     _grow(chart, root, tree)
     return tree
 
 
 def _grow(chart: Statechart, state: State, node: Tree) -> None:
-    from dsl.export import input_label, need_label, trigger_label
+    from dsl.export import trigger_label
 
     for t in state.starts:
         node.add(Text.assemble(("start → ", "green"), t.target.rsplit("/", 1)[-1], f"  {trigger_label(t)}"))
@@ -235,17 +236,22 @@ def _grow(chart: Statechart, state: State, node: Tree) -> None:
         if child.kind is StateKind.FINAL:
             continue
         branch = node.add(_label(child, initial=child.id == state.initial))
-        for n in child.needs:
-            style = "cyan" if n.requested else "dim cyan"
-            branch.add(Text("⚙ " + need_label(n), style=style))
-        for b in child.inputs:
-            branch.add(Text("◂ " + input_label(b), style="green"))
-        for t in child.transitions:
-            label = trigger_label(t)
-            arrow = Text.assemble(("→ ", "dim" if t.generated else "green"), t.target.rsplit("/", 1)[-1],
-                                  (f"  {label}" if label else "", "dim" if t.generated else ""))
-            branch.add(arrow)
+        _details(child, branch)
         _grow(chart, child, branch)
+
+
+def _details(state: State, branch: Tree) -> None:
+    """A state's needs (with their binding), its inputs, and its transitions, under its label."""
+    from dsl.export import input_label, need_label, trigger_label
+
+    for n in state.needs:
+        branch.add(Text("⚙ " + need_label(n), style="cyan" if n.requested else "dim cyan"))
+    for b in state.inputs:
+        branch.add(Text("◂ " + input_label(b), style="green"))
+    for t in state.transitions:
+        label = trigger_label(t)
+        branch.add(Text.assemble(("→ ", "dim" if t.generated else "green"), t.target.rsplit("/", 1)[-1],
+                                 (f"  {label}" if label else "", "dim" if t.generated else "")))
 
 
 def _label(s: State, initial: bool = False) -> Text:
