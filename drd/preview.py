@@ -102,7 +102,7 @@ def _at_start(chart: Statechart, mid: str, at_start: list[rec.Record], interp: A
     p = Preview(mid, placer.cluster.name)
     states = {r.path: chart.states[r.state] for r in at_start if isinstance(r, rec.Entered)}
     active = _active(at_start)
-    grants = {path: dict(g) for path, g in _grants(at_start).items() if path in active}
+    grants = {path: g for path, g in Explainer(at_start).holds_now().items() if path in active}
     p.holds = [{"path": path, "resources": {k: v for k, v in g.items() if "." not in k}} for path, g in grants.items()]
     for path in active:
         state = states[path]
@@ -139,17 +139,6 @@ def _active(records: Sequence[rec.Record]) -> list[str]:
         elif isinstance(r, rec.Exited):
             active.pop(r.path, None)
     return list(active)
-
-
-def _grants(records: Sequence[rec.Record]) -> dict[str, Mapping[str, str]]:
-    """What each path holds (need, and `need.part`, -> unit id)."""
-    held: dict[str, Mapping[str, str]] = {}
-    for r in records:
-        if isinstance(r, rec.Granted):
-            held[r.path] = {**held.get(r.path, {}), **r.resources}
-        elif isinstance(r, rec.Released):
-            held.pop(r.path, None)
-    return held
 
 
 def _devices(path: str, state: State, states: Mapping[str, State],

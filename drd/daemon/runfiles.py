@@ -92,7 +92,6 @@ def claim(directory: Path, host: str, cluster: str, config: str, log: str = "") 
         AlreadyRunning: a live daemon holds the pidfile.
     """
     path = path_of(directory, cluster, host)
-    path.parent.mkdir(parents=True, exist_ok=True)
     old = read(path)
     if old is not None and old.pid != os.getpid() and old.running():
         raise AlreadyRunning(old, path)
