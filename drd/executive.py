@@ -24,7 +24,7 @@ from drd.runtime import records as rec
 from drd.runtime.broker import ResourceBroker
 from drd.runtime.clock import Clock
 from drd.runtime.component import Component
-from drd.runtime.constraints import ConstraintGuard
+from drd.runtime.constraints import Breach, ConstraintGuard
 from drd.runtime.interpreter import Interpreter, describe_devices
 from drd.runtime.ownership import Gates, LocalGates, NoGates
 from drd.runtime.pool import ResourcePool
@@ -107,8 +107,12 @@ class Executive:
         self.pool.telemetry = DriverTelemetry(drivers, self.pool, self.clock.now)
         return local
 
-    def record(self, mission: str, record: rec.Record) -> None:
-        """A record about `mission` from outside its interpreter (a device's gate): to its listeners."""
+    def record(self, mission: str, record: rec.Record | Breach) -> None:
+        """A record about `mission` from outside its interpreter (a device's gate): to its listeners; a command a
+        gate refused for a constraint: to the behavior that declared it."""
+        if isinstance(record, Breach):
+            self.guard.breached(record)
+            return
         interp = self.missions.get(mission)
         if interp is not None:
             interp.record(record)

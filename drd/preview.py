@@ -4,8 +4,7 @@ As `nomad plan` does for a job: the mission is entered on an executive over the 
 run starts it, and read back at that instant, before any control cycle (so no component steps and no robot
 moves). The preview says which robot and device each need gets, which host would run each component (the host
 of its devices, else the Load Balancer's policy over idle hosts), who waits and behind whom, and what cannot
-hold: a need nothing in the hosts file satisfies, a binding or a `var` that fails at entry, a constraint (a
-cluster does not enforce them yet, so `missionctl run` refuses the mission).
+hold: a need nothing in the hosts file satisfies, a binding or a `var` that fails at entry.
 """
 
 from __future__ import annotations
@@ -20,7 +19,6 @@ from drd.placement import Placed, place, view_of, with_more
 from drd.runtime import records as rec
 from drd.sim.world import World
 from dsl.catalog import Catalog, ComponentType, Kind
-from dsl.errors import Diagnostic
 from dsl.statechart import State, Statechart
 
 
@@ -39,16 +37,6 @@ class Preview:
     def to_dict(self) -> dict[str, Any]:
         return {"mission": self.mission, "cluster": self.cluster, "holds": self.holds,
                 "components": self.components, "waits": self.waits, "problems": self.problems}
-
-
-def cluster_unsupported(chart: Statechart) -> list[Diagnostic]:
-    """What a cluster cannot run yet, as diagnostics at the place in the mission: constraints are measured and
-    enforced in the dry-run only (a cluster's controller does not read its robots' pose and battery each cycle);
-    running such a mission unguarded would promise a safety it does not give."""
-    return [Diagnostic("cluster-constraint", f"constraint {c.name}: constraints are enforced in the dry-run only, not"
-                       " yet on a cluster", c.span, hint="dry-run it (`missionctl dry-run`), or remove the"
-                       " constraint to run it on the cluster without that guard")
-            for state in chart.states.values() for c in state.constraints]
 
 
 def preview(charts: Sequence[tuple[Statechart, int | None]], cluster: Cluster, world: World,
@@ -126,7 +114,6 @@ def _at_start(chart: Statechart, mid: str, at_start: list[rec.Record], interp: A
                    for w in p.waits if not w["blocked_by"]]
     p.problems += [f"{r.path} would end at start: {r.outcome}: {r.reason}"
                    for r in at_start if isinstance(r, rec.Finished) and r.outcome != "success"]
-    p.problems += [f"{d.span}: {d.message}" for d in cluster_unsupported(chart)]
     return p
 
 

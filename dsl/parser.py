@@ -478,6 +478,21 @@ class Parser:
             b.depth = {}
             return (tree if isinstance(tree, ast.MissionFile) else None), errors
 
+    def expression(self, text: str, file: str = "<expression>") -> ast.Expr | None:
+        """One expression on its own (a constraint's condition, sent to a device's host as the printer wrote
+        it), or None if it does not parse."""
+        with self.lock:
+            b = self.builder
+            b.file, b.errors, b.depth = file, [], {}
+            b.line_offset = b.column_offset = 0
+            self.layout.reset()
+            try:
+                result = self.lark.parse(text, start="expr")
+            except UnexpectedInput:
+                result = None
+            b.depth = {}
+            return result if isinstance(result, ast.Expr) and not b.errors else None
+
     def _subexpr(self, text: str, at: Token) -> ast.Expr | None:
         """Parse an interpolated `{expr}` with positions relative to the string token."""
         b = self.builder
@@ -660,9 +675,19 @@ def _keyword_hint(tok: Token, expected: set[str] | frozenset[str]) -> str | None
 _default: Parser | None = None
 
 
-def parse(text: str, file: str = "<string>") -> tuple[ast.MissionFile | None, list[Diagnostic]]:
-    """Parse with a shared parser instance (building the LALR tables once per process)."""
+def _shared() -> Parser:
+    """The shared parser instance (building the LALR tables once per process)."""
     global _default
     if _default is None:
         _default = Parser()
-    return _default.parse(text, file)
+    return _default
+
+
+def parse(text: str, file: str = "<string>") -> tuple[ast.MissionFile | None, list[Diagnostic]]:
+    """Parse with the shared parser instance."""
+    return _shared().parse(text, file)
+
+
+def parse_expression(text: str) -> ast.Expr | None:
+    """Parse one expression with the shared parser instance (None if it does not parse)."""
+    return _shared().expression(text)

@@ -11,6 +11,7 @@ Every process is ours and killed by pid (`tests/cluster_support.py`).
 from __future__ import annotations
 
 import json
+import math
 import subprocess
 from collections.abc import Iterator
 from pathlib import Path
@@ -46,8 +47,19 @@ mission High priority 1 {
 CONSTRAINED = """\
 mission Fenced {
     needs ranger: Ranger
-    constraint home: distance(ranger, point(0, 0)) <= 12
-    FollowCorridor(speed: 0.3)
+    constraint home: distance(ranger, point(1, 0)) <= 6
+    FollowCorridor(speed: 0.5)
+}
+"""
+
+HANDLED = """\
+mission Fenced {
+    needs ranger: Ranger
+    constraint home: distance(ranger, point(1, 0)) <= 6
+    start -> Out
+    FollowCorridor(speed: 0.5) as Out
+    Out -> Home on violation [event.name == "home"]
+    ReturnToStart(speed: 0.5) as Home
 }
 """
 
@@ -136,12 +148,44 @@ def test_two_missions_share_one_ranger_by_priority(cluster: DaemonCluster, tmp_p
             and r["mission"] == low_report["mission"]], "the patrol drove again once resumed"
 
 
-def test_a_mission_with_constraints_is_refused_by_the_cluster_with_its_place(cluster: DaemonCluster,
-                                                                             tmp_path: Path) -> None:
-    fenced = tmp_path / "fenced.mission"
-    fenced.write_text(CONSTRAINED)
-    r = cluster.missionctl("run", str(fenced), "--config", str(cluster.hosts_file), timeout=60)
-    assert r.returncode == 2, r.stderr
-    assert "fenced.mission:3:" in r.stderr and "dry-run only" in r.stderr and "not run" in r.stderr
-    eventually(lambda: not any(m.get("outcome") is None for m in cluster.client().missions()),
-               "no mission to run", 5)
+def robot_distance(cluster: DaemonCluster, robot: str, x: float, y: float) -> float:
+    """How far the simulated robot stands from (x, y), asked of the simulator itself (the robot's side)."""
+    from drd.sim.service import SimReply, SimRequest, decode_value
+
+    reply = cluster.client().bus.call(f"drd/{cluster.name}/sim", SimRequest("call", "odometry", [robot]), timeout=5)
+    assert isinstance(reply, SimReply) and reply.error == "", reply
+    pose = decode_value(reply.value)
+    px, py = pose.x, pose.y
+    return math.hypot(px - x, py - y)
+
+
+def run_traced(cluster: DaemonCluster, tmp_path: Path, text: str) -> tuple[int, dict[str, Any], list[dict[str, Any]]]:
+    mission, trace = tmp_path / "c.mission", tmp_path / "c.jsonl"
+    mission.write_text(text)
+    r = cluster.missionctl("run", str(mission), "--config", str(cluster.hosts_file), "--speed", "8", "--json",
+                           "--trace", str(trace), timeout=120)
+    assert r.stdout, (r.stderr[-2000:], cluster.log("controller")[-3000:])
+    return r.returncode, json.loads(r.stdout), records(trace)
+
+
+def test_a_constraint_is_enforced_on_the_robots_host_and_stops_it_at_the_fence(cluster: DaemonCluster,
+                                                                              tmp_path: Path) -> None:
+    rc, report, recs = run_traced(cluster, tmp_path, CONSTRAINED)
+    assert rc == 1 and report["outcome"] == "failure", report
+    assert "constraint home violated" in report["reason"], report["reason"]
+    # refused at ranger1's own gate (the controller's monitor does not refuse commands, it unbinds)
+    refused = [r for r in recs if r["kind"] == "command" and not r["accepted"]]
+    assert refused and "constraint home" in refused[0]["reason"], refused[:3]
+    assert any(r["kind"] == "event" and r["name"] == "violation" and r["fields"]["name"] == "home" for r in recs)
+    distance = robot_distance(cluster, "ranger1", 1.0, 0.0)
+    assert 5.4 < distance <= 6.1, distance  # stopped at the fence: not before it, not past it
+
+
+def test_a_violation_handler_on_a_cluster_takes_over_and_drives_back(cluster: DaemonCluster, tmp_path: Path) -> None:
+    rc, report, recs = run_traced(cluster, tmp_path, HANDLED)
+    assert rc == 0 and report["outcome"] == "success", report
+    taken = [(r["path"], r["target"]) for r in recs if r["kind"] == "taken" and r["trigger"] == "event"]
+    assert taken == [("Fenced/Out", "Fenced/Home")], taken
+    home = [r for r in recs if r["kind"] == "command" and r["path"] == "Fenced/Home"]
+    assert home and all(r["accepted"] for r in home)  # driving back in breaks nothing
+    assert robot_distance(cluster, "ranger1", 1.0, 0.0) < 1.0  # home again

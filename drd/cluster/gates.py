@@ -16,14 +16,19 @@ from collections.abc import Callable, Iterable, Mapping
 from typing import Any
 
 from drd.bus import Message, message
+from drd.rcm.constraints import Measure
 from drd.runtime import records as rec
+from drd.runtime.constraints import Breach
+
+#: (host, robot -> live values) of a `telemetry` record.
+Seen = Callable[[str, Mapping[str, Any]], None]
 
 
 @message("drd.gate.update", 1)
 class GateUpdate(Message):
     """Gate operations for one host, in order: `["grant", device, holder, epoch, at]`,
     `["clear", device, holder, at, reason]`, `["unbind", device, issuer, at, reason]` (holders and issuers are
-    mission-qualified paths)."""
+    mission-qualified paths), and the constraints' (`guard`, `unguard`, `seen`, `watch`: `drd.cluster.guard`)."""
 
     ops: list[list[Any]]
     world: str = ""  # the world the devices' drivers run in, and its reset count (as `ComponentCall`)
@@ -32,7 +37,7 @@ class GateUpdate(Message):
 
 @message("drd.gate.update-reply", 1)
 class GateUpdateReply(Message):
-    """The records the gates made while applying the update (halts), as `wire_record` dicts."""
+    """The records the gates made while applying the update (halts, breaches, telemetry), as dicts."""
 
     records: list[dict[str, Any]]
 
@@ -42,6 +47,7 @@ class RemoteGates:
 
     def __init__(self, device_hosts: Mapping[str, str]) -> None:
         self.device_hosts = dict(device_hosts)
+        self.seen: Seen | None = None  # where robots' live values in the replies go (`drd.cluster.telemetry`)
         self._pending: dict[str, list[list[Any]]] = {}
         self._lock = threading.Lock()  # the mission loops of several missions share it
 
@@ -56,8 +62,11 @@ class RemoteGates:
 
     def _add(self, device: str, op: list[Any]) -> None:
         host = self.device_hosts.get(device)
-        if host is None:  # an aggregate, or a device no host serves: nothing to tell
-            return
+        if host is not None:  # else an aggregate, or a device no host serves: nothing to tell
+            self.send(host, op)
+
+    def send(self, host: str, op: list[Any]) -> None:
+        """Queue an operation for `host` (in order with its gates' operations)."""
         with self._lock:
             self._pending.setdefault(host, []).append(op)
 
@@ -80,11 +89,17 @@ def wire_record(mission: str, record: rec.Record) -> dict[str, Any]:
 _KINDS: dict[str, type[rec.Record]] = {"command": rec.Command, "halted": rec.Halted}
 
 
-def from_wire(data: Mapping[str, Any]) -> tuple[str, rec.Record] | None:
-    """(mission, record) of a `wire_record` dict, or None if it is not a gate's record (never trusted further)."""
-    kind = _KINDS.get(str(data.get("kind")))
+def from_wire(data: Mapping[str, Any]) -> tuple[str, rec.Record | Breach] | None:
+    """(mission, record) of a `wire_record` dict or a guard's `breach`, or None if it is neither (never trusted
+    further)."""
     mission = data.get("mission")
-    if kind is None or not isinstance(mission, str):
+    if not isinstance(mission, str):
+        return None
+    if data.get("kind") == "breach":
+        breach = breach_of(data)
+        return (mission, breach) if breach is not None else None
+    kind = _KINDS.get(str(data.get("kind")))
+    if kind is None:
         return None
     fields = {k: v for k, v in data.items() if k not in ("kind", "mission")}
     try:
@@ -93,9 +108,26 @@ def from_wire(data: Mapping[str, Any]) -> tuple[str, rec.Record] | None:
         return None
 
 
-def deliver(records: Iterable[Mapping[str, Any]] | None, sink: Callable[[str, rec.Record], None]) -> None:
-    """Hand each gate record of a reply to the mission it concerns."""
+def breach_of(data: Mapping[str, Any]) -> Breach | None:
+    """A `breach` record's `Breach` (`drd.cluster.guard`), or None if malformed."""
+    try:
+        m = Measure(bool(data["holds"]), float(data["margin"]), float(data["value"]), float(data["limit"]))
+        return Breach(str(data["holder"]), str(data["name"]), m)
+    except (KeyError, TypeError, ValueError):
+        return None
+
+
+def deliver(records: Iterable[Mapping[str, Any]] | None, sink: Callable[[str, rec.Record | Breach], None],
+            seen: Seen | None = None) -> None:
+    """Hand each gate record of a reply to the mission it concerns, and robots' live values to `seen`."""
     for data in records or ():
-        found = from_wire(data) if isinstance(data, Mapping) else None
+        if not isinstance(data, Mapping):
+            continue
+        if data.get("kind") == "telemetry":
+            host, robots = data.get("host"), data.get("robots")
+            if seen is not None and isinstance(host, str) and isinstance(robots, Mapping):
+                seen(host, robots)
+            continue
+        found = from_wire(data)
         if found is not None:
             sink(*found)

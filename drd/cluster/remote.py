@@ -41,6 +41,7 @@ from drd.bus import Bus, BusError, Message, RemoteError, message
 from drd.cluster.gates import RemoteGates, deliver
 from drd.errors import ComponentFailure
 from drd.runtime.component import Component, Context, Status
+from drd.runtime.constraints import Breach
 from drd.runtime.records import Record, plain
 
 
@@ -182,7 +183,7 @@ class ComponentRouter:
                  timeout: float = 1.0, dead: Callable[[str], bool] = lambda h: False, catalog: Any = None,
                  place: Callable[[str, Mapping[str, Any], frozenset[str]], str] | None = None,
                  gates: RemoteGates | None = None,
-                 records: Callable[[str, Record], None] = lambda mission, record: None,
+                 records: Callable[[str, Record | Breach], None] = lambda mission, record: None,
                  cycle: SimCycle | None = None, generation: int = 0):
         self.bus = bus
         self.cluster = cluster
@@ -310,7 +311,7 @@ class ComponentRouter:
             else:
                 self.gone.add(host)
             raise HostDown(f"host {host} did not answer {op} within {timeout:g} s ({e})") from None
-        deliver(getattr(reply, "records", None), self.records)
+        deliver(getattr(reply, "records", None), self.records, self.gates.seen if self.gates is not None else None)
         return reply, time.perf_counter() - t0
 
     def _forget_late_start(self, host: str, msg: ComponentCall | ComponentBatch) -> None:

@@ -48,6 +48,7 @@ import psutil
 
 from drd.bus import Bus, BusError, Message, Query, Reply
 from drd.cluster.gates import GateUpdate, GateUpdateReply, wire_record
+from drd.cluster.guard import HostGuard
 from drd.cluster.remote import ComponentBatch, ComponentBatchReply, ComponentCall, ComponentReply
 from drd.daemon.keys import ClusterKeys
 from drd.daemon.messages import InstanceInfo
@@ -169,6 +170,7 @@ class Creator:
         self._make_drivers = drivers
         self._generation: tuple[str, int] | None = None  # (world, reset generation) the drivers were built for
         self._gates = LocalGates(self._gate_record)
+        self._guard: HostGuard | None = None  # the constraints in force on this host's gates
         self._records: list[dict[str, Any]] = []  # what the gates recorded since the last reply
         self._sim: Any = None  # a RemoteSimulation, when the drivers reach the simulator through requests
         self._world: Any = None  # the simulation the drivers use (local or remote), for its `version`
@@ -359,6 +361,8 @@ class Creator:
                         gates.clear(device, holder, float(at), reason)
                     case ["unbind", str(device), str(issuer), float() | int() as at, str(reason)]:
                         gates.unbind(device, issuer, float(at), reason)
+                    case [str(kind), *_] if kind in HostGuard.KINDS and self._guard is not None:
+                        self._guard.apply(op)
                     case _:
                         log.warning("creator %s: a malformed gate operation was ignored: %.200r", self.host, op)
             except Exception as e:  # a driver that cannot stop is reported in the halt's record, never raised
@@ -367,7 +371,14 @@ class Creator:
     def _gate_record(self, mission: str, record: rec.Record) -> None:
         self._records.append(wire_record(mission, record))
 
+    def _report(self, data: dict[str, Any]) -> None:
+        self._records.append(data)
+
     def _take_records(self) -> list[dict[str, Any]] | None:
+        """What goes back with a reply: the gates' records, then the watched robots' live values."""
+        telemetry = self._guard.telemetry() if self._guard is not None else None
+        if telemetry is not None:
+            self._records.append(telemetry)
         records, self._records = self._records, []
         return records or None
 
@@ -696,8 +707,7 @@ class Creator:
         if self._drivers is None or self._generation != (world, generation):
             if self._make_drivers is not None:
                 self._drivers = self._make_drivers(world)
-                self._gates = LocalGates.of(self._drivers.devices, self._drivers.robots, self._sharable,
-                                            self._gate_record)
+                self._guard_gates()
                 self._generation = (world, generation)
                 return self._drivers
             from drd.hw.drivers import drivers_for
@@ -715,11 +725,16 @@ class Creator:
             else:
                 sim = self._sim = None
             self._drivers = drivers_for(self.cluster, self.host, sim, catalog=self.catalog)
-            self._gates = LocalGates.of(self._drivers.devices, self._drivers.robots, self._sharable,
-                                        self._gate_record)
+            self._guard_gates()
             self._world = sim
             self._generation = (world, generation)
         return self._drivers
+
+    def _guard_gates(self) -> None:
+        """Gates over the drivers just built, guarded by the constraints the controller says are in force."""
+        self._gates = LocalGates.of(self._drivers.devices, self._drivers.robots, self._sharable, self._gate_record)
+        self._guard = HostGuard(self.cluster, self.host, self._drivers, self._gates, lambda: self._now,
+                                self._report)
 
     def _check(self, call: ComponentCall) -> ComponentType:
         ct = self.catalog.get(call.component)

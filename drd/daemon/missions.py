@@ -29,10 +29,11 @@ from typing import Any
 
 from drd.bus import Bus, Message, Query, Reply, message
 from drd.cluster.gates import GateUpdate, GateUpdateReply, RemoteGates, deliver
+from drd.cluster.guard import SharedGuard
 from drd.cluster.remote import ComponentCall, ComponentError, ComponentRouter, SimCycle
+from drd.cluster.telemetry import RemoteTelemetry
 from drd.hosts import Cluster, Role
 from drd.placement import HostView
-from drd.preview import cluster_unsupported
 from drd.profiling import Sampler
 from drd.sim.service import SimReply, SimRequest, SimulationService
 from drd.sim.service import key as sim_key
@@ -140,7 +141,15 @@ class MissionRunner:
         self.simulator = next((h.name for h in cluster.hosts if Role.SIMULATOR in h.roles), None)
         # the devices' gates are on their hosts: every mission's grants reach them through these
         self.gates = RemoteGates({u.id: u.host for u in cluster.resources() if u.host and type(u).__name__ == "Unit"})
-        controller.executive.gates = self.gates
+        executive = controller.executive
+        executive.gates = self.gates
+        # robots' pose and battery come with the hosts' replies; constraints are guarded on the devices' hosts
+        self.telemetry = RemoteTelemetry({r.id: r.host for r in cluster.robots if r.host}, self._fetch,
+                                         self.gates.send, clock.now)
+        self.gates.seen = self.telemetry.seen
+        executive.pool.telemetry = self.telemetry
+        executive.guard = self.guard = SharedGuard(executive.pool, self.gates.device_hosts, self.gates.send,
+                                                   clock.now)
         self.world: WorldRun | None = None
         self._starting = threading.Lock()
         self.generation = 0  # worlds started so far: a Creator builds its drivers again for a new one
@@ -235,9 +244,6 @@ class MissionRunner:
             return RunReply("", False, str(e).splitlines())
         if self.simulator is None:
             raise ValueError("no host has the role simulator in hosts.yaml: the sim drivers need one")
-        unmeasured = cluster_unsupported(chart)
-        if unmeasured:
-            return RunReply("", False, render(unmeasured, dict(compiled.sources)))
         priority = req.priority or chart.priority
         with self._starting:  # one start at a time: two first missions must not start two worlds
             return self._start(req, chart, priority)
@@ -285,7 +291,8 @@ class MissionRunner:
         from drd.sim.world import check_hosts
 
         path = world_file(req.world or self.cluster.world)
-        problems = check_hosts(load_world(path), self.cluster)
+        loaded = load_world(path)
+        problems = check_hosts(loaded, self.cluster)
         if problems:
             raise ValueError("; ".join(map(str, problems)))
         try:
@@ -301,6 +308,8 @@ class MissionRunner:
             self.clock.start_mission()
             self.clock.set_sim(reset.time)
             self._reset_dependencies(self.controller.executive)
+            self.telemetry.reset()  # the hosts build their drivers (and guards) again for the new world
+            self.controller.executive.pool.places = {r.id: (r.x0, r.y0, r.x1, r.y1) for r in loaded.rooms}
             self.world, self.lost = world, []
         return world
 
@@ -327,21 +336,30 @@ class MissionRunner:
         return decision.host
 
     def flush_gates(self, world: WorldRun) -> None:
-        """Send the gate operations nobody carried this cycle (a device whose holder lost it stops now)."""
-        executive = self.controller.executive
-        for host in self.gates.hosts():
-            ops = self.gates.take(host)
-            if not ops or self.host_down(host):
-                continue
-            try:
-                reply = self.bus.call(f"drd/{self.cluster.name}/host/{host}/creator",
-                                      GateUpdate(ops, world.name, world.generation), timeout=CALL_TIMEOUT)
-            except Exception as e:  # the host's loss is noticed by the membership and the next calls
-                log.warning("the gate operations for %s were not delivered: %s", host, e)
-                continue
-            if isinstance(reply, GateUpdateReply):
-                with self.lock:
-                    deliver(reply.records, executive.record)
+        """Send the gate operations nobody carried this cycle (a device whose holder lost it stops now), and ask
+        the hosts whose robots are watched and who sent nothing this cycle (`drd.cluster.telemetry`)."""
+        for host in sorted(set(self.gates.hosts()) | set(self.telemetry.due())):
+            self._update_gates(host, world)
+
+    def _fetch(self, host: str) -> None:
+        """`host`'s pending operations now, and its reply delivered (a robot's first read)."""
+        world = self.world
+        if world is not None:
+            self._update_gates(host, world)
+
+    def _update_gates(self, host: str, world: WorldRun) -> None:
+        ops = self.gates.take(host) or []
+        if self.host_down(host):
+            return
+        try:
+            reply = self.bus.call(f"drd/{self.cluster.name}/host/{host}/creator",
+                                  GateUpdate(ops, world.name, world.generation), timeout=CALL_TIMEOUT)
+        except Exception as e:  # the host's loss is noticed by the membership and the next calls
+            log.warning("the gate operations for %s were not delivered: %s", host, e)
+            return
+        if isinstance(reply, GateUpdateReply):
+            with self.lock:
+                deliver(reply.records, self.controller.executive.record, self.telemetry.seen)
 
     def _reset_dependencies(self, executive: Any) -> None:
         """A new world puts every Scout back in its magazine: the Static Dependency Database starts again from
@@ -435,6 +453,7 @@ class WorldRun:
         # ComponentRouter.step_first); the executive's clock reads the time it will then have
         self.cycle.pending_step = CONTROL_PERIOD
         runner.clock.set_sim(sim_time + CONTROL_PERIOD)  # exactly the world's (Simulation.step)
+        runner.guard.share(runner.telemetry.latest.get)  # other hosts' robots, for each host's constraints
         try:
             executive.step()
         except BaseException:

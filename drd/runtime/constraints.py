@@ -38,12 +38,23 @@ class Active:
     robots: tuple[str, ...]  # the robots it names
     measure: Callable[[], Measure]  # in the declaring behavior's scope
     refused: Callable[[Measure], None] = lambda m: None  # a command was refused: where it would have led
+    names: Callable[[], Mapping[str, object]] = dict  # the declaring behavior's scope (what a host guard is sent)
     violated: bool = False  # broken, or a command refused, since it last held with nothing refused
     refused_at: float = -1.0
     text: str = field(default="", init=False)
 
     def __post_init__(self) -> None:
         self.text = text_of(self.condition)
+
+
+@dataclass(frozen=True, slots=True)
+class Breach:
+    """A command refused by the constraint `name` of `holder` at a gate elsewhere (a device's host on a cluster):
+    where the command would have led. The holder's interpreter takes it as its own gate's refusal."""
+
+    holder: str
+    name: str
+    measure: Measure
 
 
 def robots_named(condition: ast.Expr, names: Mapping[str, object]) -> tuple[str, ...]:
@@ -83,6 +94,12 @@ class ConstraintGuard:
 
     def remove(self, holder: str) -> None:
         self.active = [a for a in self.active if a.holder != holder]
+
+    def breached(self, breach: Breach) -> None:
+        """A gate elsewhere refused a command for one of these constraints: its behavior hears it as if here."""
+        for a in self.active:
+            if a.holder == breach.holder and a.name == breach.name:
+                a.refused(breach.measure)
 
     def __call__(self, gate: DeviceGate, issuer: str, method: str, args: tuple[Any, ...],
                  kwargs: Mapping[str, Any]) -> str:

@@ -771,7 +771,8 @@ class Interpreter:
         actives = self._constraints.setdefault(node, [])
         for c in node.state.constraints:
             active = Active(self.resources.holder(node), node.path, c.name, c.condition,
-                            robots_named(c.condition, names), functools.partial(self._measure, node, c.condition))
+                            robots_named(c.condition, names), functools.partial(self._measure, node, c.condition),
+                            names=functools.partial(self._names, node))
             active.refused = functools.partial(self._breached, node, active)
             actives.append(active)
             self.guard.add(active)

@@ -1,0 +1,74 @@
+"""Where robots on other hosts are and the charge they have left, as the controller reads them.
+
+A robot's pose and battery are its own drivers' (`drd.runtime.telemetry.DriverTelemetry`), and its drivers are on
+its host. The controller asks for a robot only when an expression reads it (`ranger.x` in a guard, a constraint's
+condition): the first read fetches it at once (one round trip, so a mission never starts on a guess), and from
+then on the robot's host is asked to `watch` it and sends its values with every reply (`drd.cluster.gates`
+`telemetry` records). A host nobody called in a control cycle is asked at the cycle's end (`due`), so the
+values read at the start of a cycle are those after the previous one. A world started again starts from none.
+"""
+
+from __future__ import annotations
+
+import math
+import threading
+from collections.abc import Callable, Mapping
+from typing import Any
+
+#: Keys a host may report (`drd.runtime.pool.LIVE`); anything else in a reply is ignored.
+KEYS = frozenset({"x", "y", "heading", "battery"})
+
+
+class RemoteTelemetry:
+    """`ResourcePool.telemetry` over the hosts' reports. `fetch(host)` sends that host's pending operations (the
+    `watch` among them) and delivers its reply, before returning."""
+
+    def __init__(self, robot_hosts: Mapping[str, str], fetch: Callable[[str], None],
+                 send: Callable[[str, list[Any]], None], now: Callable[[], float]) -> None:
+        self.robot_hosts = dict(robot_hosts)
+        self.fetch = fetch
+        self.send = send
+        self.now = now
+        self.latest: dict[str, dict[str, float]] = {}
+        self.wanted: dict[str, set[str]] = {}  # host -> its robots some expression reads
+        self._reported: set[str] = set()  # hosts that sent values since the last `due`
+        self._lock = threading.Lock()
+
+    def __call__(self, robot: str) -> Mapping[str, float] | None:
+        host = self.robot_hosts.get(robot)
+        if host is None:
+            return None
+        with self._lock:
+            new = robot not in self.wanted.setdefault(host, set())
+            if new:
+                self.wanted[host].add(robot)
+                watch = sorted(self.wanted[host])
+        if new:
+            self.send(host, ["watch", watch, self.now()])
+            self.fetch(host)
+        return self.latest.get(robot)
+
+    def seen(self, host: str, robots: Mapping[str, Any]) -> None:
+        """A host's report: the live values of the robots it watches (only its own robots are taken)."""
+        with self._lock:
+            self._reported.add(host)
+            for robot, data in robots.items():
+                if self.robot_hosts.get(robot) != host or not isinstance(data, Mapping):
+                    continue
+                self.latest[robot] = {k: float(v) for k, v in data.items() if k in KEYS and _finite(v)}
+
+    def due(self) -> list[str]:
+        """The hosts with watched robots that sent nothing since the last call (to be asked now)."""
+        with self._lock:
+            hosts = sorted(h for h, robots in self.wanted.items() if robots and h not in self._reported)
+            self._reported = set()
+        return hosts
+
+    def reset(self) -> None:
+        """A new world: no robot is known or watched any more (the hosts' drivers are built again)."""
+        with self._lock:
+            self.latest, self.wanted, self._reported = {}, {}, set()
+
+
+def _finite(v: object) -> bool:
+    return isinstance(v, int | float) and not isinstance(v, bool) and math.isfinite(v)
