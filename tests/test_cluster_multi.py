@@ -189,3 +189,22 @@ def test_a_violation_handler_on_a_cluster_takes_over_and_drives_back(cluster: Da
     home = [r for r in recs if r["kind"] == "command" and r["path"] == "Fenced/Home"]
     assert home and all(r["accepted"] for r in home)  # driving back in breaks nothing
     assert robot_distance(cluster, "ranger1", 1.0, 0.0) < 1.0  # home again
+
+
+LIVE_GUARD = """\
+mission Reach {
+    needs ranger: Ranger
+    start -> Out
+    FollowCorridor(speed: 0.5) as Out
+    Out -> done when ranger.x > 4
+}
+"""
+
+
+def test_a_guard_reads_the_robots_live_pose_on_a_cluster(cluster: DaemonCluster, tmp_path: Path) -> None:
+    rc, report, recs = run_traced(cluster, tmp_path, LIVE_GUARD)
+    assert rc == 0 and report["outcome"] == "success", report
+    taken = [r for r in recs if r["kind"] == "taken" and r["label"] == "when ranger.x > 4"]
+    assert taken and 5.9 < taken[0]["at"] < 9.0, taken  # 3 m at 0.5 m/s from x = 1, read live each cycle
+    x = robot_distance(cluster, "ranger1", 0.0, 0.0)
+    assert 4.0 < x < 4.6, x
