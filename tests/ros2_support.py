@@ -1,0 +1,81 @@
+"""Helpers for tests against zenoh-ros2-sdk, the independent pure-Python rmw_zenoh client.
+
+The SDK reads ``.msg`` files from a folder (and would clone ROS repositories from the internet for the ones
+missing); :func:`write_msg_files` writes them from rosbags' bundled Jazzy definitions, and :func:`ros2_sdk`
+points the SDK at them and at a router port, and closes its singleton session after.
+"""
+
+from __future__ import annotations
+
+import re
+import socket
+import time
+from collections.abc import Callable, Iterable, Iterator
+from contextlib import contextmanager
+from pathlib import Path
+from types import ModuleType
+
+import pytest
+
+from drd.bus.ros2 import MessageTypes
+
+_SEPARATOR = re.compile(r"^=+\nMSG: ", re.M)
+_SHORT = re.compile(r"^([A-Za-z_][A-Za-z0-9_]*)/([A-Za-z][A-Za-z0-9_]*)$")
+WAIT = 5.0
+
+
+def free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        port: int = s.getsockname()[1]
+        return port
+
+
+def eventually(predicate: Callable[[], object], what: str, timeout: float = WAIT) -> None:
+    deadline = time.monotonic() + timeout
+    while not predicate():
+        if time.monotonic() > deadline:
+            pytest.fail(f"timed out after {timeout:g} s waiting for {what}")
+        time.sleep(0.02)
+
+
+def msg_definitions(types: MessageTypes, type_names: Iterable[str]) -> dict[str, str]:
+    """Each type's own ``.msg`` text (and its dependencies'), from rosbags' concatenated definition."""
+    out: dict[str, str] = {}
+    for type_name in type_names:
+        text, _md5 = types.store.generate_msgdef(type_name, ros_version=2)
+        first, *others = _SEPARATOR.split(text)
+        out[type_name] = first
+        for other in others:
+            short, _, body = other.partition("\n")
+            m = _SHORT.fullmatch(short.strip())
+            assert m is not None, short
+            out[f"{m[1]}/msg/{m[2]}"] = body
+    return out
+
+
+def write_msg_files(types: MessageTypes, type_names: Iterable[str], folder: Path) -> Path:
+    """``folder/<package>/msg/<Name>.msg`` for every type named and every type they use."""
+    for type_name, text in msg_definitions(types, type_names).items():
+        package, _msg, name = type_name.split("/")
+        path = folder / package / "msg" / f"{name}.msg"
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_text(text.strip() + "\n", encoding="utf-8")
+    return folder
+
+
+@contextmanager
+def ros2_sdk(types: MessageTypes, type_names: Iterable[str], folder: Path) -> Iterator[ModuleType]:
+    """The SDK, reading its message definitions from ``folder``; its shared session is closed after."""
+    sdk = pytest.importorskip("zenoh_ros2_sdk", reason="zenoh-ros2-sdk is not installed (pip install -e '.[test]')")
+    from zenoh_ros2_sdk import message_registry, session
+
+    message_registry._registry = message_registry.MessageRegistry(str(write_msg_files(types, type_names, folder)))
+    try:
+        yield sdk
+    finally:
+        instance = session.ZenohSession._instance
+        if instance is not None:
+            instance.close()
+        session.ZenohSession._instance = None
+        message_registry._registry = None
