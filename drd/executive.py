@@ -29,6 +29,7 @@ from drd.runtime.interpreter import Interpreter, describe_devices
 from drd.runtime.ownership import Gates, LocalGates, NoGates
 from drd.runtime.pool import ResourcePool
 from drd.runtime.records import plain
+from drd.runtime.snapshot import NodeImage
 from drd.runtime.telemetry import DriverTelemetry
 from dsl.catalog import Catalog
 from dsl.statechart import Statechart
@@ -119,11 +120,13 @@ class Executive:
 
     def submit(self, chart: Statechart, mission_id: str | None = None,
                listeners: Iterable[Callable[[rec.Record], None]] = (),
-               registry: Mapping[str, Callable[[], Component]] | None = None, priority: int = 1) -> str:
+               registry: Mapping[str, Callable[[], Component]] | None = None, priority: int = 1,
+               resume: NodeImage | None = None) -> str:
         """Start a compiled mission; returns its id (`<name>-<n>`).
 
         `registry` replaces the executive's own for this mission (a cluster mission's `RemoteRegistry`);
-        `priority` ranks the mission against the others sharing the team (1 first)."""
+        `priority` ranks the mission against the others sharing the team (1 first); `resume`: enter it again as
+        it was saved (`drd.runtime.snapshot`), after its controller was lost."""
         mid = mission_id or f"{chart.name}-{next(self._ids)}"
         self.forget_finished()
         if mid in self.missions:
@@ -138,8 +141,15 @@ class Executive:
         for listener in listeners:
             interp.attach(listener)
         self.missions[mid] = interp
-        interp.start()
+        if resume is not None:
+            interp.resume(resume)
+        else:
+            interp.start()
         return mid
+
+    def continue_records(self, after: int) -> None:
+        """Number the next records after `after` (a controller resuming goes on with its journal's numbering)."""
+        self._seq = itertools.count(after + 1)
 
     def step(self) -> None:
         for interp in list(self.missions.values()):

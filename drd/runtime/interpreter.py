@@ -35,6 +35,7 @@ from drd.runtime.hosting import ComponentHost
 from drd.runtime.ownership import Arbiter, Gates, LocalGates, NoGates
 from drd.runtime.pool import ResourcePool
 from drd.runtime.resources import BindingError, ResourceClient
+from drd.runtime.snapshot import NodeImage, Restore, live_children
 from drd.runtime.telemetry import DriverTelemetry
 from drd.runtime.tree import (
     ACTIVE,
@@ -121,6 +122,8 @@ class Interpreter:
         self.guard = guard if guard is not None else ConstraintGuard(self.pool)
         self._constraints: dict[Node, list[Active]] = {}  # active behaviors' constraints
         self._violations: collections.deque[tuple[Node, Active, Measure]] = collections.deque()
+        self._restore: Restore | None = None  # while `resume` enters the mission again
+        self._restoring: dict[str, NodeImage] = {}  # nodes entered again whose children are not entered yet
         self.resources = ResourceClient(self.rcm, self.pool, self.mission, gates or self._own_gates(), self.arbiter,
                                         clock.now, self._names, priority)
         rank = {sid: i for i, sid in enumerate(s.id for s in chart.walk())}  # declaration order
@@ -161,6 +164,22 @@ class Interpreter:
         self._settle()
         self._flush()
         return MacroStep(self.clock.now(), 0, tuple(self._taken), self.outcome)
+
+    def resume(self, image: NodeImage) -> MacroStep:
+        """Enter the mission again as `image` (`drd.runtime.snapshot.capture`) saw it: after its controller was
+        lost, the holds it had end (`released`, `controller lost`) and each state it was in is entered again,
+        with its entry time and data, asking for its resources anew (`drd.runtime.snapshot`)."""
+        if self.root is not None:
+            raise RuntimeError("this interpreter has already started")
+        now = self.clock.now()
+        for n in image.walk():
+            if n.grant:
+                held = tuple(dict.fromkeys([*n.grant.values(), *n.epochs]))
+                self._notify(rec.Released(now, n.path, held, "controller lost"))
+        self._notify(rec.Restored(now, image.path, image.entered if not image.children else max(
+            x.entered for x in image.walk())))
+        self._restore = Restore(image, self.pool.view)  # followed until each saved state is entered or gone
+        return self.start()
 
     def step(self) -> MacroStep:
         """One macro step at `clock.now()`."""
@@ -291,6 +310,12 @@ class Interpreter:
             self._unreserve(node)
             self._finish(node, False, e.message)
             return node
+        if self._restore is not None:
+            image = self._restore.take(node)
+            if image is not None and state.kind is not LEAF:
+                self._restoring[path] = image
+            if not self._restore:
+                self._restore = None
         if plan.adopted:
             try:
                 self.resources.adopt(node)
@@ -388,7 +413,11 @@ class Interpreter:
         if state.constraints:
             self._watch(node)
         kind = state.kind
-        if kind is LEAF:
+        image = self._restoring.pop(node.path, None) if self._restoring else None
+        if image is not None and image.children:
+            for sid, index in live_children(image):  # the children it had live, not its initial ones
+                self._enter_child(node, self._states[sid], index)
+        elif kind is LEAF:
             self.host.start(node)
         elif kind is COMPOUND:
             target = self._initial(node)
@@ -714,6 +743,9 @@ class Interpreter:
         if node.phase is DONE:
             node.detach()
             return
+        if self._restore is not None:  # a saved state inside it will not be entered again
+            self._restore.forget(node.path)
+            self._restoring.pop(node.path, None)
         if self._reservations:  # what states inside it reserved goes back first (its own is its transition's)
             self._drop_reservations(node.path, inside=True)
         if not node.children:  # a leaf, most often: nothing inside to close first

@@ -92,7 +92,8 @@ class Revoked(Record):
 
 
 #: Why a hold ended (`Released.reason`).
-END_REASONS = ("exit", "release", "revoked", "host lost", "resource lost", "expired", "cancelled")
+END_REASONS = ("exit", "release", "revoked", "host lost", "resource lost", "expired", "cancelled",
+               "controller lost")
 
 
 @dataclass(frozen=True, slots=True)
@@ -135,6 +136,14 @@ class Suspended(Record):
 @dataclass(frozen=True, slots=True)
 class Resumed(Record):
     pass
+
+
+@dataclass(frozen=True, slots=True)
+class Restored(Record):
+    """The mission was entered again from its journal after its controller was lost: its state as saved at
+    `since` (the holds of the lost controller ended, `released` with reason `controller lost`, just before)."""
+
+    since: float = 0.0
 
 
 @dataclass(frozen=True, slots=True)
