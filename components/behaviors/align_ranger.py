@@ -67,7 +67,7 @@ class AlignRanger(Component):
                 drive.set_velocity(v, turn_rate(err))
                 return Status.RUNNING
         err = wrap(math.atan2(self.door["y"] - y, self.door["x"] - x) - a)
-        if abs(err) < float(self.ctx.params.get("tolerance", 0.05)):
+        if abs(err) < float(self.ctx.params["tolerance"]):
             drive.stop()
             return Status.SUCCESS
         drive.set_velocity(0.0, turn_rate(err))

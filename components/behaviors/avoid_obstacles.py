@@ -18,7 +18,7 @@ TURN = 0.8
 
 class AvoidObstacles(Component):
     def step(self, now: float) -> Status:
-        margin = float(self.ctx.params.get("margin", 0.3))
+        margin = float(self.ctx.params["margin"])
         scan = self.device("ranges").scan()
         b, ranges = scan.beams(), scan.ranges
         # the nearest hit ahead inside the swept path (x > 0, |y| < BODY), and how open each side is

@@ -33,7 +33,7 @@ class Calibrate(Component):
         self.scans = 0
 
     def step(self, now: float) -> Status:
-        samples = int(self.ctx.params.get("samples", 20))
+        samples = int(self.ctx.params["samples"])
         scan = self.device("ranges").scan()
         self.scans += 1
         left, right = fit_wall(scan, 1), fit_wall(scan, -1)

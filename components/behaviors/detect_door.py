@@ -106,7 +106,7 @@ class DetectDoor(Component):
         return odo() if callable(odo) else None
 
     def step(self, now: float) -> Status:
-        min_width = float(self.ctx.params.get("min_width", 0.7))
+        min_width = float(self.ctx.params["min_width"])
         scan = self.device("ranges").scan()
         if wall_across(scan):  # a wall across the way: no new door between here and the end
             self.ctx.log("the corridor ends here, with no new door")

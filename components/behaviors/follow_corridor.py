@@ -220,7 +220,7 @@ class FollowCorridor(Component):
         self.turn_to: float | None = None  # heading to turn to, when turning around
 
     def step(self, now: float) -> Status:
-        speed = float(self.ctx.params.get("speed", 0.4))
+        speed = float(self.ctx.params["speed"])
         drive = self.device("drive")
         scan = self.device("ranges").scan()
         x, y, a = drive.odometry()

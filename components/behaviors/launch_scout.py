@@ -27,7 +27,7 @@ class LaunchScout(Component):
             return Status.FAILURE
         bound = self.ctx.resources.get("scout")
         scout = bound if bound in loaded else loaded[0]
-        distance = min(float(self.ctx.params.get("max_range", 30.0)), float(launcher.max_range))
+        distance = min(float(self.ctx.params["max_range"]), float(launcher.max_range))
         if "ranges" in self.ctx.devices:
             scan = self.device("ranges").scan()
             front = min(r for i, r in enumerate(scan.ranges) if abs(scan.angle(i)) <= 0.03 + scan.angle_step / 2)

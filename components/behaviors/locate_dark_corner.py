@@ -2,7 +2,7 @@
 
 Works from the sensors only: `Camera.brightness(n)` while the wheels turn the robot through a full turn,
 and the wheels' odometry for the bearing of each region. The camera has no depth, and a Scout has no
-range finder, so the distance to the corner is an estimate: a fixed `step` (param, default 3 m, about
+range finder, so the distance to the corner is an estimate: a fixed `STEP` (3 m, about
 the distance from a Scout landed in a room to its back wall) along the darkest bearing. The goal is in
 odometry coordinates (the Ranger's odometry frame, which is the world frame at start).
 
@@ -42,16 +42,22 @@ def circular_mean(angles: list[float]) -> float:
     return math.atan2(sum(math.sin(a) for a in angles), sum(math.cos(a) for a in angles))
 
 
+# Not parameters (the manifest declares only `max_light`, so no mission can set them): constants of the behavior.
+#: Brightness regions sampled per frame.
+N_REGIONS = 16
+#: How far along the darkest bearing (m) the goal is put: the camera has no depth.
+STEP = 3.0
+#: Turning rate (rad/s) while sampling.
+TURN_RATE = 0.6
+
+
 class LocateDarkCorner(Component):
-    """Params: `max_light` (0.2), `n_regions` (16), `step` (3 m), `turn_rate` (0.6 rad/s).
+    """Param: `max_light` (its default in the manifest).
     Output `goal` {x, y, light}; SUCCESS, or FAILURE when no bearing is as dark as `max_light` after a full turn."""
 
     def start(self) -> None:
         p = self.ctx.params
-        self.max_light = float(p.get("max_light", 0.2))
-        self.n_regions = int(p.get("n_regions", 16))
-        self.step_m = float(p.get("step", 3.0))
-        self.turn_rate = float(p.get("turn_rate", 0.6))
+        self.max_light = float(p["max_light"])
         self.camera = self.device("camera")
         self.drive = optional_device(self, "drive")
         self.samples: list[tuple[float, float, float, float]] = []  # light, absolute bearing, x, y
@@ -63,14 +69,14 @@ class LocateDarkCorner(Component):
         if self.last_heading is not None:
             self.turned += abs(wrap(h - self.last_heading))
         self.last_heading = h
-        lights = self.camera.brightness(self.n_regions)
-        for light, b in zip(lights, region_bearings(self.camera.fov, self.n_regions), strict=True):
+        lights = self.camera.brightness(N_REGIONS)
+        for light, b in zip(lights, region_bearings(self.camera.fov, N_REGIONS), strict=True):
             self.samples.append((light, wrap(h + b), x, y))
 
     def step(self, now: float) -> Status:
         self._sample()
         if self.drive is not None and self.turned < 2 * math.pi:
-            self.drive.set_velocity(0.0, self.turn_rate)
+            self.drive.set_velocity(0.0, TURN_RATE)
             return Status.RUNNING
         if self.drive is not None:
             self.drive.stop()
@@ -84,7 +90,7 @@ class LocateDarkCorner(Component):
         near = [s for s in self.samples if s[0] <= darkest + 0.03]  # smooth the noise over the dark spot
         bearing = circular_mean([s[1] for s in near])
         x, y = self.samples[-1][2], self.samples[-1][3]
-        goal = {"x": x + self.step_m * math.cos(bearing), "y": y + self.step_m * math.sin(bearing),
+        goal = {"x": x + STEP * math.cos(bearing), "y": y + STEP * math.sin(bearing),
                 "light": sum(s[0] for s in near) / len(near)}
         self.ctx.outputs["goal"] = goal
         self.ctx.log(f"dark corner at bearing {math.degrees(bearing):.0f} deg, light {goal['light']:.2f}")

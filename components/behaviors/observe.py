@@ -5,18 +5,21 @@ Fig. 8) no frame is taken and the clock does not count, so `Observe(duration: 12
 
 One frame per control cycle: the region brightness (the image, coarsely) and the people in it are read
 and kept in memory (`self.frames`, `self.detections`: the number of detections over all frames).
-Output `observation` {frames}. Params: `duration` (10 s), `n_regions` (16).
+Output `observation` {frames}. Param: `duration` (its default in the manifest, as every parameter's).
 """
 
 from __future__ import annotations
 
 from drd.runtime.component import Component, Status
 
+#: Brightness regions read per frame: the coarse image kept. Not a parameter (no mission can set it, the manifest
+#: declares none), so a constant here.
+N_REGIONS = 16
+
 
 class Observe(Component):
     def start(self) -> None:
-        self.duration = float(self.ctx.params.get("duration", 10.0))
-        self.n_regions = int(self.ctx.params.get("n_regions", 16))
+        self.duration = float(self.ctx.params["duration"])
         self.camera = self.device("camera")
         self.observed = 0.0
         self.last: float | None = self.ctx.now()
@@ -27,7 +30,7 @@ class Observe(Component):
         if self.last is not None:
             self.observed += now - self.last
         self.last = now
-        self.camera.brightness(self.n_regions)
+        self.camera.brightness(N_REGIONS)
         self.detections += len(self.camera.detections())
         self.frames += 1
         self.ctx.outputs["observation"] = {"frames": self.frames}

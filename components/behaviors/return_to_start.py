@@ -27,7 +27,7 @@ class ReturnToStart(Component):
         self.home = tuple(origin())[:2] if callable(origin) else (0.0, 0.0)
 
     def step(self, now: float) -> Status:
-        speed = float(self.ctx.params.get("speed", 0.5))
+        speed = float(self.ctx.params["speed"])
         drive = self.device("drive")
         x, y, a = drive.odometry()
         dx, dy = self.home[0] - x, self.home[1] - y

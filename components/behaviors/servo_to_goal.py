@@ -11,7 +11,7 @@ When the Scout is stopped short of the goal by a wall or an obstacle (driving fo
 moving for `stall` seconds), it is as close as it can get: it stops and succeeds. The goal of a dark corner
 is only an estimate along a bearing (LocateDarkCorner has no depth), so it often lies beyond the corner's
 walls: driving into the corner until blocked is the point.
-Params: `speed` (0.3 m/s), `tolerance` (0.3 m), `turn_gain` (1.5 /s), `max_turn` (1.0 rad/s), `stall` (1.5 s).
+Params: `speed`, `tolerance`, `stall` (their defaults in the manifest). Steering gain and limit: TURN_GAIN, MAX_TURN.
 """
 
 from __future__ import annotations
@@ -21,19 +21,23 @@ import math
 from components.behaviors.locate_dark_corner import wrap
 from drd.runtime.component import Component, Status
 
+# Not parameters (the manifest does not declare them, so no mission can set them): the steering loop's tuning.
+#: Turn rate (rad/s) per radian of bearing error.
+TURN_GAIN = 1.5
+#: Largest turn rate commanded (rad/s).
+MAX_TURN = 1.0
+
 
 class ServoToGoal(Component):
     def start(self) -> None:
         p = self.ctx.params
-        self.speed = float(p.get("speed", 0.3))
-        self.tolerance = float(p.get("tolerance", 0.3))
-        self.turn_gain = float(p.get("turn_gain", 1.5))
-        self.max_turn = float(p.get("max_turn", 1.0))
+        self.speed = float(p["speed"])
+        self.tolerance = float(p["tolerance"])
         self.drive = self.device("drive")
         self.camera = self.device("camera")
         self.radio = self.device("radio")
         self.goal = self.input("goal")
-        self.stall = float(p.get("stall", 1.5))
+        self.stall = float(p["stall"])
         self.frames_sent = 0
         self.link_was_ok = True
         self.anchor: tuple[float, float, float] | None = None  # (t, x, y) of the last real progress
@@ -60,7 +64,7 @@ class ServoToGoal(Component):
             self.drive.stop()
             return Status.SUCCESS
         err = wrap(math.atan2(dy, dx) - h)
-        omega = max(-self.max_turn, min(self.max_turn, self.turn_gain * err))
+        omega = max(-MAX_TURN, min(MAX_TURN, TURN_GAIN * err))
         v = self.speed * math.cos(err) if abs(err) < math.pi / 3 else 0.0  # turn on the spot first
         if v <= 0.05 or self.anchor is None or math.hypot(x - self.anchor[1], y - self.anchor[2]) > 0.05:
             self.anchor = (now, x, y)

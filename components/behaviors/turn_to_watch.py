@@ -3,7 +3,8 @@
 Which way is "the room": with a `camera` device (optional; the manifest needs only `drive`), the brightest
 bearing seen over a full turn (the door and the lit middle of the room); without one, the `heading` param
 (odometry, rad) when given, else half a turn from the heading at start (the Scout arrives facing its corner).
-Params: `turn_rate` (0.5 rad/s), `n_regions` (16), `heading` (optional). Heading from odometry.
+Params: `turn_rate` (its default in the manifest), `heading` (optional, no default: a manifest cannot declare
+an optional float without one, so it is read only when given). Heading from odometry.
 """
 
 from __future__ import annotations
@@ -14,19 +15,21 @@ from components.behaviors.locate_dark_corner import optional_device, region_bear
 from drd.runtime.component import Component, Status
 
 ALIGNED = 0.05  # rad
+#: Brightness regions sampled per frame. Not a parameter (the manifest declares none), so a constant.
+N_REGIONS = 16
 
 
 class TurnToWatch(Component):
     def start(self) -> None:
         p = self.ctx.params
-        self.turn_rate = float(p.get("turn_rate", 0.5))
-        self.n_regions = int(p.get("n_regions", 16))
+        self.turn_rate = float(p["turn_rate"])
         self.drive = self.device("drive")
         self.camera = optional_device(self, "camera")
         _, _, h = self.drive.odometry()
         self.target: float | None = None
-        if p.get("heading") is not None:
-            self.target = float(p["heading"])
+        heading = p.get("heading")
+        if heading is not None:
+            self.target = float(heading)
         elif self.camera is None:
             self.target = wrap(h + math.pi)
         self.best = (-1.0, h)  # brightest light seen, its absolute bearing
@@ -38,8 +41,8 @@ class TurnToWatch(Component):
         if self.target is None:  # scanning for the brightest bearing
             self.turned += abs(wrap(h - self.last))
             self.last = h
-            lights = self.camera.brightness(self.n_regions)
-            for light, b in zip(lights, region_bearings(self.camera.fov, self.n_regions), strict=True):
+            lights = self.camera.brightness(N_REGIONS)
+            for light, b in zip(lights, region_bearings(self.camera.fov, N_REGIONS), strict=True):
                 if light > self.best[0]:
                     self.best = (light, wrap(h + b))
             if self.turned < 2 * math.pi:

@@ -14,7 +14,7 @@ from drd.runtime.component import Component, Status
 
 class Wait(Component):
     def start(self) -> None:
-        self.duration = float(self.ctx.params.get("duration", 10.0))
+        self.duration = float(self.ctx.params["duration"])
         self.began = self.ctx.now()
 
     def step(self, now: float) -> Status:

@@ -2,14 +2,14 @@
 
 From the sensors only: `Camera.detections()` reports people in the field of view, in line of sight (never
 through a wall or a closed door) and in enough light. The `area` is the fraction of the image a person
-covers, from their angular width at the detected distance (a person is taken as `person_width`, 0.5 m,
+covers, from their angular width at the detected distance (a person is taken as `PERSON_WIDTH`, 0.5 m,
 wide): `2 atan(w / 2d) / fov`; only people covering at least `threshold` count. The position is estimated
 from the bearing and distance and the robot's odometry when a `drive` device is given (optional: the
 manifest needs only `camera`); without one, x and y are in the robot's own frame (x ahead, y to the left).
 
-One event when a person first shows up, then one each time they have moved `min_move` (0.5 m) since the
+One event when a person first shows up, then one each time they have moved `MIN_MOVE` (0.5 m) since the
 last event about them, so a person standing still is not reported over and over.
-Params: `duration` (60 s), `threshold` (0.05), `person_width` (0.5 m), `min_move` (0.5 m).
+Params: `duration`, `threshold` (their defaults in the manifest).
 """
 
 from __future__ import annotations
@@ -19,14 +19,18 @@ import math
 from components.behaviors.locate_dark_corner import optional_device
 from drd.runtime.component import Component, Status
 
+# Not parameters (the manifest does not declare them, so no mission can set them): constants of the behavior.
+#: The width (m) a person is taken to have, to tell the fraction of the image they cover.
+PERSON_WIDTH = 0.5
+#: How far (m) a person must move after an event about them before the next one.
+MIN_MOVE = 0.5
+
 
 class Watch(Component):
     def start(self) -> None:
         p = self.ctx.params
-        self.duration = float(p.get("duration", 60.0))
-        self.threshold = float(p.get("threshold", 0.05))
-        self.person_width = float(p.get("person_width", 0.5))
-        self.min_move = float(p.get("min_move", 0.5))
+        self.duration = float(p["duration"])
+        self.threshold = float(p["threshold"])
         self.camera = self.device("camera")
         self.drive = optional_device(self, "drive")
         self.t0 = self.ctx.now()
@@ -37,12 +41,12 @@ class Watch(Component):
         x0, y0, h = self.drive.odometry() if self.drive is not None else (0.0, 0.0, 0.0)
         for d in self.camera.detections():
             dist = max(d.distance, 0.05)
-            area = 2 * math.atan(self.person_width / (2 * dist)) / self.camera.fov
+            area = 2 * math.atan(PERSON_WIDTH / (2 * dist)) / self.camera.fov
             if area < self.threshold:
                 continue
             x, y = x0 + dist * math.cos(h + d.bearing), y0 + dist * math.sin(h + d.bearing)
             last = self.reported.get(d.label)
-            if last is not None and math.hypot(x - last[0], y - last[1]) < self.min_move:
+            if last is not None and math.hypot(x - last[0], y - last[1]) < MIN_MOVE:
                 continue
             self.reported[d.label] = (x, y)
             self.events += 1
