@@ -16,7 +16,7 @@ from __future__ import annotations
 import math
 from typing import Any
 
-from components.behaviors.follow_corridor import wrap
+from components.behaviors.scan import wrap
 from drd.runtime.component import Component, Status
 
 K_TURN = 1.5

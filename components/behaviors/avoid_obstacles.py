@@ -7,25 +7,22 @@ radius) is subtracted. Only points inside the swept path (|lateral| < BODY) coun
 
 from __future__ import annotations
 
-import bisect
-import math
-
+from components.behaviors.scan import nearest_in_path, openness
 from drd.runtime.component import Component, Status
 
 BODY = 0.3
 TURN = 0.8
+#: The sector (rad, open) whose openness tells the left side from the right (mirrored).
+SIDE = (0.2, 1.4)
 
 
 class AvoidObstacles(Component):
     def step(self, now: float) -> Status:
         margin = float(self.ctx.params["margin"])
         scan = self.device("ranges").scan()
-        b, ranges = scan.beams(), scan.ranges
-        # the nearest hit ahead inside the swept path (x > 0, |y| < BODY), and how open each side is
-        ahead = min([x for r, c, s in zip(ranges, b.cos, b.sin, strict=True)
-                     if (x := r * c) > 0 and -BODY < r * s < BODY], default=math.inf)
-        left = sum(ranges[bisect.bisect_right(b.angles, 0.2):bisect.bisect_left(b.angles, 1.4)])  # 0.2 < a < 1.4
-        right = sum(ranges[bisect.bisect_right(b.angles, -1.4):bisect.bisect_left(b.angles, -0.2)])
+        # the nearest reading ahead inside the swept path (x > 0, |y| < BODY), and how open each side is
+        ahead = nearest_in_path(scan, BODY)
+        left, right = openness(scan, *SIDE), openness(scan, -SIDE[1], -SIDE[0])
         near = ahead - BODY < margin
         if near:
             self.device("drive").set_velocity(0.0, TURN if left >= right else -TURN)

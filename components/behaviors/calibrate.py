@@ -10,7 +10,7 @@ import math
 import statistics
 from typing import Any
 
-from components.behaviors.follow_corridor import Wall, fit_wall, points
+from components.behaviors.scan import Wall, fit_wall, points
 from drd.runtime.component import Component, Status
 
 

@@ -14,7 +14,7 @@ import math
 import re
 from typing import Any
 
-from components.behaviors.follow_corridor import corridor, wall_across
+from components.behaviors.scan import corridor, expected, wall_across
 from drd.runtime.component import Component, Status
 
 #: How far past the wall line (m) a beam must reach to count as looking through a gap.
@@ -111,8 +111,7 @@ class DetectDoor(Component):
         if wall_across(scan):  # a wall across the way: no new door between here and the end
             self.ctx.log("the corridor ends here, with no new door")
             return Status.FAILURE
-        left, right = corridor(scan, self.expect)
-        self.expect = (left.distance if left else self.expect[0], right.distance if right else self.expect[1])
+        self.expect = expected(corridor(scan, self.expect), self.expect)
         pose = self._pose() or (0.0, 0.0, 0.0)
         log = self.input("visited")
         for gap in find_gaps(scan, min_width, self.expect):

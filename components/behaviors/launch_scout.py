@@ -10,12 +10,15 @@ distance is the cap alone.
 
 from __future__ import annotations
 
+from components.behaviors.scan import front_range
 from drd.runtime.component import Component, Status
 
 #: How far short of what the front beam sees (m) the Scout should land.
 CLEARANCE = 1.0
 #: Shortest throw worth making (m): anything less means a wall or closed door straight ahead.
 MIN_THROW = 1.5
+#: The front beam: the beams within this angle (rad) of the heading, half a beam step of margin included.
+FRONT = 0.03
 
 
 class LaunchScout(Component):
@@ -30,7 +33,7 @@ class LaunchScout(Component):
         distance = min(float(self.ctx.params["max_range"]), float(launcher.max_range))
         if "ranges" in self.ctx.devices:
             scan = self.device("ranges").scan()
-            front = min(r for i, r in enumerate(scan.ranges) if abs(scan.angle(i)) <= 0.03 + scan.angle_step / 2)
+            front = front_range(scan, FRONT)
             distance = min(distance, front - CLEARANCE)
         if distance < MIN_THROW:
             self.ctx.log(f"LaunchScout: target out of range ({distance:.2f} m)")

@@ -15,19 +15,8 @@ from __future__ import annotations
 import math
 from typing import Any
 
+from components.behaviors.scan import circular_mean, region_bearings, wrap
 from drd.runtime.component import Component, Status
-
-
-def wrap(angle: float) -> float:
-    """The same angle in [-pi, pi)."""
-    return (angle + math.pi) % (2 * math.pi) - math.pi
-
-
-def region_bearings(fov: float, n: int) -> list[float]:
-    """Bearing (rad, left positive) of the centre of each of `n` brightness regions, right to left."""
-    if n == 1:
-        return [0.0]
-    return [-fov / 2 + fov / (2 * n) + i * fov / n for i in range(n)]
 
 
 def optional_device(comp: Component, need: str) -> Any:
@@ -36,10 +25,6 @@ def optional_device(comp: Component, need: str) -> Any:
         return comp.device(need)
     except LookupError:
         return None
-
-
-def circular_mean(angles: list[float]) -> float:
-    return math.atan2(sum(math.sin(a) for a in angles), sum(math.cos(a) for a in angles))
 
 
 # Not parameters (the manifest declares only `max_light`, so no mission can set them): constants of the behavior.

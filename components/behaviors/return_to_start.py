@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import math
 
-from components.behaviors.follow_corridor import clearance_ahead, wrap
+from components.behaviors.scan import clearance_ahead, wrap
 from drd.runtime.component import Component, Status
 
 ARRIVED = 0.3

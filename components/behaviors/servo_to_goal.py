@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import math
 
-from components.behaviors.locate_dark_corner import wrap
+from components.behaviors.scan import wrap
 from drd.runtime.component import Component, Status
 
 # Not parameters (the manifest does not declare them, so no mission can set them): the steering loop's tuning.

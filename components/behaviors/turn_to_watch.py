@@ -11,7 +11,8 @@ from __future__ import annotations
 
 import math
 
-from components.behaviors.locate_dark_corner import optional_device, region_bearings, wrap
+from components.behaviors.locate_dark_corner import optional_device
+from components.behaviors.scan import region_bearings, wrap
 from drd.runtime.component import Component, Status
 
 ALIGNED = 0.05  # rad
