@@ -8,6 +8,7 @@ import math
 import pytest
 
 from components.behaviors.scan import (
+    ScanMemo,
     ahead,
     between,
     circular_mean,
@@ -199,3 +200,30 @@ def test_corridor_drops_a_wall_far_from_the_expected_distance_and_expected_keeps
     assert right is not None and right.distance == pytest.approx(1.5, abs=1e-6)
     assert expected(walls, (2.0, 1.45)) == pytest.approx((2.0, 1.5))
     assert expected((None, None), (None, 0.8)) == (None, 0.8)
+
+
+# -- the memo a component keeps ------------------------------------------------------------------------------------
+
+
+def test_a_memo_changes_no_result() -> None:
+    scan, memo = corridor_scan(1.0, 1.5, tilt=0.05), ScanMemo()
+    for _ in range(2):  # the second time from the memo
+        assert fit_wall(scan, 1, 0.9, memo) == fit_wall(scan, 1, 0.9)
+        assert corridor(scan, (1.0, None), memo=memo) == corridor(scan, (1.0, None))
+        assert clearance_ahead(scan, 0.5, memo) == clearance_ahead(scan, 0.5)
+        assert wall_across(scan, memo=memo) == wall_across(scan)
+    data = memo.of(scan)
+    assert data and ("fit", 1, 0.9) in data and ("clearance", 0.5) in data, "the memo is filled and read"
+
+
+def test_a_memo_holds_the_latest_scan_only_and_belongs_to_one_owner() -> None:
+    first, second, memo = corridor_scan(), corridor_scan(), ScanMemo()
+    fit_wall(first, 1, memo=memo)
+    kept = memo.of(first)
+    assert kept and memo.of(first) is kept
+    assert memo.of(second) == {}, "an equal but other scan starts afresh"
+    assert memo.of(first) == {}, "the first scan's data went with it"
+    assert ScanMemo().of(first) == {}, "another component's memo shares nothing"
+    changing = Scan([1.0, 2.0], 0.0, 0.1, FAR)  # type: ignore[arg-type]  # ranges that could change
+    assert memo.of(changing) is None
+    assert clearance_ahead(changing, memo=memo) == 1.0 and memo.of(changing) is None  # computed, not kept

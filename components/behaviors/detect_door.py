@@ -14,7 +14,7 @@ import math
 import re
 from typing import Any
 
-from components.behaviors.scan import corridor, expected, wall_across
+from components.behaviors.scan import ScanMemo, corridor, expected, wall_across
 from drd.runtime.component import Component, Status
 
 #: How far past the wall line (m) a beam must reach to count as looking through a gap.
@@ -48,9 +48,9 @@ def known(log: Any, x: float, y: float, side: str, width: float) -> bool:
 
 
 def find_gaps(scan: Any, min_width: float, expect: tuple[float | None, float | None] = (None, None),
-              ) -> list[dict[str, float | str]]:
+              memo: ScanMemo | None = None) -> list[dict[str, float | str]]:
     """Door gaps in one scan, in the robot frame: {width, x, y, side, bearing}."""
-    walls = corridor(scan, expect)
+    walls = corridor(scan, expect, memo=memo)
     b = scan.beams()
     out: list[dict[str, float | str]] = []
     for wall, sgn, side in ((walls[0], 1, "left"), (walls[1], -1, "right")):
@@ -95,6 +95,7 @@ class DetectDoor(Component):
 
     def start(self) -> None:
         self.expect: tuple[float | None, float | None] = (None, None)
+        self.memo = ScanMemo()  # what the scan helpers derive from this cycle's scan
 
     def _pose(self) -> tuple[float, float, float] | None:
         """Odometry, from the robot's Drive if this component was given one (the runtime may add it), else from
@@ -108,13 +109,13 @@ class DetectDoor(Component):
     def step(self, now: float) -> Status:
         min_width = float(self.ctx.params["min_width"])
         scan = self.device("ranges").scan()
-        if wall_across(scan):  # a wall across the way: no new door between here and the end
+        if wall_across(scan, memo=self.memo):  # a wall across the way: no new door between here and the end
             self.ctx.log("the corridor ends here, with no new door")
             return Status.FAILURE
-        self.expect = expected(corridor(scan, self.expect), self.expect)
+        self.expect = expected(corridor(scan, self.expect, memo=self.memo), self.expect)
         pose = self._pose() or (0.0, 0.0, 0.0)
         log = self.input("visited")
-        for gap in find_gaps(scan, min_width, self.expect):
+        for gap in find_gaps(scan, min_width, self.expect, self.memo):
             px, py, pa = pose
             gx, gy = float(gap["x"]), float(gap["y"])
             x = px + gx * math.cos(pa) - gy * math.sin(pa)

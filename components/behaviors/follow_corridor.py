@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import math
 
-from components.behaviors.scan import END, clearance_ahead, corridor, expected, wall_across, wrap
+from components.behaviors.scan import END, ScanMemo, clearance_ahead, corridor, expected, wall_across, wrap
 from drd.runtime.component import Component, Status
 
 #: Gains of the P controller: rad/s per metre off the centre line, and per radian of heading error.
@@ -32,6 +32,7 @@ class FollowCorridor(Component):
         self.expect: tuple[float | None, float | None] = (None, None)
         self.origin: tuple[float, float] | None = None
         self.turn_to: float | None = None  # heading to turn to, when turning around
+        self.memo = ScanMemo()  # what the scan helpers derive from this cycle's scan
 
     def step(self, now: float) -> Status:
         speed = float(self.ctx.params["speed"])
@@ -45,8 +46,8 @@ class FollowCorridor(Component):
             self.turn_to, self.origin = None, (x, y)
         if self.origin is None:
             self.origin = (x, y)
-        blocked = clearance_ahead(scan) < END
-        if blocked and wall_across(scan):
+        blocked = clearance_ahead(scan, memo=self.memo) < END
+        if blocked and wall_across(scan, memo=self.memo):
             if math.hypot(x - self.origin[0], y - self.origin[1]) < 0.5:  # started facing the end
                 self.turn_to = wrap(a + math.pi)
                 drive.set_velocity(0.0, TURN_RATE)
@@ -54,7 +55,7 @@ class FollowCorridor(Component):
             drive.stop()
             self.ctx.log("end of the corridor")
             return Status.SUCCESS
-        left, right = fitted = corridor(scan, self.expect)
+        left, right = fitted = corridor(scan, self.expect, memo=self.memo)
         self.expect = expected(fitted, self.expect)
         walls = [w for w in (left, right) if w is not None]
         heading = sum(w.angle for w in walls) / len(walls) if walls else 0.0  # the corridor's direction

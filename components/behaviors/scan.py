@@ -8,14 +8,19 @@ points in one (`points`), how open it is (`openness`), the nearest reading in th
 (`nearest_in_path`), the free distance ahead (`clearance_ahead`), the front reading (`front_range`), the corridor
 walls (`fit_wall`, `corridor`, `expected`) and whether a wall closes the way (`wall_across`); and the bearings the
 camera behaviors share (`wrap`, `region_bearings`, `circular_mean`).
+
+Every function is pure. The costly ones (a side's points, a wall fit, the clearance) take an optional `ScanMemo`
+that the calling component owns, so what several of them derive from the one scan of a control cycle is computed
+once for that component; nothing is kept in this module between calls.
 """
 
 from __future__ import annotations
 
 import bisect
 import math
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
+from types import MappingProxyType
 from typing import Any
 
 from drd.hw.interfaces import Beams, Scan
@@ -97,28 +102,52 @@ class Wall:
     inliers: int
 
 
+class ScanMemo:
+    """What the helpers derive from the latest scan a component read (a side's points, wall fits, the clearance),
+    keyed by what they computed, so that asking again about the same scan costs nothing.
+
+    One per component instance, kept by the component (never in module state, so nothing is shared between
+    instances or missions). It holds one scan: a new scan (another object) starts it afresh. A scan whose ranges
+    are not a tuple could change, so nothing is kept for it. Results are the same with or without a memo."""
+
+    __slots__ = ("_data", "_scan")
+
+    def __init__(self) -> None:
+        self._scan: Scan | None = None
+        self._data: dict[Any, Any] = {}
+
+    def of(self, scan: Scan) -> dict[Any, Any] | None:
+        """The derived data of `scan` (empty at first), or None for a scan that is not kept."""
+        if scan is self._scan:
+            return self._data
+        if not isinstance(scan.ranges, tuple):
+            return None
+        self._scan, self._data = scan, {}
+        return self._data
+
+
 #: The beams a wall fit looks at, per side: 20 to 160 degrees off the heading, left (+1) or right (-1).
-SECTORS = {1: (math.radians(20), math.radians(160)), -1: (math.radians(-160), math.radians(-20))}
+SECTORS: Mapping[int, tuple[float, float]] = MappingProxyType(
+    {1: (math.radians(20), math.radians(160)), -1: (math.radians(-160), math.radians(-20))})
 #: A starting distance needs SUPPORT abeam distances (itself included) at most SPREAD metres above it.
 SUPPORT, SPREAD = 6, 0.08
 
 
-def fit_wall(scan: Scan, side: int, expect: float | None = None) -> Wall | None:
+def fit_wall(scan: Scan, side: int, expect: float | None = None, memo: ScanMemo | None = None) -> Wall | None:
     """Fit the wall on one side (+1 left, -1 right) by least squares on the beams near it, robust to door gaps
     and end walls: start from a lateral distance abeam that enough beams agree on (the nearest one, or the one
     nearest `expect`, the last known distance), keep the points close to it.
 
-    A pure function of its arguments. What it derives from a scan is kept with the scan (`derived`), so the
-    behaviors that read the same scan in one control cycle (the laser's driver hands them one `Scan`) share it:
-    the points of a side are computed once, and a fit whose first inliers are those of an earlier fit is that fit.
+    A pure function of its arguments. With a `memo`, what it derives from the scan is kept there: the points of a
+    side are computed once per scan, and a fit whose first inliers are those of an earlier fit is that fit.
     """
-    memo = derived(scan)
-    if memo is None:
+    data = memo.of(scan) if memo is not None else None
+    if data is None:
         return _fit(scan, side, expect, {})
     key = ("fit", side, expect)
-    if key not in memo:
-        memo[key] = _fit(scan, side, expect, memo)
-    wall: Wall | None = memo[key]
+    if key not in data:
+        data[key] = _fit(scan, side, expect, data)
+    wall: Wall | None = data[key]
     return wall
 
 
@@ -182,37 +211,13 @@ def _refine(xs: list[float], ys: list[float], first: tuple[int, ...], side: int)
     return Wall(c * math.cos(a), side * a, n)
 
 
-#: Data derived from the latest few scans (wall fits, their points), by scan identity: see `derived`.
-_DERIVED: dict[int, tuple[Scan, dict[Any, Any]]] = {}
-_DERIVED_SCANS = 8
-
-
-def derived(scan: Scan) -> dict[Any, Any] | None:
-    """A dict for what helpers derive from `scan` (keyed by what they computed), kept while `scan` is one of the
-    few latest seen; None for a scan whose ranges are not a tuple (it could change, so nothing is kept).
-
-    Keyed by identity: the entry holds the scan itself, so its id cannot be reused while the entry exists, and a
-    `Scan` with a tuple of ranges never changes."""
-    entry = _DERIVED.get(id(scan))
-    if entry is not None and entry[0] is scan:
-        return entry[1]
-    if not isinstance(scan.ranges, tuple):
-        return None
-    if len(_DERIVED) >= _DERIVED_SCANS:
-        for old in list(_DERIVED)[:len(_DERIVED) + 1 - _DERIVED_SCANS]:  # the oldest (dicts keep insertion order)
-            _DERIVED.pop(old, None)
-    memo: dict[Any, Any] = {}
-    _DERIVED[id(scan)] = (scan, memo)
-    return memo
-
-
-def corridor(scan: Scan, expect: tuple[float | None, float | None] = (None, None),
-             jump: float = 0.4) -> tuple[Wall | None, Wall | None]:
+def corridor(scan: Scan, expect: tuple[float | None, float | None] = (None, None), jump: float = 0.4,
+             memo: ScanMemo | None = None) -> tuple[Wall | None, Wall | None]:
     """The left and right walls (either may be None where no wall is seen, or where the fit is more than `jump`
     metres from the expected distance: a room seen through a doorway, not the corridor wall)."""
     out = []
     for side, exp in ((1, expect[0]), (-1, expect[1])):
-        w = fit_wall(scan, side, exp)
+        w = fit_wall(scan, side, exp, memo)
         out.append(None if w is None or (exp is not None and abs(w.distance - exp) > jump) else w)
     return out[0], out[1]
 
@@ -234,18 +239,18 @@ BODY = 0.35
 ACROSS, WIDER = 0.9, 1.0
 
 
-def clearance_ahead(scan: Scan, half_width: float = BODY) -> float:
+def clearance_ahead(scan: Scan, half_width: float = BODY, memo: ScanMemo | None = None) -> float:
     """Free distance straight ahead (m) in a swath `2 * half_width` wide: the nearest hit in front of the robot
     within that lateral distance of its axis, or the laser's range when nothing is there."""
-    memo = derived(scan)
+    data = memo.of(scan) if memo is not None else None
     key = ("clearance", half_width)
-    if memo is not None and key in memo:
-        free: float = memo[key]
+    if data is not None and key in data:
+        free: float = data[key]
         return free
     far = scan.max_range
     free = min([r * c for r, c, s in _ahead(scan) if r < far and -half_width < r * s < half_width], default=far)
-    if memo is not None:
-        memo[key] = free
+    if data is not None:
+        data[key] = free
     return free
 
 
@@ -256,11 +261,11 @@ def _ahead(scan: Scan) -> zip[tuple[float, float, float]]:
     return zip(scan.ranges[i0:i1], b.cos[i0:i1], b.sin[i0:i1], strict=True)
 
 
-def wall_across(scan: Scan, within: float = END) -> bool:
+def wall_across(scan: Scan, within: float = END, memo: ScanMemo | None = None) -> bool:
     """The corridor ends here: the way ahead is blocked within `within` metres, and by something wider than a
     person (hits ahead spanning over `WIDER` metres across, looking within `ACROSS` of the axis: inside the
     corridor's side walls), so an intruder walking by is not taken for the end."""
-    if clearance_ahead(scan) >= within:
+    if clearance_ahead(scan, memo=memo) >= within:
         return False
     far, depth = scan.max_range, within + 0.25
     across = [y for r, c, s in _ahead(scan) if r < far and 0 < r * c < depth and -ACROSS < (y := r * s) < ACROSS]

@@ -1,9 +1,12 @@
-"""Parameter defaults come only from the manifests: no behavior repeats one in code.
+"""What the behaviors' sources may not do: repeat a manifest's parameter default, or keep state in their module.
 
 The runtime hands a component its parameters with the manifest's defaults applied (the compiled state's
 `defaults`, a rig's `Rig.start`), so a behavior reads `ctx.params["speed"]`. A fallback in code
 (`params.get("speed", 0.4)`) is a second copy of the default that can drift from the manifest; a value no
 manifest declares is no parameter at all (no mission can set it) and belongs in a named module constant.
+
+A dict, a list or an `lru_cache` at module (or class) level outlives the component instance and the mission that
+filled it: state belongs to the instance (`ScanMemo`), a constant mapping is read-only (`MappingProxyType`).
 """
 
 from __future__ import annotations
@@ -11,6 +14,8 @@ from __future__ import annotations
 import ast
 import importlib.util
 from pathlib import Path
+
+import pytest
 
 from drd.manifests import load_catalog
 
@@ -89,3 +94,56 @@ def test_the_check_finds_what_it_forbids() -> None:
     assert repeated_defaults('n = int(self.ctx.params["n_regions"])', declared)  # no manifest declares it
     assert repeated_defaults('v = float(self.ctx.params["speed"])', declared) == []
     assert repeated_defaults('h = self.ctx.params.get("heading")\nd = self.ctx.services.get("x")', declared) == []
+
+
+#: Calls that make a mutable container, and decorators that keep results between calls.
+MUTABLE_CALLS = {"dict", "list", "set", "defaultdict", "OrderedDict", "Counter", "deque", "WeakKeyDictionary",
+                 "WeakValueDictionary", "bytearray"}
+CACHES = {"lru_cache", "cache", "cached_property"}
+
+
+def _name(node: ast.expr) -> str:
+    node = node.func if isinstance(node, ast.Call) else node
+    return node.attr if isinstance(node, ast.Attribute) else node.id if isinstance(node, ast.Name) else ""
+
+
+def _mutable(value: ast.expr | None) -> bool:
+    return isinstance(value, ast.Dict | ast.List | ast.Set | ast.DictComp | ast.ListComp | ast.SetComp) or (
+        isinstance(value, ast.Call) and _name(value) in MUTABLE_CALLS)
+
+
+def module_state(source: str) -> list[str]:
+    """Where `source` keeps state beyond an instance: mutable containers bound at module or class level, caching
+    decorators, `global` statements."""
+    tree = ast.parse(source)
+    found = []
+    bodies = [tree.body] + [n.body for n in ast.walk(tree) if isinstance(n, ast.ClassDef)]
+    for stmt in (s for body in bodies for s in body):
+        if isinstance(stmt, ast.Assign | ast.AnnAssign) and _mutable(stmt.value):
+            found.append(f"line {stmt.lineno}: {ast.unparse(stmt)[:80]}")
+    for node in ast.walk(tree):
+        if isinstance(node, ast.FunctionDef | ast.AsyncFunctionDef):
+            found += [f"line {node.lineno}: {node.name} is cached by @{_name(d)}" for d in node.decorator_list
+                      if _name(d) in CACHES]
+        elif isinstance(node, ast.Global):
+            found.append(f"line {node.lineno}: global {', '.join(node.names)}")
+    return found
+
+
+BEHAVIORS = sorted((ROOT / "components" / "behaviors").glob("*.py"))
+
+
+@pytest.mark.parametrize("path", BEHAVIORS, ids=[p.stem for p in BEHAVIORS])
+def test_no_behavior_module_keeps_state_between_instances(path: Path) -> None:
+    assert module_state(path.read_text(encoding="utf-8")) == []
+
+
+def test_the_state_check_finds_what_it_forbids() -> None:
+    assert len(BEHAVIORS) >= 14 and any(p.stem == "scan" for p in BEHAVIORS)
+    assert module_state("_DERIVED: dict[int, object] = {}")
+    assert module_state("SEEN = set()")
+    assert module_state("class C:\n    cache = {}")
+    assert module_state("import functools\n@functools.lru_cache(maxsize=8)\ndef f(x): return x")
+    assert module_state("def f():\n    global N\n    N = 1")
+    assert module_state("K = (1, 2)\nS = frozenset({1})\nM = MappingProxyType({1: 2})\n"
+                        "def f():\n    seen = {}\n    return seen") == []
