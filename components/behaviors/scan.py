@@ -18,12 +18,14 @@ from __future__ import annotations
 
 import bisect
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from types import MappingProxyType
-from typing import Any
+from typing import Any, TypeVar
 
 from drd.hw.interfaces import Beams, Scan
+
+T = TypeVar("T")
 
 # -- bearings ------------------------------------------------------------------------------------------------------
 
@@ -126,6 +128,20 @@ class ScanMemo:
         return self._data
 
 
+def _scratch(scan: Scan, memo: ScanMemo | None) -> dict[Any, Any]:
+    """Where to keep what is derived from `scan`: the memo's, or a dict for this call only."""
+    data = memo.of(scan) if memo is not None else None
+    return {} if data is None else data
+
+
+def _kept(data: dict[Any, Any], key: object, compute: Callable[[], T]) -> T:
+    """`data[key]`, computed the first time it is asked for."""
+    if key not in data:
+        data[key] = compute()
+    value: T = data[key]
+    return value
+
+
 #: The beams a wall fit looks at, per side: 20 to 160 degrees off the heading, left (+1) or right (-1).
 SECTORS: Mapping[int, tuple[float, float]] = MappingProxyType(
     {1: (math.radians(20), math.radians(160)), -1: (math.radians(-160), math.radians(-20))})
@@ -141,14 +157,8 @@ def fit_wall(scan: Scan, side: int, expect: float | None = None, memo: ScanMemo 
     A pure function of its arguments. With a `memo`, what it derives from the scan is kept there: the points of a
     side are computed once per scan, and a fit whose first inliers are those of an earlier fit is that fit.
     """
-    data = memo.of(scan) if memo is not None else None
-    if data is None:
-        return _fit(scan, side, expect, {})
-    key = ("fit", side, expect)
-    if key not in data:
-        data[key] = _fit(scan, side, expect, data)
-    wall: Wall | None = data[key]
-    return wall
+    data = _scratch(scan, memo)
+    return _kept(data, ("fit", side, expect), lambda: _fit(scan, side, expect, data))
 
 
 def _side(scan: Scan, side: int) -> tuple[list[float], list[float], list[float]]:
@@ -167,11 +177,8 @@ def _side(scan: Scan, side: int) -> tuple[list[float], list[float], list[float]]
     return [x for x, _ in pts], [y for _, y in pts], support
 
 
-def _fit(scan: Scan, side: int, expect: float | None, memo: dict[Any, Any]) -> Wall | None:
-    key = ("side", side)
-    if key not in memo:
-        memo[key] = _side(scan, side)
-    xs, ys, support = memo[key]
+def _fit(scan: Scan, side: int, expect: float | None, data: dict[Any, Any]) -> Wall | None:
+    xs, ys, support = _kept(data, ("side", side), lambda: _side(scan, side))
     if not support:
         return None
     if expect is None:
@@ -182,11 +189,7 @@ def _fit(scan: Scan, side: int, expect: float | None, memo: dict[Any, Any]) -> W
             else support[j]
     # first pass: the points within 0.25 m of the line y = d0; the rest depends on d0 only through them
     first = tuple([i for i, y in enumerate(ys) if -0.25 < y - d0 < 0.25])
-    refined = ("refine", side, first)
-    if refined not in memo:
-        memo[refined] = _refine(xs, ys, first, side)
-    wall: Wall | None = memo[refined]
-    return wall
+    return _kept(data, ("refine", side, first), lambda: _refine(xs, ys, first, side))
 
 
 def _refine(xs: list[float], ys: list[float], first: tuple[int, ...], side: int) -> Wall | None:
@@ -242,16 +245,9 @@ ACROSS, WIDER = 0.9, 1.0
 def clearance_ahead(scan: Scan, half_width: float = BODY, memo: ScanMemo | None = None) -> float:
     """Free distance straight ahead (m) in a swath `2 * half_width` wide: the nearest hit in front of the robot
     within that lateral distance of its axis, or the laser's range when nothing is there."""
-    data = memo.of(scan) if memo is not None else None
-    key = ("clearance", half_width)
-    if data is not None and key in data:
-        free: float = data[key]
-        return free
     far = scan.max_range
-    free = min([r * c for r, c, s in _ahead(scan) if r < far and -half_width < r * s < half_width], default=far)
-    if data is not None:
-        data[key] = free
-    return free
+    return _kept(_scratch(scan, memo), ("clearance", half_width), lambda: min(
+        [r * c for r, c, s in _ahead(scan) if r < far and -half_width < r * s < half_width], default=far))
 
 
 def _ahead(scan: Scan) -> zip[tuple[float, float, float]]:
