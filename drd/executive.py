@@ -11,6 +11,7 @@ default one imports a component's entry point, from its manifest, the first time
 
 from __future__ import annotations
 
+import functools
 import itertools
 from collections.abc import Callable, Iterable, Mapping
 from typing import Any
@@ -93,7 +94,7 @@ class Executive:
         self.gates: Gates = self._gates(gates)
         self.pool.places = dict(self.services.get("places", {}))  # the world's rooms: `inside(ranger, "n1")`
         self._ids = itertools.count(1)
-        self._seq = itertools.count(1)  # the records of every mission, in the order they happened
+        self.sent = 0  # records sent, of every mission: each is numbered in the order they happened
         self._queryable = bus.serve(f"drd/{cluster}/executive", self._command)
 
     def _gates(self, gates: Gates | None) -> Gates:
@@ -121,12 +122,12 @@ class Executive:
     def submit(self, chart: Statechart, mission_id: str | None = None,
                listeners: Iterable[Callable[[rec.Record], None]] = (),
                registry: Mapping[str, Callable[[], Component]] | None = None, priority: int = 1,
-               resume: NodeImage | None = None) -> str:
+               resume: NodeImage | None = None, since: float = 0.0, paused: float = 0.0) -> str:
         """Start a compiled mission; returns its id (`<name>-<n>`).
 
         `registry` replaces the executive's own for this mission (a cluster mission's `RemoteRegistry`);
         `priority` ranks the mission against the others sharing the team (1 first); `resume`: enter it again as
-        it was saved (`drd.runtime.snapshot`), after its controller was lost."""
+        it was saved at `since` (`drd.runtime.snapshot`), after its controller was lost `paused` seconds ago."""
         mid = mission_id or f"{chart.name}-{next(self._ids)}"
         self.forget_finished()
         if mid in self.missions:
@@ -137,19 +138,23 @@ class Executive:
                              pool=self.pool, mission=mid, services=self.services, preallocate=self.preallocate,
                              gates=self.gates, priority=priority, guard=self.guard)
         key = f"drd/{self.cluster}/mission/{mid}/record"
-        interp.attach(lambda r: self.bus.put(key, _to_message(mid, r, next(self._seq))))
+        interp.attach(functools.partial(self._send, key, mid))
         for listener in listeners:
             interp.attach(listener)
         self.missions[mid] = interp
         if resume is not None:
-            interp.resume(resume)
+            interp.resume(resume, since, paused)
         else:
             interp.start()
         return mid
 
     def continue_records(self, after: int) -> None:
         """Number the next records after `after` (a controller resuming goes on with its journal's numbering)."""
-        self._seq = itertools.count(after + 1)
+        self.sent = max(self.sent, after)
+
+    def _send(self, key: str, mission: str, record: rec.Record) -> None:
+        self.sent += 1
+        self.bus.put(key, _to_message(mission, record, self.sent))
 
     def step(self) -> None:
         for interp in list(self.missions.values()):

@@ -545,6 +545,7 @@ class _RecordWatch:
         self.recorder = recorder  # --record: the same records, into an MCAP file
         self.queue: queue.Queue[object] = queue.Queue()
         self.seen: dict[str, tuple[DryRun, dict[str, None]]] = {}  # mission -> (its report so far, active paths)
+        self.away_since: float | None = None  # when the controller stopped answering (None: it answers)
 
         def on_record(sample: Any) -> None:
             if isinstance(sample.payload, MissionRecord):
@@ -589,7 +590,7 @@ class _RecordWatch:
             now = time.monotonic()
             if now >= next_poll and finished is None:  # a missed record must not hang us: ask the executive
                 next_poll = now + self.every
-                for m in self.client.missions():
+                for m in self._missions(mission):
                     if m.get("id") == mission and isinstance(m.get("time"), int | float):
                         clock = max(clock, float(m["time"]) - base)
                     if m.get("id") == mission and m.get("outcome"):
@@ -606,6 +607,28 @@ class _RecordWatch:
         result.wall_time = time.monotonic() - (start if began is None else began)
         return result
 
+
+    def _missions(self, mission: str) -> list[dict[str, Any]]:
+        """The executive's missions; none while the controller does not answer (it may be restarting: a
+        controller started again resumes its missions from its journal), said once when it goes and comes back."""
+        from drd.errors import BusFailure
+
+        try:
+            missions = self.client.missions()
+        except BusFailure:
+            if self.away_since is None:
+                self.away_since = time.monotonic()
+                err.print(Text.assemble(("⚠ ", "bold yellow"), "the controller does not answer: waiting for it (a"
+                                        " controller started again resumes the mission from its journal)"))
+            return []
+        if self.away_since is not None:
+            away, self.away_since = time.monotonic() - self.away_since, None
+            if not any(m.get("id") == mission for m in missions):
+                fail(f"mission {mission}: the controller came back without it (it kept no journal of it): see"
+                     " `missionctl status`", code=1)
+            err.print(Text.assemble(("▶ ", "bold green"), f"the controller is back after {away:.1f} s: mission"
+                                    f" {mission} resumed"))
+        return missions
 
     def _take(self, msg: Any, result: Any, base: float) -> Any:
         """One record of the followed mission: into its report (and the trace file); the record, or None."""
@@ -801,6 +824,10 @@ def _missions_view(missions: list[dict[str, Any]], width: int = 80) -> list[Rend
             head.append(f"  {duration_text(round(float(m['time']), 1))}", style="dim")
         if m.get("outcome") and m.get("reason"):
             head.append(f"  {m['reason']}", style="dim")
+        resumed = m.get("resumed")
+        if isinstance(resumed, dict) and isinstance(resumed.get("paused"), int | float):
+            head.append(f"  resumed after its controller was lost ({float(resumed['paused']):.1f} s without one)",
+                        style="yellow")
         tree = Tree(head)
         root = m.get("tree")
         if root and m.get("outcome") is None:

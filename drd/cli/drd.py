@@ -197,7 +197,9 @@ def _serve(cluster: Cluster, host: str, cat: Catalog, tr: Transport, rd: Path, c
     from drd.daemon import runfiles
     from drd.daemon.daemon import Daemon, DaemonConfig
 
-    daemon = Daemon(DaemonConfig(cluster, host, cat, tr, load_period=load_period, peer_grace=peer_grace))
+    journal = rd / cluster.name / "journal.sqlite"  # the controller's missions, resumed after a crash
+    daemon = Daemon(DaemonConfig(cluster, host, cat, tr, load_period=load_period, peer_grace=peer_grace,
+                                 journal=journal))
     try:
         info = runfiles.claim(rd, host, cluster.name, str(config.absolute()), str(log_file or ""))
     except runfiles.AlreadyRunning as e:

@@ -31,6 +31,7 @@ import time
 from collections import Counter, deque
 from collections.abc import Callable
 from dataclasses import asdict, dataclass
+from pathlib import Path
 from typing import Any
 
 from drd.bus import Bus, LoadReport, Message, Ping, Pong, Query, Reply, Sample
@@ -79,6 +80,7 @@ class DaemonConfig:
     tick: float = 0.05
     peer_grace: float = 3.0
     peer_recheck: float = 5.0
+    journal: Path | None = None  # the controller's missions on disk (`drd.journal`); None: not kept
 
     def __post_init__(self) -> None:
         self.cluster.host(self.host)  # KeyError naming the known hosts
@@ -189,15 +191,17 @@ class Daemon:
                                on_change=self._instances_changed)
         if Role.CONTROLLER in roles:
             from drd.daemon.missions import MissionRunner
+            from drd.journal import Journal
 
             with self._lock:
                 self.controller = Controller(bus, self.cluster, self.config.catalog, me, self._lock,
                                              on_reject=self._reject, on_change=self._controller_change,
                                              clock=self._controller_clock)
+                journal = Journal(self.config.journal) if self.config.journal is not None else None
                 self.runner = MissionRunner(bus, self.cluster, self.config.catalog, me, self._lock, self.controller,
                                             self.controller.mission_clock, sim_service=self.sim_service,
                                             host_down=lambda h: self.view.state(h) is HostState.DOWN,
-                                            host_views=self.view.host_views)
+                                            host_views=self.view.host_views, journal=journal)
         self._declared.append(bus.watch_tokens(keys.hosts, self._on_token, history=True))
         if not self.creator.pool.wait_ready():  # up only once a component can be placed here in milliseconds
             log.warning("the Creator's worker processes are not all ready yet: the first starts here may be slow")

@@ -20,6 +20,7 @@ when its last mission ends, and each ended mission's processes are retired on ev
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 import logging
 import threading
@@ -32,7 +33,9 @@ from drd.cluster.gates import GateUpdate, GateUpdateReply, RemoteGates, deliver
 from drd.cluster.guard import SharedGuard
 from drd.cluster.remote import ComponentCall, ComponentError, ComponentRouter, SimCycle
 from drd.cluster.telemetry import RemoteTelemetry
+from drd.daemon.resume import Checkpoints, resume, wait_for_hosts
 from drd.hosts import Cluster, Role
+from drd.journal import Journal
 from drd.placement import HostView
 from drd.profiling import Sampler
 from drd.sim.service import SimReply, SimRequest, SimulationService
@@ -47,6 +50,8 @@ CONTROL_PERIOD = 0.1
 CALL_TIMEOUT = 1.0
 #: Seconds a placement counts on its host before the host's own announcements (its instances) show it.
 RECENT_PLACEMENT = 3.0
+#: Seconds beyond two leases a restarted controller waits for the hosts before it resumes the journal's missions.
+RESUME_GRACE = 5.0
 
 
 @message("drd.mission.run", 3)
@@ -97,6 +102,11 @@ class SimTimeClock:
         self.t = self.base + sim_time
 
 
+def request_data(req: RunMission) -> dict[str, Any]:
+    """What the journal keeps of a run request (all but the client's patience)."""
+    return {f.name: getattr(req, f.name) for f in dataclasses.fields(req) if f.name != "give_up_at"}
+
+
 def run_key(cluster: str) -> str:
     return f"drd/{cluster}/missions/run"
 
@@ -125,7 +135,8 @@ class MissionRunner:
     def __init__(self, bus: Bus, cluster: Cluster, catalog: Catalog, me: str, lock: threading.RLock,
                  controller: Any, clock: SimTimeClock, *, sim_service: SimulationService | None = None,
                  host_down: Callable[[str], bool] = lambda h: False,
-                 host_views: Callable[[], list[HostView]] | None = None) -> None:
+                 host_views: Callable[[], list[HostView]] | None = None, journal: Journal | None = None) -> None:
+        """`journal`: where missions are saved each cycle and resumed from after a restart (`drd.journal`)."""
         self.bus = bus
         self.cluster = cluster
         self.catalog = catalog
@@ -151,11 +162,32 @@ class MissionRunner:
         executive.guard = self.guard = SharedGuard(executive.pool, self.gates.device_hosts, self.gates.send,
                                                    clock.now)
         self.world: WorldRun | None = None
-        self._starting = threading.Lock()
+        self.starting = threading.Lock()
         self.generation = 0  # worlds started so far: a Creator builds its drivers again for a new one
         self.lost: list[str] = []  # hosts seen down whose robots the world's loop stops in the simulator
+        self.journal = journal
+        self.checkpoints = Checkpoints(journal) if journal is not None else None
         self._queryable = bus.serve(run_key(cluster.name), self._serve)
         threading.Thread(target=self._warm_up, name="drd-compiler-warm-up", daemon=True).start()
+        if journal is not None and journal.running():
+            threading.Thread(target=self._resume, name="drd-resume", daemon=True).start()
+
+    def _resume(self) -> None:
+        """Resume the journal's missions once the hosts with devices (and the simulator's) are back, or after a
+        grace of two leases and a few seconds: a host still down then is handled as during a run."""
+        assert self.journal is not None
+        hosts = sorted({h.name for h in self.cluster.hosts if h.devices} | ({self.simulator} if self.simulator else
+                                                                               set()))
+        down = wait_for_hosts(self, hosts, 2 * self.cluster.lease + RESUME_GRACE)
+        if down:
+            log.warning("resuming without %s (still down)", ", ".join(down))
+        try:
+            resumed = resume(self, self.journal)
+        except Exception:  # never leave the operator guessing: the journal stays for the next start
+            log.exception("the journal's missions could not be resumed")
+            return
+        if resumed:
+            log.info("resumed %d mission(s) from the journal: %s", len(resumed), ", ".join(resumed))
 
     def _warm_up(self) -> None:
         """Compile an empty mission once, in the background: the compiler's imports and the parser's tables then
@@ -181,6 +213,8 @@ class MissionRunner:
         if world is not None:
             world.stopping.set()
             world.thread.join(timeout=5)
+        if self.journal is not None:
+            self.journal.close()
 
     def host_lost(self, host: str) -> None:
         """A host's resources left the manager: it went down and did not come back within the lease (called
@@ -245,7 +279,7 @@ class MissionRunner:
         if self.simulator is None:
             raise ValueError("no host has the role simulator in hosts.yaml: the sim drivers need one")
         priority = req.priority or chart.priority
-        with self._starting:  # one start at a time: two first missions must not start two worlds
+        with self.starting:  # one start at a time: two first missions must not start two worlds
             return self._start(req, chart, priority)
 
     def _start(self, req: RunMission, chart: Any, priority: int) -> RunReply:
@@ -269,21 +303,29 @@ class MissionRunner:
             mid = f"{chart.name}-{int(time.time() * 1000) % 10_000_000}"
             while mid in executive.missions:
                 mid += "x"
-            router = ComponentRouter(self.bus, self.cluster.name, self.resource_hosts, self.me,
-                                     local=executive.registry, mission=mid, world=world.name,
-                                     active=functools.partial(_active, executive, mid), timeout=CALL_TIMEOUT,
-                                     dead=self.host_down, catalog=self.catalog,
-                                     place=self.place if self.host_views else None, gates=self.gates,
-                                     records=executive.record, cycle=world.cycle, generation=world.generation)
             base = self.clock.now()
-            world.add(mid, router, base, req.until)
-            executive.submit(chart, mid, registry=router.registry(), priority=priority)
-        if not world.thread.is_alive() and not world.started:
-            world.started = True
-            world.thread.start()
+            if self.journal is not None:  # before its first record: a loss from now on resumes it
+                self.journal.begin(mid, request_data(req), priority, base, req.until)
+            self.submit(world, chart, mid, priority, base, req.until)
+        world.go()
         log.info("mission %s started (%s, world %s, speed %gx, priority %d)", mid, req.file, world.name,
                  world.speed, priority)
         return RunReply(mid, True, [], world.name, world.speed, time.time(), base, priority)
+
+    def submit(self, world: WorldRun, chart: Any, mid: str, priority: int, base: float, until: float,
+               resume: Any = None, since: float = 0.0, paused: float = 0.0) -> None:
+        """Start mission `mid` in `world` (or enter it again as `resume`, a `drd.runtime.snapshot.NodeImage`),
+        its components reached through a router of its own (called with the lock held)."""
+        executive = self.controller.executive
+        router = ComponentRouter(self.bus, self.cluster.name, self.resource_hosts, self.me,
+                                 local=executive.registry, mission=mid, world=world.name,
+                                 active=functools.partial(_active, executive, mid), timeout=CALL_TIMEOUT,
+                                 dead=self.host_down, catalog=self.catalog,
+                                 place=self.place if self.host_views else None, gates=self.gates,
+                                 records=executive.record, cycle=world.cycle, generation=world.generation)
+        world.add(mid, router, base, until)
+        executive.submit(chart, mid, registry=router.registry(), priority=priority, resume=resume, since=since,
+                         paused=paused)
 
     def _new_world(self, req: RunMission) -> WorldRun:
         from drd.sim import load_world
@@ -300,17 +342,22 @@ class MissionRunner:
         except Exception as e:
             raise ValueError(f"the simulator on {self.simulator} did not start the world: {e}") from None
         with self.lock:
-            self.generation += 1
-            world = WorldRun(self, path.stem, self.generation, req.speed)
-            world.cycle.sim_time, world.cycle.sim_version = reset.time, reset.version
-            world.cycle.step_sim = lambda dt: self.sim(SimRequest("step", dt=dt))
-            world.cycle.simulator = (self.simulator or "") if self.sim_service is None else ""  # a batch there steps it
             self.clock.start_mission()
-            self.clock.set_sim(reset.time)
             self._reset_dependencies(self.controller.executive)
-            self.telemetry.reset()  # the hosts build their drivers (and guards) again for the new world
-            self.controller.executive.pool.places = {r.id: (r.x0, r.y0, r.x1, r.y1) for r in loaded.rooms}
-            self.world, self.lost = world, []
+            return self.open_world(path.stem, loaded, reset, self.generation + 1, req.speed)
+
+    def open_world(self, name: str, loaded: Any, reply: SimReply, generation: int, speed: float) -> WorldRun:
+        """The loop of the world the simulator runs (`reply`: its time and version now), for the hosts'
+        drivers of `generation` (called with the lock held; the clock's base is set by the caller)."""
+        self.generation = generation
+        world = WorldRun(self, name, generation, speed)
+        world.cycle.sim_time, world.cycle.sim_version = reply.time, reply.version
+        world.cycle.step_sim = lambda dt: self.sim(SimRequest("step", dt=dt))
+        world.cycle.simulator = (self.simulator or "") if self.sim_service is None else ""  # a batch there steps it
+        self.clock.set_sim(reply.time)
+        self.telemetry.reset()  # the hosts build their drivers (and guards) again for the new world
+        self.controller.executive.pool.places = {r.id: (r.x0, r.y0, r.x1, r.y1) for r in loaded.rooms}
+        self.world, self.lost = world, []
         return world
 
     def place(self, component: str, params: Mapping[str, Any], exclude: frozenset[str]) -> str:
@@ -393,6 +440,12 @@ class WorldRun:
         self.cycles = 0
         self.thread = threading.Thread(target=self._loop, name=f"drd-world-{name}-{generation}", daemon=True)
 
+    def go(self) -> None:
+        """Start the world's loop, unless it runs already."""
+        if not self.thread.is_alive() and not self.started:
+            self.started = True
+            self.thread.start()
+
     def add(self, mission: str, router: ComponentRouter, start: float, until: float) -> None:
         """A mission joins the world at executive time `start`, to be stopped `until` seconds later (called with
         the runner's lock held)."""
@@ -428,6 +481,8 @@ class WorldRun:
                     break
                 sim_time = stepped
                 runner.flush_gates(self)
+                if runner.checkpoints is not None:
+                    runner.checkpoints.save(runner, self)
                 self._retire_finished()
                 self.cycles += 1
                 lag = sim_time / self.speed - (time.perf_counter() - start)
@@ -496,6 +551,8 @@ class WorldRun:
             ended = {m: self.routers.pop(m) for m in done}
             outcomes = {m: (missions[m].outcome, missions[m].reason) if m in missions else (None, "") for m in ended}
         for mid, router in ended.items():
+            if runner.journal is not None and not (everyone and self.stopping.is_set() and outcomes[mid][0] is None):
+                runner.journal.finish(mid, outcomes[mid][0] or "stopped", outcomes[mid][1])
             for host in sorted(set(router.stats.by_host) | set(router.batches.by_host)):
                 if host == runner.me or runner.host_down(host):
                     continue

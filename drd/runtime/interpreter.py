@@ -123,6 +123,7 @@ class Interpreter:
         self._constraints: dict[Node, list[Active]] = {}  # active behaviors' constraints
         self._violations: collections.deque[tuple[Node, Active, Measure]] = collections.deque()
         self._restore: Restore | None = None  # while `resume` enters the mission again
+        self.resumed: tuple[float, float, float] | None = None  # (when, state of when, paused s): `resume`d
         self._restoring: dict[str, NodeImage] = {}  # nodes entered again whose children are not entered yet
         self.resources = ResourceClient(self.rcm, self.pool, self.mission, gates or self._own_gates(), self.arbiter,
                                         clock.now, self._names, priority)
@@ -165,10 +166,10 @@ class Interpreter:
         self._flush()
         return MacroStep(self.clock.now(), 0, tuple(self._taken), self.outcome)
 
-    def resume(self, image: NodeImage) -> MacroStep:
-        """Enter the mission again as `image` (`drd.runtime.snapshot.capture`) saw it: after its controller was
-        lost, the holds it had end (`released`, `controller lost`) and each state it was in is entered again,
-        with its entry time and data, asking for its resources anew (`drd.runtime.snapshot`)."""
+    def resume(self, image: NodeImage, since: float = 0.0, paused: float = 0.0) -> MacroStep:
+        """Enter the mission again as `image` (`drd.runtime.snapshot.capture`) saw it at `since`: after its
+        controller was lost, the holds it had end (`released`, `controller lost`) and each state it was in is
+        entered again, with its entry time and data, asking anew for the resources it held (`drd.runtime.snapshot`)."""
         if self.root is not None:
             raise RuntimeError("this interpreter has already started")
         now = self.clock.now()
@@ -176,8 +177,8 @@ class Interpreter:
             if n.grant:
                 held = tuple(dict.fromkeys([*n.grant.values(), *n.epochs]))
                 self._notify(rec.Released(now, n.path, held, "controller lost"))
-        self._notify(rec.Restored(now, image.path, image.entered if not image.children else max(
-            x.entered for x in image.walk())))
+        self._notify(rec.Restored(now, image.path, since, paused))
+        self.resumed = (now, since, paused)
         self._restore = Restore(image, self.pool.view)  # followed until each saved state is entered or gone
         return self.start()
 
@@ -283,8 +284,11 @@ class Interpreter:
         def tree(n: Node) -> dict[str, Any]:
             return {"path": n.path, "kind": n.state.kind.value, "phase": n.phase.value,
                     "resources": dict(n.grant or {}), "children": [tree(c) for c in n.children]}
-        return {"mission": self.mission, "outcome": self.outcome, "reason": self.reason,
-                "time": self.clock.now(), "tree": tree(self.root) if self.root else None}
+        out = {"mission": self.mission, "outcome": self.outcome, "reason": self.reason,
+               "time": self.clock.now(), "tree": tree(self.root) if self.root else None}
+        if self.resumed is not None:
+            out["resumed"] = dict(zip(("at", "since", "paused"), self.resumed, strict=True))
+        return out
 
     # ------------------------------------------------------------- entering
     def _enter(self, state: State, path: str, parent: Node | None, scope: dict[str, Any]) -> Node:
@@ -312,6 +316,10 @@ class Interpreter:
             return node
         if self._restore is not None:
             image = self._restore.take(node)
+            if image is not None and image.grant:  # the same resources again, not whichever fits now
+                needs = {n.name for n in state.needs}
+                self.resources.pins[self.resources.holder(node)] = {
+                    k: v for k, v in image.grant.items() if k in needs}
             if image is not None and state.kind is not LEAF:
                 self._restoring[path] = image
             if not self._restore:
@@ -325,8 +333,11 @@ class Interpreter:
                 return node
         if parent is not None and (plan.reserves or self.preallocate):
             self._preallocate(node)
-        if plan.requested:  # a state whose needs are all bound above never talks to the manager
-            self._request(node, plan.requested)
+        requested = plan.requested
+        if node.released:  # entered again after its controller was lost: what it had given back stays given back
+            requested = tuple(n for n in requested if n.name not in node.released)
+        if requested:  # a state whose needs are all bound above never talks to the manager
+            self._request(node, requested)
         else:
             self._activate(node)
         return node

@@ -141,9 +141,11 @@ class Resumed(Record):
 @dataclass(frozen=True, slots=True)
 class Restored(Record):
     """The mission was entered again from its journal after its controller was lost: its state as saved at
-    `since` (the holds of the lost controller ended, `released` with reason `controller lost`, just before)."""
+    `since`, after `paused` seconds (wall time) without a controller (the holds of the lost controller ended,
+    `released` with reason `controller lost`, just before)."""
 
     since: float = 0.0
+    paused: float = 0.0
 
 
 @dataclass(frozen=True, slots=True)

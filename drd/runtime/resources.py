@@ -47,6 +47,7 @@ class ResourceClient:
         self.names = names
         self.mission_priority = mission_priority
         self.holders: dict[str, Node] = {}  # request holder -> node
+        self.pins: dict[str, dict[str, str]] = {}  # holder -> need -> the resource its next request must get
 
     # -------------------------------------------------------------- requests
     def holder(self, node: Node) -> str:
@@ -59,9 +60,10 @@ class ResourceClient:
         Raises:
             EvalError: a `quantity` or a parameter could not be evaluated (the node fails, nothing is asked).
         """
-        reqs = tuple(self.need_request(node, n) for n in needs)
-        node.requested = True
         holder = self.holder(node)
+        pins = self.pins.pop(holder, None)
+        reqs = tuple(self.need_request(node, n, pins.get(n.name) if pins else None) for n in needs)
+        node.requested = True
         self.holders[holder] = node
         request = Request(holder, node.state.priority, reqs, self.mission, self.mission_priority)
         if at is None:
@@ -69,12 +71,15 @@ class ResourceClient:
         else:
             self.broker.reserve(request, self.now(), at)
 
-    def need_request(self, node: Node, need: ResourceNeed) -> NeedRequest:
+    def need_request(self, node: Node, need: ResourceNeed, pinned: str | None = None) -> NeedRequest:
+        """`pinned`: the resource it must be (a mission resumed after its controller was lost asks for what it
+        held, whatever its `where` says of the resource now)."""
         quantity = need.quantity
         if isinstance(quantity, ast.Expr):
             value = evaluate(quantity, self.names(node), self.pool.count)
             quantity = float(value) if isinstance(value, int | float) and not isinstance(value, bool) else 1.0
-        return NeedRequest(need.name, need.type, float(quantity or 1.0), need.slice, self.where(node, need))
+        where = self.where(node, need) if pinned is None else (lambda cand, chosen: cand.id == pinned)
+        return NeedRequest(need.name, need.type, float(quantity or 1.0), need.slice, where)
 
     def where(self, node: Node, need: ResourceNeed) -> Any:
         """The need's `where` as the solver calls it: evaluated in the node's scope, with the candidate (and the

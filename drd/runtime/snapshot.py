@@ -75,21 +75,23 @@ class NodeImage:
     outputs: dict[str, Any] = field(default_factory=dict)
     finished: list[str] = field(default_factory=list)
     counters: list[int] = field(default_factory=list)  # multi: instances, succeeded, failed, low, high
-    grant: dict[str, str] = field(default_factory=dict)  # need -> resource id
+    grant: dict[str, str] = field(default_factory=dict)  # need -> resource id (of the needs it still held)
+    released: list[str] = field(default_factory=list)  # needs it gave back early (`release(x)`)
     epochs: dict[str, int] = field(default_factory=dict)  # unit -> epoch
     children: list[NodeImage] = field(default_factory=list)
 
     def to_dict(self) -> dict[str, Any]:
         return {"path": self.path, "state": self.state, "phase": self.phase, "entered": self.entered,
                 "data": self.data, "outputs": self.outputs, "finished": self.finished, "counters": self.counters,
-                "grant": self.grant, "epochs": self.epochs, "children": [c.to_dict() for c in self.children]}
+                "grant": self.grant, "released": self.released, "epochs": self.epochs,
+                "children": [c.to_dict() for c in self.children]}
 
     @classmethod
     def from_dict(cls, d: Mapping[str, Any]) -> NodeImage:
         return cls(str(d["path"]), str(d["state"]), str(d["phase"]), float(d["entered"]), dict(d.get("data", {})),
                    dict(d.get("outputs", {})), [str(x) for x in d.get("finished", [])],
                    [int(x) for x in d.get("counters", [])], {str(k): str(v) for k, v in d.get("grant", {}).items()},
-                   {str(k): int(v) for k, v in d.get("epochs", {}).items()},
+                   [str(x) for x in d.get("released", [])], {str(k): int(v) for k, v in d.get("epochs", {}).items()},
                    [cls.from_dict(c) for c in d.get("children", [])])
 
     def walk(self) -> list[NodeImage]:
@@ -107,9 +109,11 @@ def capture(root: Node) -> NodeImage:
         own = {name for name, _t in n.state.shared} | {v.name for v in n.state.vars}
         data = {k: encode(v) for k, v in n.scope.items() if k in own}
         counters = [n.instances, n.succeeded, n.failed, *n.bounds] if n.state.kind.value == "multi" else []
+        gone = n.released
+        grant = {k: v for k, v in (n.grant or {}).items() if k.partition(".")[0] not in gone}
         return NodeImage(n.path, n.state.id, n.phase.value, n.entered, data,
                          {k: encode(v) for k, v in n.outputs.items()}, sorted(n.finished), counters,
-                         dict(n.grant or {}), dict(n.epochs), [image(c) for c in n.children if c.phase is not DONE])
+                         grant, sorted(gone), dict(n.epochs), [image(c) for c in n.children if c.phase is not DONE])
     return image(root)
 
 
@@ -133,6 +137,7 @@ class Restore:
         node.scope.update({k: decode(v, self.resource) for k, v in image.data.items()})
         node.outputs.update({k: decode(v, self.resource) for k, v in image.outputs.items()})
         node.finished.update(image.finished)
+        node.released = frozenset(image.released)
         if len(image.counters) == 5:
             node.instances, node.succeeded, node.failed = image.counters[:3]
             node.bounds = (image.counters[3], image.counters[4])

@@ -1,0 +1,84 @@
+"""A mission survives its controller (issue #16): kill -9 of the controller mid-mission, `drd start` again, and
+the mission goes on under the same id to success, followed by the same `missionctl run` to the end.
+
+Real daemons on loopback (controller; ranger1 with the simulator, as the repository's hosts.yaml has it), every
+process ours and killed by pid. What is asserted is what an operator and outside tools see: the client's report
+and trace, `missionctl status`, ranger1's announced instances, the simulated Ranger itself."""
+
+from __future__ import annotations
+
+import json
+import signal
+import time
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+import pytest
+from cluster_support import MISSIONCTL, ROOT, DaemonCluster, eventually, running, serving_cluster
+
+NAMES = ["controller", "ranger1"]
+
+
+def corridor_hosts(cluster: DaemonCluster) -> str:
+    """The repository's hosts.yaml (the simulator on ranger1) on our free ports, with the test lease."""
+    text = (ROOT / "hosts.yaml").read_text()
+    ports = dict(zip(NAMES, cluster.ports, strict=True))
+    text = text.replace("name: corridor", f"name: {cluster.name}").replace("lease: 3s", "lease: 1000ms")
+    text = text.replace("127.0.0.1:7447", f"127.0.0.1:{ports['controller']}")
+    return text.replace("127.0.0.1:7448", f"127.0.0.1:{ports['ranger1']}")
+
+
+@pytest.fixture(scope="module")
+def cluster(tmp_path_factory: pytest.TempPathFactory) -> Iterator[DaemonCluster]:
+    with serving_cluster(tmp_path_factory.mktemp("restart"), NAMES, corridor_hosts) as c:
+        yield c
+
+
+def mission_time(cluster: DaemonCluster, mission: str) -> float | None:
+    for m in cluster.client().missions():
+        if m.get("id") == mission and m.get("outcome") is None and isinstance(m.get("time"), int | float):
+            return float(m["time"])
+    return None
+
+
+def records(path: Path) -> list[dict[str, Any]]:
+    return [json.loads(line) for line in path.read_text().splitlines() if line.strip()]
+
+
+def test_a_mission_goes_on_after_its_controller_is_killed_and_started_again(cluster: DaemonCluster,
+                                                                          tmp_path: Path) -> None:
+    trace = tmp_path / "run.jsonl"
+    cmd = [*MISSIONCTL, "run", str(ROOT / "missions" / "corridor_surveillance.mission"), "--config",
+           str(cluster.hosts_file), "--speed", "20", "--json", "--trace", str(trace)]
+    with running(cmd) as run:
+        eventually(lambda: trace.exists() and any(r["kind"] == "granted" for r in records(trace)),
+                   "the mission to run", 60, poll=0.1)
+        mission = records(trace)[0]["mission"]
+        eventually(lambda: (mission_time(cluster, mission) or 0.0) > 60.0, "a minute of the mission", 60, poll=0.2)
+        cluster.procs["controller"].send_signal(signal.SIGKILL)
+        cluster.procs["controller"].wait(timeout=10)
+        killed_at = time.monotonic()
+        time.sleep(1.5)  # the lease runs out: ranger1 stops its robots and retires the instances
+        cluster.start("controller")
+        out, err = run.communicate(timeout=240)
+    assert run.returncode == 0, (out[-2000:], err[-3000:], cluster.log("controller")[-4000:])
+    report = json.loads(out)
+    assert report["outcome"] == "success" and report["mission"] == mission, report
+    assert "controller" in err and "resumed" in err, err[-2000:]  # the client said what happened
+    recs = records(trace)
+    assert {r["mission"] for r in recs} == {mission}
+    restored = [r for r in recs if r["kind"] == "restored"]
+    assert len(restored) == 1, restored
+    seqs = [r["seq"] for r in recs]
+    assert seqs == sorted(seqs) and len(set(seqs)) == len(seqs), "records are numbered on, never again"
+    check = cluster.missionctl("check-trace", str(trace), "--config", str(cluster.hosts_file), "--json")
+    assert check.returncode == 0, check.stdout + check.stderr
+    [status] = [m for m in cluster.client().missions() if m.get("id") == mission]
+    assert status["outcome"] == "success"
+    assert status["resumed"]["paused"] > 1.5, status.get("resumed")  # what `missionctl status` says of it
+    assert restored[0]["since"] <= restored[0]["at"] and restored[0]["paused"] > 1.5
+    # no ghost: what ranger1 announces of the mission is gone once it ended (its instances were retired)
+    eventually(lambda: not [i for i in cluster.client().components().instances if i.mission == mission],
+               "ranger1 to retire the mission's instances", 10)
+    assert time.monotonic() - killed_at < 240
