@@ -140,3 +140,12 @@ def test_the_corridor_mission_resumed_mid_way_succeeds_with_one_holder_per_devic
     again = {r["path"] for r in recs[restored:] if r["kind"] == "entered"}
     assert set(live) <= again, set(live) - again  # every state it was in is entered again
     assert len(entered) > len(live)
+    # an instance that had given its Ranger back (`release(ranger)` after the launch) does not take it again,
+    # and each gets back the very Scout it had
+    gave_back = {n.path for n in image.walk() if "ranger" in n.released}
+    assert gave_back, [(n.path, n.released) for n in image.walk()]
+    regranted = {r["path"]: r["resources"] for r in recs[restored:] if r["kind"] == "granted"}
+    for n in image.walk():
+        if n.path in regranted and n.grant:
+            assert regranted[n.path].get("scout") == n.grant.get("scout"), (n.path, regranted[n.path], n.grant)
+            assert ("ranger" in regranted[n.path]) == (n.path not in gave_back), (n.path, regranted[n.path])
