@@ -24,6 +24,7 @@ from drd.hosts import Cluster, Role
 from drd.hw.drivers import HostDrivers, drivers_for
 from drd.inject import Action, Injection
 from drd.record import INTRUDER, Recorder
+from drd.restart import ControllerLife
 from drd.runtime import records as rec
 from drd.runtime.trace import TraceWriter
 from drd.sim.model import DoorState
@@ -207,12 +208,18 @@ def team(cluster: Cluster, world: World, catalog: Catalog, *, seed: int = 0, reg
     """The world simulated and one executive over the team of `cluster` (its hosts' devices driven in the
     simulation), in this process: what a dry-run runs missions on. `late`: hosts whose devices join later."""
     sim = Simulation(world, seed=seed)
+    return sim, executive_over(cluster, world, sim, catalog, registry, [r.id for r in cluster.resources()
+                                                                        if r.host in late])
+
+
+def executive_over(cluster: Cluster, world: World, sim: Simulation, catalog: Catalog, registry: Any = None,
+                   gone: Collection[str] = ()) -> Executive:
+    """An executive over the team of `cluster` in the world `sim` runs, without the resources in `gone`."""
     drivers = merged_drivers(cluster, sim, catalog)
     places = {room.id: (room.x0, room.y0, room.x1, room.y1) for room in world.rooms}
-    executive = Executive(LocalNetwork().session("controller"), SimulationClock(sim), registry or EntryPoints(catalog),
-                          cluster=cluster.name, resources=[r for r in cluster.resources() if r.host not in late],
-                          lease=cluster.lease, services={"drivers": drivers, "places": places})
-    return sim, executive
+    return Executive(LocalNetwork().session("controller"), SimulationClock(sim), registry or EntryPoints(catalog),
+                     cluster=cluster.name, resources=[r for r in cluster.resources() if r.id not in gone],
+                     lease=cluster.lease, services={"drivers": drivers, "places": places})
 
 
 def run(chart: Statechart, cluster: Cluster, world: World, catalog: Catalog, **options: Any) -> DryRun:
@@ -239,22 +246,24 @@ def run_many(missions: Sequence[Mission], cluster: Cluster, world: World, catalo
         raise ValueError("\n".join(map(str, problems)))
     late = {i.target for i in injections if i.action is Action.JOIN}  # hosts whose daemon starts later
     sim, executive = team(cluster, world, catalog, seed=seed, registry=registry, late=late)
+    life = ControllerLife(executive, functools.partial(executive_over, cluster, world, sim, catalog, registry),
+                          cluster.resources(), [r.id for r in cluster.resources() if r.host in late])
     start = time.perf_counter()
     if recorder is not None:
         recorder.scene(world)
-    results = [_submit(executive, m, n, speed, trace, recorder) for n, m in enumerate(missions, 1)]
-    running = [executive.missions[r.mission_id or ""] for r in results]  # the interpreters
+    results = [_submit(life, m, n, speed, trace, recorder) for n, m in enumerate(missions, 1)]
     next_progress = 0.0
     pending = sorted(injections)
-    while not all(interp.finished for interp in running) and sim.time < until - 1e-6:  # 0.1 s steps add up
+    while not life.finished() and sim.time < until - 1e-6:  # 0.1 s steps add up
         if stop is not None and stop.is_set():
             break
         sim.step(CONTROL_PERIOD)
         while pending and pending[0].at <= sim.time + 1e-9:
-            effect = _inject(pending.pop(0), sim, executive, cluster)
+            effect = _inject(pending.pop(0), sim, life, cluster, pending)
             for result in results:
                 result.injections.append(effect)
-        executive.step()
+        if life.executive is not None:  # a dead controller steps nothing
+            life.executive.step()
         if recorder is not None:
             recorder.poses(sim.time, {**{rid: (p.x, p.y, p.heading) for rid in sim.robots if (p := sim.pose(rid))},
                                       **{INTRUDER + iid: (x, y, 0.0) for iid, (x, y) in sim.intruders().items()}})
@@ -263,20 +272,18 @@ def run_many(missions: Sequence[Mission], cluster: Cluster, world: World, catalo
             if lag > 0:
                 time.sleep(lag)
         if progress is not None and sim.time >= next_progress:
-            progress(sim, executive)
+            if life.executive is not None:
+                progress(sim, life.executive)
             next_progress = sim.time + progress_every
     why = "stopped by operator" if stop is not None and stop.is_set() else f"sim time limit of {until:g} s reached"
-    for interp in running:
-        if not interp.finished:
-            interp.stop(why)
-    _conclude(results, running, sim, time.perf_counter() - start)
-    executive.close()
+    life.end(why)
+    _conclude(results, [life.interpreters[r.mission_id or ""] for r in results], sim, time.perf_counter() - start)
     if recorder is not None:
         recorder.end([summary(r) for r in results], sim.time)
     return results
 
 
-def _submit(executive: Executive, m: Mission, n: int, speed: float | None, trace: IO[str] | None,
+def _submit(life: ControllerLife, m: Mission, n: int, speed: float | None, trace: IO[str] | None,
             recorder: Recorder | None = None) -> DryRun:
     """Start mission number `n` on the executive; its report gathers its records (and the trace gets them)."""
     result = DryRun(m.chart.name, None, "", 0.0, 0.0, speed=speed, priority=m.priority or m.chart.priority)
@@ -287,7 +294,7 @@ def _submit(executive: Executive, m: Mission, n: int, speed: float | None, trace
     if recorder is not None:
         listeners.append(functools.partial(recorder.record, mid))
     result.mission_id = mid
-    executive.submit(m.chart, mid, listeners=listeners, priority=result.priority)
+    life.submit(m.chart, mid, listeners, result.priority)
     return result
 
 
@@ -329,29 +336,36 @@ def _conclude(results: list[DryRun], running: list[Any], sim: Simulation, wall: 
         result.tracks = tracks
 
 
-def _inject(inj: Injection, sim: Simulation, executive: Executive, cluster: Cluster) -> dict[str, Any]:
-    """Apply one injected failure now; the record says what it did."""
+def _inject(inj: Injection, sim: Simulation, life: ControllerLife, cluster: Cluster,
+            later: Sequence[Injection] = ()) -> dict[str, Any]:
+    """Apply one injected failure now (`later`: the injections still to come); the record says what it did."""
     what = str(inj)
-    if inj.action is Action.JOIN:
+    executive = life.executive  # None while the controller is down: the manager learns it when it starts again
+    controller = inj.action in (Action.KILL, Action.RESTART) and Role.CONTROLLER in cluster.host(inj.target).roles
+    if inj.action is Action.KILL and controller:
+        restarting = any(i.action is Action.RESTART and i.target == inj.target for i in later)
+        what += ": " + life.kill(sim.time, inj.target, restarting)
+    elif inj.action is Action.RESTART and controller:
+        what += ": " + life.restart(sim.time)
+    elif inj.action in (Action.JOIN, Action.RESTART):
         found = [r for r in cluster.resources() if r.host == inj.target]
-        executive.add_resources(found)
+        life.gone.difference_update(r.id for r in found)
+        if executive is not None:
+            executive.add_resources(found)
         what += f": {len(found)} resources joined the manager"
-    elif inj.action is Action.KILL and Role.CONTROLLER in cluster.host(inj.target).roles:
-        # as on a cluster: the hosts stop their robots, and a mission does not outlive its controller (no journal)
-        for interp in executive.missions.values():
-            if not interp.finished:
-                interp.stop(f"the controller ({inj.target}) was lost: every host stopped its robots; the mission "
-                            "cannot resume (no journal yet)")
-        what += ": every mission stopped, every robot with it"
     elif inj.action is Action.KILL:
         robots = [r.id for r in cluster.host(inj.target).robots if r.id in sim.robots]
         for rid in robots:
             sim.lose(rid)  # nothing drives them any more
-        executive.remove_host(inj.target)
+        life.gone.update(r.id for r in cluster.resources() if r.host == inj.target)
+        if executive is not None:
+            executive.remove_host(inj.target)
         what += f": its resources left the manager; {', '.join(robots) or 'no robot'} stopped"
     elif inj.action is Action.LOSE:
         sim.lose(inj.target)
-        executive.remove_resources(_robot_resources(cluster, inj.target))
+        life.gone.update(_robot_resources(cluster, inj.target))
+        if executive is not None:
+            executive.remove_resources(_robot_resources(cluster, inj.target))
         what += ": the robot and its resources are gone"
     elif sim.door(inj.target) is DoorState.BLOCKED:
         what += ": nothing happens, a blocked door stays blocked"

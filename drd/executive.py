@@ -212,6 +212,13 @@ class Executive:
         self.stop()
         self._queryable.close()
 
+    def abandon(self) -> None:
+        """Its process died (a dry-run's `kill controller`): nothing more is said or done, missions are left as
+        they were (no stop, no release: what a crash leaves)."""
+        for interp in self.missions.values():
+            interp.listeners.clear()
+        self._queryable.close()
+
     def _command(self, query: Query) -> Message | Reply:
         cmd = query.payload
         if not isinstance(cmd, MissionCommand):

@@ -8,6 +8,8 @@ Pure: parsing and checking against the cluster and the world; `drd.dryrun` appli
   instance that held it fails, the rest of the mission goes on.
 - `join HOST`: the host's daemon starts late: until then the manager does not know its resources (its robots
   stand idle in the world); when it joins they are added, and a running multiplicity below its max grows.
+- `restart HOST`: the daemon of a host killed earlier starts again. The controller resumes its missions from its
+  journal (as `drd start` does on a cluster: `drd.runtime.snapshot`); any other host joins back.
 - `block DOOR`: an open door is obstructed (as solid as closed, and not openable).
 - `close DOOR` / `open DOOR`: a door changes state.
 """
@@ -27,6 +29,7 @@ from dsl.errors import did_you_mean
 class Action(StrEnum):
     KILL = "kill"
     JOIN = "join"
+    RESTART = "restart"
     LOSE = "lose"
     BLOCK = "block"
     CLOSE = "close"
@@ -34,8 +37,8 @@ class Action(StrEnum):
 
 
 #: What each action applies to, for messages.
-TARGET = {Action.KILL: "host", Action.JOIN: "host", Action.LOSE: "robot", Action.BLOCK: "door", Action.CLOSE: "door",
-          Action.OPEN: "door"}
+TARGET = {Action.KILL: "host", Action.JOIN: "host", Action.RESTART: "host", Action.LOSE: "robot",
+          Action.BLOCK: "door", Action.CLOSE: "door", Action.OPEN: "door"}
 
 _FORM = re.compile(r"^\s*(?P<action>\w+)\s+(?P<target>[\w.\-]+)\s+at\s+(?P<at>\S+)\s*$")
 USAGE = "write ACTION TARGET at TIME, e.g. 'kill ranger1 at 90s', 'lose scout3 at 2min', 'block door_n3 at 60s'"
@@ -86,9 +89,24 @@ def parse_all(texts: list[str], *, hosts: set[str], robots: set[str], doors: set
             out.append(parse(t, hosts=hosts, robots=robots, doors=doors))
         except InjectionError as e:
             problems.append(str(e))
+    out.sort()
+    problems += _restarts_follow_kills(out)
     if problems:
         raise InjectionError("\n".join(problems))
-    return sorted(out)
+    return out
+
+
+def _restarts_follow_kills(injections: list[Injection]) -> list[str]:
+    """A `restart HOST` needs that host killed before it (and not restarted since)."""
+    problems, down = [], set()
+    for i in injections:
+        if i.action is Action.KILL:
+            down.add(i.target)
+        elif i.action is Action.RESTART:
+            if i.target not in down:
+                problems.append(f"{i}: {i.target} is not down then: write 'kill {i.target} at ...' before it")
+            down.discard(i.target)
+    return problems
 
 
 def _suggest(name: str, candidates: Iterable[str]) -> str:

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import subprocess
+from pathlib import Path
 
 import pytest
 
@@ -27,8 +28,8 @@ def test_injections_are_read_with_the_languages_durations(text: str, expected: I
 
 
 @pytest.mark.parametrize(("text", "message"), [
-    ("kil ranger1 at 90s", "unknown injection 'kil' in 'kil ranger1 at 90s': use one of kill, join, lose, block, "
-                           "close, open (did you mean kill?)"),
+    ("kil ranger1 at 90s", "unknown injection 'kil' in 'kil ranger1 at 90s': use one of kill, join, restart, lose, "
+                           "block, close, open (did you mean kill?)"),
     ("kill scout1 at 90s", "no host 'scout1' to kill"),
     ("lose scout3 at 1s", "known robots are ranger1, scout1, scout2 (did you mean scout1?)"),
     ("block door_n9 at 1s", "no door 'door_n9' to block"),
@@ -70,6 +71,39 @@ def test_killing_the_controller_ends_the_mission_as_on_a_cluster() -> None:
     assert report["reason"].startswith("the controller (controller) was lost: every host stopped its robots")
     assert report["sim_time"] == pytest.approx(30.0, abs=0.11)
     assert all(h["to"] is not None and h["to"] <= 30.1 for h in report["holds"])  # type: ignore[union-attr]
+
+
+def test_a_controller_started_again_resumes_the_mission_from_its_journal_as_on_a_cluster(tmp_path: Path) -> None:
+    """Issue #16: killed at 60 s and started again at 70 s, the controller resumes the corridor mission where it
+    was; the robots stood still meanwhile, and the trace shows one holder per device throughout."""
+    trace, recording = tmp_path / "run.jsonl", tmp_path / "run.mcap"
+    code, report, err = dry_run("missions/corridor_surveillance.mission", "--inject", "kill controller at 60s",
+                                "--inject", "restart controller at 70s", "--trace", str(trace), "--record",
+                                str(recording))
+    assert code == 0 and report["outcome"] == "success", err
+    effects = [i["effect"] for i in report["injections"]]  # type: ignore[union-attr]
+    assert "1 mission(s) wait for the controller" in effects[0] and "1 mission(s) resumed" in effects[1], effects
+    records = [json.loads(line) for line in trace.read_text().splitlines()]
+    [restored] = [r for r in records if r["kind"] == "restored"]
+    assert restored["at"] == pytest.approx(70.0, abs=0.11) and restored["since"] == pytest.approx(60.0, abs=0.11)
+    assert not [r for r in records if 60.05 < r["at"] < 69.95], "a dead controller records nothing"
+    released = [r for r in records if r["kind"] == "released" and r["reason"] == "controller lost"]
+    assert released and all(r["at"] == restored["at"] for r in released)
+    from drd.tracecheck import check
+
+    assert check(records, {"ranger1.radio"}).ok
+    from drd.record import read
+
+    seen = read(recording)  # the robots' side: nothing moved while the controller was down
+    for robot in ("ranger1", "scout1"):
+        before, after = seen.pose(robot, 60.2), seen.pose(robot, 69.9)
+        assert before is not None and after is not None
+        assert abs(before[0] - after[0]) < 0.02 and abs(before[1] - after[1]) < 0.02, (robot, before, after)
+
+
+def test_a_restart_needs_a_kill_before_it() -> None:
+    code, _report, err = dry_run("missions/corridor_surveillance.mission", "--inject", "restart controller at 10s")
+    assert code == 2 and "controller is not down then: write 'kill controller at ...' before it" in err, err
 
 
 def test_a_lost_scout_fails_its_own_instance_not_the_mission() -> None:

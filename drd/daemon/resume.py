@@ -17,7 +17,7 @@ import time
 from typing import Any
 
 from drd.journal import Journal, Journaled, WorldState
-from drd.runtime.snapshot import NodeImage, capture
+from drd.runtime.snapshot import NodeImage, capture, property_changes
 
 log = logging.getLogger("drd.daemon.resume")
 
@@ -49,25 +49,11 @@ class Checkpoints:
                     self._saved[mid] = text
                     changed[mid] = (now, snapshot)
             state = WorldState(world.name, world.generation, runner.clock.base, now, executive.sent,
-                               changed_properties(runner.cluster, executive.pool))
+                               property_changes(runner.cluster.resources(), executive.pool))
         self.journal.save(changed, state)  # every cycle: the clock and the record numbers move on
 
     def forget(self, mission: str) -> None:
         self._saved.pop(mission, None)
-
-
-def changed_properties(cluster: Any, pool: Any) -> dict[str, dict[str, Any]]:
-    """The Static Dependency Database's values that differ from the hosts file's (resource -> key -> value)."""
-    out: dict[str, dict[str, Any]] = {}
-    for r in cluster.resources():
-        now = pool.properties(r.id)
-        diff = {k: v for k, v in now.items() if r.properties.get(k, _MISSING) != v}
-        if diff:
-            out[r.id] = diff
-    return out
-
-
-_MISSING = object()
 
 
 def resume(runner: Any, journal: Journal) -> list[str]:

@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import math
 import re
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -166,3 +166,18 @@ def epochs_of(root: NodeImage) -> dict[str, int]:
         for unit, epoch in n.epochs.items():
             out[unit] = max(out.get(unit, 0), epoch)
     return out
+
+
+def property_changes(resources: Iterable[Any], pool: Any) -> dict[str, dict[str, Any]]:
+    """The Static Dependency Database's values (`pool.properties`) that differ from the resources' own (hosts.yaml):
+    resource -> key -> value (a launched Scout's `carrier`), what a resumed mission must find again."""
+    out: dict[str, dict[str, Any]] = {}
+    for r in resources:
+        now = pool.properties(r.id)
+        diff = {k: v for k, v in now.items() if r.properties.get(k, _MISSING) != v}
+        if diff:
+            out[r.id] = diff
+    return out
+
+
+_MISSING = object()
