@@ -64,8 +64,8 @@ _TOP_KEYS = ("cluster", "hosts")
 _CLUSTER_KEYS = ("name", "security", "lease", "placement", "world", "history")
 #: The simulated world when hosts.yaml names none (`sim` drivers need one: worlds/NAME.yaml).
 DEFAULT_WORLD = "corridor"
-_HOST_KEYS = ("endpoint", "roles", "cores", "devices", "robots")
-_DEVICE_KEYS = ("type", "driver", "options", "capacity", "slice")
+_HOST_KEYS = ("endpoint", "roles", "cores", "drivers", "devices", "robots")
+_DEVICE_KEYS = ("type", "driver", "options", "driver_options", "capacity", "slice")
 _ROBOT_KEYS = ("type", "carrier", "parts", "properties")
 _SECURITY_ALLOWED = ("mode", *dict.fromkeys(k for keys in SECURITY_KEYS.values() for k in keys))
 _PLACEMENT_KEYS = ("cpu", "memory", "instances")
@@ -113,6 +113,9 @@ class Device:
     options: Mapping[str, object] = field(default_factory=dict, hash=False)
     capacity: float | None = None
     slice: float | None = None  # minimum time slice when a need sets none (exclusive devices only)
+    #: How its driver reaches the hardware (`driver_options:`, over the host's `drivers: {<driver>: ...}`): plain
+    #: values the driver class checks itself (`check_options`), never device properties (docs/ros2.md).
+    driver_options: Mapping[str, object] = field(default_factory=dict, hash=False)
 
     @property
     def sharable(self) -> bool:
@@ -291,7 +294,8 @@ class _Parser(ConfigReader):
         if self.catalog is None:
             return Host(name, endpoint, roles, cores)
         raw = data.get("devices", {})
-        devices = [self.device(name, d, v, p) for d, v, p in self.entries(raw, f"{key}.devices", _DEVICE_ID)]
+        shared = self.driver_settings(data.get("drivers", {}), f"{key}.drivers")
+        devices = [self.device(name, d, v, p, shared) for d, v, p in self.entries(raw, f"{key}.devices", _DEVICE_ID)]
         # Broken entries still count (typeless), so the parts naming them are not reported again;
         # with no usable `devices` mapping at all (None), parts are not looked up.
         local = {str(k): Device(f"{name}.{k}", name, "", "") for k in raw} if isinstance(raw, dict) else None
@@ -302,7 +306,24 @@ class _Parser(ConfigReader):
                                                                                     f"{key}.robots")]
         return Host(name, endpoint, roles, cores, tuple(devices), tuple(robots))
 
-    def device(self, host: str, local_id: str, data: dict[Any, Any], key: str) -> Device:
+    def driver_settings(self, value: object, key: str) -> dict[str, dict[str, object]]:
+        """A host's `drivers:`: per driver name, the `driver_options` every device of that driver starts from."""
+        out: dict[str, dict[str, object]] = {}
+        for driver, options in self.mapping(value, key).items():
+            if self.name(driver, f"{key}.{driver}") is not None:
+                out[str(driver)] = self.plain(options, f"{key}.{driver}")
+        return out
+
+    def plain(self, value: object, key: str) -> dict[str, object]:
+        """A mapping of plain YAML values (what a driver's options are): no check of the keys, the driver's own."""
+        data = self.mapping(value, key)
+        for k in data:
+            if not isinstance(k, str):
+                self.fail(f"{key}.{k}", f"a key is a name, got {got(k)}")
+        return {str(k): v for k, v in data.items()}
+
+    def device(self, host: str, local_id: str, data: dict[Any, Any], key: str,
+               shared: Mapping[str, Mapping[str, object]] | None = None) -> Device:
         self.keys(data, key, _DEVICE_KEYS, required=("type", "driver"))
         t = self.component(data["type"], f"{key}.type", Kind.RC) if "type" in data else None
         driver = self.name(data["driver"], f"{key}.driver") if "driver" in data else None
@@ -319,8 +340,11 @@ class _Parser(ConfigReader):
                 self.fail(f"{key}.slice", f"{t.name} is sharable: it is never taken away, so it has no time slice")
             else:
                 slice_ = self.duration(data["slice"], f"{key}.slice")
+        own = self.plain(data["driver_options"], f"{key}.driver_options") if "driver_options" in data else {}
+        wiring = {**(shared or {}).get(driver or "", {}), **own}
         # An empty type was reported already: parts using the device are then not checked again.
-        return Device(f"{host}.{local_id}", host, t.name if t else "", driver or "", options, capacity, slice_)
+        return Device(f"{host}.{local_id}", host, t.name if t else "", driver or "", options, capacity, slice_,
+                      wiring)
 
     def robot(self, host: str, rid: str, data: dict[Any, Any], key: str, local: Mapping[str, Device] | None,
               users: dict[str, str]) -> Robot:

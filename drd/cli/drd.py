@@ -7,6 +7,7 @@ See docs/daemon.md.
 
 from __future__ import annotations
 
+import json
 import logging
 import signal
 import subprocess
@@ -22,6 +23,7 @@ from rich.table import Table
 from rich.text import Text
 
 from drd.cli.common import (
+    INTERNAL,
     OK,
     catalog,
     duration_text,
@@ -375,6 +377,102 @@ def status(
         table.add_row(i.host, i.cluster, str(i.pid), i.state if alive else "dead (stale pidfile)", i.config, i.log)
     out.print(table)
     return OK
+
+
+@app.command()
+def sim(
+    world: str = typer.Option(None, "--world", "-w", show_default=False,
+                              help="A world name (worlds/NAME.yaml) or a path [default: the hosts file's "
+                                   "cluster.world, else corridor]."),
+    config: Path = typer.Option(Path("hosts.yaml"), "--config", "-c", "--hosts",
+                                help="The hosts file whose robots are served (their devices and options)."),
+    ros2: bool = typer.Option(False, "--ros2", help="Serve the robots as ROS 2 robots over rmw_zenoh (docs/ros2.md)."),
+    listen: str = typer.Option("tcp/127.0.0.1:7447", "--listen",
+                               help="The zenoh endpoint to listen on, as a robot's router does."),
+    speed: float = typer.Option(1.0, "--speed", help="Sim time runs this many times real time."),
+    domain: int = typer.Option(0, "--domain", help="The ROS domain id."),
+    seed: int = typer.Option(0, "--seed", help="The simulation's seed."),
+    as_json: bool = typer.Option(False, "--json", help="One JSON line when serving, one when stopped."),
+    extra: list[Path] = ComponentsOption,
+) -> int:
+    """Run a world and serve its robots as ROS 2 robots (`--ros2`): `/<robot>/cmd_vel`, `odom`, `scan`, the camera
+    and launcher topics of docs/ros2.md, in real time or at `--speed`, on a zenoh router that ROS 2 tools and drd's
+    `ros2` drivers connect to. Stops on Ctrl-C or SIGTERM."""
+    if not ros2:
+        fail("drd sim serves a world over a protocol: give --ros2 (the only one so far)", hint="drd sim --ros2")
+    if not (0 < speed < float("inf")):
+        fail(f"--speed {speed:g}: expected a positive number")
+    if not 0 <= domain <= 232:
+        fail(f"--domain {domain}: a ROS domain id is 0 to 232")
+    cluster, sim_world, world_name = _served_team(config, world, extra)
+    return _serve_ros2(cluster, sim_world, world_name, listen, speed, domain, seed, as_json)
+
+
+def _served_team(config: Path, world: str | None, extra: list[Path]) -> tuple[Cluster, Any, str]:
+    """The hosts file, the world it (or `--world`) names and its name, checked against each other; or a clear exit."""
+    from drd.dryrun import locate_world
+    from drd.sim import load_world
+    from drd.sim.world import WorldError, check_hosts
+
+    cat = catalog(extra)
+    cluster = _load_cluster(config, cat)
+    name = world or cluster.world
+    found, tried = locate_world(name, [Path.cwd(), config.resolve().parent] if world else [config.resolve().parent])
+    if found is None:
+        fail(f"world {name!r}: no such file; looked at {', '.join(map(str, tried))}")
+    try:
+        sim_world = load_world(found)
+    except WorldError as e:
+        fail_all(e.problems)
+    problems = check_hosts(sim_world, cluster)
+    if problems:
+        fail_all(problems)
+    return cluster, sim_world, found.stem
+
+
+def _serve_ros2(cluster: Cluster, sim_world: Any, world_name: str, listen: str, speed: float, domain: int,
+                seed: int, as_json: bool) -> int:
+    """Serve the robots until SIGTERM or Ctrl-C (`drd sim --ros2`)."""
+    from drd.bus import BusError
+    from drd.bus.ros2 import Ros2Session
+    from drd.hw.ros2 import message_types
+    from drd.sim import Simulation
+    from drd.sim.ros2 import ServedRobots, serve
+
+    try:
+        session = Ros2Session.listen(listen, types=message_types())
+    except (BusError, ValueError) as e:
+        fail(f"cannot listen on {listen}: {e}", code=INTERNAL, hint="is another router or drd on that port?")
+    stop = threading.Event()
+    for signum in (signal.SIGTERM, signal.SIGINT):
+        signal.signal(signum, lambda _n, _f: stop.set())
+    try:
+        served = ServedRobots(Simulation(sim_world, seed=seed), cluster, session, domain_id=domain)
+        try:
+            topics = {rid: r.topics for rid, r in served.robots.items()}
+            if as_json:
+                _json_line({"event": "serving", "endpoint": listen, "domain": domain, "world": world_name,
+                            "speed": speed, "robots": {rid: [list(t) for t in ts] for rid, ts in topics.items()}})
+            else:
+                out.print(f"serving {world_name} as ROS 2 robots on {listen} (domain {domain}, {speed:g}x real "
+                          f"time): {', '.join(topics) or 'no robot of the hosts file is in the world'}")
+            sys.stdout.flush()
+            reached = serve(served, stop, speed=speed)
+        finally:
+            served.close()
+    finally:
+        session.close()
+    if as_json:
+        _json_line({"event": "stopped", "sim_time": round(reached, 3)})
+    else:
+        out.print(f"stopped at {reached:.1f} s of sim time")
+    return OK
+
+
+def _json_line(data: dict[str, Any]) -> None:
+    """One event of a long-running command as one JSON line (JSON Lines: a reader parses each as it comes)."""
+    sys.stdout.write(json.dumps(data) + "\n")
+    sys.stdout.flush()
 
 
 def main() -> None:

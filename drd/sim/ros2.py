@@ -1,0 +1,479 @@
+"""The simulator served as ROS 2 robots over rmw_zenoh (docs/ros2.md): `drd sim --ros2`, and the dry-run's lockstep.
+
+`ServedRobots` gives every simulated robot of a hosts file the topics of the mapping (`drd.hw.ros2`): it
+publishes each robot's odometry, battery, scan, camera image and detections, magazine and radio links when
+`publish()` is called, stamped with sim time (and `/clock`), and obeys `cmd_vel`, launch and jump requests. Two
+ways to run it:
+
+- `serve(...)`: real time (or `speed` times it), on a zenoh *router* session that ROS 2 tools and drd's `ros2`
+  drivers connect to, until a stop event: what `drd sim --ros2` runs;
+- `LockstepSimulation`: a `Simulation` whose every `step` waits for the commands drd's drivers sent, steps, serves
+  every robot's state and waits until the drivers have it. The dry-run uses it for `driver: ros2` devices: every
+  command and reading goes through rmw_zenoh messages, and the run is as reproducible as with `sim` drivers.
+
+Robots a hosts file does not name, and devices it does not give them, are not served. A lost robot is silent (its
+drivers' data go stale, as a real robot's would).
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import math
+import socket
+import threading
+import time
+from collections import Counter
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from drd.bus.base import BusError
+from drd.bus.ros2 import MessageInfo, Publisher, QoS, Ros2Node, Ros2Session
+from drd.hosts import Cluster, Device, Robot
+from drd.hw import ros2 as mapping
+from drd.hw.ros2 import Ros2Link, Ros2Options
+from drd.sim.physics import MAX_LAUNCH, Simulation
+from drd.sim.robots import SimError
+
+log = logging.getLogger("drd.sim.ros2")
+
+#: Seconds of sim time between two publications of every robot's state (10 Hz: the dry-run's control period).
+PUBLISH_PERIOD = 0.1
+#: The served camera image: this many columns, one row, `32FC1` (one pixel per region the behaviors look at).
+IMAGE_WIDTH = 16
+#: How long a lockstep waits for the other side before it says so and goes on.
+LOCKSTEP_WAIT = 5.0
+
+
+@dataclass
+class _Served:
+    """What one robot is served as: its node and its topics (name, type), for the CLI's report."""
+
+    node: Ros2Node
+    topics: list[tuple[str, str]] = field(default_factory=list)
+
+
+class ServedRobots:
+    """Every robot of `cluster` that lives in `sim`, served on `session` in ROS domain `domain_id`."""
+
+    def __init__(self, sim: Simulation, cluster: Cluster, session: Ros2Session, *, domain_id: int = 0,
+                 lockstep: bool = False) -> None:
+        self.sim, self.session, self.domain_id, self.lockstep = sim, session, domain_id, lockstep
+        self.types = session.types
+        if not self.types.known(mapping.DETECTIONS):
+            raise ValueError("serve robots on a session opened with types=drd.hw.ros2.message_types() (vision_msgs)")
+        self.lock = threading.RLock()  # the simulation: one caller at a time (zenoh's threads and the stepper)
+        self.changed = threading.Condition()
+        self.received: Counter[str] = Counter()  # commands received per key
+        self.published: Counter[str] = Counter()  # messages published per key
+        self._queue: list[Callable[[], None]] = []
+        self._streams: list[Callable[[dict[str, int]], None]] = []
+        self.robots: dict[str, _Served] = {}
+        self._nodes: dict[str, Ros2Node] = {}
+        self.rangers = {r.id for r in sim.world.rangers}
+        devices = {d.id: d for h in cluster.hosts for d in h.devices}
+        root = Ros2Node(session, "drd_sim", "", domain_id)
+        self._nodes[""] = root
+        self._clock = root.publisher("/clock", mapping.CLOCK, QoS(depth=1))
+        try:
+            for robot in cluster.robots:
+                if robot.id in sim.robots:
+                    self._serve(robot, devices)
+        except BaseException:
+            self.close()
+            raise
+
+    # -- building ----------------------------------------------------------------------------------------
+
+    def _serve(self, robot: Robot, devices: Mapping[str, Device]) -> None:
+        for device_id in robot.parts.values():
+            device = devices.get(device_id)
+            if device is None:
+                continue
+            opts = Ros2Options.of(device, robot.id) if device.driver == "ros2" else Ros2Options(namespace=robot.id)
+            builder = _BUILDERS.get(device.type)
+            if builder is not None:
+                builder(self, robot.id, device, opts)
+
+    def node(self, rid: str, opts: Ros2Options) -> Ros2Node:
+        ns = opts.namespace or rid
+        found = self._nodes.get(ns)
+        if found is None:
+            found = self._nodes[ns] = Ros2Node(self.session, "drd_sim", ns, self.domain_id)
+        self.robots.setdefault(rid, _Served(found))
+        return found
+
+    def publisher(self, rid: str, opts: Ros2Options, key: str, suffix: str = "") -> Publisher | None:
+        topic = opts.topic(key)
+        if topic is None:
+            return None
+        _, type_name, qos = mapping.TOPICS[key]
+        pub = self.node(rid, opts).publisher(topic + suffix, type_name, qos)
+        self.robots[rid].topics.append((pub.topic.name, type_name))
+        return pub
+
+    def subscribe(self, rid: str, opts: Ros2Options, key: str, handle: Callable[[Any], None]) -> None:
+        topic = opts.topic(key)
+        if topic is None:
+            return
+        _, type_name, qos = mapping.TOPICS[key]
+
+        def counted(msg: Any, info: MessageInfo) -> None:
+            try:
+                handle(msg)
+            except Exception:
+                log.exception("served %s: handling a message on %s", rid, info.key)
+            finally:
+                with self.changed:
+                    self.received[info.key] += 1
+                    self.changed.notify_all()
+
+        sub = self.node(rid, opts).subscribe(topic, type_name, counted, qos)
+        self.robots[rid].topics.append((sub.topic.name, type_name))
+
+    def stream(self, pub: Publisher | None, make: Callable[[dict[str, int]], Any]) -> None:
+        """Publish `make(stamp)` on `pub` at every `publish()` (nothing when `make` raises SimError: a lost robot)."""
+        if pub is None:
+            return
+        types, type_name = self.types, pub.topic.type_name
+
+        def send(st: dict[str, int]) -> None:
+            try:
+                message = make(st)
+            except SimError:
+                return
+            pub.publish_cdr(types.serialize(message, type_name))
+            self.published[pub.key] += 1
+
+        self._streams.append(send)
+
+    def command(self, fn: Callable[[], None]) -> None:
+        """A setpoint from a subscriber: at once (real time) or at the next step (lockstep, in the stepper's thread)."""
+        with self.lock:
+            if self.lockstep:
+                self._queue.append(fn)
+            else:
+                _quietly(fn)
+
+    # -- running -----------------------------------------------------------------------------------------
+
+    def apply(self) -> None:
+        """Carry out the setpoints queued since the last step (lockstep)."""
+        with self.lock:
+            queue, self._queue = self._queue, []
+            for fn in queue:
+                _quietly(fn)
+
+    def publish(self) -> None:
+        """Every robot's state now, and `/clock`."""
+        with self.lock:
+            st = mapping.stamp(self.sim.time)
+            for send in self._streams:
+                send(st)
+            self._clock.publish_cdr(self.types.serialize(self.types.make(mapping.CLOCK, clock=st), mapping.CLOCK))
+
+    def wait_received(self, sent: Mapping[str, int], timeout: float) -> list[str]:
+        """Wait (up to `timeout` s) until every command of `sent` (key -> count) has arrived; the keys still short."""
+        deadline = time.monotonic() + timeout
+        with self.changed:
+            while True:
+                short = [k for k, n in sent.items() if self.received[k] < n]
+                left = deadline - time.monotonic()
+                if not short or left <= 0:
+                    return short
+                self.changed.wait(left)
+
+    def close(self) -> None:
+        for node in self._nodes.values():
+            node.close()
+        self._nodes = {}
+
+
+def _quietly(fn: Callable[[], None]) -> None:
+    try:
+        fn()
+    except SimError as e:  # a lost robot, a Scout still in its magazine: a real base would ignore it too
+        log.debug("served simulator: %s", e)
+
+
+def _option(device: Device, key: str, default: float) -> float:
+    value = device.options.get(key, default)
+    return float(value) if isinstance(value, int | float) and not isinstance(value, bool) else default
+
+
+# -- one builder per RC type ----------------------------------------------------------------------------------
+
+def _drive(s: ServedRobots, rid: str, device: Device, opts: Ros2Options) -> None:
+    sim, types = s.sim, s.types
+    if "max_speed" in device.options:
+        sim.set_max_speed(rid, _option(device, "max_speed", math.inf))
+    origin = sim.origin(rid)
+    start = (origin.x, origin.y, origin.heading)
+    odom_frame, base_frame = f"{rid}/odom", f"{rid}/base_link"
+
+    def odometry(st: dict[str, int]) -> Any:
+        p = sim.odometry(rid)
+        v, omega = sim.command(rid)
+        x, y, a = mapping.relative(start, (p.x, p.y, p.heading))
+        return types.make(mapping.ODOMETRY, header={"stamp": st, "frame_id": odom_frame}, child_frame_id=base_frame,
+                          pose={"pose": {"position": {"x": x, "y": y}, "orientation": mapping.quaternion(a)}},
+                          twist={"twist": {"linear": {"x": v}, "angular": {"z": omega}}})
+
+    def battery(st: dict[str, int]) -> Any:
+        nan = math.nan
+        return types.make(mapping.BATTERY, header={"stamp": st, "frame_id": base_frame}, percentage=sim.battery(rid),
+                          voltage=nan, temperature=nan, current=nan, charge=nan, capacity=nan, design_capacity=nan,
+                          power_supply_status=2, present=True)  # DISCHARGING
+
+    s.stream(s.publisher(rid, opts, "odom"), odometry)
+    s.stream(s.publisher(rid, opts, "battery"), battery)
+    s.subscribe(rid, opts, "cmd_vel", lambda m: s.command(lambda: sim.set_velocity(rid, float(m.linear.x),
+                                                                                    float(m.angular.z))))
+
+
+def _range_sensor(s: ServedRobots, rid: str, device: Device, opts: Ros2Options) -> None:
+    sim, types = s.sim, s.types
+    beams = int(_option(device, "beams", 181))
+    max_range = _option(device, "max_range", 8.0)
+    fov = math.radians(_option(device, "fov", 180.0))
+    step = fov / (beams - 1) if beams > 1 else 0.0
+    lo = -fov / 2 if beams > 1 else 0.0
+    frame = f"{rid}/laser"
+
+    def scan(st: dict[str, int]) -> Any:
+        r = np.asarray(sim.ranges(rid, beams, max_range, fov), dtype=np.float32)
+        r[r >= np.float32(max_range)] = np.inf  # REP 117: nothing hit within range
+        return types.make(mapping.LASER_SCAN, header={"stamp": st, "frame_id": frame}, angle_min=lo,
+                          angle_max=lo + step * (beams - 1), angle_increment=step, scan_time=PUBLISH_PERIOD,
+                          range_min=0.0, range_max=max_range, ranges=r)
+
+    s.stream(s.publisher(rid, opts, "scan"), scan)
+
+
+def _camera(s: ServedRobots, rid: str, device: Device, opts: Ros2Options) -> None:
+    sim, types = s.sim, s.types
+    fov = math.radians(_option(device, "fov", 60.0))
+    resolution = int(_option(device, "resolution", 640))
+    max_range = _option(device, "max_range", 10.0)
+    min_light = _option(device, "min_light", 0.2)
+    frame = f"{rid}/camera"
+    pixel = fov / resolution
+
+    def image(st: dict[str, int]) -> Any:
+        regions = sim.brightness(rid, fov, IMAGE_WIDTH, max_range)  # right to left; columns go left to right
+        data = np.asarray(regions[::-1], dtype="<f4").tobytes()
+        return types.make(mapping.IMAGE, header={"stamp": st, "frame_id": frame}, height=1, width=IMAGE_WIDTH,
+                          encoding="32FC1", is_bigendian=0, step=4 * IMAGE_WIDTH, data=np.frombuffer(data, np.uint8))
+
+    def detections(st: dict[str, int]) -> Any:
+        seen = []
+        for d in sim.camera(rid, fov, max_range, min_light):
+            bearing = round(d.bearing / pixel) * pixel  # to the pixel, as the sim camera reports it
+            seen.append({"header": {"stamp": st, "frame_id": frame}, "id": d.label, "results": [
+                {"hypothesis": {"class_id": "person", "score": 1.0},
+                 "pose": {"pose": {"position": {"x": d.distance * math.cos(bearing),
+                                                "y": d.distance * math.sin(bearing)}}}}]})
+        return types.make(mapping.DETECTIONS, header={"stamp": st, "frame_id": frame}, detections=seen)
+
+    s.stream(s.publisher(rid, opts, "image"), image)
+    s.stream(s.publisher(rid, opts, "detections"), detections)
+
+
+def _result(s: ServedRobots, pub: Publisher | None, answer: dict[str, Any]) -> None:
+    if pub is not None:
+        pub.publish_cdr(s.types.serialize(s.types.make(mapping.STRING, data=json.dumps(answer)), mapping.STRING))
+
+
+def _request(data: str, fields: Mapping[str, type]) -> dict[str, Any]:
+    """A JSON request with these fields (and an `id`), or ValueError saying what is wrong."""
+    request = json.loads(data)
+    if not isinstance(request, dict) or "id" not in request:
+        raise ValueError("a request is a JSON object with an id")
+    for name, kind in fields.items():
+        value = request.get(name)
+        if not isinstance(value, kind) or isinstance(value, bool):
+            raise ValueError(f"field {name}: expected a {kind.__name__ if isinstance(kind, type) else 'number'}")
+    return request
+
+
+def _launcher(s: ServedRobots, rid: str, device: Device, opts: Ros2Options) -> None:
+    sim, types = s.sim, s.types
+    max_range = min(MAX_LAUNCH, _option(device, "max_range", MAX_LAUNCH))
+    origin = sim.origin(rid)
+    start = (origin.x, origin.y, origin.heading)
+    results = s.publisher(rid, opts, "launch_result")
+    s.stream(s.publisher(rid, opts, "magazine"),
+             lambda st: types.make(mapping.STRING, data=json.dumps(list(sim.magazine(rid)))))
+
+    def launch(msg: Any) -> None:
+        rid_ = None
+        try:
+            req = _request(msg.data, {"scout": str, "heading": (int, float), "distance": (int, float)})  # type: ignore[dict-item]
+            rid_ = req["id"]
+            distance = float(req["distance"])
+            if distance <= 0:
+                raise ValueError(f"launch distance must be positive, got {distance}")
+            with s.lock:
+                if req["scout"] not in sim.magazine(rid):
+                    raise ValueError(f"{req['scout']} is not in {rid}'s magazine")
+                distance = min(distance, max_range)
+                p = sim.odometry(rid)
+                flight = sim.launch(req["scout"], float(req["heading"]), distance)
+            a = p.heading + float(req["heading"])
+            x, y, h = mapping.relative(start, (p.x + distance * math.cos(a), p.y + distance * math.sin(a), a))
+            _result(s, results, {"id": rid_, "ok": True, "x": x, "y": y, "heading": h,
+                                 "duration": flight.t1 - flight.t0})
+        except (ValueError, SimError) as e:
+            _result(s, results, {"id": rid_, "ok": False, "error": str(e)})
+
+    s.subscribe(rid, opts, "launch", launch)
+
+
+def _jump(s: ServedRobots, rid: str, device: Device, opts: Ros2Options) -> None:
+    sim = s.sim
+    max_distance = min(sim.max_jump, _option(device, "max_distance", sim.max_jump))
+    results = s.publisher(rid, opts, "jump_result")
+
+    def jump(msg: Any) -> None:
+        rid_ = None
+        try:
+            req = _request(msg.data, {"dx": (int, float)})  # type: ignore[dict-item]
+            rid_ = req["id"]
+            dx = float(req["dx"])
+            if not 0 < dx <= max_distance:
+                raise ValueError(f"jump distance must be in (0, {max_distance:g}] m, got {dx}")
+            with s.lock:
+                sim.jump(rid, dx)
+            _result(s, results, {"id": rid_, "ok": True})
+        except (ValueError, SimError) as e:
+            _result(s, results, {"id": rid_, "ok": False, "error": str(e)})
+
+    s.subscribe(rid, opts, "jump", jump)
+
+
+def _radio(s: ServedRobots, rid: str, device: Device, opts: Ros2Options) -> None:
+    sim = s.sim
+    reach = _option(device, "range", 30.0)
+    peers = sorted(r for r in sim.robots if (r in s.rangers) != (rid in s.rangers))
+    for peer in peers:
+        scout, ranger = (rid, peer) if peer in s.rangers else (peer, rid)
+        s.stream(s.publisher(rid, opts, "link", f"/{peer}"), _link(s, scout, ranger, reach))
+
+
+def _link(s: ServedRobots, scout: str, ranger: str, reach: float) -> Callable[[dict[str, int]], Any]:
+    return lambda st: s.types.make(mapping.BOOL, data=s.sim.radio_ok(scout, ranger, reach))
+
+
+_BUILDERS: dict[str, Callable[[ServedRobots, str, Device, Ros2Options], None]] = {
+    "Drive": _drive, "RangeSensor": _range_sensor, "Camera": _camera, "Launcher": _launcher, "Jump": _jump,
+    "RadioChannel": _radio,
+}
+
+
+# -- real time ----------------------------------------------------------------------------------------------
+
+def serve(served: ServedRobots, stop: threading.Event, *, speed: float = 1.0, period: float = PUBLISH_PERIOD,
+          until: float | None = None) -> float:
+    """Step the simulation `period` s of sim time at a time, at `speed` times real time, publishing after each step,
+    until `stop` is set (or sim time reaches `until`); returns the sim time reached."""
+    sim = served.sim
+    served.publish()
+    start, t0 = time.monotonic(), sim.time
+    while not stop.is_set() and (until is None or sim.time < until - 1e-9):
+        with served.lock:
+            sim.step(period)
+        served.publish()
+        lag = (sim.time - t0) / speed - (time.monotonic() - start)
+        if lag > 0:
+            stop.wait(lag)
+    return sim.time
+
+
+def free_endpoint() -> str:
+    """A loopback endpoint no one listens on now (the dry-run's private router)."""
+    with socket.socket() as sock:
+        sock.bind(("127.0.0.1", 0))
+        return f"tcp/127.0.0.1:{sock.getsockname()[1]}"
+
+
+# -- lockstep (the dry-run) ------------------------------------------------------------------------------------
+
+class LockstepSimulation(Simulation):
+    """A `Simulation` whose robots are served over rmw_zenoh to the `ros2` drivers of this very process, in lockstep.
+
+    `serve(cluster)` starts a private router on a free loopback port and returns the drivers' services
+    (`{"ros2": Ros2Link}`: every `ros2` device, whatever its `endpoint`, reaches this router; its clock is sim
+    time). Each `step` then: waits until the server got every command the drivers sent, carries them out, steps,
+    publishes every robot's state, waits until every driver subscription has it, and runs the drivers' watchdogs.
+    """
+
+    served: ServedRobots | None = None
+    link: Ros2Link | None = None
+    _sessions: tuple[Ros2Session, ...] = ()
+
+    def serve(self, cluster: Cluster, *, domain_id: int = 0, loopback: bool = True) -> dict[str, Any]:
+        """Serve the robots of `cluster`; the services for their drivers. `loopback`: the drivers' session is a
+        client of the router over TCP on loopback, as on a real robot (else they share the router's session)."""
+        router, endpoint = None, ""
+        for _attempt in range(3):  # a free port may be taken between the look and the listen
+            endpoint = free_endpoint()
+            try:
+                router = Ros2Session.listen(endpoint, options={"scouting/delay": 0}, types=mapping.message_types())
+                break
+            except BusError:
+                continue
+        if router is None:
+            raise BusError("the dry-run's ROS 2 router could not listen on a loopback port")
+        sessions = [router]
+        try:
+            client = Ros2Session.connect(endpoint, options={"scouting/delay": 0}, types=router.types) if loopback \
+                else Ros2Session(router.bus, types=router.types)
+            sessions.insert(0, client)
+            self.served = ServedRobots(self, cluster, router, domain_id=domain_id, lockstep=True)
+        except BaseException:
+            for session in sessions:
+                session.close()
+            raise
+        self._sessions = tuple(sessions)
+        self.link = Ros2Link(clock=lambda: self.time, session=client, period=None)
+        return {"ros2": self.link}
+
+    def sync(self) -> None:
+        """Publish the state now and wait until the drivers have it (before the first cycle)."""
+        if self.served is None or self.link is None:
+            return
+        self.served.publish()
+        self._wait_readings()
+
+    def step(self, dt: float | None = None) -> None:
+        served, link = self.served, self.link
+        if served is None or link is None:
+            super().step(dt)
+            return
+        short = served.wait_received(dict(link.sent), LOCKSTEP_WAIT)
+        if short:
+            log.warning("lockstep: commands on %s did not reach the served simulator", ", ".join(short))
+        served.apply()
+        with served.lock:
+            super().step(dt)
+        served.publish()
+        self._wait_readings()
+        link.tick()
+
+    def _wait_readings(self) -> None:
+        assert self.served is not None and self.link is not None
+        short = self.link.wait_received(dict(self.served.published), LOCKSTEP_WAIT)
+        if short:
+            log.warning("lockstep: %s did not reach the ros2 drivers", ", ".join(short))
+
+    def close(self) -> None:
+        if self.link is not None:
+            self.link.close()
+        if self.served is not None:
+            self.served.close()
+        for session in self._sessions:
+            session.close()
+        self.served, self.link, self._sessions = None, None, ()
