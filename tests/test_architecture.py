@@ -74,7 +74,7 @@ RULES: list[tuple[str, list[str], tuple[str, ...], tuple[str, ...], tuple[str, .
     ("one place prints", EVERYTHING, ("drd.cli",), ("rich", "typer"), ()),
     ("one transport seam", EVERYTHING, ("drd.bus",), ("zenoh",), ()),
     ("components are plug-ins", ["components"], (), ("drd", "dsl"),
-     ("drd.errors", "drd.runtime", "drd.hw", "drd.sim", "drd.hosts")),
+     ("drd.errors", "drd.runtime", "drd.hw", "drd.sim", "drd.hosts", "drd.bus.ros2")),
 ]
 
 

@@ -157,4 +157,9 @@ def check_driver_classes(cluster: Cluster, host: str, catalog: Catalog | None = 
             declared(cls)
         except (DriverError, EntryPointError, DriverDeclarationError) as e:
             problems.append(f"{key}: {e}")
+            continue
+        check = getattr(cls, "check_options", None)  # a driver that reads `driver_options` checks them itself
+        if callable(check):
+            where = f"{cluster.source}: hosts.{host}.devices.{device.id.removeprefix(host + '.')}"
+            problems += [f"{where}.{p}" for p in check(device)]
     return problems

@@ -1,0 +1,36 @@
+"""The `ros2` RangeSensor: the latest `sensor_msgs/msg/LaserScan` on `scan` (docs/ros2.md)."""
+
+from __future__ import annotations
+
+from typing import Any
+
+from components.ros2 import Ros2Driver
+from drd.hosts import Device
+from drd.hw.interfaces import Scan
+from drd.hw.ros2 import scan_ranges
+
+
+class Ros2RangeSensor(Ros2Driver):
+    """A ROS 2 laser. Options: `beams`, `max_range` (manifest properties: what the device is said to have; the
+    scan itself says what it has). `driver_options`: `max_age`, `scan_frame`, `topics: {scan: ...}`."""
+
+    READINGS = frozenset({"scan", "beams", "max_range"})
+
+    def __init__(self, device: Device, robot_id: str, backend: object = None) -> None:
+        super().__init__(device, robot_id, backend)
+        self.beams = int(self.option("beams", 181))
+        self.max_range = self.option("max_range", 8.0)
+        self._scan = self.subscribe("scan", self.opts.max_age, self.opts.frames.get("scan_frame"))
+        self._latest: tuple[Any, Scan] | None = None
+
+    def scan(self) -> Scan:
+        """The latest scan, right to left, angles relative to the heading: the same object until a new one comes."""
+        assert self._scan is not None
+        msg = self._scan.get()
+        if self._latest is not None and self._latest[0] is msg:
+            return self._latest[1]
+        top = float(msg.range_max)
+        scan = Scan(scan_ranges(msg.ranges, float(msg.range_min), top), float(msg.angle_min),
+                    float(msg.angle_increment), top)
+        self._latest = (msg, scan)
+        return scan
