@@ -11,6 +11,7 @@ default one imports a component's entry point, from its manifest, the first time
 
 from __future__ import annotations
 
+import collections
 import functools
 import itertools
 from collections.abc import Callable, Iterable, Mapping
@@ -19,7 +20,7 @@ from typing import Any
 from drd import entrypoints
 from drd.bus import Bus, Message, Query, Reply
 from drd.entrypoints import EntryPointError
-from drd.executive_messages import MissionCommand, MissionRecord, MissionStatus
+from drd.executive_messages import MissionCommand, MissionRecord, MissionRecords, MissionStatus
 from drd.rcm import ReleaseReason, ResourceManager, Unit
 from drd.runtime import records as rec
 from drd.runtime.broker import ResourceBroker
@@ -34,6 +35,11 @@ from drd.runtime.snapshot import NodeImage
 from drd.runtime.telemetry import DriverTelemetry
 from dsl.catalog import Catalog
 from dsl.statechart import Statechart
+
+#: Records kept per mission for a client that missed some (`records` command): its latest ones, while it runs and
+#: for the `KEPT_FINISHED` missions that ended last.
+KEPT_RECORDS = 2000
+KEPT_FINISHED = 5
 
 
 class EntryPoints(Mapping[str, Callable[[], Component]]):
@@ -95,6 +101,7 @@ class Executive:
         self.pool.places = dict(self.services.get("places", {}))  # the world's rooms: `inside(ranger, "n1")`
         self._ids = itertools.count(1)
         self.sent = 0  # records sent, of every mission: each is numbered in the order they happened
+        self.kept: dict[str, collections.deque[MissionRecord]] = {}  # each mission's latest records, for catch-up
         self._queryable = bus.serve(f"drd/{cluster}/executive", self._command)
 
     def _gates(self, gates: Gates | None) -> Gates:
@@ -154,12 +161,17 @@ class Executive:
 
     def _send(self, key: str, mission: str, record: rec.Record) -> None:
         self.sent += 1
-        self.bus.put(key, _to_message(mission, record, self.sent))
+        msg = _to_message(mission, record, self.sent)
+        kept = self.kept.get(mission)
+        if kept is None:
+            kept = self.kept[mission] = collections.deque(maxlen=KEPT_RECORDS)
+        kept.append(msg)
+        self.bus.put(key, msg)
 
     def step(self) -> None:
         for interp in list(self.missions.values()):
             interp.step()
-        if len(self.missions) > self.history:
+        if len(self.missions) > self.history or len(self.kept) > 2 * KEPT_FINISHED:
             self.forget_finished()
 
     def forget_finished(self) -> list[str]:
@@ -168,6 +180,8 @@ class Executive:
         dropped = finished[:max(0, len(finished) - self.history)]
         for mid in dropped:
             del self.missions[mid]
+        for mid in [m for m in self.kept if m not in self.missions or m in finished[:-KEPT_FINISHED]]:
+            del self.kept[mid]  # a client catching up is after a mission that ran lately
         return dropped
 
     def run(self, advance: Callable[[], None], until: float, *, done: Callable[[], bool] | None = None) -> None:
@@ -231,11 +245,13 @@ class Executive:
             case "stop":
                 self.stop(cmd.mission)
                 return self.status()
+            case "records" if cmd.mission:
+                return MissionRecords([r for r in self.kept.get(cmd.mission, ()) if r.seq > cmd.after])
             case "emit" if cmd.event:
                 for mid in [cmd.mission] if cmd.mission else list(self.missions):
                     self.missions[mid].emit(cmd.event, "operator", **(cmd.fields or {}))
                 return self.status()
-        return query.error(f"unknown command {cmd.op!r}: use status, stop or emit EVENT")
+        return query.error(f"unknown command {cmd.op!r}: use status, stop, emit EVENT or records")
 
 
 def _to_message(mission: str, r: rec.Record, seq: int = 0) -> MissionRecord:

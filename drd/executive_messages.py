@@ -23,14 +23,23 @@ class MissionRecord(Message):
     seq: int = 0
 
 
-@message("drd.mission.command", 1)
+@message("drd.mission.command", 2)
 class MissionCommand(Message):
-    """An operator's command: `status`, `stop` (a mission, or all with mission ""), `emit`."""
+    """An operator's command: `status`, `stop` (a mission, or all with mission ""), `emit`, or `records` (of a
+    mission, numbered after `after`: what a client missed while its controller was away, `MissionRecords`)."""
 
     op: str
     mission: str = ""
     event: str = ""
     fields: dict[str, Any] | None = None
+    after: int = 0
+
+
+@message("drd.mission.records", 1)
+class MissionRecords(Message):
+    """A running mission's latest records (at most `drd.executive.KEPT_RECORDS`), in order."""
+
+    records: list[MissionRecord]
 
 
 @message("drd.mission.status", 1)

@@ -82,3 +82,48 @@ def test_a_mission_goes_on_after_its_controller_is_killed_and_started_again(clus
     eventually(lambda: not [i for i in cluster.client().components().instances if i.mission == mission],
                "ranger1 to retire the mission's instances", 10)
     assert time.monotonic() - killed_at < 240
+
+
+@pytest.fixture(scope="module")
+def slow_lease(tmp_path_factory: pytest.TempPathFactory) -> Iterator[DaemonCluster]:
+    """The same cluster with a lease of 4 s, so a freeze of 2.6 s is a short one."""
+    def hosts(cluster: DaemonCluster) -> str:
+        return corridor_hosts(cluster).replace("lease: 1000ms", "lease: 4s")
+
+    with serving_cluster(tmp_path_factory.mktemp("freeze"), NAMES, hosts) as c:
+        yield c
+
+
+def test_a_host_frozen_for_less_than_its_lease_delays_the_mission_and_queries_still_answer(
+        slow_lease: DaemonCluster, tmp_path: Path) -> None:
+    """Issue #16: a SIGSTOP of ranger1 (the Ranger's host and the simulator's) for 2.6 s, lease 4 s: the mission
+    waits and succeeds; meanwhile `missionctl status` and `hosts` answer, and `hosts` names ranger1 as silent."""
+    cluster = slow_lease
+    trace = tmp_path / "run.jsonl"
+    cmd = [*MISSIONCTL, "run", str(ROOT / "missions" / "corridor_surveillance.mission"), "--config",
+           str(cluster.hosts_file), "--speed", "10", "--json", "--trace", str(trace)]
+    with running(cmd) as run:
+        eventually(lambda: trace.exists() and any(r["kind"] == "granted" for r in records(trace)),
+                   "the mission to run", 60, poll=0.1)
+        ranger1 = cluster.procs["ranger1"]
+        ranger1.send_signal(signal.SIGSTOP)
+        frozen = time.monotonic()
+        try:
+            time.sleep(1.6)  # silent for longer than a healthy daemon ever is
+            status_cmd = [*MISSIONCTL, "status", "--config", str(cluster.hosts_file), "--json", "--timeout", "2"]
+            hosts_cmd = [*MISSIONCTL, "hosts", "--config", str(cluster.hosts_file), "--timeout", "2"]
+            with running(status_cmd) as status, running(hosts_cmd) as hosts:  # asked while ranger1 is frozen
+                time.sleep(max(0.0, 2.6 - (time.monotonic() - frozen)))
+                ranger1.send_signal(signal.SIGCONT)
+                status_out, status_err = status.communicate(timeout=30)
+                hosts_out, _ = hosts.communicate(timeout=30)
+        finally:
+            ranger1.send_signal(signal.SIGCONT)
+        out, err = run.communicate(timeout=240)
+    assert status.returncode == 0, status_err[-1000:]
+    missions = json.loads(status_out)["missions"]
+    assert [m["id"] for m in missions if m.get("outcome") is None], missions  # the running mission, as last known
+    assert hosts.returncode == 0 and "ranger1" in hosts_out and "silent" in hosts_out, hosts_out
+    assert run.returncode == 0, (err[-2000:], cluster.log("controller")[-3000:])
+    assert json.loads(out)["outcome"] == "success"
+    assert "down" not in cluster.log("controller").split("mission ")[-1], cluster.log("controller")[-2000:]

@@ -149,3 +149,19 @@ def test_the_corridor_mission_resumed_mid_way_succeeds_with_one_holder_per_devic
         if n.path in regranted and n.grant:
             assert regranted[n.path].get("scout") == n.grant.get("scout"), (n.path, regranted[n.path], n.grant)
             assert ("ranger" in regranted[n.path]) == (n.path not in gave_back), (n.path, regranted[n.path])
+
+
+def test_the_executive_gives_a_client_the_records_it_missed(catalog: Catalog) -> None:
+    """A client whose session found a restarted controller late asks for what it missed (`records` after N)."""
+    from drd.executive_messages import MissionCommand, MissionRecords
+
+    team = Team(catalog)
+    team.submit(chart_of(catalog, TIMED))
+    team.run(4.0)
+    client = team.network.session("client")
+    everything = client.call("drd/corridor/executive", MissionCommand("records", "M-1"), timeout=2)
+    assert isinstance(everything, MissionRecords) and everything.records
+    seqs = [r.seq for r in everything.records]
+    assert seqs == sorted(seqs) and seqs[0] == 1 and everything.records[0].kind == "entered"
+    later = client.call("drd/corridor/executive", MissionCommand("records", "M-1", after=seqs[2]), timeout=2)
+    assert isinstance(later, MissionRecords) and [r.seq for r in later.records] == seqs[3:]

@@ -546,6 +546,8 @@ class _RecordWatch:
         self.queue: queue.Queue[object] = queue.Queue()
         self.seen: dict[str, tuple[DryRun, dict[str, None]]] = {}  # mission -> (its report so far, active paths)
         self.away_since: float | None = None  # when the controller stopped answering (None: it answers)
+        self.seqs: set[int] = set()  # the numbers of the records followed (a record caught up twice counts once)
+        self.last_seq = 0
 
         def on_record(sample: Any) -> None:
             if isinstance(sample.payload, MissionRecord):
@@ -579,7 +581,9 @@ class _RecordWatch:
                 msg: Any = self.queue.get(timeout=0.2)
             except queue.Empty:
                 msg = None
-            if msg is not None and msg.mission == mission:
+            if msg is not None and msg.mission == mission and msg.seq not in self.seqs:
+                self.seqs.add(msg.seq)
+                self.last_seq = max(self.last_seq, msg.seq)
                 r = self._take(msg, result, base)
                 if isinstance(r, rec.Entered):
                     active[r.path] = None
@@ -597,7 +601,8 @@ class _RecordWatch:
                         time.sleep(0.5)  # the records in flight come first
                         while not self.queue.empty():
                             extra: Any = self.queue.get()
-                            if extra.mission == mission:
+                            if extra.mission == mission and extra.seq not in self.seqs:
+                                self.seqs.add(extra.seq)
                                 self._take(extra, result, base)
                         finished = (m["outcome"], m.get("reason") or "")
             if now >= next_print and finished is None:
@@ -628,7 +633,24 @@ class _RecordWatch:
                      " `missionctl status`", code=1)
             err.print(Text.assemble(("▶ ", "bold green"), f"the controller is back after {away:.1f} s: mission"
                                     f" {mission} resumed"))
+            self._catch_up(mission)
         return missions
+
+    def _catch_up(self, mission: str) -> None:
+        """The records of `mission` sent while this client could not hear the controller (it resumed the mission
+        before this session found it again), from the executive's own copy; duplicates are dropped by `follow`."""
+        from drd.errors import BusFailure
+        from drd.executive_messages import MissionCommand, MissionRecords
+
+        try:
+            reply = self.client.bus.call(self.client.keys.executive, MissionCommand("records", mission,
+                                                                                    after=self.last_seq),
+                                         timeout=self.client.timeout)
+        except BusFailure:
+            return  # the live records go on; the next return of the controller tries again
+        if isinstance(reply, MissionRecords):
+            for r in reply.records:
+                self.queue.put(r)
 
     def _take(self, msg: Any, result: Any, base: float) -> Any:
         """One record of the followed mission: into its report (and the trace file); the record, or None."""
@@ -717,6 +739,10 @@ def _status_view(data: dict[str, Any], width: int | None = None) -> RenderableTy
     return Group(*parts)
 
 
+#: Seconds without a load report after which an up host shows as `silent` (a daemon reports every second or less).
+SILENT_AFTER = 1.5
+
+
 def _hosts_table(rows: list[dict[str, Any]], now: float) -> Table:
     from rich.table import Table
 
@@ -727,9 +753,12 @@ def _hosts_table(rows: list[dict[str, Any]], now: float) -> Table:
         up = h["state"] == "up"
         since = "—" if h["since"] is None else _ago(now - h["since"])
         load1 = "—" if h["load1"] is None or not up else f"{h['load1']:.2f}"
-        table.add_row(h["name"] + ("*" if "controller" in h["roles"] else ""),
-                      Text(h["state"], style="green" if up else "bold red"), _pct(h["cpu"] if up else None),
-                      _pct(h["memory"] if up else None), load1, str(h["instances"]) if up else "—", since, h["reason"])
+        age = h.get("report_age")
+        silent = up and isinstance(age, int | float) and age > SILENT_AFTER  # frozen, or its link is
+        state = Text("silent", style="bold yellow") if silent else Text(h["state"], style="green" if up else "bold red")
+        why = f"no load report for {age:.1f} s (down at its lease)" if silent else h["reason"]
+        table.add_row(h["name"] + ("*" if "controller" in h["roles"] else ""), state, _pct(h["cpu"] if up else None),
+                      _pct(h["memory"] if up else None), load1, str(h["instances"]) if up else "—", since, why)
     table.caption = "* controller"
     table.caption_justify = "left"
     return table

@@ -104,6 +104,10 @@ def resources_reply(snapshot: Mapping[str, Any], cluster: str, answered_by: str,
     return ResourcesReply(cluster, answered_by, units, robots, queue, dict(removing))
 
 
+#: Seconds a query waits for the executive's lock; then a read gets the last answer given, a command a refusal.
+BUSY_WAIT = 0.5
+
+
 class SerializedBus(Bus):
     """A bus whose handlers run under a lock: hands a single-threaded object (the executive) a bus.
 
@@ -121,6 +125,9 @@ class SerializedBus(Bus):
         self._lock = lock
         self._expect = dict(expect or {})
         self._on_reject = on_reject
+        self.busy_wait = BUSY_WAIT
+        self._last: dict[str, Message] = {}  # key -> the last answer to a read-only query
+        self._readers: dict[str, Callable[[], Message]] = {}  # key -> how to answer it anew (`keep`)
 
     def put_raw(self, key: str, data: bytes) -> None:
         self.inner.put_raw(key, data)
@@ -137,10 +144,41 @@ class SerializedBus(Bus):
                 if self._on_reject is not None:
                     self._on_reject(query.key, reason)
                 return query.error(reason)
-            with self._lock:
-                return handler(query)
+            if not self._lock.acquire(timeout=self.busy_wait):
+                return self._busy(key_expr, query)
+            try:
+                reply = handler(query)
+            finally:
+                self._lock.release()
+            if self._read_only(query) and isinstance(reply, Message):
+                self._last[key_expr] = reply
+            return reply
 
         return self.inner.serve(key_expr, locked)
+
+    @staticmethod
+    def _read_only(query: Query) -> bool:
+        """A query that changes nothing (a status, a view): its last answer may stand in while the lock is busy."""
+        op = getattr(query.payload, "op", "status")
+        return op == "status"
+
+    def _busy(self, key: str, query: Query) -> Reply | Message:
+        """The lock stayed taken (the mission loop waits on a slow host): a read gets the last answer given, a
+        command a clear refusal to retry (never a hang)."""
+        last = self._last.get(key)
+        if last is not None and self._read_only(query):
+            return last
+        return query.error(f"the controller is busy (its mission loop has waited over {self.busy_wait:g} s on a host"
+                           " that does not answer: see `missionctl hosts`); try again")
+
+    def keep(self, key: str, read: Callable[[], Message]) -> None:
+        """Keep an answer to read-only queries on `key` ready (`refresh`), for when the lock is busy."""
+        self._readers[key] = read
+
+    def refresh(self) -> None:
+        """Compute again the answers kept for a busy lock (called with the lock held)."""
+        for key, read in self._readers.items():
+            self._last[key] = read()
 
     def request_raw(self, key: str, data: bytes | None, timeout: float = 2.0) -> list[Reply]:
         return self.inner.request_raw(key, data, timeout)
@@ -169,8 +207,9 @@ def _expected(types: tuple[type, ...]) -> str:
 class Controller:
     """The controller host's services: the manager and the executive, kept in step with the view.
 
-    Every method must be called with `lock` held (the daemon's); the executive's own queryable and
-    `rcm/resources` take it themselves.
+    `lock` is the executive's (the mission loop holds it through a control cycle): membership changes are queued
+    and applied when it is free (`flush`); the executive's own queryable and `rcm/resources` take it themselves
+    and answer from their last reply when a slow host holds the loop up (`SerializedBus`).
     """
 
     def __init__(self, bus: Bus, cluster: Cluster, catalog: Catalog, me: str, lock: threading.RLock, *,
@@ -195,10 +234,15 @@ class Controller:
                                    resources=host_resources(cluster, me), lease=cluster.lease,
                                    history=cluster.history)
         self.membership = Membership(cluster.lease, {me})
+        self._pending: list[Action] = []  # membership actions the executive has not applied yet
+        self._pending_lock = threading.Lock()
         self._queryable = serialized.serve(self.keys.resources, self._resources)
+        self.serialized = serialized
+        serialized.keep(self.keys.resources, self.resources)
+        serialized.keep(self.keys.executive, self.executive.status)
 
     def host_up(self, host: str) -> None:
-        self._apply(self.membership.up(host, self.clock.now()))
+        self._queue(self.membership.up(host, self.clock.now()))
 
     def host_down(self, host: str) -> None:
         now = self.clock.now()
@@ -211,7 +255,25 @@ class Controller:
     def step(self) -> None:
         """Apply removals that fell due. Missions are stepped in lockstep with the simulator by their own
         loop (`drd.daemon.missions.WorldRun`), not here."""
-        self._apply(self.membership.due(self.clock.now()))
+        self._queue(self.membership.due(self.clock.now()))
+
+    def _queue(self, actions: list[Action]) -> None:
+        """Membership actions for the executive: applied now if its lock is free, else by the mission loop at its
+        next cycle (`flush`): the daemon's view never waits for a mission loop held up by a slow host."""
+        with self._pending_lock:
+            self._pending += actions
+        self.flush(blocking=False)
+
+    def flush(self, blocking: bool = True) -> None:
+        """Apply the membership actions queued (with the executive's lock; `blocking=False`: only if it is free)."""
+        if not self._pending or not self._lock.acquire(blocking=blocking):
+            return
+        try:
+            with self._pending_lock:
+                actions, self._pending = self._pending, []
+            self._apply(actions)
+        finally:
+            self._lock.release()
 
     def resources(self) -> ResourcesReply:
         snapshot = self.executive.broker.rcm.snapshot()

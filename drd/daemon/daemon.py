@@ -14,7 +14,9 @@ Services of every daemon (keys in `drd.daemon.keys`, docs/daemon.md):
   lease after it went down.
 
 Threading: bus callbacks run on zenoh's threads and the periodic work on the thread calling
-`run()`; all of them go through one lock around the view and the controller. Callbacks only
+`run()`; they go through one lock around the view. The controller's executive has its own, which the mission
+loop holds through each control cycle; the view never waits for it (membership changes are queued for the
+executive), so a host slow to answer the loop never holds up the view, load reports or queries. Callbacks only
 update state; publishing happens in `step()`. Input from peers is never trusted: anything of the
 wrong type, from an unknown host or under the wrong key is refused, counted and logged (on
 `drd.bus` and `drd.daemon.rejects`: `drd start` rate-limits both with `drd.daemon.logs.install`).
@@ -29,7 +31,8 @@ import os
 import threading
 import time
 from collections import Counter, deque
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
@@ -66,6 +69,8 @@ log = logging.getLogger("drd.daemon")
 rejects = logging.getLogger("drd.daemon.rejects")
 
 MAX_EVENTS = 1000
+#: Seconds a view query waits for the daemon's lock before it reads without it.
+BUSY_WAIT = 0.25
 
 
 @dataclass(frozen=True, slots=True)
@@ -137,7 +142,8 @@ class Daemon:
         self.creator: Any = None  # drd.daemon.creator.Creator
         self.sim_service: Any = None  # drd.sim.service.SimulationService, on the simulator host
         self._bus = bus
-        self._lock = threading.RLock()
+        self._lock = threading.RLock()  # the view, the events, the announcements
+        self._exec_lock = threading.RLock()  # the controller's executive (the mission loop holds it per cycle)
         self._declared: list[Declaration] = []
         self._token: Declaration | None = None
         self._sampler = LoadSampler(config.host)
@@ -193,13 +199,14 @@ class Daemon:
             from drd.daemon.missions import MissionRunner
             from drd.journal import Journal
 
-            with self._lock:
-                self.controller = Controller(bus, self.cluster, self.config.catalog, me, self._lock,
+            with self._exec_lock:
+                self.controller = Controller(bus, self.cluster, self.config.catalog, me, self._exec_lock,
                                              on_reject=self._reject, on_change=self._controller_change,
                                              clock=self._controller_clock)
                 journal = Journal(self.config.journal) if self.config.journal is not None else None
-                self.runner = MissionRunner(bus, self.cluster, self.config.catalog, me, self._lock, self.controller,
-                                            self.controller.mission_clock, sim_service=self.sim_service,
+                self.runner = MissionRunner(bus, self.cluster, self.config.catalog, me, self._exec_lock,
+                                            self.controller, self.controller.mission_clock,
+                                            sim_service=self.sim_service,
                                             host_down=lambda h: self.view.state(h) is HostState.DOWN,
                                             host_views=self.view.host_views, journal=journal)
         self._declared.append(bus.watch_tokens(keys.hosts, self._on_token, history=True))
@@ -226,8 +233,13 @@ class Daemon:
             self.close()
 
     def step(self) -> None:
-        """The periodic work: silent hosts, the controller, load reports, announcements, peer checks."""
+        """The periodic work: load reports (first: never behind the lock a mission loop may hold while a host is
+        slow to answer, or the others would take this host for dead), silent hosts, the controller,
+        announcements, peer checks."""
         now = self.clock()
+        if now >= self._next_load:
+            self._next_load = now + self.config.period
+            self.bus.put(self.keys.load(self.host), self._sampler.sample(len(self._instances()), self.wall()))
         with self._lock:
             self._handle(self.view.tick(now))
             if self.controller is not None:
@@ -235,9 +247,6 @@ class Daemon:
             announce, self._announce_due = self._announce_due, False
         if announce:
             self.bus.put(self.keys.announce(self.host), self.announcement())
-        if now >= self._next_load:
-            self._next_load = now + self.config.period
-            self.bus.put(self.keys.load(self.host), self._sampler.sample(len(self._instances()), self.wall()))
         if now >= self._next_peer_check and not self._checking:
             self._next_peer_check = now + self.config.peer_recheck
             self._check_peers()
@@ -255,7 +264,7 @@ class Daemon:
             self._token.close()
         if self.runner is not None:
             self.runner.close()  # joins the mission loop, which takes the lock
-        with self._lock:
+        with self._exec_lock:
             if self.controller is not None:
                 self.controller.close()
         for service in (self.creator, self.sim_service):
@@ -286,10 +295,22 @@ class Daemon:
                             self.roles, self._sampler.rss(), self.config.period, self.cluster.lease,
                             self.bus.stats.as_dict(), dict(self.rejected), dict(self.unreachable))
 
+    @contextmanager
+    def _briefly(self) -> Iterator[None]:
+        """The lock for a read of the view, if it comes within `BUSY_WAIT` seconds; else the read goes on without
+        it (it may see a host's record mid-update, never a broken reply): a view query answers at once even while
+        the mission loop holds the lock waiting on a frozen host."""
+        got = self._lock.acquire(timeout=BUSY_WAIT)
+        try:
+            yield
+        finally:
+            if got:
+                self._lock.release()
+
     def hosts(self, events: int = 50) -> HostsReply:
         now = self.clock()
         infos = []
-        with self._lock:
+        with self._briefly():
             for rec in self.view.records.values():
                 report, ann = rec.report, rec.announcement
                 infos.append(HostInfo(
@@ -304,7 +325,7 @@ class Daemon:
         return HostsReply(self.cluster.name, self.host, self.wall(), infos, recent)
 
     def components(self) -> ComponentsReply:
-        with self._lock:
+        with self._briefly():
             return ComponentsReply(self.cluster.name, self.host, self.view.runnable(self.config.catalog),
                                    self.view.instances(), self.view.services())
 

@@ -6,7 +6,7 @@ from the wire is never trusted) and answers a `RunReply`: the mission id, or the
 (rendered as `missionctl validate` prints them) when the mission is invalid.
 
 A valid mission runs in lockstep with the simulator, on the thread of its world (`WorldRun`): each control
-cycle (0.1 s of sim time) the simulation steps, then the executive steps under the daemon's lock, its clock
+cycle (0.1 s of sim time) the simulation steps, then the executive steps under the executive's lock, its clock
 at the simulation's new time; components on other hosts are stepped through their Creators
 (`drd.cluster.remote`), and the gate operations no call carried go to the devices' hosts at the end of the
 cycle (`drd.cluster.gates`). The step is made just before the cycle's first call to another host: carried by
@@ -46,10 +46,13 @@ log = logging.getLogger("drd.daemon.missions")
 
 #: Sim seconds per control cycle, as in the dry-run.
 CONTROL_PERIOD = 0.1
-#: Seconds a Creator or the simulator may take to answer one call before its host counts as lost.
+#: Seconds a Creator or the simulator may take to answer one call, at least: a host counts as lost only once it
+#: has not answered for its lease (`MissionRunner.patience`), so a short freeze delays the mission, never fails it.
 CALL_TIMEOUT = 1.0
 #: Seconds a placement counts on its host before the host's own announcements (its instances) show it.
 RECENT_PLACEMENT = 3.0
+#: Wall seconds between two refreshes of the answers status queries get while the mission loop is held up.
+REFRESH_EVERY = 0.5
 #: Seconds beyond two leases a restarted controller waits for the hosts before it resumes the journal's missions.
 RESUME_GRACE = 5.0
 
@@ -149,6 +152,7 @@ class MissionRunner:
         self.host_views = host_views
         self._recent: list[tuple[float, str, str]] = []  # (when, host, component) of placements not yet reported
         self.resource_hosts = {r.id: r.host for r in cluster.resources() if r.host}
+        self.patience = max(CALL_TIMEOUT, cluster.lease)  # how long a call waits for a host that does not answer
         self.simulator = next((h.name for h in cluster.hosts if Role.SIMULATOR in h.roles), None)
         # the devices' gates are on their hosts: every mission's grants reach them through these
         self.gates = RemoteGates({u.id: u.host for u in cluster.resources() if u.host and type(u).__name__ == "Unit"})
@@ -218,7 +222,7 @@ class MissionRunner:
 
     def host_lost(self, host: str) -> None:
         """A host's resources left the manager: it went down and did not come back within the lease (called
-        with the daemon's lock held). Its robots leave the simulation at the next control cycle, when the
+        with the executive's lock held). Its robots leave the simulation at the next control cycle, when the
         mission loop talks to the simulator anyway; a short freeze costs nothing, as for its grants."""
         if self.current is not None:
             self.lost.append(host)
@@ -241,7 +245,7 @@ class MissionRunner:
     def sim(self, req: SimRequest) -> SimReply:
         if self.sim_service is not None:
             return self.sim_service.handle(req)
-        reply = self.bus.call(sim_key(self.cluster.name), req, timeout=CALL_TIMEOUT)
+        reply = self.bus.call(sim_key(self.cluster.name), req, timeout=self.patience)
         if not isinstance(reply, SimReply):
             raise ValueError(f"the simulator answered a {type(reply).TYPE}")
         return reply
@@ -319,7 +323,7 @@ class MissionRunner:
         executive = self.controller.executive
         router = ComponentRouter(self.bus, self.cluster.name, self.resource_hosts, self.me,
                                  local=executive.registry, mission=mid, world=world.name,
-                                 active=functools.partial(_active, executive, mid), timeout=CALL_TIMEOUT,
+                                 active=functools.partial(_active, executive, mid), timeout=self.patience,
                                  dead=self.host_down, catalog=self.catalog,
                                  place=self.place if self.host_views else None, gates=self.gates,
                                  records=executive.record, cycle=world.cycle, generation=world.generation)
@@ -400,7 +404,7 @@ class MissionRunner:
             return
         try:
             reply = self.bus.call(f"drd/{self.cluster.name}/host/{host}/creator",
-                                  GateUpdate(ops, world.name, world.generation), timeout=CALL_TIMEOUT)
+                                  GateUpdate(ops, world.name, world.generation), timeout=self.patience)
         except Exception as e:  # the host's loss is noticed by the membership and the next calls
             log.warning("the gate operations for %s were not delivered: %s", host, e)
             return
@@ -438,6 +442,7 @@ class WorldRun:
         self.started = False
         self.closed = False  # its loop takes no new mission (set under the runner's lock)
         self.cycles = 0
+        self.refresh_at = 0.0  # when the answers kept for busy status queries are computed again
         self.thread = threading.Thread(target=self._loop, name=f"drd-world-{name}-{generation}", daemon=True)
 
     def go(self) -> None:
@@ -483,6 +488,10 @@ class WorldRun:
                 runner.flush_gates(self)
                 if runner.checkpoints is not None:
                     runner.checkpoints.save(runner, self)
+                if time.monotonic() >= self.refresh_at:  # what status queries get while a slow host holds us up
+                    self.refresh_at = time.monotonic() + REFRESH_EVERY
+                    with runner.lock:
+                        runner.controller.serialized.refresh()
                 self._retire_finished()
                 self.cycles += 1
                 lag = sim_time / self.speed - (time.perf_counter() - start)
@@ -504,6 +513,7 @@ class WorldRun:
         """One control cycle (the runner's lock held): the world's step, the executive's, the time limits. The
         world's time after it, or None when the simulator stopped answering (every mission is then stopped)."""
         runner, executive = self.runner, self.runner.controller.executive
+        runner.controller.flush()  # hosts that came or went meanwhile: the manager learns it before the step
         # the world steps before the cycle's first call (carried by a batch to the simulator host, see
         # ComponentRouter.step_first); the executive's clock reads the time it will then have
         self.cycle.pending_step = CONTROL_PERIOD
