@@ -184,12 +184,14 @@ class DryRun:
 _ENDED = {"exit": "exited", "release": "released"}
 
 
-def merged_drivers(cluster: Cluster, sim: Simulation, catalog: Catalog) -> HostDrivers:
-    """Every host's drivers in one place: in a dry-run all hosts live in this process."""
+def merged_drivers(cluster: Cluster, sim: Simulation, catalog: Catalog,
+                   services: Mapping[str, Any] | None = None) -> HostDrivers:
+    """Every host's drivers in one place: in a dry-run all hosts live in this process. `services`: the backends of
+    drivers other than `sim` (the served simulator's `ros2` link)."""
     out = HostDrivers()
     for host in cluster.hosts:
         if host.devices:
-            d = drivers_for(cluster, host.name, sim, catalog=catalog)
+            d = drivers_for(cluster, host.name, sim, services=services, catalog=catalog)
             out.devices.update(d.devices)
             out.robots.update(d.robots)
     return out
@@ -207,15 +209,30 @@ def team(cluster: Cluster, world: World, catalog: Catalog, *, seed: int = 0, reg
          late: Collection[str] = ()) -> tuple[Simulation, Executive]:
     """The world simulated and one executive over the team of `cluster` (its hosts' devices driven in the
     simulation), in this process: what a dry-run runs missions on. `late`: hosts whose devices join later."""
-    sim = Simulation(world, seed=seed)
+    sim = simulation(cluster, world, seed)
     return sim, executive_over(cluster, world, sim, catalog, registry, [r.id for r in cluster.resources()
                                                                         if r.host in late])
+
+
+def simulation(cluster: Cluster, world: World, seed: int = 0) -> Simulation:
+    """The world a dry-run simulates; when a device of `cluster` is on `driver: ros2`, served as ROS 2 robots in this
+    process, in lockstep with its steps (`drd.sim.ros2.LockstepSimulation`: close it after the run)."""
+    if not any(d.driver == "ros2" for h in cluster.hosts for d in h.devices):
+        return Simulation(world, seed=seed)
+    from drd.sim.ros2 import LockstepSimulation  # zenoh and rosbags: only for a team of ROS 2 robots
+
+    sim = LockstepSimulation(world, seed=seed)
+    sim.serve(cluster)
+    return sim
 
 
 def executive_over(cluster: Cluster, world: World, sim: Simulation, catalog: Catalog, registry: Any = None,
                    gone: Collection[str] = ()) -> Executive:
     """An executive over the team of `cluster` in the world `sim` runs, without the resources in `gone`."""
-    drivers = merged_drivers(cluster, sim, catalog)
+    drivers = merged_drivers(cluster, sim, catalog, getattr(sim, "services", None))
+    sync = getattr(sim, "sync", None)
+    if callable(sync):  # served over ROS 2: the new drivers get the robots' state before any behavior reads it
+        sync()
     places = {room.id: (room.x0, room.y0, room.x1, room.y1) for room in world.rooms}
     return Executive(LocalNetwork().session("controller"), SimulationClock(sim), registry or EntryPoints(catalog),
                      cluster=cluster.name, resources=[r for r in cluster.resources() if r.id not in gone],
@@ -278,6 +295,9 @@ def run_many(missions: Sequence[Mission], cluster: Cluster, world: World, catalo
     why = "stopped by operator" if stop is not None and stop.is_set() else f"sim time limit of {until:g} s reached"
     life.end(why)
     _conclude(results, [life.interpreters[r.mission_id or ""] for r in results], sim, time.perf_counter() - start)
+    close = getattr(sim, "close", None)
+    if callable(close):  # the served robots' sessions (ROS 2)
+        close()
     if recorder is not None:
         recorder.end([summary(r) for r in results], sim.time)
     return results

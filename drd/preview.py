@@ -57,6 +57,9 @@ def preview(charts: Sequence[tuple[Statechart, int | None]], cluster: Cluster, w
     for interp in executive.missions.values():
         if not interp.finished:
             interp.stop("preview only")
+    close = getattr(_sim, "close", None)
+    if callable(close):  # a team of ROS 2 robots was served for the preview
+        close()
     return previews
 
 

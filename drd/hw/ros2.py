@@ -317,6 +317,8 @@ class Ros2Link:
         self.sent: Counter[str] = Counter()
         self.received: Counter[str] = Counter()
         self.listeners: Counter[str] = Counter()  # subscriptions per key
+        self._total = 0  # messages received in all
+        self._target = 0  # the total a waiter waits for (0: wake at every message)
         self._closed = threading.Event()
         self._thread: threading.Thread | None = None
 
@@ -356,7 +358,9 @@ class Ros2Link:
             finally:
                 with self.changed:
                     self.received[info.key] += 1
-                    self.changed.notify_all()
+                    self._total += 1
+                    if self._total >= self._target:  # wake a lockstep's wait once, not at every message
+                        self.changed.notify_all()
 
         sub = node.subscribe(topic, type_name, counted, qos)
         with self.changed:
@@ -372,12 +376,17 @@ class Ros2Link:
         `published` says were sent; the keys still short (empty when all arrived)."""
         deadline = time.monotonic() + timeout
         with self.changed:
-            while True:
-                short = [k for k, n in self.listeners.items() if n > 0 and self.received[k] < n * published.get(k, 0)]
-                left = deadline - time.monotonic()
-                if not short or left <= 0:
-                    return short
-                self.changed.wait(left)
+            wanted = {k: n * published.get(k, 0) for k, n in self.listeners.items() if n > 0}
+            self._target = self._total + sum(max(0, w - self.received[k]) for k, w in wanted.items())
+            try:
+                while True:
+                    short = [k for k, w in wanted.items() if self.received[k] < w]
+                    left = deadline - time.monotonic()
+                    if not short or left <= 0:
+                        return short
+                    self.changed.wait(left)
+            finally:
+                self._target = 0
 
     def watch(self, check: Callable[[], None]) -> None:
         """Run `check` (a bound method: held weakly) periodically, or at each `tick()`."""

@@ -46,6 +46,9 @@ PUBLISH_PERIOD = 0.1
 IMAGE_WIDTH = 16
 #: How long a lockstep waits for the other side before it says so and goes on.
 LOCKSTEP_WAIT = 5.0
+#: The battery and the radio links go out every this many publications (0.5 s of sim time: well within a driver's
+#: `status_max_age`); the magazine too, and at once when a launch changes it.
+STATUS_EVERY = 5
 
 
 @dataclass
@@ -70,7 +73,8 @@ class ServedRobots:
         self.received: Counter[str] = Counter()  # commands received per key
         self.published: Counter[str] = Counter()  # messages published per key
         self._queue: list[Callable[[], None]] = []
-        self._streams: list[Callable[[dict[str, int]], None]] = []
+        self._streams: list[tuple[Callable[[Any], None], bool]] = []  # (send, a status stream)
+        self._count = 0  # publications so far
         self.robots: dict[str, _Served] = {}
         self._nodes: dict[str, Ros2Node] = {}
         self.rangers = {r.id for r in sim.world.rangers}
@@ -78,6 +82,7 @@ class ServedRobots:
         root = Ros2Node(session, "drd_sim", "", domain_id)
         self._nodes[""] = root
         self._clock = root.publisher("/clock", mapping.CLOCK, QoS(depth=1))
+        self._time, self._header = self.msg("builtin_interfaces/msg/Time"), self.msg("std_msgs/msg/Header")
         try:
             for robot in cluster.robots:
                 if robot.id in sim.robots:
@@ -134,21 +139,38 @@ class ServedRobots:
         sub = self.node(rid, opts).subscribe(topic, type_name, counted, qos)
         self.robots[rid].topics.append((sub.topic.name, type_name))
 
-    def stream(self, pub: Publisher | None, make: Callable[[dict[str, int]], Any]) -> None:
-        """Publish `make(stamp)` on `pub` at every `publish()` (nothing when `make` raises SimError: a lost robot)."""
-        if pub is None:
-            return
-        types, type_name = self.types, pub.topic.type_name
+    def msg(self, type_name: str) -> Any:
+        """The message class of `type_name` (built directly: `MessageTypes.make` is for the rare messages)."""
+        return self.types.store.types[type_name]
 
-        def send(st: dict[str, int]) -> None:
+    def header(self, st: Any, frame: str) -> Any:
+        return self._header(stamp=st, frame_id=frame)
+
+    def stream(self, pub: Publisher | None, make: Callable[[Any], Any], status: bool = False) -> Callable[[Any], None]:
+        """Publish `make(stamp)` on `pub` at every `publish()` (every `STATUS_EVERY`th for a `status` stream; nothing
+        when `make` raises SimError: a lost robot). Returns the sender, to publish at once."""
+        types = self.types
+        type_name = pub.topic.type_name if pub is not None else ""
+
+        def send(st: Any) -> None:
+            if pub is None:
+                return
             try:
                 message = make(st)
             except SimError:
                 return
             pub.publish_cdr(types.serialize(message, type_name))
-            self.published[pub.key] += 1
+            with self.changed:
+                self.published[pub.key] += 1
 
-        self._streams.append(send)
+        if pub is not None:
+            self._streams.append((send, status))
+        return send
+
+    def now(self) -> Any:
+        """The stamp of the current sim time."""
+        st = mapping.stamp(self.sim.time)
+        return self._time(sec=st["sec"], nanosec=st["nanosec"])
 
     def command(self, fn: Callable[[], None]) -> None:
         """A setpoint from a subscriber: at once (real time) or at the next step (lockstep, in the stepper's thread)."""
@@ -170,10 +192,13 @@ class ServedRobots:
     def publish(self) -> None:
         """Every robot's state now, and `/clock`."""
         with self.lock:
-            st = mapping.stamp(self.sim.time)
-            for send in self._streams:
-                send(st)
-            self._clock.publish_cdr(self.types.serialize(self.types.make(mapping.CLOCK, clock=st), mapping.CLOCK))
+            st = self.now()
+            status = self._count % STATUS_EVERY == 0
+            self._count += 1
+            for send, is_status in self._streams:
+                if status or not is_status:
+                    send(st)
+            self._clock.publish_cdr(self.types.serialize(self.msg(mapping.CLOCK)(clock=st), mapping.CLOCK))
 
     def wait_received(self, sent: Mapping[str, int], timeout: float) -> list[str]:
         """Wait (up to `timeout` s) until every command of `sent` (key -> count) has arrived; the keys still short."""
@@ -213,29 +238,37 @@ def _drive(s: ServedRobots, rid: str, device: Device, opts: Ros2Options) -> None
     origin = sim.origin(rid)
     start = (origin.x, origin.y, origin.heading)
     odom_frame, base_frame = f"{rid}/odom", f"{rid}/base_link"
+    odometry_, pose_, point, quaternion = (s.msg(t) for t in (
+        mapping.ODOMETRY, "geometry_msgs/msg/Pose", "geometry_msgs/msg/Point", "geometry_msgs/msg/Quaternion"))
+    with_cov, twist_cov, twist, vector = (s.msg(t) for t in ("geometry_msgs/msg/PoseWithCovariance",
+                                                             "geometry_msgs/msg/TwistWithCovariance", mapping.TWIST,
+                                                             "geometry_msgs/msg/Vector3"))
+    zeros = np.zeros(36, dtype=np.float64)
 
-    def odometry(st: dict[str, int]) -> Any:
+    def odometry(st: Any) -> Any:
         p = sim.odometry(rid)
         v, omega = sim.command(rid)
         x, y, a = mapping.relative(start, (p.x, p.y, p.heading))
-        return types.make(mapping.ODOMETRY, header={"stamp": st, "frame_id": odom_frame}, child_frame_id=base_frame,
-                          pose={"pose": {"position": {"x": x, "y": y}, "orientation": mapping.quaternion(a)}},
-                          twist={"twist": {"linear": {"x": v}, "angular": {"z": omega}}})
+        pose = pose_(position=point(x=x, y=y, z=0.0),
+                     orientation=quaternion(x=0.0, y=0.0, z=math.sin(a / 2), w=math.cos(a / 2)))
+        moving = twist(linear=vector(x=v, y=0.0, z=0.0), angular=vector(x=0.0, y=0.0, z=omega))
+        return odometry_(header=s.header(st, odom_frame), child_frame_id=base_frame,
+                         pose=with_cov(pose=pose, covariance=zeros), twist=twist_cov(twist=moving, covariance=zeros))
 
-    def battery(st: dict[str, int]) -> Any:
+    def battery(st: Any) -> Any:
         nan = math.nan
-        return types.make(mapping.BATTERY, header={"stamp": st, "frame_id": base_frame}, percentage=sim.battery(rid),
+        return types.make(mapping.BATTERY, header=s.header(st, base_frame), percentage=sim.battery(rid),
                           voltage=nan, temperature=nan, current=nan, charge=nan, capacity=nan, design_capacity=nan,
                           power_supply_status=2, present=True)  # DISCHARGING
 
     s.stream(s.publisher(rid, opts, "odom"), odometry)
-    s.stream(s.publisher(rid, opts, "battery"), battery)
+    s.stream(s.publisher(rid, opts, "battery"), battery, status=True)
     s.subscribe(rid, opts, "cmd_vel", lambda m: s.command(lambda: sim.set_velocity(rid, float(m.linear.x),
                                                                                     float(m.angular.z))))
 
 
 def _range_sensor(s: ServedRobots, rid: str, device: Device, opts: Ros2Options) -> None:
-    sim, types = s.sim, s.types
+    sim = s.sim
     beams = int(_option(device, "beams", 181))
     max_range = _option(device, "max_range", 8.0)
     fov = math.radians(_option(device, "fov", 180.0))
@@ -243,12 +276,14 @@ def _range_sensor(s: ServedRobots, rid: str, device: Device, opts: Ros2Options) 
     lo = -fov / 2 if beams > 1 else 0.0
     frame = f"{rid}/laser"
 
-    def scan(st: dict[str, int]) -> Any:
+    laser_scan, none = s.msg(mapping.LASER_SCAN), np.zeros(0, dtype=np.float32)
+
+    def scan(st: Any) -> Any:
         r = np.asarray(sim.ranges(rid, beams, max_range, fov), dtype=np.float32)
         r[r >= np.float32(max_range)] = np.inf  # REP 117: nothing hit within range
-        return types.make(mapping.LASER_SCAN, header={"stamp": st, "frame_id": frame}, angle_min=lo,
-                          angle_max=lo + step * (beams - 1), angle_increment=step, scan_time=PUBLISH_PERIOD,
-                          range_min=0.0, range_max=max_range, ranges=r)
+        return laser_scan(header=s.header(st, frame), angle_min=lo, angle_max=lo + step * (beams - 1),
+                          angle_increment=step, time_increment=0.0, scan_time=PUBLISH_PERIOD, range_min=0.0,
+                          range_max=max_range, ranges=r, intensities=none)
 
     s.stream(s.publisher(rid, opts, "scan"), scan)
 
@@ -262,21 +297,23 @@ def _camera(s: ServedRobots, rid: str, device: Device, opts: Ros2Options) -> Non
     frame = f"{rid}/camera"
     pixel = fov / resolution
 
-    def image(st: dict[str, int]) -> Any:
-        regions = sim.brightness(rid, fov, IMAGE_WIDTH, max_range)  # right to left; columns go left to right
-        data = np.asarray(regions[::-1], dtype="<f4").tobytes()
-        return types.make(mapping.IMAGE, header={"stamp": st, "frame_id": frame}, height=1, width=IMAGE_WIDTH,
-                          encoding="32FC1", is_bigendian=0, step=4 * IMAGE_WIDTH, data=np.frombuffer(data, np.uint8))
+    image_ = s.msg(mapping.IMAGE)
 
-    def detections(st: dict[str, int]) -> Any:
+    def image(st: Any) -> Any:
+        regions = sim.brightness(rid, fov, IMAGE_WIDTH, max_range)  # right to left; columns go left to right
+        data = np.frombuffer(np.asarray(regions[::-1], dtype="<f4").tobytes(), np.uint8)
+        return image_(header=s.header(st, frame), height=1, width=IMAGE_WIDTH, encoding="32FC1", is_bigendian=0,
+                      step=4 * IMAGE_WIDTH, data=data)
+
+    def detections(st: Any) -> Any:
         seen = []
         for d in sim.camera(rid, fov, max_range, min_light):
             bearing = round(d.bearing / pixel) * pixel  # to the pixel, as the sim camera reports it
-            seen.append({"header": {"stamp": st, "frame_id": frame}, "id": d.label, "results": [
+            seen.append({"header": s.header(st, frame), "id": d.label, "results": [
                 {"hypothesis": {"class_id": "person", "score": 1.0},
                  "pose": {"pose": {"position": {"x": d.distance * math.cos(bearing),
                                                 "y": d.distance * math.sin(bearing)}}}}]})
-        return types.make(mapping.DETECTIONS, header={"stamp": st, "frame_id": frame}, detections=seen)
+        return types.make(mapping.DETECTIONS, header=s.header(st, frame), detections=seen)
 
     s.stream(s.publisher(rid, opts, "image"), image)
     s.stream(s.publisher(rid, opts, "detections"), detections)
@@ -300,13 +337,14 @@ def _request(data: str, fields: Mapping[str, type]) -> dict[str, Any]:
 
 
 def _launcher(s: ServedRobots, rid: str, device: Device, opts: Ros2Options) -> None:
-    sim, types = s.sim, s.types
+    sim = s.sim
     max_range = min(MAX_LAUNCH, _option(device, "max_range", MAX_LAUNCH))
     origin = sim.origin(rid)
     start = (origin.x, origin.y, origin.heading)
     results = s.publisher(rid, opts, "launch_result")
-    s.stream(s.publisher(rid, opts, "magazine"),
-             lambda st: types.make(mapping.STRING, data=json.dumps(list(sim.magazine(rid)))))
+    string = s.msg(mapping.STRING)
+    magazine = s.stream(s.publisher(rid, opts, "magazine"),
+                        lambda st: string(data=json.dumps(list(sim.magazine(rid)))), status=True)
 
     def launch(msg: Any) -> None:
         rid_ = None
@@ -322,6 +360,7 @@ def _launcher(s: ServedRobots, rid: str, device: Device, opts: Ros2Options) -> N
                 distance = min(distance, max_range)
                 p = sim.odometry(rid)
                 flight = sim.launch(req["scout"], float(req["heading"]), distance)
+                magazine(s.now())  # the magazine changed: said before the result
             a = p.heading + float(req["heading"])
             x, y, h = mapping.relative(start, (p.x + distance * math.cos(a), p.y + distance * math.sin(a), a))
             _result(s, results, {"id": rid_, "ok": True, "x": x, "y": y, "heading": h,
@@ -360,11 +399,12 @@ def _radio(s: ServedRobots, rid: str, device: Device, opts: Ros2Options) -> None
     peers = sorted(r for r in sim.robots if (r in s.rangers) != (rid in s.rangers))
     for peer in peers:
         scout, ranger = (rid, peer) if peer in s.rangers else (peer, rid)
-        s.stream(s.publisher(rid, opts, "link", f"/{peer}"), _link(s, scout, ranger, reach))
+        s.stream(s.publisher(rid, opts, "link", f"/{peer}"), _link(s, scout, ranger, reach), status=True)
 
 
-def _link(s: ServedRobots, scout: str, ranger: str, reach: float) -> Callable[[dict[str, int]], Any]:
-    return lambda st: s.types.make(mapping.BOOL, data=s.sim.radio_ok(scout, ranger, reach))
+def _link(s: ServedRobots, scout: str, ranger: str, reach: float) -> Callable[[Any], Any]:
+    boolean = s.msg(mapping.BOOL)
+    return lambda st: boolean(data=s.sim.radio_ok(scout, ranger, reach))
 
 
 _BUILDERS: dict[str, Callable[[ServedRobots, str, Device, Ros2Options], None]] = {
@@ -412,6 +452,7 @@ class LockstepSimulation(Simulation):
 
     served: ServedRobots | None = None
     link: Ros2Link | None = None
+    services: dict[str, Any] | None = None  # the drivers' backends: {"ros2": link}
     _sessions: tuple[Ros2Session, ...] = ()
 
     def serve(self, cluster: Cluster, *, domain_id: int = 0, loopback: bool = True) -> dict[str, Any]:
@@ -439,7 +480,8 @@ class LockstepSimulation(Simulation):
             raise
         self._sessions = tuple(sessions)
         self.link = Ros2Link(clock=lambda: self.time, session=client, period=None)
-        return {"ros2": self.link}
+        self.services = {"ros2": self.link}
+        return self.services
 
     def sync(self) -> None:
         """Publish the state now and wait until the drivers have it (before the first cycle)."""
