@@ -453,6 +453,8 @@ class LockstepSimulation(Simulation):
     served: ServedRobots | None = None
     link: Ros2Link | None = None
     services: dict[str, Any] | None = None  # the drivers' backends: {"ros2": link}
+    #: Set to a list to get each step's phases: (commands' wait, physics, serving the state, readings' wait), s.
+    timings: list[tuple[float, float, float, float]] | None = None
     _sessions: tuple[Ros2Session, ...] = ()
 
     def serve(self, cluster: Cluster, *, domain_id: int = 0, loopback: bool = True) -> dict[str, Any]:
@@ -495,15 +497,21 @@ class LockstepSimulation(Simulation):
         if served is None or link is None:
             super().step(dt)
             return
+        t0 = time.perf_counter()
         short = served.wait_received(dict(link.sent), LOCKSTEP_WAIT)
         if short:
             log.warning("lockstep: commands on %s did not reach the served simulator", ", ".join(short))
+        t1 = time.perf_counter()
         served.apply()
         with served.lock:
             super().step(dt)
+        t2 = time.perf_counter()
         served.publish()
+        t3 = time.perf_counter()
         self._wait_readings()
         link.tick()
+        if self.timings is not None:  # (commands' wait, physics, serving the state, readings' wait) in seconds
+            self.timings.append((t1 - t0, t2 - t1, t3 - t2, time.perf_counter() - t3))
 
     def _wait_readings(self) -> None:
         assert self.served is not None and self.link is not None
