@@ -103,6 +103,7 @@ class Executive:
         self.sent = 0  # records sent, of every mission: each is numbered in the order they happened
         self.kept: dict[str, collections.deque[MissionRecord]] = {}  # each mission's latest records, for catch-up
         self._queryable = bus.serve(f"drd/{cluster}/executive", self._command)
+        self._reads = bus.serve(f"drd/{cluster}/executive/status", self._read)  # what an observer may ask
 
     def _gates(self, gates: Gates | None) -> Gates:
         if gates is not None:
@@ -225,6 +226,7 @@ class Executive:
     def close(self) -> None:
         self.stop()
         self._queryable.close()
+        self._reads.close()
 
     def abandon(self) -> None:
         """Its process died (a dry-run's `kill controller`): nothing more is said or done, missions are left as
@@ -232,6 +234,14 @@ class Executive:
         for interp in self.missions.values():
             interp.listeners.clear()
         self._queryable.close()
+        self._reads.close()
+
+    def _read(self, query: Query) -> Message | Reply:
+        """`status` and `records` only: the executive's read-only side."""
+        cmd = query.payload
+        if not isinstance(cmd, MissionCommand) or cmd.op not in ("status", "records"):
+            return query.error("expected a drd.mission.command status or records (others go to the executive)")
+        return self._command(query)
 
     def _command(self, query: Query) -> Message | Reply:
         cmd = query.payload

@@ -67,7 +67,9 @@ DEFAULT_WORLD = "corridor"
 _HOST_KEYS = ("endpoint", "roles", "cores", "drivers", "devices", "robots")
 _DEVICE_KEYS = ("type", "driver", "options", "driver_options", "capacity", "slice")
 _ROBOT_KEYS = ("type", "carrier", "parts", "properties")
-_SECURITY_ALLOWED = ("mode", *dict.fromkeys(k for keys in SECURITY_KEYS.values() for k in keys))
+_SECURITY_ALLOWED = ("mode", *dict.fromkeys(k for keys in SECURITY_KEYS.values() for k in keys), "roles")
+#: The roles of `cluster.security.roles`, most powerful first (docs/security.md).
+ACCESS_ROLES = ("daemon", "operator", "observer")
 _PLACEMENT_KEYS = ("cpu", "memory", "instances")
 _SCALARS: Mapping[str, Any] = {"int": int, "float": (int, float), "bool": bool, "str": str}
 
@@ -82,6 +84,15 @@ class Security:
     ca: str | None = None
     cert: str | None = None
     key: str | None = None
+    #: Who may do what (`ACCESS_ROLES` -> user names, or certificate common names with `tls`); empty: every
+    #: authenticated peer may do everything, as a daemon.
+    roles: Mapping[str, tuple[str, ...]] = field(default_factory=dict, hash=False)
+
+    def role_of(self, name: str) -> str | None:
+        """The role of a user (or certificate name): `daemon` for the daemons' own user, None when unknown."""
+        if name == self.user:
+            return "daemon"
+        return next((role for role in ACCESS_ROLES if name in self.roles.get(role, ())), None)
 
     @property
     def files(self) -> dict[str, str]:
@@ -270,12 +281,37 @@ class _Parser(ConfigReader):
         mode = self.choice(data["mode"], f"{key}.mode", SecurityMode, "mode") if "mode" in data else None
         if mode is None:
             return Security()
-        for k in _SECURITY_ALLOWED[1:]:
+        for k in _SECURITY_ALLOWED[1:-1]:
             if k in data and k not in SECURITY_KEYS[mode]:
                 self.fail(f"{key}.{k}", f"does not apply to mode {mode}")
             elif k not in data and k in SECURITY_KEYS[mode]:
                 self.fail(f"{key}.{k}", f"required for mode {mode}")
-        return Security(mode, **{k: self.text(data[k], f"{key}.{k}") for k in SECURITY_KEYS[mode] if k in data})
+        roles = self.access_roles(data["roles"], f"{key}.roles", mode) if "roles" in data else {}
+        return Security(mode, **{k: self.text(data[k], f"{key}.{k}") for k in SECURITY_KEYS[mode] if k in data},
+                        roles=roles)
+
+    def access_roles(self, value: object, key: str, mode: SecurityMode) -> dict[str, tuple[str, ...]]:
+        """`roles: {operator: [alice], observer: [bob]}`: each name in one role only; `none` has no identities."""
+        if mode is SecurityMode.NONE:
+            self.fail(key, "roles need identities: use mode password (user names) or tls (certificate names)")
+            return {}
+        data = self.mapping(value, key)
+        self.keys(data, key, ACCESS_ROLES)
+        out: dict[str, tuple[str, ...]] = {}
+        seen: dict[str, str] = {}
+        for role in ACCESS_ROLES:
+            names = data.get(role, [])
+            if not isinstance(names, list) or not all(isinstance(n, str) and n for n in names):
+                self.fail(f"{key}.{role}", "expected a list of names")
+                continue
+            for n in names:
+                if n in seen:
+                    self.fail(f"{key}.{role}", f"{n} is already a{'n' if seen[n][0] in 'aeiou' else ''} {seen[n]}")
+                seen[n] = role
+            out[role] = tuple(names)
+        if mode is SecurityMode.TLS and not out.get("daemon"):
+            self.fail(f"{key}.daemon", "with tls, list the daemons' certificate names: they may do everything")
+        return out
 
     def placement(self, value: object, key: str) -> Placement:
         data = self.mapping(value, key)

@@ -172,12 +172,15 @@ def _plain_value(text: str, kind: Any, minimum: float | None) -> Any:
 
 
 @contextmanager
-def cluster_client(config: Path, connect: list[str] | None, timeout: float) -> Iterator[ClusterClient]:
-    """A client of the cluster, or a clean exit 2; request errors become one-line errors too."""
+def cluster_client(config: Path, connect: list[str] | None, timeout: float,
+                   to: str = "") -> Iterator[ClusterClient]:
+    """A client of the cluster, or a clean exit 2; request errors become one-line errors too. `to`: what the
+    command does that only an operator may (`run a mission`...): refused here, before the cluster is asked, to a
+    user whose role (`cluster.security.roles`) does not allow it; the daemons refuse it anyway."""
     from drd.bus import BusError, RemoteError
     from drd.daemon.client import ClientError, ClusterClient
 
-    endpoints, options, name, prefer = _endpoints(config, connect)
+    endpoints, options, name, prefer = _endpoints(config, connect, to)
     try:
         client = ClusterClient.connect(endpoints, cluster=name, options=options, timeout=timeout, prefer=prefer)
     except ClientError as e:
@@ -194,8 +197,10 @@ def cluster_client(config: Path, connect: list[str] | None, timeout: float) -> I
         client.close()
 
 
-def _endpoints(config: Path, connect: list[str] | None) -> tuple[list[str], dict[str, Any], str | None, list[str]]:
-    """(endpoints, zenoh options, cluster name, preferred daemons) from --connect or the hosts file."""
+def _endpoints(config: Path, connect: list[str] | None,
+               to: str = "") -> tuple[list[str], dict[str, Any], str | None, list[str]]:
+    """(endpoints, zenoh options, cluster name, preferred daemons) from --connect or the hosts file (whose roles
+    must allow this user `to` do what it asks, if anything)."""
     if connect:
         return list(connect), {}, None, []
     from drd.daemon.security import SecurityError, transport
@@ -209,8 +214,22 @@ def _endpoints(config: Path, connect: list[str] | None) -> tuple[list[str], dict
         tr = transport(cluster)
     except (HostsError, SecurityError) as e:
         fail_all(e.problems)
+    _may(cluster.security, str(tr.options.get("transport/auth/usrpwd/user") or ""), to)
     prefer = [cluster.controller.name] + [h.name for h in cluster.hosts if h.name != cluster.controller.name]
     return list(tr.endpoints.values()), dict(tr.options), cluster.name, prefer
+
+
+def _may(security: Any, user: str, to: str) -> None:
+    """Refuse (exit 2) a user whose role does not allow what the command does; nothing without roles."""
+    if not security.roles or not user:
+        return
+    role = security.role_of(user)
+    if role is None:
+        fail(f"user {user} has no role in the hosts file (cluster.security.roles): the daemons refuse it",
+             hint="ask for one, or set DRD_USER to a user that has one")
+    if to and role == "observer":
+        fail(f"user {user} is an observer: it may watch the cluster (status, hosts, resources, a mission's"
+             f" records), not {to}", hint="an operator may: set DRD_USER to one")
 
 
 # --- commands --------------------------------------------------------------------------------------
@@ -359,7 +378,7 @@ def run(mission: Path = typer.Argument(..., help="The mission file.", show_defau
     wait = max(timeout, 15.0)
     request = RunMission(source, str(mission), world, speed, until, seed, params or None, priority,
                          give_up_at=time.time() + wait - 0.5)  # the reply must still reach us after it
-    with cluster_client(config, connect, timeout) as client:
+    with cluster_client(config, connect, timeout, to="run a mission") as client:
         watch = _RecordWatch(client, trace_out, recorder)
         try:
             report = _run_and_follow(client, watch, request, wait, detach)
@@ -480,7 +499,7 @@ def stop(mission: str = typer.Argument("", help="The mission id (default: the on
          timeout: float = TimeoutOption) -> int:
     """Stop a running mission (its behaviors are terminated, its resources released). Without an id it stops the
     one mission that runs; with several running it names them and stops none (`--all` stops them all)."""
-    with cluster_client(config, connect, timeout) as client:
+    with cluster_client(config, connect, timeout, to="stop a mission") as client:
         missions = stop_missions(client, mission, every, timeout)
     if as_json:
         print_json({"stopped": missions})
@@ -643,8 +662,8 @@ class _RecordWatch:
         from drd.executive_messages import MissionCommand, MissionRecords
 
         try:
-            reply = self.client.bus.call(self.client.keys.executive, MissionCommand("records", mission,
-                                                                                    after=self.last_seq),
+            reply = self.client.bus.call(self.client.keys.executive_status,
+                                         MissionCommand("records", mission, after=self.last_seq),
                                          timeout=self.client.timeout)
         except BusFailure:
             return  # the live records go on; the next return of the controller tries again

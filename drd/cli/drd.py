@@ -170,7 +170,7 @@ def start(
     if problems:
         fail_all(problems, hint="see docs/drivers.md for the drivers drd has and how to add one")
     try:
-        tr = transport(cluster)
+        tr = transport(cluster, daemon=True)
     except SecurityError as e:
         fail_all(e.problems, hint="security is configured, so drd will not start without it")
     rd = runfiles.run_dir(run_dir_opt)

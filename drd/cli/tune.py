@@ -59,7 +59,7 @@ def tune(instance: str = typer.Argument(..., metavar="INSTANCE", show_default=Fa
         wanted = parse_cores(cores) if cores is not None else None
     except ValueError as e:
         fail(f"--cores {cores}: {e}")
-    with cluster_client(config, connect, timeout) as client:
+    with cluster_client(config, connect, timeout, to="tune an instance") as client:
         try:
             where = client.lookup(instance)
         except RemoteError:
@@ -70,7 +70,7 @@ def tune(instance: str = typer.Argument(..., metavar="INSTANCE", show_default=Fa
                 f"running instances: {', '.join(known)}" if known else "no instance runs now"))
         if where.kind != "instance":
             fail(f"{instance} is a daemon service, not a component instance")
-        reply = client.bus.call(where.key, Tune(instance, wanted, nice), timeout=max(timeout, 2.0))
+        reply = client.bus.call(client.keys.tune(where.host), Tune(instance, wanted, nice), timeout=max(timeout, 2.0))
     if not isinstance(reply, Tuned):
         fail(f"{where.host} answered a {type(reply).TYPE}")
     if as_json:

@@ -141,9 +141,9 @@ class ClusterClient:
         from drd.executive_messages import MissionCommand, MissionStatus  # registers the executive's messages
 
         try:
-            reply = self.bus.call(self.keys.executive, MissionCommand("status"), timeout=self.timeout)
+            reply = self.bus.call(self.keys.executive_status, MissionCommand("status"), timeout=self.timeout)
         except BusTimeout:
-            raise ClientError(f"the executive does not answer on {self.keys.executive}"
+            raise ClientError(f"the executive does not answer on {self.keys.executive_status}"
                               f" within {self.timeout:g} s (is the controller's drd up?)") from None
         return list(_expect(reply, MissionStatus).missions)
 

@@ -16,6 +16,7 @@ from typing import Any
 
 from drd.bus import Bus, Handler, Message, Query, Queryable, Reply, Subscription, Token
 from drd.bus.base import SampleCallback, TokenCallback
+from drd.bus.keys import is_concrete
 from drd.daemon.keys import ClusterKeys
 from drd.daemon.messages import ResourcesReply, RobotInfo, UnitInfo, ViewRequest, WaiterInfo
 from drd.hosts import Cluster
@@ -144,6 +145,8 @@ class SerializedBus(Bus):
                 if self._on_reject is not None:
                     self._on_reject(query.key, reason)
                 return query.error(reason)
+            if not is_concrete(query.key):  # the executive answers only what is addressed to it (drd.daemon.acl)
+                return query.error(f"ask {key_expr} by its exact key, not with {query.key}")
             if not self._lock.acquire(timeout=self.busy_wait):
                 return self._busy(key_expr, query)
             try:
@@ -224,7 +227,8 @@ class Controller:
         self.clock: Clock = clock or WallClock()
         self._lock = lock
         self._on_change = on_change
-        expect = {self.keys.executive: (MissionCommand,), self.keys.resources: (ViewRequest, type(None))}
+        expect = {self.keys.executive: (MissionCommand,), self.keys.executive_status: (MissionCommand,),
+                  self.keys.resources: (ViewRequest, type(None))}
         serialized = SerializedBus(bus, lock, expect=expect, on_reject=on_reject)
         # The executive runs on the simulator's time (`drd.daemon.missions`); membership on this clock.
         from drd.daemon.missions import SimTimeClock
@@ -240,6 +244,7 @@ class Controller:
         self.serialized = serialized
         serialized.keep(self.keys.resources, self.resources)
         serialized.keep(self.keys.executive, self.executive.status)
+        serialized.keep(self.keys.executive_status, self.executive.status)
 
     def host_up(self, host: str) -> None:
         self._queue(self.membership.up(host, self.clock.now()))

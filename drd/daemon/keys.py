@@ -63,6 +63,11 @@ class ClusterKeys:
             raise ValueError(f"unknown database operation {op!r} (expected one of {', '.join(DB_OPS)})")
         return f"{self.host(host)}/db/{op}"
 
+    def tune(self, host: str) -> str:
+        """The Creator of `host` tuning a running instance's process (`Tune`): an operator's, apart from the
+        Creator's own key, which only the controller calls."""
+        return f"{self.host(host)}/tune"
+
     def instance(self, host: str, path: str) -> str:
         """A running component instance's liveliness token (its path's `/` are key separators)."""
         return f"{self.root}/instance/{host}/{path}"  # path: `<mission>/<instance path>`
@@ -80,6 +85,11 @@ class ClusterKeys:
     def executive(self) -> str:
         """The controller's Mission Executive (`MissionCommand`), served by `drd.executive`."""
         return f"{self.root}/executive"
+
+    @property
+    def executive_status(self) -> str:
+        """The executive's read-only side (`MissionCommand` status and records): what an observer may ask."""
+        return f"{self.root}/executive/status"
 
 
 def cluster_of(token_key: str) -> tuple[str, str] | None:

@@ -29,6 +29,7 @@ from collections.abc import Callable, Mapping
 from typing import Any
 
 from drd.bus import Bus, Message, Query, Reply, message
+from drd.bus.keys import is_concrete
 from drd.cluster.gates import GateUpdate, GateUpdateReply, RemoteGates, deliver
 from drd.cluster.guard import SharedGuard
 from drd.cluster.remote import ComponentCall, ComponentError, ComponentRouter, SimCycle
@@ -252,6 +253,8 @@ class MissionRunner:
 
     def _serve(self, query: Query) -> Message | Reply:
         req = query.payload
+        if not is_concrete(query.key):  # a run is asked by this exact key (drd.daemon.acl)
+            return query.error(f"ask {query.queryable} by its exact key")
         if not isinstance(req, RunMission):
             return query.error("expected a drd.mission.run")
         try:

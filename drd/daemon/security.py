@@ -3,7 +3,8 @@
 - `none`: nothing; an open cluster (a laptop, an isolated test network). Endpoints as written.
 - `password`: zenoh user/password authentication (`transport/auth/usrpwd`). A peer that does not
   present a user and password listed in `password_file` is refused, and so are we by it. Links are
-  authenticated, not encrypted.
+  authenticated, not encrypted. A client presents `$DRD_USER` (default: the daemons' `user`); with
+  `security.roles`, the daemons enforce what each role may do (`drd.daemon.acl`).
 - `tls`: mutual TLS (`transport/link/tls`, `enable_mtls`); both sides present a certificate signed
   by `ca`. `tcp/H:P` endpoints become `tls/H:P`, and only `tls` links are allowed.
 
@@ -17,6 +18,7 @@ with security configured never starts without it.
 from __future__ import annotations
 
 import binascii
+import os
 import re
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
@@ -24,7 +26,11 @@ from pathlib import Path
 from typing import Any
 
 from drd.config import ConfigError, ConfigProblem
+from drd.daemon.acl import access_control, check_roles
 from drd.hosts import Cluster, SecurityMode, check_files
+
+#: The user a client presents itself as in password mode (`missionctl` on an operator's machine).
+USER_ENV = "DRD_USER"
 
 
 class SecurityError(ConfigError):
@@ -44,8 +50,10 @@ class Transport:
         return {h: e for h, e in self.endpoints.items() if h != me}
 
 
-def transport(cluster: Cluster) -> Transport:
-    """The cluster's endpoints and zenoh options for its security mode.
+def transport(cluster: Cluster, user: str | None = None, *, daemon: bool = False) -> Transport:
+    """The cluster's endpoints and zenoh options for its security mode. `user`: who a client presents itself as
+    (password mode; default: `$DRD_USER`, else the daemons' user); `daemon`: a daemon's, which enforces the
+    roles of `security.roles` (`drd.daemon.acl`).
 
     Raises:
         SecurityError: a file is missing, unreadable or badly formed, or an endpoint cannot carry TLS.
@@ -55,15 +63,21 @@ def transport(cluster: Cluster) -> Transport:
     if problems:
         raise SecurityError(problems)
     endpoints = {h.name: h.endpoint for h in cluster.hosts}
+    acl = access_control(cluster) if daemon else None
     if sec.mode is SecurityMode.NONE:
         return Transport(sec.mode, endpoints)
     if sec.mode is SecurityMode.PASSWORD:
         assert sec.user is not None and sec.password_file is not None  # parse_hosts requires both
-        password = read_password(cluster.source, sec.password_file, sec.user)
+        who = sec.user if daemon else (user or os.environ.get(USER_ENV) or sec.user)
+        password = read_password(cluster.source, sec.password_file, who)
+        unknown = check_roles(cluster, dictionary_users(sec.password_file)) if daemon else []
+        if unknown:
+            raise SecurityError(unknown)
         return Transport(sec.mode, endpoints, {
-            "transport/auth/usrpwd/user": sec.user,
+            "transport/auth/usrpwd/user": who,
             "transport/auth/usrpwd/password": password,
             "transport/auth/usrpwd/dictionary_file": sec.password_file,
+            **({"access_control": acl} if acl else {}),
         })
     assert sec.ca is not None and sec.cert is not None and sec.key is not None  # parse_hosts requires all three
     tls = {}
@@ -79,6 +93,7 @@ def transport(cluster: Cluster) -> Transport:
     if problems:
         raise SecurityError(problems)
     return Transport(sec.mode, tls, {
+        **({"access_control": acl} if acl else {}),
         "transport/link/protocols": ["tls"],
         "transport/link/tls/root_ca_certificate": sec.ca,
         "transport/link/tls/listen_certificate": sec.cert,
@@ -149,6 +164,12 @@ def read_password(source: str, path: str, user: str) -> str:
     if not found:
         raise SecurityError([ConfigProblem(source, key, f"{path}: the password of user {user!r} is empty")])
     return found
+
+
+def dictionary_users(path: str) -> list[str]:
+    """The users of a zenoh dictionary file (already read by `read_password`, so well formed)."""
+    lines = Path(path).read_text(encoding="utf-8").splitlines()
+    return list(dict.fromkeys(line.partition(":")[0] for line in lines if line.strip()))
 
 
 def describe(mode: SecurityMode, endpoints: Sequence[str]) -> str:

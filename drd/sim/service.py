@@ -32,6 +32,7 @@ from pathlib import Path
 from typing import Any
 
 from drd.bus import Bus, Message, Query, Reply, message
+from drd.bus.keys import is_concrete
 from drd.profiling import Sampler
 
 #: The Simulation methods a remote driver may call (what components/sim/* use), and their arity bounds.
@@ -276,6 +277,8 @@ class SimulationService:
             self._queryable.close()
 
     def _serve(self, query: Query) -> Message | Reply:
+        if not is_concrete(query.key):  # only the controller and the drivers ask, by this exact key
+            return query.error(f"ask {query.queryable} by its exact key")
         if not isinstance(query.payload, SimRequest):
             return query.error("expected a drd.sim.request")
         with self._sampler.run():  # the controller's own requests are in its own profile

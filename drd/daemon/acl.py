@@ -1,0 +1,71 @@
+"""Who may do what on a cluster's bus: zenoh's own access control, from `cluster.security.roles` (docs/security.md).
+
+Every daemon enforces the same rules on the links clients open to it (zenoh's `access_control`):
+
+- `daemon` (the daemons' own user, and the names listed under `daemon`): everything;
+- `operator`: ask what it likes of the daemons but a Creator's or the simulator's own key (the controller's to
+  call), so it runs, stops and tunes missions and reads everything; it sends nothing else: no publication (no
+  load report, no announcement, no record), no liveliness token, no queryable, no reply;
+- `observer`: as an operator, but it may not ask to run, stop or tune (`missions/run`, `executive`,
+  `host/*/tune`): it reads status, the Component Database, the manager's resources, and missions' records.
+
+Why deny rules over `default_permission: allow` (and not allow rules over `deny`): zenoh's user/password
+authentication is one-way, so the daemon that *opens* a link to another daemon does not learn the other's user:
+under a default of deny it could send nothing. Links clients open are always authenticated where they arrive, so
+the deny rules of their role apply there. Two things make deny rules complete: every user of the daemons'
+password file must have a role (`check_roles`: a user matching no rule would be allowed everything), and the
+services that change state answer only a query addressed to exactly their key (a `drd/<cluster>/**` query that
+no deny rule names is refused by the service itself, `drd.bus.keys.is_concrete`). Pure: the configuration as data.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable
+from typing import Any
+
+from drd.config import ConfigProblem
+from drd.hosts import Cluster, SecurityMode
+
+#: What only daemons may ask, and what an observer may not ask either, under `drd/<cluster>/`.
+DAEMONS_ONLY = ("host/*/creator", "sim")
+OPERATORS_ONLY = ("missions/run", "executive", "host/*/tune")
+#: What a client never sends: it publishes, serves and answers nothing.
+NEVER_FROM_CLIENTS = ["put", "delete", "declare_queryable", "reply", "liveliness_token"]
+
+
+def access_control(cluster: Cluster) -> dict[str, Any] | None:
+    """zenoh's `access_control` for the cluster's daemons, or None when no roles are configured (then every
+    authenticated peer may do everything, as before roles existed)."""
+    sec = cluster.security
+    if not sec.roles or sec.mode is SecurityMode.NONE:
+        return None
+    root = f"drd/{cluster.name}"
+    field = "usernames" if sec.mode is SecurityMode.PASSWORD else "cert_common_names"
+    rules = [
+        {"id": "clients-send-nothing", "messages": NEVER_FROM_CLIENTS, "flows": ["ingress"], "permission": "deny",
+         "key_exprs": ["**"]},
+        {"id": "daemons-only", "messages": ["query"], "flows": ["ingress"], "permission": "deny",
+         "key_exprs": [f"{root}/{k}" for k in DAEMONS_ONLY]},
+        {"id": "operators-only", "messages": ["query"], "flows": ["ingress"], "permission": "deny",
+         "key_exprs": [f"{root}/{k}" for k in OPERATORS_ONLY]},
+    ]
+    grants = {"operator": ["clients-send-nothing", "daemons-only"],
+              "observer": ["clients-send-nothing", "daemons-only", "operators-only"]}
+    roles = [role for role in grants if sec.roles.get(role)]
+    subjects = [{"id": role, field: list(sec.roles[role])} for role in roles]
+    policies = [{"id": f"{role}-policy", "rules": grants[role], "subjects": [role]} for role in roles]
+    if not policies:  # only daemons listed: nothing to restrict
+        return None
+    return {"enabled": True, "default_permission": "allow", "rules": rules, "subjects": subjects,
+            "policies": policies}
+
+
+def check_roles(cluster: Cluster, users: Iterable[str]) -> list[ConfigProblem]:
+    """Every user of the daemons' password file has a role (see the module); problems name the file and key."""
+    sec = cluster.security
+    if not sec.roles or sec.mode is not SecurityMode.PASSWORD:
+        return []
+    return [ConfigProblem(cluster.source, "cluster.security.roles",
+                          f"user {u} of {sec.password_file} has no role: give it one (operator, observer) or remove"
+                          " its line (a user with no role would be allowed everything)")
+            for u in users if sec.role_of(u) is None]
