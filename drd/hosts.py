@@ -67,7 +67,7 @@ DEFAULT_WORLD = "corridor"
 _HOST_KEYS = ("endpoint", "roles", "cores", "drivers", "devices", "robots")
 _DEVICE_KEYS = ("type", "driver", "options", "driver_options", "capacity", "slice")
 _ROBOT_KEYS = ("type", "carrier", "parts", "properties")
-_SECURITY_ALLOWED = ("mode", *dict.fromkeys(k for keys in SECURITY_KEYS.values() for k in keys), "roles")
+_SECURITY_ALLOWED = ("mode", *dict.fromkeys(k for keys in SECURITY_KEYS.values() for k in keys), "open", "roles")
 #: The roles of `cluster.security.roles`, most powerful first (docs/security.md).
 ACCESS_ROLES = ("daemon", "operator", "observer")
 _PLACEMENT_KEYS = ("cpu", "memory", "instances")
@@ -87,6 +87,8 @@ class Security:
     #: Who may do what (`ACCESS_ROLES` -> user names, or certificate common names with `tls`); empty: every
     #: authenticated peer may do everything, as a daemon.
     roles: Mapping[str, tuple[str, ...]] = field(default_factory=dict, hash=False)
+    #: With mode none: the operator means it to run open beyond loopback (a daemon refuses otherwise).
+    open: bool = False
 
     def role_of(self, name: str) -> str | None:
         """The role of a user (or certificate name): `daemon` for the daemons' own user, None when unknown."""
@@ -281,14 +283,17 @@ class _Parser(ConfigReader):
         mode = self.choice(data["mode"], f"{key}.mode", SecurityMode, "mode") if "mode" in data else None
         if mode is None:
             return Security()
-        for k in _SECURITY_ALLOWED[1:-1]:
+        for k in _SECURITY_ALLOWED[1:-2]:
             if k in data and k not in SECURITY_KEYS[mode]:
                 self.fail(f"{key}.{k}", f"does not apply to mode {mode}")
             elif k not in data and k in SECURITY_KEYS[mode]:
                 self.fail(f"{key}.{k}", f"required for mode {mode}")
         roles = self.access_roles(data["roles"], f"{key}.roles", mode) if "roles" in data else {}
+        is_open = data.get("open", False)
+        if "open" in data and (mode is not SecurityMode.NONE or not isinstance(is_open, bool)):
+            self.fail(f"{key}.open", "only `open: true` with mode none: an open cluster on a network, on purpose")
         return Security(mode, **{k: self.text(data[k], f"{key}.{k}") for k in SECURITY_KEYS[mode] if k in data},
-                        roles=roles)
+                        roles=roles, open=is_open is True)
 
     def access_roles(self, value: object, key: str, mode: SecurityMode) -> dict[str, tuple[str, ...]]:
         """`roles: {operator: [alice], observer: [bob]}`: each name in one role only; `none` has no identities."""

@@ -61,3 +61,44 @@ def test_bad_roles_are_refused_with_their_key(tmp_path: Path, security: str, mes
     with pytest.raises(HostsError) as e:
         cluster_with(tmp_path, security)
     assert "cluster.security.roles" in str(e.value) and message in str(e.value), str(e.value)
+
+
+NETWORK = """\
+cluster:
+  name: lab
+  security: {security}
+hosts:
+  controller: {{endpoint: tcp/10.1.2.3:7447, roles: [controller]}}
+  ranger1: {{endpoint: tcp/127.0.0.1:7448, roles: [worker]}}
+"""
+
+
+def test_an_open_cluster_on_a_network_is_refused_unless_said_on_purpose(tmp_path: Path) -> None:
+    from drd.daemon.security import SecurityError, transport
+
+    (tmp_path / "hosts.yaml").write_text(NETWORK.format(security="{mode: none}"))
+    cluster = load_endpoints(tmp_path / "hosts.yaml")
+    with pytest.raises(SecurityError) as e:
+        transport(cluster, daemon=True)
+    assert "cluster.security" in str(e.value) and "controller listen beyond this machine" in str(e.value)
+    assert "open: true" in str(e.value)
+    transport(cluster)  # a client may still talk to it
+    (tmp_path / "hosts.yaml").write_text(NETWORK.format(security="{mode: none, open: true}"))
+    assert transport(load_endpoints(tmp_path / "hosts.yaml"), daemon=True).endpoints["controller"] == "tcp/10.1.2.3:7447"
+    (tmp_path / "hosts.yaml").write_text(NETWORK.format(security="{mode: password, user: drd, password_file: u,"
+                                                                  " open: true}"))
+    with pytest.raises(HostsError) as bad:
+        load_endpoints(tmp_path / "hosts.yaml")
+    assert "cluster.security.open" in str(bad.value)
+
+
+def test_drd_start_refuses_an_open_cluster_on_a_network_before_anything_runs(tmp_path: Path) -> None:
+    import subprocess
+
+    from tests.conftest import ROOT
+
+    (tmp_path / "hosts.yaml").write_text(NETWORK.format(security="{mode: none}"))
+    r = subprocess.run(["drd", "start", "--host", "ranger1", "--config", str(tmp_path / "hosts.yaml"), "--run-dir",
+                        str(tmp_path / "run")], cwd=ROOT, capture_output=True, text=True, timeout=60, check=False)
+    assert r.returncode == 2 and "mode none on a network" in r.stderr and "Traceback" not in r.stderr, r.stderr
+    assert not list((tmp_path / "run").rglob("*.pid"))

@@ -18,6 +18,7 @@ with security configured never starts without it.
 from __future__ import annotations
 
 import binascii
+import ipaddress
 import os
 import re
 from collections.abc import Mapping, Sequence
@@ -65,6 +66,12 @@ def transport(cluster: Cluster, user: str | None = None, *, daemon: bool = False
     endpoints = {h.name: h.endpoint for h in cluster.hosts}
     acl = access_control(cluster) if daemon else None
     if sec.mode is SecurityMode.NONE:
+        exposed = sorted(h for h, e in endpoints.items() if not is_loopback(e))
+        if daemon and exposed and not sec.open:
+            raise SecurityError([ConfigProblem(cluster.source, "cluster.security", (
+                f"mode none on a network: {', '.join(exposed)} listen beyond this machine, where anyone who reaches"
+                " them could run missions and drive robots; use mode password or tls, or say `open: true` if that"
+                " is what you want"))])
         return Transport(sec.mode, endpoints)
     if sec.mode is SecurityMode.PASSWORD:
         assert sec.user is not None and sec.password_file is not None  # parse_hosts requires both
@@ -164,6 +171,17 @@ def read_password(source: str, path: str, user: str) -> str:
     if not found:
         raise SecurityError([ConfigProblem(source, key, f"{path}: the password of user {user!r} is empty")])
     return found
+
+
+def is_loopback(endpoint: str) -> bool:
+    """Whether an endpoint (`tcp/HOST:PORT`) listens on this machine only."""
+    host = endpoint.partition("/")[2].rpartition(":")[0].strip("[]")
+    if host == "localhost":
+        return True
+    try:
+        return ipaddress.ip_address(host).is_loopback
+    except ValueError:  # a DNS name: it may be anywhere
+        return False
 
 
 def dictionary_users(path: str) -> list[str]:
