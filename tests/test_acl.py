@@ -84,7 +84,8 @@ def test_an_open_cluster_on_a_network_is_refused_unless_said_on_purpose(tmp_path
     assert "open: true" in str(e.value)
     transport(cluster)  # a client may still talk to it
     (tmp_path / "hosts.yaml").write_text(NETWORK.format(security="{mode: none, open: true}"))
-    assert transport(load_endpoints(tmp_path / "hosts.yaml"), daemon=True).endpoints["controller"] == "tcp/10.1.2.3:7447"
+    opened = transport(load_endpoints(tmp_path / "hosts.yaml"), daemon=True)
+    assert opened.endpoints["controller"] == "tcp/10.1.2.3:7447"
     (tmp_path / "hosts.yaml").write_text(NETWORK.format(security="{mode: password, user: drd, password_file: u,"
                                                                   " open: true}"))
     with pytest.raises(HostsError) as bad:
