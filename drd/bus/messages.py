@@ -10,18 +10,24 @@ could get wrong (JSON syntax, envelope, type, version, field names and types, si
 raises :class:`MalformedMessage` with a readable reason, so a bad peer costs a log line,
 never a crash. :func:`encode` applies the same checks, so a sender cannot emit what a
 receiver would reject.
+
+The codec is msgspec's, compiled: the envelope and the body are checked against structs built from the
+annotations (:mod:`drd.bus.schema`), and only the registered message classes are ever built. orjson writes
+the bytes: it refuses, as JSON does, a dict key that is not a string, wherever it hides (msgspec would write
+it as one). The reason of a refusal is found in Python, after the fact, by :func:`drd.bus.schema.check`.
 """
 
 from __future__ import annotations
 
 import dataclasses
-import json
-import math
 import typing
 from collections.abc import Callable
-from typing import Any, ClassVar, TypeVar, dataclass_transform
+from typing import Any, ClassVar, NamedTuple, TypeVar, dataclass_transform
 
-from .schema import RAW_INIT, SCHEMAS, Convert, Mismatch, check_annotation, dumper, forget, kind, loader
+import msgspec
+import orjson
+
+from .schema import SCHEMAS, Mismatch, check, check_annotation, define_wire, kind, nullable_float, wire_struct
 
 MAX_SIZE = 1 << 20  # 1 MiB: bigger payloads belong in a file or a stream, not a bus message.
 
@@ -43,11 +49,32 @@ class Message:
     VERSION: ClassVar[int]
 
 
+class _Envelope(msgspec.Struct, forbid_unknown_fields=True):
+    """The envelope as msgspec checks it; the body is kept as its bytes, for the decoder of its (type, version)."""
+
+    v: int
+    type: str
+    body: msgspec.Raw
+
+
+class _Decoder(NamedTuple):
+    check: Callable[[bytes], Any]  # the wire struct's decode: every field, no other, each of its type
+    build: Callable[[bytes], Any]  # the class's decode: builds the dataclass (``__post_init__`` runs)
+
+
+class _Encoder(NamedTuple):
+    head: bytes  # the envelope's bytes up to the body: head + body + b"}" is the whole envelope
+    check: Callable[[bytes], Any]  # what the receiver checks, checked on the bytes written
+    walk: bool  # check in Python first: a non-finite float where null is allowed would pass as null
+
+
 _REGISTRY: dict[tuple[str, int], type[Message]] = {}
 _ENVELOPE = frozenset({"v", "type", "body"})
+_decode_envelope = msgspec.json.Decoder(_Envelope).decode
 # Per class and per (type, version), built on first use: what encode and decode need in one lookup.
-_ENCODERS: dict[type, tuple[Convert, bytes]] = {}  # class -> (dumper, the envelope's bytes up to the body)
-_DECODERS: dict[tuple[str, int], Convert] = {}  # (type, version) -> the class's loader
+_ENCODERS: dict[type, _Encoder] = {}
+_DECODERS: dict[tuple[str, int], _Decoder] = {}
+_dumps: Callable[[Any], bytes] = orjson.dumps
 
 
 @dataclass_transform(frozen_default=True)
@@ -55,8 +82,9 @@ def message(type_name: str, version: int = 1) -> Callable[[type[M]], type[M]]:
     """Make ``cls`` a frozen dataclass and register it as ``type_name`` at ``version``.
 
     Field annotations are the schema: str, int, float, bool, None, list[X], tuple[X, ...],
-    dict[str, X], X | None (and other unions), Any, and nested registered messages (which
-    must be defined before the class that uses them).
+    dict[str, X], X | None (and other unions of different JSON kinds), Any, and nested registered
+    messages (which must be defined before the class that uses them). Every field is on the wire,
+    defaults or not, and no other.
     """
     if not type_name or not isinstance(type_name, str):
         raise ValueError("a message type name must be a non-empty string")
@@ -66,26 +94,20 @@ def message(type_name: str, version: int = 1) -> Callable[[type[M]], type[M]]:
     def register(cls: type[M]) -> type[M]:
         if not issubclass(cls, Message):
             raise TypeError(f"{cls.__name__} must subclass drd.bus.messages.Message")
-        generated_init = "__dataclass_fields__" not in cls.__dict__ and "__init__" not in cls.__dict__
         if "__dataclass_fields__" not in cls.__dict__:
             cls = dataclasses.dataclass(frozen=True)(cls)
         hints = typing.get_type_hints(cls)
-        fields = dataclasses.fields(cls)  # type: ignore[arg-type]
-        schema = tuple((f.name, hints[f.name]) for f in fields)
+        schema = tuple((f.name, hints[f.name]) for f in dataclasses.fields(cls))  # type: ignore[arg-type]
         for name, annotation in schema:
             check_annotation(annotation, f"{cls.__name__}.{name}")
+            if name.startswith("_"):  # orjson writes a dataclass's public attributes only
+                raise TypeError(f"{cls.__name__}.{name}: a message field's name cannot start with '_'")
         old = _REGISTRY.get((type_name, version))
         if old is not None and (old.__module__, old.__qualname__) != (cls.__module__, cls.__qualname__):
             raise ValueError(f"message type {type_name!r} v{version} is already registered by {old.__qualname__}")
+        define_wire(cls, schema)
         cls.TYPE, cls.VERSION = type_name, version
         _REGISTRY[(type_name, version)] = cls
-        SCHEMAS[cls] = schema
-        if (generated_init and not hasattr(cls, "__post_init__") and all(f.init for f in fields)
-                and not any("__slots__" in c.__dict__ for c in cls.__mro__[:-1])):
-            RAW_INIT.add(cls)
-        else:
-            RAW_INIT.discard(cls)
-        forget(cls)
         _ENCODERS.pop(cls, None)
         _DECODERS.pop((type_name, version), None)
         return cls
@@ -100,15 +122,17 @@ def registered() -> dict[tuple[str, int], type[Message]]:
 
 def encode(msg: Message) -> bytes:
     """The wire bytes of ``msg``; raises MalformedMessage if it breaks its own schema."""
-    codec = _ENCODERS.get(type(msg))
-    if codec is None:
-        codec = _encoder(type(msg))
+    head, check_body, walk = _ENCODERS.get(type(msg)) or _encoder(type(msg))
     try:
-        data = codec[1] + _dumps(codec[0](msg)) + b"}"
+        if walk:
+            check(msg, type(msg), load=False)
+        body = _dumps(msg)
+        check_body(body)
     except Mismatch as exc:
         raise MalformedMessage(exc.describe("body")) from None
-    except (TypeError, ValueError) as exc:  # what JSON cannot carry, inside an ``Any`` field
-        raise MalformedMessage(f"body: {exc}") from None
+    except (TypeError, ValueError) as exc:  # msgspec's ValidationError is a ValueError, orjson's error a TypeError
+        raise MalformedMessage(_encode_reason(msg, exc)) from None
+    data = head + body + b"}"
     if len(data) > MAX_SIZE:
         raise MalformedMessage(f"too large: {len(data)} bytes > {MAX_SIZE}")
     return data
@@ -116,101 +140,87 @@ def encode(msg: Message) -> bytes:
 
 def decode(data: bytes | bytearray | memoryview) -> Message:
     """Parse and schema-check wire bytes; raises MalformedMessage(reason) on anything off."""
-    if type(data) is not bytes:
-        if not isinstance(data, bytes | bytearray | memoryview):
-            raise MalformedMessage(f"payload is {type(data).__name__}, not bytes")
-        data = bytes(data)
+    if type(data) is not bytes and not isinstance(data, bytes | bytearray | memoryview):
+        raise MalformedMessage(f"payload is {type(data).__name__}, not bytes")
     if len(data) > MAX_SIZE:
         raise MalformedMessage(f"too large: {len(data)} bytes > {MAX_SIZE}")
     try:
-        env = _loads(data)
-    except (ValueError, RecursionError) as exc:  # UnicodeDecodeError and JSONDecodeError are ValueErrors
-        raise MalformedMessage(f"bad JSON: {exc}") from None
-    try:  # the usual case in a few steps: a known (type, version), an int version, nothing else in the envelope
-        version = env["v"]
-        convert = _DECODERS[env["type"], version]
-        if type(version) is int and len(env) == 3:
-            return convert(env["body"])  # type: ignore[no-any-return]
-    except (KeyError, TypeError):  # not an object, a key missing, a type not decoded yet: the checks below say
-        pass
-    except Mismatch as exc:
-        raise MalformedMessage(exc.describe("body")) from None
-    return _decode_envelope(env)
+        env = _decode_envelope(data)
+        check_body, build = _DECODERS.get((env.type, env.v)) or _decoder(env.type, env.v)
+        check_body(env.body)
+        result: Message = build(env.body)
+        return result
+    except (ValueError, RecursionError) as exc:  # msgspec's errors, and UnicodeDecodeError, are ValueErrors
+        raise MalformedMessage(_decode_reason(bytes(data), exc)) from None
 
 
-def _decode_envelope(env: Any) -> Message:
-    """`decode` after the JSON parse, every check spelled out: what is wrong with the envelope, or the body's
-    first use of its (type, version)."""
+def _encode_reason(msg: Message, exc: Exception) -> str:
+    """Why ``msg`` could not be encoded: the field at fault, else what the JSON encoder or msgspec said (about
+    what an ``Any`` field holds)."""
+    try:
+        check(msg, type(msg), load=False)
+    except Mismatch as mismatch:
+        return mismatch.describe("body")
+    return f"body: {exc}"
+
+
+def _decode_reason(data: bytes, exc: Exception) -> str:
+    """Why msgspec refused ``data``, every check spelled out: the JSON, the envelope, the (type, version), then
+    the body's first field at fault (msgspec's own words if none is: what the annotations cannot say)."""
+    try:
+        env = msgspec.json.decode(data)
+    except (ValueError, RecursionError) as bad:  # msgspec's DecodeError, or UnicodeDecodeError
+        return f"bad JSON: {bad}"
     if type(env) is not dict:
-        raise MalformedMessage(f"envelope is a JSON {kind(env)}, not an object")
+        return f"envelope is a JSON {kind(env)}, not an object"
     if env.keys() != _ENVELOPE:
         missing, extra = _ENVELOPE - env.keys(), env.keys() - _ENVELOPE
-        raise MalformedMessage(f"envelope keys: missing {sorted(missing)}, unexpected {sorted(extra)}")
+        return f"envelope keys: missing {sorted(missing)}, unexpected {sorted(extra)}"
     name, version = env["type"], env["v"]
     if type(name) is not str:
-        raise MalformedMessage(f"envelope 'type' must be a string, got {kind(name)}")
+        return f"envelope 'type' must be a string, got {kind(name)}"
     if type(version) is not int:
-        raise MalformedMessage(f"envelope 'v' must be an int, got {kind(version)}")
-    convert = _DECODERS.get((name, version))
-    if convert is None:
-        convert = _decoder(name, version)
+        return f"envelope 'v' must be an int, got {kind(version)}"
     try:
-        result: Message = convert(env["body"])
-    except Mismatch as exc:
-        raise MalformedMessage(exc.describe("body")) from None
-    return result
+        check(env["body"], _registered(name, version), load=True)
+    except Mismatch as mismatch:
+        return mismatch.describe("body")
+    except MalformedMessage as unknown:
+        return unknown.reason
+    return f"body: {exc}"
 
 
-def _encoder(cls: type) -> tuple[Convert, bytes]:
-    """Build and cache the class's (dumper, envelope head): the head is the envelope's bytes as the codec
-    writes them, up to the body, so ``head + body + b"}"`` is byte for byte the whole envelope's encoding."""
+def _encoder(cls: type) -> _Encoder:
+    """Build and cache the class's encoder: the head is the envelope's bytes as orjson writes them, up to the
+    body, so ``head + body + b"}"`` is byte for byte the whole envelope's encoding."""
     if cls not in SCHEMAS:
         raise MalformedMessage(f"{cls.__name__} is not a registered message type")
     envelope = _dumps({"v": cls.VERSION, "type": cls.TYPE, "body": None})  # type: ignore[attr-defined]
     if not envelope.endswith(b"null}"):  # pragma: no cover - every JSON codec writes null as null
         raise AssertionError(f"unexpected envelope encoding {envelope!r}")
-    codec = _ENCODERS[cls] = (dumper(cls), envelope[: -len(b"null}")])
+    walk = any(nullable_float(tp) for _, tp in SCHEMAS[cls])
+    check_body = msgspec.json.Decoder(wire_struct(cls)).decode
+    codec = _ENCODERS[cls] = _Encoder(envelope[: -len(b"null}")], check_body, walk)
     return codec
 
 
-def _decoder(name: str, version: int) -> Convert:
-    """Build and cache the loader of a registered (type, version); MalformedMessage names what is known."""
+def _registered(name: str, version: int) -> type[Message]:
+    """The class registered as (type, version); MalformedMessage names what is known."""
     cls = _REGISTRY.get((name, version))
     if cls is None:
         known = sorted(v for (t, v) in _REGISTRY if t == name)
         if not known:
             raise MalformedMessage(f"unknown message type {name!r}")
         raise MalformedMessage(f"unsupported version {version} of {name!r} (supported: {known})")
-    convert = _DECODERS[(name, version)] = loader(cls)
-    return convert
+    return cls
 
 
-def _no_constant(token: str) -> Any:
-    raise ValueError(f"{token} is not a number")
-
-
-def _finite(token: str) -> float:
-    value = float(token)
-    if math.isinf(value):
-        raise ValueError(f"{token} is out of range")
-    return value
-
-
-def _json_codec() -> tuple[Callable[[Any], bytes], Callable[[bytes], Any]]:
-    """orjson when installed (parsing is ~8x faster, and on a request path that matters), else json.
-
-    Both refuse NaN/Infinity, bad UTF-8 and deep nesting, and keep the last of duplicate keys.
-    """
-    try:
-        import orjson
-    except ImportError:  # pragma: no cover - depends on the machine
-        encoder = json.JSONEncoder(separators=(",", ":"), ensure_ascii=False, allow_nan=False)
-        decoder = json.JSONDecoder(parse_constant=_no_constant, parse_float=_finite)
-        return (lambda obj: encoder.encode(obj).encode()), (lambda data: decoder.decode(data.decode()))
-    return orjson.dumps, orjson.loads
-
-
-_dumps, _loads = _json_codec()
+def _decoder(name: str, version: int) -> _Decoder:
+    """Build and cache the decoder of a registered (type, version)."""
+    cls = _registered(name, version)
+    check_body, build = msgspec.json.Decoder(wire_struct(cls)).decode, msgspec.json.Decoder(cls).decode
+    codec = _DECODERS[(name, version)] = _Decoder(check_body, build)
+    return codec
 
 
 # --- core messages ---------------------------------------------------------------------------

@@ -1,0 +1,118 @@
+"""The msgspec codec's own rules (drd.bus.messages, drd.bus.schema), beside the contract's malformed-input table.
+
+- every field is on the wire, defaulted or not, and no other: msgspec alone would fill a default and ignore an
+  unknown field;
+- a non-finite float is refused where null is allowed too (it would be written as null and read back as None);
+- what msgspec cannot decode, and what orjson would not write, is refused when the class is defined;
+- decode builds only the registered classes, runs their ``__post_init__``, and turns its refusal into a reason;
+- encode's reason names the field even where the bytes could not show it.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+from typing import Any
+
+import pytest
+
+from drd.bus import Message, message
+from drd.bus.messages import MalformedMessage, decode, encode
+from drd.bus.schema import wire_struct
+
+
+@message("test.codec.point")
+class Point(Message):
+    x: float
+    y: float = 0.0
+
+
+@message("test.codec.reading")
+class Reading(Message):
+    value: float | None = None
+    values: list[float | None] | None = None
+    at: Point | None = None
+
+
+@message("test.codec.checked")
+class Checked(Message):
+    count: int
+
+    def __post_init__(self) -> None:
+        if self.count < 0:
+            raise ValueError(f"count must not be negative, got {self.count}")
+
+
+def env(body: object, type_name: str) -> bytes:
+    return json.dumps({"v": 1, "type": type_name, "body": body}).encode()
+
+
+def test_a_defaulted_field_must_still_be_sent() -> None:
+    with pytest.raises(MalformedMessage) as info:
+        decode(env({"x": 1.0}, "test.codec.point"))
+    assert info.value.reason == "body: missing field 'y' of test.codec.point"
+    assert decode(env({"x": 1, "y": 2}, "test.codec.point")) == Point(1.0, 2.0)
+
+
+def test_a_nested_unknown_field_is_refused_with_its_path() -> None:
+    with pytest.raises(MalformedMessage) as info:
+        decode(env({"value": None, "values": None, "at": {"x": 1.0, "y": 2.0, "z": 3.0}}, "test.codec.reading"))
+    assert info.value.reason == "body.at: expected Point | null, got object"  # an optional field: the union is named
+
+
+@pytest.mark.parametrize("bad", [float("nan"), float("inf"), -float("inf")])
+def test_a_non_finite_float_is_refused_where_null_is_allowed(bad: float) -> None:
+    with pytest.raises(MalformedMessage, match=r"^body\.value: expected float \| null, got float$"):
+        encode(Reading(bad))
+    with pytest.raises(MalformedMessage, match=r"^body\.values: expected list\[float \| null\] \| null, got list$"):
+        encode(Reading(values=[1.0, bad]))
+    with pytest.raises(MalformedMessage, match=r"^body\.at: expected Point \| null, got Point$"):
+        encode(Reading(at=Point(bad)))
+    with pytest.raises(MalformedMessage, match=r"^body\.x: .* is not a finite float$"):
+        encode(Point(bad))
+    assert decode(encode(Reading(None, [None, 2.5], Point(1, 2)))) == Reading(None, [None, 2.5], Point(1.0, 2.0))
+
+
+def test_an_int_where_a_float_is_expected_arrives_as_a_float() -> None:
+    back = decode(encode(Point(1, 2)))
+    assert back == Point(1.0, 2.0) and type(back.x) is float  # type: ignore[attr-defined]
+
+
+def test_what_the_codec_cannot_carry_is_refused_at_definition() -> None:
+    with pytest.raises(TypeError, match="unsupported annotation.*array-like"):
+
+        @message("test.codec.two-lists")
+        class TwoLists(Message):
+            items: list[int] | tuple[str, ...]
+
+    with pytest.raises(TypeError, match="unsupported annotation.*dict-like"):
+
+        @message("test.codec.two-objects")
+        class TwoObjects(Message):
+            at: Point | dict[str, Any]
+
+    with pytest.raises(TypeError, match="cannot start with '_'"):
+
+        @message("test.codec.private")
+        class Private(Message):
+            _secret: str
+
+
+def test_decode_runs_post_init_and_turns_its_refusal_into_a_reason() -> None:
+    assert decode(encode(Checked(2))) == Checked(2)
+    with pytest.raises(MalformedMessage, match="count must not be negative, got -1"):
+        decode(env({"count": -1}, "test.codec.checked"))
+
+
+def test_decode_builds_the_registered_class_and_nothing_else() -> None:
+    msg = decode(env({"value": 1.5, "values": [None], "at": {"x": 0.5, "y": 1}}, "test.codec.reading"))
+    assert type(msg) is Reading and type(msg.at) is Point  # type: ignore[attr-defined]
+    assert dataclasses.replace(msg, value=2.0) == Reading(2.0, [None], Point(0.5, 1.0))  # type: ignore[type-var]
+    assert wire_struct(Reading) is not Reading  # the wire struct checks; the dataclass is what callers get
+
+
+def test_an_extra_attribute_set_on_a_message_is_refused_on_encode() -> None:
+    point = Point(1.0)
+    object.__setattr__(point, "z", 3.0)
+    with pytest.raises(MalformedMessage, match="body: .*unknown field `z`"):
+        encode(point)
