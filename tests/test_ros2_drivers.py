@@ -22,9 +22,11 @@ from components.ros2.radio_channel import Ros2RadioChannel
 from components.ros2.range_sensor import Ros2RangeSensor
 from drd.bus.ros2 import MessageTypes, Ros2Session
 from drd.hosts import Device, load_hosts
+from drd.hw.commands import spec_of
 from drd.hw.drivers import DriverError, check_driver_classes, load_driver
 from drd.hw.interfaces import Camera, Drive, HardwareError, Jump, Launcher, RadioChannel, RangeSensor, StaleCommand
 from drd.hw.ros2 import LASER_SCAN, ODOMETRY, TWIST, Ros2Link, message_types, quaternion
+from drd.runtime.ownership import DeviceGate
 from drd.sim import Simulation, load_world
 from drd.sim.ros2 import ServedRobots, serve
 from dsl.catalog import Catalog
@@ -211,6 +213,22 @@ def test_stop_close_and_a_fenced_out_command_each_send_a_zero_twist(robot: FakeR
             else:
                 drive.close()
             assert _zero_after(robot, since, 0.5) <= 0.5
+    finally:
+        drive.close()
+
+
+def test_a_revoked_grant_stops_the_robot_through_the_gate(robot: FakeRobot, router: int, link: Ros2Link) -> None:
+    """The ownership gate in front of the Drive (drd.runtime.ownership): the holder's grant ends, the gate halts the
+    device (its declared STOP, `stop`), and the robot side sees a zero Twist."""
+    drive = drive_of(router, link)
+    gate = DeviceGate("robot.drive", drive, spec_of(drive), lambda _mission, _record: None)
+    try:
+        gate.grant("M/Follow", 7, 0.0, exclusive=True)
+        gate.execute(drive, "M/Follow", 7, "set_velocity", (0.3, 0.0), {}, 0.0)
+        eventually(lambda: (t := robot.last_twist()) is not None and t[1].linear.x == pytest.approx(0.3), "a Twist")
+        since = time.monotonic()
+        gate.clear("M/Follow", 0.1, "revoked")
+        assert _zero_after(robot, since, 0.5) <= 0.5
     finally:
         drive.close()
 

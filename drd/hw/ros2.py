@@ -24,6 +24,7 @@ import numpy as np
 
 from drd.bus.ros2 import MessageCallback, MessageInfo, MessageTypes, Publisher, QoS, Ros2Node, Ros2Session
 from drd.bus.ros2 import Subscription as Ros2Subscription
+from drd.errors import ConfigurationError
 from drd.hosts import Device
 
 log = logging.getLogger("drd.hw.ros2")
@@ -195,11 +196,11 @@ _TEXTS = ("endpoint", "namespace", "odom_frame", "base_frame", "scan_frame", "ca
 OPTION_KEYS = frozenset({*_NUMBERS, *_TEXTS, "domain_id", "topics", "origin", "classes"})
 
 
-class OptionsError(ValueError):
+class OptionsError(ConfigurationError, ValueError):
     """`driver_options` a `ros2` driver refuses: every problem, each naming its key."""
 
     def __init__(self, device: str, problems: Sequence[str]) -> None:
-        super().__init__(f"{device}: " + "; ".join(problems))
+        super().__init__(f"{device}: " + "; ".join(problems), where=device)
         self.problems = list(problems)
 
 
