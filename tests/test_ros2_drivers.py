@@ -267,6 +267,19 @@ def test_stale_or_missing_data_raise(robot: FakeRobot, router: int, link: Ros2Li
         elsewhere.close()
 
 
+def test_messages_in_another_frame_are_dropped(robot: FakeRobot, router: int, link: Ros2Link) -> None:
+    """The fake robot's odometry is in `odom` / `base_link`: a Drive told to expect other frames takes none of it."""
+    right = drive_of(router, link, odom_frame="odom", base_frame="base_link")
+    wrong = drive_of(router, link, odom_frame="odom", base_frame="bot/base_footprint", max_age=0.3)
+    try:
+        eventually(lambda: _reads(right.odometry), "odometry in the frames expected")
+        with pytest.raises(HardwareError, match=r"no message on /bot/odom \(\d+ in another frame"):
+            wrong.odometry()
+    finally:
+        right.close()
+        wrong.close()
+
+
 def test_options_are_checked_before_anything_runs(catalog: Catalog, tmp_path: Path) -> None:
     bad = device("Drive", "drive", endpoint="tcp/127.0.0.1:1", watchdg=0.5, max_age=-1, origin=[1, 2])
     with pytest.raises(DriverError, match=r"driver_options.watchdg: unknown option"):

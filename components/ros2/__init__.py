@@ -26,8 +26,9 @@ log = logging.getLogger("drd.ros2")
 class Latest:
     """The latest message of one subscription, when it arrived (on the link's clock), and how many came."""
 
-    def __init__(self, driver: Ros2Driver, key: str, topic: str, max_age: float, frame: str | None = None) -> None:
-        self.key, self.topic, self.max_age, self.frame = key, topic, max_age, frame
+    def __init__(self, driver: Ros2Driver, key: str, topic: str, max_age: float, frame: str | None = None,
+                 child: str | None = None) -> None:
+        self.key, self.topic, self.max_age, self.frame, self.child = key, topic, max_age, frame, child
         self.what = driver.describe()
         self.endpoint = driver.opts.endpoint
         self.link = driver.link
@@ -38,11 +39,13 @@ class Latest:
         self.arrived = threading.Condition()
 
     def receive(self, message: Any, _info: MessageInfo) -> None:
-        if self.frame is not None and message.header.frame_id != self.frame:
+        frame = message.header.frame_id if self.frame is not None else None
+        child = message.child_frame_id if self.child is not None else None
+        if frame != self.frame or child != self.child:
             self.wrong_frame += 1
             if self.wrong_frame == 1:
-                log.warning("%s: %s in frame %r, not %r: dropped", self.what, self.topic, message.header.frame_id,
-                            self.frame)
+                log.warning("%s: %s in frame %r (child %r), not %r (child %r): dropped", self.what, self.topic, frame,
+                            child, self.frame, self.child)
             return
         with self.arrived:
             self.message, self.at = message, self.link.now()
@@ -109,13 +112,15 @@ class Ros2Driver:
         self._entities.append(pub)
         return pub
 
-    def subscribe(self, key: str, max_age: float, frame: str | None = None, suffix: str = "") -> Latest | None:
-        """The latest message of topic `key` (None when the options turn it off), kept fresh by a subscription."""
+    def subscribe(self, key: str, max_age: float, frame: str | None = None, suffix: str = "",
+                  child: str | None = None) -> Latest | None:
+        """The latest message of topic `key` (None when the options turn it off), kept fresh by a subscription; with
+        `frame` (and `child`), only messages in that frame (an Odometry's child frame) count."""
         topic = self.opts.topic(key)
         if topic is None:
             return None
         _, type_name, qos = TOPICS[key]
-        latest = Latest(self, key, topic + suffix, max_age, frame)
+        latest = Latest(self, key, topic + suffix, max_age, frame, child)
         sub = self.link.subscribe(self.node, topic + suffix, type_name, qos, _weak(latest.receive))
         latest.topic = sub.topic.name
         self._entities.append(sub)

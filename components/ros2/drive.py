@@ -27,7 +27,8 @@ class Ros2Drive(Ros2Driver):
         super().__init__(device, robot_id, backend)
         self.max_speed = self.option("max_speed", math.inf)
         opts = self.opts
-        self._odom = self.subscribe("odom", opts.max_age, opts.frames.get("odom_frame"))
+        self._odom = self.subscribe("odom", opts.max_age, opts.frames.get("odom_frame"),
+                                    child=opts.frames.get("base_frame"))
         self._battery = self.subscribe("battery", opts.status_max_age)
         self._cmd = self.publisher("cmd_vel")
         self._lock = threading.Lock()
