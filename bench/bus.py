@@ -11,8 +11,8 @@ script with --serve) answers on two keys over tcp/127.0.0.1, as another daemon w
 Both paths run in the same rounds, on the same sessions, interleaved in blocks of 50 calls
 (which path goes first alternates block by block), so a change in the machine's load hits both
 alike. Each round gives a ratio: its median ZenohBus.call over its median raw call. Goal: the
-median of the rounds' ratios <= 1.25 (the spread of the rounds is shown too). Nothing is pinned
-to a CPU. `--in-process` runs the server in this process instead: the two sides then contend for
+median of the rounds' ratios <= 1.1 (issue #14; the spread of the rounds is shown too, and the load
+average: on a loaded machine the figure is not worth much). Nothing is pinned to a CPU. `--in-process` runs the server in this process instead: the two sides then contend for
 one GIL, which penalizes every microsecond of Python work, so that figure is shown for
 information, not judged.
 """
@@ -36,7 +36,7 @@ import zenoh  # noqa: E402
 from drd.bus import Ping, Pong, Query, encode  # noqa: E402
 from drd.bus.zenoh_bus import ZENOH_VERSION, ZenohBus  # noqa: E402
 
-GOAL = 1.25
+GOAL = 1.1
 BUS_KEY, RAW_KEY = "bench/bus/ping", "bench/raw/ping"
 
 

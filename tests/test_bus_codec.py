@@ -5,7 +5,8 @@
 - a non-finite float is refused where null is allowed too (it would be written as null and read back as None);
 - what msgspec cannot decode, and what orjson would not write, is refused when the class is defined;
 - decode builds only the registered classes, runs their ``__post_init__``, and turns its refusal into a reason;
-- encode's reason names the field even where the bytes could not show it.
+- encode's reason names the field even where the bytes could not show it, and no key that is not a string
+  goes out as one.
 """
 
 from __future__ import annotations
@@ -32,6 +33,12 @@ class Reading(Message):
     value: float | None = None
     values: list[float | None] | None = None
     at: Point | None = None
+
+
+@message("test.codec.tagged")
+class Tagged(Message):
+    tags: dict[str, str]
+    free: Any = None
 
 
 @message("test.codec.checked")
@@ -111,8 +118,18 @@ def test_decode_builds_the_registered_class_and_nothing_else() -> None:
     assert wire_struct(Reading) is not Reading  # the wire struct checks; the dataclass is what callers get
 
 
-def test_an_extra_attribute_set_on_a_message_is_refused_on_encode() -> None:
+def test_a_stray_attribute_never_reaches_the_wire_unseen() -> None:
     point = Point(1.0)
     object.__setattr__(point, "z", 3.0)
+    assert decode(encode(point)) == Point(1.0)  # msgspec writes the fields
+    tagged = Tagged({"a": "b"})
+    object.__setattr__(tagged, "z", 3.0)
     with pytest.raises(MalformedMessage, match="body: .*unknown field `z`"):
-        encode(point)
+        encode(tagged)  # orjson writes a dataclass's public attributes: the check refuses the one too many
+
+
+def test_a_key_that_is_not_a_string_is_refused_even_inside_any() -> None:
+    with pytest.raises(MalformedMessage, match=r"^body\.tags: keys must be str, got int$"):
+        encode(Tagged({1: "one"}))  # type: ignore[dict-item]
+    with pytest.raises(MalformedMessage, match=r"^body: "):
+        encode(Tagged({"a": "b"}, {"deep": [{2: "two"}]}))

@@ -22,12 +22,22 @@ from __future__ import annotations
 import dataclasses
 import typing
 from collections.abc import Callable
-from typing import Any, ClassVar, NamedTuple, TypeVar, dataclass_transform
+from typing import Any, ClassVar, Literal, NamedTuple, TypeVar, dataclass_transform
 
 import msgspec
 import orjson
 
-from .schema import SCHEMAS, Mismatch, check, check_annotation, define_wire, kind, nullable_float, wire_struct
+from .schema import (
+    SCHEMAS,
+    Mismatch,
+    check,
+    check_annotation,
+    define_wire,
+    holds_mapping,
+    kind,
+    nullable_float,
+    wire_struct,
+)
 
 MAX_SIZE = 1 << 20  # 1 MiB: bigger payloads belong in a file or a stream, not a bus message.
 
@@ -57,24 +67,27 @@ class _Envelope(msgspec.Struct, forbid_unknown_fields=True):
     body: msgspec.Raw
 
 
-class _Decoder(NamedTuple):
-    check: Callable[[bytes], Any]  # the wire struct's decode: every field, no other, each of its type
-    build: Callable[[bytes], Any]  # the class's decode: builds the dataclass (``__post_init__`` runs)
+class _Codec(NamedTuple):
+    """What encode and decode need for one class, built on its first use."""
 
-
-class _Encoder(NamedTuple):
-    head: bytes  # the envelope's bytes up to the body: head + body + b"}" is the whole envelope
-    check: Callable[[bytes], Any]  # what the receiver checks, checked on the bytes written
-    walk: bool  # check in Python first: a non-finite float where null is allowed would pass as null
+    head: bytes  # the envelope's bytes up to the body, as encode writes them: head + body + b"}" is the envelope
+    write: Callable[[Any], bytes]  # the body's bytes: msgspec's writer, or orjson's where a dict may hide a key
+    check: Callable[[bytes], Any]  # the whole envelope (that v, that type, the body: every field, no other)
+    check_body: Callable[[bytes], Any]  # the body alone (the wire struct)
+    build: Callable[[bytes], Any]  # the body into the dataclass (its ``__post_init__`` runs)
+    walk: bool  # encode checks in Python first: a non-finite float where null is allowed would pass as null
 
 
 _REGISTRY: dict[tuple[str, int], type[Message]] = {}
 _ENVELOPE = frozenset({"v", "type", "body"})
 _decode_envelope = msgspec.json.Decoder(_Envelope).decode
-# Per class and per (type, version), built on first use: what encode and decode need in one lookup.
-_ENCODERS: dict[type, _Encoder] = {}
-_DECODERS: dict[tuple[str, int], _Decoder] = {}
+_write = msgspec.json.Encoder().encode
 _dumps: Callable[[Any], bytes] = orjson.dumps
+# Built on first use: per class, per (type, version), and per envelope head (decode's shortcut, for the bytes
+# a drd peer writes).
+_CODECS: dict[type, _Codec] = {}
+_BY_KEY: dict[tuple[str, int], _Codec] = {}
+_BY_HEAD: dict[bytes, _Codec] = {}
 
 
 @dataclass_transform(frozen_default=True)
@@ -108,8 +121,7 @@ def message(type_name: str, version: int = 1) -> Callable[[type[M]], type[M]]:
         define_wire(cls, schema)
         cls.TYPE, cls.VERSION = type_name, version
         _REGISTRY[(type_name, version)] = cls
-        _ENCODERS.pop(cls, None)
-        _DECODERS.pop((type_name, version), None)
+        _forget(cls, (type_name, version))
         return cls
 
     return register
@@ -122,36 +134,51 @@ def registered() -> dict[tuple[str, int], type[Message]]:
 
 def encode(msg: Message) -> bytes:
     """The wire bytes of ``msg``; raises MalformedMessage if it breaks its own schema."""
-    head, check_body, walk = _ENCODERS.get(type(msg)) or _encoder(type(msg))
+    codec = _CODECS.get(type(msg)) or _codec(type(msg))
     try:
-        if walk:
+        if codec.walk:
             check(msg, type(msg), load=False)
-        body = _dumps(msg)
-        check_body(body)
+        data = codec.head + codec.write(msg) + b"}"
+        codec.check(data)  # what the receiver checks, on the very bytes it will get
     except Mismatch as exc:
         raise MalformedMessage(exc.describe("body")) from None
     except (TypeError, ValueError) as exc:  # msgspec's ValidationError is a ValueError, orjson's error a TypeError
         raise MalformedMessage(_encode_reason(msg, exc)) from None
-    data = head + body + b"}"
     if len(data) > MAX_SIZE:
         raise MalformedMessage(f"too large: {len(data)} bytes > {MAX_SIZE}")
     return data
 
 
 def decode(data: bytes | bytearray | memoryview) -> Message:
-    """Parse and schema-check wire bytes; raises MalformedMessage(reason) on anything off."""
-    if type(data) is not bytes and not isinstance(data, bytes | bytearray | memoryview):
-        raise MalformedMessage(f"payload is {type(data).__name__}, not bytes")
+    """Parse and schema-check wire bytes; raises MalformedMessage(reason) on anything off.
+
+    The bytes a drd peer writes take a shortcut: their envelope's head names the class, one check covers the
+    envelope and the body, and the body is built from its slice of the bytes. Anything else (another layout of
+    the envelope, a malformed message) takes the long way, which decodes the envelope first, then the body.
+    """
+    if type(data) is not bytes:
+        if not isinstance(data, bytes | bytearray | memoryview):
+            raise MalformedMessage(f"payload is {type(data).__name__}, not bytes")
+        data = bytes(data)
     if len(data) > MAX_SIZE:
         raise MalformedMessage(f"too large: {len(data)} bytes > {MAX_SIZE}")
+    start = data.find(b'"body":', 0, 128) + 7
+    codec = _BY_HEAD.get(data[:start])
+    if codec is not None:
+        try:
+            codec.check(data)
+            shortcut: Message = codec.build(data[start:-1])  # fails unless the body is all of the rest but the "}"
+            return shortcut
+        except (ValueError, RecursionError):
+            pass  # the long way says what is wrong, or decodes a repeated key as it should (the last one counts)
     try:
         env = _decode_envelope(data)
-        check_body, build = _DECODERS.get((env.type, env.v)) or _decoder(env.type, env.v)
-        check_body(env.body)
-        result: Message = build(env.body)
+        codec = _BY_KEY.get((env.type, env.v)) or _codec(_registered(env.type, env.v))
+        codec.check_body(env.body)
+        result: Message = codec.build(env.body)
         return result
     except (ValueError, RecursionError) as exc:  # msgspec's errors, and UnicodeDecodeError, are ValueErrors
-        raise MalformedMessage(_decode_reason(bytes(data), exc)) from None
+        raise MalformedMessage(_decode_reason(data, exc)) from None
 
 
 def _encode_reason(msg: Message, exc: Exception) -> str:
@@ -190,18 +217,36 @@ def _decode_reason(data: bytes, exc: Exception) -> str:
     return f"body: {exc}"
 
 
-def _encoder(cls: type) -> _Encoder:
-    """Build and cache the class's encoder: the head is the envelope's bytes as orjson writes them, up to the
-    body, so ``head + body + b"}"`` is byte for byte the whole envelope's encoding."""
+def _codec(cls: type) -> _Codec:
+    """Build and cache the codec of a registered class."""
     if cls not in SCHEMAS:
         raise MalformedMessage(f"{cls.__name__} is not a registered message type")
-    envelope = _dumps({"v": cls.VERSION, "type": cls.TYPE, "body": None})  # type: ignore[attr-defined]
+    name, version = cls.TYPE, cls.VERSION  # type: ignore[attr-defined]
+    envelope = _dumps({"v": version, "type": name, "body": None})
     if not envelope.endswith(b"null}"):  # pragma: no cover - every JSON codec writes null as null
         raise AssertionError(f"unexpected envelope encoding {envelope!r}")
-    walk = any(nullable_float(tp) for _, tp in SCHEMAS[cls])
-    check_body = msgspec.json.Decoder(wire_struct(cls)).decode
-    codec = _ENCODERS[cls] = _Encoder(envelope[: -len(b"null}")], check_body, walk)
+    schema, wire = SCHEMAS[cls], wire_struct(cls)
+    whole = msgspec.defstruct(
+        f"{cls.__name__}Envelope", [("v", Literal[version]), ("type", Literal[name]), ("body", wire)],
+        forbid_unknown_fields=True, module=cls.__module__,
+    )
+    codec = _Codec(
+        head=envelope[: -len(b"null}")],
+        write=_dumps if any(holds_mapping(tp) for _, tp in schema) else _write,
+        check=msgspec.json.Decoder(whole).decode,
+        check_body=msgspec.json.Decoder(wire).decode,
+        build=msgspec.json.Decoder(cls).decode,
+        walk=any(nullable_float(tp) for _, tp in schema),
+    )
+    _CODECS[cls] = _BY_KEY[(name, version)] = _BY_HEAD[codec.head] = codec
     return codec
+
+
+def _forget(cls: type, key: tuple[str, int]) -> None:
+    """Drop the codecs of a (re-)registered class and of its (type, version)."""
+    for codec in (_CODECS.pop(cls, None), _BY_KEY.pop(key, None)):
+        if codec is not None:
+            _BY_HEAD.pop(codec.head, None)
 
 
 def _registered(name: str, version: int) -> type[Message]:
@@ -213,14 +258,6 @@ def _registered(name: str, version: int) -> type[Message]:
             raise MalformedMessage(f"unknown message type {name!r}")
         raise MalformedMessage(f"unsupported version {version} of {name!r} (supported: {known})")
     return cls
-
-
-def _decoder(name: str, version: int) -> _Decoder:
-    """Build and cache the decoder of a registered (type, version)."""
-    cls = _registered(name, version)
-    check_body, build = msgspec.json.Decoder(wire_struct(cls)).decode, msgspec.json.Decoder(cls).decode
-    codec = _DECODERS[(name, version)] = _Decoder(check_body, build)
-    return codec
 
 
 # --- core messages ---------------------------------------------------------------------------

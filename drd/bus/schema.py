@@ -104,6 +104,17 @@ def nullable_float(tp: Any, nullable: bool = False) -> bool:
     return tp in SCHEMAS and any(nullable_float(a) for _, a in SCHEMAS[tp])
 
 
+def holds_mapping(tp: Any) -> bool:
+    """May a value of ``tp`` hold a dict (a ``dict`` or ``Any`` anywhere in it)? msgspec would write a key that
+    is not a string as one, where JSON (and orjson) refuse it: such a message is written by orjson."""
+    origin, args = typing.get_origin(tp), typing.get_args(tp)
+    if tp is Any or tp is dict or origin is dict:
+        return True
+    if tp in SCHEMAS:
+        return any(holds_mapping(a) for _, a in SCHEMAS[tp])
+    return any(holds_mapping(a) for a in args if a is not Ellipsis)
+
+
 def kind(value: Any) -> str:
     """A JSON value's kind, as a peer would name it."""
     if value is None:
