@@ -19,6 +19,7 @@ import time
 from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
 from pathlib import Path
+from typing import Any
 
 import pytest
 
@@ -215,3 +216,21 @@ def running_cluster(folder: Path, names: Sequence[str], *, lease: float = LEASE,
         yield cluster
     finally:
         cluster.close()
+
+
+def corridor_hosts(cluster: DaemonCluster, *, simulator_on_controller: bool = False, lease: str = "1000ms") -> str:
+    """The repository's hosts.yaml (controller; ranger1 with its Scouts and, unless moved to the controller, the
+    simulator) on the cluster's free ports and name, with the test lease."""
+    text = (ROOT / "hosts.yaml").read_text()
+    if simulator_on_controller:
+        text = text.replace("roles: [worker, simulator]", "roles: [worker]")
+        text = text.replace("roles: [controller]", "roles: [controller, simulator]")
+    ports = dict(zip(cluster.names, cluster.ports, strict=True))
+    text = text.replace("name: corridor", f"name: {cluster.name}").replace("lease: 3s", f"lease: {lease}")
+    text = text.replace("127.0.0.1:7447", f"127.0.0.1:{ports['controller']}")
+    return text.replace("127.0.0.1:7448", f"127.0.0.1:{ports['ranger1']}")
+
+
+def read_trace(path: Path) -> list[dict[str, Any]]:
+    """A `--trace` file's records."""
+    return [json.loads(line) for line in path.read_text().splitlines() if line.strip()]

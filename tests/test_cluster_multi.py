@@ -10,6 +10,7 @@ Every process is ours and killed by pid (`tests/cluster_support.py`).
 
 from __future__ import annotations
 
+import functools
 import json
 import math
 import subprocess
@@ -18,14 +19,23 @@ from pathlib import Path
 from typing import Any
 
 import pytest
-from cluster_support import MISSIONCTL, ROOT, DaemonCluster, eventually, running, serving_cluster
+from cluster_support import (
+    MISSIONCTL,
+    ROOT,
+    DaemonCluster,
+    corridor_hosts,
+    eventually,
+    read_trace,
+    running,
+    serving_cluster,
+)
 
 NAMES = ["controller", "ranger1"]
 
 LOW = """\
 mission Low {
     Patrol
-    Patrol -> done after 16s
+    Patrol -> done after 30s
 }
 
 behavior Patrol {
@@ -40,7 +50,7 @@ mission High priority 1 {
     Wait(duration: 1s) as Pause
     Pause -> Drive
     FollowCorridor(speed: 0.2) as Drive
-    Drive -> done after 4s
+    Drive -> done after 10s
 }
 """
 
@@ -64,26 +74,11 @@ mission Fenced {
 """
 
 
-def corridor_hosts(cluster: DaemonCluster) -> str:
-    """The repository's hosts.yaml (controller, ranger1 with its Scouts) on our free ports, the test lease, the
-    simulator on the controller."""
-    text = (ROOT / "hosts.yaml").read_text()
-    text = text.replace("roles: [worker, simulator]", "roles: [worker]")
-    text = text.replace("roles: [controller]", "roles: [controller, simulator]")
-    ports = dict(zip(NAMES, cluster.ports, strict=True))
-    text = text.replace("name: corridor", f"name: {cluster.name}").replace("lease: 3s", "lease: 1000ms")
-    text = text.replace("127.0.0.1:7447", f"127.0.0.1:{ports['controller']}")
-    return text.replace("127.0.0.1:7448", f"127.0.0.1:{ports['ranger1']}")
-
-
 @pytest.fixture(scope="module")
 def cluster(tmp_path_factory: pytest.TempPathFactory) -> Iterator[DaemonCluster]:
-    with serving_cluster(tmp_path_factory.mktemp("cluster_multi"), NAMES, corridor_hosts) as c:
+    with serving_cluster(tmp_path_factory.mktemp("cluster_multi"), NAMES,
+                         functools.partial(corridor_hosts, simulator_on_controller=True)) as c:
         yield c
-
-
-def records(path: Path) -> list[dict[str, Any]]:
-    return [json.loads(line) for line in path.read_text().splitlines() if line.strip()]
 
 
 def test_two_missions_share_one_ranger_by_priority(cluster: DaemonCluster, tmp_path: Path) -> None:
@@ -115,7 +110,7 @@ def test_two_missions_share_one_ranger_by_priority(cluster: DaemonCluster, tmp_p
     assert high_report["outcome"] == low_report["outcome"] == "success"
     assert "priority 1" in high_err and "priority 2" in low_err  # each run says the rank it got
 
-    low_recs, high_recs = records(low_trace), records(high_trace)
+    low_recs, high_recs = read_trace(low_trace), read_trace(high_trace)
     assert {r["mission"] for r in low_recs} == {low_report["mission"]}, "each trace holds its own mission"
     assert {r["mission"] for r in high_recs} == {high_report["mission"]}
 
@@ -165,7 +160,7 @@ def run_traced(cluster: DaemonCluster, tmp_path: Path, text: str) -> tuple[int, 
     r = cluster.missionctl("run", str(mission), "--config", str(cluster.hosts_file), "--speed", "8", "--json",
                            "--trace", str(trace), timeout=120)
     assert r.stdout, (r.stderr[-2000:], cluster.log("controller")[-3000:])
-    return r.returncode, json.loads(r.stdout), records(trace)
+    return r.returncode, json.loads(r.stdout), read_trace(trace)
 
 
 def test_a_constraint_is_enforced_on_the_robots_host_and_stops_it_at_the_fence(cluster: DaemonCluster,

@@ -677,7 +677,7 @@ class _RecordWatch:
         from drd.runtime import records as rec
 
         if self.trace is not None:
-            line = {"kind": msg.kind, "at": round(msg.at - base, 6), "path": msg.path, **msg.data,
+            line = {"kind": msg.kind, "at": round(msg.at - base, 6), "path": msg.path, **_rebased(msg.data, base),
                     "mission": msg.mission, "seq": msg.seq}
             self.trace.write(json.dumps(line, separators=(",", ":"), default=str) + "\n")
         r = _record(msg, rec, base)
@@ -692,7 +692,19 @@ class _RecordWatch:
 
 def _record(msg: Any, rec: Any, base: float = 0.0) -> Any:
     """A `MissionRecord` from the wire as the runtime's record (what the dry-run's report reads)."""
-    return rec.from_dict({**msg.data, "kind": msg.kind, "at": round(msg.at - base, 6), "path": msg.path})
+    return rec.from_dict({**_rebased(msg.data, base), "kind": msg.kind, "at": round(msg.at - base, 6),
+                          "path": msg.path})
+
+
+#: Fields of a record that are times, as `at` is (docs/trace.md): made relative to the mission's start too.
+TIME_FIELDS = ("since",)
+
+
+def _rebased(data: dict[str, Any], base: float) -> dict[str, Any]:
+    """A record's fields with its times relative to the mission's start, as `at`."""
+    if not base or not any(k in data for k in TIME_FIELDS):
+        return data
+    return {k: round(v - base, 6) if k in TIME_FIELDS and isinstance(v, int | float) else v for k, v in data.items()}
 
 
 # --- rendering -------------------------------------------------------------------------------------

@@ -23,7 +23,6 @@ lets the command through, and the controller's monitor stops the robot at the ne
 
 from __future__ import annotations
 
-import dataclasses
 import functools
 import logging
 from collections.abc import Callable, Iterable, Mapping
@@ -32,7 +31,7 @@ from typing import Any
 from drd.hosts import Cluster
 from drd.rcm import ResourceManager
 from drd.rcm.constraints import Measure, measure
-from drd.runtime.constraints import Active, ConstraintGuard
+from drd.runtime.constraints import Active, ConstraintGuard, walk
 from drd.runtime.interpreter import describe_devices
 from drd.runtime.ownership import LocalGates
 from drd.runtime.pool import ResourcePool, ResourceView
@@ -50,19 +49,7 @@ Op = list[Any]
 
 def read_names(condition: ast.Expr) -> list[str]:
     """The names a condition reads, in order of first appearance."""
-    found: dict[str, None] = {}
-    stack: list[Any] = [condition]
-    while stack:
-        node = stack.pop()
-        if isinstance(node, ast.Name):
-            found[node.id] = None
-        for f in dataclasses.fields(node):
-            value = getattr(node, f.name)
-            if isinstance(value, ast.Expr):
-                stack.append(value)
-            elif isinstance(value, tuple):
-                stack.extend(v for v in value if isinstance(v, ast.Expr))
-    return list(found)
+    return list(dict.fromkeys(node.id for node in walk(condition) if isinstance(node, ast.Name)))
 
 
 def encode_scope(condition: ast.Expr, names: Mapping[str, object]) -> dict[str, list[Any]]:

@@ -60,7 +60,7 @@ class Breach:
 def robots_named(condition: ast.Expr, names: Mapping[str, object]) -> tuple[str, ...]:
     """The robots (aggregates) a condition names, directly or as the owner of a part (`scout.radio`)."""
     found: dict[str, None] = {}
-    for node in _walk(condition):
+    for node in walk(condition):
         if isinstance(node, ast.Name):
             value = names.get(node.id)
             if isinstance(value, ResourceView) and isinstance(value.candidate, Aggregate):
@@ -68,7 +68,8 @@ def robots_named(condition: ast.Expr, names: Mapping[str, object]) -> tuple[str,
     return tuple(found)
 
 
-def _walk(e: ast.Expr) -> Iterable[ast.Expr]:
+def walk(e: ast.Expr) -> Iterable[ast.Expr]:
+    """Every sub-expression of `e`, `e` first."""
     stack: list[Any] = [e]
     while stack:
         node = stack.pop()
