@@ -12,9 +12,10 @@ Both paths run in the same rounds, on the same sessions, interleaved in blocks o
 (which path goes first alternates block by block), so a change in the machine's load hits both
 alike. Each round gives a ratio: its median ZenohBus.call over its median raw call. Goal: the
 median of the rounds' ratios <= 1.1 (issue #14; the spread of the rounds is shown too, and the load
-average: on a loaded machine the figure is not worth much). Nothing is pinned to a CPU. `--in-process` runs the server in this process instead: the two sides then contend for
-one GIL, which penalizes every microsecond of Python work, so that figure is shown for
-information, not judged.
+average: on a loaded machine the figure is not worth much). Nothing is pinned to a CPU.
+`--in-process` runs the server in this process instead: the two sides then contend for one GIL,
+which penalizes every microsecond of Python work, so that figure is shown for information, not
+judged.
 """
 
 from __future__ import annotations
