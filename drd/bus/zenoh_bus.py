@@ -229,6 +229,7 @@ class ZenohBus(Bus):
         # zenoh's close waits on every peer (10 s, then ZError, for a frozen one): bounded here, so no command and
         # no daemon's stop is held up by a peer that does not answer; the session goes with the process anyway
         closer = threading.Thread(target=self._close_session, name=f"close {self.name}", daemon=True)
+        _CLOSERS.append(closer)
         closer.start()
         closer.join(CLOSE_WAIT)
         if closer.is_alive():
@@ -242,6 +243,7 @@ class ZenohBus(Bus):
 
     def __repr__(self) -> str:
         return f"ZenohBus({self.name!r}{', closed' if self._closed else ''})"
+
 
     # -- helpers
     def _keep(self, entity: Any) -> Any:
@@ -266,3 +268,15 @@ class ZenohBus(Bus):
             return fn(*args, **kwargs)
         except zenoh.ZError as exc:
             raise BusError(str(exc)) from exc
+
+
+#: The threads closing sessions (`ZenohBus.close` waits for each at most `CLOSE_WAIT`).
+_CLOSERS: list[threading.Thread] = []
+
+
+def still_closing() -> bool:
+    """Whether a session's close still runs in zenoh (a peer that does not answer): a process that ends now must
+    end with `os._exit`, or the interpreter's shutdown tears that thread down inside zenoh and the process aborts
+    ("FATAL: exception not rethrown")."""
+    _CLOSERS[:] = [t for t in _CLOSERS if t.is_alive()]
+    return bool(_CLOSERS)

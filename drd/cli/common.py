@@ -275,6 +275,30 @@ def run_app(app: Callable[..., object], prog: str,
     `fast(argv)` may return the call of a command it parsed itself (see `drd.cli.cluster.fast_command`):
     it then runs without typer building its parameters; otherwise (None) typer parses as usual.
     """
+    try:
+        _run_app(app, prog, fast)
+    except SystemExit as e:
+        if "drd.bus.zenoh_bus" in sys.modules:  # a zenoh session was used: see drd.bus.zenoh_bus.still_closing
+            _end_now(e.code)
+        raise
+
+
+def _end_now(code: object) -> NoReturn:
+    """End the process without the interpreter's shutdown: zenoh's own threads (and a session's close that still
+    waits on a peer) are torn down by it mid-call, and the process then aborts ("FATAL: exception not rethrown",
+    exit -6) after its output. What the command wrote is flushed first; its files are closed by then."""
+    import logging
+
+    logging.shutdown()
+    if code is not None and not isinstance(code, int):  # sys.exit("message"), as the interpreter would print it
+        print(code, file=sys.stderr)
+    sys.stdout.flush()
+    sys.stderr.flush()
+    os._exit(code if isinstance(code, int) else (0 if code is None else 1))
+
+
+def _run_app(app: Callable[..., object], prog: str,
+             fast: Callable[[Sequence[str]], Callable[[], object] | None] | None) -> NoReturn:
     argv = sys.argv[1:]
     if argv in (["--version"], ["--version", "--json"], ["--json", "--version"]):  # before typer: a callback
         if "--json" in argv:                                                      # would cost every command its
