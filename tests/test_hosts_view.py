@@ -2,12 +2,10 @@
 
 from __future__ import annotations
 
-import io
 from typing import Any
 
-from rich.console import Console
-
 from drd.cli.cluster import SILENT_AFTER, _hosts_table
+from drd.cli.common import as_text
 
 
 def host(name: str, age: float | None, state: str = "up") -> dict[str, Any]:
@@ -16,9 +14,7 @@ def host(name: str, age: float | None, state: str = "up") -> dict[str, Any]:
 
 
 def render(rows: list[dict[str, Any]]) -> str:
-    out = io.StringIO()
-    Console(file=out, width=140, color_system=None).print(_hosts_table(rows, 110.0))
-    return out.getvalue()
+    return as_text(_hosts_table(rows, 110.0), width=140)
 
 
 def test_a_host_that_stopped_reporting_shows_as_silent_with_how_long() -> None:

@@ -10,6 +10,7 @@ result and stderr as what went wrong, whatever happened.
 from __future__ import annotations
 
 import json
+import io
 import os
 import sys
 import traceback
@@ -139,6 +140,13 @@ def fail_diagnostics(diagnostics: Sequence[Diagnostic], sources: Mapping[str, st
         fail(f"{first.span}: {first.message}", INVALID, first.hint, diagnostics=[d.to_dict() for d in diagnostics])
     render_diagnostics(diagnostics, sources)
     raise typer.Exit(INVALID)
+
+
+def as_text(renderable: object, width: int = 120) -> str:
+    """What a renderable prints as, in plain text (for a test, or a log)."""
+    console = Console(width=width, color_system=None, record=True, file=io.StringIO())
+    console.print(renderable)
+    return console.export_text()
 
 
 def duration_text(seconds: float) -> str:
