@@ -9,8 +9,8 @@ result and stderr as what went wrong, whatever happened.
 
 from __future__ import annotations
 
-import json
 import io
+import json
 import os
 import sys
 import traceback
