@@ -55,7 +55,7 @@ class Rig:
             devices[need] = BoundDevice(binding, issuer, None, (0, 0), None, lambda: self.sim.time)
         ctx = Context(path, {**defaults, **(params or {})}, resources,
                       lambda name, **fields: self.events.append((name, fields)), self.logs.append,
-                      lambda: self.sim.time, services={"sim": self.sim}, devices=devices, inputs=self.inputs)
+                      lambda: self.sim.time, devices=devices, inputs=self.inputs)
         comp = cls()
         comp.setup(ctx)
         comp.start()

@@ -55,7 +55,7 @@ class Probe(Component):
         if mode == "emit":
             ctx.emit("Seen", at=now)
         if mode == "shared":
-            log = ctx.services["shared"].setdefault("log", [])
+            log = ctx.services.shared.setdefault("log", [])
             log.append(ctx.path)
         if mode == "drive":
             drive = self.device("drive")

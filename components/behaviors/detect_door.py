@@ -103,8 +103,8 @@ class DetectDoor(Component):
         if "drive" in self.ctx.devices:
             x, y, heading = self.device("drive").odometry()
             return float(x), float(y), float(heading)
-        odo = self.ctx.services.get("odometry")
-        return odo() if callable(odo) else None
+        odo = self.ctx.services.odometry
+        return odo() if odo is not None else None
 
     def step(self, now: float) -> Status:
         min_width = float(self.ctx.params["min_width"])

@@ -286,15 +286,16 @@ def run_app(app: Callable[..., object], prog: str,
     try:
         _run_app(app, prog, fast)
     except SystemExit as e:
-        if "drd.bus.zenoh_bus" in sys.modules:  # a zenoh session was used: see drd.bus.zenoh_bus.still_closing
+        zenoh_bus = sys.modules.get("drd.bus.zenoh_bus")
+        if zenoh_bus is not None and zenoh_bus.still_closing():  # see drd.bus.zenoh_bus.still_closing
             _end_now(e.code)
         raise
 
 
 def _end_now(code: object) -> NoReturn:
-    """End the process without the interpreter's shutdown: zenoh's own threads (and a session's close that still
-    waits on a peer) are torn down by it mid-call, and the process then aborts ("FATAL: exception not rethrown",
-    exit -6) after its output. What the command wrote is flushed first; its files are closed by then."""
+    """End the process without the interpreter's shutdown: a session's close that still runs in zenoh (it waits on
+    a peer) would be torn down by it mid-call, and the process would abort ("FATAL: exception not rethrown", exit
+    -6) after its output. What the command wrote is flushed first; its files are closed by then."""
     import logging
 
     logging.shutdown()

@@ -557,13 +557,12 @@ class RemoteComponent(Component):
 
     def message(self, op: str, **fields: Any) -> ComponentCall:
         ctx, router = self._ctx, self.router
-        shared = ctx.services.get("shared")  # the inputs bound to shared data, by input name
-        inputs = {k: v for k, v in ctx.inputs.items() if not isinstance(shared, dict) or k not in shared}
-        ids = ({k: str(id(v)) for k, v in shared.items() if isinstance(v, dict)}
-               if isinstance(shared, dict) else None)
+        shared = ctx.services.shared  # the inputs bound to shared data, by input name
+        inputs = {k: v for k, v in ctx.inputs.items() if k not in shared}
+        ids = {k: str(id(v)) for k, v in shared.items() if isinstance(v, dict)}
         return ComponentCall(op, router.mission, ctx.path, self.name, router.world, generation=router.generation,
                              epochs=self._epochs(), sim_time=router.sim_time, sim_version=router.sim_version,
-                             shared=plain(shared) if isinstance(shared, dict) else None,
+                             shared=plain(shared) if shared else None,
                              inputs=plain(inputs) if inputs else None,
                              now=fields.pop("now", ctx.now()), shared_ids=ids or None, **fields)
 
@@ -582,8 +581,8 @@ class RemoteComponent(Component):
         if reply.outputs is not None:
             ctx.outputs.clear()
             ctx.outputs.update(reply.outputs)
-        shared = ctx.services.get("shared")
-        if isinstance(shared, dict) and reply.shared is not None:
+        shared = ctx.services.shared
+        if reply.shared is not None:
             for name, value in reply.shared.items():
                 old = shared.get(name)
                 if isinstance(old, dict) and isinstance(value, dict):
@@ -593,9 +592,9 @@ class RemoteComponent(Component):
                     shared[name] = value
         for line in reply.logs or ():
             ctx.log(str(line))
-        update = ctx.services.get("dependencies")
+        update = ctx.services.dependencies
         for dep in reply.dependencies or ():
-            if callable(update) and len(dep) == 3:
+            if update is not None and len(dep) == 3:
                 update(str(dep[0]), str(dep[1]), dep[2])
         for event in reply.events or ():
             if len(event) == 2 and isinstance(event[1], dict):

@@ -614,8 +614,8 @@ def _run_call(h: _Hosted, call: Call, link: _Link) -> CallReply:
 
     h.now = call.now
     services = h.ctx.services
-    services["shared"] = call.shared if call.shared is not None else {}
-    h.ctx.inputs = {**(call.inputs or {}), **services["shared"]}  # shared data: the objects sent back
+    services.shared = call.shared if call.shared is not None else {}
+    h.ctx.inputs = {**(call.inputs or {}), **services.shared}  # shared data: the objects sent back
     result = ""
     error = ""
     link.begin(call.ahead)
@@ -636,14 +636,14 @@ def _run_call(h: _Hosted, call: Call, link: _Link) -> CallReply:
             error = f"unknown op {op!r}"
     except Exception as e:  # component code is not ours to trust: the state fails, the worker goes on
         error = f"component raised {type(e).__name__}: {e}"
-    reply = CallReply(result, plain(h.ctx.outputs), h.events, h.logs, plain(services["shared"]), h.deps, error, False,
+    reply = CallReply(result, plain(h.ctx.outputs), h.events, h.logs, plain(services.shared), h.deps, error, False,
                   link.unused())
     h.events, h.logs, h.deps = [], [], []
     return reply
 
 
 def _setup(path: str, setup: Setup, params: dict[str, Any] | None, link: _Link) -> _Hosted:
-    from drd.runtime.component import Context
+    from drd.runtime.component import Context, Services
     from drd.runtime.records import plain
 
     module, _, cls_name = setup.entry_point.partition(":")
@@ -655,8 +655,7 @@ def _setup(path: str, setup: Setup, params: dict[str, Any] | None, link: _Link) 
                   lambda ev, **f: h.events.append([ev, plain(f)]),
                   lambda text: h.logs.append(str(text)),
                   lambda: h.now, devices=devices,
-                  services={"shared": {},
-                            "dependencies": lambda rid, k, v: h.deps.append([rid, k, plain(v)])})
+                  services=Services(dependencies=lambda rid, k, v: h.deps.append([rid, k, plain(v)])))
     h.ctx = ctx
     h.comp = factory()
     h.comp.setup(ctx)

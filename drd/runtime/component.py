@@ -25,6 +25,20 @@ class Status(StrEnum):
 
 
 @dataclass
+class Services:
+    """What the runtime lends a component besides its devices, by name and type (no drivers, no simulator: a
+    component reaches hardware only through its devices)."""
+
+    #: input name -> an ancestor's shared datum it is bound to (the one object: a proxy sends it and brings back
+    #: its changes)
+    shared: dict[str, Any] = field(default_factory=dict)
+    #: update(resource, key, value): the Static Dependency Database (a launched Scout's `carrier`)
+    dependencies: Callable[[str, str, object], None] | None = None
+    #: () -> (x, y, heading): the robot's pose, for a component given no Drive, when the runtime has one
+    odometry: Callable[[], tuple[float, float, float]] | None = None
+
+
+@dataclass
 class Context:
     """What a component instance may use: its parameters, resources and the mission's events."""
 
@@ -38,7 +52,7 @@ class Context:
     #: input name -> its value, as the mission bound it (`dsl.dataflow`): a sibling's output (current before each
     #: step), or an ancestor's shared datum (the one object, which the component may change)
     inputs: dict[str, Any] = field(default_factory=dict)
-    services: Mapping[str, Any] = field(default_factory=dict)  # shared data, simulator handles
+    services: Services = field(default_factory=Services)
     devices: Mapping[str, Any] = field(default_factory=dict)  # need name -> its device, through the gate
     #: need name -> `drd.runtime.ownership.Binding` (unit, robot part, the holder and the epoch it is bound at):
     #: what a proxy of a component running elsewhere forwards to the devices' host.
@@ -77,7 +91,7 @@ class Component:
 
     def update_dependency(self, resource: str, key: str, value: object) -> None:
         """Change the Static Dependency Database (a launched Scout: `carrier` becomes "")."""
-        update = self.ctx.services.get("dependencies")
+        update = self.ctx.services.dependencies
         if update is None:
             raise LookupError(f"{self.ctx.path}: no dependency database in this context")
         update(resource, key, value)

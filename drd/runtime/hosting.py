@@ -13,7 +13,7 @@ from collections.abc import Callable, Iterator, Mapping
 from typing import Any
 
 from drd.runtime import records as rec
-from drd.runtime.component import Component, Context, Registry, Status
+from drd.runtime.component import Component, Context, Registry, Services, Status
 from drd.runtime.ownership import Arbiter, Binding, BoundDevice
 from drd.runtime.resources import ResourceClient
 from drd.runtime.tree import ACTIVE, Node
@@ -72,7 +72,8 @@ class ComponentHost:
             ctx = Context(path, dict(node.scope), resources,
                           lambda ev, **f: self.emit(ev, path, **f),
                           lambda text: self.notify(rec.Log(self.now(), path, text)),
-                          self.now, devices=devices, services={**self.services, "shared": {}},
+                          self.now, devices=devices,
+                          services=Services(dependencies=self.services.get("dependencies")),
                           bindings=bindings, rank=rank)
             try:
                 comp = factory()
@@ -99,7 +100,7 @@ class ComponentHost:
         ctx = node.context
         if ctx is None:
             return
-        shared = ctx.services.get("shared")
+        shared = ctx.services.shared
         for b in node.state.inputs:
             if b.shared:
                 if entry:
