@@ -154,6 +154,13 @@ class DryRun:
             return []
         return Explainer(self.records).chain(self.reason)
 
+    def degraded(self) -> list[dict[str, Any]]:
+        """What a successful mission lost on the way: the instances that failed (`[{path, at, reason}]`), so a
+        success with 3 of 6 Watch states failed never reads as a plain success."""
+        if self.outcome != "success":
+            return []
+        return Explainer(self.records).degraded()
+
     def still_active(self) -> list[dict[str, Any]]:
         """The leaves still active when a run was stopped (`--until`, the time limit, Ctrl-C, `missionctl stop`):
         `[{path, since, state}]`, `state` running, waiting (for resources) or suspended (preempted)."""
@@ -173,7 +180,7 @@ class DryRun:
                 "outcome": self.outcome, "reason": self.reason,
                 "sim_time": self.sim_time, "wall_time": self.wall_time,
                 "real_time_factor": self.real_time_factor, "speed": self.speed,
-                "failure_chain": self.failure_chain(), "still_active": self.still_active(),
+                "failure_chain": self.failure_chain(), "degraded": self.degraded(), "still_active": self.still_active(),
                 "waiting": self.waiting(), "logs": self.logs(),
                 "timeline": self.timeline(), "holds": self.holds(), "waits": self.waits(),
                 "injections": self.injections,

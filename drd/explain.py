@@ -39,6 +39,20 @@ class Explainer:
                 self.parent[r.path] = parent
                 self.children.setdefault(parent, []).append(r.path)
 
+    # --- a success that lost something ------------------------------------------------------------------
+    def degraded(self) -> list[dict[str, Any]]:
+        """The instances of a multiplicity that failed although their mission did not (graceful degradation: a
+        lost Scout fails its RoomSurveillance, the others go on): `[{path, at, reason}]`, each with the reason of
+        its own failure chain, so a success never hides what it lost."""
+        out = []
+        for r in self.records:
+            if isinstance(r, rec.Exited) and r.status == "failure" and r.path in self.instances:
+                end = self.records.index(r)
+                rows = self._explain(r.path, end, r.reason)
+                leaves = [row["reason"] for row in rows[1:] if row.get("reason")] or [r.reason or "failed"]
+                out.append({"path": r.path, "at": round(r.at, 6), "reason": leaves[-1]})
+        return out
+
     # --- the failure chain -------------------------------------------------------------------------------
     def chain(self, reason: str) -> list[dict[str, Any]]:
         finished = next((r for r in reversed(self.records) if isinstance(r, rec.Finished)), None)

@@ -116,6 +116,7 @@ def test_a_lost_scout_fails_its_own_instance_not_the_mission() -> None:
     holder = rows[lost[0]["path"]]
     assert holder["status"] == "failure" and holder["exited"] == pytest.approx(30.0, abs=0.11)
     assert rows["CorridorSurveillance"]["status"] == "stopped"
+    assert report["degraded"] == [], "a stopped mission is explained by what was still active, not as degraded"
     survivors = [t for p, t in rows.items() if p.count("/") == 2 and p != lost[0]["path"]]
     assert survivors and all(t["status"] != "failure" for t in survivors)
 
@@ -144,3 +145,16 @@ def test_bad_injections_are_invalid_input() -> None:
                            "--inject", "explode door_n1 at 2s")
     assert code == 2 and "no host 'ranger9' to kill" in err and "unknown injection 'explode'" in err
     assert "Traceback" not in err
+
+
+def test_a_success_that_lost_an_instance_says_so_first() -> None:
+    """Issue #17: a mission is never reported success without saying what failed on the way."""
+    code, report, _ = dry_run("missions/corridor_surveillance.mission", "--inject", "lose scout2 at 70s")
+    assert code == 0 and report["outcome"] == "success"
+    [lost] = report["degraded"]  # type: ignore[misc]
+    assert lost["path"].endswith("]") and lost["at"] == pytest.approx(70.0, abs=0.11)
+    assert "resource lost" in lost["reason"]
+    text = subprocess.run(["missionctl", "dry-run", "missions/corridor_surveillance.mission", "--inject",
+                           "lose scout2 at 70s"], cwd=ROOT, capture_output=True, text=True, timeout=300, check=False)
+    first = text.stdout.splitlines()[0]
+    assert "success" in first and "degraded: 1 instance failed" in first, first

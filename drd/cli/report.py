@@ -54,8 +54,15 @@ def report_view(r: DryRun, several: bool = False, width: int = 80) -> list[Rende
     root = r.mission
     colour = "green" if r.outcome == "success" else "red"
     who = f"{r.mission_id or r.mission} (priority {r.priority})" if several else r.mission
+    lost = r.degraded()
+    if lost:  # a success that lost instances on the way says so in its first line
+        colour = "yellow"
+    head = f"  {r.reason}".rstrip() + (f"  degraded: {len(lost)} instance{'s' if len(lost) > 1 else ''} failed"
+                                       if lost else "")
     parts: list[RenderableType] = [Text.assemble(("mission ", "bold"), who, "  ", (f"{r.outcome}", f"bold {colour}"),
-                                                 f"  {r.reason}".rstrip())]
+                                                 head)]
+    parts += [Text(f"  {_relative(d['path'], root)} failed at {d['at']:.1f} s: {d['reason']}", style="yellow")
+              for d in lost]
     pace = f"{r.real_time_factor:.0f}x real time"
     if not r.kept_up:  # say so, rather than leave the operator to compare with what they asked
         pace += f" ({r.speed:g}x asked: the {'cluster' if r.on_cluster else 'machine'} could not keep up)"
