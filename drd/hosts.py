@@ -43,6 +43,9 @@ class Role(StrEnum):
     """Runs components (behaviors and the drivers of its devices)."""
     SIMULATOR = "simulator"
     """Runs the simulator component that `sim` drivers talk to; at most one host has it."""
+    ROUTER = "router"
+    """Its daemon runs a zenoh router in-process: with routers, the other daemons and the clients connect to the
+    routers only (a star per router, routers meshed), not to each other (docs/daemon.md, topologies)."""
 
 
 class SecurityMode(StrEnum):

@@ -106,12 +106,16 @@ def config_digest(cluster: Cluster) -> str:
 
 
 def open_bus(config: DaemonConfig, tr: Transport) -> Bus:
-    """A zenoh peer session listening on this host's endpoint and connecting to every other one."""
+    """This host's zenoh session: a peer listening on its endpoint and connecting to every other one, or, when the
+    hosts file names routers, a router (listening, meshed with the other routers) or a client of the routers."""
     from drd.bus.zenoh_bus import ZenohBus  # zenoh only when a real cluster is joined
 
     lease_ms = max(1000, int(config.cluster.lease * 2000))  # zenoh drops a silent link after twice our lease
-    return ZenohBus(listen=[tr.endpoints[config.host]], connect=list(tr.others(config.host).values()),
-                    lease_ms=lease_ms, options=dict(tr.options), name=config.host)
+    me = config.host
+    listen = [tr.endpoints[me]] if tr.listens(me) else []
+    options = {**tr.options, "mode": tr.zenoh_mode(me)}
+    return ZenohBus(listen=listen, connect=list(tr.others(me).values()), lease_ms=lease_ms, options=options,
+                    name=me)
 
 
 class HostTaken(ConfigurationError):
@@ -477,7 +481,8 @@ class Daemon:
         """In a thread of its own (a probe may take a while): name the peers we cannot see, and why."""
         with self._lock:
             down = {h.name: h.endpoint for h in self.cluster.hosts
-                    if h.name != self.host and self.view.state(h.name) is HostState.DOWN}
+                    if h.name != self.host and self.view.state(h.name) is HostState.DOWN
+                    and self.transport.listens(h.name)}  # a client of the routers has no endpoint to probe
         if not down:
             if not self.unreachable:
                 log.info("all %d peers reachable", len(self.cluster.hosts) - 1)

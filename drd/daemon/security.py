@@ -28,7 +28,7 @@ from typing import Any
 
 from drd.config import ConfigError, ConfigProblem
 from drd.daemon.acl import access_control, check_roles
-from drd.hosts import Cluster, SecurityMode, check_files
+from drd.hosts import Cluster, Role, SecurityMode, check_files
 
 #: The user a client presents itself as in password mode (`missionctl` on an operator's machine).
 USER_ENV = "DRD_USER"
@@ -45,10 +45,25 @@ class Transport:
     mode: SecurityMode
     endpoints: Mapping[str, str]
     options: Mapping[str, Any] = field(default_factory=dict)
+    routers: tuple[str, ...] = ()  # the hosts with the role router (none: every daemon meets every other)
 
     def others(self, me: str) -> dict[str, str]:
-        """Endpoints of every host but `me`: what a daemon connects to."""
-        return {h: e for h, e in self.endpoints.items() if h != me}
+        """What the daemon of `me` connects to: every other host, or with routers the other routers only."""
+        return {h: e for h, e in self.endpoints.items() if h != me and (not self.routers or h in self.routers)}
+
+    def zenoh_mode(self, me: str) -> str:
+        """The zenoh mode of `me`'s session: a peer among peers, a router, or a client of the routers."""
+        if not self.routers:
+            return "peer"
+        return "router" if me in self.routers else "client"
+
+    def listens(self, me: str) -> bool:
+        """Whether `me`'s daemon listens on its endpoint (a client of the routers does not)."""
+        return self.zenoh_mode(me) != "client"
+
+    def entry_points(self) -> list[str]:
+        """Where a client (missionctl) connects: the routers, else every daemon."""
+        return [e for h, e in self.endpoints.items() if not self.routers or h in self.routers]
 
 
 def transport(cluster: Cluster, user: str | None = None, *, daemon: bool = False) -> Transport:
@@ -64,6 +79,7 @@ def transport(cluster: Cluster, user: str | None = None, *, daemon: bool = False
     if problems:
         raise SecurityError(problems)
     endpoints = {h.name: h.endpoint for h in cluster.hosts}
+    routers = tuple(h.name for h in cluster.hosts if Role.ROUTER in h.roles)
     acl = access_control(cluster) if daemon else None
     if sec.mode is SecurityMode.NONE:
         exposed = sorted(h for h, e in endpoints.items() if not is_loopback(e))
@@ -72,7 +88,7 @@ def transport(cluster: Cluster, user: str | None = None, *, daemon: bool = False
                 f"mode none on a network: {', '.join(exposed)} listen beyond this machine, where anyone who reaches"
                 " them could run missions and drive robots; use mode password or tls, or say `open: true` if that"
                 " is what you want"))])
-        return Transport(sec.mode, endpoints)
+        return Transport(sec.mode, endpoints, routers=routers)
     if sec.mode is SecurityMode.PASSWORD:
         assert sec.user is not None and sec.password_file is not None  # parse_hosts requires both
         who = sec.user if daemon else (user or os.environ.get(USER_ENV) or sec.user)
@@ -80,7 +96,7 @@ def transport(cluster: Cluster, user: str | None = None, *, daemon: bool = False
         unknown = check_roles(cluster, dictionary_users(sec.password_file)) if daemon else []
         if unknown:
             raise SecurityError(unknown)
-        return Transport(sec.mode, endpoints, {
+        return Transport(sec.mode, endpoints, routers=routers, options={
             "transport/auth/usrpwd/user": who,
             "transport/auth/usrpwd/password": password,
             "transport/auth/usrpwd/dictionary_file": sec.password_file,
@@ -99,7 +115,7 @@ def transport(cluster: Cluster, user: str | None = None, *, daemon: bool = False
                                                                           wanted)) is not None]
     if problems:
         raise SecurityError(problems)
-    return Transport(sec.mode, tls, {
+    return Transport(sec.mode, tls, routers=routers, options={
         **({"access_control": acl} if acl else {}),
         "transport/link/protocols": ["tls"],
         "transport/link/tls/root_ca_certificate": sec.ca,
