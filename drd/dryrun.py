@@ -23,7 +23,7 @@ from drd.explain import Explainer
 from drd.hosts import Cluster, Role
 from drd.hw.drivers import HostDrivers, drivers_for
 from drd.inject import Action, Injection
-from drd.record import INTRUDER, Recorder
+from drd.record import Recorder
 from drd.restart import ControllerLife
 from drd.runtime import records as rec
 from drd.runtime.trace import TraceWriter
@@ -275,6 +275,7 @@ def run_many(missions: Sequence[Mission], cluster: Cluster, world: World, catalo
     start = time.perf_counter()
     if recorder is not None:
         recorder.scene(world)
+        recorder.watch(sim)  # what the sensors read, launches, landings and door changes, from now on
     results = [_submit(life, m, n, speed, trace, recorder) for n, m in enumerate(missions, 1)]
     next_progress = 0.0
     pending = sorted(injections)
@@ -289,8 +290,7 @@ def run_many(missions: Sequence[Mission], cluster: Cluster, world: World, catalo
         if life.executive is not None:  # a dead controller steps nothing
             life.executive.step()
         if recorder is not None:
-            recorder.poses(sim.time, {**{rid: (p.x, p.y, p.heading) for rid in sim.robots if (p := sim.pose(rid))},
-                                      **{INTRUDER + iid: (x, y, 0.0) for iid, (x, y) in sim.intruders().items()}})
+            recorder.cycle(sim)  # where everyone is, and what changed in this cycle
         if speed:
             lag = sim.time / speed - (time.perf_counter() - start)
             if lag > 0:

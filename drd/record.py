@@ -1,44 +1,74 @@
-"""A run as an MCAP file (issue #13, first part): what the mission did, where the robots were, and its ending.
+"""A run as an MCAP file, and served live to Foxglove (issue #13): what the mission did, where the robots were,
+what their sensors read, and its ending.
 
-Written with the Foxglove SDK (its MCAP writer and standard schemas), read back with `mcap`, so any MCAP tool
-(Foxglove, `ros2 bag`, PlotJuggler, the `mcap` CLI) opens it. Message log times are sim time. Channels:
+Written with the Foxglove SDK (its MCAP writer, its WebSocket server and its standard schemas), read back with
+`mcap`, so any MCAP tool (Foxglove, `ros2 bag`, PlotJuggler, the `mcap` CLI) opens it. Message log times are sim
+time, in the mission's seconds. `docs/recording.md` says what each channel holds; in short:
 
 - `/drd/records`: every trace record, JSON (`docs/trace.md`: `kind`, `at`, `path`, its fields, `mission`);
-- `/drd/world`: `foxglove.SceneUpdate`, once at the start: the walls, each door (its colour its state) and each
-  room's name, in the `world` frame;
-- `/drd/tf`: `foxglove.FrameTransforms`, each robot's pose in the `world` frame every control cycle, and each
-  intruder's (frame `intruder/<id>`);
+- `/drd/active`: each mission's active configuration at each instant it changed (JSON: the active leaves and their
+  state, what each behavior holds, who waits behind whom), kept from the records as they are written;
+- `/drd/log`: the records' `log` lines as `foxglove.Log` (the Log panel);
+- `/drd/world`: `foxglove.SceneUpdate`: the walls, doors (their colour their state, changed when an injection
+  changes one), rooms, obstacles, and a body for each robot and intruder, locked to its frame; a camera's field of
+  view once it is first read;
+- `/drd/tf`: `foxglove.FrameTransforms` each control cycle: every robot's and intruder's pose that changed since
+  the cycle before (all of them every second, so a viewer that joins late has them all within a second);
+- `/drd/trails`: `foxglove.SceneUpdate`: each robot's path, one piece per second of sim time;
+- `/drd/scan/<robot>`: `foxglove.LaserScan`, each scan a behavior read (at most one per robot per control cycle);
+- `/drd/camera`, `/drd/light`: JSON: what each camera saw (people: bearing, distance, light) and its region
+  brightness; `/drd/seen`: `foxglove.SceneUpdate`: a line from the camera to each person it sees, for 0.3 s;
+- `/drd/flights`: JSON: each launch and jump, then its landing;
+- `/drd/hosts`, `/drd/hosts/load`, `/drd/placements`: JSON, a cluster run's hosts (up or down), their load
+  reports, and where each component instance runs;
 - `/drd/runs`: one JSON message per mission when the run ends: what the records cannot say (its id, priority,
   speed, wall time, the injections, where each placed Scout ended), so `replay` rebuilds the same report.
 
-The MCAP writer indexes the file as it goes (chunks), so a file cut short by a crash is still readable up to its
-last chunk.
+The sensors are recorded as the drivers read them, by tapping the simulation's sensor calls (`Recorder.watch`): no
+second ray cast, and no reading changed (a reading is a function of the instant: `drd.sim.physics`). The MCAP writer
+indexes the file as it goes (chunks, flushed each second of sim time), so a file cut short by a crash is still
+readable up to its last chunk.
 """
 
 from __future__ import annotations
 
 import bisect
+import functools
 import json
 import math
 import struct
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+import orjson
+
 from drd.errors import ConfigurationError
 from drd.runtime import records as rec
-from drd.runtime.trace import trace_line
-from drd.sim.model import World
+from drd.sim.model import INTRUDER_RADIUS, RANGER_RADIUS, SCOUT_RADIUS, DoorState, World
 
 RECORDS, TF, RUNS, WORLD = "/drd/records", "/drd/tf", "/drd/runs", "/drd/world"
+ACTIVE, LOG, TRAILS = "/drd/active", "/drd/log", "/drd/trails"
+SCAN, CAMERA, LIGHT, SEEN, FLIGHTS = "/drd/scan/", "/drd/camera", "/drd/light", "/drd/seen", "/drd/flights"
+HOSTS, LOADS, PLACEMENTS = "/drd/hosts", "/drd/hosts/load", "/drd/placements"
 WORLD_ATTACHMENT = "world.yaml"
 #: Chunks of this size (uncompressed), and a flush every this many seconds of sim time.
 CHUNK_BYTES, FLUSH_EVERY = 64 * 1024, 1.0
+#: Every pose, changed or not, at least this often (s of sim time): a late viewer has every frame within it.
+KEYFRAME_EVERY = 1.0
+#: At most one scan per robot this often (s of sim time): the control period, the rate behaviors read at.
+SCAN_EVERY = 0.1
+#: How long a camera's sighting stays drawn in the 3D view (s): a little more than two control cycles.
+SEEN_FOR = 0.3
+#: A trail gets a point when its robot moved this far (m) from the last one.
+TRAIL_STEP = 0.1
 #: The frame of an intruder (a person walking through the world, not a robot): `intruder/<id>`.
 INTRUDER = "intruder/"
 #: The version of this layout, in the file's metadata (`drd` record `format`).
 FORMAT = "drd-run-1"
+#: Where `--foxglove` serves when given no address: loopback only.
+LIVE_DEFAULT = ("127.0.0.1", 8765)
 
 
 class RecordingError(ConfigurationError):
@@ -49,113 +79,571 @@ def _ns(seconds: float) -> int:
     return max(0, int(round(seconds * 1e9)))
 
 
+def _default(value: Any) -> Any:
+    """Resources and other objects appear by their id or text (as in a trace: `drd.runtime.trace`)."""
+    return getattr(value, "id", None) or str(value)
+
+
+_JSON_OPTIONS = orjson.OPT_NON_STR_KEYS | orjson.OPT_PASSTHROUGH_DATACLASS | orjson.OPT_PASSTHROUGH_DATETIME
+
+
+def _json(value: Any) -> bytes:
+    """JSON as a trace line has it (`json.dumps` with `_default`), at a third of its cost."""
+    return orjson.dumps(value, default=_default, option=_JSON_OPTIONS)
+
+
+def _color(hex_: str, alpha: float = 1.0) -> Any:
+    from foxglove.messages import Color
+
+    return Color(r=int(hex_[1:3], 16) / 255, g=int(hex_[3:5], 16) / 255, b=int(hex_[5:7], 16) / 255, a=alpha)
+
+
+def _pose(x: float = 0.0, y: float = 0.0, heading: float = 0.0, z: float = 0.0) -> Any:
+    from foxglove.messages import Pose, Quaternion, Vector3
+
+    return Pose(position=Vector3(x=x, y=y, z=z),
+                orientation=Quaternion(x=0.0, y=0.0, z=math.sin(heading / 2), w=math.cos(heading / 2)))
+
+
+def _stamp(at: float) -> Any:
+    from foxglove.messages import Timestamp
+
+    ns = _ns(at)
+    return Timestamp(sec=ns // 1_000_000_000, nsec=ns % 1_000_000_000)
+
+
+def _line(points: Sequence[tuple[float, float]], color: Any, width: float, strip: bool = False) -> Any:
+    from foxglove.messages import LinePrimitive, LinePrimitiveLineType, Point3
+
+    kind = LinePrimitiveLineType.LineStrip if strip else LinePrimitiveLineType.LineList
+    return LinePrimitive(type=kind, thickness=width, scale_invariant=False,
+                         points=[Point3(x=x, y=y, z=0.0) for x, y in points], color=color)
+
+
+#: Colours of the 3D view, as the picture's (`drd.render`): doors green open, red closed, brown blocked.
+DOOR_COLOURS = {DoorState.OPEN: "#2e9e44", DoorState.CLOSED: "#d32f2f", DoorState.BLOCKED: "#8e3b00"}
+RANGER_COLOUR, SCOUT_COLOUR, INTRUDER_COLOUR, WALL_COLOUR = "#1f4e9c", "#f28e2b", "#c2185b", "#1d2330"
+
+
 class Recorder:
-    """Writes one run into `path`: `record` for each trace record, `poses` each control cycle, `end` once."""
+    """Writes one run into `path` (None: no file) and serves it live on `serve` (host, port; None: not served):
+    `scene` and `watch` once, `record` for each trace record, `poses` each control cycle, `end` once."""
 
-    def __init__(self, path: Path) -> None:
+    def __init__(self, path: Path | None, *, serve: tuple[str, int] | None = None) -> None:
         import foxglove
-        from foxglove.channels import FrameTransformsChannel, SceneUpdateChannel
+        from foxglove.channels import FrameTransformsChannel, LogChannel, SceneUpdateChannel
+        from foxglove.mcap import MCAPCompression, MCAPWriteOptions
 
-        self.path = path
-        self.context = foxglove.Context()  # this run's own: nothing global, several recorders may coexist
-        from foxglove.mcap import MCAPWriteOptions
-
-        try:  # small chunks, flushed each second of sim time: a run cut short keeps all but its last second
-            self.writer = foxglove.open_mcap(str(path), allow_overwrite=True, context=self.context,
-                                             writer_options=MCAPWriteOptions(chunk_size=CHUNK_BYTES))
-        except Exception as e:  # the SDK's own errors: a folder that does not exist, no permission
-            raise RecordingError(f"{path}: cannot write the recording: {e}") from e
-        self.records = foxglove.Channel(RECORDS, message_encoding="json", context=self.context,
-                                        schema=_json_schema(foxglove, "drd.Record", RECORD_SCHEMA))
-        self.runs = foxglove.Channel(RUNS, message_encoding="json", context=self.context,
-                                     schema=_json_schema(foxglove, "drd.Run", RUN_SCHEMA))
+        self.path, self.context = path, foxglove.Context()  # this run's own: several recorders may coexist
+        self.writer: Any = None
+        self.server: Any = None
+        if path is not None:
+            # small chunks, flushed each second of sim time: a run cut short keeps all but its last second. LZ4: on
+            # the corridor mission its flushes cost 14 ms, zstd's 24 ms (level 1) to 57 ms (the default, threaded),
+            # for a file 15 % larger (2.1 MB, not 1.8)
+            try:
+                self.writer = foxglove.open_mcap(str(path), allow_overwrite=True, context=self.context,
+                                                 writer_options=MCAPWriteOptions(
+                                                     chunk_size=CHUNK_BYTES, compression=MCAPCompression.Lz4))
+            except Exception as e:  # the SDK's own errors: a folder that does not exist, no permission
+                raise RecordingError(f"{path}: cannot write the recording: {e}") from e
+        self.channels: dict[str, Any] = {}  # the JSON channels, each made when first used (`json`)
         self.tf = FrameTransformsChannel(TF, context=self.context)
         self.world = SceneUpdateChannel(WORLD, context=self.context)
-        self.closed = False
-        self.flushed = 0.0  # the sim time of the last flush
+        self.trails = SceneUpdateChannel(TRAILS, context=self.context)
+        self.seen = SceneUpdateChannel(SEEN, context=self.context)
+        self.log = LogChannel(LOG, context=self.context)
+        self.scans: dict[str, Any] = {}
+        self.views: dict[str, ActiveView] = {}
+        self.frames = _Frames()
+        self.sensors = _Sensors(self)
+        self.entities: dict[str, Any] = {}  # the world's entities as they are now, for a viewer that joins late
+        self.closed, self.flushed, self.now = False, 0.0, 0.0  # `now`: the latest sim time logged
+        if serve is not None:
+            self._serve(*serve)
+
+    def _json_channel(self, topic: str) -> Any:
+        import foxglove
+
+        name, schema = JSON_SCHEMAS[topic]
+        return foxglove.Channel(topic, message_encoding="json", context=self.context, schema=foxglove.Schema(
+            name=name, encoding="jsonschema", data=json.dumps(schema).encode()))
+
+    def _serve(self, host: str, port: int) -> None:
+        """The live view: the Foxglove WebSocket server on `host:port` only, serving this recorder's channels."""
+        import foxglove
+
+        try:
+            self.server = foxglove.start_server(name="drd", host=host, port=port, context=self.context,
+                                                server_listener=_late_viewers(self))
+        except Exception as e:  # the SDK's own errors: the port is taken, the address is not this machine's
+            self.close()
+            raise RecordingError(f"cannot serve the live view on {host}:{port}: {e}") from e
+
+    @property
+    def port(self) -> int | None:
+        """The port the live view is served on (None when it is not served)."""
+        return None if self.server is None else int(self.server.port)
+
+    def json(self, topic: str, at: float, value: Any) -> None:
+        """One message on a JSON channel (`JSON_SCHEMAS`) at sim time `at`."""
+        self._channel(topic).log(_json(value), log_time=_ns(at))
+
+    def _channel(self, topic: str) -> Any:
+        channel = self.channels.get(topic)
+        if channel is None:
+            channel = self.channels[topic] = self._json_channel(topic)
+        return channel
 
     def scene(self, world: World) -> None:
-        """The world as a scene at time 0: walls, doors (green open, orange closed, red blocked), room names; and
-        its file as the attachment `world.yaml`, so a replay can draw the run without it."""
+        """The world as a scene at time 0, and its file as the attachment `world.yaml`, so a replay can draw the
+        run without it."""
         source = Path(world.source)
-        if source.is_file():
+        if self.writer is not None and source.is_file():
             self.writer.attach(log_time=0, create_time=0, name=WORLD_ATTACHMENT, media_type="application/yaml",
                                data=source.read_bytes())
-        from foxglove.messages import (
-            Color,
-            LinePrimitive,
-            LinePrimitiveLineType,
-            Point3,
-            Pose,
-            Quaternion,
-            SceneEntity,
-            SceneUpdate,
-            TextPrimitive,
-            Vector3,
-        )
+        self.update_world(0.0, [*_building(world), *_bodies(world)])
 
-        def line(points: list[tuple[float, float]], color: Color, width: float) -> LinePrimitive:
-            return LinePrimitive(type=LinePrimitiveLineType.LineList, thickness=width, scale_invariant=False,
-                                 points=[Point3(x=x, y=y, z=0.0) for x, y in points], color=color)
+    def update_world(self, at: float, entities: list[tuple[str, Any]]) -> None:
+        """Add or replace entities (id, entity) of the world's scene at sim time `at`."""
+        from foxglove.messages import SceneUpdate
 
-        flat = Quaternion(x=0.0, y=0.0, z=0.0, w=1.0)
-        doors = {"open": Color(r=0.2, g=0.7, b=0.3, a=1.0), "closed": Color(r=0.95, g=0.6, b=0.1, a=1.0),
-                 "blocked": Color(r=0.85, g=0.15, b=0.15, a=1.0)}
-        walls = [p for w in world.walls for p in ((w.a[0], w.a[1]), (w.b[0], w.b[1]))]
-        entities = [SceneEntity(frame_id="world", id="walls", lines=[line(walls, Color(r=0.3, g=0.3, b=0.35, a=1.0),
-                                                                           0.08)])]
-        entities += [SceneEntity(frame_id="world", id=f"door/{d.id}",
-                                 lines=[line([(d.a[0], d.a[1]), (d.b[0], d.b[1])], doors[d.state.value], 0.12)])
-                     for d in world.doors]
-        entities += [SceneEntity(frame_id="world", id=f"room/{r.id}", texts=[TextPrimitive(
-            pose=Pose(position=Vector3(x=(r.x0 + r.x1) / 2, y=(r.y0 + r.y1) / 2, z=0.0), orientation=flat),
-            billboard=True, font_size=0.4, scale_invariant=False, color=Color(r=0.1, g=0.1, b=0.1, a=1.0),
-            text=r.id)]) for r in world.rooms]
-        self.world.log(SceneUpdate(entities=entities), log_time=0)
+        self.entities.update(entities)
+        self.world.log(SceneUpdate(entities=[e for _, e in entities]), log_time=_ns(at))
+
+    def scene_now(self) -> Any:
+        """The world's scene as it is now (None before `scene`)."""
+        from foxglove.messages import SceneUpdate
+
+        return SceneUpdate(entities=list(self.entities.values())) if self.entities else None
+
+    def watch(self, sim: Any) -> None:
+        """Record what `sim`'s sensors read from now on (`_Sensors`), its launches, jumps and door changes."""
+        self.sensors.tap(sim)
 
     def record(self, mission: str, r: rec.Record) -> None:
-        self.records.log(trace_line(r, mission, exact=True), log_time=_ns(r.at))
+        """One trace record of `mission`: on `/drd/records`, and into its active configuration (`/drd/active`)."""
+        view = self.views.get(mission)
+        if view is None:
+            view = self.views[mission] = ActiveView(mission)
+        if view.changed_at is not None and r.at > view.changed_at + 1e-9:
+            self._active(view)  # the instant before is complete
+        view.take(r)
+        data = r.to_dict()
+        data["mission"] = mission
+        self._channel(RECORDS).log(_json(data), log_time=_ns(r.at))
+        if isinstance(r, rec.Log):
+            self._log_line(r)
+        self.now = max(self.now, r.at)
 
-    def poses(self, at: float, poses: dict[str, tuple[float, float, float]]) -> None:
-        """Each robot's (x, y, heading) at sim time `at`, as frame transforms from `world`."""
-        from foxglove.messages import FrameTransform, FrameTransforms, Quaternion, Timestamp, Vector3
+    def _log_line(self, r: rec.Log) -> None:
+        from foxglove.messages import Log, LogLevel
 
-        stamp = Timestamp(sec=int(at), nsec=int(round((at - int(at)) * 1e9)) % 1_000_000_000)
-        self.tf.log(FrameTransforms(transforms=[
-            FrameTransform(timestamp=stamp, parent_frame_id="world", child_frame_id=rid,
-                           translation=Vector3(x=x, y=y, z=0.0),
-                           rotation=Quaternion(x=0.0, y=0.0, z=math.sin(h / 2), w=math.cos(h / 2)))
-            for rid, (x, y, h) in sorted(poses.items())]), log_time=_ns(at))
+        self.log.log(Log(timestamp=_stamp(r.at), level=LogLevel.Info, message=r.text, name=r.path),
+                     log_time=_ns(r.at))
+
+    def _active(self, view: ActiveView) -> None:
+        at = view.changed_at or 0.0
+        self.json(ACTIVE, at, view.state(at))
+        view.changed_at = None
+
+    def cycle(self, sim: Any) -> None:
+        """The end of a control cycle of `sim`: where every robot and intruder is (`poses`)."""
+        carried = {scout: r.id for r in sim.world.rangers for scout in sim.magazine(r.id)}
+        poses = {rid: (p.x, p.y, p.heading) for rid in sim.robots if rid not in carried and (p := sim.pose(rid))}
+        for iid, (x, y) in sim.intruders().items():
+            poses[INTRUDER + iid] = (x, y, 0.0)
+        self.poses(sim.time, poses, carried)
+
+    def poses(self, at: float, poses: dict[str, tuple[float, float, float]],
+              carried: dict[str, str] | None = None) -> None:
+        """The end of a control cycle at sim time `at`: each robot's (x, y, heading) as frame transforms from
+        `world` (those that changed), each Scout in a magazine (`carried`: Scout -> Ranger) as its Ranger's frame,
+        the trails, the landings due, and the active configurations that changed."""
+        for view in self.views.values():
+            if view.changed_at is not None:
+                self._active(view)
+        message = self.frames.transforms(at, poses, carried or {})
+        if message is not None:
+            self.tf.log(message, log_time=_ns(at))
+        trails = self.frames.trails(at)
+        if trails is not None:
+            self.trails.log(trails, log_time=_ns(at))
+        self.sensors.land(at)
+        self.now = max(self.now, at)
         if at - self.flushed >= FLUSH_EVERY:
             self.flushed = at
-            self.writer.flush()
+            if self.writer is not None:
+                self.writer.flush()
 
     def end(self, runs: Sequence[dict[str, Any]], at: float) -> None:
-        """Each mission's run summary (`summary`), then close the file."""
+        """Each mission's run summary (`summary`), then close the file and the live view."""
+        for view in self.views.values():
+            if view.changed_at is not None:
+                self._active(view)
         for run in runs:
-            self.runs.log(json.dumps({"format": FORMAT, **run}, default=_default), log_time=_ns(at))
+            self._channel(RUNS).log(json.dumps({"format": FORMAT, **run}, default=_default), log_time=_ns(at))
         self.close()
 
     def close(self) -> None:
         if not self.closed:
             self.closed = True
-            self.writer.close()
+            if self.writer is not None:
+                self.writer.close()
+            if self.server is not None:
+                self.server.stop()
 
 
-def _default(value: Any) -> Any:
-    return getattr(value, "id", None) or str(value)
+def _late_viewers(r: Recorder) -> Any:
+    """The live view's listener: a viewer that subscribes after the start gets what was sent once (the world as it
+    is now, each mission's active configuration)."""
+    from foxglove.websocket import ChannelView, Client, ServerListener
+
+    class LateViewers(ServerListener):
+        def on_subscribe(self, client: Client, channel: ChannelView) -> None:
+            scene = r.scene_now() if channel.topic == WORLD else None
+            if scene is not None:
+                r.world.log(scene, log_time=_ns(r.now))
+            elif channel.topic == ACTIVE:
+                for view in list(r.views.values()):
+                    r.json(ACTIVE, r.now, view.state(r.now))
+
+    return LateViewers()
 
 
-#: The JSON schemas of the two JSON channels (named, so a viewer lists `drd.Record`, not an anonymous schema).
-RECORD_SCHEMA = {"type": "object", "required": ["kind", "at", "path", "mission"], "properties": {
-    "kind": {"type": "string"}, "at": {"type": "number"}, "path": {"type": "string"}, "mission": {"type": "string"}}}
-RUN_SCHEMA = {"type": "object", "required": ["format", "mission", "records", "sim_time"], "properties": {
-    "format": {"type": "string"}, "mission": {"type": "string"}, "records": {"type": "string"},
-    "sim_time": {"type": "number"}, "wall_time": {"type": "number"}}}
+def _building(world: World) -> list[tuple[str, Any]]:
+    """Walls, doors (coloured by state), obstacles and room names, in the `world` frame."""
+    from foxglove.messages import CubePrimitive, SceneEntity, TextPrimitive, Vector3
+
+    walls = [p for w in world.walls for p in ((w.a[0], w.a[1]), (w.b[0], w.b[1]))]
+    out = [SceneEntity(frame_id="world", id="walls", lines=[_line(walls, _color(WALL_COLOUR), 0.08)])]
+    out += [_door(d.id, d.a, d.b, d.state)[1] for d in world.doors]
+    out += [SceneEntity(frame_id="world", id=f"obstacle/{i}", cubes=[CubePrimitive(
+        pose=_pose((o.x0 + o.x1) / 2, (o.y0 + o.y1) / 2, z=o.height / 2),
+        size=Vector3(x=o.x1 - o.x0, y=o.y1 - o.y0, z=o.height), color=_color("#8d6e63", 0.8))])
+        for i, o in enumerate(world.obstacles)]
+    out += [SceneEntity(frame_id="world", id=f"room/{r.id}", texts=[TextPrimitive(
+        pose=_pose((r.x0 + r.x1) / 2, (r.y0 + r.y1) / 2), billboard=True, font_size=0.4, scale_invariant=False,
+        color=_color("#3a4256"), text=r.id)]) for r in world.rooms]
+    ids = ["walls", *(f"door/{d.id}" for d in world.doors), *(f"obstacle/{i}" for i in range(len(world.obstacles))),
+           *(f"room/{r.id}" for r in world.rooms)]
+    return list(zip(ids, out, strict=True))
 
 
-def _json_schema(foxglove: Any, name: str, schema: dict[str, Any]) -> Any:
-    return foxglove.Schema(name=name, encoding="jsonschema", data=json.dumps(schema).encode())
+def _door(door_id: str, a: tuple[float, float], b: tuple[float, float], state: DoorState) -> tuple[str, Any]:
+    from foxglove.messages import SceneEntity
+
+    return f"door/{door_id}", SceneEntity(frame_id="world", id=f"door/{door_id}",
+                                          lines=[_line([a, b], _color(DOOR_COLOURS[DoorState(state)]), 0.12)])
+
+
+def _bodies(world: World) -> list[tuple[str, Any]]:
+    """A body for each robot and intruder, locked to its frame (so it moves with `/drd/tf`): a disc to scale, a
+    heading line for robots, and its name."""
+    from foxglove.messages import CylinderPrimitive, SceneEntity, TextPrimitive, Vector3
+
+    def body(frame: str, radius: float, colour: str, heading: bool) -> tuple[str, Any]:
+        lines = [_line([(0.0, 0.0), (radius * 2.2, 0.0)], _color("#ffffff"), 0.03)] if heading else []
+        disc = CylinderPrimitive(pose=_pose(z=0.05), size=Vector3(x=2 * radius, y=2 * radius, z=0.1),
+                                 bottom_scale=1.0, top_scale=1.0, color=_color(colour, 0.9))
+        name = TextPrimitive(pose=_pose(z=0.3), billboard=True, font_size=12.0, scale_invariant=True,
+                             color=_color(colour), text=frame.removeprefix(INTRUDER))
+        return f"body/{frame}", SceneEntity(frame_id=frame, id=f"body/{frame}", frame_locked=True, lines=lines,
+                                            cylinders=[disc], texts=[name])
+
+    return ([body(r.id, RANGER_RADIUS, RANGER_COLOUR, True) for r in world.rangers]
+            + [body(s, SCOUT_RADIUS, SCOUT_COLOUR, True) for s in world.scout_ids]
+            + [body(INTRUDER + i.id, i.radius or INTRUDER_RADIUS, INTRUDER_COLOUR, False) for i in world.intruders])
+
+
+class _Frames:
+    """The poses of each control cycle as frame transforms (only those that changed, all every second), and the
+    trails they leave (a point every `TRAIL_STEP` metres, sent as one piece per second)."""
+
+    def __init__(self) -> None:
+        self.last: dict[str, tuple[float, float, float] | str] = {}  # a pose, or the Ranger carrying it
+        self.keyframe = -math.inf
+        self.trail_end: dict[str, tuple[float, float]] = {}
+        self.trail_new: dict[str, list[tuple[float, float]]] = {}
+        self.pieces = 0
+        self.trail_sent = 0.0
+
+    def transforms(self, at: float, poses: dict[str, tuple[float, float, float]], carried: dict[str, str]) -> Any:
+        """This cycle's `FrameTransforms` (None when nothing moved and no keyframe is due): a Scout in a magazine is
+        its Ranger's frame (sent once, not every cycle it is carried)."""
+        from foxglove.messages import FrameTransform, FrameTransforms, Quaternion, Vector3
+
+        every = at - self.keyframe >= KEYFRAME_EVERY - 1e-9
+        if every:
+            self.keyframe = at
+        last, stamp, out = self.last, _stamp(at), []
+        for rid, ranger in carried.items():
+            if every or last.get(rid) != ranger:
+                last[rid] = ranger
+                out.append(FrameTransform(timestamp=stamp, parent_frame_id=ranger, child_frame_id=rid,
+                                          translation=Vector3(x=0.0, y=0.0, z=0.0),
+                                          rotation=Quaternion(x=0.0, y=0.0, z=0.0, w=1.0)))
+                self.trail_end.pop(rid, None)
+        for rid, pose in poses.items():
+            if every or last.get(rid) != pose:
+                last[rid] = pose
+                x, y, h = pose
+                out.append(FrameTransform(timestamp=stamp, parent_frame_id="world", child_frame_id=rid,
+                                          translation=Vector3(x=x, y=y, z=0.0),
+                                          rotation=Quaternion(x=0.0, y=0.0, z=math.sin(h / 2), w=math.cos(h / 2))))
+                self._trail(rid, x, y)
+        return FrameTransforms(transforms=out) if out else None
+
+    def _trail(self, rid: str, x: float, y: float) -> None:
+        end = self.trail_end.get(rid)
+        if end is None or math.hypot(x - end[0], y - end[1]) >= TRAIL_STEP:
+            self.trail_new.setdefault(rid, [end] if end is not None else []).append((x, y))
+            self.trail_end[rid] = (x, y)
+
+    def trails(self, at: float) -> Any:
+        """The trails' new pieces, once a second (None otherwise, or when nobody moved)."""
+        if at - self.trail_sent < 1.0 - 1e-9:
+            return None
+        self.trail_sent = at
+        from foxglove.messages import SceneEntity, SceneUpdate
+
+        pieces = []
+        for rid, points in self.trail_new.items():
+            if len(points) > 1:
+                self.pieces += 1
+                colour = INTRUDER_COLOUR if rid.startswith(INTRUDER) else (
+                    SCOUT_COLOUR if rid.startswith("scout") else RANGER_COLOUR)
+                pieces.append(SceneEntity(frame_id="world", id=f"trail/{rid}/{self.pieces}", timestamp=_stamp(at),
+                                          lines=[_line(points, _color(colour, 0.7), 0.04, strip=True)]))
+        self.trail_new = {}
+        return SceneUpdate(entities=pieces) if pieces else None
+
+
+class _Sensors:
+    """What the simulation's sensors give its drivers, recorded as they read it: the simulation's `ranges`,
+    `camera` and `brightness` (and `launch`, `jump`, `set_door`) are wrapped on that one instance."""
+
+    def __init__(self, recorder: Recorder) -> None:
+        self.r = recorder
+        self.sim: Any = None
+        self.last_scan: dict[str, float] = {}
+        self.saw: dict[str, bool] = {}  # robot -> did its last recorded camera frame see someone
+        self.fovs: set[str] = set()
+        self.flying: list[tuple[float, str, str, tuple[float, float]]] = []  # (t1, robot, kind, end), landings due
+
+    def tap(self, sim: Any) -> None:
+        self.sim = sim
+        for name in ("ranges", "camera", "brightness", "launch", "jump", "set_door"):
+            setattr(sim, name, functools.partial(getattr(self, name), getattr(sim, name)))
+
+    def ranges(self, read: Callable[..., list[float]], robot: str, n_beams: int, max_range: float,
+               fov: float = math.pi) -> list[float]:
+        out = read(robot, n_beams, max_range, fov)
+        at = self.sim.time
+        if at - self.last_scan.get(robot, -math.inf) >= SCAN_EVERY - 1e-9:
+            self.last_scan[robot] = at
+            self._scan(robot, at, out, max_range, fov)
+        return out
+
+    def _scan(self, robot: str, at: float, ranges: list[float], max_range: float, fov: float) -> None:
+        from foxglove.channels import LaserScanChannel
+        from foxglove.messages import LaserScan
+
+        channel = self.r.scans.get(robot)
+        if channel is None:
+            channel = self.r.scans[robot] = LaserScanChannel(SCAN + robot, context=self.r.context)
+        inf = math.inf  # a beam that hit nothing: +inf (REP 117), not a point at the laser's reach
+        half = fov / 2 if len(ranges) > 1 else 0.0
+        channel.log(LaserScan(timestamp=_stamp(at), frame_id=robot, pose=_pose(), start_angle=-half, end_angle=half,
+                              ranges=[d if d < max_range else inf for d in ranges]), log_time=_ns(at))
+
+    def camera(self, read: Callable[..., list[Any]], robot: str, fov: float, max_range: float,
+               min_light: float = 0.2) -> list[Any]:
+        seen = read(robot, fov, max_range, min_light)
+        at = self.sim.time
+        self._fov(robot, fov, max_range)
+        if seen or self.saw.get(robot, True):  # a frame with people, and the first without after them
+            self.saw[robot] = bool(seen)
+            people = [{"label": d.label, "bearing": d.bearing, "distance": d.distance, "light": d.light}
+                      for d in seen]
+            self.r.json(CAMERA, at, {"robot": robot, "at": at, "fov": fov, "max_range": max_range,
+                                     "detections": people})
+            if seen:
+                self._seen(robot, at, seen)
+        return seen
+
+    def _seen(self, robot: str, at: float, seen: list[Any]) -> None:
+        from foxglove.messages import Duration, SceneEntity, SceneUpdate
+
+        ends = [(d.distance * math.cos(d.bearing), d.distance * math.sin(d.bearing)) for d in seen]
+        line = _line([p for end in ends for p in ((0.0, 0.0), end)], _color("#ffc107"), 0.05)
+        self.r.seen.log(SceneUpdate(entities=[SceneEntity(
+            timestamp=_stamp(at), frame_id=robot, id=f"seen/{robot}", frame_locked=True, lines=[line],
+            lifetime=Duration(sec=0, nsec=int(SEEN_FOR * 1e9)))]), log_time=_ns(at))
+
+    def _fov(self, robot: str, fov: float, max_range: float) -> None:
+        """A camera's field of view, drawn once, locked to its robot's frame (as long as the view's reach, at most
+        3 m: a wedge as long as a 10 m camera's would cover the building)."""
+        if robot in self.fovs:
+            return
+        self.fovs.add(robot)
+        from foxglove.messages import SceneEntity
+
+        reach = min(max_range, 3.0)
+        arc = [(reach * math.cos(a), reach * math.sin(a)) for a in (-fov / 2 + fov * k / 8 for k in range(9))]
+        entity = SceneEntity(frame_id=robot, id=f"fov/{robot}", frame_locked=True,
+                             lines=[_line([(0.0, 0.0), *arc, (0.0, 0.0)], _color(SCOUT_COLOUR, 0.6), 0.02, True)])
+        self.r.update_world(self.sim.time, [(f"fov/{robot}", entity)])
+
+    def brightness(self, read: Callable[..., list[float]], robot: str, fov: float, n_regions: int,
+                   max_range: float = 10.0) -> list[float]:
+        out = read(robot, fov, n_regions, max_range)
+        at = self.sim.time
+        self.r.json(LIGHT, at, {"robot": robot, "at": at, "fov": fov, "regions": out})
+        return out
+
+    def launch(self, fly: Callable[..., Any], scout: str, heading: float, distance: float) -> Any:
+        return self._flight(fly(scout, heading, distance))
+
+    def jump(self, fly: Callable[..., Any], scout: str, dx: float) -> Any:
+        return self._flight(fly(scout, dx))
+
+    def _flight(self, f: Any) -> Any:
+        self.land(f.t0)  # the landings before it first: the channel's times never go back
+        self.r.json(FLIGHTS, f.t0, {"robot": f.robot, "kind": f.kind, "at": f.t0, "from": list(f.start),
+                                    "to": list(f.end), "lands_at": f.t1, "heading": f.heading, "blocked": f.blocked})
+        bisect.insort(self.flying, (f.t1, f.robot, f.kind, f.end))
+        return f
+
+    def land(self, at: float) -> None:
+        """The landings due by `at` (the simulation lands a flight in the step that reaches its end time)."""
+        while self.flying and self.flying[0][0] <= at + 1e-9:
+            t1, robot, kind, end = self.flying.pop(0)
+            self.r.json(FLIGHTS, max(t1, 0.0), {"robot": robot, "kind": "landing", "of": kind, "at": t1,
+                                                "to": list(end)})
+
+    def set_door(self, change: Callable[..., None], door: str, state: DoorState) -> None:
+        change(door, state)
+        d = next((d for d in self.sim.world.doors if d.id == door), None)
+        if d is not None:
+            self.r.update_world(self.sim.time, [_door(d.id, d.a, d.b, state)])
+
+
+class ActiveView:
+    """One mission's active configuration, kept from its records as they come: what `state_at` reads from every
+    record up to an instant (`drd.explain`: the active leaves, each running, waiting or suspended; what each
+    behavior holds; who waits behind whom), without reading them all again at each change."""
+
+    def __init__(self, mission: str) -> None:
+        self.mission = mission
+        self.name = ""  # the mission's name: its root state's
+        self.active: dict[str, float] = {}  # path -> since, in the order entered
+        self.below: dict[str, int] = {}  # path -> how many active paths are under it (0: a leaf)
+        self.suspended: set[str] = set()
+        self.waits: dict[str, dict[str, Any]] = {}
+        self.holds: dict[str, dict[str, str]] = {}  # path -> need -> unit (aggregates' parts too)
+        self.needs: dict[str, dict[str, str]] = {}  # the same without aggregates' parts (who blocks whom)
+        self.outcome: str | None = None
+        self.changed_at: float | None = None
+
+    def take(self, r: rec.Record) -> None:
+        """Apply one record; `changed_at` is its time when it changed the configuration."""
+        if isinstance(r, rec.Entered):
+            self._enter(r)
+        elif isinstance(r, rec.Exited):
+            self._exit(r.path)
+        elif isinstance(r, rec.Suspended):
+            self.suspended.add(r.path)
+        elif isinstance(r, rec.Resumed):
+            self.suspended.discard(r.path)
+        elif isinstance(r, rec.Waiting):
+            w = self.waits.setdefault(r.path, {"path": r.path, "since": round(r.at, 6), "needs": [],
+                                               "blocked_by": []})
+            w["needs"] = list(r.needs) or w["needs"]
+            w["blocked_by"] = list(r.blocked_by) or w["blocked_by"]
+        elif isinstance(r, rec.Granted):
+            self.waits.pop(r.path, None)
+            self.holds[r.path] = dict(r.resources)
+            self.needs[r.path] = {k: v for k, v in r.resources.items() if "." not in k}
+        elif isinstance(r, rec.Released):
+            gone = set(r.resources)
+            self.holds[r.path] = {k: v for k, v in self.holds.get(r.path, {}).items() if v not in gone}
+            self.needs[r.path] = {k: v for k, v in self.needs.get(r.path, {}).items() if v not in gone}
+        elif isinstance(r, rec.Finished):
+            self.outcome = r.outcome
+        else:
+            return
+        self.changed_at = r.at
+
+    def _enter(self, r: rec.Entered) -> None:
+        if not self.name:
+            self.name = r.path.split("/", 1)[0]
+        if r.path not in self.active:
+            for prefix in _prefixes(r.path):
+                self.below[prefix] = self.below.get(prefix, 0) + 1
+        self.active[r.path] = r.at
+
+    def _exit(self, path: str) -> None:
+        if self.active.pop(path, None) is not None:
+            for prefix in _prefixes(path):
+                self.below[prefix] -= 1
+        self.suspended.discard(path)
+        self.waits.pop(path, None)
+        self.holds.pop(path, None)
+        self.needs.pop(path, None)
+
+    def state(self, at: float) -> dict[str, Any]:
+        """The configuration now: as `state_at` gives a mission at `at` (`mission`, `id`, `outcome`, `active`,
+        `holds`, `waiting`), with `at`."""
+        def state(path: str) -> str:
+            if path in self.waits:
+                return "waiting"
+            frozen = any(path == s or path.startswith((s + "/", s + "[")) for s in self.suspended)
+            return "suspended" if frozen else "running"
+
+        active = [{"path": p, "since": round(t, 6), "state": state(p)} for p, t in self.active.items()
+                  if not self.below.get(p)]
+        waiting = [{**w, "blocked_by": [{"path": b, "holds": self.needs.get(b, {})} for b in w["blocked_by"]]}
+                   for w in self.waits.values()]
+        return {"mission": self.name, "id": self.mission, "at": at, "outcome": self.outcome, "active": active,
+                "holds": {p: held for p, held in self.holds.items() if held}, "waiting": waiting}
+
+
+def _prefixes(path: str) -> list[str]:
+    """The paths a path is under: `A/B[2]/C` is under `A`, `A/B` and `A/B[2]` (as `drd.explain` reads them: a path
+    `q` is under `p` when it starts with `p/` or `p[`)."""
+    return [path[:i] for i, c in enumerate(path) if c in "/[" and i > 0]
+
+
+#: The JSON channels: their schema's name and JSON schema (named, so a viewer lists `drd.Record`, not anonymous).
+_NUM, _STR = {"type": "number"}, {"type": "string"}
+JSON_SCHEMAS: dict[str, tuple[str, dict[str, Any]]] = {
+    RECORDS: ("drd.Record", {"type": "object", "required": ["kind", "at", "path", "mission"], "properties": {
+        "kind": _STR, "at": _NUM, "path": _STR, "mission": _STR}}),
+    RUNS: ("drd.Run", {"type": "object", "required": ["format", "mission", "records", "sim_time"], "properties": {
+        "format": _STR, "mission": _STR, "records": _STR, "sim_time": _NUM, "wall_time": _NUM}}),
+    ACTIVE: ("drd.Active", {"type": "object", "required": ["mission", "id", "at", "active", "holds", "waiting"],
+                            "properties": {"mission": _STR, "id": _STR, "at": _NUM, "outcome": {
+                                "type": ["string", "null"]}, "active": {"type": "array", "items": {
+                                    "type": "object", "properties": {"path": _STR, "since": _NUM, "state": _STR}}},
+                                "holds": {"type": "object"}, "waiting": {"type": "array"}}}),
+    CAMERA: ("drd.CameraFrame", {"type": "object", "required": ["robot", "at", "fov", "detections"], "properties": {
+        "robot": _STR, "at": _NUM, "fov": _NUM, "max_range": _NUM, "detections": {"type": "array", "items": {
+            "type": "object", "properties": {"label": _STR, "bearing": _NUM, "distance": _NUM, "light": _NUM}}}}}),
+    LIGHT: ("drd.Brightness", {"type": "object", "required": ["robot", "at", "fov", "regions"], "properties": {
+        "robot": _STR, "at": _NUM, "fov": _NUM, "regions": {"type": "array", "items": _NUM}}}),
+    FLIGHTS: ("drd.Flight", {"type": "object", "required": ["robot", "kind", "at", "to"], "properties": {
+        "robot": _STR, "kind": _STR, "at": _NUM, "from": {"type": "array"}, "to": {"type": "array"},
+        "lands_at": _NUM, "blocked": {"type": "boolean"}}}),
+    HOSTS: ("drd.Hosts", {"type": "object", "required": ["at", "hosts"], "properties": {
+        "at": _NUM, "hosts": {"type": "array"}, "events": {"type": "array"}}}),
+    LOADS: ("drd.LoadReport", {"type": "object", "required": ["host", "cpu", "memory"], "properties": {
+        "host": _STR, "cpu": _NUM, "memory": _NUM, "load1": _NUM, "instances": {"type": "integer"}}}),
+    PLACEMENTS: ("drd.Placements", {"type": "object", "required": ["at", "instances"], "properties": {
+        "at": _NUM, "instances": {"type": "array"}}}),
+}
+#: What older code imports (the first part's names).
+RECORD_SCHEMA, RUN_SCHEMA = JSON_SCHEMAS[RECORDS][1], JSON_SCHEMAS[RUNS][1]
 
 
 @dataclass
@@ -166,6 +654,8 @@ class Recording:
     records: dict[str, list[rec.Record]] = field(default_factory=dict)
     runs: list[dict[str, Any]] = field(default_factory=list)
     tracks: dict[str, list[tuple[float, float, float, float]]] = field(default_factory=dict)
+    #: A Scout in a magazine: from when, carried by which Ranger (its frame's parent is the Ranger's).
+    carried: dict[str, list[tuple[float, str]]] = field(default_factory=dict)
     world: bytes | None = None  # the world file the run used (`world.yaml` attachment), if it was a file
     cut: bool = False  # the file ends before the run did (a crash): what its complete chunks held
 
@@ -177,10 +667,18 @@ class Recording:
         return None if self.world is None else parse_world(load_yaml(self.world.decode("utf-8")), name)
 
     def pose(self, robot: str, at: float) -> tuple[float, float, float] | None:
-        """Where `robot` was at sim time `at` (its last recorded pose then), or None before its first."""
-        track = self.tracks.get(robot, [])
+        """Where `robot` was at sim time `at` (its last recorded pose then, its Ranger's while it was carried), or
+        None before its first."""
+        track, carried = self.tracks.get(robot, []), self.carried.get(robot, [])
         i = bisect.bisect_right([t for t, *_ in track], at + 1e-9)
+        j = bisect.bisect_right([t for t, _ in carried], at + 1e-9)
+        if j and (i == 0 or carried[j - 1][0] >= track[i - 1][0]):
+            return self.pose(carried[j - 1][1], at)
         return None if i == 0 else track[i - 1][1:]
+
+    def robots(self) -> list[str]:
+        """Every robot and intruder (`intruder/<id>`) the recording has a pose of."""
+        return sorted({*self.tracks, *self.carried})
 
 
 def read(path: Path) -> Recording:
@@ -228,6 +726,12 @@ def read(path: Path) -> Recording:
 
 def _take_poses(out: Recording, decoded: Any, log_time: int) -> None:
     for t in decoded.transforms:
+        if t.parent_frame_id != "world":  # a Scout in its Ranger's magazine
+            carried = out.carried.setdefault(t.child_frame_id, [])
+            if not carried or carried[-1][1] != t.parent_frame_id or (
+                    out.tracks.get(t.child_frame_id) and out.tracks[t.child_frame_id][-1][0] > carried[-1][0]):
+                carried.append((log_time / 1e9, t.parent_frame_id))
+            continue
         h = 2 * math.atan2(t.rotation.z, t.rotation.w)
         heading = math.atan2(math.sin(h), math.cos(h))  # in (-pi, pi]
         out.tracks.setdefault(t.child_frame_id, []).append(
@@ -261,7 +765,7 @@ def state_at(recording: Recording, at: float) -> dict[str, Any]:
                          "outcome": ended.outcome if ended else None, "active": ex.active_now(),
                          "holds": ex.holds_now(), "waiting": ex.waiting_now()})
     where = {rid: {"x": round(p[0], 3), "y": round(p[1], 3), "heading": round(p[2], 4)}
-             for rid in sorted(recording.tracks) if (p := recording.pose(rid, at)) is not None}
+             for rid in recording.robots() if (p := recording.pose(rid, at)) is not None}
     return {"at": at, "missions": missions, "robots": {k: v for k, v in where.items() if not k.startswith(INTRUDER)},
             "intruders": {k.removeprefix(INTRUDER): {"x": v["x"], "y": v["y"]} for k, v in where.items()
                           if k.startswith(INTRUDER)}}

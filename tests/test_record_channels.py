@@ -1,0 +1,207 @@
+"""What a recording holds besides the records (issue #13): the sensors as the drivers read them, launches and
+landings, the behavior tree's active configuration at each change, and where everyone ended; read back with the
+independent `mcap` reader (and Foxglove's protobuf decoder for its schemas), never with `drd.record`'s writer."""
+
+from __future__ import annotations
+
+import math
+from collections import Counter, defaultdict
+from pathlib import Path
+from typing import Any
+
+import orjson
+import pytest
+from mcap.reader import make_reader
+from mcap_protobuf.decoder import DecoderFactory
+
+from drd.dryrun import DryRun, run
+from drd.hosts import load_hosts
+from drd.record import Recorder, read, state_at
+from drd.sim.physics import Simulation
+from drd.sim.world import load_world
+from dsl import compile_file
+from dsl.catalog import Catalog
+from tests.conftest import ROOT, shared_examples
+from tests.runtime_support import Timed
+
+
+class Run:
+    """One dry-run with a recording, and what its simulation's sensors gave the drivers (seen from the class, under
+    the recorder's tap): `reads[kind]` lists (robot, sim time, args, result)."""
+
+    def __init__(self, path: Path, report: DryRun, sim: Simulation, reads: dict[str, list[tuple[Any, ...]]]) -> None:
+        self.path, self.report, self.sim, self.reads = path, report, sim, reads
+
+    def messages(self) -> list[tuple[str, str, int, Any]]:
+        """(topic, schema name, log time, decoded message) of every message, in file order."""
+        factory, decoders, out = DecoderFactory(), {}, []
+        with self.path.open("rb") as fh:
+            for schema, channel, message in make_reader(fh).iter_messages(log_time_order=False):
+                assert schema is not None, channel.topic
+                if channel.message_encoding == "json":
+                    decoded = orjson.loads(message.data)
+                else:
+                    decoder = decoders.setdefault(schema.id, factory.decoder_for(channel.message_encoding, schema))
+                    decoded = decoder(message.data)
+                out.append((channel.topic, schema.name, message.log_time, decoded))
+        return out
+
+
+def recorded_run(tmp: Path, chart_file: Path, catalog: Catalog, monkeypatch: pytest.MonkeyPatch,
+                 **options: Any) -> Run:
+    reads: dict[str, list[tuple[Any, ...]]] = defaultdict(list)
+    for name in ("ranges", "camera", "brightness"):
+        original = getattr(Simulation, name)
+
+        def spy(self: Simulation, robot: str, *args: Any, _original: Any = original, _name: str = name) -> Any:
+            result = _original(self, robot, *args)
+            reads[_name].append((robot, self.time, args, result))
+            return result
+
+        monkeypatch.setattr(Simulation, name, spy)
+    chart = compile_file(chart_file, catalog).statechart
+    assert chart is not None
+    sims: list[Simulation] = []
+    path = tmp / "run.mcap"
+    report = run(chart, load_hosts(ROOT / "hosts.yaml", catalog), load_world(ROOT / "worlds" / "corridor.yaml"),
+                 catalog, recorder=Recorder(path), progress=lambda sim, _ex: sims.append(sim), **options)
+    return Run(path, report, sims[0], reads)
+
+
+@pytest.fixture(scope="module")
+def corridor(tmp_path_factory: pytest.TempPathFactory, catalog: Catalog) -> Run:
+    with pytest.MonkeyPatch.context() as monkeypatch:
+        return recorded_run(tmp_path_factory.mktemp("corridor"), ROOT / "missions" / "corridor_surveillance.mission",
+                            catalog, monkeypatch)
+
+
+def test_the_channels_and_their_schemas(corridor: Run) -> None:
+    assert corridor.report.outcome == "success"
+    with corridor.path.open("rb") as fh:
+        summary = make_reader(fh).get_summary()
+    assert summary is not None and summary.statistics is not None
+    schema = {c.topic: summary.schemas[c.schema_id].name for c in summary.channels.values()}
+    assert schema == {
+        "/drd/records": "drd.Record", "/drd/runs": "drd.Run", "/drd/active": "drd.Active",
+        "/drd/camera": "drd.CameraFrame", "/drd/light": "drd.Brightness", "/drd/flights": "drd.Flight",
+        "/drd/tf": "foxglove.FrameTransforms", "/drd/world": "foxglove.SceneUpdate",
+        "/drd/trails": "foxglove.SceneUpdate", "/drd/seen": "foxglove.SceneUpdate", "/drd/log": "foxglove.Log",
+        "/drd/scan/ranger1": "foxglove.LaserScan"}  # the only laser of hosts.yaml
+    counts = Counter(topic for topic, *_ in corridor.messages())
+    assert {summary.channels[c].topic: n for c, n in summary.statistics.channel_message_counts.items() if n} == counts
+    assert counts["/drd/records"] == len(corridor.report.records)
+    assert counts["/drd/log"] == len(corridor.report.logs())
+    assert counts["/drd/runs"] == 1  # and no cluster's channels (`/drd/hosts`...) in a dry-run
+
+
+def test_message_times_are_sim_time_and_never_go_back_on_a_channel(corridor: Run) -> None:
+    last: dict[str, int] = {}
+    for topic, _schema, log_time, _msg in corridor.messages():
+        assert log_time >= last.get(topic, 0), topic
+        last[topic] = log_time
+    assert max(last.values()) == round(corridor.report.sim_time * 1e9)
+
+
+def test_scans_are_what_the_laser_gave_its_driver_once_per_cycle(corridor: Run) -> None:
+    read: dict[tuple[str, int], tuple[Any, ...]] = {}
+    for robot, at, args, result in corridor.reads["ranges"]:
+        read.setdefault((robot, round(at * 1e9)), (args, result))
+    scans = [(t, m) for topic, _s, t, m in corridor.messages() if topic == "/drd/scan/ranger1"]
+    assert len(scans) == len(read)  # the laser was read in that many control cycles, once each
+    for t, scan in scans:
+        (beams, max_range, fov), ranges = read[("ranger1", t)]
+        assert scan.frame_id == "ranger1" and scan.timestamp.ToNanoseconds() == t
+        assert len(scan.ranges) == beams and scan.start_angle == pytest.approx(-fov / 2)
+        assert scan.end_angle == pytest.approx(fov / 2)
+        assert [max_range if math.isinf(d) else d for d in scan.ranges] == ranges  # nothing hit: +inf
+
+
+def test_camera_frames_light_and_sightings_are_what_the_cameras_gave(corridor: Run) -> None:
+    messages = corridor.messages()
+    frames = [m for topic, _s, _t, m in messages if topic == "/drd/camera"]
+    with_people = {(m["robot"], m["at"]): m["detections"] for m in frames if m["detections"]}
+    seen = {(robot, at): [{"label": d.label, "bearing": d.bearing, "distance": d.distance, "light": d.light}
+                          for d in result] for robot, at, _args, result in corridor.reads["camera"] if result}
+    assert with_people == seen and len(seen) > 20  # every frame with someone in it, exactly
+    sightings = [m for topic, _s, _t, m in messages if topic == "/drd/seen"]
+    assert len(sightings) == len(seen)
+    assert {e.frame_id for m in sightings for e in m.entities} <= {f"scout{i}" for i in range(1, 7)}
+    light = [(m["robot"], m["at"], m["regions"]) for topic, _s, _t, m in messages if topic == "/drd/light"]
+    assert light == [(robot, at, result) for robot, at, _args, result in corridor.reads["brightness"]]
+    fovs = [e for topic, _s, _t, m in messages if topic == "/drd/world" for e in m.entities if e.id.startswith("fov/")]
+    assert sorted(e.frame_id for e in fovs) == sorted({robot for robot, *_ in corridor.reads["camera"]})
+
+
+def test_each_launch_and_its_landing(corridor: Run) -> None:
+    flights = [m for topic, _s, _t, m in corridor.messages() if topic == "/drd/flights"]
+    launches = [f for f in flights if f["kind"] == "launch"]
+    assert sorted(f["robot"] for f in launches) == sorted(s["scout"] for s in corridor.report.scouts)
+    landings = {(f["robot"], f["at"]): f["to"] for f in flights if f["kind"] == "landing"}
+    jumps = [f for f in flights if f["kind"] == "jump"]
+    assert len(landings) == len(launches) + len(jumps)
+    assert all(landings[(f["robot"], f["lands_at"])] == f["to"] for f in launches + jumps)
+
+
+def test_the_final_poses_are_the_dry_runs(corridor: Run) -> None:
+    last: dict[str, tuple[str, float, float, float]] = {}
+    for topic, _s, _t, m in corridor.messages():
+        if topic == "/drd/tf":
+            for tf in m.transforms:
+                last[tf.child_frame_id] = (tf.parent_frame_id, tf.translation.x, tf.translation.y,
+                                           2 * math.atan2(tf.rotation.z, tf.rotation.w))
+    sim = corridor.sim
+    for rid in sim.robots:
+        pose = sim.pose(rid)
+        parent, x, y, h = last[rid]
+        assert parent == "world" and (x, y) == (pose.x, pose.y), rid
+        assert math.cos(h - pose.heading) == pytest.approx(1.0), rid
+    for iid, (x, y) in sim.intruders().items():
+        assert last[f"intruder/{iid}"][1:3] == (x, y)
+    scouts = {s["scout"]: (s["x"], s["y"]) for s in corridor.report.scouts}
+    assert {k: (round(v[1], 2), round(v[2], 2)) for k, v in last.items() if k in scouts} == scouts
+
+
+def test_a_scout_in_its_magazine_is_its_rangers_frame(corridor: Run) -> None:
+    recording = read(corridor.path)
+    launched = {s["scout"]: s["at"] for s in corridor.report.scouts}
+    for scout, at in launched.items():
+        assert recording.carried[scout][0] == (pytest.approx(0.1), "ranger1")
+        assert recording.pose(scout, at - 0.2) == recording.pose("ranger1", at - 0.2)  # carried there
+        assert recording.tracks[scout][0][0] >= at - 1e-6  # its own track begins with its flight
+
+
+def active_messages(r: Run) -> list[dict[str, Any]]:
+    return [m for topic, _s, _t, m in r.messages() if topic == "/drd/active"]
+
+
+#: The records that change the active configuration.
+CHANGES = {"entered", "exited", "suspended", "resumed", "waiting", "granted", "released", "finished"}
+
+
+def assert_active_is_state_at(r: Run) -> None:
+    recording = read(r.path)
+    messages = active_messages(r)
+    changes = sorted({round(x.at, 9) for x in r.report.records if x.kind in CHANGES})
+    assert [round(m["at"], 9) for m in messages] == changes  # one message at each instant it changed
+    for m in messages:
+        [expected] = state_at(recording, m["at"])["missions"]
+        assert {k: m[k] for k in ("mission", "id", "outcome", "active", "holds", "waiting")} == expected, m["at"]
+
+
+def test_the_active_configuration_at_each_change_is_what_replay_at_says(corridor: Run) -> None:
+    assert_active_is_state_at(corridor)
+    last = active_messages(corridor)[-1]
+    assert last["outcome"] == "success" and last["active"] == [] and last["holds"] == {}
+
+
+def test_the_active_configuration_shows_who_waits_and_who_is_suspended(tmp_path: Path, catalog: Catalog,
+                                                                      monkeypatch: pytest.MonkeyPatch) -> None:
+    """Fig. 8: three behaviors want one camera, two share it by slices, the third waits behind them."""
+    shared = recorded_run(tmp_path, shared_examples() / "shared_camera.mission", catalog, monkeypatch,
+                          registry={"Observe": Timed})
+    assert shared.report.outcome == "success"
+    assert_active_is_state_at(shared)
+    states = Counter(a["state"] for m in active_messages(shared) for a in m["active"])
+    assert states["waiting"] and states["suspended"] and states["running"]
+    blocked = [w for m in active_messages(shared) for w in m["waiting"] if w["blocked_by"]]
+    assert any(b["holds"] == {"cam": "ranger1.camera"} for w in blocked for b in w["blocked_by"])
