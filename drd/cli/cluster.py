@@ -548,6 +548,11 @@ def progress_line(sim_time: float, active: list[str], width: int = 80) -> Text:
     return Text.assemble(("sim ", "dim"), f"{sim_time:7.1f} s  ", ("active ", "dim"), names)
 
 
+#: Seconds a client waits, once it lost the controller, for the mission to be there again (a restarted controller
+#: resumes it once the hosts are back: up to two leases and a few seconds after its start).
+RESUME_PATIENCE = 60.0
+
+
 class _RecordWatch:
     """The records of the cluster's missions, from the moment `missionctl run` subscribed; then a report."""
 
@@ -646,10 +651,12 @@ class _RecordWatch:
                                         " controller started again resumes the mission from its journal)"))
             return []
         if self.away_since is not None:
-            away, self.away_since = time.monotonic() - self.away_since, None
-            if not any(m.get("id") == mission for m in missions):
+            if not any(m.get("id") == mission for m in missions):  # back, but not resumed yet (it waits for the
+                if time.monotonic() - self.away_since < RESUME_PATIENCE:  # hosts first): keep waiting a while
+                    return missions
                 fail(f"mission {mission}: the controller came back without it (it kept no journal of it): see"
                      " `missionctl status`", code=1)
+            away, self.away_since = time.monotonic() - self.away_since, None
             err.print(Text.assemble(("▶ ", "bold green"), f"the controller is back after {away:.1f} s: mission"
                                     f" {mission} resumed"))
             self._catch_up(mission)
