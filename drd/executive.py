@@ -256,7 +256,8 @@ class Executive:
                 self.stop(cmd.mission)
                 return self.status()
             case "records" if cmd.mission:
-                return MissionRecords([r for r in self.kept.get(cmd.mission, ()) if r.seq > cmd.after])
+                kept = list(self.kept.get(cmd.mission, ()))  # one copy: the loop may append meanwhile
+                return MissionRecords([r for r in kept if r.seq > cmd.after])
             case "emit" if cmd.event:
                 for mid in [cmd.mission] if cmd.mission else list(self.missions):
                     self.missions[mid].emit(cmd.event, "operator", **(cmd.fields or {}))

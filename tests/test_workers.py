@@ -21,6 +21,7 @@ from typing import Any
 import psutil
 import pytest
 
+from drd.cluster.gates import GateUpdate
 from drd.cluster.remote import ComponentBatch, ComponentCall, ComponentReply
 from drd.daemon.creator import Creator, CreatorError
 from drd.daemon.workers import Tune, WorkerPool
@@ -446,3 +447,20 @@ def test_an_action_is_answered_a_setpoint_is_not() -> None:
     foot, wheels = spec_of(drivers.robots["scout1"]["foot"]), spec_of(drivers.robots["scout1"]["wheels"])
     assert (foot.setpoints, foot.actions) == (frozenset(), {"jump"})
     assert (wheels.setpoints, wheels.actions, wheels.stop) == ({"set_velocity", "stop"}, frozenset(), "stop")
+
+
+def test_a_host_refuses_the_calls_of_a_controller_older_than_one_it_heard(creator: Creator) -> None:
+    """Issue #16: a controller frozen while another took over must not act when it wakes: each call carries the
+    start time of its controller, and a host refuses one older than the newest it has heard."""
+    newer, older = 2000.0, 1000.0
+    grant = [["grant", "ranger1.drive", f"{MISSION}/M/A", 1, 0.0]]
+    assert not start(creator, "M/A", term=newer, gates=grant).error
+    refused = start(creator, "M/B", term=older)
+    assert "refuses a call from an older controller" in refused.error, refused
+    assert "M/B" not in {path for path, _ in creator.names()}
+    stolen = GateUpdate([["grant", "ranger1.drive", "Old-1/M/X", 9, 1.0]], term=older)
+    assert creator.update_gates(stolen).records == []
+    gate = creator._gates.get("ranger1.drive")
+    assert gate is not None and list(gate.holders) == [f"{MISSION}/M/A"], "the old controller's grant was ignored"
+    again = creator.handle(ComponentCall("step", MISSION, "M/A", now=1.0, term=newer))
+    assert not again.error, again  # the current controller goes on

@@ -32,7 +32,6 @@ from drd.cli.common import (
     err,
     fail,
     fail_all,
-    open_recorder,
     open_trace,
     out,
     print_json,
@@ -338,6 +337,15 @@ def query(text: str = typer.Argument(..., metavar="QUERY", show_default=False,
     return OK
 
 
+_RECORD_OPTION = typer.Option(None, "--record", show_default=False,
+                              help="Record the run as an MCAP file: the mission's records and active states, the"
+                                   " hosts' load and liveliness, placements, the robots' poses (`missionctl replay`,"
+                                   " docs/recording.md).")
+_FOXGLOVE_OPTION = typer.Option(None, "--foxglove", show_default=False, metavar="[HOST:PORT]",
+                                help="Serve the run live to Foxglove (its WebSocket protocol), the channels of"
+                                     " --record, on HOST:PORT only; `--foxglove` alone: 127.0.0.1:8765.")
+
+
 def run(mission: Path = typer.Argument(..., help="The mission file.", show_default=False),
         config: Path = ConfigOption, connect: list[str] = ConnectOption,
         world: str = typer.Option("", "--world", "-w", show_default=False,
@@ -354,8 +362,7 @@ def run(mission: Path = typer.Argument(..., help="The mission file.", show_defau
         trace: Path | None = typer.Option(None, "--trace", show_default=False,
                                    help="Write every record of the mission as JSON lines to this file"
                                         " (docs/trace.md)."),
-        record: Path | None = typer.Option(None, "--record", show_default=False,
-                                    help="Record the mission's records as an MCAP file (`missionctl replay`)."),
+        record: Path | None = _RECORD_OPTION, foxglove: str | None = _FOXGLOVE_OPTION,
         detach: bool = typer.Option(False, "--detach", "-d", help="Print the mission id and return at once."),
         as_json: bool = typer.Option(False, "--json", help="Print the report as JSON."),
         timeout: float = TimeoutOption) -> int:
@@ -371,10 +378,7 @@ def run(mission: Path = typer.Argument(..., help="The mission file.", show_defau
         params = parse_assignments(param)
     except ParamError as e:
         fail(str(e))
-    if (trace is not None or record is not None) and detach:
-        fail(f"{'--trace' if trace is not None else '--record'} needs the records as they come: it cannot be used "
-             "with --detach")
-    trace_out, recorder = open_trace(trace), open_recorder(record)
+    trace_out, recorder = _outputs(trace, record, foxglove, detach)
     wait = max(timeout, 15.0)
     request = RunMission(source, str(mission), world, speed, until, seed, params or None, priority,
                          give_up_at=time.time() + wait - 0.5)  # the reply must still reach us after it
@@ -400,6 +404,15 @@ def run(mission: Path = typer.Argument(..., help="The mission file.", show_defau
     return OK if report.outcome == "success" else MISSION_FAILED
 
 
+def _outputs(trace: Path | None, record: Path | None, foxglove: str | None,
+             detach: bool) -> tuple[IO[str] | None, Recorder | None]:
+    """The `--trace` file and the recorder of `--record` and `--foxglove`, which need the records as they come."""
+    if (trace is not None or record is not None or foxglove is not None) and detach:
+        given = "--trace" if trace is not None else "--record" if record is not None else "--foxglove"
+        fail(f"{given} needs the records as they come: it cannot be used with --detach")
+    return open_trace(trace), live_recorder(record, foxglove)
+
+
 def _run_and_follow(client: ClusterClient, watch: _RecordWatch, request: Any, wait: float,
                     detach: bool) -> DryRun | None:
     """Submit the mission, then follow it to its end (None when detached: its id is printed). Ctrl-C before the
@@ -422,6 +435,7 @@ def _run_and_follow(client: ClusterClient, watch: _RecordWatch, request: Any, wa
             if detach:
                 out.print(reply.mission)
                 return None
+            watch.started(reply)
             err.print(Text.assemble(("▶ ", "bold green"), f"mission {reply.mission} started on the cluster (world "
                                     f"{reply.world}, {reply.speed:g}x real time, priority {reply.priority})"))
         if interrupted:
@@ -570,16 +584,26 @@ class _RecordWatch:
         self.queue: queue.Queue[object] = queue.Queue()
         self.seen: dict[str, tuple[DryRun, dict[str, None]]] = {}  # mission -> (its report so far, active paths)
         self.away_since: float | None = None  # when the controller stopped answering (None: it answers)
+        self.behind = False  # the controller came back: the records it sent before we heard it are still to fetch
         self.seqs: set[int] = set()  # the numbers of the records followed (a record caught up twice counts once)
         self.last_seq = 0
+        self.view: _ClusterView | None = None
 
         def on_record(sample: Any) -> None:
             if isinstance(sample.payload, MissionRecord):
                 self.queue.put(sample.payload)
         self.sub = client.bus.subscribe(f"drd/{client.cluster}/mission/*/record", on_record)
 
+    def started(self, reply: Any) -> None:
+        """The controller started the mission (`RunReply`): what the client sees of the cluster goes into the
+        recording from now on (`_ClusterView`)."""
+        if self.recorder is not None and self.view is None:
+            self.view = _ClusterView(self.client, self.recorder, reply)
+
     def close(self) -> None:
         self.sub.close()
+        if self.view is not None:
+            self.view.close()
         if self.recorder is not None and self.recorder.closed is False and not self.seen:
             self.recorder.close()  # nothing followed (refused, or an error): an empty but valid file
 
@@ -659,12 +683,15 @@ class _RecordWatch:
             away, self.away_since = time.monotonic() - self.away_since, None
             err.print(Text.assemble(("▶ ", "bold green"), f"the controller is back after {away:.1f} s: mission"
                                     f" {mission} resumed"))
-            self._catch_up(mission)
+            self.behind = True
+        if self.behind:  # until the executive answered: it may be busy with the resumed mission's first cycles
+            self.behind = not self._catch_up(mission)
         return missions
 
-    def _catch_up(self, mission: str) -> None:
+    def _catch_up(self, mission: str) -> bool:
         """The records of `mission` sent while this client could not hear the controller (it resumed the mission
-        before this session found it again), from the executive's own copy; duplicates are dropped by `follow`."""
+        before this session found it again), from the executive's own copy; duplicates are dropped by `follow`.
+        Whether the executive answered."""
         from drd.errors import BusFailure
         from drd.executive_messages import MissionCommand, MissionRecords
 
@@ -673,10 +700,11 @@ class _RecordWatch:
                                          MissionCommand("records", mission, after=self.last_seq),
                                          timeout=self.client.timeout)
         except BusFailure:
-            return  # the live records go on; the next return of the controller tries again
+            return False  # the live records go on; the next poll asks again
         if isinstance(reply, MissionRecords):
             for r in reply.records:
                 self.queue.put(r)
+        return True
 
     def _take(self, msg: Any, result: Any, base: float) -> Any:
         """One record of the followed mission: into its report (and the trace file); the record, or None."""
@@ -695,6 +723,161 @@ class _RecordWatch:
             facts(result, r)
             result.sim_time = max(result.sim_time, r.at)
         return r
+
+
+def live_recorder(record: Path | None, foxglove: str | None) -> Recorder | None:
+    """The recorder of `--record FILE` and `--foxglove [HOST:PORT]` (None when neither is asked), or a clear exit."""
+    if record is None and foxglove is None:
+        return None
+    from drd.record import Recorder, RecordingError
+
+    try:
+        return Recorder(record, serve=None if foxglove is None else live_address(foxglove))
+    except RecordingError as e:
+        fail(str(e))
+
+
+def live_address(text: str) -> tuple[str, int]:
+    """`HOST:PORT`, `:PORT` or `PORT` (the host then loopback's 127.0.0.1), or a clear exit."""
+    from drd.record import LIVE_DEFAULT
+
+    host, _, port = text.rpartition(":") if ":" in text else ("", "", text)
+    host = host.strip("[]") or LIVE_DEFAULT[0]
+    if not port.isdigit() or not 0 <= int(port) <= 65535:
+        fail(f"--foxglove {text!r}: expected HOST:PORT (such as 127.0.0.1:8765) or a port")
+    return host, int(port)
+
+
+class _ClusterView:
+    """`run --record`/`--foxglove`: the cluster as this client sees it, into the recording (`drd.record`): each
+    host's load reports as they come (`/drd/hosts/load`); asked every `every` s in a thread of its own, the hosts
+    (up or down) and where each component instance runs, when they change (`/drd/hosts`, `/drd/placements`), and
+    the robots' poses from the simulator (`/drd/tf`; a Scout in a magazine as its Ranger's frame). Times are the
+    mission's (the recorder's latest record time; the simulator's time less its offset for the poses)."""
+
+    #: Seconds (wall) between two requests for the poses, and between two for the hosts and placements.
+    every, hosts_every = 0.2, 1.0
+
+    def __init__(self, client: ClusterClient, recorder: Recorder, reply: Any) -> None:
+        import threading
+
+        from drd.bus.messages import LoadReport
+
+        self.client, self.recorder, self.base = client, recorder, float(reply.base)
+        self.said: dict[str, Any] = {}  # what was last written on each channel (only changes are written)
+        self.world = self._world(str(reply.world))
+        self.offset: float | None = None  # mission time = simulator time + offset (None: not known yet)
+        self.refused = False  # the simulator does not answer this user: no poses
+
+        def on_load(sample: Any) -> None:
+            if isinstance(sample.payload, LoadReport):
+                recorder.json("/drd/hosts/load", recorder.now, asdict(sample.payload))
+
+        self.sub = client.bus.subscribe(client.keys.loads, on_load)
+        self.stop = threading.Event()
+        self.thread = threading.Thread(target=self._loop, name="drd-record-cluster", daemon=True)
+        self.thread.start()
+
+    def _world(self, name: str) -> Any:
+        """The mission's world as this installation has it (for the scene, and the robots to ask about)."""
+        from drd.sim.service import world_file
+        from drd.sim.world import WorldError, load_world
+
+        try:
+            world = load_world(world_file(name))
+        except (ValueError, WorldError, OSError):
+            return None
+        self.recorder.scene(world)
+        return world
+
+    def close(self) -> None:
+        self.stop.set()
+        self.thread.join(timeout=5.0)
+        self.sub.close()
+
+    def _loop(self) -> None:
+        from drd.errors import BusFailure
+
+        next_hosts = 0.0
+        while not self.stop.is_set():
+            steps = [self._poses]
+            if time.monotonic() >= next_hosts:
+                next_hosts = time.monotonic() + self.hosts_every
+                steps += [self._hosts, self._placements]
+            for step in steps:
+                try:
+                    step()
+                except (BusFailure, ValueError, KeyError, TypeError):
+                    pass  # a host or the simulator that does not answer now: asked again next time
+            self.recorder.flush(self.recorder.now)
+            self.stop.wait(self.every)
+
+    def _changed(self, topic: str, value: Any, extra: dict[str, Any] | None = None) -> None:
+        """Write `value` (and `extra`) on `topic` if `value` is not what was written last."""
+        if self.said.get(topic) != value:
+            self.said[topic] = value
+            self.recorder.json(topic, self.recorder.now, {"at": self.recorder.now, **value, **(extra or {})})
+
+    def _hosts(self) -> None:
+        """Each host up or down (since when, why), its roles, instances, robots and devices; and the cluster's
+        events not yet written (a host that came, went, or disagrees)."""
+        reply = self.client.hosts(events=20)
+        hosts = [{**{k: v for k, v in asdict(h).items() if k in ("name", "state", "reason", "roles", "instances",
+                                                                "robots", "devices")},
+                  "since": None if h.since is None else round(h.since, 1)} for h in reply.hosts]
+        seen = self.said.setdefault("events", set())
+        events = [asdict(e) for e in reply.events if (e.at, e.kind, e.host) not in seen]
+        seen.update((e["at"], e["kind"], e["host"]) for e in events)
+        if events:  # something happened: written even if the hosts look the same again
+            self.said.pop("/drd/hosts", None)
+        self._changed("/drd/hosts", {"hosts": hosts}, {"answered_by": reply.answered_by, "events": events})
+
+    def _placements(self) -> None:
+        instances = sorted((asdict(i) for i in self.client.components().instances),
+                           key=lambda i: (str(i["mission"]), str(i["name"])))
+        self._changed("/drd/placements", {"instances": [{k: i[k] for k in ("name", "component", "host", "mission",
+                                                                         "state")} for i in instances]})
+
+    def _poses(self) -> None:
+        """Every robot's pose (and who is in which magazine) from the simulator, in one request."""
+        from drd.bus import RemoteError
+        from drd.sim.service import SimReply, SimRequest, key
+
+        if self.world is None or self.refused:
+            return
+        robots, rangers = [*(r.id for r in self.world.rangers), *self.world.scout_ids], [r.id for r in
+                                                                                      self.world.rangers]
+        calls = [["pose", [rid]] for rid in robots] + [["magazine", [rid]] for rid in rangers]
+        try:
+            reply = self.client.bus.call(key(self.client.cluster), SimRequest("multi", args=calls),
+                                         timeout=self.client.timeout)
+        except RemoteError:  # a closed cluster: only daemons may ask the simulator (docs/security.md)
+            self.refused = True
+            return
+        if not isinstance(reply, SimReply) or self.world is None:
+            return
+        if self.offset is None:
+            self.offset = self._calibrate(reply.time)
+        values = [v for v, _error in reply.value]
+        poses = {rid: (float(v["x"]), float(v["y"]), float(v["heading"])) for rid, v in zip(robots, values,
+                                                                                             strict=False)
+                 if isinstance(v, dict)}
+        carried = {scout: ranger for ranger, v in zip(rangers, values[len(robots):], strict=False)
+                   for scout in (v or [])}
+        self.recorder.transforms(reply.time + self.offset, {k: v for k, v in poses.items() if k not in carried},
+                                 carried)
+
+    def _calibrate(self, sim_time: float) -> float:
+        """The mission's time less the simulator's (the executive's clock is the simulator's plus an offset, and a
+        mission's records count from its start): the executive's time asked right after the simulator's, rounded
+        to the control period (both count in whole periods)."""
+        from drd.executive_messages import MissionCommand, MissionStatus
+
+        status = self.client.bus.call(self.client.keys.executive_status, MissionCommand("status"),
+                                      timeout=self.client.timeout)
+        if not isinstance(status, MissionStatus):
+            raise ValueError("the executive did not say its time")
+        return round((status.time - self.base - sim_time) / 0.1) * 0.1
 
 
 def _record(msg: Any, rec: Any, base: float = 0.0) -> Any:

@@ -24,7 +24,7 @@ from drd.runtime.constraints import Breach
 Seen = Callable[[str, Mapping[str, Any]], None]
 
 
-@message("drd.gate.update", 1)
+@message("drd.gate.update", 2)
 class GateUpdate(Message):
     """Gate operations for one host, in order: `["grant", device, holder, epoch, at]`,
     `["clear", device, holder, at, reason]`, `["unbind", device, issuer, at, reason]` (holders and issuers are
@@ -33,6 +33,7 @@ class GateUpdate(Message):
     ops: list[list[Any]]
     world: str = ""  # the world the devices' drivers run in, and its reset count (as `ComponentCall`)
     generation: int = 0
+    term: float = 0.0  # the controller's (as `ComponentCall`)
 
 
 @message("drd.gate.update-reply", 1)

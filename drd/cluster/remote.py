@@ -45,7 +45,7 @@ from drd.runtime.constraints import Breach
 from drd.runtime.records import Record, plain
 
 
-@message("drd.component.call", 3)
+@message("drd.component.call", 4)
 class ComponentCall(Message):
     """One lifecycle call for the instance `path` of mission `mission` (see the module docstring).
 
@@ -73,6 +73,8 @@ class ComponentCall(Message):
     shared_ids: dict[str, str] | None = None
     gates: list[list[Any]] | None = None
     generation: int = 0  # the world's reset count: a new one means new drivers on the device's host
+    term: float = 0.0  # when the calling controller started: a host refuses calls of a controller older than one
+    #                    it has heard (one revived after another took over must not act)
 
 
 @message("drd.component.reply", 2)
@@ -184,7 +186,7 @@ class ComponentRouter:
                  place: Callable[[str, Mapping[str, Any], frozenset[str]], str] | None = None,
                  gates: RemoteGates | None = None,
                  records: Callable[[str, Record | Breach], None] = lambda mission, record: None,
-                 cycle: SimCycle | None = None, generation: int = 0):
+                 cycle: SimCycle | None = None, generation: int = 0, term: float = 0.0):
         self.bus = bus
         self.cluster = cluster
         self.resource_hosts = dict(resource_hosts)
@@ -203,6 +205,7 @@ class ComponentRouter:
         self.gone: set[str] = set()
         self.cycle = cycle if cycle is not None else SimCycle()
         self.generation = generation
+        self.term = term
         self.stats = RouterStats()
         self.batches = RouterStats()  # one per host per cycle when nothing interrupts the cycle
         self._ready: dict[int, tuple[float, ComponentReply]] = {}  # id(component) -> (now, its step's reply)
@@ -561,6 +564,7 @@ class RemoteComponent(Component):
         inputs = {k: v for k, v in ctx.inputs.items() if k not in shared}
         ids = {k: str(id(v)) for k, v in shared.items() if isinstance(v, dict)}
         return ComponentCall(op, router.mission, ctx.path, self.name, router.world, generation=router.generation,
+                             term=router.term,
                              epochs=self._epochs(), sim_time=router.sim_time, sim_version=router.sim_version,
                              shared=plain(shared) if shared else None,
                              inputs=plain(inputs) if inputs else None,

@@ -107,6 +107,9 @@ def resources_reply(snapshot: Mapping[str, Any], cluster: str, answered_by: str,
 
 #: Seconds a query waits for the executive's lock; then a read gets the last answer given, a command a refusal.
 BUSY_WAIT = 0.5
+#: Executive commands answered without its lock: `records` copies the deque of a mission's latest records, which
+#: the mission loop only appends to (a client catching up must not depend on the loop's pauses).
+LOCK_FREE = frozenset({"records"})
 
 
 class SerializedBus(Bus):
@@ -147,6 +150,8 @@ class SerializedBus(Bus):
                 return query.error(reason)
             if not is_concrete(query.key):  # the executive answers only what is addressed to it (drd.daemon.acl)
                 return query.error(f"ask {key_expr} by its exact key, not with {query.key}")
+            if getattr(query.payload, "op", "") in LOCK_FREE:  # reads only what the loop appends: no lock needed
+                return handler(query)
             if not self._lock.acquire(timeout=self.busy_wait):
                 return self._busy(key_expr, query)
             try:

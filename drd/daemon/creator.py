@@ -163,6 +163,7 @@ class Creator:
         self.catalog = catalog
         self.instances: dict[str, Instance] = {}  # by `<mission>/<path>`
         self.calls = 0
+        self.term = 0.0  # the start time of the newest controller heard (`_stale`)
         self._now = 0.0  # the controller's time of the call being served (the gates' records carry it)
         self.arbiter = CycleArbiter(lambda: self._now, self._setpoint_failed)
         self._sim_service = sim_service  # this host's own SimulationService (drd.sim.service), if it has one
@@ -236,6 +237,9 @@ class Creator:
 
     def handle(self, call: ComponentCall) -> ComponentReply:
         with self._lock:
+            stale = self._stale(call.term)
+            if stale:
+                return ComponentReply(error=stale)
             self._now = call.now
             if call.op == "retire":
                 self._apply_gates(call.gates, call.world, call.generation)
@@ -258,6 +262,8 @@ class Creator:
     def update_gates(self, update: GateUpdate) -> GateUpdateReply:
         """Apply gate operations from the controller (grants, ends of grants, unbindings); the halts they caused."""
         with self._lock:
+            if self._stale(update.term):
+                return GateUpdateReply([])
             self._apply_gates(update.ops, update.world, update.generation)
             self._flush_sim()
             return GateUpdateReply(self._take_records() or [])
@@ -274,6 +280,9 @@ class Creator:
         latest: dict[str, Any] = {}  # shared dict id on the controller -> its value after the last step
         with self._lock:
             first = batch.calls[0]
+            stale = self._stale(first.term)
+            if stale:
+                return ComponentBatchReply([ComponentReply(error=stale)])
             self._now = first.now
             self._apply_gates(batch.gates, first.world, first.generation)
             owners: dict[str, int] = {}
@@ -345,6 +354,17 @@ class Creator:
         sim.owner = ""
         refused += [(key, f"component raised HardwareError: {error}") for key, error in sim.flush()]
         return refused
+
+    def _stale(self, term: float) -> str:
+        """Why a call of the controller that started at `term` is refused ("" if it is not): a controller older
+        than one already heard (a frozen one that woke after another took over) must not act here."""
+        if term < self.term:
+            log.warning("creator %s: refused a call from an older controller (started %.3f, the current one %.3f)",
+                        self.host, term, self.term)
+            return (f"{self.host} refuses a call from an older controller (started at {term:.3f}; a controller that"
+                    f" started at {self.term:.3f} acts now)")
+        self.term = term
+        return ""
 
     # -- the gates ------------------------------------------------------------------------------------
 

@@ -154,6 +154,7 @@ class MissionRunner:
         self._recent: list[tuple[float, str, str]] = []  # (when, host, component) of placements not yet reported
         self.resource_hosts = {r.id: r.host for r in cluster.resources() if r.host}
         self.patience = max(CALL_TIMEOUT, cluster.lease)  # how long a call waits for a host that does not answer
+        self.term = time.time()  # this controller's term: hosts refuse the calls of an older one (`Creator`)
         self.simulator = next((h.name for h in cluster.hosts if Role.SIMULATOR in h.roles), None)
         # the devices' gates are on their hosts: every mission's grants reach them through these
         self.gates = RemoteGates({u.id: u.host for u in cluster.resources() if u.host and type(u).__name__ == "Unit"})
@@ -329,7 +330,8 @@ class MissionRunner:
                                  active=functools.partial(_active, executive, mid), timeout=self.patience,
                                  dead=self.host_down, catalog=self.catalog,
                                  place=self.place if self.host_views else None, gates=self.gates,
-                                 records=executive.record, cycle=world.cycle, generation=world.generation)
+                                 records=executive.record, cycle=world.cycle, generation=world.generation,
+                                 term=self.term)
         world.add(mid, router, base, until)
         executive.submit(chart, mid, registry=router.registry(), priority=priority, resume=resume, since=since,
                          paused=paused)
@@ -407,7 +409,7 @@ class MissionRunner:
             return
         try:
             reply = self.bus.call(f"drd/{self.cluster.name}/host/{host}/creator",
-                                  GateUpdate(ops, world.name, world.generation), timeout=self.patience)
+                                  GateUpdate(ops, world.name, world.generation, self.term), timeout=self.patience)
         except Exception as e:  # the host's loss is noticed by the membership and the next calls
             log.warning("the gate operations for %s were not delivered: %s", host, e)
             return
@@ -570,7 +572,8 @@ class WorldRun:
                 if host == runner.me or runner.host_down(host):
                     continue
                 try:
-                    router.call(host, ComponentCall("retire", mid, "", world=self.name, generation=self.generation))
+                    router.call(host, ComponentCall("retire", mid, "", world=self.name, generation=self.generation,
+                                                    term=runner.term))
                 except Exception as e:  # a host that does not answer has lost the mission's processes anyway
                     log.info("mission %s: %s did not confirm the retirement: %s", mid, host, e)
             for path, host, how in router.placed:
