@@ -37,6 +37,7 @@ import functools
 import json
 import math
 import struct
+import threading
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -148,6 +149,7 @@ class Recorder:
             except Exception as e:  # the SDK's own errors: a folder that does not exist, no permission
                 raise RecordingError(f"{path}: cannot write the recording: {e}") from e
         self.channels: dict[str, Any] = {}  # the JSON channels, each made when first used (`json`)
+        self.lock = threading.Lock()
         self.tf = FrameTransformsChannel(TF, context=self.context)
         self.world = SceneUpdateChannel(WORLD, context=self.context)
         self.trails = SceneUpdateChannel(TRAILS, context=self.context)
@@ -192,7 +194,8 @@ class Recorder:
     def _channel(self, topic: str) -> Any:
         channel = self.channels.get(topic)
         if channel is None:
-            channel = self.channels[topic] = self._json_channel(topic)
+            with self.lock:  # a cluster run writes from several threads (`drd.cli.cluster._ClusterView`)
+                channel = self.channels.get(topic) or self.channels.setdefault(topic, self._json_channel(topic))
         return channel
 
     def scene(self, world: World) -> None:
@@ -263,17 +266,25 @@ class Recorder:
         for view in self.views.values():
             if view.changed_at is not None:
                 self._active(view)
-        message = self.frames.transforms(at, poses, carried or {})
+        self.transforms(at, poses, carried or {})
+        self.sensors.land(at)
+        self.now = max(self.now, at)
+        self.flush(at)
+
+    def transforms(self, at: float, poses: dict[str, tuple[float, float, float]], carried: dict[str, str]) -> None:
+        """The poses at sim time `at` on `/drd/tf` (those that changed) and the trails they leave."""
+        message = self.frames.transforms(at, poses, carried)
         if message is not None:
             self.tf.log(message, log_time=_ns(at))
         trails = self.frames.trails(at)
         if trails is not None:
             self.trails.log(trails, log_time=_ns(at))
-        self.sensors.land(at)
-        self.now = max(self.now, at)
+
+    def flush(self, at: float) -> None:
+        """Write the chunk so far to the file when a second of sim time has passed since the last time."""
         if at - self.flushed >= FLUSH_EVERY:
             self.flushed = at
-            if self.writer is not None:
+            if self.writer is not None and not self.closed:
                 self.writer.flush()
 
     def end(self, runs: Sequence[dict[str, Any]], at: float) -> None:

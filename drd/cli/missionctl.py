@@ -432,7 +432,8 @@ def _check_render(render: Path | None) -> None:
 
 @app.command()
 def replay(
-    file: Path = typer.Argument(..., help="A recording made with `dry-run --record`.", show_default=False),
+    file: Path = typer.Argument(..., help="A recording made with `dry-run --record` or `run --record`.",
+                                show_default=False),
     at: str = typer.Option(None, "--at", show_default=False,
                            help="Show the run at this sim time instead (90s, 2min): each mission's active behaviors, "
                                 "holds and waits, and where each robot was."),
@@ -491,7 +492,8 @@ def _recorded_world(recording: Recording, file: Path) -> World:
     except WorldError as e:
         fail_all(e.problems)
     if world is None:
-        fail(f"{file} holds no world to draw (a cluster run's recording has none)", hint="draw a dry-run's")
+        fail(f"{file} holds no world to draw (a cluster run's recording has one only when the client's drd has the"
+             " mission's world)", hint="draw a dry-run's")
     return world
 
 
