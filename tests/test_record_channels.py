@@ -205,3 +205,24 @@ def test_the_active_configuration_shows_who_waits_and_who_is_suspended(tmp_path:
     assert states["waiting"] and states["suspended"] and states["running"]
     blocked = [w for m in active_messages(shared) for w in m["waiting"] if w["blocked_by"]]
     assert any(b["holds"] == {"cam": "ranger1.camera"} for w in blocked for b in w["blocked_by"])
+
+
+def test_the_foxglove_layout_shows_channels_a_recording_has(corridor: Run) -> None:
+    """docs/foxglove-layout.json: a 3D panel on the world, trails, sightings and scans (frames from `/drd/tf`),
+    tables of the active states and holds, the records raw, the log lines."""
+    import json
+
+    layout = json.loads((ROOT / "docs" / "foxglove-layout.json").read_text())
+    panels = layout["configById"]
+    shown = {p["topicPath"].split(".")[0] for p in panels.values() if "topicPath" in p}
+    shown |= {p["topicToRender"] for p in panels.values() if "topicToRender" in p}
+    three_d = set(panels["3D!drd"]["topics"])
+    topics = {topic for topic, *_ in corridor.messages()}
+    assert shown <= topics and {"/drd/world", "/drd/trails", "/drd/seen", "/drd/scan/ranger1"} <= three_d
+    assert all(t in topics or t.startswith("/drd/scan/") for t in three_d)  # another team's lasers too
+    assert shown == {"/drd/active", "/drd/records", "/drd/log"}
+
+    def leaves(node: object) -> set[str]:
+        return {node} if isinstance(node, str) else leaves(node["first"]) | leaves(node["second"])  # type: ignore[index]
+
+    assert leaves(layout["layout"]) == set(panels)

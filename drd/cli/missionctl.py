@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import re
 import shutil
 import subprocess
 from collections.abc import Iterator
@@ -23,7 +24,6 @@ from drd.cli.common import (
     err,
     fail,
     fail_all,
-    open_recorder,
     open_trace,
     out,
     print_json,
@@ -47,7 +47,7 @@ if TYPE_CHECKING:  # rich's tables and trees, and the exporters, load only for t
     from drd.executive import Executive
     from drd.hosts import Cluster
     from drd.inject import Injection
-    from drd.record import Recording
+    from drd.record import Recorder, Recording
     from drd.sim.physics import Simulation
     from drd.sim.world import World
 
@@ -269,8 +269,51 @@ def _label(s: State, initial: bool = False) -> Text:
 
 
 def main() -> None:
+    import sys
+
+    sys.argv[1:] = live_default(sys.argv[1:])
     # `missionctl status` and the other read-only cluster commands skip typer's parameter building
     run_app(app, "missionctl", fast=lambda argv: cluster.fast_command(app, argv))
+
+
+#: What `--foxglove` may be followed by: `HOST:PORT`, `[IPV6]:PORT`, `:PORT` or `PORT`.
+_ADDRESS = re.compile(r"(?:\[[0-9A-Fa-f:.]+\]|[A-Za-z0-9_.-]*):[0-9]+|[0-9]+")
+
+
+def live_default(argv: list[str]) -> list[str]:
+    """`--foxglove` with no address after it (the end, another option, a mission file) is `--foxglove
+    127.0.0.1:8765`: typer has no option whose value may be left out."""
+    from drd.record import LIVE_DEFAULT
+
+    out: list[str] = []
+    for i, word in enumerate(argv):
+        out.append(word)
+        if word == "--":
+            return out + argv[i + 1:]
+        if word == "--foxglove" and (i + 1 == len(argv) or not _ADDRESS.fullmatch(argv[i + 1])):
+            out.append(f"{LIVE_DEFAULT[0]}:{LIVE_DEFAULT[1]}")
+    return out
+
+
+_RECORD_OPTION = typer.Option(None, "--record", show_default=False,
+                              help="Record the run as an MCAP file: records, active states, poses, sensors"
+                                   " (`missionctl replay` reads it back; docs/recording.md).")
+_LIVE_OPTION = typer.Option(None, "--foxglove", show_default=False, metavar="[HOST:PORT]",
+                            help="Serve the run live to Foxglove (its WebSocket protocol), the channels of --record,"
+                                 " on HOST:PORT only; `--foxglove` alone: 127.0.0.1:8765. The run then goes at"
+                                 " real time unless --speed says otherwise.")
+
+
+def _recorder(record: Path | None, foxglove: str | None) -> Recorder | None:
+    """`--record` and `--foxglove`'s recorder (None for neither); where the live view is served, on stderr."""
+    recorder = cluster.live_recorder(record, foxglove)
+    if recorder is not None and recorder.port is not None:
+        host = cluster.live_address(foxglove or "")[0]
+        host = f"[{host}]" if ":" in host else host
+        err.print(Text.assemble(("● ", "bold green"), f"live view on ws://{host}:{recorder.port} (Foxglove: Open"
+                                                       " connection, Foxglove WebSocket; layout docs/foxglove-"
+                                                       "layout.json)"))
+    return recorder
 
 
 @app.command("dry-run")
@@ -296,8 +339,7 @@ def dry_run(
                                show_default=False),
     render: Path = typer.Option(None, "--render", help="Draw the world, trajectories, placed Scouts and detections "
                                                        "to this image (.png, .svg or .pdf).", show_default=False),
-    record: Path = typer.Option(None, "--record", help="Record the run as an MCAP file (records, robots' poses; "
-                                                       "`missionctl replay` reads it back).", show_default=False),
+    record: Path = _RECORD_OPTION, foxglove: str = _LIVE_OPTION,
     inject: list[str] = typer.Option([], "--inject", help="A failure at a sim time, e.g. 'kill ranger1 at 90s', "
                                                           "'lose scout3 at 2min', 'block door_n3 at 60s' "
                                                           "(also close/open DOOR). Repeatable.", show_default=False),
@@ -324,8 +366,10 @@ def dry_run(
     fh = open_trace(trace)
     stop = threading.Event()
     runs = [Mission(chart, priority[i] if i < len(priority) else None) for i, chart in enumerate(charts)]
-    reports = _run_live(runs, cluster, sim_world, cat, fh, stop, not as_json, seed=seed, until=until, speed=speed,
-                        injections=injections, recorder=open_recorder(record))
+    recorder = _recorder(record, foxglove)
+    reports = _run_live(runs, cluster, sim_world, cat, fh, stop, not as_json, seed=seed, until=until,
+                        speed=1.0 if speed is None and foxglove is not None else speed,  # watched: real time
+                        injections=injections, recorder=recorder)
     if stop.is_set():  # on stderr, as `missionctl run` says it: stdout keeps the report alone
         err.print(Text.assemble(("■ ", "bold yellow"), f"Ctrl-C: stopped the dry-run at {reports[0].sim_time:.1f} s"
                                                        " of sim time; the report says what ran so far"))
