@@ -1,8 +1,9 @@
 """``ZenohBus``: the bus of every multi-process run, over eclipse-zenoh 1.x in peer mode.
 
 A thin mapping: ``put`` → ``Session.put``, ``subscribe`` → ``declare_subscriber``, ``serve`` →
-``declare_queryable``, ``request`` → ``Session.get`` (all queryables, no consolidation, so
-every reply comes back), tokens → ``Session.liveliness()``. Schema checks and error
+``declare_queryable``, ``request`` → ``Querier.get`` (all queryables, no consolidation, so
+every reply comes back; a querier declared per key and timeout, and kept), tokens →
+``Session.liveliness()``. Schema checks and error
 containment come from :class:`drd.bus.base.Bus`.
 
 Threading: zenoh calls our callbacks from its own threads. zenoh-python runs the
@@ -31,6 +32,7 @@ import zenoh
 from .base import (
     DEFAULT_TIMEOUT,
     Bus,
+    BusClosed,
     BusError,
     Handler,
     Queryable,
@@ -45,6 +47,8 @@ from .keys import check_key_expr
 
 #: Seconds a bus waits for its zenoh session to close (a frozen peer would hold it 10 s).
 CLOSE_WAIT = 1.0
+#: Queriers a bus keeps declared, one per (key, timeout) requested (the oldest is dropped past this).
+MAX_QUERIERS = 64
 
 
 @functools.cache
@@ -123,6 +127,7 @@ class ZenohBus(Bus):
         super().__init__(name or str(self.session.zid()))
         self._lock = threading.Lock()
         self._declared: dict[int, Any] = {}  # keeps zenoh entities referenced (they undeclare when dropped)
+        self._queriers: dict[tuple[str, float], zenoh.Querier] = {}  # by (key, timeout), oldest first
 
     # -- publish/subscribe
     def put_raw(self, key: str, data: bytes) -> None:
@@ -147,16 +152,17 @@ class ZenohBus(Bus):
         check_key_expr(key_expr)
 
         def on_query(query: zenoh.Query) -> None:
-            try:
-                payload = query.payload  # each property read builds a new object: read once
-                data = None if payload is None else payload.to_bytes()
-                answer = self._answer(handler, str(query.key_expr), key_expr, data)
+            try:  # each zenoh property read builds a new object: each is read once
+                query_key_expr = query.key_expr
+                query_key = str(query_key_expr)
+                payload = query.payload
+                answer = self._answer(handler, query_key, key_expr, None if payload is None else payload.to_bytes())
                 if answer is None:
                     return
                 if answer.is_error:
                     query.reply_err(answer.data)
-                else:
-                    query.reply(answer.key, answer.data)
+                else:  # the query's own key expression when it is the reply's: zenoh need not parse it again
+                    query.reply(query_key_expr if answer.key == query_key else answer.key, answer.data)
             except Exception:  # a closing session, a reply key zenoh refuses: log, never crash
                 log.exception("bus %s: could not answer a query on %r", self.name, key_expr)
             finally:
@@ -167,14 +173,15 @@ class ZenohBus(Bus):
 
     def request_raw(self, key: str, data: bytes | None, timeout: float = DEFAULT_TIMEOUT) -> list[Reply]:
         self._check_open()
-        check_key_expr(key)
-        if timeout <= 0:
-            raise ValueError(f"timeout must be positive, not {timeout!r}")
         try:
-            replies = self.session.get(
-                key, target=_ALL, consolidation=_NO_CONSOLIDATION, timeout=timeout, payload=data
-            )
-        except zenoh.ZError as exc:
+            querier = self._queriers.get((key, timeout))
+        except TypeError:  # an unhashable key: refused as a bad key by `_querier`
+            querier = None
+        if querier is None:
+            querier = self._querier(key, timeout)
+        try:
+            replies = querier.get(payload=data)  # `querier` stays referenced until every reply is read
+        except zenoh.ZError as exc:  # the bus closed meanwhile (its queriers are undeclared)
             raise BusError(str(exc)) from exc
         raw: list[tuple[str, bytes, bool]] = []
         for reply in replies:  # blocks (GIL released) until every queryable answered or the timeout
@@ -189,6 +196,28 @@ class ZenohBus(Bus):
                     raw.append((key, body, True))  # our error replies are always JSON, so this cannot hide one
         # decode only once the query is finished: an in-process queryable needs the GIL to finalize it
         return [self._received_reply(k, body, is_error) for k, body, is_error in raw]
+
+    def _querier(self, key: str, timeout: float) -> zenoh.Querier:
+        """Declare (and keep, at most MAX_QUERIERS) the querier of requests on ``key`` with ``timeout``: zenoh
+        parses the key once, not on every request, and the request's options are set once."""
+        check_key_expr(key)
+        if timeout <= 0:
+            raise ValueError(f"timeout must be positive, not {timeout!r}")
+        querier: zenoh.Querier = self._zcall(
+            self.session.declare_querier, key, target=_ALL, consolidation=_NO_CONSOLIDATION, timeout=timeout
+        )
+        evicted = []  # let go once the lock is released: zenoh undeclares a querier when it is no longer referenced
+        with self._lock:
+            if not self._closed:
+                kept = self._queriers.get((key, timeout))
+                if kept is not None:  # another thread's, declared meanwhile: ours goes when this returns
+                    return kept
+                while len(self._queriers) >= MAX_QUERIERS:  # the oldest; a request still using it keeps it
+                    evicted.append(self._queriers.pop(next(iter(self._queriers))))
+                self._queriers[(key, timeout)] = querier
+                return querier
+        _undeclare_querier(querier)  # the bus closed meanwhile
+        raise BusClosed(f"bus session {self.name} is closed")
 
     # -- liveliness
     def declare_token(self, key: str) -> Token:
@@ -221,6 +250,9 @@ class ZenohBus(Bus):
                 return
             self._closed = True
             declared, self._declared = list(self._declared.values()), {}
+            queriers, self._queriers = list(self._queriers.values()), {}
+        for querier in queriers:
+            _undeclare_querier(querier)
         for entity in reversed(declared):
             try:
                 entity.undeclare()
@@ -268,6 +300,13 @@ class ZenohBus(Bus):
             return fn(*args, **kwargs)
         except zenoh.ZError as exc:
             raise BusError(str(exc)) from exc
+
+
+def _undeclare_querier(querier: zenoh.Querier) -> None:
+    try:
+        querier.undeclare()  # type: ignore[no-untyped-call]
+    except (zenoh.ZError, RuntimeError):  # the session went first; or a request in another thread still sends on
+        pass  # it (pyo3's "Already borrowed"): zenoh undeclares it when that request drops it
 
 
 #: The threads closing sessions (`ZenohBus.close` waits for each at most `CLOSE_WAIT`).
