@@ -469,6 +469,14 @@ def test_invalid_key_expressions_are_refused(pair: Pair, key: str) -> None:
         pair.a.subscribe(key, Collector())
     with pytest.raises(ValueError):
         pair.a.put(key, Chat("x"))
+    with pytest.raises(ValueError):
+        pair.a.request(key, Chat("x"), timeout=0.3)
+
+
+def test_a_request_needs_a_positive_timeout(pair: Pair) -> None:
+    for timeout in (0, -1.0):
+        with pytest.raises(ValueError, match="timeout must be positive"):
+            pair.a.request("svc/t", Chat("x"), timeout=timeout)
 
 
 def test_tokens_and_puts_need_valid_keys(pair: Pair) -> None:
