@@ -16,7 +16,7 @@ from typing import Any
 
 import psutil
 import pytest
-from cluster_support import ROOT, DaemonCluster, serving_cluster
+from cluster_support import ROOT, DaemonCluster, running_cluster
 
 NAMES = ["controller", "ranger1", "ranger2"]
 MISSION = """\
@@ -38,7 +38,13 @@ def hosts(cluster: DaemonCluster) -> str:
 
 @pytest.fixture(scope="module")
 def cluster(tmp_path_factory: pytest.TempPathFactory) -> Iterator[DaemonCluster]:
-    with serving_cluster(tmp_path_factory.mktemp("routers"), NAMES, hosts) as c:
+    """The Rangers' daemons first: a client of the routers waits for one (zenoh opens a client only connected)."""
+    with running_cluster(tmp_path_factory.mktemp("routers"), NAMES) as c:
+        c.hosts_file.write_text(hosts(c))
+        for name in reversed(NAMES):
+            c.start(name)
+        c.wait_ready()
+        c.wait_up()
         yield c
 
 

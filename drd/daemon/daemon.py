@@ -37,7 +37,7 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
 
-from drd.bus import Bus, LoadReport, Message, Ping, Pong, Query, Reply, Sample
+from drd.bus import Bus, BusError, LoadReport, Message, Ping, Pong, Query, Reply, Sample
 from drd.bus.base import Declaration
 from drd.daemon.controller import Controller
 from drd.daemon.keys import ClusterKeys, cluster_of
@@ -105,17 +105,33 @@ def config_digest(cluster: Cluster) -> str:
     return hashlib.sha256(json.dumps(data, sort_keys=True, default=str).encode()).hexdigest()
 
 
-def open_bus(config: DaemonConfig, tr: Transport) -> Bus:
+def open_bus(config: DaemonConfig, tr: Transport, stop: threading.Event | None = None) -> Bus:
     """This host's zenoh session: a peer listening on its endpoint and connecting to every other one, or, when the
-    hosts file names routers, a router (listening, meshed with the other routers) or a client of the routers."""
+    hosts file names routers, a router (listening, meshed with the other routers) or a client of the routers. A
+    client waits for a router (zenoh opens a client only once connected): started before its routers, it tries
+    again each second, saying so once, until one answers or `stop` is set."""
     from drd.bus.zenoh_bus import ZenohBus  # zenoh only when a real cluster is joined
 
     lease_ms = max(1000, int(config.cluster.lease * 2000))  # zenoh drops a silent link after twice our lease
     me = config.host
+    mode = tr.zenoh_mode(me)
     listen = [tr.endpoints[me]] if tr.listens(me) else []
-    options = {**tr.options, "mode": tr.zenoh_mode(me)}
-    return ZenohBus(listen=listen, connect=list(tr.others(me).values()), lease_ms=lease_ms, options=options,
-                    name=me)
+    options = {**tr.options, "mode": mode, **({"connect/timeout_ms": ROUTER_WAIT_MS} if mode == "client" else {})}
+    connect = list(tr.others(me).values())
+    said = False
+    while True:
+        try:
+            return ZenohBus(listen=listen, connect=connect, lease_ms=lease_ms, options=options, name=me)
+        except BusError:
+            if mode != "client" or (stop is not None and stop.is_set()):
+                raise
+            if not said:
+                log.info("waiting for a router to answer at %s", ", ".join(connect))
+                said = True
+
+
+#: Milliseconds a client of the routers waits for one at each attempt to open its session.
+ROUTER_WAIT_MS = 1000
 
 
 class HostTaken(ConfigurationError):
@@ -175,7 +191,7 @@ class Daemon:
     def start(self) -> None:
         """Open the bus (unless given one) and declare every service; the token comes last."""
         if self._bus is None:
-            self._bus = open_bus(self.config, self.transport)
+            self._bus = open_bus(self.config, self.transport, self._stop)
         bus, keys, me = self.bus, self.keys, self.host
         if bus.alive(keys.host(me), timeout=1.0):  # before anything is declared: the first one stays in charge
             raise HostTaken(f"another drd already runs as host {me} in cluster {self.cluster.name} (its token is on "
