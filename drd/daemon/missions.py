@@ -333,8 +333,9 @@ class MissionRunner:
                                  records=executive.record, cycle=world.cycle, generation=world.generation,
                                  term=self.term)
         world.add(mid, router, base, until)
-        executive.submit(chart, mid, registry=router.registry(), priority=priority, resume=resume, since=since,
-                         paused=paused)
+        listeners = [functools.partial(self.checkpoints.note, mid)] if self.checkpoints is not None else []
+        executive.submit(chart, mid, listeners=listeners, registry=router.registry(), priority=priority,
+                         resume=resume, since=since, paused=paused)
 
     def _new_world(self, req: RunMission) -> WorldRun:
         from drd.sim import load_world

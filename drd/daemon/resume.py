@@ -11,7 +11,6 @@ under its own id. A mission that can no longer be compiled is ended in the journ
 
 from __future__ import annotations
 
-import json
 import logging
 import time
 from typing import Any
@@ -26,34 +25,47 @@ log = logging.getLogger("drd.daemon.resume")
 SEQ_GAP = 100_000
 
 
+#: Records that change a mission's state tree (a state entered or left, a hold begun or ended...): only after one
+#: of these is its state saved again (commands, events and logs change nothing that resuming needs).
+STRUCTURAL = frozenset({"entered", "exited", "taken", "granted", "released", "revoked", "suspended", "resumed",
+                        "reserved", "restored"})
+#: Wall seconds between two saves of the world's clock and record numbers when no mission changed (the numbers
+#: a resumed executive goes on from jump `SEQ_GAP` past the last saved anyway).
+CLOCK_EVERY = 1.0
+
+
 class Checkpoints:
-    """The last state saved of each mission, so a cycle that changed nothing writes nothing."""
+    """Saves a mission's state after a control cycle in which it changed (`note` hears its records), and the
+    world's clock at most once a second otherwise: a cycle that changed nothing costs nothing."""
 
     def __init__(self, journal: Journal) -> None:
         self.journal = journal
-        self._saved: dict[str, str] = {}
+        self._dirty: set[str] = set()
+        self._clock_saved = 0.0
+
+    def note(self, mission: str, record: Any) -> None:
+        """A record of `mission` (a listener of its interpreter): a structural one makes its state worth saving."""
+        if record.kind in STRUCTURAL:
+            self._dirty.add(mission)
 
     def save(self, runner: Any, world: Any) -> None:
         """After a control cycle of `world` (takes the runner's lock to read the missions)."""
+        wall = time.monotonic()
+        if not self._dirty and wall - self._clock_saved < CLOCK_EVERY:
+            return
         executive = runner.controller.executive
         changed: dict[str, tuple[float, dict[str, Any]]] = {}
         with runner.lock:
             now = runner.clock.now()
-            for mid in world.missions():
+            dirty, self._dirty = self._dirty, set()
+            for mid in sorted(dirty & set(world.missions())):
                 interp = executive.missions.get(mid)
-                if interp is None or interp.root is None or interp.finished:
-                    continue
-                snapshot = capture(interp.root).to_dict()
-                text = json.dumps(snapshot, sort_keys=True, separators=(",", ":"))
-                if self._saved.get(mid) != text:
-                    self._saved[mid] = text
-                    changed[mid] = (now, snapshot)
+                if interp is not None and interp.root is not None and not interp.finished:
+                    changed[mid] = (now, capture(interp.root).to_dict())
             state = WorldState(world.name, world.generation, runner.clock.base, now, executive.sent,
                                property_changes(runner.cluster.resources(), executive.pool))
-        self.journal.save(changed, state)  # every cycle: the clock and the record numbers move on
-
-    def forget(self, mission: str) -> None:
-        self._saved.pop(mission, None)
+        self._clock_saved = wall
+        self.journal.save(changed, state)
 
 
 def resume(runner: Any, journal: Journal) -> list[str]:
