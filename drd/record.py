@@ -667,6 +667,7 @@ class Recording:
     tracks: dict[str, list[tuple[float, float, float, float]]] = field(default_factory=dict)
     #: A Scout in a magazine: from when, carried by which Ranger (its frame's parent is the Ranger's).
     carried: dict[str, list[tuple[float, str]]] = field(default_factory=dict)
+    fovs: dict[str, float] = field(default_factory=dict)  # each camera's field of view (radians), by robot
     world: bytes | None = None  # the world file the run used (`world.yaml` attachment), if it was a file
     cut: bool = False  # the file ends before the run did (a crash): what its complete chunks held
 
@@ -714,6 +715,9 @@ def read(path: Path) -> Recording:
                             _take_poses(out, decoder(message.data), message.log_time)
                     elif channel.topic in (RECORDS, RUNS):
                         _take(out, channel.topic, message.data)
+                    elif channel.topic in (CAMERA, LIGHT) and len(out.fovs) < 64:
+                        frame = orjson.loads(message.data)
+                        out.fovs.setdefault(str(frame.get("robot")), float(frame.get("fov") or 0.0))
             except (McapError, struct.error, EOFError):  # a file cut short: keep what its complete chunks held
                 if not out.records:
                     raise

@@ -14,8 +14,9 @@ salted with a constant and no file carries a date. Every artist a test may look 
 
 from __future__ import annotations
 
+import bisect
 import math
-from collections.abc import Iterator, Sequence
+from collections.abc import Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from itertools import pairwise
 from pathlib import Path
@@ -90,10 +91,17 @@ class RunReport(Protocol):
     def tracks(self) -> dict[str, list[tuple[float, float, float]]]: ...
     @property
     def injections(self) -> list[dict[str, Any]]: ...
+    def holds(self) -> list[dict[str, Any]]: ...
 
 
-def render(world: World, report: RunReport, path: Path, *, title: str | None = None) -> None:
-    """Draw `report` (a `DryRun`) over `world` and write it to `path` (PNG, SVG or PDF, by suffix).
+#: How far a Scout's view is drawn (m): its camera sees farther (10 m), but a wedge that long would cover the room.
+VIEW_REACH = 2.5
+
+
+def render(world: World, report: RunReport, path: Path, *, title: str | None = None,
+           views: Mapping[str, tuple[float, float]] | None = None) -> None:
+    """Draw `report` (a `DryRun`) over `world` and write it to `path` (PNG, SVG or PDF, by suffix). `views`: where
+    each Scout looked at the end (robot -> heading, its camera's field of view, radians), drawn as a wedge.
 
     Raises:
         ValueError: the suffix is not one of `SUPPORTED_SUFFIXES` (checked before anything is drawn).
@@ -113,9 +121,11 @@ def render(world: World, report: RunReport, path: Path, *, title: str | None = N
         _draw_world(ax, world, doors)
         _note_injected_doors(ax, world, report, labels)
         _draw_tracks(ax, world, report, labels)
-        _draw_findings(ax, report, labels)
+        _draw_time_marks(ax, world, report)
+        _draw_views(ax, world, report, views or {})
+        _draw_findings(ax, world, report, labels)
         _frame(fig, ax, world)
-        _legend(fig, world, report, doors)
+        _legend(fig, world, report, doors, bool(views))
         _title(ax, world, report, title)
         _place_labels(fig, ax, labels)
         fig.savefig(path, format=fmt, dpi=150, metadata=_METADATA[fmt])
@@ -390,23 +400,113 @@ def _phases(track: _Track) -> Iterator[tuple[bool, list[tuple[float, float, floa
 # ----------------------------------------------------------------------------------------- what they found
 
 
-def _draw_findings(ax: Axes, report: RunReport, labels: _Labels) -> None:
-    """Doors DetectDoor reported and MotionDetected events, where the robots estimated them."""
+def _draw_findings(ax: Axes, world: World, report: RunReport, labels: _Labels) -> None:
+    """Doors DetectDoor reported and MotionDetected events, where the robots estimated them: each sighting in the
+    colour of the Scout that saw it, and one label per Scout saying how many and when (not one per sighting)."""
     for i, door in enumerate(report.doors):
         ax.plot([door["x"]], [door["y"]], marker="D", markersize=10, markerfacecolor="none",
                 markeredgecolor=DOOR_FOUND, markeredgewidth=2.0, linestyle="none", zorder=Z_DOOR,
                 gid=f"door-found-{i}")
         labels.markers.append((float(door["x"]), float(door["y"])))
-    labelled: list[tuple[float, float]] = []
-    for i, d in enumerate(report.detections):
+    colours = scout_colours(world)
+    seers = seers_of(world, report)
+    groups: dict[str | None, list[tuple[float, float, float]]] = {}
+    for i, (d, seer) in enumerate(zip(report.detections, seers, strict=True)):
         x, y = float(d["x"]), float(d["y"])
-        ax.plot([x], [y], marker="*", markersize=14, markerfacecolor=DETECTION, markeredgecolor="#5d4037",
-                markeredgewidth=0.9, linestyle="none", zorder=Z_MARK + 1, gid=f"detection-{i}")
-        if all(math.hypot(x - lx, y - ly) > 0.8 for lx, ly in labelled):  # one label per cluster stays legible
-            labelled.append((x, y))
-            labels.add(ax, x, y, f"{d['at']:.0f} s", "#5d4037", gid=f"detection-label-{i}")
-        else:
-            labels.markers.append((x, y))
+        ax.plot([x], [y], marker="*", markersize=14, markerfacecolor=colours.get(seer or "", DETECTION),
+                markeredgecolor="#5d4037", markeredgewidth=0.9, linestyle="none", zorder=Z_MARK + 1,
+                gid=f"detection-{i}")
+        labels.markers.append((x, y))
+        groups.setdefault(seer, []).append((float(d["at"]), x, y))
+    for seer, seen in groups.items():
+        times = [t for t, _, _ in seen]
+        when = f"{min(times):.0f} s" if round(min(times)) == round(max(times)) else \
+            f"{min(times):.0f}–{max(times):.0f} s"
+        text = f"{seer + ': ' if seer else ''}{_n(len(seen), 'sighting')}, {when}"
+        x, y = min(((x, y) for _, x, y in seen), key=lambda p: (p[0], p[1]))  # the leftmost: deterministic
+        labels.add(ax, x, y, text, colours.get(seer or "", "#5d4037"), gid=f"detections-{seer or 'unknown'}")
+
+
+def scout_colours(world: World) -> dict[str, str]:
+    """Each Scout's colour, in the world's order (the same in every picture of that world)."""
+    return {sid: SCOUTS[i % len(SCOUTS)] for i, sid in enumerate(world.scout_ids)}
+
+
+def seers_of(world: World, report: RunReport) -> list[str | None]:
+    """The Scout that saw each detection (None when it cannot be told): the Scout held, when it was seen, by the
+    behavior that reported it or by one of its parents (`holds`); else the one launched by its parent's
+    LaunchScout (the corridor mission's RoomSurveillance)."""
+    scouts = set(world.scout_ids)
+    holds = [(h["path"], float(h["from"]), float(h["to"]), [v for v in h["resources"].values() if v in scouts])
+             for h in report.holds()]
+    launched = {str(s.get("by", "")).rpartition("/")[0]: str(s.get("scout")) for s in report.scouts}
+    out: list[str | None] = []
+    for d in report.detections:
+        by, at = str(d.get("by", "")), float(d["at"])
+        held = [s for path, t0, t1, units in holds if (by == path or by.startswith(path + "/")) and t0 <= at <= t1
+                for s in units]
+        parent = by.rpartition("/")[0]
+        out.append(held[0] if len(set(held)) == 1 else launched.get(parent) if parent else None)
+    return out
+
+
+def _draw_views(ax: Axes, world: World, report: RunReport, views: Mapping[str, tuple[float, float]]) -> None:
+    """Each placed Scout's camera: its field of view as a wedge and its heading as an arrow, where it ended."""
+    from matplotlib.patches import FancyArrowPatch, Wedge
+
+    colours = scout_colours(world)
+    for scout in sorted({str(s["scout"]) for s in report.scouts if s.get("scout") in views}):
+        heading, fov = views[scout]
+        track = report.tracks.get(scout)
+        end = next((s for s in report.scouts if s.get("scout") == scout), {})
+        x, y = (track[-1][1], track[-1][2]) if track else (float(end.get("x", 0.0)), float(end.get("y", 0.0)))
+        colour = colours.get(scout, SCOUTS[0])
+        a0, a1 = math.degrees(heading - fov / 2), math.degrees(heading + fov / 2)
+        ax.add_patch(Wedge((x, y), VIEW_REACH, a0, a1, facecolor=colour, edgecolor=colour, alpha=0.18,
+                           linewidth=1.0, zorder=Z_SCOUT, gid=f"scout-{scout}-view"))
+        ax.add_patch(FancyArrowPatch((x, y), (x + math.cos(heading), y + math.sin(heading)), arrowstyle="-|>",
+                                     color=colour, linewidth=1.6, mutation_scale=12, shrinkA=0, shrinkB=0,
+                                     zorder=Z_MARK, gid=f"scout-{scout}-heading"))
+
+
+def time_step(sim_time: float) -> float:
+    """The time between two marks along the paths: a round step giving at most ten marks."""
+    return next((s for s in (5.0, 10.0, 20.0, 30.0, 60.0, 120.0, 300.0, 600.0) if sim_time / s <= 10), 1800.0)
+
+
+def _draw_time_marks(ax: Axes, world: World, report: RunReport) -> None:
+    """A dot every `time_step` seconds along each robot's path, with the time, where it had moved since the last
+    one (a robot standing still gets no pile of marks)."""
+    step = time_step(report.sim_time)
+    colours = {**{r.id: RANGERS[i % len(RANGERS)] for i, r in enumerate(world.rangers)}, **scout_colours(world)}
+    for rid, colour in colours.items():
+        track = report.tracks.get(rid) or []
+        last: tuple[float, float] | None = None
+        k = math.ceil(track[0][0] / step) if track else 0
+        while track and k * step <= track[-1][0]:
+            at = k * step
+            x, y = _where(track, at)
+            k += 1
+            if at == 0 or (last is not None and math.hypot(x - last[0], y - last[1]) < 0.5):
+                continue
+            last = (x, y)
+            ax.plot([x], [y], marker="o", markersize=3.5, markerfacecolor="white", markeredgecolor=colour,
+                    markeredgewidth=1.2, linestyle="none", zorder=Z_MARK, gid=f"time-{rid}-{at:g}")
+            ax.annotate(f"{at:g} s", xy=(x, y), xytext=(0, -7), textcoords="offset points", ha="center", va="top",
+                        fontsize=6.5, color=colour, zorder=Z_LABEL, gid=f"time-label-{rid}-{at:g}")
+
+
+def _where(track: _Track, at: float) -> tuple[float, float]:
+    """Where a track was at `at` (between its points, in a straight line)."""
+    times = [p[0] for p in track]
+    i = bisect.bisect_right(times, at)
+    if i == 0:
+        return track[0][1], track[0][2]
+    if i == len(track):
+        return track[-1][1], track[-1][2]
+    (t0, x0, y0), (t1, x1, y1) = track[i - 1], track[i]
+    k = 0.0 if t1 <= t0 else (at - t0) / (t1 - t0)
+    return x0 + (x1 - x0) * k, y0 + (y1 - y0) * k
 
 
 _Spot = tuple[float, float, Literal["left", "center", "right"], Literal["bottom", "center", "top"]]
@@ -486,7 +586,7 @@ def _area(a: Bbox, b: Bbox) -> float:
     return 0.0 if both is None else both.width * both.height
 
 
-def _legend(fig: Figure, world: World, report: RunReport, doors: dict[str, DoorState]) -> None:
+def _legend(fig: Figure, world: World, report: RunReport, doors: dict[str, DoorState], views: bool) -> None:
     """One entry per kind of thing (not per robot), below the plot, listing only kinds the picture shows."""
     from matplotlib.lines import Line2D
     from matplotlib.patches import Patch
@@ -511,8 +611,12 @@ def _legend(fig: Figure, world: World, report: RunReport, doors: dict[str, DoorS
          "intruder path (end ○)", bool(world.intruders)),
         (line(DOOR_FOUND, linestyle="none", marker="D", markerfacecolor="none", markeredgewidth=2.0),
          "door found", bool(report.doors)),
-        (line(DETECTION, linestyle="none", marker="*", markersize=13, markeredgecolor="#5d4037"),
-         "detection (time)", bool(report.detections)),
+        (line(scout, linestyle="none", marker="*", markersize=13, markeredgecolor="#5d4037"),
+         "sighting (the colour of the Scout that saw it)", bool(report.detections)),
+        (Patch(facecolor=scout, edgecolor=scout, alpha=0.3), "Scout's camera view, heading", views and
+         bool(report.scouts)),
+        (line("#555555", linestyle="none", marker="o", markersize=4, markerfacecolor="white"), "time mark",
+         bool(report.tracks)),
     ]
     shown = [(h, label) for h, label, present in entries if present]
     legend = fig.legend([h for h, _ in shown], [label for _, label in shown], loc="outside lower center",

@@ -367,13 +367,14 @@ def dry_run(
     stop = threading.Event()
     runs = [Mission(chart, priority[i] if i < len(priority) else None) for i, chart in enumerate(charts)]
     recorder = _recorder(record, foxglove)
-    reports = _run_live(runs, cluster, sim_world, cat, fh, stop, not as_json, seed=seed, until=until,
+    sims: list[Simulation] = []  # the simulation, for where each Scout looked at the end (the picture)
+    reports = _run_live(runs, cluster, sim_world, cat, fh, stop, not as_json, sims, seed=seed, until=until,
                         speed=1.0 if speed is None and foxglove is not None else speed,  # watched: real time
                         injections=injections, recorder=recorder)
     if stop.is_set():  # on stderr, as `missionctl run` says it: stdout keeps the report alone
         err.print(Text.assemble(("■ ", "bold yellow"), f"Ctrl-C: stopped the dry-run at {reports[0].sim_time:.1f} s"
                                                        " of sim time; the report says what ran so far"))
-    _show_reports(reports, sim_world, render, as_json)
+    _show_reports(reports, sim_world, render, as_json, _views(sims, cluster, sim_world))
     return OK if all(r.outcome == "success" for r in reports) else MISSION_FAILED
 
 
@@ -420,9 +421,26 @@ def _injections(inject: list[str], cluster: Cluster, sim_world: World) -> list[I
         fail_all([str(e)])
 
 
+def _views(sims: list[Simulation], cluster: Cluster, sim_world: World) -> dict[str, tuple[float, float]]:
+    """Where each Scout looked at the end of the run (its heading) and its camera's field of view, for the
+    picture."""
+    fovs = _camera_fovs(cluster)
+    return {rid: (sims[0].pose(rid).heading, fovs[rid]) for rid in sim_world.scout_ids if sims and rid in fovs}
+
+
+def _camera_fovs(cluster: Cluster) -> dict[str, float]:
+    """Each robot's camera's field of view (radians), from its device's options in the hosts file."""
+    import math
+
+    devices = {d.id: d for d in cluster.devices}
+    return {r.id: math.radians(float(str(d.options.get("fov", 60.0)))) for r in cluster.robots
+            for unit in r.parts.values() if (d := devices.get(unit)) is not None and d.type == "Camera"}
+
+
 def _run_live(runs: list[Mission], cluster: Cluster, sim_world: World, cat: Catalog, fh: IO[str] | None,
-              stop: threading.Event, live_view: bool, **options: Any) -> list[DryRun]:
-    """`run_many` with a live line on a terminal, the trace flushed each second of sim time, Ctrl-C stopping."""
+              stop: threading.Event, live_view: bool, sims: list[Simulation], **options: Any) -> list[DryRun]:
+    """`run_many` with a live line on a terminal, the trace flushed each second of sim time, Ctrl-C stopping;
+    `sims` gets the simulation."""
     from rich.live import Live
 
     from drd.cli.report import progress_view
@@ -431,6 +449,8 @@ def _run_live(runs: list[Mission], cluster: Cluster, sim_world: World, cat: Cata
     live = Live(Text("starting…"), console=err, transient=True) if err.is_terminal and live_view else None
 
     def progress(sim: Simulation, executive: Executive) -> None:
+        if not sims:
+            sims.append(sim)
         if live is not None:
             live.update(progress_view(sim, executive))
         if fh is not None:
@@ -512,7 +532,8 @@ def replay(
     for report in reports:
         report.tracks = {rid.removeprefix(INTRUDER): [(t, x, y) for t, x, y, _h in track]
                          for rid, track in recording.tracks.items()}
-    _show_reports(reports, world, render, as_json)
+    views = {rid: (recording.tracks[rid][-1][3], fov) for rid, fov in recording.fovs.items() if rid in recording.tracks}
+    _show_reports(reports, world, render, as_json, views)
     return OK if all(r.outcome == "success" for r in reports) else MISSION_FAILED
 
 
@@ -541,14 +562,15 @@ def _recorded_world(recording: Recording, file: Path) -> World:
     return world
 
 
-def _show_reports(reports: list[DryRun], sim_world: World | None, render: Path | None, as_json: bool) -> None:
+def _show_reports(reports: list[DryRun], sim_world: World | None, render: Path | None, as_json: bool,
+                  views: dict[str, tuple[float, float]] | None = None) -> None:
     from drd.cli.report import print_report
     from drd.dryrun import merged
 
     if render is not None and sim_world is not None:
         from drd.render import render as draw
 
-        draw(sim_world, reports[0] if len(reports) == 1 else merged(reports), render)
+        draw(sim_world, reports[0] if len(reports) == 1 else merged(reports), render, views=views)
         err.print(Text.assemble(("✓ ", "bold green"), f"drew {render}"))
     if as_json:
         print_json(reports[0].to_dict() if len(reports) == 1 else [r.to_dict() for r in reports], default=str)
