@@ -477,3 +477,36 @@ mission M {
     h = Harness(compiled(text, catalog), {"LaunchScout": Launches}, ranger_world(1, 3))
     assert h.run() == "success"
     assert h.interp.root is not None and h.interp.root.scope["aboard"] == 2
+
+
+class Counted(Timed):
+    """Counts its lifecycle calls in a list shared by the test."""
+
+    calls: list[str] = []
+
+    def start(self) -> None:
+        super().start()
+        Counted.calls.append("start")
+
+    def terminate(self, status: Any) -> None:
+        Counted.calls.append("terminate")
+
+    def shutdown(self) -> None:
+        Counted.calls.append("shutdown")
+
+
+def test_shutdown_ends_an_instance_once_after_its_last_entry(catalog: Catalog) -> None:
+    """Issue #14: a state entered twice reuses its component (`terminate` ends each entry); when the mission ends,
+    `shutdown` is called once, last."""
+    text = """
+mission M {
+    needs ranger: Ranger
+    var laps: int = 0
+    start -> Calibrate
+    Calibrate -> Calibrate [laps < 1] / set laps = laps + 1
+    Calibrate -> done [laps >= 1]
+}"""
+    Counted.calls = []
+    h = Harness(compiled(text, catalog), {"Calibrate": Counted}, ranger_world())
+    assert h.run() == "success"
+    assert Counted.calls == ["start", "terminate", "start", "terminate", "shutdown"], Counted.calls

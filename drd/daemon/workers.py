@@ -542,12 +542,21 @@ def worker_main(conn: Connection) -> None:
                     link.send(Done(tuple(run_calls(calls, latest, link, hosted))))
                 case Drop(paths):
                     for path in paths:
-                        hosted.pop(path, None)
+                        _shutdown(hosted.pop(path, None))
                 case _:  # nothing else comes unasked
                     pass
     except (EOFError, OSError):  # the Creator retired this worker (or died): its end of the pipe is closed
         pass
     os._exit(0)
+
+
+def _shutdown(h: _Hosted | None) -> None:
+    """An instance forgotten for good: its `shutdown` (what it raises only ends it; nobody waits for an answer)."""
+    if h is not None and h.comp is not None:
+        try:
+            h.comp.shutdown()
+        except Exception:  # component code is not ours to trust, and this instance is gone anyway
+            pass
 
 
 def _die_with_parent() -> None:

@@ -3,7 +3,8 @@
 The lifecycle follows py_trees' split: `setup` once with the context (parameters,
 resources, emit), `start` on entry, `step` each control cycle (non-blocking, returns a
 `Status`), `suspend`/`resume` when the Resource Controller Manager takes a resource away
-and gives it back, `terminate` on exit whatever the reason. A component that raises fails
+and gives it back, `terminate` on exit whatever the reason, and `shutdown` once when the
+instance is dropped for good (a state entered again reuses it until then). A component that raises fails
 its state (an `error` trigger), never the executive.
 """
 
@@ -117,6 +118,11 @@ class Component:
 
     def terminate(self, status: Status) -> None:
         """On exit, whatever the reason (success, failure, or stopped while RUNNING)."""
+
+    def shutdown(self) -> None:
+        """Once, when the instance is dropped for good (its mission ended, or its host forgot it): release what
+        `setup` acquired (files, sockets, threads). A state entered again before that reuses the instance, so
+        `terminate` is the end of one entry, this the end of the object; nothing is called after it."""
 
 
 #: How the executive finds component classes by name.

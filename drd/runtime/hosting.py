@@ -160,6 +160,16 @@ class ComponentHost:
         except Exception as e:  # the node is leaving anyway: just say so
             self.notify(rec.Log(self.now(), node.path, f"component raised {type(e).__name__}: {e}"))
 
+    def shutdown(self) -> None:
+        """The mission ended: every instance made is dropped for good (`Component.shutdown`, once each); what one
+        raises is only logged."""
+        made, self._made = self._made, {}
+        for path, (comp, _ctx, _lazy) in made.items():
+            try:
+                comp.shutdown()
+            except Exception as e:  # component code is not ours to trust
+                self.notify(rec.Log(self.now(), path, f"component raised {type(e).__name__} in shutdown: {e}"))
+
     def call(self, node: Node, fn: Callable[[], Any], fail: bool = True) -> bool:
         """Call component code; an exception fails the node (unless `fail` is False), never the executive."""
         try:

@@ -805,6 +805,7 @@ class Interpreter:
         if self.outcome is None:
             self.outcome, self.reason = outcome, reason
             self._notify(rec.Finished(self.clock.now(), self.chart.root, outcome, reason))
+            self.host.shutdown()
 
     # ------------------------------------------------------------- constraints
     def _watch(self, node: Node) -> None:
