@@ -1,9 +1,13 @@
 """Dry-run benchmark: sim seconds per wall second (the real-time factor) of the corridor mission.
 
-Run `python bench/dryrun.py [--repeat 3] [--cpu] [--json] [--profile] [--seed 0]` (never by pytest).
+Run `python bench/dryrun.py [--repeat 3] [--cpu] [--json] [--profile] [--seed 0] [--no-record]` (never by pytest).
 The corridor surveillance mission (missions/corridor_surveillance.mission) on worlds/corridor.yaml with
 hosts.yaml, through `drd.dryrun.run`: the path `missionctl dry-run` takes (compiled chart, real executive,
 resource manager, components and sim drivers, one process). Goal: >= 100x real time.
+
+The recording column (issue #13): each round runs the mission a second time with a `drd.record.Recorder` (what
+`--record run.mcap` does), right after the first; the best recorded round against the best plain one is the
+recording's cost. Goals: at most 25 % of the dry-run's time, and a file of at most 20 MB.
 
 The mission, hosts and world are loaded once, outside the timing; each round times one whole `run`
 and the best of `--repeat` is kept. Every round must succeed, find every open door of the world and
@@ -20,6 +24,7 @@ import hashlib
 import json
 import pstats
 import sys
+import tempfile
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -32,12 +37,15 @@ from rich.table import Table
 from drd.dryrun import DryRun, run
 from drd.hosts import Cluster, load_hosts
 from drd.manifests import load_catalog
+from drd.record import Recorder
 from drd.sim.world import World, load_world
 from dsl import compile_file
 from dsl.catalog import Catalog
 from dsl.statechart import Statechart
 
 GOAL = 100.0  # sim seconds per wall (or CPU) second, at least
+RECORD_COST_GOAL = 0.25  # what recording adds to a dry-run's time, at most
+RECORD_SIZE_GOAL = 20 * 1024 * 1024  # the corridor mission's recording, at most (bytes)
 ROOT = Path(__file__).resolve().parent.parent
 MISSION = ROOT / "missions" / "corridor_surveillance.mission"
 WORLD = ROOT / "worlds" / "corridor.yaml"
@@ -57,6 +65,8 @@ class Round:
     sim_time: float
     seconds: float  # wall or CPU, as measured
     fingerprint: str
+    recorded: float | None = None  # the same run with a recording (seconds), None when not measured
+    size: int = 0  # the recording's bytes
 
     @property
     def factor(self) -> float:
@@ -90,17 +100,27 @@ def check(s: Setup, r: DryRun) -> None:
         raise SystemExit(f"{len(r.scouts)} Scouts launched for {len(doors)} open doors")
 
 
-def one(s: Setup, seed: int, clock: Callable[[], float]) -> Round:
+def one(s: Setup, seed: int, clock: Callable[[], float], record: bool = True) -> Round:
     gc.collect()
     t0 = clock()
     r = run(s.chart, s.cluster, s.world, s.catalog, seed=seed)
     seconds = clock() - t0
     check(s, r)
-    return Round(r.sim_time, seconds, fingerprint(r))
+    result = Round(r.sim_time, seconds, fingerprint(r))
+    if record:
+        with tempfile.TemporaryDirectory() as tmp:
+            path = Path(tmp) / "run.mcap"
+            gc.collect()
+            t0 = clock()
+            again = run(s.chart, s.cluster, s.world, s.catalog, seed=seed, recorder=Recorder(path))
+            result.recorded, result.size = clock() - t0, path.stat().st_size
+        if fingerprint(again) != result.fingerprint:
+            raise SystemExit("recording changed the run")
+    return result
 
 
-def measure(s: Setup, seed: int, repeat: int, clock: Callable[[], float]) -> list[Round]:
-    rounds = [one(s, seed, clock) for _ in range(repeat)]
+def measure(s: Setup, seed: int, repeat: int, clock: Callable[[], float], record: bool = True) -> list[Round]:
+    rounds = [one(s, seed, clock, record) for _ in range(repeat)]
     prints = {r.fingerprint for r in rounds}
     if len(prints) != 1:
         raise SystemExit(f"seed {seed} gave {len(prints)} different runs: {sorted(prints)}")
@@ -123,39 +143,74 @@ def main() -> None:
     ap.add_argument("--profile", action="store_true",
                     help="also cProfile one run (top 25 entries by own time, then by cumulative time)")
     ap.add_argument("--cpu", action="store_true", help="time process CPU time, steadier on a busy machine")
+    ap.add_argument("--no-record", action="store_true", help="skip the recording column")
     ap.add_argument("--mission", type=Path, default=MISSION, help=argparse.SUPPRESS)
     ap.add_argument("--world", type=Path, default=WORLD, help=argparse.SUPPRESS)
     ap.add_argument("--hosts", type=Path, default=HOSTS, help=argparse.SUPPRESS)
     args = ap.parse_args()
     repeat = max(1, args.repeat)
     setup = load(args.mission, args.world, args.hosts)
-    rounds = measure(setup, args.seed, repeat, time.process_time if args.cpu else time.perf_counter)
-    best = min(rounds, key=lambda r: r.seconds)
-    ok = best.factor >= GOAL
-    how = "CPU time" if args.cpu else "wall clock"
+    rounds = measure(setup, args.seed, repeat, time.process_time if args.cpu else time.perf_counter,
+                     not args.no_record)
     if args.json:
-        out: dict[str, Any] = {
-            "mission": args.mission.name, "world": args.world.name, "seed": args.seed, "repeat": repeat,
-            "cpu": args.cpu, "sim_time": round(best.sim_time, 3), "seconds": round(best.seconds, 4),
-            "real_time_factor": round(best.factor, 2), "all_seconds": [round(r.seconds, 4) for r in rounds],
-            "fingerprint": best.fingerprint, "goal": GOAL, "pass": ok,
-        }
-        print(json.dumps(out, indent=2))
+        print(json.dumps(figures(args, rounds), indent=2))
     else:
-        table = Table(title=f"{args.mission.name} on {args.world.name}, seed {args.seed} "
-                            f"(best of {repeat}, {how})")
-        for col in ("round", "sim s", f"{'CPU' if args.cpu else 'wall'} s", "x real time"):
-            table.add_column(col, justify="right")
-        for i, r in enumerate(rounds, 1):
-            table.add_row(str(i), f"{r.sim_time:.1f}", f"{r.seconds:.3f}", f"{r.factor:.1f}",
-                          style="bold" if r is best else None)
-        console = Console()
-        console.print(table)
-        verdict = "[bold green]PASS[/]" if ok else "[bold red]MISS[/]"
-        console.print(f"real-time factor = {best.factor:.1f}x (goal >= {GOAL:g}x): {verdict}"
-                      f"  [dim]fingerprint {best.fingerprint}[/]")
+        show(args, rounds)
     if args.profile:  # on stderr with --json, so that stdout stays valid JSON
         profile(setup, args.seed, sys.stderr if args.json else sys.stdout)
+
+
+def recording(rounds: list[Round]) -> tuple[float, int] | None:
+    """What recording costs (the best recorded round over the best plain one, less 1) and the file's size."""
+    recorded = [r.recorded for r in rounds if r.recorded is not None]
+    if not recorded:
+        return None
+    return min(recorded) / min(r.seconds for r in rounds) - 1, max(r.size for r in rounds)
+
+
+def figures(args: argparse.Namespace, rounds: list[Round]) -> dict[str, Any]:
+    best = min(rounds, key=lambda r: r.seconds)
+    out: dict[str, Any] = {
+        "mission": args.mission.name, "world": args.world.name, "seed": args.seed, "repeat": len(rounds),
+        "cpu": args.cpu, "sim_time": round(best.sim_time, 3), "seconds": round(best.seconds, 4),
+        "real_time_factor": round(best.factor, 2), "all_seconds": [round(r.seconds, 4) for r in rounds],
+        "fingerprint": best.fingerprint, "goal": GOAL, "pass": best.factor >= GOAL,
+    }
+    cost = recording(rounds)
+    if cost is not None:
+        out["recording"] = {"cost": round(cost[0], 4), "bytes": cost[1], "ratio": round(1 + cost[0], 4),
+                            "all_seconds": [round(r.recorded or 0.0, 4) for r in rounds],
+                            "goal_cost": RECORD_COST_GOAL, "goal_bytes": RECORD_SIZE_GOAL,
+                            "pass": cost[0] <= RECORD_COST_GOAL and cost[1] <= RECORD_SIZE_GOAL}
+    return out
+
+
+def show(args: argparse.Namespace, rounds: list[Round]) -> None:
+    best = min(rounds, key=lambda r: r.seconds)
+    how = "CPU" if args.cpu else "wall"
+    table = Table(title=f"{args.mission.name} on {args.world.name}, seed {args.seed} "
+                        f"(best of {len(rounds)}, {'CPU time' if args.cpu else 'wall clock'})")
+    cols = ["round", "sim s", f"{how} s", "x real time"]
+    cols += [f"{how} s recorded", "recorded / not"] if rounds[0].recorded is not None else []
+    for col in cols:
+        table.add_column(col, justify="right")
+    for i, r in enumerate(rounds, 1):
+        cells = [str(i), f"{r.sim_time:.1f}", f"{r.seconds:.3f}", f"{r.factor:.1f}"]
+        if r.recorded is not None:
+            cells += [f"{r.recorded:.3f}", f"{r.recorded / r.seconds:.3f}"]
+        table.add_row(*cells, style="bold" if r is best else None)
+    console = Console()
+    console.print(table)
+    verdict = "[bold green]PASS[/]" if best.factor >= GOAL else "[bold red]MISS[/]"
+    console.print(f"real-time factor = {best.factor:.1f}x (goal >= {GOAL:g}x): {verdict}"
+                  f"  [dim]fingerprint {best.fingerprint}[/]")
+    cost = recording(rounds)
+    if cost is not None:
+        ok = cost[0] <= RECORD_COST_GOAL and cost[1] <= RECORD_SIZE_GOAL
+        verdict = "[bold green]PASS[/]" if ok else "[bold red]MISS[/]"
+        console.print(f"recording: x{1 + cost[0]:.3f} the time (+{100 * cost[0]:.1f} %, goal <= "
+                      f"{100 * RECORD_COST_GOAL:g} %), file {cost[1] / 1e6:.2f} MB (goal <= "
+                      f"{RECORD_SIZE_GOAL / 1024 / 1024:g} MiB): {verdict}")
 
 
 if __name__ == "__main__":

@@ -784,3 +784,76 @@ def state_at(recording: Recording, at: float) -> dict[str, Any]:
     return {"at": at, "missions": missions, "robots": {k: v for k, v in where.items() if not k.startswith(INTRUDER)},
             "intruders": {k.removeprefix(INTRUDER): {"x": v["x"], "y": v["y"]} for k, v in where.items()
                           if k.startswith(INTRUDER)}}
+
+
+#: A ROS 2 bag of a recording (`to_ros2_bag`): the topic and ROS 2 type of each channel it keeps. The scenes
+#: (`/drd/world`, `/drd/trails`, `/drd/seen`) have no ROS 2 standard type short of markers, and are left out.
+ROS2_TOPICS = {TF: ("/tf", "tf2_msgs/msg/TFMessage"), LOG: ("/rosout", "rcl_interfaces/msg/Log")}
+#: The laser's reach in a bag (`LaserScan.range_max`): a Foxglove scan does not carry it; a beam that hit nothing
+#: is +inf either way (REP 117).
+ROS2_RANGE_MAX = 100.0
+
+
+def to_ros2_bag(path: Path, bag: Path) -> dict[str, int]:
+    """Write the recording at `path` as a ROS 2 bag (a folder, MCAP storage, CDR messages) at `bag`: `/tf`
+    (`tf2_msgs/TFMessage`), `/<robot>/scan` (`sensor_msgs/LaserScan`), `/rosout` (`rcl_interfaces/Log`) and each
+    JSON channel as `std_msgs/String` on its own topic. Messages per topic written; RecordingError if `path` is not
+    a recording or `bag` exists. (`rosbags-convert` cannot: it reads ROS bags only, and refuses an MCAP file whose
+    profile is not `ros2`.)"""
+    from mcap.exceptions import McapError
+    from mcap.reader import make_reader
+    from mcap_protobuf.decoder import DecoderFactory
+    from rosbags.rosbag2 import StoragePlugin, Writer, WriterError
+    from rosbags.typesys import Stores, get_typestore
+
+    store, factory, counts = get_typestore(Stores.ROS2_HUMBLE), DecoderFactory(), dict[str, int]()
+    connections: dict[str, Any] = {}
+    try:
+        with path.open("rb") as fh, Writer(bag, version=9, storage_plugin=StoragePlugin.MCAP) as writer:
+            for schema, channel, message in make_reader(fh).iter_messages(log_time_order=False):
+                decode = None if schema is None or channel.message_encoding == "json" else \
+                    factory.decoder_for(channel.message_encoding, schema)
+                converted = _ros2(store, channel.topic, message.log_time,
+                                  message.data if decode is None else decode(message.data))
+                if converted is None:
+                    continue
+                topic, kind, msg = converted
+                if topic not in connections:
+                    connections[topic] = writer.add_connection(topic, kind, typestore=store)
+                writer.write(connections[topic], message.log_time, store.serialize_cdr(msg, kind))
+                counts[topic] = counts.get(topic, 0) + 1
+    except (OSError, McapError, WriterError, struct.error, EOFError) as e:
+        raise RecordingError(f"{path}: cannot write it as a ROS 2 bag at {bag}: {e}") from e
+    return counts
+
+
+def _ros2(store: Any, topic: str, ns: int, message: Any) -> tuple[str, str, Any] | None:
+    """One message of a recording as (topic, ROS 2 type, message), or None for one a bag does not keep."""
+    T = store.types
+    stamp = T["builtin_interfaces/msg/Time"](sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000)
+
+    def header(frame: str) -> Any:
+        return T["std_msgs/msg/Header"](stamp=stamp, frame_id=frame)
+
+    if topic == TF:
+        return "/tf", "tf2_msgs/msg/TFMessage", T["tf2_msgs/msg/TFMessage"](transforms=[
+            T["geometry_msgs/msg/TransformStamped"](header=header(t.parent_frame_id), child_frame_id=t.child_frame_id,
+                                                    transform=T["geometry_msgs/msg/Transform"](
+                translation=T["geometry_msgs/msg/Vector3"](x=t.translation.x, y=t.translation.y, z=t.translation.z),
+                rotation=T["geometry_msgs/msg/Quaternion"](x=t.rotation.x, y=t.rotation.y, z=t.rotation.z,
+                                                           w=t.rotation.w))) for t in message.transforms])
+    if topic.startswith(SCAN):
+        import numpy as np
+
+        n = len(message.ranges)
+        return f"/{topic.removeprefix(SCAN)}/scan", "sensor_msgs/msg/LaserScan", T["sensor_msgs/msg/LaserScan"](
+            header=header(message.frame_id), angle_min=message.start_angle, angle_max=message.end_angle,
+            angle_increment=(message.end_angle - message.start_angle) / max(1, n - 1), time_increment=0.0,
+            scan_time=SCAN_EVERY, range_min=0.0, range_max=ROS2_RANGE_MAX,
+            ranges=np.asarray(message.ranges, dtype=np.float32), intensities=np.zeros(0, dtype=np.float32))
+    if topic == LOG:
+        return "/rosout", "rcl_interfaces/msg/Log", T["rcl_interfaces/msg/Log"](
+            stamp=stamp, level=20, name=message.name, msg=message.message, file="", function="", line=0)
+    if topic in JSON_SCHEMAS:
+        return topic, "std_msgs/msg/String", T["std_msgs/msg/String"](data=bytes(message).decode("utf-8"))
+    return None

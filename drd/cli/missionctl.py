@@ -505,6 +505,9 @@ def replay(
                                 help="Draw the run to this image (.png, .svg or .pdf), from the recording alone."),
     trace: Path = typer.Option(None, "--trace", show_default=False, help="Write the records back out as a "
                                                                          "JSON-lines trace (docs/trace.md)."),
+    ros2_bag: Path = typer.Option(None, "--ros2-bag", show_default=False,
+                                  help="Write the recording as a ROS 2 bag in this new folder (/tf, /<robot>/scan,"
+                                       " /rosout, the JSON channels as std_msgs/String; docs/recording.md)."),
     as_json: bool = typer.Option(False, "--json", help="Print the report as JSON (a list for several missions)."),
 ) -> int:
     """Print the report of a recorded run, rebuilt from the recording alone (no hosts file, no world): exit 0 if
@@ -526,6 +529,7 @@ def replay(
         print_json(state) if as_json else print_state(state)
         return OK
     _check_render(render)
+    _write_bag(file, ros2_bag)
     reports = [rebuilt(run, recording.records.get(str(run.get("records")), [])) for run in recording.runs]
     _write_trace(recording, open_trace(trace))
     world = _recorded_world(recording, file) if render is not None else None
@@ -535,6 +539,22 @@ def replay(
     views = {rid: (recording.tracks[rid][-1][3], fov) for rid, fov in recording.fovs.items() if rid in recording.tracks}
     _show_reports(reports, world, render, as_json, views)
     return OK if all(r.outcome == "success" for r in reports) else MISSION_FAILED
+
+
+def _write_bag(file: Path, bag: Path | None) -> None:
+    """`replay --ros2-bag`: the recording as a ROS 2 bag (`drd.record.to_ros2_bag`), said on stderr."""
+    if bag is None:
+        return
+    from drd.record import RecordingError, to_ros2_bag
+
+    if bag.exists():
+        fail(f"--ros2-bag {bag}: it exists; a bag is written into a new folder")
+    try:
+        counts = to_ros2_bag(file, bag)
+    except RecordingError as e:
+        fail(str(e))
+    err.print(Text.assemble(("✓ ", "bold green"), f"wrote the ROS 2 bag {bag}: {sum(counts.values())} messages on "
+                                                   f"{len(counts)} topics"))
 
 
 def _write_trace(recording: Recording, fh: IO[str] | None) -> None:
