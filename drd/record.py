@@ -317,7 +317,11 @@ def _late_viewers(r: Recorder) -> Any:
                 r.world.log(scene, log_time=_ns(r.now))
             elif channel.topic == ACTIVE:
                 for view in list(r.views.values()):
-                    r.json(ACTIVE, r.now, view.state(r.now))
+                    try:
+                        state = view.state(r.now)
+                    except RuntimeError:  # the run changed it meanwhile (this is the server's thread): it sends
+                        continue  # the next change anyway
+                    r.json(ACTIVE, r.now, state)
 
     return LateViewers()
 

@@ -5,6 +5,7 @@ asks the simulator for; read back with the `mcap` reader. Every process is ours 
 from __future__ import annotations
 
 import json
+import socket
 import subprocess
 from collections import Counter
 from collections.abc import Iterator
@@ -37,11 +38,20 @@ def messages(path: Path) -> list[tuple[str, int, Any]]:
     return out
 
 
+def free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        port: int = s.getsockname()[1]
+        return port
+
+
 def test_a_cluster_run_records_hosts_loads_placements_and_poses(cluster: DaemonCluster, tmp_path: Path) -> None:
+    port = free_port()  # and serves them live (tests/test_record_live.py has a viewer)
     run = cluster.missionctl("run", "missions/corridor_surveillance.mission", "--config", str(cluster.hosts_file),
                              "--speed", "5", "--until", "20", "--record", str(tmp_path / "run.mcap"), "--json",
-                             timeout=120)
+                             "--foxglove", f"127.0.0.1:{port}", timeout=120)
     assert run.returncode == 1, run.stderr[-2000:]  # stopped at --until
+    assert f"live view on ws://127.0.0.1:{port}" in run.stderr
     report = json.loads(run.stdout)
     got = messages(tmp_path / "run.mcap")
     counts = Counter(topic for topic, *_ in got)

@@ -732,9 +732,15 @@ def live_recorder(record: Path | None, foxglove: str | None) -> Recorder | None:
     from drd.record import Recorder, RecordingError
 
     try:
-        return Recorder(record, serve=None if foxglove is None else live_address(foxglove))
+        recorder = Recorder(record, serve=None if foxglove is None else live_address(foxglove))
     except RecordingError as e:
         fail(str(e))
+    if recorder.port is not None:
+        host = live_address(foxglove or "")[0]
+        host = f"[{host}]" if ":" in host else host
+        err.print(Text.assemble(("● ", "bold green"), f"live view on ws://{host}:{recorder.port} (Foxglove: Open"
+                                " connection, Foxglove WebSocket; layout docs/foxglove-layout.json)"))
+    return recorder
 
 
 def live_address(text: str) -> tuple[str, int]:

@@ -47,7 +47,7 @@ if TYPE_CHECKING:  # rich's tables and trees, and the exporters, load only for t
     from drd.executive import Executive
     from drd.hosts import Cluster
     from drd.inject import Injection
-    from drd.record import Recorder, Recording
+    from drd.record import Recording
     from drd.sim.physics import Simulation
     from drd.sim.world import World
 
@@ -304,18 +304,6 @@ _LIVE_OPTION = typer.Option(None, "--foxglove", show_default=False, metavar="[HO
                                  " real time unless --speed says otherwise.")
 
 
-def _recorder(record: Path | None, foxglove: str | None) -> Recorder | None:
-    """`--record` and `--foxglove`'s recorder (None for neither); where the live view is served, on stderr."""
-    recorder = cluster.live_recorder(record, foxglove)
-    if recorder is not None and recorder.port is not None:
-        host = cluster.live_address(foxglove or "")[0]
-        host = f"[{host}]" if ":" in host else host
-        err.print(Text.assemble(("● ", "bold green"), f"live view on ws://{host}:{recorder.port} (Foxglove: Open"
-                                                       " connection, Foxglove WebSocket; layout docs/foxglove-"
-                                                       "layout.json)"))
-    return recorder
-
-
 @app.command("dry-run")
 def dry_run(
     missions: list[Path] = typer.Argument(..., help="The mission file; several run together on one team, each "
@@ -351,6 +339,7 @@ def dry_run(
     is stopped: --until, Ctrl-C, which still prints the report of what ran)."""
     import threading
 
+    from drd.cli.cluster import live_recorder
     from drd.dryrun import Mission
 
     cat = catalog(components)
@@ -366,7 +355,7 @@ def dry_run(
     fh = open_trace(trace)
     stop = threading.Event()
     runs = [Mission(chart, priority[i] if i < len(priority) else None) for i, chart in enumerate(charts)]
-    recorder = _recorder(record, foxglove)
+    recorder = live_recorder(record, foxglove)
     sims: list[Simulation] = []  # the simulation, for where each Scout looked at the end (the picture)
     reports = _run_live(runs, cluster, sim_world, cat, fh, stop, not as_json, sims, seed=seed, until=until,
                         speed=1.0 if speed is None and foxglove is not None else speed,  # watched: real time
