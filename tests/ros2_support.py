@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import re
 import socket
+import threading
 import time
 from collections.abc import Callable, Iterable, Iterator
 from contextlib import contextmanager
@@ -17,7 +18,13 @@ from types import ModuleType
 
 import pytest
 
-from drd.bus.ros2 import MessageTypes
+from drd.bus.ros2 import MessageTypes, Ros2Session
+from drd.hosts import Cluster
+from drd.hw.ros2 import message_types
+from drd.sim import Simulation, load_world
+from drd.sim.ros2 import ServedRobots, serve
+
+ROOT = Path(__file__).resolve().parents[1]
 
 _SEPARATOR = re.compile(r"^=+\nMSG: ", re.M)
 _SHORT = re.compile(r"^([A-Za-z_][A-Za-z0-9_]*)/([A-Za-z][A-Za-z0-9_]*)$")
@@ -79,3 +86,26 @@ def ros2_sdk(types: MessageTypes, type_names: Iterable[str], folder: Path) -> It
             instance.close()
         session.ZenohSession._instance = None
         message_registry._registry = None
+
+
+#: zenoh's scouting delay at open, shortened: a test's sessions find each other at once on loopback.
+FAST_OPEN = {"scouting/delay": 50}
+
+
+@contextmanager
+def served_team(cluster: Cluster, speed: float) -> Iterator[tuple[ServedRobots, int]]:
+    """The corridor world's team of `cluster` served as ROS 2 robots (at `speed` x real time) on a free loopback
+    port, on a thread of this process; stopped and closed afterwards."""
+    port = free_port()
+    session = Ros2Session.listen(f"tcp/127.0.0.1:{port}", options=FAST_OPEN, types=message_types())
+    robots = ServedRobots(Simulation(load_world(ROOT / "worlds" / "corridor.yaml")), cluster, session)
+    stop = threading.Event()
+    thread = threading.Thread(target=serve, args=(robots, stop), kwargs={"speed": speed}, daemon=True)
+    thread.start()
+    try:
+        yield robots, port
+    finally:
+        stop.set()
+        thread.join(timeout=5)
+        robots.close()
+        session.close()

@@ -27,13 +27,11 @@ from drd.hw.drivers import DriverError, check_driver_classes, load_driver
 from drd.hw.interfaces import Camera, Drive, HardwareError, Jump, Launcher, RadioChannel, RangeSensor, StaleCommand
 from drd.hw.ros2 import LASER_SCAN, ODOMETRY, TWIST, Ros2Link, message_types, quaternion
 from drd.runtime.ownership import DeviceGate
-from drd.sim import Simulation, load_world
-from drd.sim.ros2 import ServedRobots, serve
+from drd.sim.ros2 import ServedRobots
 from dsl.catalog import Catalog
-from tests.ros2_support import eventually, free_port, ros2_sdk
+from tests.ros2_support import FAST_OPEN, eventually, free_port, ros2_sdk, served_team
 
 ROOT = Path(__file__).resolve().parents[1]
-FAST_OPEN = {"scouting/delay": 50}
 
 
 def device(kind: str, name: str, options: dict[str, object] | None = None, **driver_options: object) -> Device:
@@ -296,20 +294,8 @@ def test_options_are_checked_before_anything_runs(catalog: Catalog, tmp_path: Pa
 
 @pytest.fixture
 def served(catalog: Catalog) -> Iterator[tuple[ServedRobots, int]]:
-    port = free_port()
-    session = Ros2Session.listen(f"tcp/127.0.0.1:{port}", options=FAST_OPEN, types=message_types())
-    robots = ServedRobots(Simulation(load_world(ROOT / "worlds" / "corridor.yaml")),
-                          load_hosts(ROOT / "hosts.yaml", catalog), session)
-    stop = threading.Event()
-    thread = threading.Thread(target=serve, args=(robots, stop), kwargs={"speed": 2.0}, daemon=True)
-    thread.start()
-    try:
-        yield robots, port
-    finally:
-        stop.set()
-        thread.join(timeout=5)
-        robots.close()
-        session.close()
+    with served_team(load_hosts(ROOT / "hosts.yaml", catalog), 2.0) as team:
+        yield team
 
 
 def test_every_ros2_driver_works_the_served_simulator(served: tuple[ServedRobots, int], link: Ros2Link) -> None:

@@ -21,14 +21,12 @@ import pytest
 from drd.bus.ros2 import Ros2Session, topic_key
 from drd.hosts import Cluster, load_hosts
 from drd.hw.ros2 import DETECTIONS, LASER_SCAN, ODOMETRY, TWIST, message_types, yaw_of
-from drd.sim import Simulation, load_world
-from drd.sim.ros2 import IMAGE_WIDTH, ServedRobots, serve
+from drd.sim.ros2 import IMAGE_WIDTH, ServedRobots
 from dsl.catalog import Catalog
-from tests.ros2_support import eventually, free_port, msg_definitions, ros2_sdk
+from tests.ros2_support import eventually, free_port, msg_definitions, ros2_sdk, served_team
 
 ROOT = Path(__file__).resolve().parents[1]
 SDK_TYPES = (TWIST, LASER_SCAN, ODOMETRY, DETECTIONS, "sensor_msgs/msg/Image")
-FAST_OPEN = {"scouting/delay": 50}
 
 
 @pytest.fixture
@@ -39,19 +37,8 @@ def cluster(catalog: Catalog) -> Cluster:
 @pytest.fixture
 def served(cluster: Cluster) -> Iterator[tuple[ServedRobots, int]]:
     """The corridor team served in real time (x4) on a free loopback port, on a thread of this process."""
-    port = free_port()
-    session = Ros2Session.listen(f"tcp/127.0.0.1:{port}", options=FAST_OPEN, types=message_types())
-    robots = ServedRobots(Simulation(load_world(ROOT / "worlds" / "corridor.yaml")), cluster, session)
-    stop = threading.Event()
-    thread = threading.Thread(target=serve, args=(robots, stop), kwargs={"speed": 4.0}, daemon=True)
-    thread.start()
-    try:
-        yield robots, port
-    finally:
-        stop.set()
-        thread.join(timeout=5)
-        robots.close()
-        session.close()
+    with served_team(cluster, 4.0) as team:
+        yield team
 
 
 @pytest.fixture
