@@ -17,13 +17,13 @@ from dataclasses import dataclass, replace
 from dsl import ast
 from dsl.catalog import Catalog, ComponentType, InputSpec, Kind
 from dsl.checker import Body, Checked
-from dsl.dataflow import UNTYPED, Ambiguous, InputBinding, Offer, bind, producer_order
+from dsl.dataflow import UNTYPED, Ambiguous, InputBinding, Level, Offer, Scope, bind, producer_order
 from dsl.errors import NOWHERE, Reporter, Span
 from dsl.linearize import plan_graph, predecessors, total_order
 from dsl.statechart import ResourceNeed, State, Statechart, StateKind, Transition
 
 #: The data in scope of a child, nearest level first (`dsl.dataflow`).
-_Levels = tuple[tuple[Offer, ...], ...]
+_Levels = tuple[Level, ...]
 
 
 @dataclass(frozen=True, slots=True)
@@ -92,8 +92,8 @@ class Builder:
         offers = [o for key, c in body.children.items() if c.mult is None
                   for o in self._offers(f"{sid}/{key}", key, c.name, ())]
         offers += [Offer(sid, s.name, s.type.name, True) for s in body.shared]
-        kids = {key: self._child(sid, c, depth + 1, prio, inner,
-                                 (tuple(o for o in offers if o.shared or o.key != key), *data))
+        scope = Scope(offers)
+        kids = {key: self._child(sid, c, depth + 1, prio, inner, (Level(scope, key), *data))
                 for key, c in body.children.items()}
         self.states[sid] = self._body(self.states[sid], body, kids)
 
@@ -202,13 +202,13 @@ class Builder:
         value, last = arg.value, False
         if isinstance(value, ast.Call) and value.func == "last" and len(value.args) == 1 and value.where is None:
             value, last = value.args[0], True
-        near = data[0] if data else ()
+        near = data[0] if data else Level(Scope(()))
         offer: Offer | None
         if isinstance(value, ast.Attr) and isinstance(value.obj, ast.Name):
             key, field = value.obj.id, value.attr
-            hits = [o for o in near if not o.shared and o.key == key and o.name == field]
+            hits = [o for o in near.outputs_of(key) if o.name == field]
             if not hits:
-                outputs = sorted({o.name for o in near if not o.shared and o.key == key})
+                outputs = sorted({o.name for o in near.outputs_of(key)})
                 self._error("unknown-input-source", f"{key}.{field} is not an output of a sibling of {child.name}",
                             arg.span, f"{key}'s outputs: {', '.join(outputs)}" if outputs else
                             f"siblings with outputs: {', '.join(sorted({o.key for o in near if not o.shared}))}"
@@ -216,7 +216,7 @@ class Builder:
                 return None
             offer = hits[0]
         elif isinstance(value, ast.Name):
-            offer = next((o for level in data for o in level if o.shared and o.name == value.id), None)
+            offer = next((o for level in data for o in level.named(value.id) if o.shared), None)
             if offer is None:
                 self._error("unknown-input-source", f"{value.id} is no shared datum in scope of {child.name}",
                             arg.span, "an input reads a sibling's output (sibling.output) or a `shared` datum")
