@@ -300,6 +300,9 @@ def run_many(missions: Sequence[Mission], cluster: Cluster, world: World, catalo
                 progress(sim, life.executive)
             next_progress = sim.time + progress_every
     why = "stopped by operator" if stop is not None and stop.is_set() else f"sim time limit of {until:g} s reached"
+    for inj in pending:  # the missions ended first: say so, rather than drop them without a word
+        for result in results:
+            result.injections.append(_not_injected(inj, sim.time))
     life.end(why)
     _conclude(results, [life.interpreters[r.mission_id or ""] for r in results], sim, time.perf_counter() - start)
     close = getattr(sim, "close", None)
@@ -402,6 +405,12 @@ def _inject(inj: Injection, sim: Simulation, life: ControllerLife, cluster: Clus
         what += f": the door is now {state[inj.action].value}"
     return {"at": round(sim.time, 3), "action": inj.action.value, "target": inj.target, "injection": str(inj),
             "effect": what}
+
+
+def _not_injected(inj: Injection, now: float) -> dict[str, Any]:
+    """The report's row of an injection that never happened: the run ended (at `now`) before its time."""
+    return {"at": inj.at, "action": inj.action.value, "target": inj.target, "injection": str(inj),
+            "effect": f"{inj} (the run ended at {now:.1f} s, before it)", "skipped": True}
 
 
 def _robot_resources(cluster: Cluster, robot: str) -> list[str]:

@@ -81,14 +81,21 @@ def parse(text: str, *, hosts: set[str], robots: set[str], doors: set[str]) -> I
     return Injection(at, action, m["target"])
 
 
-def parse_all(texts: list[str], *, hosts: set[str], robots: set[str], doors: set[str]) -> list[Injection]:
-    """Every `--inject`, in time order; all problems reported together."""
+def parse_all(texts: list[str], *, hosts: set[str], robots: set[str], doors: set[str],
+              until: float | None = None) -> list[Injection]:
+    """Every `--inject`, in time order; all problems reported together. One after `until` (the run's sim time
+    limit) is refused: it could never happen, and a run that silently left it out would mislead."""
     out, problems = [], []
     for t in texts:
         try:
-            out.append(parse(t, hosts=hosts, robots=robots, doors=doors))
+            inj = parse(t, hosts=hosts, robots=robots, doors=doors)
         except InjectionError as e:
             problems.append(str(e))
+            continue
+        if until is not None and inj.at > until:
+            problems.append(f"injection {t!r} comes after the run ends (--until {until:g} s):"
+                            " it would never happen")
+        out.append(inj)
     out.sort()
     problems += _restarts_follow_kills(out)
     if problems:

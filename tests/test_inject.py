@@ -158,3 +158,24 @@ def test_a_success_that_lost_an_instance_says_so_first() -> None:
                            "lose scout2 at 70s"], cwd=ROOT, capture_output=True, text=True, timeout=300, check=False)
     first = text.stdout.splitlines()[0]
     assert "success" in first and "degraded: 1 instance failed" in first, first
+
+
+def test_an_injection_after_the_runs_end_is_refused_before_it_starts() -> None:
+    """Issue #18: it was silently dropped."""
+    with pytest.raises(InjectionError, match=r"'kill ranger1 at 2min' comes after the run ends \(--until 60 s\)"):
+        parse_all(["kill ranger1 at 2min"], **KNOWN, until=60.0)
+    code, _, err = dry_run("missions/corridor_surveillance.mission", "--until", "60", "--inject",
+                           "kill ranger1 at 5000s")
+    assert code == 2 and "comes after the run ends" in err and "Traceback" not in err
+
+
+def test_an_injection_the_missions_ended_before_is_reported_not_injected(tmp_path: Path) -> None:
+    mission = tmp_path / "short.mission"
+    mission.write_text("mission Short {\n    Wait(duration: 2s)\n}\n")
+    code, report, _ = dry_run(str(mission), "--inject", "kill ranger1 at 50s")
+    assert code == 0 and report["sim_time"] == pytest.approx(2.0, abs=0.11)
+    [row] = report["injections"]  # type: ignore[misc]
+    assert row["skipped"] is True and row["target"] == "ranger1" and "the run ended at 2.0 s" in row["effect"]
+    text = subprocess.run(["missionctl", "dry-run", str(mission), "--inject", "kill ranger1 at 50s"], cwd=ROOT,
+                          capture_output=True, text=True, timeout=300, check=False).stdout
+    assert "not injected at 50.0 s" in text

@@ -350,7 +350,7 @@ def dry_run(
     if charts is None:
         return INVALID
     cluster, sim_world = _team_files(hosts, world, cat)
-    injections = _injections(inject, cluster, sim_world)
+    injections = _injections(inject, cluster, sim_world, until)
     _check_render(render)
     fh = open_trace(trace)
     stop = threading.Event()
@@ -398,14 +398,14 @@ def _team_files(hosts: Path, world: str | None, cat: Catalog) -> tuple[Cluster, 
         fail_all(e.problems)
 
 
-def _injections(inject: list[str], cluster: Cluster, sim_world: World) -> list[Injection]:
+def _injections(inject: list[str], cluster: Cluster, sim_world: World, until: float) -> list[Injection]:
     from drd.inject import InjectionError
     from drd.inject import parse_all as parse_injections
 
     try:
         return parse_injections(inject, hosts={h.name for h in cluster.hosts},
                                 robots={r.id for r in sim_world.rangers} | set(sim_world.scout_ids),
-                                doors={d.id for d in sim_world.doors})
+                                doors={d.id for d in sim_world.doors}, until=until)
     except InjectionError as e:
         fail_all([str(e)])
 

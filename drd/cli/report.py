@@ -70,7 +70,8 @@ def report_view(r: DryRun, several: bool = False, width: int = 80) -> list[Rende
                       else f"sim time {r.sim_time:.1f} s"))
     parts += _why_view(r, width)
     for row in r.injections:
-        parts.append(Text.assemble(("injected ", "bold yellow"), f"at {row['at']:.1f} s: {row['effect']}"))
+        parts.append(Text.assemble(("not injected " if row.get("skipped") else "injected ", "bold yellow"),
+                                   f"at {row['at']:.1f} s: {row['effect']}"))
     path_width = max(20, width - 36)
 
     def rel(path: str, room: int = path_width) -> str:
