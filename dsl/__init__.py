@@ -11,7 +11,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from dsl.catalog import Catalog
-from dsl.errors import Diagnostic, MissionError, Reporter, Severity
+from dsl.errors import Diagnostic, MissionError, OverBudget, Reporter, Severity
 from dsl.statechart import Statechart
 
 if TYPE_CHECKING:
@@ -50,13 +50,17 @@ def compile_program(program: Program, catalog: Catalog, report: Reporter) -> Sta
     from dsl.build import Builder
     from dsl.checker import Checker
 
-    if report.failed:  # syntax errors: semantic checks would only echo them
+    if report.failed:  # syntax errors (or the budget spent): semantic checks would only echo them
         return None
-    checked = Checker(program, catalog, report).run()
-    mission = program.mission
-    if report.failed or mission is None:
+    try:
+        checked = Checker(program, catalog, report).run()
+        mission = program.mission
+        if report.failed or mission is None:
+            return None
+        chart = Builder(checked, catalog, report).build(mission, program.main)
+    except OverBudget as stop:
+        report.over_budget(stop)
         return None
-    chart = Builder(checked, catalog, report).build(mission, program.main)
     return None if report.failed else chart
 
 
@@ -74,8 +78,9 @@ def compile_file(path: str | Path, catalog: Catalog) -> Compiled:
     return _finish(load_file(path, report), catalog, report)
 
 
-def compile_text(text: str, catalog: Catalog, file: str = "<string>") -> Compiled:
+def compile_text(text: str, catalog: Catalog, file: str = "<string>", budget: float | None = None) -> Compiled:
+    """Compile a mission given as text; with `budget` (seconds), compiling stops past it with a located error."""
     from dsl.loader import load_text
 
-    report = Reporter()
+    report = Reporter(budget=budget)
     return _finish(load_text(text, file, report), catalog, report)

@@ -64,6 +64,8 @@ class Builder:
 
     def _instance(self, sid: str, name: str, child: ast.Child, parent: str | None, depth: int, prio: int,
                   held: tuple[_Held, ...], data: _Levels) -> None:
+        if not len(self.states) % 256:
+            self.report.check_budget(child.span)
         behavior = self.checked.behaviors.get(child.name)
         args = child.args or ()
         if behavior is None:

@@ -138,6 +138,7 @@ class Checker:
         self._collect_emitted_events()
         order = self._call_graph()
         for name in order:
+            self.report.check_budget(self.behaviors[name].name_span)
             self._behavior(self.behaviors[name])
         return Checked(self.behaviors, self.bodies, self.events)
 

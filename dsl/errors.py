@@ -7,6 +7,7 @@ plain-text form used everywhere else.
 
 from __future__ import annotations
 
+import time
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from enum import StrEnum
@@ -149,11 +150,42 @@ class MissionError(MissionInputError):
         return "\n".join(d.render(self.sources) for d in self.diagnostics)
 
 
+class OverBudget(Exception):  # noqa: N818 - a signal between the compiler's stages, never shown as such
+    """Compiling went past its time budget (`Reporter.budget`): raised where it was, so the compiler stops there and
+    reports it at that place (the file's name is filled in by whoever knows it)."""
+
+    def __init__(self, span: Span) -> None:
+        super().__init__(str(span))
+        self.span = span
+
+
 @dataclass
 class Reporter:
-    """Collects diagnostics during one compilation; the single place that records errors."""
+    """Collects diagnostics during one compilation; the single place that records errors.
+
+    `budget` (seconds, from the reporter's creation) bounds a compilation a controller does for someone else: the
+    stages call `check_budget` as they go, and past it the compiler stops with one located error instead of
+    holding a core for as long as the input makes it."""
 
     diagnostics: list[Diagnostic] = field(default_factory=list)
+    budget: float | None = None
+    deadline: float = field(init=False, default=float("inf"))
+
+    def __post_init__(self) -> None:
+        if self.budget is not None:
+            self.deadline = time.monotonic() + self.budget
+
+    def check_budget(self, span: Span) -> None:
+        """Raise `OverBudget` at `span` if the budget is spent."""
+        if time.monotonic() > self.deadline:
+            raise OverBudget(span)
+
+    def over_budget(self, stop: OverBudget) -> None:
+        """Report the stop `stop` (once)."""
+        if not any(d.code == "budget" for d in self.diagnostics):
+            self.error("budget", f"compiling stopped here: it took longer than its budget of {self.budget:g} s",
+                       stop.span, "split the mission into smaller files, or run it with `missionctl dry-run`,"
+                       " which has no budget")
 
     def error(self, code: str, message: str, span: Span, hint: str | None = None,
               notes: Iterable[tuple[str, Span]] = ()) -> None:

@@ -13,14 +13,19 @@ must not be lost, or one error would cascade into the next line.
 
 from __future__ import annotations
 
+import time
 from collections.abc import Iterator
 from itertools import chain
 
 from lark import Token
 from lark.lark import PostLex
 
+from dsl.errors import OverBudget, Span
+
 OPENERS = {"LPAR", "LSQB"}
 CLOSERS = {"RPAR", "RSQB"}
+#: The budget is looked at every this many tokens (a clock read per token would cost more than the check is worth).
+BUDGET_EVERY = 1024
 ACTION_KEYWORDS = {"SET", "EMIT", "RELEASE", "LOG"}
 
 
@@ -32,11 +37,14 @@ class Layout(PostLex):
     def __init__(self) -> None:
         self.reset()
 
-    def reset(self) -> None:
-        """Forget everything: called before each parse."""
+    def reset(self, deadline: float = float("inf")) -> None:
+        """Forget everything: called before each parse. Past `deadline` (`time.monotonic`), `OverBudget` is raised
+        at the token reached."""
         self.history: list[Token] = []
         self.pending: list[Token] = []  # pulled from the lexer, not yet given to the parser
         self.depth = 0
+        self.deadline = deadline
+        self.count = 0
 
     def save(self) -> tuple[list[Token], list[Token], int]:
         return self.history, self.pending, self.depth
@@ -49,6 +57,10 @@ class Layout(PostLex):
         held: Token | None = None  # a _SEP or SLASH waiting for the next token
         for tok in chain(replay, stream):
             kind = tok.type
+            self.count += 1
+            if not self.count % BUDGET_EVERY and time.monotonic() > self.deadline:
+                line, column = tok.line or 1, tok.column or 1
+                raise OverBudget(Span("", line, column, line, column + max(1, len(tok.value))))
             if kind == "_SEP":
                 if self.depth > 0:
                     continue

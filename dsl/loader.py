@@ -94,7 +94,7 @@ def _add(program: Program, text: str, name: str, base: Path, report: Reporter, m
     program.sources[name] = text
     if main and _not_a_mission(name, report):
         return
-    tree, errors = parse(text, name)
+    tree, errors = parse(text, name, report if report.budget is not None else None)
     report.diagnostics.extend(errors)
     if tree is None:
         return

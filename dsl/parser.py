@@ -15,6 +15,7 @@ import math
 import os
 import threading
 from collections.abc import Callable, Sequence
+from dataclasses import replace
 from functools import cache
 from importlib import resources
 from typing import Any
@@ -24,7 +25,7 @@ from lark.exceptions import UnexpectedCharacters, UnexpectedInput, UnexpectedTok
 
 from dsl import ast
 from dsl.ast import KEYWORDS
-from dsl.errors import Diagnostic, Span
+from dsl.errors import Diagnostic, OverBudget, Reporter, Span
 from dsl.layout import Layout
 from dsl.unclosed import unclosed_block
 
@@ -460,18 +461,24 @@ class Parser:
         self.builder.subparse = self._subexpr
         self.lock = threading.Lock()
 
-    def parse(self, text: str, file: str = "<string>") -> tuple[ast.MissionFile | None, list[Diagnostic]]:
-        """Parse one file's text. Returns the AST (None if unrecoverable) and syntax diagnostics."""
+    def parse(self, text: str, file: str = "<string>", report: Reporter | None = None,
+              ) -> tuple[ast.MissionFile | None, list[Diagnostic]]:
+        """Parse one file's text. Returns the AST (None if unrecoverable) and syntax diagnostics; past the budget of
+        `report` (if any), None and the place it stopped."""
         with self.lock:
             b = self.builder
             b.file, b.errors, b.depth = file, [], {}
             b.line_offset = b.column_offset = 0
-            self.layout.reset()
+            self.layout.reset(report.deadline if report is not None else float("inf"))
             recovery = _Recovery(self, file, text)
             try:
                 tree = self.lark.parse(text, start="start", on_error=recovery)
             except UnexpectedInput as e:
                 recovery.report(e)
+                tree = None
+            except OverBudget as stop:
+                assert report is not None  # only a budget raises it
+                report.over_budget(OverBudget(replace(stop.span, file=file)))
                 tree = None
             errors = recovery.diagnostics + b.errors
             errors.sort(key=lambda d: (d.span.line, d.span.column))
@@ -683,9 +690,10 @@ def _shared() -> Parser:
     return _default
 
 
-def parse(text: str, file: str = "<string>") -> tuple[ast.MissionFile | None, list[Diagnostic]]:
-    """Parse with the shared parser instance."""
-    return _shared().parse(text, file)
+def parse(text: str, file: str = "<string>", report: Reporter | None = None,
+          ) -> tuple[ast.MissionFile | None, list[Diagnostic]]:
+    """Parse with the shared parser instance (within the budget of `report`, if it has one)."""
+    return _shared().parse(text, file, report)
 
 
 def parse_expression(text: str) -> ast.Expr | None:

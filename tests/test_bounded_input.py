@@ -137,3 +137,26 @@ def test_a_multiplicity_evaluated_above_the_limit_fails_at_its_start_without_cre
     entered = [json.loads(line)["path"] for line in (tmp_path / "trace.jsonl").read_text().splitlines()
                if json.loads(line)["kind"] == "entered"]
     assert not any("[" in path for path in entered), "no instance may be created"
+
+
+def chain_of_waits(states: int) -> str:
+    lines = ["mission Chain {", "    start -> s0"]
+    for i in range(states):
+        lines += [f"    Wait(duration: 1s) as s{i}", f"    s{i} -> s{i + 1}"]
+    return "\n".join([*lines, f"    Wait(duration: 1s) as s{states}", "}"]) + "\n"
+
+
+def test_a_compile_past_its_budget_stops_with_one_located_error() -> None:
+    """What a controller compiles for a client has a budget (`compile_text(..., budget=)`): past it the compiler
+    stops where it is, at whichever stage, and says so there; with no budget the same text compiles."""
+    from drd.manifests import load_catalog
+    from dsl import compile_text
+
+    catalog, text = load_catalog(), chain_of_waits(2_000)
+    spent = compile_text(text, catalog, "chain.mission", budget=0.0)
+    assert not spent.ok and spent.statechart is None
+    [stop] = spent.diagnostics
+    assert stop.code == "budget" and stop.span.file == "chain.mission"
+    assert 1 <= stop.span.line <= text.count("\n") and "budget of 0 s" in stop.message
+    assert "chain.mission:" in stop.render(spent.sources)
+    assert compile_text(text, catalog, "chain.mission").ok
