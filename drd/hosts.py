@@ -64,7 +64,10 @@ SECURITY_KEYS: Mapping[SecurityMode, tuple[str, ...]] = {
     SecurityMode.TLS: ("ca", "cert", "key"),
 }
 _TOP_KEYS = ("cluster", "hosts")
-_CLUSTER_KEYS = ("name", "security", "lease", "placement", "world", "history")
+_CLUSTER_KEYS = ("name", "security", "lease", "placement", "world", "history", "store")
+_STORE_KEYS = ("etcd",)
+#: An etcd member's client URL (its HTTP JSON gateway; TLS to etcd is not supported yet).
+_ETCD_URL = re.compile(r"http://[A-Za-z0-9.\-]+:(\d{1,5})")
 #: The simulated world when hosts.yaml names none (`sim` drivers need one: worlds/NAME.yaml).
 DEFAULT_WORLD = "corridor"
 _HOST_KEYS = ("endpoint", "roles", "cores", "drivers", "devices", "robots")
@@ -113,6 +116,18 @@ class Placement:
     cpu: float = 1.0
     memory: float = 0.5
     instances: float = 0.2
+
+
+@dataclass(frozen=True, slots=True)
+class Store:
+    """Where the controller keeps its missions: its own SQLite journal (no `etcd`), or a replicated etcd cluster
+    (its members' client URLs), which also elects the one acting controller among several (issue #16)."""
+
+    etcd: tuple[str, ...] = ()
+
+    @property
+    def replicated(self) -> bool:
+        return bool(self.etcd)
 
 
 @dataclass(frozen=True, slots=True)
@@ -179,11 +194,18 @@ class Cluster:
     source: str = "hosts.yaml"
     world: str = DEFAULT_WORLD  # the world its `sim` drivers live in (worlds/NAME.yaml), unless a command says
     history: int = DEFAULT_HISTORY  # finished missions the controller keeps (status, stop); older ones are dropped
+    store: Store = Store()  # the controllers' journal: SQLite on the one controller, or etcd for several
 
     @property
     def controller(self) -> Host:
-        """The host running the RCM and the Mission Executive (a parsed cluster has exactly one)."""
+        """The (first) host with the RCM and the Mission Executive: the one controller, or with a replicated store
+        the first of the controllers, one of which is elected to act (`controllers`)."""
         return next(h for h in self.hosts if Role.CONTROLLER in h.roles)
+
+    @property
+    def controllers(self) -> list[Host]:
+        """Every host with the controller role (several only with a replicated `store`)."""
+        return [h for h in self.hosts if Role.CONTROLLER in h.roles]
 
     def host(self, name: str) -> Host:
         """The host called `name`; KeyError names the known hosts."""
@@ -268,11 +290,35 @@ class _Parser(ConfigReader):
         placement = self.placement(c.get("placement", {}), "cluster.placement")
         world = self.name(c["world"], "cluster.world") if "world" in c else DEFAULT_WORLD
         history = self.history(c["history"], "cluster.history") if "history" in c else DEFAULT_HISTORY
+        store = self.store(c["store"], "cluster.store") if "store" in c else Store()
         hosts = tuple(self.host(n, h, p) for n, h, p in self.entries(data.get("hosts", {}), "hosts"))
         if data.get("hosts") == {}:
             self.fail("hosts", "expected at least one host")
-        self.check_cluster(hosts)
-        return Cluster(name or "", security, lease, placement, hosts, self.source, world or DEFAULT_WORLD, history)
+        self.check_cluster(hosts, store)
+        return Cluster(name or "", security, lease, placement, hosts, self.source, world or DEFAULT_WORLD, history,
+                       store=store)
+
+    def store(self, value: object, key: str) -> Store:
+        """`{etcd: [http://HOST:PORT, ...]}`: the etcd members' client URLs (each once)."""
+        data = self.mapping(value, key)
+        self.keys(data, key, _STORE_KEYS, required=_STORE_KEYS if data is value else ())
+        urls = data.get("etcd")
+        if "etcd" not in data:
+            return Store()
+        if not isinstance(urls, list) or not urls:
+            self.fail(f"{key}.etcd", "expected a non-empty list of etcd client URLs (http://HOST:PORT), got"
+                      f" {got(urls)}")
+            return Store()
+        good: list[str] = []
+        for i, url in enumerate(urls):
+            m = _ETCD_URL.fullmatch(url) if isinstance(url, str) else None
+            if m is None or not 0 < int(m.group(1)) < 65536:
+                self.fail(f"{key}.etcd[{i}]", f"expected an etcd client URL http://HOST:PORT, got {got(url)}")
+            elif url in good:
+                self.fail(f"{key}.etcd[{i}]", f"{url} is listed twice")
+            else:
+                good.append(url)
+        return Store(tuple(good)) if len(good) == len(urls) else Store()
 
     def history(self, value: object, key: str) -> int:
         if isinstance(value, int) and not isinstance(value, bool) and 1 <= value <= MAX_HISTORY:
@@ -463,13 +509,19 @@ class _Parser(ConfigReader):
             if why:
                 self.fail(path, f"{why} ({t.name}'s manifest, {t.source})")
 
-    def check_cluster(self, hosts: Sequence[Host]) -> None:
-        """Across hosts: one controller, at most one simulator, distinct endpoints and robot ids, references."""
+    def check_cluster(self, hosts: Sequence[Host], store: Store | None = None) -> None:
+        """Across hosts: one controller (several with a replicated store, which elects the one acting), at most one
+        simulator, distinct endpoints and robot ids, references."""
         for role, exactly in ((Role.CONTROLLER, True), (Role.SIMULATOR, False)):
             having = [h.name for h in hosts if role in h.roles]
+            if role is Role.CONTROLLER and store is not None and store.replicated:
+                having = having[:1]  # standbys: etcd elects the one that acts
             for other in having[1:]:
+                several = ("; several controllers need a replicated store to elect the one that acts"
+                           " (cluster.store: {etcd: [http://HOST:PORT, ...]}, docs/hosts.md)"
+                           if role is Role.CONTROLLER else "")
                 self.fail(f"hosts.{other}.roles", f"{role} is already a role of host {having[0]};"
-                          f" a cluster has {'exactly' if exactly else 'at most'} one {role}")
+                          f" a cluster has {'exactly' if exactly else 'at most'} one {role}{several}")
             if exactly and not having and hosts:
                 self.fail("hosts", f"no host has the role {role}; exactly one must")
         endpoints: dict[str, str] = {}
