@@ -2,6 +2,8 @@
 
 Run `python bench/compile.py [--lines 10000] [--repeat 5] [--cpu] [--json] [--profile]` (never by pytest).
 Goal: the whole pipeline (parse + check + linearize + build) takes at most 2x a raw LALR parse.
+`--slope` compiles the generated mission at 1/8, 1/4, 1/2 and all of `--lines` and prints the cost per byte at each
+size: it stays flat when the compiler is linear (issue #18; `tests/test_costs.py` checks it by counting work).
 """
 
 from __future__ import annotations
@@ -191,6 +193,37 @@ def profile(text: str, out: TextIO) -> None:
     pstats.Stats(prof, stream=out).sort_stats("cumulative").print_stats(25)
 
 
+def slope(lines: int, repeat: int, clock: Callable[[], float]) -> list[dict[str, float]]:
+    """Microseconds per byte of the whole pipeline at four sizes up to `lines` (best of `repeat` each)."""
+    catalog = load_catalog()
+    dsl.compile_text(generate(100), catalog, FILE)  # the parser's tables, once
+    rows = []
+    for part in (8, 4, 2, 1):
+        text = generate(max(50, lines // part))
+        best = float("inf")
+        for _ in range(repeat):
+            gc.collect()
+            t0 = clock()
+            dsl.compile_text(text, catalog, FILE)
+            best = min(best, clock() - t0)
+        rows.append({"bytes": len(text), "lines": text.count("\n") + 1, "ms": round(best * 1000, 3),
+                     "us_per_byte": round(best * 1e6 / len(text), 3)})
+    return rows
+
+
+def print_slope(rows: list[dict[str, float]], as_json: bool) -> None:
+    growth = rows[-1]["us_per_byte"] / rows[0]["us_per_byte"]  # the peer: the same compiler on 1/8 of the text
+    if as_json:
+        print(json.dumps({"slope": rows, "per_byte_growth": round(growth, 3)}, indent=2))
+        return
+    table = Table(title="cost per byte by size (flat = linear)")
+    for col in ("bytes", "lines", "ms", "us/byte"):
+        table.add_column(col, justify="right")
+    for r in rows:
+        table.add_row(f"{r['bytes']:,.0f}", f"{r['lines']:,.0f}", f"{r['ms']:.1f}", f"{r['us_per_byte']:.2f}")
+    Console().print(table, f"cost per byte at the largest size / at the smallest = {growth:.2f}x")
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--lines", type=int, default=10_000, help="size of the generated mission (lines)")
@@ -199,12 +232,17 @@ def main() -> None:
     ap.add_argument("--profile", action="store_true", help="also print the top 25 cumulative cProfile entries")
     ap.add_argument("--cpu", action="store_true", help="time process CPU time, steadier on a busy machine")
     ap.add_argument("--dump", metavar="FILE", type=argparse.FileType("w"), help="write the mission to FILE")
+    ap.add_argument("--slope", action="store_true", help="the cost per byte at four sizes up to --lines")
     args = ap.parse_args()
+    clock = time.process_time if args.cpu else time.perf_counter
+    if args.slope:
+        print_slope(slope(args.lines, max(1, args.repeat), clock), args.json)
+        return
     text = generate(args.lines)
     if args.dump:
         args.dump.write(text)
     lines = text.count("\n") + 1
-    secs = measure(text, max(1, args.repeat), time.process_time if args.cpu else time.perf_counter)
+    secs = measure(text, max(1, args.repeat), clock)
     ratio = secs["whole pipeline"] / secs["raw lark parse"]
     if args.json:
         print(json.dumps({"lines": lines, "repeat": args.repeat, "cpu": args.cpu,
