@@ -9,6 +9,7 @@ are checked for form only, never imported: a host imports just the drivers it ru
 
 from __future__ import annotations
 
+import math
 import os
 import re
 from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
@@ -156,7 +157,7 @@ class _Checker(ConfigReader):
         return False
 
     def positive(self, value: object, key: str, integer: bool = False) -> Any:
-        if is_number(value, integer) and value > 0:  # type: ignore[operator]
+        if is_number(value, integer) and 0 < value < math.inf:  # type: ignore[operator]
             return value if integer else float(value)  # type: ignore[arg-type]
         self.fail(key, f"expected a positive {'integer' if integer else 'number'}, got {got(value)}")
         return None
@@ -210,14 +211,69 @@ def _scheduling(c: _Checker, value: object, key: str) -> Scheduling:
 def _params(c: _Checker, value: object, key: str) -> tuple[ParamSpec, ...]:
     out = []
     for name, spec, path in c.entries(value, key, dict):
-        c.keys(spec, path, ("type", "default", "description"), required=("type",))
+        c.keys(spec, path, PARAM_KEYS, required=("type",))
         type_ = c.text(spec.get("type", ""), f"{path}.type")
         default = spec.get("default")
         if "default" in spec and type_ in SCALAR_TYPES:
             default = _default(c, default, type_, f"{path}.default")
+        limit = _param_range(c, spec, path, type_)
+        if limit is not None and isinstance(default, int | float) and not isinstance(default, bool):
+            why = limit.refuses(float(default))
+            if why:
+                c.fail(f"{path}.default", f"{why}: a default must lie in its own range")
         description = c.text(spec.get("description", ""), f"{path}.description")
-        out.append(ParamSpec(name, type_, default, "default" not in spec, description))
+        out.append(ParamSpec(name, type_, default, "default" not in spec, description, limit))
     return tuple(out)
+
+
+#: The keys of one parameter: its range (`min`, `max`, `unit`) is declared beside its type and default.
+PARAM_KEYS = ("type", "default", "min", "max", "unit", "description")
+#: The parameter types that take a range.
+NUMERIC = ("int", "float", "duration")
+
+
+def _param_range(c: _Checker, spec: Mapping[str, Any], path: str, type_: str) -> Limit | None:
+    """`speed: {type: float, min: 0, max: 2, unit: m/s}` -> Limit(0, 2, "m/s"); a duration's bounds are durations
+    (`min: 0s, max: 24h`) and carry their unit. None when the parameter declares no range."""
+    written = [k for k in ("min", "max", "unit") if k in spec]
+    if not written:
+        return None
+    if type_ not in NUMERIC:
+        if type_:
+            c.fail(f"{path}.{written[0]}",
+                   f"a range applies to a numeric parameter (int, float or duration), not {type_}")
+        return None
+    duration = type_ == "duration"
+    if duration and "unit" in spec:
+        c.fail(f"{path}.unit", "a duration's unit is written in its bounds (min: 0s, max: 24h)")
+    low, high = _bounds(c, spec, path, duration)
+    unit = "" if duration else c.text(spec.get("unit", ""), f"{path}.unit")
+    return Limit(low, high, unit, duration)
+
+
+def _bounds(c: _Checker, spec: Mapping[str, Any], path: str, duration: bool = False,
+            ) -> tuple[float | None, float | None]:
+    """A range's `min` and `max` (finite numbers, or durations), each None when not written, and not crossed."""
+    bounds: list[float | None] = []
+    for b in ("min", "max"):
+        v = spec.get(b)
+        if v is None:
+            bounds.append(None)
+        elif duration:
+            seconds = parse_duration(v) if isinstance(v, str) else None
+            if seconds is None:
+                c.fail(f"{path}.{b}", f"expected a duration such as 0s or 24h, got {got(v)}")
+            bounds.append(seconds)
+        elif is_number(v) and math.isfinite(v):
+            bounds.append(float(v))
+        else:
+            c.fail(f"{path}.{b}", f"expected a finite number, got {got(v)}")
+            bounds.append(None)
+    low, high = bounds
+    if low is not None and high is not None and low > high:
+        shown = Limit(duration=duration).show
+        c.fail(path, f"min {shown(low)} is above max {shown(high)}")
+    return low, high
 
 
 def _default(c: _Checker, value: object, type_: str, key: str) -> object:
@@ -229,6 +285,9 @@ def _default(c: _Checker, value: object, type_: str, key: str) -> object:
         return seconds
     if isinstance(value, bool) != (type_ == "bool") or not isinstance(value, _PYTYPES[type_]):
         c.fail(key, f"expects {type_}, got {got(value)}")
+        return None
+    if isinstance(value, float) and not math.isfinite(value):
+        c.fail(key, f"expects a finite {type_}, got {got(value)}")
         return None
     return float(value) if type_ == "float" else value
 
@@ -285,13 +344,7 @@ def _limits(c: _Checker, value: object, key: str) -> dict[str, Limit]:
     out: dict[str, Limit] = {}
     for name, spec, path in c.entries(value, key, dict):
         c.keys(spec, path, ("min", "max", "unit"))
-        bounds = [spec.get(b) for b in ("min", "max")]
-        for b, v in zip(("min", "max"), bounds, strict=True):
-            if v is not None and not is_number(v):
-                c.fail(f"{path}.{b}", f"expected a number, got {got(v)}")
-        low, high = (float(v) if is_number(v) else None for v in bounds)
-        if low is not None and high is not None and low > high:
-            c.fail(path, f"min {low:g} is above max {high:g}")
+        low, high = _bounds(c, spec, path)
         out[name] = Limit(low, high, str(spec.get("unit", "")))
     return out
 
@@ -517,7 +570,7 @@ def show(value: object) -> str:
     text = repr(value) if isinstance(value, str) else str(value)
     if len(text) <= SHOWN_CHARS:
         return text
-    return f"{text[:SHOWN_CHARS - 1]}… ({len(text)} characters)"
+    return f"{text[:SHOWN_CHARS - 1]}… ({len(text):,} characters)"
 
 
 def _hint(value: str, candidates: Iterable[str]) -> str:

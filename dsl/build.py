@@ -15,10 +15,11 @@ from collections.abc import Iterator
 from dataclasses import dataclass, replace
 
 from dsl import ast
-from dsl.catalog import Catalog, ComponentType, InputSpec, Kind
+from dsl.catalog import Catalog, ComponentType, InputSpec, Kind, Limit
 from dsl.checker import Body, Checked
 from dsl.dataflow import UNTYPED, Ambiguous, InputBinding, Level, Offer, Scope, bind, producer_order
 from dsl.errors import NOWHERE, Reporter, Span
+from dsl.exprtypes import constant
 from dsl.linearize import plan_graph, predecessors, total_order
 from dsl.statechart import ResourceNeed, State, Statechart, StateKind, Transition
 
@@ -77,7 +78,7 @@ class Builder:
             self.states[sid] = State(sid, name, StateKind.LEAF, parent, depth, component=child.name,
                                      args=tuple(a for a in args if a.name not in bound), defaults=defaults,
                                      needs=self._leaf_needs(child, held), priority=prio, inputs=inputs,
-                                     span=child.span)
+                                     ranges=_evaluated_ranges(ct, args), span=child.span)
             return
         body = self.checked.bodies[behavior.name]
         needs = tuple(self._need(n, held) for n in body.needs)
@@ -345,3 +346,13 @@ def _distinct(hits: list[_Held]) -> list[_Held]:
     for h in hits:
         seen.setdefault(h.name, h)
     return list(seen.values())
+
+
+def _evaluated_ranges(ct: ComponentType | None, args: tuple[ast.Arg, ...]) -> tuple[tuple[str, Limit], ...]:
+    """The ranges of the parameters given as expressions (`speed: s * 2`): checked on entry, when they have a
+    value; a constant was checked by the compiler, where it is written."""
+    if ct is None:
+        return ()
+    given = {a.name: a.value for a in args}
+    return tuple((p.name, p.limit) for p in ct.params
+                 if p.limit is not None and p.name in given and constant(given[p.name]) is None)

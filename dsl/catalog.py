@@ -8,6 +8,7 @@ of I/O and a test can build a catalog by hand.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
 from enum import StrEnum
@@ -37,21 +38,61 @@ class Process(StrEnum):
 
 @dataclass(frozen=True, slots=True)
 class Limit:
-    """The range a numeric property may take in hosts.yaml (`beams: {min: 1, max: 4096}`), and its unit, for the
-    message that refuses a value outside it."""
+    """The range a numeric value may take where it is written, and its unit, for the message that refuses a value
+    outside it: a device option or robot property in hosts.yaml (`beams: {min: 1, max: 4096}`), a behavior's
+    parameter in a mission (`speed: {type: float, min: 0, max: 2, unit: m/s}`). `duration`: the bounds are seconds,
+    shown as durations (`0s..24h`)."""
 
     min: float | None = None
     max: float | None = None
     unit: str = ""
+    duration: bool = False
 
     def refuses(self, value: float) -> str:
-        """Why `value` is outside the range ('' when it is inside)."""
+        """Why `value` is outside the range ('' when it is inside); NaN and infinities are always outside. An int is
+        compared as it is (a YAML integer of 400 digits has no float)."""
+        if isinstance(value, float) and not math.isfinite(value):
+            expected = f" (expected {self.text})" if self.min is not None or self.max is not None else ""
+            return f"{value} is not a finite number{expected}"
         if (self.min is not None and value < self.min) or (self.max is not None and value > self.max):
-            low = "" if self.min is None else f"{self.min:g}"
-            high = "" if self.max is None else f"{self.max:g}"
-            shown = f"{int(value)}" if value.is_integer() and abs(value) < 1e15 else f"{value:g}"
-            return f"{shown} is out of range: {low}..{high}{' ' + self.unit if self.unit else ''}"
+            return f"{self.show(value)} is out of range: {self.text}"
         return ""
+
+    @property
+    def text(self) -> str:
+        """`0..2 m/s`, `3..4096`, `0s..24h`, `0..` (no maximum)."""
+        low = "" if self.min is None else self.show(self.min)
+        high = "" if self.max is None else self.show(self.max)
+        return f"{low}..{high}{' ' + self.unit if self.unit and not self.duration else ''}"
+
+    def show(self, value: float) -> str:
+        """A value as the range is written: an integer without `.0`, a duration with its unit."""
+        if isinstance(value, int) and abs(value) >= 10**15:
+            return f"an integer of {len(str(value)) if value.bit_length() < 10_000 else 'thousands of'} digits"
+        value = float(value)
+        if self.duration:
+            return duration_text(value)
+        return f"{int(value)}" if value.is_integer() and abs(value) < 1e15 else f"{value:g}"
+
+    @property
+    def bounded(self) -> bool:
+        """Both ends declared: what every standard numeric parameter and property has."""
+        return self.min is not None and self.max is not None
+
+
+def possessive(name: str) -> str:
+    """`FollowCorridor's`, `AvoidObstacles'`: how a message names what a component's manifest says."""
+    return f"{name}'" if name.endswith("s") else f"{name}'s"
+
+
+def duration_text(seconds: float) -> str:
+    """Seconds as a duration literal of the language (`86400` -> `24h`, `0.25` -> `250ms`): the largest unit that
+    writes it exactly, else seconds."""
+    for unit, size in (("h", 3600.0), ("min", 60.0), ("s", 1.0), ("ms", 0.001)):
+        count = seconds / size
+        if seconds and abs(count) >= 1 and abs(count - round(count)) < 1e-9:
+            return f"{round(count)}{unit}"
+    return "0s" if seconds == 0 else f"{seconds:g}s"
 
 
 @dataclass(frozen=True, slots=True)
@@ -63,6 +104,9 @@ class ParamSpec:
     default: object = None
     required: bool = False
     description: str = ""
+    #: The range of a numeric parameter (its manifest's `min`, `max`, `unit`): a constant argument outside it is a
+    #: located compile error, an evaluated one fails the state as it is entered.
+    limit: Limit | None = None
 
 
 @dataclass(frozen=True, slots=True)

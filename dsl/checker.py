@@ -15,13 +15,15 @@ from dataclasses import dataclass, field
 import networkx as nx
 
 from dsl import ast
-from dsl.catalog import SCALAR_TYPES, Catalog, ComponentType, Kind, ParamSpec, RecordSpec
+from dsl.catalog import SCALAR_TYPES, Catalog, ComponentType, Kind, ParamSpec, RecordSpec, possessive
 from dsl.errors import Reporter, Span, did_you_mean
 from dsl.exprtypes import ANY, Scope, Type, Typer, assignable, constant, show
 from dsl.linearize import find_cycle, plan_graph
 
 #: Deeper chains of behaviors calling behaviors are rejected (they only come from generators).
 MAX_BEHAVIOR_DEPTH = 64
+#: The parameter types a manifest may give a range (`min`, `max`, `unit`).
+NUMERIC = ("int", "float", "duration")
 #: The most instances a multiplicity may create (written as a constant, or evaluated when it starts): each is a
 #: statechart and components; a mission of more is a mistake or an attack (`Wait[1000000000]`).
 MAX_INSTANCES = 1000
@@ -350,10 +352,28 @@ class Checker:
             value = constant(arg.value) if spec.type == "duration" else None
             if value is not None and value < 0:
                 self.report.error("duration", f"{arg.name}: a duration cannot be negative ({value:g} s)", arg.span)
+            elif isinstance(target, ComponentType):
+                self._in_range(target, spec, arg)
         for spec in params.values():
             if spec.required and spec.name not in given:
                 self.report.error("missing-parameter", f"{child.name} needs parameter {spec.name}", child.span,
                                   f"write {child.name}({spec.name}: ...)")
+
+    def _in_range(self, target: ComponentType, spec: ParamSpec, arg: ast.Arg) -> None:
+        """A constant argument inside the range its manifest declares (`FollowCorridor(speed: 50)` is refused here,
+        where it is written); an expression is checked when the state is entered (`drd.runtime.interpreter`)."""
+        value = constant(arg.value) if spec.limit is not None and spec.type in NUMERIC else None
+        if value is None or spec.limit is None:
+            return
+        why = spec.limit.refuses(value)
+        if not why:
+            return
+        default = spec.default
+        keep = (f", or leave it out for the default {spec.limit.show(default)}"
+                f"{' ' + spec.limit.unit if spec.limit.unit else ''}"
+                if isinstance(default, int | float) and not isinstance(default, bool) else "")
+        self.report.error("range", f"{arg.name} {why} ({possessive(target.name)} manifest, {target.source})",
+                          arg.value.span, f"give {arg.name} a value within {spec.limit.text}{keep}")
 
     def _callee(self, name: str, span: Span, implicit_in: str | None = None) -> ast.Behavior | ComponentType | None:
         if name in self.behaviors:

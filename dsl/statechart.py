@@ -17,6 +17,7 @@ from dataclasses import dataclass, field
 from enum import StrEnum
 
 from dsl import ast
+from dsl.catalog import Limit
 from dsl.dataflow import InputBinding
 from dsl.errors import NOWHERE, Span
 
@@ -96,6 +97,9 @@ class State:
     after: tuple[str, ...] = ()  # concurrent plans: siblings that must be done before this starts
     constraints: tuple[ast.Constraint, ...] = ()  # hold while the state is active (checked every control cycle)
     inputs: tuple[InputBinding, ...] = ()  # leaf: what each declared input reads (dsl.dataflow)
+    #: leaf: the manifest's range of each parameter whose argument is an expression, checked as it is evaluated on
+    #: entry (a constant one was checked by the compiler)
+    ranges: tuple[tuple[str, Limit], ...] = ()
     entry: tuple[str, ...] = ()  # parallel: the children in the order they are entered and stepped (producers
     #                              first); empty: declaration order
     multiplicity: ast.Multiplicity | None = None

@@ -22,7 +22,7 @@ from drd.manifests import (
     load_catalog,
     parse_manifest,
 )
-from dsl.catalog import Catalog, ComponentType, Kind, NeedSpec, ParamSpec, Process, RecordSpec, Scheduling
+from dsl.catalog import Catalog, ComponentType, Kind, Limit, NeedSpec, ParamSpec, Process, RecordSpec, Scheduling
 
 STANDARD = Path(components.__file__).parent
 DOCS = Path(__file__).resolve().parents[1] / "docs" / "components.md"
@@ -81,7 +81,8 @@ def test_the_agreed_needs_and_records(standard: Catalog) -> None:
     servo, watch, door = (standard.components[n] for n in ("ServoToGoal", "Watch", "DetectDoor"))
     assert servo.needs[2] == NeedSpec("radio", "RadioChannel", ("Scout",), 1.0, servo.needs[2].description)
     duration = watch.params[0]
-    assert duration == ParamSpec("duration", "duration", 60.0, False, duration.description)
+    assert duration == ParamSpec("duration", "duration", 60.0, False, duration.description,
+                                 Limit(0.0, 86_400.0, duration=True))
     assert dict(door.outputs[0].fields) == {"width": "float", "x": "float", "y": "float", "side": "str"}
     assert standard.events["MotionDetected"].fields == {"area": "float", "x": "float", "y": "float"}
     assert standard.components["RadioChannel"].sharable and standard.components["RadioChannel"].capacity == 10

@@ -52,6 +52,7 @@ from drd.runtime.tree import (
     StatePlan,
 )
 from dsl import ast
+from dsl.catalog import possessive
 from dsl.checker import MAX_INSTANCES
 from dsl.evaluate import EvalError, evaluate, format_value, truthy
 from dsl.export import trigger_label
@@ -465,6 +466,11 @@ class Interpreter:
             except EvalError as e:
                 self._notify(rec.Log(self.clock.now(), path, f"cannot enter: {e.message}"))
                 self._finish(parent, False, e.message)
+                return None
+            why = out_of_range(state, params) if state.ranges else ""
+            if why:
+                self._notify(rec.Log(self.clock.now(), path, f"cannot enter: {why}"))
+                self._finish(parent, False, why)
                 return None
         plan = self._plans[state.id]
         defaults = plan.defaults
@@ -1063,3 +1069,15 @@ def hears(listener: str, source: str) -> bool:
             base_a, bracket, _ = a.partition("[")
             return not (bracket and b.startswith(base_a + "["))
     return True
+
+
+def out_of_range(state: State, params: Mapping[str, Any]) -> str:
+    """Why a leaf cannot be entered with these evaluated arguments: the first outside its manifest's range
+    (`FollowCorridor(speed: s * 10)` with s = 5), else ''. NaN and infinities are always outside."""
+    for name, limit in state.ranges:
+        value = params.get(name)
+        if isinstance(value, int | float) and not isinstance(value, bool):
+            why = limit.refuses(value)
+            if why:
+                return f"{state.name}: {name} {why} ({possessive(state.component or state.name)} manifest)"
+    return ""
