@@ -10,6 +10,7 @@ file and `check_files` looks at the security files the daemon will need. See doc
 
 from __future__ import annotations
 
+import math
 import os
 import re
 from collections.abc import Iterable, Iterator, Mapping, Sequence
@@ -22,7 +23,7 @@ from drd.config import ConfigError, ConfigProblem, ConfigReader, display_path, r
 from drd.manifests import got, is_number, show  # one YAML dialect, one wording
 from drd.rcm.model import Aggregate, Unit
 from dsl.ast import parse_duration
-from dsl.catalog import Catalog, ComponentType, Kind
+from dsl.catalog import Catalog, ComponentType, Kind, Limit, possessive
 from dsl.errors import did_you_mean
 
 DEFAULT_LEASE = 3.0
@@ -77,6 +78,16 @@ _SECURITY_ALLOWED = ("mode", *dict.fromkeys(k for keys in SECURITY_KEYS.values()
 #: The roles of `cluster.security.roles`, most powerful first (docs/security.md).
 ACCESS_ROLES = ("daemon", "operator", "observer")
 _PLACEMENT_KEYS = ("cpu", "memory", "instances")
+#: The range and unit of every number hosts.yaml itself defines (device options and robot properties declare theirs
+#: in their manifests, `limits:`): a value outside is refused at load with the file, the key and the range.
+RANGES: Mapping[str, Limit] = {
+    "lease": Limit(0.1, 600.0, duration=True),  # below a control period of the network, grants would flap
+    "slice": Limit(0.1, 86_400.0, duration=True),
+    "capacity": Limit(1, 1_000_000),
+    "cores": Limit(1, 4096, "cores"),
+    "history": Limit(1, MAX_HISTORY, "missions"),
+    "placement": Limit(0, 1000),  # a weight: relative, so a bound only refuses nonsense
+}
 _SCALARS: Mapping[str, Any] = {"int": int, "float": (int, float), "bool": bool, "str": str}
 
 
@@ -286,7 +297,7 @@ class _Parser(ConfigReader):
         self.keys(c, "cluster", _CLUSTER_KEYS, required=("name",) if c is data.get("cluster") else ())
         name = self.name(c["name"], "cluster.name") if "name" in c else None
         security = self.security(c.get("security", {"mode": "none"}), "cluster.security")
-        lease = self.duration(c["lease"], "cluster.lease") if "lease" in c else DEFAULT_LEASE
+        lease = self.duration(c["lease"], "cluster.lease", RANGES["lease"]) if "lease" in c else DEFAULT_LEASE
         placement = self.placement(c.get("placement", {}), "cluster.placement")
         world = self.name(c["world"], "cluster.world") if "world" in c else DEFAULT_WORLD
         history = self.history(c["history"], "cluster.history") if "history" in c else DEFAULT_HISTORY
@@ -323,7 +334,7 @@ class _Parser(ConfigReader):
     def history(self, value: object, key: str) -> int:
         if isinstance(value, int) and not isinstance(value, bool) and 1 <= value <= MAX_HISTORY:
             return value
-        self.fail(key, f"expected a count of finished missions to keep, 1 to {MAX_HISTORY}, got {got(value)}")
+        self.fail(key, f"expected a count of finished missions to keep, {RANGES['history'].text}, got {got(value)}")
         return DEFAULT_HISTORY
 
     def security(self, value: object, key: str) -> Security:
@@ -370,7 +381,7 @@ class _Parser(ConfigReader):
     def placement(self, value: object, key: str) -> Placement:
         data = self.mapping(value, key)
         self.keys(data, key, _PLACEMENT_KEYS)
-        weights = {k: self.number(data[k], f"{key}.{k}", zero=True) for k in _PLACEMENT_KEYS if k in data}
+        weights = {k: self.number(data[k], f"{key}.{k}", RANGES["placement"]) for k in _PLACEMENT_KEYS if k in data}
         placement = Placement(**{k: v for k, v in weights.items() if v is not None})
         if not any((placement.cpu, placement.memory, placement.instances)):
             self.fail(key, "at least one weight must be positive")
@@ -380,7 +391,7 @@ class _Parser(ConfigReader):
         self.keys(data, key, _HOST_KEYS, required=("endpoint", "roles"))
         endpoint = self.endpoint(data["endpoint"], f"{key}.endpoint") if "endpoint" in data else ""
         roles = self.roles(data["roles"], f"{key}.roles") if "roles" in data else ()
-        cores = self.number(data["cores"], f"{key}.cores", integer=True) if "cores" in data else None
+        cores = self.number(data["cores"], f"{key}.cores", RANGES["cores"], integer=True) if "cores" in data else None
         if self.catalog is None:
             return Host(name, endpoint, roles, cores)
         raw = data.get("devices", {})
@@ -410,6 +421,9 @@ class _Parser(ConfigReader):
         for k in data:
             if not isinstance(k, str):
                 self.fail(f"{key}.{k}", f"a key is a name, got {got(k)}")
+        for path, v in _floats(data, key):
+            if not math.isfinite(v):
+                self.fail(path, f"{v} is not a finite number")
         return {str(k): v for k, v in data.items()}
 
     def device(self, host: str, local_id: str, data: dict[Any, Any], key: str,
@@ -423,13 +437,14 @@ class _Parser(ConfigReader):
             if not t.sharable:
                 self.fail(f"{key}.capacity", f"{t.name} is not sharable; only a sharable device has a capacity")
             else:
-                capacity = self.number(data["capacity"], f"{key}.capacity") or capacity
+                count = self.number(data["capacity"], f"{key}.capacity", RANGES["capacity"], integer=True)
+                capacity = capacity if count is None else float(count)
         slice_ = None
         if "slice" in data:
             if t and t.sharable:
                 self.fail(f"{key}.slice", f"{t.name} is sharable: it is never taken away, so it has no time slice")
             else:
-                slice_ = self.duration(data["slice"], f"{key}.slice")
+                slice_ = self.duration(data["slice"], f"{key}.slice", RANGES["slice"])
         own = self.plain(data["driver_options"], f"{key}.driver_options") if "driver_options" in data else {}
         wiring = {**(shared or {}).get(driver or "", {}), **own}
         # An empty type was reported already: parts using the device are then not checked again.
@@ -504,10 +519,10 @@ class _Parser(ConfigReader):
     def within(self, t: ComponentType, name: str, value: object, path: str) -> None:
         """A numeric value inside the range its manifest declares (`limits`), else a problem naming the range."""
         limit = t.limits.get(name)
-        if limit is not None and isinstance(value, int | float) and not isinstance(value, bool):
-            why = limit.refuses(float(value))
+        if isinstance(value, int | float) and not isinstance(value, bool):
+            why = (limit or _FINITE).refuses(value)
             if why:
-                self.fail(path, f"{why} ({t.name}'s manifest, {t.source})")
+                self.fail(path, f"{why} ({possessive(t.name)} manifest, {t.source})")
 
     def check_cluster(self, hosts: Sequence[Host], store: Store | None = None) -> None:
         """Across hosts: one controller (several with a replicated store, which elects the one acting), at most one
@@ -570,12 +585,16 @@ class _Parser(ConfigReader):
             self.fail(key, f"{text!r} is not a name (letters, digits and _, not starting with a digit{dots})")
         return text if pattern.fullmatch(text) else None
 
-    def number(self, value: object, key: str, integer: bool = False, zero: bool = False) -> Any:
-        if is_number(value, integer) and (value > 0 or zero and value == 0):  # type: ignore[operator]
-            return value if integer else float(value)  # type: ignore[arg-type]
-        sign = "non-negative" if zero else "positive"
-        self.fail(key, f"expected a {sign} {'integer' if integer else 'number'}, got {got(value)}")
-        return None
+    def number(self, value: object, key: str, limit: Limit, integer: bool = False) -> Any:
+        """A number inside its declared range (`RANGES`), else a problem naming the range; None then."""
+        if not is_number(value, integer):
+            self.fail(key, f"expected {'an integer' if integer else 'a number'} ({limit.text}), got {got(value)}")
+            return None
+        why = limit.refuses(value)  # type: ignore[arg-type]
+        if why:
+            self.fail(key, why)
+            return None
+        return value if integer else float(value)  # type: ignore[arg-type]
 
     def choice(self, value: object, key: str, enum: type[_E], what: str) -> _E | None:
         options = [str(m.value) for m in enum]
@@ -602,11 +621,18 @@ class _Parser(ConfigReader):
             self.fail(key, f"port {m.group(3)} is out of range (1 to 65535)")
         return text if m else ""
 
-    def duration(self, value: object, key: str) -> float:
+    def duration(self, value: object, key: str, limit: Limit | None = None) -> float:
+        """A duration literal (`3s`, `500ms`; a bare number's unit would be a guess), positive and inside `limit`."""
         seconds = parse_duration(value) if isinstance(value, str) else None
-        if not seconds:
-            self.fail(key, f"expected a positive duration such as 3s or 500ms, got {got(value)}")
-        return seconds or DEFAULT_LEASE
+        if seconds is None or (limit is None and seconds <= 0):
+            what = (f"a duration such as 3s or 500ms ({limit.text})" if limit
+                    else "a positive duration such as 3s or 500ms")
+            self.fail(key, f"expected {what}, got {got(value)}")
+            return DEFAULT_LEASE
+        if limit is not None and (why := limit.refuses(seconds)):
+            self.fail(key, why)
+            return DEFAULT_LEASE
+        return seconds
 
     def component(self, value: object, key: str, kind: Kind) -> ComponentType | None:
         """The catalog type `value` names, if it is of `kind` (an rc for devices, an arc for robots)."""
@@ -673,6 +699,22 @@ def check_files(cluster: Cluster) -> list[HostsProblem]:
 
 
 # ---------------------------------------------------------------- small helpers
+
+
+#: What every number in hosts.yaml is held to when nothing declares its range: finite (YAML writes .nan and .inf).
+_FINITE = Limit()
+
+
+def _floats(value: object, key: str) -> Iterator[tuple[str, float]]:
+    """Every float inside plain YAML data (a driver's options), with its key path: NaN and inf are refused there too."""
+    if isinstance(value, float):
+        yield key, value
+    elif isinstance(value, dict):
+        for k, v in value.items():
+            yield from _floats(v, f"{key}.{k}")
+    elif isinstance(value, list):
+        for i, v in enumerate(value):
+            yield from _floats(v, f"{key}[{i}]")
 
 
 def _hint(value: str, candidates: Iterable[str], empty: str) -> str:
