@@ -19,7 +19,9 @@ from enum import Enum, StrEnum
 from pathlib import Path
 from typing import Any, TypeVar
 
-from drd.config import ConfigError, ConfigProblem, ConfigReader, display_path, read_yaml
+import yaml
+
+from drd.config import ConfigError, ConfigProblem, ConfigReader, StrictLoader, display_path, read_config_text, read_yaml
 from drd.manifests import got, is_number, show  # one YAML dialect, one wording
 from drd.rcm.model import Aggregate, Unit
 from dsl.ast import parse_duration
@@ -680,7 +682,11 @@ def load_endpoints(path: str | os.PathLike[str]) -> Cluster:
 
 def _load(path: Path, catalog: Catalog | None) -> Cluster:
     source = display_path(path)
-    cluster = _parse(read_yaml(path, source, HostsError), source, catalog)
+    data = read_yaml(path, source, HostsError)
+    try:
+        cluster = _parse(data, source, catalog)
+    except HostsError as e:
+        raise HostsError(with_lines(e.problems, path)) from None
     folder = path.absolute().parent  # `/` keeps absolute paths as they are
     files: dict[str, Any] = {k: str(folder / Path(v).expanduser()) for k, v in cluster.security.files.items()}
     return replace(cluster, security=replace(cluster.security, **files))
@@ -696,6 +702,39 @@ def check_files(cluster: Cluster) -> list[HostsProblem]:
         elif not os.access(file, os.R_OK):
             problems.append(HostsProblem(cluster.source, f"cluster.security.{key}", f"cannot read {name}"))
     return problems
+
+
+def with_lines(problems: Iterable[HostsProblem], path: Path) -> list[HostsProblem]:
+    """`problems` with the line of each key in the file (the deepest part of the key path the file has: a missing
+    key points at its parent). Found only once there are problems: the file's YAML nodes are read again for them,
+    so a file that loads costs nothing more. The file read again is the file loaded (a change in between only
+    moves the lines)."""
+    try:
+        root = yaml.compose(read_config_text(path), Loader=StrictLoader)
+    except (OSError, ValueError, yaml.YAMLError):
+        return list(problems)
+    return [p if p.line or not p.key else replace(p, line=_line(root, p.key)) for p in problems]
+
+
+def _line(node: yaml.Node | None, key: str) -> int | None:
+    """The line (1-based) of `key`, a dotted path whose names may hold dots themselves (device ids: `s1.wheels`)
+    and `[i]` for a list's items, under `node`."""
+    line = None
+    while key and node is not None:
+        nxt: yaml.Node | None = None
+        if isinstance(node, yaml.MappingNode):
+            names = [(str(k.value), k, v) for k, v in node.value if isinstance(k, yaml.ScalarNode)]
+            hits = [(n, k, v) for n, k, v in names if key == n or key.startswith((f"{n}.", f"{n}["))]
+            if hits:
+                name, k, nxt = max(hits, key=lambda h: len(h[0]))
+                line, key = k.start_mark.line + 1, key[len(name):].removeprefix(".")
+        elif isinstance(node, yaml.SequenceNode) and (m := re.match(r"\[(\d+)\]\.?", key)):
+            index = int(m.group(1))
+            if index < len(node.value):
+                nxt = node.value[index]
+                line, key = nxt.start_mark.line + 1, key[m.end():]
+        node = nxt
+    return line
 
 
 # ---------------------------------------------------------------- small helpers
