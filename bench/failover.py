@@ -30,7 +30,7 @@ from rich.table import Table
 from drd.daemon.resume import Checkpoints
 from drd.dryrun import team
 from drd.hosts import load_hosts
-from drd.journal import Journal
+from drd.journal import Journal, SqliteJournal
 from drd.manifests import load_catalog
 from drd.sim.world import load_world
 from dsl import compile_file
@@ -80,7 +80,7 @@ def main(argv: list[str] | None = None) -> int:
     with tempfile.TemporaryDirectory() as tmp:
         for i in range(args.repeat):  # alternated, so a busy moment of the machine hits both
             plain.append(one_run(None))
-            journal = Journal(Path(tmp) / f"journal-{i}.sqlite")
+            journal = SqliteJournal(Path(tmp) / f"journal-{i}.sqlite")
             journaled.append(one_run(journal))
             journal.close()
     per_cycle = statistics.median(r["stepping"] / r["cycles"] for r in plain)

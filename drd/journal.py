@@ -1,8 +1,13 @@
-"""The controller's journal: every running mission's request and latest state, on disk, so a restarted controller
-resumes them (issue #16).
+"""The controller's journal: every running mission's request and latest state, kept so that a restarted controller,
+or a standby that takes over, resumes them (issue #16).
 
-An SQLite database in WAL mode in the controller's run directory (`<run dir>/<cluster>/journal.sqlite`): SQLite
-is in the standard library, a commit is atomic and survives a crash of the process (`synchronous=NORMAL` in WAL
+`Journal` is the interface the controller uses; it has two backends. `SqliteJournal` (the default, for the one
+controller of a cluster) is an SQLite database on the controller's disk; `EtcdJournal` keeps the same records in a
+replicated etcd cluster, which several controller hosts share (`cluster.store` in hosts.yaml), and writes only
+while its controller is the elected one (`drd.cluster.election`).
+
+The SQLite backend: a database in WAL mode in the controller's run directory (`<run dir>/<cluster>/journal.sqlite`):
+SQLite is in the standard library, a commit is atomic and survives a crash of the process (`synchronous=NORMAL` in WAL
 mode loses at most the last commits on a power cut, never the file), and one file is easy to inspect
 (`sqlite3 journal.sqlite 'select id, outcome from missions'`). The format is versioned (`meta.version`): a
 journal of another version is refused with a clear error, never misread.
@@ -16,19 +21,31 @@ journal of another version is refused with a clear error, never misread.
   and the number of the last record sent (a resumed executive numbers on from it).
 
 Finished missions stay in the journal (up to `keep`, the oldest go first) for `missionctl status` after a restart.
+
+The etcd backend holds the same three tables as keys under `drd/<cluster>/journal/` (`version`, `mission/<id>`,
+`request/<id>`, `state/<id>`, `world`), each value JSON; every write is one transaction that holds only if the
+leader key is still the one its controller created (its term): a controller that lost the election writes nothing.
 """
 
 from __future__ import annotations
 
 import json
+import logging
 import sqlite3
 import threading
 import time
+from abc import ABC, abstractmethod
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from drd.errors import ConfigurationError
+
+if TYPE_CHECKING:
+    from drd.etcd import Etcd
+
+log = logging.getLogger("drd.journal")
 
 VERSION = 1
 
@@ -76,8 +93,39 @@ class WorldState:
     saved: float = 0.0  # wall time (`time.time()`) of the save
 
 
-class Journal:
-    """See the module. Thread-safe: the mission loop saves while request handlers begin and finish missions."""
+class Journal(ABC):
+    """Where the controller keeps its missions (see the module); every backend is thread-safe: the mission loop
+    saves while request handlers begin and finish missions."""
+
+    keep: int = 100
+
+    @abstractmethod
+    def close(self) -> None:
+        """Let go of the store (the records stay)."""
+
+    @abstractmethod
+    def begin(self, mission: str, request: dict[str, Any], priority: int, base: float, until: float) -> None:
+        """A mission started (before its first control cycle)."""
+
+    @abstractmethod
+    def save(self, states: dict[str, tuple[float, dict[str, Any]]], world: WorldState) -> None:
+        """The missions' states after a control cycle (mission -> (time, snapshot)) and the world's, at once."""
+
+    @abstractmethod
+    def finish(self, mission: str, outcome: str, reason: str) -> None:
+        """A mission ended: it is no longer resumed; the oldest finished beyond `keep` are dropped."""
+
+    @abstractmethod
+    def running(self) -> list[Journaled]:
+        """The missions that had not ended when the journal was last written, oldest first."""
+
+    @abstractmethod
+    def world(self) -> WorldState | None:
+        """The world the missions ran in, if one was saved."""
+
+
+class SqliteJournal(Journal):
+    """The default backend: an SQLite database in WAL mode on the controller's disk (see the module)."""
 
     def __init__(self, path: Path, keep: int = 100) -> None:
         self.path = path
@@ -149,3 +197,129 @@ class Journal:
                               float(row[6]))
         except (ValueError, TypeError) as e:
             raise JournalError(f"{self.path}: a damaged entry: {e}") from None
+
+
+class EtcdJournal(Journal):
+    """The replicated backend: the journal's records as keys of an etcd cluster (see the module), written only while
+    the leader key `leader` is the one created at revision `term` (this controller's election). A write refused for
+    that reason means another controller acts: nothing more is written, and `on_fenced(reason)` is told once."""
+
+    def __init__(self, etcd: Etcd, cluster: str, term: int, *, leader: str, keep: int = 100,
+                 on_fenced: Callable[[str], None] | None = None) -> None:
+        from drd.etcd import EtcdError, created_at, put
+
+        self.etcd = etcd
+        self.prefix = f"drd/{cluster}/journal/"
+        self.term = term
+        self.leader = leader
+        self.keep = keep
+        self.on_fenced = on_fenced
+        self.fenced = ""  # why it writes no more ("" while it does)
+        self.where = f"etcd ({', '.join(etcd.endpoints)}) {self.prefix}"
+        self._lock = threading.Lock()
+        try:
+            found = etcd.get(self.prefix + "version")
+            if found is None:
+                etcd.txn([created_at(self.prefix + "version", 0)], [put(self.prefix + "version", str(VERSION))])
+            elif found.value.decode() != str(VERSION):
+                raise JournalError(f"{self.where}: journal version {found.value.decode()}, this drd reads version"
+                                   f" {VERSION}: delete the keys under {self.prefix} to start without resuming")
+        except EtcdError as e:
+            raise JournalError(f"{self.where}: cannot use the journal: {e}") from None
+
+    def close(self) -> None:
+        """Nothing to let go: each write is a request of its own."""
+
+    def _write(self, ops: list[dict[str, Any]]) -> bool:
+        """One transaction of `ops`, if this controller still holds the election; whether it was written."""
+        from drd.etcd import EtcdError, created_at
+
+        with self._lock:
+            if self.fenced:
+                return False
+            try:
+                ok, _rev, _ = self.etcd.txn([created_at(self.leader, self.term)], ops)
+            except EtcdError as e:  # etcd unreachable: this controller's lease runs out too, and it is fenced
+                log.warning("journal not written (%s): %s", self.where, e)
+                return False
+            if ok:
+                return True
+            self.fenced = f"the leader key is no longer this controller's (term {self.term}): another one acts"
+        log.warning("journal: %s; it writes nothing more", self.fenced)
+        if self.on_fenced is not None:
+            self.on_fenced(self.fenced)
+        return False
+
+    def begin(self, mission: str, request: dict[str, Any], priority: int, base: float, until: float) -> None:
+        from drd.etcd import put
+
+        meta = {"priority": priority, "base": base, "until": until, "started": time.time(), "outcome": None,
+                "reason": ""}
+        self._write([put(self.prefix + f"request/{mission}", json.dumps(request)),
+                     put(self.prefix + f"mission/{mission}", json.dumps(meta))])
+
+    def save(self, states: dict[str, tuple[float, dict[str, Any]]], world: WorldState) -> None:
+        from drd.etcd import put
+
+        ops = [put(self.prefix + f"state/{m}", json.dumps({"at": at, "snapshot": snap}, separators=(",", ":")))
+               for m, (at, snap) in states.items()]
+        data = {"name": world.name, "generation": world.generation, "base": world.base, "now": world.now,
+                "seq": world.seq, "properties": world.properties, "saved": time.time()}
+        self._write([*ops, put(self.prefix + "world", json.dumps(data, default=str))])
+
+    def finish(self, mission: str, outcome: str, reason: str) -> None:
+        from drd.etcd import EtcdError, delete, put
+
+        try:
+            found = self.etcd.get(self.prefix + f"mission/{mission}")
+            meta = json.loads(found.value) if found is not None else {"priority": 1, "base": 0.0, "until": 0.0,
+                                                                      "started": time.time()}
+            finished = sorted(((m["started"], kv.key) for kv, m in self._metas() if m.get("outcome") is not None
+                               and kv.key != self.prefix + f"mission/{mission}"), reverse=True)
+        except (EtcdError, ValueError) as e:
+            log.warning("journal: mission %s not marked finished (%s): %s", mission, self.where, e)
+            return
+        meta |= {"outcome": outcome, "reason": reason}
+        dropped = [key.rsplit("/", 1)[1] for _started, key in finished[max(0, self.keep - 1):]]
+        self._write([put(self.prefix + f"mission/{mission}", json.dumps(meta)),
+                     delete(self.prefix + f"state/{mission}"),
+                     *[delete(self.prefix + f"{kind}/{m}") for m in dropped for kind in ("mission", "request")]])
+
+    def _metas(self) -> list[tuple[Any, dict[str, Any]]]:
+        return [(kv, json.loads(kv.value)) for kv in self.etcd.prefix(self.prefix + "mission/")]
+
+    def running(self) -> list[Journaled]:
+        from drd.etcd import EtcdError
+
+        try:
+            jobs = sorted((m["started"], kv.key.rsplit("/", 1)[1], m) for kv, m in self._metas()
+                          if m.get("outcome") is None)
+            out = []
+            for _started, mid, m in jobs:
+                request = self.etcd.get(self.prefix + f"request/{mid}")
+                state = self.etcd.get(self.prefix + f"state/{mid}")
+                saved = json.loads(state.value) if state is not None else None
+                out.append(Journaled(mid, json.loads(request.value) if request is not None else {},
+                                     int(m["priority"]), float(m["base"]), float(m["until"]),
+                                     float(saved["at"]) if saved is not None else float(m["base"]),
+                                     saved["snapshot"] if saved is not None else None))
+            return out
+        except EtcdError as e:
+            raise JournalError(f"{self.where}: cannot read the journal: {e}") from None
+        except (ValueError, TypeError, KeyError) as e:
+            raise JournalError(f"{self.where}: a damaged entry: {e}") from None
+
+    def world(self) -> WorldState | None:
+        from drd.etcd import EtcdError
+
+        try:
+            found = self.etcd.get(self.prefix + "world")
+            if found is None:
+                return None
+            w = json.loads(found.value)
+            return WorldState(str(w["name"]), int(w["generation"]), float(w["base"]), float(w["now"]), int(w["seq"]),
+                              dict(w.get("properties") or {}), float(w.get("saved") or 0.0))
+        except EtcdError as e:
+            raise JournalError(f"{self.where}: cannot read the journal: {e}") from None
+        except (ValueError, TypeError, KeyError) as e:
+            raise JournalError(f"{self.where}: a damaged entry: {e}") from None

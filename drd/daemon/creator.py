@@ -163,7 +163,7 @@ class Creator:
         self.catalog = catalog
         self.instances: dict[str, Instance] = {}  # by `<mission>/<path>`
         self.calls = 0
-        self.term = 0.0  # the start time of the newest controller heard (`_stale`)
+        self.term = 0.0  # the term of the newest controller heard: its election's, or its start time (`_stale`)
         self._now = 0.0  # the controller's time of the call being served (the gates' records carry it)
         self.arbiter = CycleArbiter(lambda: self._now, self._setpoint_failed)
         self._sim_service = sim_service  # this host's own SimulationService (drd.sim.service), if it has one
@@ -359,10 +359,10 @@ class Creator:
         """Why a call of the controller that started at `term` is refused ("" if it is not): a controller older
         than one already heard (a frozen one that woke after another took over) must not act here."""
         if term < self.term:
-            log.warning("creator %s: refused a call from an older controller (started %.3f, the current one %.3f)",
-                        self.host, term, self.term)
-            return (f"{self.host} refuses a call from an older controller (started at {term:.3f}; a controller that"
-                    f" started at {self.term:.3f} acts now)")
+            log.warning("creator %s: refused a call from an older controller (term %s, the current one %s)",
+                        self.host, _term(term), _term(self.term))
+            return (f"{self.host} refuses a call from an older controller (term {_term(term)}; the controller of term"
+                    f" {_term(self.term)} acts now)")
         self.term = term
         return ""
 
@@ -855,6 +855,12 @@ class Creator:
         except Exception as e:  # a driver could not be built, no worker could start: this call fails, we go on
             log.warning("creator %s: %s of %s failed: %s", self.host, query.payload.op, query.payload.path, e)
             return ComponentReply(error=f"{type(e).__name__}: {e}", records=self._take_records())
+
+
+def _term(term: float) -> str:
+    """A controller's term as it reads: etcd's revision (a whole number) with several controllers, else the one
+    controller's start time."""
+    return str(int(term)) if term == int(term) else f"{term:.3f}"
 
 
 def _key(call: ComponentCall) -> str:

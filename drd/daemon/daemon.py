@@ -27,6 +27,7 @@ from __future__ import annotations
 import hashlib
 import json
 import logging
+import math
 import os
 import threading
 import time
@@ -175,6 +176,8 @@ class Daemon:
         self._controller_clock = controller_clock
         self.stop_reason = "stopped"
         self._stop: threading.Event | None = None  # the event `run` serves until (set by a conflict too)
+        self.election: Any = None  # drd.cluster.election.Election, on a controller host of a replicated store
+        self._stepping_down = False
 
     @property
     def bus(self) -> Bus:
@@ -215,20 +218,12 @@ class Daemon:
         self.creator = Creator(bus, self.cluster, me, self.config.catalog,
                                sim_service=self.sim_service,
                                on_change=self._instances_changed)
-        if Role.CONTROLLER in roles:
-            from drd.daemon.missions import MissionRunner
-            from drd.journal import Journal
+        if Role.CONTROLLER in roles and self.cluster.store.replicated:
+            self._campaign()  # a standby until etcd elects it (`_elected`)
+        elif Role.CONTROLLER in roles:
+            from drd.journal import SqliteJournal
 
-            with self._exec_lock:
-                self.controller = Controller(bus, self.cluster, self.config.catalog, me, self._exec_lock,
-                                             on_reject=self._reject, on_change=self._controller_change,
-                                             clock=self._controller_clock)
-                journal = Journal(self.config.journal) if self.config.journal is not None else None
-                self.runner = MissionRunner(bus, self.cluster, self.config.catalog, me, self._exec_lock,
-                                            self.controller, self.controller.mission_clock,
-                                            sim_service=self.sim_service,
-                                            host_down=lambda h: self.view.state(h) is HostState.DOWN,
-                                            host_views=self.view.host_views, journal=journal)
+            self._become_controller(bus, SqliteJournal(self.config.journal) if self.config.journal else None, None)
         self._declared.append(bus.watch_tokens(keys.hosts, self._on_token, history=True))
         if not self.creator.pool.wait_ready():  # up only once a component can be placed here in milliseconds
             log.warning("the Creator's worker processes are not all ready yet: the first starts here may be slow")
@@ -239,6 +234,96 @@ class Daemon:
                  me, self.cluster.name, ", ".join(self.roles), os.getpid(), self.config.period, self.cluster.lease)
         log.info("bus: %s", describe(self.transport.mode, [self.transport.endpoints[me]]))
         self.step()
+
+    def _become_controller(self, bus: Bus, journal: Any, term: float | None) -> None:
+        """Take the controller's services: the manager and the executive (`Controller`), the missions' runner with
+        `journal` (which resumes the missions it holds), under `term` (None: its start time)."""
+        from drd.daemon.missions import MissionRunner
+
+        me = self.host
+        with self._exec_lock:
+            controller = Controller(bus, self.cluster, self.config.catalog, me, self._exec_lock,
+                                    on_reject=self._reject, on_change=self._controller_change,
+                                    clock=self._controller_clock)
+            self.controller = controller
+            self.runner = MissionRunner(bus, self.cluster, self.config.catalog, me, self._exec_lock,
+                                        controller, controller.mission_clock, sim_service=self.sim_service,
+                                        host_down=lambda h: self.view.state(h) is HostState.DOWN,
+                                        host_views=self.view.host_views, journal=journal, term=term)
+
+    # -- several controllers: an election through etcd (drd.cluster.election) --------------------------------------
+
+    def _campaign(self) -> None:
+        """Campaign for the controller's role through the cluster's etcd (`cluster.store`): a standby meanwhile."""
+        from drd.cluster.election import Election
+        from drd.etcd import Etcd
+
+        ttl = max(2, math.ceil(self.cluster.lease))  # whole seconds, at least etcd's own minimum
+        self.election = Election(Etcd(self.cluster.store.etcd), self.cluster.name, self.host, ttl,
+                                 on_elected=self._elected, on_fenced=self._fenced)
+        self.election.start()
+        log.info("standby controller: campaigning through etcd at %s (lease %d s)",
+                 ", ".join(self.cluster.store.etcd), ttl)
+
+    def _elected(self, term: int) -> None:
+        """etcd elected this host (its thread): take the controller's services behind a fence that closes when the
+        election says it no longer acts, and resume the missions of the replicated journal."""
+        from drd.cluster.election import FencedBus
+        from drd.journal import EtcdJournal, JournalError
+
+        election = self.election
+        assert election is not None
+        started = self.clock()
+        bus = FencedBus(self.bus, lambda: election.acting(term), f"controller {self.host} (term {term})")
+        try:
+            journal = EtcdJournal(election.etcd, self.cluster.name, term, leader=election.key,
+                                  keep=self.cluster.history, on_fenced=self._fenced)
+            self._become_controller(bus, journal, float(term))
+        except (JournalError, ValueError) as e:
+            log.error("cannot act as the controller: %s", e)
+            self.stop_reason = f"cannot act as the controller: {e}"
+            if self._stop is not None:
+                self._stop.set()
+            return
+        with self._lock:  # the hosts already up join the manager (later changes reach it through `_handle`)
+            controller = self.controller
+            if controller is not None:
+                for rec in self.view.records.values():
+                    if rec.name != self.host and rec.state is HostState.UP:
+                        controller.host_up(rec.name)
+            self._announce_due = True  # the others learn that this host serves the executive now
+            self._record("elected", self.host, f"the acting controller (term {term}), services up in"
+                         f" {self.clock() - started:.2f} s")
+
+    def _fenced(self, reason: str) -> None:
+        """This controller lost the election (any thread): it already sends nothing (its fence); step down on a
+        thread of our own (closing the mission loop joins it) and campaign again as a standby."""
+        with self._lock:
+            if self._stepping_down or self.controller is None:
+                return
+            self._stepping_down = True
+        threading.Thread(target=self._step_down, args=(reason,), name="drd-step-down", daemon=True).start()
+
+    def _step_down(self, reason: str) -> None:
+        runner, controller = self.runner, self.controller
+        with self._lock:
+            self.runner, self.controller = None, None
+            self._announce_due = True
+        try:
+            if runner is not None:
+                runner.close()
+            with self._exec_lock:
+                if controller is not None:
+                    controller.close()
+        except Exception:  # stepping down must finish: the fence already holds
+            log.exception("stepping down")
+        kept = getattr(runner, "bus", None)  # the FencedBus of its term
+        self._record("fenced", self.host, f"stepped down, a standby again: {reason} (its fence kept"
+                     f" {getattr(kept, 'dropped', 0)} messages from going out)")
+        with self._lock:
+            self._stepping_down = False
+        if self.election is not None and not self._closed:
+            self.election.standby()
 
     def run(self, stop: threading.Event, ready: Callable[[], object] | None = None) -> None:
         """Start, call `ready()`, then serve until `stop` is set; always closes."""
@@ -287,6 +372,8 @@ class Daemon:
         with self._exec_lock:
             if self.controller is not None:
                 self.controller.close()
+        if self.election is not None:  # after the executive stopped: a standby takes over now, not at lease expiry
+            self.election.close(revoke=True)
         for service in (self.creator, self.sim_service):
             if service is not None:
                 service.close()
@@ -405,9 +492,16 @@ class Daemon:
                     self.controller.host_up(change.host)
             elif change.kind == HostState.DOWN and self.controller is not None:
                 self.controller.host_down(change.host)
-            elif (change.kind == HostState.DOWN and self.creator is not None
-                  and change.host == self.cluster.controller.name):
+            elif change.kind == HostState.DOWN and self.creator is not None and self._acting_controller(change.host):
                 self.creator.controller_lost(f"controller {change.host} lost ({change.detail})")
+
+    def _acting_controller(self, host: str) -> bool:
+        """Whether `host` is the controller that acts: the one of hosts.yaml, or with several (a replicated store)
+        the one whose last announcement offered the executive (a standby's loss stops no robot)."""
+        if not self.cluster.store.replicated:
+            return host == self.cluster.controller.name
+        rec = self.view.records.get(host)
+        return rec is not None and rec.announcement is not None and "executive" in rec.announcement.services
 
     def _controller_change(self, kind: str, host: str, detail: str) -> None:
         """The controller's news: recorded; a host whose resources left the manager (its lease ran out, so it

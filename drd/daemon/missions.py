@@ -144,8 +144,10 @@ class MissionRunner:
     def __init__(self, bus: Bus, cluster: Cluster, catalog: Catalog, me: str, lock: threading.RLock,
                  controller: Any, clock: SimTimeClock, *, sim_service: SimulationService | None = None,
                  host_down: Callable[[str], bool] = lambda h: False,
-                 host_views: Callable[[], list[HostView]] | None = None, journal: Journal | None = None) -> None:
-        """`journal`: where missions are saved each cycle and resumed from after a restart (`drd.journal`)."""
+                 host_views: Callable[[], list[HostView]] | None = None, journal: Journal | None = None,
+                 term: float | None = None) -> None:
+        """`journal`: where missions are saved each cycle and resumed from after a restart (`drd.journal`); `term`:
+        this controller's term as its election gave it (`drd.cluster.election`), else its start time."""
         self.bus = bus
         self.cluster = cluster
         self.catalog = catalog
@@ -159,7 +161,8 @@ class MissionRunner:
         self._recent: list[tuple[float, str, str]] = []  # (when, host, component) of placements not yet reported
         self.resource_hosts = {r.id: r.host for r in cluster.resources() if r.host}
         self.patience = max(CALL_TIMEOUT, cluster.lease)  # how long a call waits for a host that does not answer
-        self.term = time.time()  # this controller's term: hosts refuse the calls of an older one (`Creator`)
+        # this controller's term: hosts refuse the calls of an older one (`Creator`)
+        self.term = time.time() if term is None else term
         self.simulator = next((h.name for h in cluster.hosts if Role.SIMULATOR in h.roles), None)
         # the devices' gates are on their hosts: every mission's grants reach them through these
         self.gates = RemoteGates({u.id: u.host for u in cluster.resources() if u.host and type(u).__name__ == "Unit"})
