@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import os
 import random
+import re
 import subprocess
 import sys
 import tracemalloc
@@ -160,3 +161,45 @@ def test_a_compile_past_its_budget_stops_with_one_located_error() -> None:
     assert 1 <= stop.span.line <= text.count("\n") and "budget of 0 s" in stop.message
     assert "chain.mission:" in stop.render(spent.sources)
     assert compile_text(text, catalog, "chain.mission").ok
+
+
+DRD = [sys.executable, "-c", "from drd.cli.drd import main; main()"]
+
+
+def hosts_with(tmp_path: Path, old: str, new: str) -> Path:
+    text = (ROOT / "hosts.yaml").read_text(encoding="utf-8")
+    assert old in text
+    path = tmp_path / "hosts.yaml"
+    path.write_text(text.replace(old, new, 1), encoding="utf-8")
+    return path
+
+
+def test_a_pasted_blob_as_a_driver_is_refused_naming_the_key_and_shown_cut(tmp_path: Path) -> None:
+    hosts = hosts_with(tmp_path, "driver: sim, slice", "driver: " + "x" * 100_000 + ", slice")
+    done = missionctl("dry-run", str(ROOT / "missions" / "corridor_surveillance.mission"), "--hosts", str(hosts),
+                      cwd=tmp_path)
+    assert done.returncode == 2 and "Traceback" not in done.stderr
+    assert "hosts.yaml: hosts.ranger1.devices.drive.driver: " in done.stderr
+    assert re.search(r"… \(100,00\d characters\) is not a driver's name", done.stderr)
+    assert max(len(line) for line in done.stderr.splitlines()) < 400  # the value cut, not echoed whole
+
+
+def test_a_driver_that_does_not_exist_fails_the_dry_run_before_it_starts(tmp_path: Path) -> None:
+    hosts = hosts_with(tmp_path, "scout3.foot: {type: Jump, driver: sim", "scout3.foot: {type: Jump, driver: serial")
+    done = missionctl("dry-run", str(ROOT / "missions" / "corridor_surveillance.mission"), "--hosts", str(hosts),
+                      "--json", cwd=tmp_path)
+    assert done.returncode == 2 and done.stdout == ""  # no report: nothing ran
+    assert "hosts.yaml: hosts.ranger1.devices.scout3.foot.driver: no module components.serial" in done.stderr
+
+
+@pytest.mark.parametrize("where", ["under-a-file", "missing-parent"])
+def test_a_run_directory_that_cannot_be_written_stops_drd_start_before_anything_starts(tmp_path: Path,
+                                                                                      where: str) -> None:
+    (tmp_path / "a-file").write_text("")
+    run_dir = tmp_path / "a-file" / "run" if where == "under-a-file" else Path("/proc/drd-no-such/run")
+    done = subprocess.run([*DRD, "start", "--host", "controller", "--config", str(ROOT / "hosts.yaml"),
+                           "--run-dir", str(run_dir)], cwd=tmp_path, capture_output=True, text=True, timeout=120,
+                          check=False)
+    assert done.returncode == 2 and "Traceback" not in done.stderr
+    assert f"run directory {run_dir}: cannot write there" in done.stderr and "--run-dir" in done.stderr
+    assert "started" not in done.stderr  # no daemon, no bus session: it refused first

@@ -174,6 +174,11 @@ def start(
     except SecurityError as e:
         fail_all(e.problems, hint="security is configured, so drd will not start without it")
     rd = runfiles.run_dir(run_dir_opt)
+    try:
+        runfiles.prepare(rd, cluster.name)
+    except OSError as e:
+        fail(f"run directory {rd}: cannot write there ({e.strerror or e})",
+             hint="give a folder this user can write with --run-dir or $DRD_RUN_DIR")
     running = runfiles.read(runfiles.path_of(rd, cluster.name, host))
     if running is not None and running.running():
         fail(f"drd for host {host} is already running (pid {running.pid})", hint=f"drd stop --host {host}")

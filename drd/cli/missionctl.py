@@ -388,14 +388,19 @@ def _charts(missions: list[Path], param: list[str], cat: Catalog) -> list[Statec
 def _team_files(hosts: Path, world: str | None, cat: Catalog) -> tuple[Cluster, World]:
     """The hosts file and the world it (or `--world`) names, loaded, or a clear exit naming file and key."""
     from drd.hosts import HostsError, load_hosts
+    from drd.hw.drivers import check_driver_classes
     from drd.sim.world import WorldError, load_world
 
     hosts_file = _hosts_file(hosts)
     try:
         cluster = load_hosts(hosts_file, cat)
-        return cluster, load_world(_world_file(world, cluster.world, hosts_file))
+        team = cluster, load_world(_world_file(world, cluster.world, hosts_file))
     except (HostsError, WorldError) as e:
         fail_all(e.problems)
+    problems = [p for h in cluster.hosts for p in check_driver_classes(cluster, h.name, cat)]
+    if problems:  # every host's drivers run in this process: a typo fails here, not in the middle of a run
+        fail_all(problems, hint="see docs/drivers.md for the drivers drd has and how to add one")
+    return team
 
 
 def _injections(inject: list[str], cluster: Cluster, sim_world: World, until: float) -> list[Injection]:

@@ -34,6 +34,21 @@ def run_dir(explicit: Path | None = None) -> Path:
     return Path(env) if env else Path.home() / ".drd" / "run"
 
 
+def prepare(directory: Path, cluster: str) -> Path:
+    """`directory`'s folder for `cluster`, created if need be and checked writable (a file made and removed): a
+    start refuses here, naming the folder, rather than fail later with an error about some file in it.
+
+    Raises:
+        OSError: it cannot be made or written (not a folder, read-only, no permission).
+    """
+    folder = directory / cluster
+    folder.mkdir(parents=True, exist_ok=True)
+    probe = folder / f".probe-{os.getpid()}"
+    probe.write_bytes(b"")
+    probe.unlink()
+    return folder
+
+
 @dataclass(frozen=True, slots=True)
 class PidFile:
     """One daemon's pidfile; `state` is `starting` until its services are declared, then `running`."""

@@ -25,6 +25,7 @@ from drd.entrypoints import EntryPointError
 from drd.errors import HardwareFailure
 from drd.hosts import Cluster, Device
 from drd.hw.commands import DriverDeclarationError, declared, spec_of
+from drd.manifests import show
 from dsl.catalog import Catalog
 
 if TYPE_CHECKING:  # the simulator (pymunk) is imported only by hosts that run sim drivers
@@ -48,8 +49,15 @@ def _camel(name: str) -> str:
     return "".join(part[:1].upper() + part[1:] for part in re.split(r"[_\-]", name) if part)
 
 
+#: What a `driver:` may be: the name of a package under `components/` (so never a path, a module or a pasted blob).
+DRIVER_NAME = re.compile(r"[a-z][a-z0-9_]{0,39}")
+
+
 def driver_entry_point(device: Device, catalog: Catalog | None = None) -> str:
     """`module:Class` implementing `device` (see the module docstring); reads the catalog for `sim` only."""
+    if not DRIVER_NAME.fullmatch(device.driver):
+        raise DriverError(f"{show(device.driver)} is not a driver's name: lowercase letters, digits and _, at most 40"
+                          " (the package under components/, e.g. sim or ros2)")
     if device.driver != SIM:
         return f"components.{device.driver}.{_snake(device.type)}:{_camel(device.driver)}{device.type}"
     if catalog is None:
@@ -72,7 +80,7 @@ def load_driver(device: Device, robot_id: str, services: Mapping[str, Any]) -> o
         DriverError: the module or class is missing, the backend is missing, or construction failed.
     """
     entry = driver_entry_point(device, services.get("catalog"))
-    where = f"device {device.id} (type {device.type}, driver {device.driver!r})"
+    where = f"device {device.id} (type {device.type}, driver {show(device.driver)})"
     try:
         cls = entrypoints.load(entry)
     except EntryPointError as e:
@@ -146,7 +154,8 @@ def drivers_for(cluster: Cluster, host_name: str, sim: Simulation | None = None,
 
 def check_driver_classes(cluster: Cluster, host: str, catalog: Catalog | None = None) -> list[str]:
     """Every driver class `host`'s devices name, imported and its declaration checked, without building one:
-    what `drd start` refuses before any process or pidfile appears (each problem names the hosts file's key)."""
+    what `drd start` (for its host) and `missionctl dry-run` (for every host: they all run in its process) refuse
+    before anything starts, each problem naming the hosts file's key."""
     problems = []
     for device in cluster.host(host).devices:
         key = f"{cluster.source}: hosts.{host}.devices.{device.id.removeprefix(host + '.')}.driver"
