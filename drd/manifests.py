@@ -273,6 +273,7 @@ def _bounds(c: _Checker, spec: Mapping[str, Any], path: str, duration: bool = Fa
     if low is not None and high is not None and low > high:
         shown = Limit(duration=duration).show
         c.fail(path, f"min {shown(low)} is above max {shown(high)}")
+        return None, None  # reported once: no value is then refused again for being outside it
     return low, high
 
 
