@@ -209,7 +209,9 @@ BAD: list[tuple[str, Callable[[dict[str, Any]], object], list[str]]] = [
     ("no-controller", edit(**{"hosts/ctl/roles": ["worker"]}),
      ["hosts: no host has the role controller; exactly one must"]),
     ("two-controllers", edit(**{"hosts/r1/roles": ["controller", "worker"]}),
-     ["hosts.r1.roles: controller is already a role of host ctl; a cluster has exactly one controller"]),
+     ["hosts.r1.roles: controller is already a role of host ctl; a cluster has exactly one controller; several"
+      " controllers need a replicated store to elect the one that acts (cluster.store: {etcd: [http://HOST:PORT,"
+      " ...]}, docs/hosts.md)"]),
     ("two-simulators", edit(**{"hosts/ctl/roles": ["controller", "simulator"], "hosts/r1/roles": ["simulator"]}),
      ["hosts.r1.roles: simulator is already a role of host ctl; a cluster has at most one simulator"]),
     ("world-not-a-name", edit(**{"cluster/world": "../etc"}), [f"cluster.world: '../etc' {NOT_A_NAME}"]),
