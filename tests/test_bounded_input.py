@@ -203,3 +203,36 @@ def test_a_run_directory_that_cannot_be_written_stops_drd_start_before_anything_
     assert done.returncode == 2 and "Traceback" not in done.stderr
     assert f"run directory {run_dir}: cannot write there" in done.stderr and "--run-dir" in done.stderr
     assert "started" not in done.stderr  # no daemon, no bus session: it refused first
+
+
+def bogus_components(tmp_path: Path) -> Path:
+    folder = tmp_path / "my_components" / "Bogus"  # not `components`: `python -c` would import it as drd's own
+    folder.mkdir(parents=True)
+    (folder / "manifest.yaml").write_text("name: Bogus\nkind: behavior\ndescription: Its code is not there.\n"
+                                          "entry_point: nowhere.bogus:Bogus\nprocess: container\n")
+    return folder.parent
+
+
+def test_drd_start_refuses_a_manifest_whose_entry_point_is_missing_before_anything_starts(tmp_path: Path) -> None:
+    done = subprocess.run([*DRD, "start", "--host", "controller", "--config", str(ROOT / "hosts.yaml"), "-C",
+                           str(bogus_components(tmp_path)), "--run-dir", str(tmp_path / "run")], cwd=tmp_path,
+                          capture_output=True, text=True, timeout=120, check=False)
+    assert done.returncode == 2 and "Traceback" not in done.stderr
+    assert "Bogus/manifest.yaml: entry_point: no module nowhere.bogus" in done.stderr
+    assert not list((tmp_path / "run").rglob("*.pid"))  # no pidfile: it refused before claiming the host
+
+
+def test_drd_start_of_the_simulators_host_refuses_a_world_that_is_not_there(tmp_path: Path) -> None:
+    hosts = hosts_with(tmp_path, "world: corridor ", "world: nowhere ")
+    done = subprocess.run([*DRD, "start", "--host", "ranger1", "--config", str(hosts), "--run-dir",
+                           str(tmp_path / "run")], cwd=tmp_path, capture_output=True, text=True, timeout=120,
+                          check=False)
+    assert done.returncode == 2 and "hosts.yaml: cluster.world: no world 'nowhere'" in done.stderr
+
+
+def test_a_dry_run_of_a_component_whose_code_is_missing_is_refused_before_it_runs(tmp_path: Path) -> None:
+    (tmp_path / "m.mission").write_text("mission UsesBogus {\n    Bogus\n}\n")
+    done = missionctl("dry-run", "m.mission", "--hosts", str(ROOT / "hosts.yaml"), "-C",
+                      str(bogus_components(tmp_path)), "--json", cwd=tmp_path)
+    assert done.returncode == 2 and done.stdout == ""
+    assert "Bogus/manifest.yaml: entry_point: no module nowhere.bogus" in done.stderr

@@ -164,11 +164,11 @@ def start(
         cluster.host(host)
     except KeyError:
         fail(f"no host {host!r} in {config} (hosts: {', '.join(h.name for h in cluster.hosts)})")
-    from drd.hw.drivers import check_driver_classes
+    from drd.preflight import start_problems
 
-    problems = check_driver_classes(cluster, host, cat)  # before any process or pidfile: a typo fails here
+    problems = start_problems(cluster, host, cat)  # before any process or pidfile: a typo fails here
     if problems:
-        fail_all(problems, hint="see docs/drivers.md for the drivers drd has and how to add one")
+        fail_all(problems, hint="see docs/drivers.md (drivers), docs/components.md (manifests), docs/worlds.md")
     try:
         tr = transport(cluster, daemon=True)
     except SecurityError as e:

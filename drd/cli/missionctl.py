@@ -349,7 +349,7 @@ def dry_run(
     charts = _charts(missions, param, cat)
     if charts is None:
         return INVALID
-    cluster, sim_world = _team_files(hosts, world, cat)
+    cluster, sim_world = _team_files(hosts, world, cat, charts)
     injections = _injections(inject, cluster, sim_world, until)
     _check_render(render)
     fh = open_trace(trace)
@@ -385,10 +385,22 @@ def _charts(missions: list[Path], param: list[str], cat: Catalog) -> list[Statec
         fail_all([str(e)])
 
 
-def _team_files(hosts: Path, world: str | None, cat: Catalog) -> tuple[Cluster, World]:
-    """The hosts file and the world it (or `--world`) names, loaded, or a clear exit naming file and key."""
+def _preflight(cluster: Cluster, cat: Catalog, charts: list[Statechart]) -> None:
+    """Every host's drivers and the missions' components importable, or a clear exit before anything runs (they
+    all run in this process: a typo fails here, not in the middle of a run)."""
+    from drd.preflight import dry_run_problems
+
+    used = {s.component for chart in charts for s in chart.states.values() if s.component}
+    problems = dry_run_problems(cluster, cat, used)
+    if problems:
+        fail_all(problems, hint="see docs/drivers.md (drivers) and docs/components.md (manifests)")
+
+
+def _team_files(hosts: Path, world: str | None, cat: Catalog,
+                charts: list[Statechart] | None = None) -> tuple[Cluster, World]:
+    """The hosts file and the world it (or `--world`) names, loaded, or a clear exit naming file and key; with
+    `charts`, also every host's drivers and their components checked (`_preflight`)."""
     from drd.hosts import HostsError, load_hosts
-    from drd.hw.drivers import check_driver_classes
     from drd.sim.world import WorldError, load_world
 
     hosts_file = _hosts_file(hosts)
@@ -397,9 +409,8 @@ def _team_files(hosts: Path, world: str | None, cat: Catalog) -> tuple[Cluster, 
         team = cluster, load_world(_world_file(world, cluster.world, hosts_file))
     except (HostsError, WorldError) as e:
         fail_all(e.problems)
-    problems = [p for h in cluster.hosts for p in check_driver_classes(cluster, h.name, cat)]
-    if problems:  # every host's drivers run in this process: a typo fails here, not in the middle of a run
-        fail_all(problems, hint="see docs/drivers.md for the drivers drd has and how to add one")
+    if charts is not None:
+        _preflight(cluster, cat, charts)
     return team
 
 
