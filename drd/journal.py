@@ -205,7 +205,9 @@ class EtcdJournal(Journal):
     that reason means another controller acts: nothing more is written, and `on_fenced(reason)` is told once."""
 
     def __init__(self, etcd: Etcd, cluster: str, term: int, *, leader: str, keep: int = 100,
-                 on_fenced: Callable[[str], None] | None = None) -> None:
+                 on_fenced: Callable[[str], None] | None = None, acting: Callable[[], bool] | None = None) -> None:
+        """`acting()`: whether its controller still acts by its own reckoning (`drd.cluster.election`); asked before
+        each write too, so a controller that resigned or whose lease ran out writes nothing while its key lingers."""
         from drd.etcd import EtcdError, created_at, put
 
         self.etcd = etcd
@@ -214,6 +216,7 @@ class EtcdJournal(Journal):
         self.leader = leader
         self.keep = keep
         self.on_fenced = on_fenced
+        self.acting = acting
         self.fenced = ""  # why it writes no more ("" while it does)
         self.where = f"etcd ({', '.join(etcd.endpoints)}) {self.prefix}"
         self._lock = threading.Lock()
@@ -235,7 +238,7 @@ class EtcdJournal(Journal):
         from drd.etcd import EtcdError, created_at
 
         with self._lock:
-            if self.fenced:
+            if self.fenced or (self.acting is not None and not self.acting()):
                 return False
             try:
                 ok, _rev, _ = self.etcd.txn([created_at(self.leader, self.term)], ops)

@@ -11,6 +11,7 @@ from __future__ import annotations
 import os
 import shutil
 import signal
+import socket
 import subprocess
 import time
 from collections.abc import Iterator
@@ -18,7 +19,6 @@ from contextlib import contextmanager
 from pathlib import Path
 
 import pytest
-from cluster_support import free_ports
 
 from drd.etcd import Etcd, EtcdError
 
@@ -26,6 +26,18 @@ ETCD = shutil.which("etcd")
 SKIP = ("etcd is not installed (the Debian package etcd-server; .ci/run installs it): the standby-controller"
         " tests need a real etcd cluster")
 START_TIMEOUT = 30.0
+
+
+def free_ports(n: int) -> list[int]:
+    """`n` distinct free ports on 127.0.0.1 (held open together, so they differ)."""
+    socks = [socket.socket() for _ in range(n)]
+    try:
+        for sock in socks:
+            sock.bind(("127.0.0.1", 0))
+        return [sock.getsockname()[1] for sock in socks]
+    finally:
+        for sock in socks:
+            sock.close()
 
 
 def need_etcd() -> None:

@@ -277,7 +277,8 @@ class Daemon:
         bus = FencedBus(self.bus, lambda: election.acting(term), f"controller {self.host} (term {term})")
         try:
             journal = EtcdJournal(election.etcd, self.cluster.name, term, leader=election.key,
-                                  keep=self.cluster.history, on_fenced=self._fenced)
+                                  keep=self.cluster.history, on_fenced=self._fenced,
+                                  acting=lambda: election.acting(term))
             self._become_controller(bus, journal, float(term))
         except (JournalError, ValueError) as e:
             log.error("cannot act as the controller: %s", e)
@@ -299,7 +300,7 @@ class Daemon:
         """This controller lost the election (any thread): it already sends nothing (its fence); step down on a
         thread of our own (closing the mission loop joins it) and campaign again as a standby."""
         with self._lock:
-            if self._stepping_down or self.controller is None:
+            if self._stepping_down or self.controller is None or self._closed:
                 return
             self._stepping_down = True
         threading.Thread(target=self._step_down, args=(reason,), name="drd-step-down", daemon=True).start()
@@ -367,6 +368,8 @@ class Daemon:
             log.debug("could not say goodbye", exc_info=True)
         if self._token is not None:
             self._token.close()
+        if self.election is not None:  # its missions go to a standby as they are, not stopped by the loop's end
+            self.election.resign()
         if self.runner is not None:
             self.runner.close()  # joins the mission loop, which takes the lock
         with self._exec_lock:
