@@ -27,6 +27,7 @@ from drd.rcm.model import Aggregate, Unit
 from dsl.ast import parse_duration
 from dsl.catalog import Catalog, ComponentType, Kind, Limit, possessive
 from dsl.errors import did_you_mean
+from dsl.limits import Limits
 
 DEFAULT_LEASE = 3.0
 #: Finished missions a controller keeps for `status` and `stop` (each is its statechart and its records' facts,
@@ -67,7 +68,8 @@ SECURITY_KEYS: Mapping[SecurityMode, tuple[str, ...]] = {
     SecurityMode.TLS: ("ca", "cert", "key"),
 }
 _TOP_KEYS = ("cluster", "hosts")
-_CLUSTER_KEYS = ("name", "security", "lease", "placement", "world", "history", "store")
+_CLUSTER_KEYS = ("name", "security", "lease", "placement", "world", "history", "store", "limits")
+_LIMITS_KEYS = ("instances", "compile")
 _STORE_KEYS = ("etcd",)
 #: An etcd member's client URL (its HTTP JSON gateway; TLS to etcd is not supported yet).
 _ETCD_URL = re.compile(r"http://[A-Za-z0-9.\-]+:(\d{1,5})")
@@ -89,6 +91,8 @@ RANGES: Mapping[str, Limit] = {
     "cores": Limit(1, 4096, "cores"),
     "history": Limit(1, MAX_HISTORY, "missions"),
     "placement": Limit(0, 1000),  # a weight: relative, so a bound only refuses nonsense
+    "instances": Limit(1, 100_000, "instances"),  # a multiplicity's most (`dsl.limits`)
+    "compile": Limit(1.0, 600.0, duration=True),  # the controller's budget to compile a submitted mission
 }
 _SCALARS: Mapping[str, Any] = {"int": int, "float": (int, float), "bool": bool, "str": str}
 
@@ -208,6 +212,7 @@ class Cluster:
     world: str = DEFAULT_WORLD  # the world its `sim` drivers live in (worlds/NAME.yaml), unless a command says
     history: int = DEFAULT_HISTORY  # finished missions the controller keeps (status, stop); older ones are dropped
     store: Store = Store()  # the controllers' journal: SQLite on the one controller, or etcd for several
+    limits: Limits = Limits()  # what a mission may create and cost to compile (`dsl.limits`)
 
     @property
     def controller(self) -> Host:
@@ -304,12 +309,23 @@ class _Parser(ConfigReader):
         world = self.name(c["world"], "cluster.world") if "world" in c else DEFAULT_WORLD
         history = self.history(c["history"], "cluster.history") if "history" in c else DEFAULT_HISTORY
         store = self.store(c["store"], "cluster.store") if "store" in c else Store()
+        limits = self.limits(c["limits"], "cluster.limits") if "limits" in c else Limits()
         hosts = tuple(self.host(n, h, p) for n, h, p in self.entries(data.get("hosts", {}), "hosts"))
         if data.get("hosts") == {}:
             self.fail("hosts", "expected at least one host")
         self.check_cluster(hosts, store)
         return Cluster(name or "", security, lease, placement, hosts, self.source, world or DEFAULT_WORLD, history,
-                       store=store)
+                       store=store, limits=limits)
+
+    def limits(self, value: object, key: str) -> Limits:
+        """`{instances: 5000, compile: 30s}`: raise (or lower) what a mission may create and cost to compile."""
+        data = self.mapping(value, key)
+        self.keys(data, key, _LIMITS_KEYS)
+        default = Limits()
+        instances = self.number(data["instances"], f"{key}.instances", RANGES["instances"], integer=True) \
+            if "instances" in data else None
+        budget = self.duration(data["compile"], f"{key}.compile", RANGES["compile"]) if "compile" in data else None
+        return Limits(instances or default.instances, budget or default.compile_seconds)
 
     def store(self, value: object, key: str) -> Store:
         """`{etcd: [http://HOST:PORT, ...]}`: the etcd members' client URLs (each once)."""

@@ -12,6 +12,8 @@ from typing import TYPE_CHECKING
 
 from dsl.catalog import Catalog
 from dsl.errors import Diagnostic, MissionError, OverBudget, Reporter, Severity
+from dsl.limits import DEFAULT as DEFAULT_LIMITS
+from dsl.limits import Limits
 from dsl.statechart import Statechart
 
 if TYPE_CHECKING:
@@ -21,7 +23,7 @@ if TYPE_CHECKING:
 # `dsl` is: a command that only reads manifests or talks to a cluster (`missionctl status`) starts in half
 # the time.
 
-__all__ = ["Compiled", "compile_file", "compile_text", "compile_program", "Diagnostic", "MissionError",
+__all__ = ["Compiled", "compile_file", "compile_text", "compile_program", "Diagnostic", "Limits", "MissionError",
            "Statechart"]
 
 
@@ -71,16 +73,17 @@ def _finish(program: Program, catalog: Catalog, report: Reporter) -> Compiled:
     return Compiled(program.main, chart, diags, program.sources)
 
 
-def compile_file(path: str | Path, catalog: Catalog) -> Compiled:
+def compile_file(path: str | Path, catalog: Catalog, limits: Limits = DEFAULT_LIMITS) -> Compiled:
     from dsl.loader import load_file
 
-    report = Reporter()
+    report = Reporter(limits=limits)
     return _finish(load_file(path, report), catalog, report)
 
 
-def compile_text(text: str, catalog: Catalog, file: str = "<string>", budget: float | None = None) -> Compiled:
+def compile_text(text: str, catalog: Catalog, file: str = "<string>", budget: float | None = None,
+                 limits: Limits = DEFAULT_LIMITS) -> Compiled:
     """Compile a mission given as text; with `budget` (seconds), compiling stops past it with a located error."""
     from dsl.loader import load_text
 
-    report = Reporter(budget=budget)
+    report = Reporter(budget=budget, limits=limits)
     return _finish(load_text(text, file, report), catalog, report)

@@ -47,7 +47,8 @@ class Builder:
     def build(self, mission: ast.Behavior, file: str) -> Statechart:
         root = ast.Child(mission.name, span=mission.name_span)
         self._instance(mission.name, mission.name, root, None, 0, 1, (), ())
-        return Statechart(mission.name, mission.name, dict(self.states), file, mission.priority or 1)
+        return Statechart(mission.name, mission.name, dict(self.states), file, mission.priority or 1,
+                          self.report.limits.instances)
 
     # ------------------------------------------------------------- states
     def _child(self, parent: str, child: ast.Child, depth: int, prio: int, held: tuple[_Held, ...],

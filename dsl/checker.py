@@ -18,15 +18,17 @@ from dsl import ast
 from dsl.catalog import SCALAR_TYPES, Catalog, ComponentType, Kind, ParamSpec, RecordSpec, possessive
 from dsl.errors import Reporter, Span, did_you_mean
 from dsl.exprtypes import ANY, Scope, Type, Typer, assignable, constant, show
+from dsl.limits import DEFAULT_INSTANCES
 from dsl.linearize import find_cycle, plan_graph
 
 #: Deeper chains of behaviors calling behaviors are rejected (they only come from generators).
 MAX_BEHAVIOR_DEPTH = 64
 #: The parameter types a manifest may give a range (`min`, `max`, `unit`).
 NUMERIC = ("int", "float", "duration")
-#: The most instances a multiplicity may create (written as a constant, or evaluated when it starts): each is a
-#: statechart and components; a mission of more is a mistake or an attack (`Wait[1000000000]`).
-MAX_INSTANCES = 1000
+#: The default most instances a multiplicity may create (written as a constant, or evaluated when it starts): each is
+#: a statechart and components; a mission of more is a mistake or an attack (`Wait[1000000000]`). A cluster may
+#: raise it (`dsl.limits`, hosts.yaml `cluster.limits.instances`).
+MAX_INSTANCES = DEFAULT_INSTANCES
 
 
 @dataclass
@@ -402,10 +404,11 @@ class Checker:
                 self.typer.expect(bound, "int", scope, "multiplicity")
         low, high = _const(m.low), _const(m.high) if m.high is not None else None
         for value in (low, high):
-            if isinstance(value, int) and value > MAX_INSTANCES:
-                self.report.error("multiplicity", f"multiplicity {value} is above the limit of {MAX_INSTANCES} "
-                                  "instances", m.span, "an instance per robot or task: use [1..*] to create as many "
-                                  "as the resources allow")
+            limit = self.report.limits.instances
+            if isinstance(value, int) and value > limit:
+                self.report.error("multiplicity", f"multiplicity {value} is above the limit of {limit} instances",
+                                  m.span, "an instance per robot or task: use [1..*] to create as many as the"
+                                  " resources allow; a cluster may raise the limit (hosts.yaml cluster.limits)")
         if isinstance(low, int) and low < 0:
             self.report.error("multiplicity", f"multiplicity {low} can never hold: it must be 0 or more", m.span)
         if m.exact and low == 0:

@@ -13,6 +13,8 @@ from dataclasses import dataclass, field
 from enum import StrEnum
 
 from drd.errors import MissionInputError
+from dsl.limits import DEFAULT as DEFAULT_LIMITS
+from dsl.limits import Limits
 
 
 @dataclass(frozen=True, slots=True)
@@ -169,6 +171,7 @@ class Reporter:
 
     diagnostics: list[Diagnostic] = field(default_factory=list)
     budget: float | None = None
+    limits: Limits = DEFAULT_LIMITS
     deadline: float = field(init=False, default=float("inf"))
 
     def __post_init__(self) -> None:

@@ -20,6 +20,7 @@ from dsl import ast
 from dsl.catalog import Limit
 from dsl.dataflow import InputBinding
 from dsl.errors import NOWHERE, Span
+from dsl.limits import DEFAULT_INSTANCES
 
 
 class StateKind(StrEnum):
@@ -118,6 +119,8 @@ class Statechart:
     file: str = "<string>"
     #: The mission's rank against other missions sharing the team (`mission Name priority N`), 1 the highest.
     priority: int = 1
+    #: The most instances a multiplicity may create at run time: the limit it was compiled with (`dsl.limits`).
+    max_instances: int = DEFAULT_INSTANCES
 
     def __getitem__(self, state_id: str) -> State:
         return self.states[state_id]

@@ -236,3 +236,38 @@ def test_a_dry_run_of_a_component_whose_code_is_missing_is_refused_before_it_run
                       str(bogus_components(tmp_path)), "--json", cwd=tmp_path)
     assert done.returncode == 2 and done.stdout == ""
     assert "Bogus/manifest.yaml: entry_point: no module nowhere.bogus" in done.stderr
+
+
+def test_a_cluster_raises_the_instance_limit_for_its_missions_and_validate_checks_against_it(tmp_path: Path) -> None:
+    """`cluster.limits.instances`: the written bound, the evaluated one and `validate --config` all follow it."""
+    import json
+
+    hosts = hosts_with(tmp_path, "  lease: 3s\n", "  lease: 3s\n  limits: {instances: 1500, compile: 30s}\n")
+    (tmp_path / "written.mission").write_text("mission Written {\n    Wait(duration: 1s)[1200]\n}\n")
+    (tmp_path / "evaluated.mission").write_text("mission Evaluated {\n    var n: int = 1600\n"
+                                                "    Wait(duration: 1s)[n]\n}\n")
+    refused = missionctl("validate", "written.mission", cwd=tmp_path)
+    assert refused.returncode == 2 and "multiplicity 1200 is above the limit of 1000 instances" in refused.stderr
+    assert "cluster.limits" in refused.stderr  # the hint says how to raise it
+    assert missionctl("validate", "written.mission", "--config", str(hosts), cwd=tmp_path).returncode == 0
+    ran = missionctl("dry-run", "written.mission", "--config", str(hosts), "--json", cwd=tmp_path)
+    assert ran.returncode == 0 and json.loads(ran.stdout)["outcome"] == "success", ran.stderr[-1000:]
+    over = missionctl("dry-run", "evaluated.mission", "--config", str(hosts), "--json", cwd=tmp_path)
+    assert over.returncode == 1
+    assert json.loads(over.stdout)["reason"] == "Wait would create 1600 instances, above the limit of 1500"
+
+
+@pytest.mark.parametrize(("limits", "message"), [
+    ("{instances: 0}", "cluster.limits.instances: 0 is out of range: 1..100000 instances"),
+    ("{compile: 1h}", "hosts.yaml:8: cluster.limits.compile: 1h is out of range: 1s..10min"),
+    ("{instance: 5}", "cluster.limits.instance: unknown key (did you mean instances?)"),
+])
+def test_bad_cluster_limits_are_refused_naming_the_key(tmp_path: Path, limits: str, message: str) -> None:
+    from drd.config import ConfigError
+    from drd.hosts import load_hosts
+    from drd.manifests import load_catalog
+
+    hosts = hosts_with(tmp_path, "  lease: 3s\n", f"  lease: 3s\n  limits: {limits}\n")
+    with pytest.raises(ConfigError) as e:
+        load_hosts(hosts, load_catalog())
+    assert any(message in str(p) for p in e.value.problems), [str(p) for p in e.value.problems]

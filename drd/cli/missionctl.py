@@ -32,8 +32,9 @@ from drd.cli.common import (
     show_diagnostics,
 )
 from drd.cli.options import ComponentsOption
-from dsl import Compiled, compile_file
+from dsl import Compiled, Limits, compile_file
 from dsl.catalog import Catalog
+from dsl.limits import DEFAULT as DEFAULT_LIMITS
 from dsl.statechart import State, Statechart, StateKind
 
 if TYPE_CHECKING:  # rich's tables and trees, and the exporters, load only for the commands that draw them
@@ -71,10 +72,10 @@ FORMAT_BY_SUFFIX = {".json": Format.json, ".dot": Format.dot, ".gv": Format.dot,
 IMAGE_SUFFIXES = {".svg": "svg", ".png": "png", ".pdf": "pdf"}
 
 
-def _compile(path: Path, cat: Catalog) -> Compiled:
-    """`compile_file`, with the parser's tables from the user's cache (`drd.cache`)."""
+def _compile(path: Path, cat: Catalog, limits: Limits = DEFAULT_LIMITS) -> Compiled:
+    """`compile_file` (under `limits`), with the parser's tables from the user's cache (`drd.cache`)."""
     cache_parser_tables()
-    return compile_file(path, cat)
+    return compile_file(path, cat, limits)
 
 
 @app.command()
@@ -82,10 +83,14 @@ def validate(
     files: list[Path] = typer.Argument(..., help="Mission files to check.", show_default=False),
     as_json: bool = typer.Option(False, "--json", help="Print structured diagnostics as JSON."),
     components: list[Path] = ComponentsOption,
+    config: Path | None = typer.Option(None, "--config", "-c", "--hosts", show_default=False,
+                                       help="Check against this cluster's limits (its hosts file's cluster.limits)"
+                                            " [default: drd's default limits]."),
 ) -> int:
     """Check mission files: syntax, names, types, plans, resources. Exit 0 if all are valid, 2 if not."""
     cat = catalog(components)
-    results = [_compile(f, cat) for f in files]
+    limits = _team_files(config, None, cat)[0].limits if config is not None else DEFAULT_LIMITS
+    results = [_compile(f, cat, limits) for f in files]
     if as_json:
         print_json([_result_dict(r) for r in results])
     else:
@@ -346,10 +351,10 @@ def dry_run(
     if len(priority) > len(missions):
         fail(f"{len(priority)} --priority for {len(missions)} mission{'s' if len(missions) > 1 else ''}:"
              " give one per mission, in order")
-    charts = _charts(missions, param, cat)
-    if charts is None:
+    loaded = _missions_and_team(missions, param, hosts, world, cat)
+    if loaded is None:
         return INVALID
-    cluster, sim_world = _team_files(hosts, world, cat, charts)
+    charts, cluster, sim_world = loaded
     injections = _injections(inject, cluster, sim_world, until)
     _check_render(render)
     fh = open_trace(trace)
@@ -367,11 +372,30 @@ def dry_run(
     return OK if all(r.outcome == "success" for r in reports) else MISSION_FAILED
 
 
-def _charts(missions: list[Path], param: list[str], cat: Catalog) -> list[Statechart] | None:
+def _missions_and_team(missions: list[Path], param: list[str], hosts: Path, world: str | None,
+                       cat: Catalog) -> tuple[list[Statechart], Cluster, World] | None:
+    """The missions compiled under the hosts file's `cluster.limits`, then the team they run on; None when a mission
+    has errors (shown). A mission's errors come before the hosts file's: when it does not load, the missions are
+    checked against the default limits first, and its own problems are said after."""
+    from drd.config import ConfigError
+    from drd.hosts import load_hosts
+    from dsl.limits import DEFAULT
+
+    try:
+        cluster: Cluster | None = load_hosts(hosts, cat) if hosts.is_file() else None
+    except ConfigError:
+        cluster = None
+    charts = _charts(missions, param, cat, cluster.limits if cluster is not None else DEFAULT)
+    if charts is None:
+        return None
+    return (charts, *_team_files(hosts, world, cat, charts, cluster))
+
+
+def _charts(missions: list[Path], param: list[str], cat: Catalog, limits: Limits) -> list[Statechart] | None:
     """The missions compiled, their `--param`s applied; None when one has errors (shown)."""
     from dsl.params import ParamError, parse_assignments
 
-    results = [_compile(mission, cat) for mission in missions]
+    results = [_compile(mission, cat, limits) for mission in missions]
     if not show_diagnostics(results):
         return None
     charts = []
@@ -396,16 +420,17 @@ def _preflight(cluster: Cluster, cat: Catalog, charts: list[Statechart]) -> None
         fail_all(problems, hint="see docs/drivers.md (drivers) and docs/components.md (manifests)")
 
 
-def _team_files(hosts: Path, world: str | None, cat: Catalog,
-                charts: list[Statechart] | None = None) -> tuple[Cluster, World]:
-    """The hosts file and the world it (or `--world`) names, loaded, or a clear exit naming file and key; with
-    `charts`, also every host's drivers and their components checked (`_preflight`)."""
+def _team_files(hosts: Path, world: str | None, cat: Catalog, charts: list[Statechart] | None = None,
+                cluster: Cluster | None = None) -> tuple[Cluster, World]:
+    """The hosts file (`cluster`: already loaded from it) and the world it (or `--world`) names, loaded, or a clear
+    exit naming file and key; with `charts`, also every host's drivers and their components checked
+    (`_preflight`)."""
     from drd.hosts import HostsError, load_hosts
     from drd.sim.world import WorldError, load_world
 
     hosts_file = _hosts_file(hosts)
     try:
-        cluster = load_hosts(hosts_file, cat)
+        cluster = cluster or load_hosts(hosts_file, cat)
         team = cluster, load_world(_world_file(world, cluster.world, hosts_file))
     except (HostsError, WorldError) as e:
         fail_all(e.problems)

@@ -111,11 +111,6 @@ def request_data(req: RunMission) -> dict[str, Any]:
     return {f.name: getattr(req, f.name) for f in dataclasses.fields(req) if f.name != "give_up_at"}
 
 
-#: Seconds a controller spends at most compiling a submitted mission (and never past its client's `give_up_at`): a
-#: mission of the largest size (1 MB) compiles in about 3 s on a 2-core machine.
-COMPILE_BUDGET = 10.0
-
-
 def run_key(cluster: str) -> str:
     return f"drd/{cluster}/missions/run"
 
@@ -282,10 +277,12 @@ class MissionRunner:
             raise ValueError("priority must be 1 or more (1 is the highest)")
         if len(req.source) > 1_000_000:
             raise ValueError("mission source larger than 1 MB")
-        budget = COMPILE_BUDGET if not req.give_up_at else min(COMPILE_BUDGET, req.give_up_at - time.time())
+        limits = self.cluster.limits
+        budget = limits.compile_seconds if not req.give_up_at else min(limits.compile_seconds,
+                                                                       req.give_up_at - time.time())
         if budget <= 0:  # it waited behind other work until its client left: compiling it would be for nobody
             return _given_up(req)
-        compiled = compile_text(req.source, self.catalog, req.file or "<mission>", budget)
+        compiled = compile_text(req.source, self.catalog, req.file or "<mission>", budget, limits)
         if not compiled.ok or compiled.statechart is None:
             diags = render(list(compiled.diagnostics), dict(compiled.sources))
             return RunReply("", False, diags or [f"{req.file}: declares no mission to run"])

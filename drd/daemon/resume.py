@@ -122,7 +122,8 @@ def _resume_one(runner: Any, journal: Journal, world: Any, job: Journaled, pause
     from dsl.params import ParamError, apply_params
 
     request = job.request
-    compiled = compile_text(str(request.get("source", "")), runner.catalog, str(request.get("file") or "<mission>"))
+    compiled = compile_text(str(request.get("source", "")), runner.catalog, str(request.get("file") or "<mission>"),
+                            limits=runner.cluster.limits)
     try:
         if not compiled.ok or compiled.statechart is None:
             raise ValueError("; ".join(d.message for d in compiled.diagnostics) or "it declares no mission")

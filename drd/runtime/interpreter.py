@@ -53,7 +53,6 @@ from drd.runtime.tree import (
 )
 from dsl import ast
 from dsl.catalog import possessive
-from dsl.checker import MAX_INSTANCES
 from dsl.evaluate import EvalError, evaluate, format_value, truthy
 from dsl.export import trigger_label
 from dsl.statechart import ResourceNeed, State, Statechart, Transition
@@ -490,9 +489,9 @@ class Interpreter:
         except (EvalError, TypeError, ValueError) as e:
             self._finish(node, False, f"multiplicity: {e}")
             return
-        if max(low, high) > MAX_INSTANCES:
+        if max(low, high) > self.chart.max_instances:
             self._finish(node, False, f"{node.state.name} would create {max(low, high)} instances, above the limit "
-                                      f"of {MAX_INSTANCES}")
+                                      f"of {self.chart.max_instances}")
             return
         node.bounds = (low, high)
         if high < low:
@@ -537,7 +536,7 @@ class Interpreter:
             except (EvalError, TypeError, ValueError):
                 continue
             if high > node.bounds[1]:
-                node.bounds = (node.bounds[0], min(high, MAX_INSTANCES))
+                node.bounds = (node.bounds[0], min(high, self.chart.max_instances))
                 self._grow_multi(node)
 
     def _flush(self) -> None:
