@@ -271,3 +271,53 @@ def test_bad_cluster_limits_are_refused_naming_the_key(tmp_path: Path, limits: s
     with pytest.raises(ConfigError) as e:
         load_hosts(hosts, load_catalog())
     assert any(message in str(p) for p in e.value.problems), [str(p) for p in e.value.problems]
+
+
+#: The inputs of issue #18, each with the located message `missionctl validate` gives (exit 2), or "" for one that
+#: is valid and only had to cost little.
+ISSUE_INPUTS = {
+    "waits": ("mission M {\n    Wait(duration: 1s)[10000]\n}\n",
+              ":2:23: error: multiplicity 10000 is above the limit of 1000 instances"),
+    "billion": ("mission M {\n    Wait(duration: 1s)[1000000000]\n}\n",
+                ":2:23: error: multiplicity 1000000000 is above the limit"),
+    "braces": ("}" * 990_000, ":1:1: error: syntax: expected behavior, import or mission, got `}`"),
+    "brackets": ("mission M {\n    var x: int = 0\n    Wait(duration: 1s) as w\n    w -> done when " + "[" * 10_000
+                 + "\n}\n", ":4:20: error: syntax: expected a condition after when"),
+    "errors": ("mission M {\n" + "    Wait(duration: ) )\n" * 10_000 + "}\n", ":2:20: error: syntax: expected"),
+    "integer": ("mission M {\n    var n: int = " + "9" * 5000 + "\n    Wait(duration: 1s)\n}\n",
+                ":2:18: error: integer 99999999999999999999999… is too large (5000 digits, at most 18)"),
+    "quantity": ("mission M {\n    needs radio: RadioChannel quantity -5\n    Wait(duration: 1s)\n}\n",
+                 ":2:40: error: quantity -5 asks for nothing: it must be above 0"),
+    "slice": ("mission M {\n    needs radio: RadioChannel for 0s\n    Wait(duration: 1s)\n}\n",
+              ":2:35: error: a time slice of 0s never lets the holder run"),
+    "negative": ("mission M {\n    Wait(duration: -1s)\n}\n",
+                 ":2:10: error: duration: a duration cannot be negative (-1 s)"),
+    "modulo": ("mission M {\n    var x: int = 3\n    Wait(duration: 1s) as w\n    w -> done / set x = x % 0\n}\n",
+               ":4:29: error: remainder by zero"),
+    "string": ('mission M {\n    Wait(duration: 1s) as w\n    w -> done / log "' + "ab" * 450_000 + '"\n}\n', ""),
+    "parentheses": ("mission M {\n    var x: int = 0\n    Wait(duration: 1s) as w\n    w -> done when "
+                    + "(" * 10_000 + "x > 1" + ")" * 10_000 + "\n}\n", ""),
+}
+#: The address space each `missionctl validate` may use (Python, lark and the mission: about 70 MB resident).
+MEMORY_CAP = 512 << 20
+
+
+def capped() -> None:
+    import resource
+
+    resource.setrlimit(resource.RLIMIT_AS, (MEMORY_CAP, MEMORY_CAP))
+
+
+@pytest.mark.parametrize("name", sorted(ISSUE_INPUTS))
+def test_each_input_of_the_issue_gets_its_located_error_within_a_memory_cap(tmp_path: Path, name: str) -> None:
+    text, message = ISSUE_INPUTS[name]
+    (tmp_path / f"{name}.mission").write_text(text, encoding="utf-8")
+    done = subprocess.run([*MISSIONCTL, "validate", f"{name}.mission"], cwd=tmp_path, capture_output=True,
+                          text=True, timeout=120, check=False, preexec_fn=capped)
+    shown = done.stdout + done.stderr
+    assert "Traceback" not in shown and "MemoryError" not in shown
+    if message:
+        assert done.returncode == 2 and f"{name}.mission{message}" in shown, shown[-1500:]
+        assert shown.count(": error: ") <= SHOWN_ERRORS
+    else:
+        assert done.returncode == 0 and "valid" in shown, shown[-1500:]
