@@ -3,7 +3,7 @@
 A door is a run of beams on one side that reach well past the fitted corridor wall (into a room), with
 wall hits on both sides of the run; its width is measured along the wall line. A closed door is a wall
 segment to the laser, so it never shows up as a gap. The door's centre is given in odometry coordinates.
-Doors already in the shared DoorLog (`visited`: a dict keyed by (rounded x, side)) are skipped. At the end of
+Doors already in the shared DoorLog (`visited`: a dict keyed by (rounded x, rounded y, side)) are skipped. At the end of
 the corridor (a wall across the way, as FollowCorridor sees it) it fails: there is no new door left ahead, so
 `FindNewDoor -> fail on error` ends that RoomSurveillance instance and the mission degrades gracefully.
 """
@@ -26,9 +26,10 @@ _FAR = math.pi - 0.15  # beams closer than 0.15 rad to the wall's direction cros
 _GAP = re.compile(r"(?<=w)b+(?=w)")
 
 
-def door_key(x: float, side: str) -> tuple[float, str]:
-    """The DoorLog key of a door: its x rounded to the metre, and its side."""
-    return (float(round(x)), side)
+def door_key(x: float, y: float, side: str) -> tuple[float, float, str]:
+    """The DoorLog key of a door: its x and y rounded to the metre, and its side. Not x alone: in a building of
+    parallel corridors two doors share an x, and one Ranger would skip the other's door as known."""
+    return (float(round(x)), float(round(y)), side)
 
 
 def known(log: Any, x: float, y: float, side: str, width: float) -> bool:
@@ -39,7 +40,7 @@ def known(log: Any, x: float, y: float, side: str, width: float) -> bool:
     """
     if not isinstance(log, dict):
         return False
-    if door_key(x, side) in log:
+    if door_key(x, y, side) in log:
         return True
     for rec in log.values():
         if isinstance(rec, dict) and math.hypot(rec["x"] - x, rec["y"] - y) < width:
@@ -126,7 +127,7 @@ class DetectDoor(Component):
             door = {"width": round(width, 3), "x": round(x, 3), "y": round(y, 3), "side": side,
                     "from": {"x": round(px, 3), "y": round(py, 3)}}  # where the Ranger stood: AlignRanger returns
             if isinstance(log, dict):
-                log[door_key(x, side)] = dict(door)
+                log[door_key(x, y, side)] = dict(door)
             self.ctx.outputs["door"] = door
             self.ctx.emit("DoorDetected", width=door["width"], x=door["x"], y=door["y"])
             return Status.SUCCESS

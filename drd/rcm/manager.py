@@ -96,6 +96,10 @@ class ResourceManager:
         self._overtime: set[str] = set()
         self._events: list[tuple[float, int, int, str]] = []  # (time, kind, token, holder)
         self._frees = 0  # bumped whenever capacity is given back
+        #: (id of a list of alternatives, capped, needs) -> (that list, its claims, their units): `_claims`' memo
+        self._claims_memo: dict[tuple[int, bool, tuple[NeedRequest, ...]],
+                                tuple[list[Solution], dict[str, float], frozenset[str]]] = {}
+        self._interned: dict[frozenset[str], frozenset[str]] = {}  # `_claim_set`'s shared sets
 
     # -- hot-plug and the Static Dependency Database -------------------------------------------
 
@@ -352,7 +356,7 @@ class ResourceManager:
         if alts is None:
             alts, capped = self._reg.alternatives(wait.request.needs, wait.given, self.max_alternatives)
         demand = self._claims_of(wait, alts, capped)
-        self._queue.add(wait, frozenset(demand), self._holds)
+        self._queue.add(wait, self._claim_set(wait, alts, capped), self._holds)
         return demand
 
     def _withdraw(self, wait: Wait, reason: ReleaseReason, now: float, out: list[Decision]) -> None:
@@ -361,7 +365,37 @@ class ResourceManager:
         self._dispatch(wait.claims, now, out)
 
     def _claims_of(self, wait: Wait, alts: list[Solution], capped: bool) -> dict[str, float]:
-        """The units of all possible assignments, with the most each assignment takes of them."""
+        """The units of all possible assignments, with the most each assignment takes of them (read-only: shared
+        by the waiters of equal needs).
+
+        Memoized per list of alternatives (the registry's cache hands the same list to every instance of a
+        behavior until a resource changes), with the set of units interned (`_claim_set`), so a thousand waiters
+        of one behavior cost one pass over a thousand candidates' units, not a thousand, after each launch."""
+        return self._claims(wait, alts, capped)[0]
+
+    def _claim_set(self, wait: Wait, alts: list[Solution], capped: bool) -> frozenset[str]:
+        """The units `_claims_of` gives, as one shared frozenset per content, so an unchanged claim is the same
+        object (and `WaitQueue.reclaim` has nothing to do)."""
+        return self._claims(wait, alts, capped)[1]
+
+    def _claims(self, wait: Wait, alts: list[Solution], capped: bool) -> tuple[dict[str, float], frozenset[str]]:
+        key = (id(alts), capped, wait.request.needs)
+        memo = self._claims_memo.get(key)
+        if memo is not None and memo[0] is alts:
+            return memo[1], memo[2]
+        if len(self._claims_memo) > 64:
+            self._claims_memo.clear()
+        demand = self._claims_fresh(wait, alts, capped)
+        units = frozenset(demand)
+        found = self._interned.get(units)
+        if found is None:
+            if len(self._interned) > 256:
+                self._interned.clear()
+            found = self._interned[units] = units
+        self._claims_memo[key] = (alts, demand, found)
+        return demand, found
+
+    def _claims_fresh(self, wait: Wait, alts: list[Solution], capped: bool) -> dict[str, float]:
         demand: dict[str, float] = {}
         for solution in alts:
             for unit, quantity in solution.totals.items():
@@ -376,17 +410,24 @@ class ResourceManager:
     def _reconsider(self, holders: Iterable[str], now: float, out: list[Decision], extra: set[str]) -> None:
         """Recompute the claims of waiters after the resources changed, then serve who can be."""
         touched = set(extra)
+        seen: set[int] = set()  # the claim sets already in `touched` (waiters of one behavior share theirs)
+
+        def touch(claims: frozenset[str]) -> None:
+            if id(claims) not in seen:
+                seen.add(id(claims))
+                touched.update(claims)
+
         for holder in holders:
             wait = self._queue.waits[holder]
             alts, capped = self._reg.alternatives(wait.request.needs, wait.given, self.max_alternatives)
-            touched |= wait.claims
+            touch(wait.claims)
             if not alts:
                 self._queue.remove(wait)
                 need, reason = diagnose(wait.request.needs, self._reg, wait.given) or ("", "")
                 out.append(Unsatisfiable(holder, need, reason))
                 continue
-            self._queue.reclaim(wait, frozenset(self._claims_of(wait, alts, capped)))
-            touched |= wait.claims
+            self._queue.reclaim(wait, self._claim_set(wait, alts, capped))
+            touch(wait.claims)
         self._dispatch(touched, now, out)
 
     # -- granting ------------------------------------------------------------------------------

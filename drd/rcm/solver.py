@@ -3,7 +3,9 @@
 Needs are solved in their declared order so that a `where` can look at the candidates chosen for
 the earlier needs (`scout.carrier == ranger`); when a later need fails, the search backtracks over
 the earlier choices. Candidates are tried in a stable order (by id) so the same state always gives
-the same assignment. How much of each unit may be taken is a parameter (`room`): the manager passes
+the same assignment. A `where` may offer `narrow(candidates, chosen)`: the candidates, in order, outside
+of which it is never true (`drd.runtime.resources.Where`: the Scouts of the chosen Ranger); only those are tried.
+How much of each unit may be taken is a parameter (`room`): the manager passes
 what is free for this request, and the capacity alone to ask whether a request can *ever* be met.
 """
 
@@ -102,7 +104,11 @@ def solutions(
     def search(index: int) -> Iterator[Solution]:
         need = needs[index]
         last = index == len(needs) - 1  # leaves are yielded here: no generator per candidate
-        for candidate in catalog.candidates(need.type):
+        candidates = catalog.candidates(need.type)
+        narrow = getattr(need.where, "narrow", None)
+        if narrow is not None:  # a `where` that can rule candidates out wholesale (a join on an earlier need)
+            candidates = narrow(candidates, view)
+        for candidate in candidates:
             demand = catalog.demand(candidate, need)
             # Capacity first: it is cheap, and `where` may be arbitrary compiled mission code.
             if not fits(demand) or (need.where is not None and not need.where(candidate, view)):

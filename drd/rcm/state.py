@@ -316,7 +316,9 @@ class WaitQueue:
         self.nested.discard(holder)
 
     def reclaim(self, wait: Wait, claims: frozenset[str]) -> None:
-        """Set the units a waiter claims (entries for units it drops go stale)."""
+        """Set the units a waiter claims (entries for units it drops go stale); the same set again costs nothing."""
+        if claims is wait.claims:
+            return
         for unit in claims - wait.claims:
             heappush(self._claimants.setdefault(unit, []), (wait.key, wait.holder))
         wait.claims = claims

@@ -97,6 +97,9 @@ class ResourcePool:
         self.telemetry: Telemetry | None = None
         self.places: dict[str, tuple[float, float, float, float]] = {}  # the world's named regions (rooms)
         self._seen: dict[str, dict[str, float]] = {}  # robot -> what `predicting` shows instead of its telemetry
+        #: property -> (value -> ids with that string value, every id with a string value): `having`'s index,
+        #: dropped on any change of the resources or their properties
+        self._index: dict[str, tuple[dict[str, set[str]], set[str]]] = {}
 
     def live(self, robot: str, key: str) -> float | None:
         """A robot's live value (`x`, `y`, `heading`, `battery`), or None when nobody can tell."""
@@ -132,6 +135,7 @@ class ResourcePool:
 
     def add(self, resources: Iterable[Candidate], now: float) -> None:
         """Register units before the aggregates that use them (decisions go to the broker's listeners)."""
+        self._index.clear()
         for c in sorted(resources, key=lambda c: isinstance(c, Aggregate)):
             self.candidates[c.id] = c
             self._props[c.id] = dict(c.properties)
@@ -152,11 +156,31 @@ class ResourcePool:
 
     def set_property(self, rid: str, key: str, value: object, now: float) -> None:
         """Change the Static Dependency Database (a launched Scout leaves its magazine)."""
+        self._index.clear()
         self._props.setdefault(rid, {})[key] = value
         self.broker.set_property(rid, key, value, now)
 
     def properties(self, rid: str) -> dict[str, object]:
         return self._props.get(rid, {})
+
+    def having(self, cands: Iterable[Candidate], prop: str, value: str) -> list[Candidate]:
+        """The candidates, in order, less those whose property `prop` (as a `ResourceView` reads it: not a part of
+        theirs) is a string other than `value`: `scout.carrier == ranger` cannot hold for them. An index per
+        property, built once per change of the properties, so a Ranger's 19 Scouts are found among 950 without
+        evaluating the expression 950 times."""
+        index = self._index.get(prop)
+        if index is None:
+            buckets: dict[str, set[str]] = {}
+            known: set[str] = set()
+            for rid, props in self._props.items():
+                v = props.get(prop)
+                if isinstance(v, str):
+                    buckets.setdefault(v, set()).add(rid)
+                    known.add(rid)
+            index = self._index[prop] = (buckets, known)
+        match, known = index[0].get(value, set()), index[1]
+        return [c for c in cands if c.id in match or c.id not in known
+                or (isinstance(c, Aggregate) and prop in c.parts)]
 
     def view(self, rid: str) -> ResourceView | None:
         c = self.candidates.get(rid)

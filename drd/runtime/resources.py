@@ -13,14 +13,14 @@ keeps the books and talks to the manager and the gates.
 
 from __future__ import annotations
 
-from collections.abc import Callable, Iterable, Mapping
+from collections.abc import Callable, Collection, Iterable, Mapping
 from typing import Any
 
 from drd.errors import MissionInputError
-from drd.rcm import Aggregate, NeedRequest, Request
+from drd.rcm import Aggregate, Candidate, NeedRequest, Request
 from drd.runtime.broker import ResourceBroker
 from drd.runtime.ownership import Arbiter, Binding, Gates, LocalGates
-from drd.runtime.pool import ResourcePool, ResourceView
+from drd.runtime.pool import LIVE, ResourcePool, ResourceView
 from drd.runtime.tree import Node
 from dsl import ast
 from dsl.evaluate import EvalError, evaluate, truthy
@@ -62,7 +62,9 @@ class ResourceClient:
         """
         holder = self.holder(node)
         pins = self.pins.pop(holder, None)
-        reqs = tuple(self.need_request(node, n, pins.get(n.name) if pins else None) for n in needs)
+        needs = tuple(needs)
+        reqs = tuple(self.need_request(node, n, pins.get(n.name) if pins else None,
+                                       earlier=[m.name for m in needs[:i]]) for i, n in enumerate(needs))
         node.requested = True
         self.holders[holder] = node
         request = Request(holder, node.state.priority, reqs, self.mission, self.mission_priority)
@@ -71,32 +73,24 @@ class ResourceClient:
         else:
             self.broker.reserve(request, self.now(), at)
 
-    def need_request(self, node: Node, need: ResourceNeed, pinned: str | None = None) -> NeedRequest:
+    def need_request(self, node: Node, need: ResourceNeed, pinned: str | None = None,
+                     earlier: Collection[str] | None = None) -> NeedRequest:
         """`pinned`: the resource it must be (a mission resumed after its controller was lost asks for what it
-        held, whatever its `where` says of the resource now)."""
+        held, whatever its `where` says of the resource now). `earlier`: the needs asked before this one in the
+        same request (the solver binds them first), when known: a `where` reading only those is the same for
+        every instance of the behavior (`Where`)."""
         quantity = need.quantity
         if isinstance(quantity, ast.Expr):
             value = evaluate(quantity, self.names(node), self.pool.count)
             quantity = float(value) if isinstance(value, int | float) and not isinstance(value, bool) else 1.0
-        where = self.where(node, need) if pinned is None else (lambda cand, chosen: cand.id == pinned)
+        where = self.where(node, need, earlier) if pinned is None else (lambda cand, chosen: cand.id == pinned)
         return NeedRequest(need.name, need.type, float(quantity or 1.0), need.slice, where)
 
-    def where(self, node: Node, need: ResourceNeed) -> Any:
-        """The need's `where` as the solver calls it: evaluated in the node's scope, with the candidate (and the
-        earlier needs' choices) under their need names."""
+    def where(self, node: Node, need: ResourceNeed, earlier: Collection[str] | None = None) -> Any:
+        """The need's `where` as the solver calls it (`Where`), or None."""
         if need.where is None:
             return None
-        expr, pool, names = need.where, self.pool, self.names
-
-        def where(cand: Any, chosen: Mapping[str, Any]) -> bool:
-            scope = names(node)
-            scope.update({k: ResourceView(v, pool) for k, v in chosen.items()})
-            scope[need.name] = ResourceView(cand, pool)
-            try:
-                return truthy(expr, scope, pool.count)
-            except EvalError:
-                return False
-        return where
+        return Where(need.where, need.name, self.pool, self.names, node, earlier)
 
     def release(self, node: Node, names: Iterable[str] | None = None) -> None:
         """Give back the whole grant (None) or these needs; the manager's decisions follow through the broker."""
@@ -266,3 +260,100 @@ class ResourceClient:
             if hit:
                 out.append((n, hit))
         return out
+
+
+class Where:
+    """A need's `where`, evaluated in its node's scope with the candidate (and the earlier needs' choices) under
+    their need names: what the solver calls for each candidate.
+
+    Two are equal when neither can depend on its node: the expression reads only the candidate and needs bound
+    before it, no live value (`x`, `battery`) and no call. The manager's alternatives, cached per needs, then
+    serve every instance of a behavior at once: a thousand waiting RoomSurveillance instances enumerate their
+    assignments once per resource change, not a thousand times. Such a `where` is also evaluated without
+    building the node's scope. Others are equal only to themselves, as the closures they replace were.
+
+    `narrow` gives the solver a cheaper set to try: with `scout.carrier == ranger` among its top-level `and`s,
+    only the Scouts whose `carrier` is the chosen Ranger (from the pool's index) and those the index cannot tell
+    about; the expression still decides for each. Rejected: compiling `where` to Python (a second evaluator).
+    """
+
+    __slots__ = ("expr", "need", "pool", "names", "node", "key", "join", "_hash")
+
+    def __init__(self, expr: ast.Expr, need: str, pool: ResourcePool, names: Names, node: Node,
+                 earlier: Collection[str] | None) -> None:
+        self.expr, self.need, self.pool, self.names, self.node = expr, need, pool, names, node
+        refs = _free_names(expr)
+        shared = earlier is not None and refs is not None and refs <= {need, *earlier}
+        self.key: tuple[ast.Expr, str, int] | None = (expr, need, id(pool)) if shared else None
+        self._hash = hash(self.key) if self.key is not None else id(self)
+        self.join = _join(expr, need)
+
+    def __call__(self, cand: Candidate, chosen: Mapping[str, Candidate]) -> bool:
+        pool = self.pool
+        scope: dict[str, Any] = {} if self.key is not None else self.names(self.node)
+        for k, v in chosen.items():
+            scope[k] = ResourceView(v, pool)
+        scope[self.need] = ResourceView(cand, pool)
+        try:
+            return truthy(self.expr, scope, pool.count)
+        except EvalError:
+            return False
+
+    def narrow(self, cands: Iterable[Candidate], chosen: Mapping[str, Candidate]) -> Iterable[Candidate]:
+        """The candidates, in their order, less those whose joined property names another resource than the one
+        chosen (they can never satisfy the expression)."""
+        if self.join is None:
+            return cands
+        prop, other = self.join
+        target = chosen.get(other)
+        return cands if target is None else self.pool.having(cands, prop, target.id)
+
+    def __eq__(self, other: object) -> bool:
+        if self.key is None or not isinstance(other, Where):
+            return self is other
+        return self.key == other.key
+
+    def __hash__(self) -> int:
+        return self._hash
+
+
+def _free_names(expr: ast.Expr) -> set[str] | None:
+    """The names an expression reads, or None when it calls a function or reads a live value (both may change
+    without any resource changing)."""
+    match expr:
+        case ast.Literal() | ast.Duration():
+            return set()
+        case ast.Name(id=n):
+            return {n}
+        case ast.Attr(obj=o, attr=a):
+            return None if a in LIVE else _free_names(o)
+        case ast.Unary(operand=x):
+            return _free_names(x)
+        case ast.Binary(left=lhs, right=rhs):
+            left, right = _free_names(lhs), _free_names(rhs)
+            return None if left is None or right is None else left | right
+        case ast.Interp(parts=parts):
+            found: set[str] = set()
+            for part in parts:
+                if not isinstance(part, str):
+                    names = _free_names(part)
+                    if names is None:
+                        return None
+                    found |= names
+            return found
+    return None
+
+
+def _join(expr: ast.Expr, need: str) -> tuple[str, str] | None:
+    """(property, other need) when `expr` is, or has among its top-level `and`s, `need.property == other` (either
+    way round): a candidate whose stored property is a different id can never satisfy it."""
+    match expr:
+        case ast.Binary(op="and", left=lhs, right=rhs):
+            return _join(lhs, need) or _join(rhs, need)
+        case ast.Binary(op="==", left=lhs, right=rhs):
+            for a, b in ((lhs, rhs), (rhs, lhs)):
+                if (isinstance(a, ast.Attr) and isinstance(a.obj, ast.Name) and a.obj.id == need
+                        and isinstance(b, ast.Name) and b.id != need and a.attr not in LIVE
+                        and a.attr not in ("id", "host")):
+                    return a.attr, b.id
+    return None
