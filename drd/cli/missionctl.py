@@ -767,3 +767,7 @@ cluster.register(app)
 from drd.cli import tune  # noqa: E402  # `missionctl tune INSTANCE --cores --nice`: a running instance's process
 
 tune.register(app)
+
+from drd.cli import world as world_cli  # noqa: E402  # `missionctl world generate`: a building and its hosts file
+
+world_cli.register(app)
