@@ -10,7 +10,7 @@ import stat
 from collections.abc import Hashable, Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, TypeVar
+from typing import Any, NoReturn, TypeVar
 
 import yaml
 
@@ -127,6 +127,10 @@ MAX_CONFIG_BYTES = 4 * 1024 * 1024
 #: YAML aliases and nesting a configuration may use: a few anchors are handy, thousands are an attack (each alias
 #: is one more reference a checker walks: "billion laughs").
 MAX_ALIASES, MAX_DEPTH = 100, 32
+#: The most nodes a file may stand for once its aliases are expanded: about what 4 MiB of plain YAML can hold. A
+#: billion-laughs file has few aliases (9 levels of 9: 81) and stands for 387 million nodes; every walk of it (a
+#: check, a message showing a value) would run out of memory.
+MAX_NODES = 1_000_000
 
 
 def read_config_text(path: Path) -> str:
@@ -143,22 +147,38 @@ def read_config_text(path: Path) -> str:
 
 
 def load_yaml(text: str) -> object:
-    """YAML in the one dialect of every configuration file (`StrictLoader`), with aliases and nesting bounded
-    (yaml.YAMLError, with a mark where it can, for anything else)."""
-    aliases = depth = 0
+    """YAML in the one dialect of every configuration file (`StrictLoader`), with aliases, nesting and the size
+    the aliases expand to bounded (yaml.YAMLError, with a mark where it can, for anything else)."""
+    aliases = 0
+    sizes: dict[str, int] = {}  # each anchor's node, in nodes once expanded
+    open_: list[tuple[str | None, int]] = [(None, 0)]  # the collections being read: (anchor, nodes so far)
+
+    def refuse(problem: str, event: yaml.Event) -> NoReturn:
+        raise yaml.MarkedYAMLError(problem=problem, problem_mark=event.start_mark)  # type: ignore[arg-type]
+
+    def add(nodes: int, anchor: str | None, event: yaml.Event) -> None:
+        if anchor is not None:
+            sizes[anchor] = nodes
+        name, inside = open_[-1]
+        open_[-1] = (name, inside + nodes)
+        if sum(n for _, n in open_) > MAX_NODES:
+            refuse(f"its aliases expand to more than {MAX_NODES:,} values (a billion-laughs file?)", event)
+
     for event in yaml.parse(text, Loader=StrictLoader):
         if isinstance(event, yaml.AliasEvent):
             aliases += 1
             if aliases > MAX_ALIASES:
-                raise yaml.MarkedYAMLError(problem=f"more than {MAX_ALIASES} aliases (*name)",
-                                           problem_mark=event.start_mark)  # type: ignore[arg-type]
+                refuse(f"more than {MAX_ALIASES} aliases (*name)", event)
+            add(sizes.get(event.anchor or "", 1), None, event)
         elif isinstance(event, yaml.CollectionStartEvent):
-            depth += 1
-            if depth > MAX_DEPTH:
-                raise yaml.MarkedYAMLError(problem=f"nested deeper than {MAX_DEPTH} levels",
-                                           problem_mark=event.start_mark)  # type: ignore[arg-type]
+            open_.append((event.anchor, 1))
+            if len(open_) - 1 > MAX_DEPTH:
+                refuse(f"nested deeper than {MAX_DEPTH} levels", event)
         elif isinstance(event, yaml.CollectionEndEvent):
-            depth -= 1
+            anchor, nodes = open_.pop()
+            add(nodes, anchor, event)
+        elif isinstance(event, yaml.ScalarEvent):
+            add(1, event.anchor, event)
     return yaml.load(text, Loader=StrictLoader)
 
 

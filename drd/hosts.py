@@ -33,9 +33,10 @@ DEFAULT_LEASE = 3.0
 #: Finished missions a controller keeps for `status` and `stop` (each is its statechart and its records' facts,
 #: tens of KB): 3,800 kept made a status reply outgrow the transport.
 DEFAULT_HISTORY, MAX_HISTORY = 100, 1000
-_NAME = re.compile(r"[A-Za-z_][A-Za-z0-9_]*", re.ASCII)
+#: A name (of the cluster, a host, a robot): a part of bus keys, file names and messages, so short and plain.
+_NAME = re.compile(r"[A-Za-z_][A-Za-z0-9_]{0,63}", re.ASCII)
 #: Device ids may be dotted (`scout1.wheels`): a robot's own devices are prefixed with its id.
-_DEVICE_ID = re.compile(r"[A-Za-z_]\w*(?:\.[A-Za-z_]\w*)*", re.ASCII)
+_DEVICE_ID = re.compile(r"[A-Za-z_]\w{0,63}(?:\.[A-Za-z_]\w{0,63}){0,3}", re.ASCII)
 _ENDPOINT = re.compile(r"(tcp|udp)/(\[[0-9A-Fa-f:.]+\]|[A-Za-z0-9](?:[A-Za-z0-9.-]*[A-Za-z0-9])?):([0-9]+)", re.ASCII)
 _E = TypeVar("_E", bound=Enum)
 
@@ -600,7 +601,10 @@ class _Parser(ConfigReader):
         text = self.text(value, key)
         if text and not pattern.fullmatch(text):
             dots = ", in parts joined by dots" if pattern is _DEVICE_ID else ""
-            self.fail(key, f"{text!r} is not a name (letters, digits and _, not starting with a digit{dots})")
+            plain = pattern.fullmatch(re.sub(r"\w{65,}", lambda m: m.group()[:64], text))
+            self.fail(key, f"{show(text)} is too long for a name (at most 64 characters{' a part' if dots else ''})"
+                      if plain else f"{show(text)} is not a name (letters, digits and _, not starting with a digit"
+                                    f"{dots})")
         return text if pattern.fullmatch(text) else None
 
     def number(self, value: object, key: str, limit: Limit, integer: bool = False) -> Any:

@@ -568,10 +568,13 @@ SHOWN_CHARS = 60
 
 
 def show(value: object) -> str:
+    """`value` as a message shows it: whole when short, else its start and its length (a string's own length, not
+    its quoted form's)."""
     text = repr(value) if isinstance(value, str) else str(value)
     if len(text) <= SHOWN_CHARS:
         return text
-    return f"{text[:SHOWN_CHARS - 1]}… ({len(text):,} characters)"
+    size = len(value) if isinstance(value, str) else len(text)
+    return f"{text[:SHOWN_CHARS - 1]}… ({size:,} characters)"
 
 
 def _hint(value: str, candidates: Iterable[str]) -> str:
