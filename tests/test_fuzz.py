@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import sys
 import tempfile
+import tracemalloc
 from pathlib import Path
 from types import FrameType
 from typing import Any
@@ -28,6 +29,9 @@ SEEDS = sorted(ROOT.glob("missions/*.mission")) + sorted((ROOT / "tests" / "miss
 #: state for each token it tries), and recovery stops after 50. So a bound of about 0.4 s of compiling for a small
 #: file; `tests/test_costs.py` checks the slope itself on inputs of growing size.
 CALLS_FIXED, CALLS_PER_BYTE = 1_000_000, 200
+#: Memory a hosts file's load may take at its peak: a fixed part and a part per byte (it is measured at a few KB a
+#: byte; an alias that expanded would cost far more).
+MEMORY_FIXED, MEMORY_PER_BYTE = 4_000_000, 2_000
 PIECES = ["{", "}", "(", ")", "[", "]", ":", ";", "\n", "->", "/", "..", "*", '"', '"{', "}", "0", "-1", "1e999",
           "9" * 30, "mission", "behavior", "needs", "parallel", "plan", "<", "as", "on", "after", "for", "when",
           "quantity", "where", "import", "emit", "log", "set", "release", "start", "done", "fail", "ms", "#", "\t",
@@ -98,7 +102,12 @@ def test_a_mutated_hosts_file_loads_or_is_refused_naming_the_file(data: st.DataO
     with tempfile.TemporaryDirectory() as folder:  # never in the checkout
         path = Path(folder) / "fuzz-hosts.yaml"
         path.write_text(text, encoding="utf-8")
+        tracemalloc.start()
         try:
             load_hosts(path, catalog)  # must not raise anything but a configuration error
         except ConfigError as e:
             assert e.problems and all("fuzz-hosts.yaml" in str(p) for p in e.problems)
+        finally:
+            peak = tracemalloc.get_traced_memory()[1]
+            tracemalloc.stop()
+        assert peak <= MEMORY_FIXED + MEMORY_PER_BYTE * len(text), f"{peak} bytes for {len(text)}"
