@@ -15,6 +15,8 @@ import math
 from dataclasses import dataclass
 from typing import Any
 
+from drd.errors import ConfigurationError
+
 #: Geometry of one wing (metres): corridor width, room depth and width, the corridor's ends past the rooms.
 CORRIDOR, DEPTH, ROOM, END = 2.5, 5.0, 6.0, 2.0
 #: Solid space between two wings: no light, wall or radio crosses it.
@@ -25,7 +27,7 @@ MAX_WINGS, MAX_SCOUTS = 500, 99
 FIRST_PORT = 7447
 
 
-class BuildingError(ValueError):
+class BuildingError(ConfigurationError, ValueError):
     """A building that cannot be generated (a count out of range), said as a user reads it."""
 
 
