@@ -12,11 +12,12 @@ zenoh 1.x code released with Jazzy), named in its docstring, so a mismatch can b
 
 from __future__ import annotations
 
-import hashlib
 import re
 from dataclasses import dataclass, replace
 from enum import IntEnum, StrEnum
 from typing import Self
+
+import xxhash
 
 ADMIN_SPACE = "@ros2_lv"
 #: rcl's enclave when none is configured (mangled to ``%`` in tokens).
@@ -77,8 +78,9 @@ class Liveliness(IntEnum):
 class QoS:
     """A QoS profile as rmw_zenoh puts it in a token. The default is rclcpp's ``QoS(10)``.
 
-    Only the liveliness token carries it (zenoh delivers whatever the two sides say); drd publishes
-    volatile samples, so ``TRANSIENT_LOCAL`` here only announces what the robot side asked for.
+    The liveliness token carries it (zenoh delivers whatever the two sides say); reliability and history also
+    set how a publisher puts, and ``TRANSIENT_LOCAL`` makes publishers and subscriptions zenoh-ext advanced ones
+    with a cache and a history query of ``depth`` samples (``drd.bus.ros2.node``), as rmw_zenoh does.
     """
 
     reliability: Reliability = Reliability.RELIABLE
@@ -246,14 +248,12 @@ def liveliness_token(kind: EntityKind, node: NodeInfo, entity_id: int, topic: To
 
 
 def entity_gid(token: str) -> bytes:
-    """A 16-byte GID for an entity, from its liveliness key as rmw_zenoh derives it (see docs/design.md).
-
-    rmw_zenoh hashes the key with XXH3-128 (``Entity::Entity``); no xxhash package is a dependency here, so this
-    is BLAKE2b-128 of the same key: as stable and as unique. rmw_zenoh only copies it into
-    ``message_info.publisher_gid`` and counts lost samples per GID; the GIDs its graph shows for drd's entities
-    (hashed from the tokens) differ from these.
+    """An entity's 16-byte GID as rmw_zenoh derives it (``Entity::Entity``): XXH3-128 (seed 0) of its liveliness
+    key, the low 64 bits then the high 64 bits, each in the machine's (little endian) order. rmw_zenoh's graph
+    computes the GID of every entity it sees from its token, so the GID in drd's attachments is the one
+    ``ros2 topic info -v`` shows for drd's publisher.
     """
-    return hashlib.blake2b(token.encode(), digest_size=16).digest()
+    return xxhash.xxh3_128_intdigest(token.encode()).to_bytes(16, "little")
 
 
 @dataclass(frozen=True, slots=True)

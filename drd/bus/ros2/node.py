@@ -9,7 +9,14 @@ Followed, in rmw_zenoh_cpp (the zenoh 1.x code of Jazzy):
 - ``src/detail/rmw_subscription_data.cpp``: subscribe to the exact data key, then declare the token; undeclare
   the token first on close.
 
-Not done (see docs/design.md): TRANSIENT_LOCAL publishing (rmw_zenoh's AdvancedPublisher cache), services.
+TRANSIENT_LOCAL, as rmw_zenoh does it since 0.2.2 (Jazzy): the publisher is a zenoh-ext *AdvancedPublisher* with a
+cache of the QoS depth, publisher detection (a liveliness token under the data key's ``@adv/pub`` space) and, when
+reliable, sporadic heartbeats every 0.5 s; the subscription is an *AdvancedSubscriber* that queries the history of
+every publisher it detects, late joiners included (the last ``depth`` samples each), and recovers a missed last
+sample from the heartbeats when reliable. A volatile entity stays a plain zenoh publisher or subscriber: on the wire
+the same, and no cache.
+
+Not done (see docs/design.md): services.
 """
 
 from __future__ import annotations
@@ -24,6 +31,7 @@ from types import TracebackType
 from typing import Any, Self, TypeVar
 
 import zenoh
+import zenoh.ext
 
 from drd.bus.base import BusError
 from drd.bus.zenoh_bus import ZenohBus
@@ -32,6 +40,7 @@ from .attachment import Attachment
 from .msgtypes import MessageTypes
 from .names import (
     DEFAULT_ENCLAVE,
+    Durability,
     EntityKind,
     History,
     NodeInfo,
@@ -48,6 +57,10 @@ from .names import (
 from .session import Ros2Session, undeclare, zenoh_call
 
 log = logging.getLogger("drd.bus.ros2")
+
+#: Seconds between the sporadic heartbeats of a reliable TRANSIENT_LOCAL publisher (rmw_zenoh's
+#: ``SAMPLE_MISS_DETECTION_HEARTBEAT_PERIOD``, 500 ms): a subscriber that missed the last sample asks the cache for it.
+HEARTBEAT_PERIOD = 0.5
 
 
 @dataclass(frozen=True, slots=True)
@@ -196,8 +209,17 @@ class Publisher(_Entity):
         self._sequence = itertools.count(1)
         congestion = zenoh.CongestionControl.BLOCK if block else zenoh.CongestionControl.DROP
         reliability = zenoh.Reliability.RELIABLE if reliable else zenoh.Reliability.BEST_EFFORT
-        self._entity = zenoh_call(f"publisher of {topic.name}", node.session.session.declare_publisher, self.key,
-                                  congestion_control=congestion, reliability=reliability)
+        session = node.session.session
+        if qos.durability is Durability.TRANSIENT_LOCAL:  # late subscribers get the last `depth` samples
+            miss = zenoh.ext.MissDetectionConfig(heartbeat=None, sporadic_heartbeat=HEARTBEAT_PERIOD) \
+                if reliable else None
+            self._entity = zenoh_call(f"publisher of {topic.name}", zenoh.ext.declare_advanced_publisher, session,
+                                      self.key, congestion_control=congestion, reliability=reliability,
+                                      cache=zenoh.ext.CacheConfig(max(1, qos.depth)), sample_miss_detection=miss,
+                                      publisher_detection=True)
+        else:
+            self._entity = zenoh_call(f"publisher of {topic.name}", session.declare_publisher, self.key,
+                                      congestion_control=congestion, reliability=reliability)
         self._declare_token()
 
     def publish(self, message: object) -> None:
@@ -229,8 +251,17 @@ class Subscription(_Entity):
         self.callback = callback
         self.received = 0
         self.dropped = 0
-        self._entity = zenoh_call(f"subscription to {topic.name}", node.session.session.declare_subscriber,
-                                  self.key, self._on_sample)
+        session, qos = node.session.session, topic.qos
+        if qos.durability is Durability.TRANSIENT_LOCAL:  # ask every publisher's cache, late joiners' too
+            recovery = zenoh.ext.RecoveryConfig(periodic_queries=None, heartbeat=True) \
+                if qos.reliability is not Reliability.BEST_EFFORT else None
+            history = zenoh.ext.HistoryConfig(detect_late_publishers=True, max_samples=max(1, qos.depth))
+            self._entity = zenoh_call(f"subscription to {topic.name}", zenoh.ext.declare_advanced_subscriber,
+                                      session, self.key, self._on_sample, history=history, recovery=recovery,
+                                      subscriber_detection=True)
+        else:
+            self._entity = zenoh_call(f"subscription to {topic.name}", session.declare_subscriber, self.key,
+                                      self._on_sample)
         self._declare_token()
 
     def _on_sample(self, sample: zenoh.Sample) -> None:
