@@ -17,10 +17,14 @@ import itertools
 from collections.abc import Callable, Iterable, Mapping
 from typing import Any
 
+import orjson
+
 from drd import entrypoints
 from drd.bus import Bus, Message, Query, Reply
+from drd.bus.messages import encode
 from drd.entrypoints import EntryPointError
 from drd.executive_messages import MissionCommand, MissionRecord, MissionRecords, MissionStatus
+from drd.paging import PAGE_BYTES, fill
 from drd.rcm import ReleaseReason, ResourceManager, Unit
 from drd.runtime import records as rec
 from drd.runtime.broker import ResourceBroker
@@ -100,6 +104,8 @@ class Executive:
         self.gates: Gates = self._gates(gates)
         self.pool.places = dict(self.services.get("places", {}))  # the world's rooms: `inside(ranger, "n1")`
         self._ids = itertools.count(1)
+        self.order: dict[str, int] = {}  # mission -> its start ordinal: the cursor of status pages
+        self._ordinals = itertools.count(1)
         self.sent = 0  # records sent, of every mission: each is numbered in the order they happened
         self.kept: dict[str, collections.deque[MissionRecord]] = {}  # each mission's latest records, for catch-up
         self._queryable = bus.serve(f"drd/{cluster}/executive", self._command)
@@ -150,6 +156,7 @@ class Executive:
         for listener in listeners:
             interp.attach(listener)
         self.missions[mid] = interp
+        self.order[mid] = next(self._ordinals)
         if resume is not None:
             interp.resume(resume, since, paused)
         else:
@@ -181,6 +188,7 @@ class Executive:
         dropped = finished[:max(0, len(finished) - self.history)]
         for mid in dropped:
             del self.missions[mid]
+            self.order.pop(mid, None)
         for mid in [m for m in self.kept if m not in self.missions or m in finished[:-KEPT_FINISHED]]:
             del self.kept[mid]  # a client catching up is after a mission that ran lately
         return dropped
@@ -219,9 +227,19 @@ class Executive:
             self.missions[mid].stop(reason)
         return targets
 
-    def status(self) -> MissionStatus:
-        return MissionStatus(self.clock.now(), [
-            {"id": mid, **plain(m.snapshot())} for mid, m in self.missions.items()])
+    def status(self, after: int = 0, count: int = 0, only: Iterable[str] | None = None) -> MissionStatus:
+        """A page of the missions (`drd.paging`): those started after the cursor `after` (`only` these, if given),
+        in the order they started; a mission whose active tree alone is over a page shows without it."""
+        wanted = None if only is None else set(only)
+
+        def items() -> Iterable[tuple[int, tuple[dict[str, Any], int]]]:
+            for mid, interp in list(self.missions.items()):
+                n = self.order.get(mid, 0)
+                if n > after and (wanted is None or mid in wanted):
+                    yield n, _sized({"id": mid, **plain(interp.snapshot())})
+
+        page, nxt = fill(items(), lambda item: item[1], count)
+        return MissionStatus(self.clock.now(), [item for item, _size in page], nxt)
 
     def close(self) -> None:
         self.stop()
@@ -247,22 +265,39 @@ class Executive:
         cmd = query.payload
         if not isinstance(cmd, MissionCommand):
             return query.error("expected a drd.mission.command")
+        if cmd.op == "status":  # of one mission (none: it is not, or no more, known) or a page of them all
+            return self.status(cmd.after, cmd.count, [cmd.mission] if cmd.mission else None)
         if cmd.mission and cmd.mission not in self.missions:
-            return query.error(f"no mission {cmd.mission}; running: {', '.join(self.missions) or 'none'}")
+            known = list(self.missions)
+            return query.error(f"no mission {cmd.mission}; running: {', '.join(known[-20:]) or 'none'}"
+                               + (f" (and {len(known) - 20} more)" if len(known) > 20 else ""))
         match cmd.op:
-            case "status":
-                return self.status()
             case "stop":
-                self.stop(cmd.mission)
-                return self.status()
+                return self.status(0, cmd.count, self.stop(cmd.mission))
             case "records" if cmd.mission:
                 kept = list(self.kept.get(cmd.mission, ()))  # one copy: the loop may append meanwhile
-                return MissionRecords([r for r in kept if r.seq > cmd.after])
+                page, nxt = fill(((r.seq, r) for r in kept if r.seq > cmd.after), _size, cmd.count)
+                return MissionRecords(page, nxt)
             case "emit" if cmd.event:
-                for mid in [cmd.mission] if cmd.mission else list(self.missions):
+                targets = [cmd.mission] if cmd.mission else list(self.missions)
+                for mid in targets:
                     self.missions[mid].emit(cmd.event, "operator", **(cmd.fields or {}))
-                return self.status()
+                return self.status(0, cmd.count, targets)
         return query.error(f"unknown command {cmd.op!r}: use status, stop, emit EVENT or records")
+
+
+def _size(msg: Message) -> int:
+    """Its bytes on the wire (as a message of its own: a few bytes more than inside a page)."""
+    return len(encode(msg))
+
+
+def _sized(item: dict[str, Any]) -> tuple[dict[str, Any], int]:
+    """A mission's status and its size in JSON; over a page, without its active tree (it says how big it was)."""
+    size = len(orjson.dumps(item, default=str))
+    if size > PAGE_BYTES:
+        item = {**item, "tree": None, "cut": f"its active tree is {size} bytes, over a reply page ({PAGE_BYTES})"}
+        size = len(orjson.dumps(item, default=str))
+    return item, size
 
 
 def _to_message(mission: str, r: rec.Record, seq: int = 0) -> MissionRecord:

@@ -49,7 +49,10 @@ def test_operator_stops_and_emits_over_the_bus(catalog: Catalog) -> None:
     assert ex.missions[first].outcome == "success" and ex.missions[second].outcome is None
     reply = operator.call("drd/local/executive", MissionCommand("stop", second))
     assert isinstance(reply, MissionStatus)
-    assert {m["id"]: m["outcome"] for m in reply.missions} == {first: "success", second: "stopped"}
+    assert {m["id"]: m["outcome"] for m in reply.missions} == {second: "stopped"}  # the one it stopped (a page)
+    status = operator.call("drd/local/executive", MissionCommand("status"))
+    assert isinstance(status, MissionStatus) and status.next == 0
+    assert {m["id"]: m["outcome"] for m in status.missions} == {first: "success", second: "stopped"}
     with pytest.raises(RemoteError, match="no mission nope"):
         operator.call("drd/local/executive", MissionCommand("stop", "nope"))
 

@@ -667,7 +667,7 @@ class _RecordWatch:
         from drd.errors import BusFailure
 
         try:
-            missions = self.client.missions()
+            missions = self.client.missions(mission)  # this one only: a long history is not asked each second
         except BusFailure:
             if self.away_since is None:
                 self.away_since = time.monotonic()
@@ -693,17 +693,13 @@ class _RecordWatch:
         before this session found it again), from the executive's own copy; duplicates are dropped by `follow`.
         Whether the executive answered."""
         from drd.errors import BusFailure
-        from drd.executive_messages import MissionCommand, MissionRecords
 
         try:
-            reply = self.client.bus.call(self.client.keys.executive_status,
-                                         MissionCommand("records", mission, after=self.last_seq),
-                                         timeout=self.client.timeout)
+            records = self.client.records(mission, self.last_seq)  # page by page (`drd.paging`)
         except BusFailure:
             return False  # the live records go on; the next poll asks again
-        if isinstance(reply, MissionRecords):
-            for r in reply.records:
-                self.queue.put(r)
+        for r in records:
+            self.queue.put(r)
         return True
 
     def _take(self, msg: Any, result: Any, base: float) -> Any:

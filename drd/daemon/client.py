@@ -10,7 +10,7 @@ timeout instead of stalling every answer.
 from __future__ import annotations
 
 import time
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import asdict
 from typing import Any, Self, TypeVar
 
@@ -136,16 +136,51 @@ class ClusterClient:
             raise ClientError(f"the controller does not answer on {self.keys.resources}"
                               f" within {self.timeout:g} s (is its drd up?)") from None
 
-    def missions(self) -> list[dict[str, Any]]:
-        """The controller's missions (`MissionStatus.missions`). Raises ClientError when it does not answer."""
+    def missions(self, mission: str = "", *, count: int = 0, timeout: float | None = None) -> list[dict[str, Any]]:
+        """The controller's missions (`MissionStatus.missions`; only `mission`, if given: none when it is not
+        known), asked page by page (`drd.paging`, `count` a page) within `timeout` (the client's) in all. Raises
+        ClientError when the executive does not answer."""
         from drd.executive_messages import MissionCommand, MissionStatus  # registers the executive's messages
 
-        try:
-            reply = self.bus.call(self.keys.executive_status, MissionCommand("status"), timeout=self.timeout)
-        except BusTimeout:
-            raise ClientError(f"the executive does not answer on {self.keys.executive_status}"
-                              f" within {self.timeout:g} s (is the controller's drd up?)") from None
-        return list(_expect(reply, MissionStatus).missions)
+        out: list[dict[str, Any]] = []
+        for page in self._pages(lambda a: MissionCommand("status", mission, after=a, count=count), MissionStatus,
+                                "the executive", timeout):
+            out += page.missions
+        return out
+
+    def records(self, mission: str, after: int = 0, *, count: int = 0,
+                timeout: float | None = None) -> list[Any]:
+        """The records of `mission` the executive kept, numbered after `after` (`MissionRecord`s in order), asked
+        page by page within `timeout` in all."""
+        from drd.executive_messages import MissionCommand, MissionRecords
+
+        out: list[Any] = []
+        for page in self._pages(lambda a: MissionCommand("records", mission, after=a, count=count), MissionRecords,
+                                "the executive", timeout, start=after):
+            out += page.records
+        return out
+
+    def _pages(self, ask: Callable[[int], Message], want: type[M], who: str, timeout: float | None,
+               start: int = 0) -> Iterator[M]:
+        """The pages of a paginated reply (each says the cursor of the next, 0 for none), asked of the executive's
+        read-only key one after the other, all within `timeout`."""
+        limit = self.timeout if timeout is None else timeout
+        deadline = time.monotonic() + limit
+        after = start
+        while True:
+            remaining = deadline - time.monotonic()
+            try:
+                if remaining <= 0:
+                    raise BusTimeout(f"no time left for the page after {after}")
+                page = _expect(self.bus.call(self.keys.executive_status, ask(after), timeout=remaining), want)
+            except BusTimeout:
+                raise ClientError(f"{who} does not answer on {self.keys.executive_status} within {limit:g} s"
+                                  " (is the controller's drd up?)") from None
+            yield page
+            nxt = int(getattr(page, "next", 0))
+            if nxt <= after:  # the last page (0), or a server that does not move on: never loop
+                return
+            after = nxt
 
     def status(self, events: int = 50) -> dict[str, Any]:
         """One view of the cluster: hosts, instances, resources, missions and recent events (plain JSON)."""

@@ -130,7 +130,9 @@ class SerializedBus(Bus):
         self._expect = dict(expect or {})
         self._on_reject = on_reject
         self.busy_wait = BUSY_WAIT
-        self._last: dict[str, Message] = {}  # key -> the last answer to a read-only query
+        # (key, what was asked) -> the last answer to that read-only query; (key, DEFAULT): the kept answer to the
+        # plain one (the first page of a status, a view), refreshed by `refresh`
+        self._last: dict[tuple[str, tuple[Any, ...]], Message] = {}
         self._readers: dict[str, Callable[[], Message]] = {}  # key -> how to answer it anew (`keep`)
 
     def put_raw(self, key: str, data: bytes) -> None:
@@ -159,7 +161,9 @@ class SerializedBus(Bus):
             finally:
                 self._lock.release()
             if self._read_only(query) and isinstance(reply, Message):
-                self._last[key_expr] = reply
+                if len(self._last) > MAX_KEPT:  # pages asked once: forget them, keep the refreshed ones
+                    self._last = {k: v for k, v in self._last.items() if k[1] == DEFAULT}
+                self._last[(key_expr, _asked(query.payload))] = reply
             return reply
 
         return self.inner.serve(key_expr, locked)
@@ -173,7 +177,8 @@ class SerializedBus(Bus):
     def _busy(self, key: str, query: Query) -> Reply | Message:
         """The lock stayed taken (the mission loop waits on a slow host): a read gets the last answer given, a
         command a clear refusal to retry (never a hang)."""
-        last = self._last.get(key)
+        asked = _asked(query.payload)
+        last = self._last.get((key, asked)) or (self._last.get((key, DEFAULT)) if asked[0] == "plain" else None)
         if last is not None and self._read_only(query):
             return last
         return query.error(f"the controller is busy (its mission loop has waited over {self.busy_wait:g} s on a host"
@@ -186,7 +191,7 @@ class SerializedBus(Bus):
     def refresh(self) -> None:
         """Compute again the answers kept for a busy lock (called with the lock held)."""
         for key, read in self._readers.items():
-            self._last[key] = read()
+            self._last[(key, DEFAULT)] = read()
 
     def request_raw(self, key: str, data: bytes | None, timeout: float = 2.0) -> list[Reply]:
         return self.inner.request_raw(key, data, timeout)
@@ -202,6 +207,21 @@ class SerializedBus(Bus):
 
     def close(self) -> None:
         self._closed = True
+
+
+#: What the kept answer of a key answers (`SerializedBus.keep`): the plain query (a view, a status's first page).
+DEFAULT: tuple[Any, ...] = ("kept",)
+#: Answers to other read-only queries kept for a busy lock (pages, one mission's status), at most.
+MAX_KEPT = 256
+
+
+def _asked(payload: Message | None) -> tuple[Any, ...]:
+    """What a query asks, as a key of the answers kept for a busy lock: `("plain",)` for a view or a status's first
+    page of every mission (the kept answer stands in for it), else its page and mission."""
+    op, mission, after = getattr(payload, "op", "status"), getattr(payload, "mission", ""), getattr(payload, "after", 0)
+    if op == "status" and not mission and not after:
+        return ("plain",)
+    return (op, mission, after, getattr(payload, "count", 0))
 
 
 def _type_name(payload: Message | None) -> str:
