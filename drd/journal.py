@@ -123,6 +123,11 @@ class Journal(ABC):
     def world(self) -> WorldState | None:
         """The world the missions ran in, if one was saved."""
 
+    def flush(self, timeout: float = 10.0) -> bool:
+        """Wait for the writes queued so far (a backend that writes as it is called has none); whether they are
+        written."""
+        return True
+
 
 class SqliteJournal(Journal):
     """The default backend: an SQLite database in WAL mode on the controller's disk (see the module)."""
@@ -326,3 +331,112 @@ class EtcdJournal(Journal):
             raise JournalError(f"{self.where}: cannot read the journal: {e}") from None
         except (ValueError, TypeError, KeyError) as e:
             raise JournalError(f"{self.where}: a damaged entry: {e}") from None
+
+
+class DeferredJournal(Journal):
+    """Another journal's writes on a thread of their own (issue #16: a replicated write is a raft commit on a quorum's
+    disks, a quarter of the executive's time per step when the loop waited for it).
+
+    One write is in flight at a time. A save made while another waits to go is merged into it (each mission's newest
+    state, the newest world), so the loop never queues behind the store and a resume takes the last state written.
+    `begin` and `finish` go in order behind the saves queued before them and are waited for (a mission is durable
+    before its first record; a finished one's state is deleted after its last save, never resurrected by it).
+    Reads wait for the writes queued before them. `flush` waits for everything queued; `close` flushes first. The
+    inner journal's guards hold as they are, at the moment of each write (the etcd backend's election: a write only
+    while the leader key is this controller's)."""
+
+    def __init__(self, inner: Journal) -> None:
+        self.inner = inner
+        self.keep = inner.keep
+        self.written = 0  # saves written
+        self.merged = 0  # saves merged into one still waiting (never written by themselves)
+        self._cond = threading.Condition()
+        self._queue: list[tuple[Any, ...]] = []  # ("save", (states, world)) or ("call", done event, function)
+        self._busy = False
+        self._closed = False
+        self._thread = threading.Thread(target=self._run, name="drd-journal", daemon=True)
+        self._thread.start()
+
+    def save(self, states: dict[str, tuple[float, dict[str, Any]]], world: WorldState) -> None:
+        """Queue the save (merged into the one waiting, if any); returns at once."""
+        with self._cond:
+            if self._closed:
+                return
+            if self._queue and self._queue[-1][0] == "save":
+                waiting, _older = self._queue[-1][1]
+                self._queue[-1] = ("save", ({**waiting, **states}, world))
+                self.merged += 1
+            else:
+                self._queue.append(("save", (dict(states), world)))
+            self._cond.notify_all()
+
+    def begin(self, mission: str, request: dict[str, Any], priority: int, base: float, until: float) -> None:
+        self._through(lambda: self.inner.begin(mission, request, priority, base, until))
+
+    def finish(self, mission: str, outcome: str, reason: str) -> None:
+        self._through(lambda: self.inner.finish(mission, outcome, reason))
+
+    def running(self) -> list[Journaled]:
+        self.flush()
+        return self.inner.running()
+
+    def world(self) -> WorldState | None:
+        self.flush()
+        return self.inner.world()
+
+    def flush(self, timeout: float = 10.0) -> bool:
+        """Wait until every write queued so far is done (at most `timeout` s); whether they are."""
+        deadline = time.monotonic() + timeout
+        with self._cond:
+            while self._queue or self._busy:
+                left = deadline - time.monotonic()
+                if left <= 0 or not self._thread.is_alive():
+                    return False
+                self._cond.wait(left)
+        return True
+
+    def close(self) -> None:
+        """Write what is queued, stop the writer, let go of the store."""
+        if not self.flush():
+            log.warning("journal: closed with writes still queued (the store did not answer)")
+        with self._cond:
+            self._closed = True
+            self._cond.notify_all()
+        self._thread.join(timeout=5)
+        self.inner.close()
+
+    def _through(self, call: Callable[[], None]) -> None:
+        """Queue `call` behind the saves queued before it and wait for it (bounded: a store that does not answer
+        fences its controller anyway)."""
+        done = threading.Event()
+        with self._cond:
+            if self._closed:
+                return
+            self._queue.append(("call", done, call))
+            self._cond.notify_all()
+        if not done.wait(30.0):
+            log.warning("journal: a write waited 30 s for the store; going on")
+
+    def _run(self) -> None:
+        while True:
+            with self._cond:
+                while not self._queue and not self._closed:
+                    self._cond.wait()
+                if not self._queue:
+                    return
+                item = self._queue.pop(0)
+                self._busy = True
+            try:
+                if item[0] == "save":
+                    self.inner.save(*item[1])
+                    self.written += 1
+                else:
+                    item[2]()
+            except Exception:  # a write that fails must not stop the ones after it
+                log.exception("journal: a write failed")
+            finally:
+                if item[0] == "call":
+                    item[1].set()
+                with self._cond:
+                    self._busy = False
+                    self._cond.notify_all()

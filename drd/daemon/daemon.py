@@ -269,16 +269,16 @@ class Daemon:
         """etcd elected this host (its thread): take the controller's services behind a fence that closes when the
         election says it no longer acts, and resume the missions of the replicated journal."""
         from drd.cluster.election import FencedBus
-        from drd.journal import EtcdJournal, JournalError
+        from drd.journal import DeferredJournal, EtcdJournal, JournalError
 
         election = self.election
         assert election is not None
         started = self.clock()
         bus = FencedBus(self.bus, lambda: election.acting(term), f"controller {self.host} (term {term})")
         try:
-            journal = EtcdJournal(election.etcd, self.cluster.name, term, leader=election.key,
-                                  keep=self.cluster.history, on_fenced=self._fenced,
-                                  acting=lambda: election.acting(term))
+            journal = DeferredJournal(EtcdJournal(election.etcd, self.cluster.name, term, leader=election.key,
+                                                  keep=self.cluster.history, on_fenced=self._fenced,
+                                                  acting=lambda: election.acting(term)))  # off the mission loop
             self._become_controller(bus, journal, float(term))
         except (JournalError, ValueError) as e:
             log.error("cannot act as the controller: %s", e)
@@ -369,6 +369,9 @@ class Daemon:
         if self._token is not None:
             self._token.close()
         if self.election is not None:  # its missions go to a standby as they are, not stopped by the loop's end
+            runner = self.runner
+            if runner is not None and runner.journal is not None:  # the last states queued, written while it acts
+                runner.journal.flush(timeout=2.0)
             self.election.resign()
         if self.runner is not None:
             self.runner.close()  # joins the mission loop, which takes the lock
