@@ -76,7 +76,8 @@ _STORE_KEYS = ("etcd",)
 _ETCD_URL = re.compile(r"http://[A-Za-z0-9.\-]+:(\d{1,5})")
 #: The simulated world when hosts.yaml names none (`sim` drivers need one: worlds/NAME.yaml).
 DEFAULT_WORLD = "corridor"
-_HOST_KEYS = ("endpoint", "roles", "cores", "drivers", "devices", "robots")
+_HOST_KEYS = ("endpoint", "roles", "cores", "drivers", "simulator", "devices", "robots")
+_SIMULATOR_KEYS = ("ros2", "listen", "domain_id")
 _DEVICE_KEYS = ("type", "driver", "options", "driver_options", "capacity", "slice")
 _ROBOT_KEYS = ("type", "carrier", "parts", "properties")
 _SECURITY_ALLOWED = ("mode", *dict.fromkeys(k for keys in SECURITY_KEYS.values() for k in keys), "open", "roles")
@@ -94,6 +95,7 @@ RANGES: Mapping[str, Limit] = {
     "placement": Limit(0, 1000),  # a weight: relative, so a bound only refuses nonsense
     "instances": Limit(1, 100_000, "instances"),  # a multiplicity's most (`dsl.limits`)
     "compile": Limit(1.0, 600.0, duration=True),  # the controller's budget to compile a submitted mission
+    "domain_id": Limit(0, 232),  # a ROS domain id (ROS 2's own bound, from DDS port arithmetic)
 }
 _SCALARS: Mapping[str, Any] = {"int": int, "float": (int, float), "bool": bool, "str": str}
 
@@ -189,6 +191,17 @@ class Robot:
 
 
 @dataclass(frozen=True, slots=True)
+class Serving:
+    """How the simulator host also serves the world it runs (`hosts.<name>.simulator`): with `ros2`, every simulated
+    robot as a ROS 2 robot over rmw_zenoh on a zenoh router listening on `listen`, in ROS domain `domain_id`
+    (`drd.sim.ros2`, docs/ros2.md), so the cluster's `ros2` drivers reach it as they reach real robots."""
+
+    ros2: bool = False
+    listen: str = ""
+    domain_id: int = 0
+
+
+@dataclass(frozen=True, slots=True)
 class Host:
     """A computer of the cluster: where its daemon listens, what it does, and its hardware."""
 
@@ -198,6 +211,7 @@ class Host:
     cores: int | None = None
     devices: tuple[Device, ...] = ()
     robots: tuple[Robot, ...] = ()
+    serving: Serving = Serving()  # the simulator host's `simulator:` options
 
 
 @dataclass(frozen=True, slots=True)
@@ -411,8 +425,9 @@ class _Parser(ConfigReader):
         endpoint = self.endpoint(data["endpoint"], f"{key}.endpoint") if "endpoint" in data else ""
         roles = self.roles(data["roles"], f"{key}.roles") if "roles" in data else ()
         cores = self.number(data["cores"], f"{key}.cores", RANGES["cores"], integer=True) if "cores" in data else None
+        serving = self.serving(data["simulator"], f"{key}.simulator", roles) if "simulator" in data else Serving()
         if self.catalog is None:
-            return Host(name, endpoint, roles, cores)
+            return Host(name, endpoint, roles, cores, serving=serving)
         raw = data.get("devices", {})
         shared = self.driver_settings(data.get("drivers", {}), f"{key}.drivers")
         devices = [self.device(name, d, v, p, shared) for d, v, p in self.entries(raw, f"{key}.devices", _DEVICE_ID)]
@@ -424,7 +439,26 @@ class _Parser(ConfigReader):
         users: dict[str, str] = {}  # device -> the first `part of robot` using it
         robots = [self.robot(name, r, v, p, local, users) for r, v, p in self.entries(data.get("robots", {}),
                                                                                     f"{key}.robots")]
-        return Host(name, endpoint, roles, cores, tuple(devices), tuple(robots))
+        return Host(name, endpoint, roles, cores, tuple(devices), tuple(robots), serving)
+
+    def serving(self, value: object, key: str, roles: Sequence[Role]) -> Serving:
+        """`simulator: {ros2: true, listen: tcp/HOST:PORT, domain_id: 0}`: only on the simulator's host; `listen` is
+        required with `ros2` (the robots' router needs a port of its own, not a guess that may be a daemon's)."""
+        data = self.mapping(value, key)
+        self.keys(data, key, _SIMULATOR_KEYS)
+        if Role.SIMULATOR not in roles:
+            self.fail(key, "only the host with the role simulator serves the world: add simulator to its roles")
+        ros2 = data.get("ros2", False)
+        if not isinstance(ros2, bool):
+            self.fail(f"{key}.ros2", f"expected true or false, got {got(ros2)}")
+            ros2 = False
+        listen = self.endpoint(data["listen"], f"{key}.listen") if "listen" in data else ""
+        if ros2 and "listen" not in data:
+            self.fail(key, "ros2: true needs listen: the endpoint of the robots' zenoh router (e.g. tcp/0.0.0.0:7447),"
+                           " which the ros2 drivers' endpoint names")
+        domain = self.number(data["domain_id"], f"{key}.domain_id", RANGES["domain_id"], integer=True) \
+            if "domain_id" in data else 0
+        return Serving(ros2, listen, domain or 0)
 
     def driver_settings(self, value: object, key: str) -> dict[str, dict[str, object]]:
         """A host's `drivers:`: per driver name, the `driver_options` every device of that driver starts from."""
@@ -564,6 +598,10 @@ class _Parser(ConfigReader):
             if h.endpoint and endpoints.setdefault(h.endpoint, h.name) != h.name:
                 self.fail(f"hosts.{h.name}.endpoint", f"{h.endpoint} is already the endpoint of host"
                           f" {endpoints[h.endpoint]}")
+        for h in hosts:
+            if h.serving.listen and h.serving.listen in endpoints:
+                self.fail(f"hosts.{h.name}.simulator.listen", f"{h.serving.listen} is the endpoint of host"
+                          f" {endpoints[h.serving.listen]}'s daemon: the robots' router needs a port of its own")
             for r in h.robots:
                 if robots.setdefault(r.id, r) is not r:
                     self.fail(f"hosts.{h.name}.robots.{r.id}", f"duplicate robot id, also on host {robots[r.id].host}")

@@ -209,7 +209,13 @@ class Daemon:
         self._serve(keys.db(me, "lookup"), self._lookup, Lookup)
         self._serve(keys.db(me, "query"), self._query, TraderRequest)
         roles = self.cluster.host(me).roles
-        if Role.SIMULATOR in roles:
+        serving = self.cluster.host(me).serving
+        if Role.SIMULATOR in roles and serving.ros2:  # the world served as ROS 2 robots too (docs/ros2.md)
+            from drd.sim.ros2 import ServedSimulationService
+
+            self.sim_service = ServedSimulationService(bus, self.cluster, listen=serving.listen,
+                                                       domain_id=serving.domain_id)
+        elif Role.SIMULATOR in roles:
             from drd.sim.service import SimulationService
 
             self.sim_service = SimulationService(bus, self.cluster.name)

@@ -9,7 +9,10 @@ ways to run it:
   drivers connect to, until a stop event: what `drd sim --ros2` runs;
 - `LockstepSimulation`: a `Simulation` whose every `step` waits for the commands drd's drivers sent, steps, serves
   every robot's state and waits until the drivers have it. The dry-run uses it for `driver: ros2` devices: every
-  command and reading goes through rmw_zenoh messages, and the run is as reproducible as with `sim` drivers.
+  command and reading goes through rmw_zenoh messages, and the run is as reproducible as with `sim` drivers;
+- `ServedSimulationService`: a cluster's simulator host with `simulator: {ros2: true, listen: ...}` in hosts.yaml.
+  The world the controller resets and steps is served on that router: each step carries out the commands received
+  since the last one, steps, and publishes the state, as a robot whose clock is the cluster's.
 
 Robots a hosts file does not name, and devices it does not give them, are not served. A lost robot is silent (its
 drivers' data go stale, as a real robot's would).
@@ -30,6 +33,7 @@ from typing import Any
 
 import numpy as np
 
+from drd.bus import Bus
 from drd.bus.base import BusError
 from drd.bus.ros2 import MessageInfo, Publisher, QoS, Ros2Node, Ros2Session
 from drd.hosts import Cluster, Device, Robot
@@ -37,6 +41,7 @@ from drd.hw import ros2 as mapping
 from drd.hw.ros2 import Ros2Link, Ros2Options
 from drd.sim.physics import MAX_LAUNCH, Simulation
 from drd.sim.robots import SimError
+from drd.sim.service import SimReply, SimRequest, SimulationService
 
 log = logging.getLogger("drd.sim.ros2")
 
@@ -527,3 +532,65 @@ class LockstepSimulation(Simulation):
         for session in self._sessions:
             session.close()
         self.served, self.link, self._sessions = None, None, ()
+
+
+# -- a cluster's simulator host (hosts.yaml `simulator: {ros2: true}`) ---------------------------------------------
+
+class ServedSimulationService(SimulationService):
+    """The simulator service of a cluster whose simulator host serves its world as ROS 2 robots.
+
+    The controller resets and steps the world as on any simulator host (`SimulationService`); each reset also serves
+    the new world's robots on this host's router (`listen`), and each step carries out the commands that arrived
+    since the previous one (queued: zenoh's threads never touch the physics), steps, and publishes every robot's
+    state. Nothing waits for the drivers: they may run on any host, as a real robot's nodes do not wait for drd. The
+    served robots and the service share one lock, so a launch or a jump (carried out on arrival) and the `sim`
+    drivers of this host never run beside a step.
+    """
+
+    def __init__(self, bus: Bus | None, cluster: Cluster, *, listen: str, domain_id: int = 0) -> None:
+        self.team, self.domain_id = cluster, domain_id
+        self.served: ServedRobots | None = None
+        try:
+            self.session = Ros2Session.listen(listen, types=mapping.message_types())
+        except BusError as e:
+            raise BusError(f"the simulator's ROS 2 router cannot listen on {listen} (hosts.yaml simulator.listen):"
+                           f" {e}") from None
+        try:
+            super().__init__(bus, cluster.name)
+        except BaseException:
+            self.session.close()
+            raise
+        self._shared = threading.RLock()  # the service's lock, shared with the served robots (re-entered)
+        self._lock = self._shared  # type: ignore[assignment]
+
+    def reset(self, world: str, seed: int = 0) -> SimReply:
+        with self._lock:
+            reply = super().reset(world, seed)
+            old, self.served = self.served, None
+            if old is not None:
+                old.close()
+            served = ServedRobots(self.sim, self.team, self.session, domain_id=self.domain_id, lockstep=True)
+            served.lock = self._shared
+            self.served = served
+            served.publish()  # the start pose, before the first step
+            return reply
+
+    def handle(self, req: SimRequest) -> SimReply:
+        if req.op != "step":
+            return super().handle(req)
+        with self._lock:
+            served = self.served
+            if served is not None and served.sim is self.sim:
+                served.apply()
+            reply = super().handle(req)
+            if served is not None and served.sim is self.sim:
+                served.publish()
+            return reply
+
+    def close(self) -> None:
+        super().close()
+        with self._lock:
+            served, self.served = self.served, None
+        if served is not None:
+            served.close()
+        self.session.close()
