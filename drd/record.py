@@ -33,12 +33,11 @@ readable up to its last chunk.
 from __future__ import annotations
 
 import bisect
-import functools
 import json
 import math
 import struct
 import threading
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -48,6 +47,7 @@ import orjson
 from drd.errors import ConfigurationError
 from drd.runtime import records as rec
 from drd.sim.model import INTRUDER_RADIUS, RANGER_RADIUS, SCOUT_RADIUS, DoorState, World
+from drd.sim.observe import SCAN_EVERY, SensorTap
 
 RECORDS, TF, RUNS, WORLD = "/drd/records", "/drd/tf", "/drd/runs", "/drd/world"
 ACTIVE, LOG, TRAILS = "/drd/active", "/drd/log", "/drd/trails"
@@ -58,8 +58,6 @@ WORLD_ATTACHMENT = "world.yaml"
 CHUNK_BYTES, FLUSH_EVERY = 64 * 1024, 1.0
 #: Every pose, changed or not, at least this often (s of sim time): a late viewer has every frame within it.
 KEYFRAME_EVERY = 1.0
-#: At most one scan per robot this often (s of sim time): the control period, the rate behaviors read at.
-SCAN_EVERY = 0.1
 #: How long a camera's sighting stays drawn in the 3D view (s): a little more than two control cycles.
 SEEN_FOR = 0.3
 #: A trail gets a point when its robot moved this far (m) from the last one.
@@ -158,7 +156,10 @@ class Recorder:
         self.scans: dict[str, Any] = {}
         self.views: dict[str, ActiveView] = {}
         self.frames = _Frames()
-        self.sensors = _Sensors(self)
+        self.sensors = SensorTap(self)  # a dry-run's simulation reports its readings here (`watch`)
+        self.fovs: set[str] = set()  # cameras whose field of view is drawn
+        self.doors: dict[str, tuple[tuple[float, float], tuple[float, float]]] = {}  # the scene's, by id
+        self.flying: list[tuple[float, str, str, tuple[float, float]]] = []  # (t1, robot, kind, end), landings due
         self.entities: dict[str, Any] = {}  # the world's entities as they are now, for a viewer that joins late
         self.closed, self.flushed, self.now = False, 0.0, 0.0  # `now`: the latest sim time logged
         if serve is not None:
@@ -205,6 +206,7 @@ class Recorder:
         if self.writer is not None and source.is_file():
             self.writer.attach(log_time=0, create_time=0, name=WORLD_ATTACHMENT, media_type="application/yaml",
                                data=source.read_bytes())
+        self.doors = {d.id: (d.a, d.b) for d in world.doors}
         self.update_world(0.0, [*_building(world), *_bodies(world)])
 
     def update_world(self, at: float, entities: list[tuple[str, Any]]) -> None:
@@ -221,8 +223,76 @@ class Recorder:
         return SceneUpdate(entities=list(self.entities.values())) if self.entities else None
 
     def watch(self, sim: Any) -> None:
-        """Record what `sim`'s sensors read from now on (`_Sensors`), its launches, jumps and door changes."""
+        """Record what `sim`'s sensors read from now on (`drd.sim.observe.SensorTap`), its launches, jumps and door
+        changes."""
         self.sensors.tap(sim)
+
+    # -- the sensors, as their drivers read them (a `drd.sim.observe.SensorSink`; times are sim times)
+
+    def scan(self, robot: str, at: float, ranges: list[float], max_range: float, fov: float) -> None:
+        from foxglove.channels import LaserScanChannel
+        from foxglove.messages import LaserScan
+
+        channel = self.scans.get(robot)
+        if channel is None:
+            channel = self.scans[robot] = LaserScanChannel(SCAN + robot, context=self.context)
+        inf = math.inf  # a beam that hit nothing: +inf (REP 117), not a point at the laser's reach
+        half = fov / 2 if len(ranges) > 1 else 0.0
+        channel.log(LaserScan(timestamp=_stamp(at), frame_id=robot, pose=_pose(), start_angle=-half, end_angle=half,
+                              ranges=[d if d < max_range else inf for d in ranges]), log_time=_ns(at))
+
+    def camera(self, robot: str, at: float, fov: float, max_range: float, people: list[dict[str, float]]) -> None:
+        self._fov(robot, at, fov, max_range)
+        self.json(CAMERA, at, {"robot": robot, "at": at, "fov": fov, "max_range": max_range, "detections": people})
+        if people:
+            self._seen(robot, at, people)
+
+    def _seen(self, robot: str, at: float, people: list[dict[str, float]]) -> None:
+        from foxglove.messages import Duration, SceneEntity, SceneUpdate
+
+        ends = [(p["distance"] * math.cos(p["bearing"]), p["distance"] * math.sin(p["bearing"])) for p in people]
+        line = _line([p for end in ends for p in ((0.0, 0.0), end)], _color("#ffc107"), 0.05)
+        self.seen.log(SceneUpdate(entities=[SceneEntity(
+            timestamp=_stamp(at), frame_id=robot, id=f"seen/{robot}", frame_locked=True, lines=[line],
+            lifetime=Duration(sec=0, nsec=int(SEEN_FOR * 1e9)))]), log_time=_ns(at))
+
+    def _fov(self, robot: str, at: float, fov: float, max_range: float) -> None:
+        """A camera's field of view, drawn once, locked to its robot's frame (as long as the view's reach, at most
+        3 m: a wedge as long as a 10 m camera's would cover the building)."""
+        if robot in self.fovs:
+            return
+        self.fovs.add(robot)
+        from foxglove.messages import SceneEntity
+
+        reach = min(max_range, 3.0)
+        arc = [(reach * math.cos(a), reach * math.sin(a)) for a in (-fov / 2 + fov * k / 8 for k in range(9))]
+        entity = SceneEntity(frame_id=robot, id=f"fov/{robot}", frame_locked=True,
+                             lines=[_line([(0.0, 0.0), *arc, (0.0, 0.0)], _color(SCOUT_COLOUR, 0.6), 0.02, True)])
+        self.update_world(at, [(f"fov/{robot}", entity)])
+
+    def light(self, robot: str, at: float, fov: float, regions: list[float]) -> None:
+        self.json(LIGHT, at, {"robot": robot, "at": at, "fov": fov, "regions": regions})
+
+    def flight(self, flight: dict[str, Any]) -> None:
+        """A launch or a jump, and its landing when it is due (`land`)."""
+        at = float(flight["at"])
+        self.land(at)  # the landings before it first: the channel's times never go back
+        self.json(FLIGHTS, at, {k: flight[k] for k in ("robot", "kind", "at", "from", "to", "lands_at", "heading",
+                                                       "blocked")})
+        bisect.insort(self.flying, (float(flight["lands_at"]), str(flight["robot"]), str(flight["kind"]),
+                                    (float(flight["to"][0]), float(flight["to"][1]))))
+
+    def land(self, at: float) -> None:
+        """The landings due by `at` (the simulation lands a flight in the step that reaches its end time)."""
+        while self.flying and self.flying[0][0] <= at + 1e-9:
+            t1, robot, kind, end = self.flying.pop(0)
+            self.json(FLIGHTS, max(t1, 0.0), {"robot": robot, "kind": "landing", "of": kind, "at": t1,
+                                              "to": list(end)})
+
+    def door(self, door: str, at: float, state: str) -> None:
+        ends = self.doors.get(door)
+        if ends is not None:
+            self.update_world(at, [_door(door, ends[0], ends[1], DoorState(state))])
 
     def record(self, mission: str, r: rec.Record) -> None:
         """One trace record of `mission`: on `/drd/records`, and into its active configuration (`/drd/active`)."""
@@ -267,7 +337,7 @@ class Recorder:
             if view.changed_at is not None:
                 self._active(view)
         self.transforms(at, poses, carried or {})
-        self.sensors.land(at)
+        self.land(at)
         self.now = max(self.now, at)
         self.flush(at)
 
@@ -432,116 +502,6 @@ class _Frames:
                                           lines=[_line(points, _color(colour, 0.7), 0.04, strip=True)]))
         self.trail_new = {}
         return SceneUpdate(entities=pieces) if pieces else None
-
-
-class _Sensors:
-    """What the simulation's sensors give its drivers, recorded as they read it: the simulation's `ranges`,
-    `camera` and `brightness` (and `launch`, `jump`, `set_door`) are wrapped on that one instance."""
-
-    def __init__(self, recorder: Recorder) -> None:
-        self.r = recorder
-        self.sim: Any = None
-        self.last_scan: dict[str, float] = {}
-        self.saw: dict[str, bool] = {}  # robot -> did its last recorded camera frame see someone
-        self.fovs: set[str] = set()
-        self.flying: list[tuple[float, str, str, tuple[float, float]]] = []  # (t1, robot, kind, end), landings due
-
-    def tap(self, sim: Any) -> None:
-        self.sim = sim
-        for name in ("ranges", "camera", "brightness", "launch", "jump", "set_door"):
-            setattr(sim, name, functools.partial(getattr(self, name), getattr(sim, name)))
-
-    def ranges(self, read: Callable[..., list[float]], robot: str, n_beams: int, max_range: float,
-               fov: float = math.pi) -> list[float]:
-        out = read(robot, n_beams, max_range, fov)
-        at = self.sim.time
-        if at - self.last_scan.get(robot, -math.inf) >= SCAN_EVERY - 1e-9:
-            self.last_scan[robot] = at
-            self._scan(robot, at, out, max_range, fov)
-        return out
-
-    def _scan(self, robot: str, at: float, ranges: list[float], max_range: float, fov: float) -> None:
-        from foxglove.channels import LaserScanChannel
-        from foxglove.messages import LaserScan
-
-        channel = self.r.scans.get(robot)
-        if channel is None:
-            channel = self.r.scans[robot] = LaserScanChannel(SCAN + robot, context=self.r.context)
-        inf = math.inf  # a beam that hit nothing: +inf (REP 117), not a point at the laser's reach
-        half = fov / 2 if len(ranges) > 1 else 0.0
-        channel.log(LaserScan(timestamp=_stamp(at), frame_id=robot, pose=_pose(), start_angle=-half, end_angle=half,
-                              ranges=[d if d < max_range else inf for d in ranges]), log_time=_ns(at))
-
-    def camera(self, read: Callable[..., list[Any]], robot: str, fov: float, max_range: float,
-               min_light: float = 0.2) -> list[Any]:
-        seen = read(robot, fov, max_range, min_light)
-        at = self.sim.time
-        self._fov(robot, fov, max_range)
-        if seen or self.saw.get(robot, True):  # a frame with people, and the first without after them
-            self.saw[robot] = bool(seen)
-            people = [{"label": d.label, "bearing": d.bearing, "distance": d.distance, "light": d.light}
-                      for d in seen]
-            self.r.json(CAMERA, at, {"robot": robot, "at": at, "fov": fov, "max_range": max_range,
-                                     "detections": people})
-            if seen:
-                self._seen(robot, at, seen)
-        return seen
-
-    def _seen(self, robot: str, at: float, seen: list[Any]) -> None:
-        from foxglove.messages import Duration, SceneEntity, SceneUpdate
-
-        ends = [(d.distance * math.cos(d.bearing), d.distance * math.sin(d.bearing)) for d in seen]
-        line = _line([p for end in ends for p in ((0.0, 0.0), end)], _color("#ffc107"), 0.05)
-        self.r.seen.log(SceneUpdate(entities=[SceneEntity(
-            timestamp=_stamp(at), frame_id=robot, id=f"seen/{robot}", frame_locked=True, lines=[line],
-            lifetime=Duration(sec=0, nsec=int(SEEN_FOR * 1e9)))]), log_time=_ns(at))
-
-    def _fov(self, robot: str, fov: float, max_range: float) -> None:
-        """A camera's field of view, drawn once, locked to its robot's frame (as long as the view's reach, at most
-        3 m: a wedge as long as a 10 m camera's would cover the building)."""
-        if robot in self.fovs:
-            return
-        self.fovs.add(robot)
-        from foxglove.messages import SceneEntity
-
-        reach = min(max_range, 3.0)
-        arc = [(reach * math.cos(a), reach * math.sin(a)) for a in (-fov / 2 + fov * k / 8 for k in range(9))]
-        entity = SceneEntity(frame_id=robot, id=f"fov/{robot}", frame_locked=True,
-                             lines=[_line([(0.0, 0.0), *arc, (0.0, 0.0)], _color(SCOUT_COLOUR, 0.6), 0.02, True)])
-        self.r.update_world(self.sim.time, [(f"fov/{robot}", entity)])
-
-    def brightness(self, read: Callable[..., list[float]], robot: str, fov: float, n_regions: int,
-                   max_range: float = 10.0) -> list[float]:
-        out = read(robot, fov, n_regions, max_range)
-        at = self.sim.time
-        self.r.json(LIGHT, at, {"robot": robot, "at": at, "fov": fov, "regions": out})
-        return out
-
-    def launch(self, fly: Callable[..., Any], scout: str, heading: float, distance: float) -> Any:
-        return self._flight(fly(scout, heading, distance))
-
-    def jump(self, fly: Callable[..., Any], scout: str, dx: float) -> Any:
-        return self._flight(fly(scout, dx))
-
-    def _flight(self, f: Any) -> Any:
-        self.land(f.t0)  # the landings before it first: the channel's times never go back
-        self.r.json(FLIGHTS, f.t0, {"robot": f.robot, "kind": f.kind, "at": f.t0, "from": list(f.start),
-                                    "to": list(f.end), "lands_at": f.t1, "heading": f.heading, "blocked": f.blocked})
-        bisect.insort(self.flying, (f.t1, f.robot, f.kind, f.end))
-        return f
-
-    def land(self, at: float) -> None:
-        """The landings due by `at` (the simulation lands a flight in the step that reaches its end time)."""
-        while self.flying and self.flying[0][0] <= at + 1e-9:
-            t1, robot, kind, end = self.flying.pop(0)
-            self.r.json(FLIGHTS, max(t1, 0.0), {"robot": robot, "kind": "landing", "of": kind, "at": t1,
-                                                "to": list(end)})
-
-    def set_door(self, change: Callable[..., None], door: str, state: DoorState) -> None:
-        change(door, state)
-        d = next((d for d in self.sim.world.doors if d.id == door), None)
-        if d is not None:
-            self.r.update_world(self.sim.time, [_door(d.id, d.a, d.b, state)])
 
 
 class ActiveView:
