@@ -282,7 +282,8 @@ def test_options_are_checked_before_anything_runs(catalog: Catalog, tmp_path: Pa
     bad = device("Drive", "drive", endpoint="tcp/127.0.0.1:1", watchdg=0.5, max_age=-1, origin=[1, 2])
     with pytest.raises(DriverError, match=r"driver_options.watchdg: unknown option"):
         load_driver(bad, "bot", {})
-    hosts = (ROOT / "hosts.ros2.yaml").read_text(encoding="utf-8").replace("domain_id: 0", "domain_id: 0, topik: {}")
+    hosts = (ROOT / "hosts.ros2.yaml").read_text(encoding="utf-8")
+    hosts = hosts.replace("7500, domain_id: 0, origin", "7500, domain_id: 0, topik: {}, origin")  # drivers.ros2
     (tmp_path / "hosts.yaml").write_text(hosts, encoding="utf-8")
     problems = check_driver_classes(load_hosts(tmp_path / "hosts.yaml", catalog), "ranger1", catalog)
     assert problems and all("driver_options.topik: unknown option" in p for p in problems)
