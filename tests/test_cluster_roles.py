@@ -144,3 +144,19 @@ def test_a_user_without_a_role_is_refused_by_missionctl(cluster: DaemonCluster) 
         assert r.returncode == 2 and "user eve has no role" in r.stderr, r.stderr
     finally:
         (cluster.folder / "users").write_text("".join(f"{u}:{p}\n" for u, p in USERS.items()))
+
+
+def test_an_operators_recording_has_the_poses_and_scans_though_only_daemons_may_ask_the_simulator(
+        cluster: DaemonCluster, tmp_path: Path) -> None:
+    """Issue #13: on a closed cluster a client may not ask the simulator (`drd/<c>/sim`, daemons only); the world's
+    poses and readings come from its own key, which every role may read."""
+    from collections import Counter
+
+    from mcap.reader import make_reader
+
+    run = missionctl(cluster, "alice", "run", "missions/corridor_surveillance.mission", "--speed", "5", "--until",
+                     "10", "--record", str(tmp_path / "run.mcap"), "--json", timeout=120)
+    assert run.returncode == 1, run.stderr[-2000:]  # stopped at --until
+    with (tmp_path / "run.mcap").open("rb") as fh:
+        counts = Counter(channel.topic for _s, channel, _m in make_reader(fh).iter_messages())
+    assert counts["/drd/tf"] > 5 and counts["/drd/scan/ranger1"] > 20, counts

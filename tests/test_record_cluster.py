@@ -69,7 +69,16 @@ def test_a_cluster_run_records_hosts_loads_placements_and_poses(cluster: DaemonC
     assert all(0 <= t <= (report["sim_time"] + 1) * 1e9 for t, _x in track)  # the mission's time
     carried = {tf.child_frame_id for topic, _t, m in got if topic == "/drd/tf" for tf in m.transforms
                if tf.parent_frame_id == "ranger1"}
-    assert carried == {f"scout{i}" for i in range(1, 7)}  # every Scout still in its magazine at 20 s
+    assert carried == {f"scout{i}" for i in range(1, 7)}  # every Scout in its magazine at first
+    # what the sensors read, from the simulator's host (`drd/<cluster>/world`), as a dry-run records them
+    scans = [(t, m) for topic, t, m in got if topic == "/drd/scan/ranger1"]
+    assert len(scans) > 20 and all(len(m.ranges) == 181 for _t, m in scans)
+    assert all(0 <= t <= (report["sim_time"] + 1) * 1e9 for t, _m in scans)  # the mission's time
+    assert [t for t, _m in scans] == sorted(t for t, _m in scans)
+    flights = [m for topic, _t, m in got if topic == "/drd/flights"]
+    launched = {report_scout["scout"] for report_scout in report["scouts"]} if report.get("scouts") else set()
+    assert {m["robot"] for m in flights if m["kind"] != "landing"} >= launched and flights, report.get("scouts")
+    assert counts["/drd/light"] > 20, counts  # the Scout's dark-corner search (no camera reads in the first 20 s)
     replay = subprocess.run([*MISSIONCTL, "replay", str(tmp_path / "run.mcap"), "--json"], cwd=tmp_path,
                             capture_output=True, text=True, timeout=60, check=False)
     assert replay.returncode == 1 and json.loads(replay.stdout) == report, replay.stderr[-2000:]

@@ -750,12 +750,18 @@ def live_address(text: str) -> tuple[str, int]:
     return host, int(port)
 
 
+#: Pages of readings asked for at most in one round (`_ClusterView._observe`): a client far behind catches up over
+#: several rounds rather than holding up the others.
+MAX_PAGES = 8
+
+
 class _ClusterView:
     """`run --record`/`--foxglove`: the cluster as this client sees it, into the recording (`drd.record`): each
     host's load reports as they come (`/drd/hosts/load`); asked every `every` s in a thread of its own, the hosts
     (up or down) and where each component instance runs, when they change (`/drd/hosts`, `/drd/placements`), and
-    the robots' poses from the simulator (`/drd/tf`; a Scout in a magazine as its Ranger's frame). Times are the
-    mission's (the recorder's latest record time; the simulator's time less its offset for the poses)."""
+    from the simulator's host the robots' poses (`/drd/tf`; a Scout in a magazine as its Ranger's frame) and what
+    their sensors read (scans, camera frames, light, launches and landings, doors: the dry-run's channels). Times
+    are the mission's (the recorder's latest record time; the simulator's time less its offset for the world's)."""
 
     #: Seconds (wall) between two requests for the poses, and between two for the hosts and placements.
     every, hosts_every = 0.2, 1.0
@@ -769,7 +775,7 @@ class _ClusterView:
         self.said: dict[str, Any] = {}  # what was last written on each channel (only changes are written)
         self.world = self._world(str(reply.world))
         self.offset: float | None = None  # mission time = simulator time + offset (None: not known yet)
-        self.refused = False  # the simulator does not answer this user: no poses
+        self.cursor = 0  # the simulator host's next reading to ask for (`drd.sim.observe.Observations`)
 
         def on_load(sample: Any) -> None:
             if isinstance(sample.payload, LoadReport):
@@ -802,7 +808,7 @@ class _ClusterView:
 
         next_hosts = 0.0
         while not self.stop.is_set():
-            steps = [self._poses]
+            steps = [self._observe]
             if time.monotonic() >= next_hosts:
                 next_hosts = time.monotonic() + self.hosts_every
                 steps += [self._hosts, self._placements]
@@ -840,34 +846,41 @@ class _ClusterView:
         self._changed("/drd/placements", {"instances": [{k: i[k] for k in ("name", "component", "host", "mission",
                                                                          "state")} for i in instances]})
 
-    def _poses(self) -> None:
-        """Every robot's pose (and who is in which magazine) from the simulator, in one request."""
+    def _observe(self) -> None:
+        """Every robot's pose, and what the sensors read since the last time, from the simulator's host, page by
+        page (`drd/<cluster>/world`, which every role may read: a closed cluster's observer records them too)."""
         from drd.bus import RemoteError
-        from drd.sim.service import SimReply, SimRequest, key
+        from drd.record import INTRUDER
+        from drd.sim.observe import replay
+        from drd.sim.service import WorldObservation, WorldObserve, world_key
 
-        if self.world is None or self.refused:
+        if self.world is None:
             return
-        robots, rangers = [*(r.id for r in self.world.rangers), *self.world.scout_ids], [r.id for r in
-                                                                                      self.world.rangers]
-        calls = [["pose", [rid]] for rid in robots] + [["magazine", [rid]] for rid in rangers]
-        try:
-            reply = self.client.bus.call(key(self.client.cluster), SimRequest("multi", args=calls),
-                                         timeout=self.client.timeout)
-        except RemoteError:  # a closed cluster: only daemons may ask the simulator (docs/security.md)
-            self.refused = True
+        seen: WorldObservation | None = None
+        for _ in range(MAX_PAGES):
+            try:
+                reply = self.client.bus.call(world_key(self.client.cluster), WorldObserve(self.cursor),
+                                             timeout=self.client.timeout)
+            except RemoteError:  # no world runs yet (or any more): asked again next time
+                return
+            if not isinstance(reply, WorldObservation):
+                return
+            seen = reply
+            if self.offset is None:
+                self.offset = self._calibrate(reply.time)
+            for reading in reply.readings:  # those of the world before this mission began are not its own
+                if float(reading.get("at", 0.0)) + self.offset >= 0.0:
+                    replay(reading, self.recorder, self.offset)
+            self.cursor = reply.next
+            if not reply.more:
+                break
+        if seen is None or self.offset is None:
             return
-        if not isinstance(reply, SimReply) or self.world is None:
-            return
-        if self.offset is None:
-            self.offset = self._calibrate(reply.time)
-        values = [v for v, _error in reply.value]
-        poses = {rid: (float(v["x"]), float(v["y"]), float(v["heading"])) for rid, v in zip(robots, values,
-                                                                                             strict=False)
-                 if isinstance(v, dict)}
-        carried = {scout: ranger for ranger, v in zip(rangers, values[len(robots):], strict=False)
-                   for scout in (v or [])}
-        self.recorder.transforms(reply.time + self.offset, {k: v for k, v in poses.items() if k not in carried},
-                                 carried)
+        poses = {rid: (v[0], v[1], v[2]) for rid, v in seen.poses.items()}
+        poses.update({INTRUDER + iid: (v[0], v[1], 0.0) for iid, v in seen.intruders.items()})
+        at = seen.time + self.offset
+        self.recorder.transforms(at, poses, dict(seen.carried))
+        self.recorder.land(at)
 
     def _calibrate(self, sim_time: float) -> float:
         """The mission's time less the simulator's (the executive's clock is the simulator's plus an offset, and a

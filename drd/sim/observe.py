@@ -110,22 +110,22 @@ class Observations:
             self.next += 1
 
     def scan(self, robot: str, at: float, ranges: list[float], max_range: float, fov: float) -> None:
-        self._add({"kind": "scan", "robot": robot, "at": at, "ranges": [r if math.isfinite(r) else max_range
+        self._add({"reading": "scan", "robot": robot, "at": at, "ranges": [r if math.isfinite(r) else max_range
                                                                         for r in ranges],
                    "max_range": max_range, "fov": fov})
 
     def camera(self, robot: str, at: float, fov: float, max_range: float, people: list[dict[str, float]]) -> None:
-        self._add({"kind": "camera", "robot": robot, "at": at, "fov": fov, "max_range": max_range,
+        self._add({"reading": "camera", "robot": robot, "at": at, "fov": fov, "max_range": max_range,
                    "people": people})
 
     def light(self, robot: str, at: float, fov: float, regions: list[float]) -> None:
-        self._add({"kind": "light", "robot": robot, "at": at, "fov": fov, "regions": regions})
+        self._add({"reading": "light", "robot": robot, "at": at, "fov": fov, "regions": regions})
 
     def flight(self, flight: dict[str, Any]) -> None:
-        self._add({"kind": "flight", **flight})
+        self._add({"reading": "flight", **flight})
 
     def door(self, door: str, at: float, state: str) -> None:
-        self._add({"kind": "door", "door": door, "at": at, "state": state})
+        self._add({"reading": "door", "door": door, "at": at, "state": state})
 
     def after(self, seq: int, limit: int) -> tuple[list[dict[str, Any]], int, bool]:
         """Up to `limit` readings numbered `seq` or later, the number to ask from next, and whether some were
@@ -140,7 +140,7 @@ def replay(reading: dict[str, Any], sink: SensorSink, offset: float = 0.0) -> No
     """Hand one `Observations` reading to `sink`, its times moved by `offset` (a client's mission time is the
     simulator's plus an offset)."""
     at = float(reading["at"]) + offset
-    kind, robot = reading.get("kind"), str(reading.get("robot", ""))
+    kind, robot = reading.get("reading"), str(reading.get("robot", ""))
     if kind == "scan":
         sink.scan(robot, at, [float(r) for r in reading["ranges"]], float(reading["max_range"]),
                   float(reading["fov"]))
@@ -149,7 +149,7 @@ def replay(reading: dict[str, Any], sink: SensorSink, offset: float = 0.0) -> No
     elif kind == "light":
         sink.light(robot, at, float(reading["fov"]), [float(r) for r in reading["regions"]])
     elif kind == "flight":
-        sink.flight({**{k: v for k, v in reading.items() if k != "kind"}, "at": at,
+        sink.flight({**{k: v for k, v in reading.items() if k != "reading"}, "at": at,
                      "lands_at": float(reading["lands_at"]) + offset})
     elif kind == "door":
         sink.door(str(reading["door"]), at, str(reading["state"]))

@@ -34,6 +34,7 @@ from typing import Any
 from drd.bus import Bus, Message, Query, Reply, message
 from drd.bus.keys import is_concrete
 from drd.profiling import Sampler
+from drd.sim.observe import Observations, SensorTap
 
 #: The Simulation methods a remote driver may call (what components/sim/* use), and their arity bounds.
 ALLOWED_METHODS: dict[str, tuple[int, int]] = {
@@ -86,6 +87,40 @@ class SimReply(Message):
 
 def key(cluster: str) -> str:
     return f"drd/{cluster}/sim"
+
+
+def world_key(cluster: str) -> str:
+    """What a recording client reads of the running world (`WorldObserve`): open to every role, it changes
+    nothing (the simulator's own key is the daemons' only, docs/security.md)."""
+    return f"drd/{cluster}/world"
+
+
+#: Readings a `WorldObservation` carries at most (a page; the client asks again from `next`).
+OBSERVE_PAGE = 400
+
+
+@message("drd.world.observe", 1)
+class WorldObserve(Message):
+    """Every robot's pose now, and the sensor readings numbered `after` or later (`drd.sim.observe`)."""
+
+    after: int = 0
+
+
+@message("drd.world.observation", 1)
+class WorldObservation(Message):
+    """The world at simulator time `time`: poses (x, y, heading) of the robots not in a magazine, who is in which
+    (`carried`: Scout -> Ranger), the intruders (x, y), and a page of readings; `next` is the number to ask from,
+    `more` says readings wait beyond this page, `missed` that some were dropped before this reader got them."""
+
+    time: float
+    world: str
+    poses: dict[str, list[float]]
+    carried: dict[str, str]
+    intruders: dict[str, list[float]]
+    readings: list[dict[str, Any]]
+    next: int
+    more: bool = False
+    missed: bool = False
 
 
 def world_file(name: str, root: Path = ROOT) -> Path:
@@ -183,7 +218,9 @@ class SimulationService:
         self.calls = 0
         self._lock = threading.Lock()
         self._sampler = Sampler("sim", every=500)  # DRD_PROFILE: requests from other hosts only
+        self.observations = Observations()  # what the running simulation's sensors read (`drd/<c>/world`)
         self._queryable = bus.serve(key(cluster), self._serve) if bus is not None else None
+        self._world_queryable = bus.serve(world_key(cluster), self._serve_world) if bus is not None else None
 
     def local(self, world: str) -> LocalSimulation | None:
         """The running simulation for drivers of this very process (the simulator host's Creator), or None when
@@ -198,8 +235,10 @@ class SimulationService:
 
         path = world_file(world, self.root)
         sim = Simulation(load_world(path), seed=seed)
+        observations = Observations()
+        SensorTap(observations).tap(sim)  # every reading, whoever reads: a recording client may ask for them
         with self._lock:
-            self.sim, self.world_name = sim, path.stem
+            self.sim, self.world_name, self.observations = sim, path.stem, observations
             return SimReply(None, sim.time, sim.version, path.stem)
 
     def handle(self, req: SimRequest) -> SimReply:
@@ -273,8 +312,31 @@ class SimulationService:
             raise ValueError(f"{method}: {e}") from None
 
     def close(self) -> None:
-        if self._queryable is not None:
-            self._queryable.close()
+        for queryable in (self._queryable, self._world_queryable):
+            if queryable is not None:
+                queryable.close()
+
+    def observe(self, req: WorldObserve) -> WorldObservation:
+        """The poses now and a page of readings (see `WorldObservation`); ValueError when no world runs."""
+        with self._lock:
+            sim, observations = self.sim, self.observations
+            if sim is None:
+                raise ValueError("no simulation is running (the controller resets it when a mission starts)")
+            carried = {scout: r.id for r in sim.world.rangers for scout in sim.magazine(r.id)}
+            poses = {rid: [p.x, p.y, p.heading] for rid in sim.robots if rid not in carried and (p := sim.pose(rid))}
+            intruders = {iid: [x, y] for iid, (x, y) in sim.intruders().items()}
+            now, name = sim.time, self.world_name
+        readings, nxt, missed = observations.after(max(0, req.after), OBSERVE_PAGE)
+        return WorldObservation(now, name, poses, carried, intruders, readings, nxt,
+                                more=nxt < observations.next, missed=missed)
+
+    def _serve_world(self, query: Query) -> Message | Reply:
+        if not isinstance(query.payload, WorldObserve):
+            return query.error("expected a drd.world.observe")
+        try:
+            return self.observe(query.payload)
+        except ValueError as e:
+            return query.error(str(e))
 
     def _serve(self, query: Query) -> Message | Reply:
         if not is_concrete(query.key):  # only the controller and the drivers ask, by this exact key
