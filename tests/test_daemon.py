@@ -210,22 +210,46 @@ def test_a_second_controller_for_the_cluster_refuses_to_start(cluster: DaemonClu
     assert cluster.procs["controller"].poll() is None  # the first one runs on
 
 
-def test_a_frozen_host_is_seen_down_within_the_lease_and_up_again_when_it_resumes(cluster: DaemonCluster,
-                                                                                   client: ClusterClient) -> None:
+FREEZE = 10.0  # seconds ranger2 stays SIGSTOPped (issue #16)
+
+
+def test_a_frozen_host_is_seen_unresponsive_within_the_lease_and_up_again_when_it_resumes(
+        cluster: DaemonCluster, client: ClusterClient) -> None:
+    """Issue #16: a SIGSTOPped worker is down for the manager within the lease, and every command names it
+    unresponsive (not down, not refusing credentials) and answers, exit 0. Their latencies are printed (and
+    recorded in docs/design.md), not asserted: the machine's load decides them."""
     pid = cluster.pid("ranger2")
     stopped_at = time.time()
+    frozen = time.monotonic()
     os.kill(pid, signal.SIGSTOP)
+    latencies: dict[str, list[float]] = {}
     try:
-        eventually(lambda: cluster.states(client)["ranger2"] == "down", "ranger2 to be seen down", STOP_BOUND + 5)
-        began = time.monotonic()  # a client is not held up by the frozen peer (issue #16): it answers, and exits 0
-        r = cluster.missionctl("status", "--json", "--config", str(cluster.hosts_file), "--timeout", "1",
-                               timeout=60)
-        print(f"\nstatus with a frozen peer: {time.monotonic() - began:.2f} s")
-        assert r.returncode == 0, r.stderr[-2000:]
-        assert {h["name"]: h["state"] for h in json.loads(r.stdout)["hosts"]}["ranger2"] == "down"
+        eventually(lambda: cluster.states(client)["ranger2"] == "unresponsive", "ranger2 to be seen unresponsive",
+                   STOP_BOUND + 5)
+        while time.monotonic() - frozen < FREEZE - 2.5:  # every command, again and again, while it is frozen
+            for args in (("status", "--json"), ("hosts", "--json"), ("resources", "--json"), ("status",), ("hosts",),
+                         ("resources",)):
+                began = time.monotonic()
+                r = cluster.missionctl(*args, "--config", str(cluster.hosts_file), "--timeout", "1", timeout=30)
+                latencies.setdefault(" ".join(args), []).append(time.monotonic() - began)
+                assert r.returncode == 0, (args, r.stderr[-2000:])
+                assert "credentials" not in r.stdout, r.stdout[-2000:]
+                if args == ("status", "--json"):
+                    data = json.loads(r.stdout)
+                    assert {h["name"]: h["state"] for h in data["hosts"]}["ranger2"] == "unresponsive"
+                    assert data["resources"]["hosts"]["ranger2"] == "unresponsive"
+                elif args == ("hosts", "--json"):
+                    assert {h["name"]: h["state"] for h in json.loads(r.stdout)["hosts"]}["ranger2"] == "unresponsive"
+                elif args == ("resources", "--json"):
+                    assert json.loads(r.stdout)["hosts"] == {"ranger2": "unresponsive"}
+                else:
+                    assert re.search(r"ranger2\s.*unresponsive", r.stdout), r.stdout[-2000:]
+        time.sleep(max(0.0, FREEZE - (time.monotonic() - frozen)))
     finally:
         resumed_at = time.time()
         os.kill(pid, signal.SIGCONT)
+    print("\nmissionctl --timeout 1 with ranger2 frozen (process start to exit, s): " + "; ".join(
+        f"{cmd} {min(ts):.2f}-{max(ts):.2f} (n={len(ts)})" for cmd, ts in latencies.items()))
     down = last_event(client, "ranger2", "down")
     assert down is not None and down.detail.startswith("silent: no load report")
     delay = down.at - stopped_at

@@ -245,6 +245,11 @@ class ZenohBus(Bus):
     # -- lifetime
     def close(self) -> None:
         """Undeclare everything and close the zenoh session (peers see our tokens vanish)."""
+        self.close_within(CLOSE_WAIT)
+
+    def close_within(self, wait: float) -> None:
+        """`close`, waiting at most `wait` seconds for the session's close (a client within its `--timeout`: the
+        process exits right after, and the OS closes its links anyway)."""
         with self._lock:
             if self._closed:
                 return
@@ -263,9 +268,9 @@ class ZenohBus(Bus):
         closer = threading.Thread(target=self._close_session, name=f"close {self.name}", daemon=True)
         _CLOSERS.append(closer)
         closer.start()
-        closer.join(CLOSE_WAIT)
+        closer.join(max(0.0, wait))
         if closer.is_alive():
-            log.info("bus %s: the session's close still waits on a peer after %g s: going on", self.name, CLOSE_WAIT)
+            log.info("bus %s: the session's close still waits on a peer after %g s: going on", self.name, wait)
 
     def _close_session(self) -> None:
         try:

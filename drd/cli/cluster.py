@@ -238,7 +238,7 @@ def hosts(config: Path = ConfigOption, connect: list[str] = ConnectOption, as_js
           timeout: float = TimeoutOption) -> int:
     """The cluster's hosts: up or down, since when and why, with their load."""
     with cluster_client(config, connect, timeout) as client:
-        reply = client.hosts()
+        reply = client.hosts(deadline=client.budget)
     data = [asdict(h) for h in reply.hosts]
     if as_json:
         print_json({"cluster": reply.cluster, "answered_by": reply.answered_by, "hosts": data})
@@ -255,7 +255,7 @@ def status(config: Path = ConfigOption, connect: list[str] = ConnectOption, as_j
     """One view of the cluster: hosts, instances, resources, missions and recent events."""
     with cluster_client(config, connect, timeout) as client:
         if not watch:
-            data = client.status(events)
+            data = client.status(events, deadline=client.budget)
             if as_json:
                 print_json(data)
             else:
@@ -296,9 +296,9 @@ def resources(config: Path = ConfigOption, connect: list[str] = ConnectOption, a
               timeout: float = TimeoutOption) -> int:
     """The Resource Controller Manager: each resource with its holders, queue and fencing epoch."""
     with cluster_client(config, connect, timeout) as client:
-        reply = client.resources()
+        reply = client.resources(deadline=client.budget)
     data = {"units": [asdict(u) for u in reply.units], "robots": [asdict(r) for r in reply.robots],
-            "queue": [asdict(w) for w in reply.queue], "removing": reply.removing}
+            "queue": [asdict(w) for w in reply.queue], "removing": reply.removing, "hosts": reply.hosts}
     if as_json:
         print_json(data)
     else:
@@ -991,7 +991,8 @@ def _hosts_table(rows: list[dict[str, Any]], now: float) -> Table:
         load1 = "—" if h["load1"] is None or not up else f"{h['load1']:.2f}"
         age = h.get("report_age")
         silent = up and isinstance(age, int | float) and age > SILENT_AFTER  # frozen, or its link is
-        state = Text("silent", style="bold yellow") if silent else Text(h["state"], style="green" if up else "bold red")
+        style = "green" if up else "bold yellow" if h["state"] == "unresponsive" else "bold red"
+        state = Text("silent", style="bold yellow") if silent else Text(h["state"], style=style)
         why = f"no load report for {age:.1f} s (down at its lease)" if silent else h["reason"]
         table.add_row(h["name"] + ("*" if "controller" in h["roles"] else ""), state, _pct(h["cpu"] if up else None),
                       _pct(h["memory"] if up else None), load1, str(h["instances"]) if up else "—", since, why)
@@ -1064,8 +1065,14 @@ def _resources_view(data: dict[str, Any], width: int | None = None, compact: boo
     if data["queue"]:
         parts.append(Text("waiting: " + ", ".join(f"{name(w['holder'])} (priority {w['priority']})"
                                                   for w in data["queue"])))
+    states = data.get("hosts") or {}
     for host, left in data["removing"].items():
-        parts.append(Text(f"{host} is down: its resources leave the manager in {left:.1f} s", style="yellow"))
+        parts.append(Text(f"{host} is {states.get(host, 'down')}: its resources leave the manager in {left:.1f} s",
+                          style="yellow"))
+    for host, state in states.items():
+        if host not in data["removing"] and state == "unresponsive":  # its resources already left: still name it
+            parts.append(Text(f"{host} is unresponsive: its resources left the manager until it reports again",
+                              style="yellow"))
     return parts
 
 

@@ -31,6 +31,12 @@ from drd.errors import BusFailure
 
 M = TypeVar("M", bound=Message)
 PREFER_WAIT = 0.5  # seconds to wait for the preferred daemon (the controller) once another one answered
+#: Seconds a request gets at least, even past the command's deadline (a connect that took the whole budget).
+FLOOR = 0.1
+#: Seconds the client's close waits for its session, at least and at most: a clean close takes a few milliseconds
+#: (measured 0-10 ms on loopback); a frozen peer would hold it 10 s, and the process exits right after anyway.
+CLOSE_FLOOR = 0.05
+CLOSE_MOST = 0.2
 
 
 class ClientError(BusFailure):
@@ -50,7 +56,10 @@ class ClusterClient:
     """Requests to the daemons of one cluster over a bus session this client owns."""
 
     def __init__(self, bus: Bus, cluster: str, *, timeout: float = 2.0, prefer: Sequence[str] = (),
-                 endpoints: Sequence[str] = ()) -> None:
+                 endpoints: Sequence[str] = (), began: float | None = None) -> None:
+        """`began`: when the command began (monotonic; default now): `budget` is `timeout` after it, the deadline
+        of a one-shot command (`missionctl status --timeout 1` answers within about 1 s, then exits)."""
+        self.began = time.monotonic() if began is None else began
         self.bus = bus
         self.cluster = cluster
         self.keys = ClusterKeys(cluster)
@@ -69,6 +78,7 @@ class ClusterClient:
         """
         from drd.bus.zenoh_bus import ZenohBus
 
+        began = time.monotonic()
         if timeout <= 0:
             raise ValueError(f"timeout must be positive, not {timeout!r}")
         try:
@@ -91,10 +101,21 @@ class ClusterClient:
         except BaseException:
             bus.close()
             raise
-        return cls(bus, clusters[0], timeout=timeout, prefer=prefer, endpoints=endpoints)
+        return cls(bus, clusters[0], timeout=timeout, prefer=prefer, endpoints=endpoints, began=began)
+
+    @property
+    def budget(self) -> float:
+        """The deadline of a one-shot command (monotonic): `timeout` after it began."""
+        return self.began + self.timeout
 
     def close(self) -> None:
-        self.bus.close()
+        """Close the session, waiting for it at most what is left of the command's budget (a frozen peer holds a
+        zenoh close for 10 s; the process exits right after, and the OS closes its links)."""
+        close_within = getattr(self.bus, "close_within", None)
+        if close_within is None:
+            self.bus.close()
+            return
+        close_within(min(CLOSE_MOST, max(CLOSE_FLOOR, self.budget - time.monotonic())))
 
     def __enter__(self) -> Self:
         return self
@@ -110,31 +131,35 @@ class ClusterClient:
         rank = {h: i for i, h in enumerate(self.prefer)}
         return sorted(hosts, key=lambda h: (rank.get(h, len(rank)), h))
 
-    def hosts(self, events: int = 50) -> HostsReply:
-        return self._ask(lambda h: self.keys.db(h, "hosts"), ViewRequest(events), HostsReply)
+    def hosts(self, events: int = 50, *, deadline: float | None = None, slow: set[str] | None = None) -> HostsReply:
+        """Any daemon's view of the hosts (`deadline`: answer by then, monotonic; `slow`: daemons not to ask, and
+        where those that did not answer in time are added)."""
+        return self._ask(lambda h: self.keys.db(h, "hosts"), ViewRequest(events), HostsReply, deadline, slow)
 
-    def components(self) -> ComponentsReply:
-        return self._ask(lambda h: self.keys.db(h, "components"), ViewRequest(), ComponentsReply)
+    def components(self, *, deadline: float | None = None, slow: set[str] | None = None) -> ComponentsReply:
+        return self._ask(lambda h: self.keys.db(h, "components"), ViewRequest(), ComponentsReply, deadline, slow)
 
     def lookup(self, name: str) -> Location:
         return self._ask(lambda h: self.keys.db(h, "lookup"), Lookup(name), Location)
 
-    def query(self, text: str, seed: int = 0) -> TraderReply:
-        return self._ask(lambda h: self.keys.db(h, "query"), TraderRequest(text, seed), TraderReply)
+    def query(self, text: str, seed: int = 0, *, deadline: float | None = None) -> TraderReply:
+        return self._ask(lambda h: self.keys.db(h, "query"), TraderRequest(text, seed), TraderReply, deadline)
 
-    def daemon_status(self, host: str) -> DaemonStatus:
-        return _expect(self.bus.call(self.keys.status(host), ViewRequest(), timeout=self.timeout), DaemonStatus)
+    def daemon_status(self, host: str, *, deadline: float | None = None) -> DaemonStatus:
+        return _expect(self.bus.call(self.keys.status(host), ViewRequest(), timeout=self._left(deadline)),
+                       DaemonStatus)
 
     def ping(self, host: str) -> Pong:
         return _expect(self.bus.call(self.keys.ping(host), Ping(1, time.time()), timeout=self.timeout), Pong)
 
-    def resources(self) -> ResourcesReply:
+    def resources(self, *, deadline: float | None = None) -> ResourcesReply:
         """The controller's manager. Raises ClientError when the controller does not answer."""
+        wait = self._left(deadline)
         try:
-            return _expect(self.bus.call(self.keys.resources, ViewRequest(), timeout=self.timeout), ResourcesReply)
+            return _expect(self.bus.call(self.keys.resources, ViewRequest(), timeout=wait), ResourcesReply)
         except BusTimeout:
             raise ClientError(f"the controller does not answer on {self.keys.resources}"
-                              f" within {self.timeout:g} s (is its drd up?)") from None
+                              f" within {wait:.2g} s (is its drd up, or frozen?)") from None
 
     def missions(self, mission: str = "", *, count: int = 0, timeout: float | None = None) -> list[dict[str, Any]]:
         """The controller's missions (`MissionStatus.missions`; only `mission`, if given: none when it is not
@@ -182,10 +207,14 @@ class ClusterClient:
                 return
             after = nxt
 
-    def status(self, events: int = 50) -> dict[str, Any]:
-        """One view of the cluster: hosts, instances, resources, missions and recent events (plain JSON)."""
-        hosts = self.hosts(events)
-        components = self.components()
+    def status(self, events: int = 50, *, deadline: float | None = None) -> dict[str, Any]:
+        """One view of the cluster: hosts, instances, resources, missions and recent events (plain JSON), all asked
+        by `deadline` (default: the client's timeout from now): a daemon that did not answer one part is not asked
+        the next, and a part with no time left is an error of its own, never a wait."""
+        deadline = time.monotonic() + self.timeout if deadline is None else deadline
+        slow: set[str] = set()
+        hosts = self.hosts(events, deadline=deadline, slow=slow)
+        components = self.components(deadline=deadline, slow=slow)
         out: dict[str, Any] = {
             "cluster": self.cluster, "answered_by": hosts.answered_by, "at": hosts.at,
             "hosts": [asdict(h) for h in hosts.hosts],
@@ -195,34 +224,50 @@ class ClusterClient:
             "events": [asdict(e) for e in hosts.events],
         }
         try:
-            out["daemon"] = asdict(self.daemon_status(hosts.answered_by))
+            out["daemon"] = asdict(self.daemon_status(hosts.answered_by, deadline=deadline))
         except BusError as e:
             out["errors"]["daemon"] = f"{hosts.answered_by} did not say how it is: {e}"
+        controller = self.prefer[0] if self.prefer else ""
+        if controller in slow:  # it did not answer the view in time: the manager and the missions would not either
+            why = f"the controller {controller} did not answer within {self.timeout:g} s (frozen, or cut off?)"
+            out["errors"] |= {"resources": why, "missions": why}
+            return out
         try:
-            res = self.resources()
+            res = self.resources(deadline=deadline)
             out["resources"] = {"units": [asdict(u) for u in res.units], "robots": [asdict(r) for r in res.robots],
-                                "queue": [asdict(w) for w in res.queue], "removing": res.removing}
+                                "queue": [asdict(w) for w in res.queue], "removing": res.removing,
+                                "hosts": res.hosts}
         except ClientError as e:
             out["errors"]["resources"] = str(e)
         try:
-            out["missions"] = self.missions()
+            out["missions"] = self.missions(timeout=self._left(deadline))
         except ClientError as e:
             out["errors"]["missions"] = str(e)
         return out
 
-    def _ask(self, key_of: Callable[[str], str], payload: Message, want: type[M]) -> M:
-        """Ask the daemons one at a time, preferred first, until one answers within the timeout."""
-        deadline = time.monotonic() + self.timeout
+    def _left(self, deadline: float | None) -> float:
+        """Seconds a request may wait: the client's timeout, or what is left until `deadline` (at least `FLOOR`)."""
+        return self.timeout if deadline is None else max(FLOOR, deadline - time.monotonic())
+
+    def _ask(self, key_of: Callable[[str], str], payload: Message, want: type[M], deadline: float | None = None,
+             slow: set[str] | None = None) -> M:
+        """Ask the daemons one at a time, preferred first (but not those in `slow`), until one answers by `deadline`
+        (default: the timeout from now); those that did not answer in time go into `slow`."""
+        deadline = time.monotonic() + self.timeout if deadline is None else max(deadline, time.monotonic() + FLOOR)
         per_try = max(0.5, self.timeout / 2)
         tried: list[str] = []
+        skip = slow if slow is not None else set()
         for host in self.daemons():
             remaining = deadline - time.monotonic()
             if remaining <= 0:
                 break
+            if host in skip:
+                continue
             try:
                 return _expect(self.bus.call(key_of(host), payload, timeout=min(remaining, per_try)), want)
             except BusTimeout:
                 tried.append(host)
+                skip.add(host)
         detail = f"daemons {', '.join(tried)} did not answer" if tried else "no daemon token is alive any more"
         raise NoDaemon(self.endpoints, self.timeout, detail)
 

@@ -76,7 +76,7 @@ def host_resources(cluster: Cluster, host: str) -> list[Unit | Aggregate]:
 
 
 def resources_reply(snapshot: Mapping[str, Any], cluster: str, answered_by: str,
-                    removing: Mapping[str, float]) -> ResourcesReply:
+                    removing: Mapping[str, float], hosts: Mapping[str, str] | None = None) -> ResourcesReply:
     """`ResourceManager.snapshot()` as the wire's view: each unit with holders, queue and epoch.
 
     A unit's queue lists the waiting holders that need its type, or the type of a robot using it,
@@ -102,7 +102,7 @@ def resources_reply(snapshot: Mapping[str, Any], cluster: str, answered_by: str,
                         {str(k): str(v) for k, v in dict(a["parts"]).items()},
                         sorted(h for h, hold in holds.items() if aid in dict(hold.get("assignment", {})).values()))
               for aid, a in aggregates.items()]
-    return ResourcesReply(cluster, answered_by, units, robots, queue, dict(removing))
+    return ResourcesReply(cluster, answered_by, units, robots, queue, dict(removing), dict(hosts or {}))
 
 
 #: Seconds a query waits for the executive's lock; then a read gets the last answer given, a command a refusal.
@@ -242,7 +242,10 @@ class Controller:
 
     def __init__(self, bus: Bus, cluster: Cluster, catalog: Catalog, me: str, lock: threading.RLock, *,
                  on_reject: Callable[[str, str], None] | None = None,
-                 on_change: Callable[[str, str, str], None] | None = None, clock: Clock | None = None) -> None:
+                 on_change: Callable[[str, str, str], None] | None = None, clock: Clock | None = None,
+                 host_states: Callable[[], Mapping[str, str]] | None = None) -> None:
+        """`host_states`: the configured hosts that are not up, each `down` or `unresponsive` (the daemon's view),
+        for the resources reply: a frozen host's resources leave the manager, its name must not."""
         from drd.executive import EntryPoints, Executive  # the runtime: only on the controller
         from drd.executive_messages import MissionCommand
 
@@ -252,6 +255,7 @@ class Controller:
         self.clock: Clock = clock or WallClock()
         self._lock = lock
         self._on_change = on_change
+        self._host_states = host_states
         expect = {self.keys.executive: (MissionCommand,), self.keys.executive_status: (MissionCommand,),
                   self.keys.resources: (ViewRequest, type(None))}
         serialized = SerializedBus(bus, lock, expect=expect, on_reject=on_reject)
@@ -307,7 +311,8 @@ class Controller:
 
     def resources(self) -> ResourcesReply:
         snapshot = self.executive.broker.rcm.snapshot()
-        return resources_reply(snapshot, self.cluster.name, self.me, self.membership.pending(self.clock.now()))
+        hosts = self._host_states() if self._host_states is not None else {}
+        return resources_reply(snapshot, self.cluster.name, self.me, self.membership.pending(self.clock.now()), hosts)
 
     def close(self) -> None:
         self._queryable.close()

@@ -250,7 +250,7 @@ class Daemon:
         with self._exec_lock:
             controller = Controller(bus, self.cluster, self.config.catalog, me, self._exec_lock,
                                     on_reject=self._reject, on_change=self._controller_change,
-                                    clock=self._controller_clock)
+                                    clock=self._controller_clock, host_states=self.view.not_up)
             self.controller = controller
             self.runner = MissionRunner(bus, self.cluster, self.config.catalog, me, self._exec_lock,
                                         controller, controller.mission_clock, sim_service=self.sim_service,
@@ -433,7 +433,8 @@ class Daemon:
             for rec in self.view.records.values():
                 report, ann = rec.report, rec.announcement
                 infos.append(HostInfo(
-                    rec.name, rec.state.value, None if rec.since is None else self._to_wall(rec.since), rec.reason,
+                    rec.name, self.view.shown_state(rec.name), None if rec.since is None else self._to_wall(rec.since),
+                    rec.reason,
                     self.transport.endpoints.get(rec.name, rec.config.endpoint), [str(r) for r in rec.config.roles],
                     report.cpu if report else None, report.memory if report else None,
                     report.load1 if report else None, report.instances if report else 0,
@@ -605,6 +606,7 @@ class Daemon:
             down = {h.name: h.endpoint for h in self.cluster.hosts
                     if h.name != self.host and self.view.state(h.name) is HostState.DOWN
                     and self.transport.listens(h.name)}  # a client of the routers has no endpoint to probe
+            silent = {h for h in down if self.view.records[h].silent}  # frozen or cut off: not a credentials issue
         if not down:
             if not self.unreachable:
                 log.info("all %d peers reachable", len(self.cluster.hosts) - 1)
@@ -614,7 +616,7 @@ class Daemon:
 
         def check() -> None:
             try:
-                found = diagnose(down)
+                found = diagnose(down, silent=silent)
                 with self._lock:
                     for host, why in found.items():
                         if self.view.state(host) is not HostState.DOWN or self.unreachable.get(host) == why:

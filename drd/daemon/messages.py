@@ -8,6 +8,7 @@ seconds. `None` means "not known yet" (no load report received, for example).
 
 from __future__ import annotations
 
+import dataclasses
 from typing import Any
 
 from drd.bus import Message, message
@@ -64,7 +65,8 @@ class ViewRequest(Message):
 
 @message("drd.daemon.host", 1)
 class HostInfo(Message):
-    """One host as the answering daemon sees it. `state` is `up` or `down`."""
+    """One host as the answering daemon sees it. `state` is `up`, `down`, or `unresponsive` (down because it went
+    silent while its link stayed open: frozen, partitioned or overloaded)."""
 
     name: str
     state: str
@@ -202,10 +204,11 @@ class WaiterInfo(Message):
     needs: dict[str, str]
 
 
-@message("drd.rcm.resources", 1)
+@message("drd.rcm.resources", 2)
 class ResourcesReply(Message):
-    """The controller's Resource Controller Manager: units, robots, the queue, and hosts whose
-    resources will be removed (`removing`: host -> seconds left of the lease) unless they come back."""
+    """The controller's Resource Controller Manager: units, robots, the queue, hosts whose
+    resources will be removed (`removing`: host -> seconds left of the lease) unless they come back, and
+    the configured hosts that are not up (`hosts`: host -> `down` or `unresponsive`, as `HostInfo.state`)."""
 
     cluster: str
     answered_by: str
@@ -213,3 +216,4 @@ class ResourcesReply(Message):
     robots: list[RobotInfo]
     queue: list[WaiterInfo]
     removing: dict[str, float]
+    hosts: dict[str, str] = dataclasses.field(default_factory=dict)

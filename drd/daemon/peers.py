@@ -11,7 +11,7 @@ certificate or security mode).
 from __future__ import annotations
 
 import socket
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Collection, Mapping
 
 
 def parse_endpoint(endpoint: str) -> tuple[str, str, int] | None:
@@ -44,12 +44,17 @@ def probe(endpoint: str, timeout: float = 0.5) -> str | None:
 
 REFUSED = ("it accepts connections but no session was established: the peers refused each other's"
            " credentials (a different password file, certificate or security mode?)")
+UNRESPONSIVE = ("unresponsive: its session was up, then it went silent, and its port still accepts connections (a"
+                " frozen or SIGSTOPped daemon, or one too loaded to answer)")
 
 
-def diagnose(down: Mapping[str, str], probe_fn: Callable[[str], str | None] = probe) -> dict[str, str]:
-    """For each down host (host -> endpoint), why it is unreachable."""
+def diagnose(down: Mapping[str, str], probe_fn: Callable[[str], str | None] = probe,
+             silent: Collection[str] = ()) -> dict[str, str]:
+    """For each down host (host -> endpoint), why it is unreachable. A `silent` one (it had a session, then stopped
+    reporting while its link stayed open) that still accepts connections is unresponsive, not refusing our
+    credentials: its kernel accepts for it while the process does nothing."""
     out = {}
     for host, endpoint in down.items():
         why = probe_fn(endpoint)
-        out[host] = f"{endpoint}: {REFUSED if why is None else why}"
+        out[host] = f"{endpoint}: {(UNRESPONSIVE if host in silent else REFUSED) if why is None else why}"
     return out

@@ -10,7 +10,10 @@ adds and removes resources). The rules:
   way).
 - It goes **down** at once when its token vanishes (a clean stop, a crash, a closed socket), and
   when its reports stop for longer than `lease` while the token stays (a frozen or SIGSTOPped
-  process, a host whose link is silent but not yet expired).
+  process, a host whose link is silent but not yet expired). A host that went down that way is
+  shown **unresponsive** (`shown_state`), not down, until it reports again: its token may vanish
+  later, when zenoh's link lease runs out, but a frozen, partitioned or overloaded host never
+  closed its link; a killed or stopped one did, at once.
 - A down host comes back **up** when its token is present and a report arrives.
 - The view's own host is always up: it is the process answering.
 
@@ -39,6 +42,10 @@ class HostState(StrEnum):
     """Never seen, gone (token vanished) or silent for longer than the lease."""
 
 
+#: How a down host that went silent (rather than closing its link) is shown: frozen, partitioned or overloaded.
+UNRESPONSIVE = "unresponsive"
+
+
 @dataclass(frozen=True, slots=True)
 class Change:
     """What one input changed: `kind` is `up`, `down`, `config-mismatch` or `rejected`; `at` is monotonic."""
@@ -58,6 +65,7 @@ class HostRecord:
     since: float | None = None
     reason: str = "never seen"
     token: bool = False
+    silent: bool = False  # down because its reports stopped while its link stayed open (shown unresponsive)
     token_since: float | None = None
     heard: float | None = None
     report: LoadReport | None = None
@@ -108,6 +116,8 @@ class ClusterView:
         rec.token, rec.token_since = False, None
         if rec.state is HostState.UP:
             return [self._set(rec, HostState.DOWN, now, rec.leaving or "lost: its liveliness token vanished")]
+        if rec.silent and rec.leaving:  # a silent host said goodbye after all: it is down, not unresponsive
+            rec.silent, rec.reason = False, rec.leaving
         return []
 
     def load(self, report: LoadReport, now: float, key_host: str | None = None) -> list[Change]:
@@ -158,12 +168,23 @@ class ClusterView:
                 last = max(t for t in (rec.heard, rec.token_since) if t is not None)
                 out.append(self._set(rec, HostState.DOWN, now,
                                      f"silent: no load report for {now - last:.2f} s (lease {self.lease:g} s)"))
+                rec.silent = True
         return out
 
     # -- queries ---------------------------------------------------------------------------------
 
     def state(self, host: str) -> HostState:
         return self.records[host].state
+
+    def shown_state(self, host: str) -> str:
+        """The state the operator sees: `up`, `down`, or `unresponsive` (down because it went silent while its
+        link stayed open: frozen, partitioned or overloaded, not stopped or killed)."""
+        rec = self.records[host]
+        return UNRESPONSIVE if rec.state is HostState.DOWN and rec.silent else rec.state.value
+
+    def not_up(self) -> dict[str, str]:
+        """The configured hosts that are not up, each with its shown state (`down` or `unresponsive`)."""
+        return {name: self.shown_state(name) for name, rec in self.records.items() if rec.state is not HostState.UP}
 
     def up(self) -> list[str]:
         """The hosts that are up, in hosts-file order."""
@@ -242,6 +263,7 @@ class ClusterView:
     @staticmethod
     def _set(rec: HostRecord, state: HostState, now: float, reason: str) -> Change:
         rec.state, rec.since, rec.reason = state, now, reason
+        rec.silent = False
         return Change(now, state.value, rec.name, reason)
 
 
