@@ -271,22 +271,30 @@ def run_many(missions: Sequence[Mission], cluster: Cluster, world: World, catalo
     late = {i.target for i in injections if i.action is Action.JOIN}  # hosts whose daemon starts later
     sim, executive = team(cluster, world, catalog, seed=seed, registry=registry, late=late)
     life = ControllerLife(executive, functools.partial(executive_over, cluster, world, sim, catalog, registry),
-                          cluster.resources(), [r.id for r in cluster.resources() if r.host in late])
+                          cluster.resources(), [r.id for r in cluster.resources() if r.host in late],
+                          **_controllers(cluster))
     start = time.perf_counter()
     if recorder is not None:
         recorder.scene(world)
         recorder.watch(sim)  # what the sensors read, launches, landings and door changes, from now on
     results = [_submit(life, m, n, speed, trace, recorder) for n, m in enumerate(missions, 1)]
     next_progress = 0.0
+    electing: dict[str, Any] | None = None
     pending = sorted(injections)
     while not life.finished() and sim.time < until - 1e-6:  # 0.1 s steps add up
         if stop is not None and stop.is_set():
             break
         sim.step(CONTROL_PERIOD)
         while pending and pending[0].at <= sim.time + 1e-9:
+            before = life.takeover
             effect = _inject(pending.pop(0), sim, life, cluster, pending)
             for result in results:
                 result.injections.append(effect)
+            if life.takeover is not None and life.takeover is not before:
+                electing = effect  # the row that says a standby will take over: it says when it did
+        taken = life.tick(sim.time)
+        if taken is not None and electing is not None:
+            electing["effect"] += f"; at {sim.time:.1f} s {taken}"
         if life.executive is not None:  # a dead controller steps nothing
             life.executive.step()
         if recorder is not None:
@@ -373,10 +381,11 @@ def _inject(inj: Injection, sim: Simulation, life: ControllerLife, cluster: Clus
     executive = life.executive  # None while the controller is down: the manager learns it when it starts again
     controller = inj.action in (Action.KILL, Action.RESTART) and Role.CONTROLLER in cluster.host(inj.target).roles
     if inj.action is Action.KILL and controller:
-        restarting = any(i.action is Action.RESTART and i.target == inj.target for i in later)
+        restarting = any(i.action is Action.RESTART and (i.target == inj.target or i.target in life.standbys_later)
+                         for i in later)  # with an election, any controller started again resumes
         what += ": " + life.kill(sim.time, inj.target, restarting)
     elif inj.action is Action.RESTART and controller:
-        what += ": " + life.restart(sim.time)
+        what += ": " + life.restart(sim.time, inj.target)
     elif inj.action in (Action.JOIN, Action.RESTART):
         found = [r for r in cluster.resources() if r.host == inj.target]
         life.gone.difference_update(r.id for r in found)
@@ -405,6 +414,16 @@ def _inject(inj: Injection, sim: Simulation, life: ControllerLife, cluster: Clus
         what += f": the door is now {state[inj.action].value}"
     return {"at": round(sim.time, 3), "action": inj.action.value, "target": inj.target, "injection": str(inj),
             "effect": what}
+
+
+def _controllers(cluster: Cluster) -> dict[str, Any]:
+    """The controller hosts, the acting one first, and the election's lease: several with a replicated store (a
+    standby takes over as on the cluster), else the one controller."""
+    from drd.cluster.election import election_ttl
+
+    if cluster.store.replicated and len(cluster.controllers) > 1:
+        return {"controllers": [h.name for h in cluster.controllers], "election": float(election_ttl(cluster.lease))}
+    return {"controllers": [cluster.controller.name]}
 
 
 def _not_injected(inj: Injection, now: float) -> dict[str, Any]:

@@ -8,11 +8,18 @@ or not joined yet, nor lost robots); it puts back the Static Dependency Database
 unfinished mission from its journal, i.e. its state at the end of the last control cycle before the kill
 (`drd.runtime.snapshot`), as `drd start` does on a cluster. Killed with no restart to come, its missions stop
 there, saying so: that is what an operator sees who does not start the controller again.
+
+With several controller hosts and a replicated store (`cluster.store: {etcd: ...}`), as on such a cluster: the first
+controller acts, the others are standbys. Killed, the acting one is replaced by the first standby still alive once
+the election's lease ran out (`drd.cluster.election.election_ttl`, the lease the dead one can no longer renew), which
+resumes the missions from the replicated journal as a restart does; a standby's death changes nothing else; a
+controller started again is a standby while another acts, and acts (once the dead one's lease ran out) when none
+does.
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable, Collection, Iterable
+from collections.abc import Callable, Collection, Iterable, Sequence
 from typing import Any
 
 from drd.executive import Executive
@@ -28,8 +35,16 @@ class ControllerLife:
     resources whose ids are in `gone`."""
 
     def __init__(self, executive: Executive, make: Callable[[Collection[str]], Executive],
-                 resources: Iterable[Any], gone: Collection[str] = ()) -> None:
+                 resources: Iterable[Any], gone: Collection[str] = (), *, controllers: Sequence[str] = (),
+                 election: float = 0.0) -> None:
+        """`controllers`: the controller hosts, the acting one first (several: a replicated store elects);
+        `election`: the election's lease, seconds (0: one controller, no election)."""
         self.executive: Executive | None = executive
+        self.acting = controllers[0] if controllers else ""
+        self.standbys = list(controllers[1:])  # alive standby controllers, in the order they would win
+        self.election = election
+        self.standbys_later = set(controllers) if election else set()  # hosts whose restart resumes (an election)
+        self.takeover: tuple[float, str] | None = None  # (when, by whom) a standby takes the dead one's place
         self.make = make
         self.resources = list(resources)
         self.gone: set[str] = set(gone)  # resource ids the manager does not know now (killed, lost, not joined)
@@ -46,10 +61,22 @@ class ControllerLife:
         self.interpreters[mid] = self.executive.missions[mid]
 
     def kill(self, now: float, host: str, restarting: bool) -> str:
-        """The controller's daemon dies now; its missions wait for a restart (or stop, with none to come)."""
+        """A controller's daemon dies now: a standby's changes nothing; the acting one's missions wait for a standby's
+        takeover, or a restart (or stop, with none to come)."""
+        if host in self.standbys:
+            self.standbys.remove(host)
+            return f"a standby controller is gone; {self.acting if self.executive is not None else 'none'} acts"
+        if self.takeover is not None and self.takeover[1] == host:  # the standby about to win: the next one will
+            self.takeover = (self.takeover[0], self.standbys.pop(0)) if self.standbys else None
+            return "the standby about to take over is gone" + (f"; {self.takeover[1]} will" if self.takeover else "")
+        if self.election and host != self.acting:
+            return "nothing happens: it is not running"
         executive = self.executive
         if executive is None:
             return "nothing happens: the controller is already down"
+        if self.standbys:  # its election lease runs out, then the first standby left wins
+            self.takeover = (now + self.election, self.standbys.pop(0))
+            restarting = True
         if not restarting:
             for interp in executive.missions.values():
                 if not interp.finished:
@@ -65,12 +92,36 @@ class ControllerLife:
         if orphan is not None:
             orphan(now, "controller lost")  # the hosts stop every robot
         self.executive, self._died_at = None, now
+        if self.takeover is not None:
+            return (f"every robot stopped; {len(self._saved)} mission(s) wait for standby {self.takeover[1]}, which"
+                    f" takes over once the election's lease of {self.election:g} s runs out")
         return f"every robot stopped; {len(self._saved)} mission(s) wait for the controller"
 
-    def restart(self, now: float) -> str:
-        """The controller starts again and resumes the missions it journaled."""
-        if self.executive is not None:
-            return "nothing happens: the controller is running"
+    def tick(self, now: float) -> str | None:
+        """A standby's takeover, when its time came: what happened (None: nothing)."""
+        if self.takeover is None or now < self.takeover[0] - 1e-9:
+            return None
+        _when, host = self.takeover
+        self.takeover = None
+        return f"standby controller {host} elected: " + self._resume(now, host)
+
+    def restart(self, now: float, host: str = "") -> str:
+        """A controller starts again: a standby while another acts (or is about to), else it resumes the missions
+        it journaled (with an election, once the dead one's lease ran out: they resume at the next `tick` then)."""
+        if self.executive is not None or self.takeover is not None:
+            if not self.election:
+                return "nothing happens: the controller is running"
+            self.standbys.append(host)
+            acting = self.acting if self.executive is not None else self.takeover[1] if self.takeover else ""
+            return f"a standby controller again ({acting} acts)"
+        if self.election and now < self._died_at + self.election - 1e-9:  # the dead one's key lingers until then
+            self.takeover = (self._died_at + self.election, host or self.acting)
+            return f"campaigns: elected once the lost controller's lease runs out, at {self.takeover[0]:g} s"
+        return self._resume(now, host)
+
+    def _resume(self, now: float, host: str) -> str:
+        """This controller acts: a new executive resumes the journaled missions."""
+        self.acting = host or self.acting
         executive = self.executive = self.make(self.gone)
         for rid, values in self._properties.items():
             for key, value in values.items():

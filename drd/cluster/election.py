@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import json
 import logging
+import math
 import os
 import threading
 import time
@@ -44,6 +45,12 @@ POLL = 0.25
 
 def leader_key(cluster: str) -> str:
     return f"drd/{cluster}/leader"
+
+
+def election_ttl(lease: float) -> int:
+    """The election's lease for a cluster's `lease` (seconds): whole seconds, at least 2 (etcd's own minimum with its
+    default timing). A standby takes over about this long after the acting controller died."""
+    return max(2, math.ceil(lease))
 
 
 @dataclass
