@@ -27,7 +27,6 @@ from __future__ import annotations
 import hashlib
 import json
 import logging
-import math
 import os
 import threading
 import time
@@ -261,10 +260,10 @@ class Daemon:
 
     def _campaign(self) -> None:
         """Campaign for the controller's role through the cluster's etcd (`cluster.store`): a standby meanwhile."""
-        from drd.cluster.election import Election
+        from drd.cluster.election import Election, election_ttl
         from drd.etcd import Etcd
 
-        ttl = max(2, math.ceil(self.cluster.lease))  # whole seconds, at least etcd's own minimum
+        ttl = election_ttl(self.cluster.lease)  # whole seconds, at least etcd's own minimum (the dry-run's too)
         self.election = Election(Etcd(self.cluster.store.etcd), self.cluster.name, self.host, ttl,
                                  on_elected=self._elected, on_fenced=self._fenced)
         self.election.start()
