@@ -106,9 +106,12 @@ class SnapshotCatalog:
 
 
 class ResourcePool(RuleBasedStateMachine):
+    #: assignments a waiter's claims are computed from; beyond it, it claims every unit of its need types
+    max_alternatives = 256
+
     def __init__(self) -> None:
         super().__init__()
-        self.rm = ResourceManager(lease=5.0, default_slice=1.0)
+        self.rm = ResourceManager(lease=5.0, default_slice=1.0, max_alternatives=self.max_alternatives)
         self.now = 0.0
         self.holding: set[str] = set()
         self.waiting: set[str] = set()
@@ -327,7 +330,43 @@ class ResourcePool(RuleBasedStateMachine):
                 return catalog.free[unit]
 
             assert first_solution(request.needs, catalog, room) is None, holder
-            claimed.update(u for solution in alternatives(request.needs, catalog)[0] for u in solution.units)
+            claimed.update(self.claims(request, catalog))
+
+    def claims(self, request: Request, catalog: SnapshotCatalog) -> set[str]:
+        """The units a waiting request claims: those of its possible assignments, or, past `max_alternatives`
+        of them, every unit of its need types."""
+        found, capped = alternatives(request.needs, catalog, None, self.max_alternatives)
+        claimed = {u for solution in found for u in solution.units}
+        if capped:
+            claimed.update(u for need in request.needs for c in catalog.candidates(need.type) for u in units_of(c))
+        return claimed
+
+    @invariant()
+    def queue_indexes_match_brute_force(self) -> None:
+        """The wait queue's grouped index answers as a scan of every waiter would (white box: the indexes
+        are private, and what they must equal is restated here from the waiters themselves)."""
+        rm = self.rm
+        queue, reg = rm._queue, rm._reg
+        for unit_id in reg.units:
+            claimants = [(w.key, h) for h, w in queue.waits.items() if unit_id in w.claims]
+            assert queue.head(unit_id) == min(claimants, default=None), unit_id
+            assert queue.claimants(unit_id) == {h for _, h in claimants}
+        for wait in queue.waits.values():
+            group = queue.group(wait.claims)
+            if group is None:
+                assert not wait.claims
+                continue
+            atoms = queue.atoms(group)
+            assert sorted(u for atom, _ in atoms for u in atom) == sorted(wait.claims)  # a partition
+            for atom, groups in atoms:
+                assert {queue.head(u) for u in atom} == {queue.best(groups)}
+                assert rm._may_open_any(atom) == any(rm._may_open(u) for u in atom)
+            alts, capped = reg.alternatives(wait.request.needs, wait.given, rm.max_alternatives)
+            demand = rm._claims_of(wait, alts, capped)
+            assert rm._blockers_of(wait, demand) == rm._blockers(wait, demand.items())
+        overtime = {u for u in reg.full if not reg.units[u].sharable
+                    and any(h in rm._overtime for h in reg.used.get(u, ()))}
+        assert rm._ot_units == overtime
 
     def teardown(self) -> None:
         self.drain()
@@ -335,3 +374,14 @@ class ResourcePool(RuleBasedStateMachine):
 
 ResourcePool.TestCase.settings = settings(max_examples=100, stateful_step_count=40, deadline=None)
 TestResourcePool = ResourcePool.TestCase
+
+
+class CappedResourcePool(ResourcePool):
+    """The same, with claims capped at one assignment: waiters of a type claim all its units, so they share
+    claim sets (the manager's groups) as the 950 RoomSurveillance instances of a 1,000-robot building do."""
+
+    max_alternatives = 1
+
+
+CappedResourcePool.TestCase.settings = settings(max_examples=100, stateful_step_count=40, deadline=None)
+TestCappedResourcePool = CappedResourcePool.TestCase

@@ -94,12 +94,16 @@ class ResourceManager:
         self._holds: dict[str, Hold] = {}
         self._pending: dict[str, Pending] = {}
         self._overtime: set[str] = set()
+        #: exclusive units held by a holder in overtime: full, yet a waiter may get them (`_may_open`)
+        self._ot_units: set[str] = set()
         self._events: list[tuple[float, int, int, str]] = []  # (time, kind, token, holder)
         self._frees = 0  # bumped whenever capacity is given back
         #: (id of a list of alternatives, capped, needs) -> (that list, its claims, their units): `_claims`' memo
         self._claims_memo: dict[tuple[int, bool, tuple[NeedRequest, ...]],
                                 tuple[list[Solution], dict[str, float], frozenset[str]]] = {}
         self._interned: dict[frozenset[str], frozenset[str]] = {}  # `_claim_set`'s shared sets
+        #: `_blockers_of`' memo of the holders in the way of a claims' demand: (registry version, demand, them)
+        self._held_memo: tuple[int, dict[str, float] | None, frozenset[str]] = (-1, None, frozenset())
 
     # -- hot-plug and the Static Dependency Database -------------------------------------------
 
@@ -307,7 +311,9 @@ class ResourceManager:
             elif kind == _SLICE and hold is not None and hold.gid == token:
                 hold.overtime = True
                 self._overtime.add(holder)
-                self._dispatch([u for u in hold.quantities() if not self._reg.units[u].sharable], now, out)
+                exclusive = [u for u in hold.quantities() if not self._reg.units[u].sharable]
+                self._ot_units.update(exclusive)
+                self._dispatch(exclusive, now, out)
             elif kind == _RESERVE and holder in self._pending and self._pending[holder].order == token:
                 pending = self._pending.pop(holder)
                 self._admit(pending.request, now, out, reserved_at=pending.at, since=pending.order)
@@ -323,7 +329,7 @@ class ResourceManager:
             wait = self._queue.waits[victim]
             self._queue.remove(wait)
             out.append(Deadlock(cycle, victim))
-            self._dispatch(wait.claims, now, out)
+            self._dispatch((), now, out, (wait.claims,))
         return tuple(out)
 
     # -- the queue -----------------------------------------------------------------------------
@@ -342,14 +348,14 @@ class ResourceManager:
         wait = Wait(request, key, order if since is None else since, resumed=False, given={})
         touched = self._try_grant(wait, now, out)
         if touched is not None:
-            self._dispatch(touched, now, out)
+            self._dispatch(touched[0], now, out, touched[1])
             return
         alts, capped = self._reg.alternatives(request.needs, {}, self.max_alternatives)
         if not alts:  # not even on an empty system: say which need and why
             out.append(Unsatisfiable(request.holder, *(diagnose(request.needs, self._reg) or ("", ""))))
             return
         demand = self._enqueue(wait, alts, capped)
-        out.append(Waiting(request.holder, tuple(sorted(self._blockers(wait, demand.items())))))
+        out.append(Waiting(request.holder, tuple(sorted(self._blockers_of(wait, demand)))))
 
     def _enqueue(self, wait: Wait, alts: list[Solution] | None = None, capped: bool = False) -> dict[str, float]:
         """Queue a request with the units it claims; returns the most it may take of each."""
@@ -362,7 +368,7 @@ class ResourceManager:
     def _withdraw(self, wait: Wait, reason: ReleaseReason, now: float, out: list[Decision]) -> None:
         self._queue.remove(wait)
         out.append(Released(wait.holder, (), reason))
-        self._dispatch(wait.claims, now, out)
+        self._dispatch((), now, out, (wait.claims,))
 
     def _claims_of(self, wait: Wait, alts: list[Solution], capped: bool) -> dict[str, float]:
         """The units of all possible assignments, with the most each assignment takes of them (read-only: shared
@@ -409,13 +415,10 @@ class ResourceManager:
 
     def _reconsider(self, holders: Iterable[str], now: float, out: list[Decision], extra: set[str]) -> None:
         """Recompute the claims of waiters after the resources changed, then serve who can be."""
-        touched = set(extra)
-        seen: set[int] = set()  # the claim sets already in `touched` (waiters of one behavior share theirs)
+        seen: dict[int, frozenset[str]] = {}  # the claim sets to serve, once each (waiters of a behavior share one)
 
         def touch(claims: frozenset[str]) -> None:
-            if id(claims) not in seen:
-                seen.add(id(claims))
-                touched.update(claims)
+            seen.setdefault(id(claims), claims)
 
         for holder in holders:
             wait = self._queue.waits[holder]
@@ -428,7 +431,7 @@ class ResourceManager:
                 continue
             self._queue.reclaim(wait, self._claim_set(wait, alts, capped))
             touch(wait.claims)
-        self._dispatch(touched, now, out)
+        self._dispatch(extra, now, out, tuple(seen.values()))
 
     # -- granting ------------------------------------------------------------------------------
 
@@ -452,8 +455,10 @@ class ResourceManager:
             and not same_owner(hold.request.holder, wait.holder)
         )
 
-    def _try_grant(self, wait: Wait, now: float, out: list[Decision]) -> set[str] | None:
-        """Grant `wait` if it can be, revoking overtime holders if needed; the units to re-dispatch."""
+    def _try_grant(self, wait: Wait, now: float,
+                   out: list[Decision]) -> tuple[set[str], list[frozenset[str]]] | None:
+        """Grant `wait` if it can be, revoking overtime holders if needed; the units and claim sets to re-dispatch
+        (a claim set given up: its units may now go to the waiters behind)."""
         needs, given = wait.request.needs, wait.given
         if not self._overtime and self._some_need_full(needs):
             return None  # nothing to search: every candidate of some need is full
@@ -465,13 +470,16 @@ class ResourceManager:
         if solution is None:
             return None
         touched: set[str] = set()
+        claims: list[frozenset[str]] = []
         if self._queue.get(wait.holder) is wait:
             self._queue.remove(wait)
-            touched |= wait.claims
+            claims.append(wait.claims)
         for victim in self._victims(solution):
-            touched.update(self._revoke(victim, out, by=wait.holder))
+            units, requeued = self._revoke(victim, out, by=wait.holder)
+            touched.update(units)
+            claims.append(requeued)
         self._grant(wait, solution, now, out)
-        return touched
+        return touched, claims
 
     def _some_need_full(self, needs: tuple[NeedRequest, ...]) -> bool:
         """Whether some need has no candidate with room left on all of its units.
@@ -525,16 +533,16 @@ class ResourceManager:
         assignment = solution.assignment
         out.append(Granted(holder, assignment, units, epochs, hold.lease_until, slice_until, wait.resumed))
 
-    def _revoke(self, holder: str, out: list[Decision], *, by: str) -> tuple[str, ...]:
+    def _revoke(self, holder: str, out: list[Decision], *, by: str) -> tuple[tuple[str, ...], frozenset[str]]:
         """Suspend a holder: free its units and queue its intact needs again, at the back.
 
-        Returns the units to re-dispatch: those freed and those the requeued request claims.
+        Returns what to re-dispatch: the units freed, and the claims of the requeued request.
         """
         hold = self._holds[holder]
         units = self._end_hold(holder)
         out.append(Revoked(holder, units, "preempted", by))
         if not hold.alloc:  # every need was (partly) given back: nothing left to resume
-            return units
+            return units, frozenset()
         given = dict(hold.given)
         given.update({name: c for name, c in hold.chosen.items() if name not in hold.alloc})
         needs = tuple(n for n in hold.request.needs if n.name in hold.alloc)
@@ -545,16 +553,18 @@ class ResourceManager:
         if not alts:  # what it held no longer fits its needs (a Scout moved to another Ranger): never resumable
             need, reason = diagnose(request.needs, self._reg, given) or ("", "")
             out.append(Unsatisfiable(holder, need, reason))
-            return units
+            return units, frozenset()
         self._enqueue(wait, alts, capped)
-        return (*units, *wait.claims)  # it may resume at once elsewhere (another free camera)
+        return units, wait.claims  # it may resume at once elsewhere (another free camera)
 
     def _end_hold(self, holder: str) -> tuple[str, ...]:
         hold = self._holds.pop(holder)
         units = tuple(hold.quantities())
         for unit in units:
             self._reg.set_use(unit, holder, 0.0)
-        self._overtime.discard(holder)
+        if holder in self._overtime:
+            self._ot_units.difference_update(units)  # an exclusive unit has one holder: this one
+            self._overtime.discard(holder)
         self._queue.hold_removed(holder, self._holds)
         self._frees += 1
         return units
@@ -568,31 +578,59 @@ class ResourceManager:
         reduced = [u for u, quantity in before.items() if after.get(u, 0.0) < quantity]
         for unit in reduced:
             self._reg.set_use(unit, holder, after.get(unit, 0.0))
+        if holder in self._overtime:
+            self._ot_units.difference_update(u for u in reduced if u not in after)
         if not after:
             self._end_hold(holder)
         elif reduced:
             self._frees += 1
         return tuple(u for u in reduced if u not in after), tuple(u for u in reduced if u in after)
 
-    def _dispatch(self, units: Iterable[str], now: float, out: list[Decision]) -> None:
-        """Serve the head waiters of units that may have room, best-placed first.
+    def _dispatch(self, units: Iterable[str], now: float, out: list[Decision],
+                  claims: Iterable[frozenset[str]] = ()) -> None:
+        """Serve the head waiters of units that may have room, best-placed first: of `units` and of every unit
+        of each claim set in `claims` (the set a waiter gave up, or a group's).
 
         Only heads are tried: a head that cannot be granted keeps its units for itself, so the
-        waiters behind it on those units could not be granted either.
+        waiters behind it on those units could not be granted either. A claim set that is a live group's is
+        served by its atoms (`WaitQueue.atoms`: units with the same claimants, hence the same head), so
+        giving up 4,000 claimed units looks at a few heads, not 4,000 units.
         """
         todo: list[tuple[Key, str]] = []
+        queued: set[tuple[Key, str]] = set()  # in `todo` now: an entry twice would be popped twice in a row
+        queue = self._queue
+
+        def push(head: tuple[Key, str] | None) -> None:
+            if head is not None and head not in queued:
+                queued.add(head)
+                heappush(todo, head)
 
         def seed(unit_ids: Iterable[str]) -> None:
             for unit_id in unit_ids:
                 if self._may_open(unit_id):
-                    head = self._queue.head(unit_id)
-                    if head is not None:
-                        heappush(todo, head)
+                    push(queue.head(unit_id))
+
+        def seed_claims(sets: Iterable[frozenset[str]]) -> None:
+            done: set[int] = set()
+            for claim_set in sets:
+                if id(claim_set) in done or not claim_set:
+                    continue
+                done.add(id(claim_set))
+                group = queue.group(claim_set)
+                if group is None:  # no one claims exactly these any more: unit by unit
+                    seed(claim_set)
+                    continue
+                for atom, groups in queue.atoms(group):
+                    if self._may_open_any(atom):
+                        push(queue.best(groups))
 
         seed(units)
+        seed_claims(claims)
         failed: dict[str, int] = {}
         while todo:
-            key, holder = heappop(todo)
+            entry = heappop(todo)
+            queued.discard(entry)
+            key, holder = entry
             wait = self._queue.get(holder)
             if wait is None or wait.key != key or failed.get(holder) == self._frees:
                 continue
@@ -600,7 +638,8 @@ class ResourceManager:
             if touched is None:
                 failed[holder] = self._frees  # retried only if capacity is given back meanwhile
             else:
-                seed(touched)
+                seed(touched[0])
+                seed_claims(touched[1])
 
     def _may_open(self, unit_id: str) -> bool:
         """Whether a unit has room, or an exclusive holder in overtime that could be preempted."""
@@ -610,6 +649,11 @@ class ResourceManager:
         overtime = self._overtime
         return (bool(overtime) and not reg.units[unit_id].sharable
                 and any(h in overtime for h in reg.used.get(unit_id, ())))
+
+    def _may_open_any(self, units: frozenset[str]) -> bool:
+        """`_may_open` of some of these registered units, by set operations: not all full, or one held in
+        overtime (`_ot_units`: the exclusive units of holders in overtime)."""
+        return not units <= self._reg.full or not units.isdisjoint(self._ot_units)
 
     # -- deadlocks -----------------------------------------------------------------------------
 
@@ -646,6 +690,34 @@ class ResourceManager:
             if best is not None and best[0] < wait.key:
                 found.add(best[1])
         return found
+
+    def _blockers_of(self, wait: Wait, demand: dict[str, float]) -> set[str]:
+        """`_blockers` of a waiter's whole claims (`demand` from `_claims_of`, `wait.claims` its units), for its
+        `Waiting` record: the same set, computed per held unit and per atom of its group rather than per unit.
+
+        Only a unit in use has holders to name; which of them are in the way of a claims' demand is memoized
+        until the registry changes (a thousand waiters of one behavior queued in a row ask the same)."""
+        group = self._queue.group(wait.claims)
+        if group is None:
+            return self._blockers(wait, demand.items())
+        reg = self._reg
+        version, memo_demand, held = self._held_memo
+        if version != reg.version or memo_demand is not demand:
+            units, load, used = reg.units, reg.load, reg.used
+            found: set[str] = set()
+            for unit in (used if len(used) < len(demand) else demand):
+                quantity = demand.get(unit)
+                holders = used.get(unit)
+                if quantity is not None and holders and units[unit].capacity - load.get(unit, 0.0) < quantity - EPS:
+                    found.update(holders)
+            held = frozenset(found)
+            self._held_memo = (reg.version, demand, held)
+        blockers = set(held)
+        for _, groups in self._queue.atoms(group):
+            best = self._queue.best(groups)
+            if best is not None and best[0] < wait.key:
+                blockers.add(best[1])
+        return blockers
 
     def _rank(self, holder: str) -> tuple[tuple[int, int], int]:
         wait = self._queue.waits[holder]
