@@ -9,6 +9,7 @@ timeout instead of stalling every answer.
 
 from __future__ import annotations
 
+import threading
 import time
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import asdict
@@ -30,7 +31,7 @@ from drd.daemon.messages import (
 from drd.errors import BusFailure
 
 M = TypeVar("M", bound=Message)
-PREFER_WAIT = 0.5  # seconds to wait for the preferred daemon (the controller) once another one answered
+PREFER_WAIT = 0.5  # seconds (at most a quarter of the timeout) to wait for the preferred daemon once another answered
 #: Seconds a request gets at least, even past the command's deadline (a connect that took the whole budget).
 FLOOR = 0.1
 #: Seconds the client's close waits for its session, at least and at most: a clean close takes a few milliseconds
@@ -93,7 +94,7 @@ class ClusterClient:
                 raise NoDaemon(endpoints, timeout)
             if prefer and prefer[0] not in {h for _, h in found}:  # links come up one by one: give the
                 found = _wait_for_tokens(bus, f"drd/{cluster or '*'}/host/{prefer[0]}",  # preferred one a moment
-                                         min(deadline, time.monotonic() + PREFER_WAIT)) or found
+                                         min(deadline, time.monotonic() + min(PREFER_WAIT, timeout / 4))) or found
             clusters = sorted({c for c, _ in found})
             if len(clusters) > 1:
                 raise ClientError(f"daemons of several clusters answer ({', '.join(clusters)}): pass --config"
@@ -232,6 +233,16 @@ class ClusterClient:
             why = f"the controller {controller} did not answer within {self.timeout:g} s (frozen, or cut off?)"
             out["errors"] |= {"resources": why, "missions": why}
             return out
+        missions: dict[str, Any] = {}
+
+        def ask_missions() -> None:  # beside the resources: a controller that does not answer costs one wait, not two
+            try:
+                missions["missions"] = self.missions(timeout=self._left(deadline))
+            except ClientError as e:
+                missions["error"] = str(e)
+
+        asking = threading.Thread(target=ask_missions, name="missionctl-missions", daemon=True)
+        asking.start()
         try:
             res = self.resources(deadline=deadline)
             out["resources"] = {"units": [asdict(u) for u in res.units], "robots": [asdict(r) for r in res.robots],
@@ -239,10 +250,11 @@ class ClusterClient:
                                 "hosts": res.hosts}
         except ClientError as e:
             out["errors"]["resources"] = str(e)
-        try:
-            out["missions"] = self.missions(timeout=self._left(deadline))
-        except ClientError as e:
-            out["errors"]["missions"] = str(e)
+        asking.join(self._left(deadline) + 1.0)  # its own requests are bounded by the deadline
+        if "missions" in missions:
+            out["missions"] = missions["missions"]
+        else:
+            out["errors"]["missions"] = missions.get("error", "the executive did not answer in time")
         return out
 
     def _left(self, deadline: float | None) -> float:
