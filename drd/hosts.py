@@ -80,7 +80,8 @@ _HOST_KEYS = ("endpoint", "roles", "cores", "drivers", "simulator", "devices", "
 _SIMULATOR_KEYS = ("ros2", "listen", "domain_id")
 _DEVICE_KEYS = ("type", "driver", "options", "driver_options", "capacity", "slice")
 _ROBOT_KEYS = ("type", "carrier", "parts", "properties")
-_SECURITY_ALLOWED = ("mode", *dict.fromkeys(k for keys in SECURITY_KEYS.values() for k in keys), "open", "roles")
+_SECURITY_ALLOWED = ("mode", *dict.fromkeys(k for keys in SECURITY_KEYS.values() for k in keys), "open", "roles",
+                     "per_host")
 #: The roles of `cluster.security.roles`, most powerful first (docs/security.md).
 ACCESS_ROLES = ("daemon", "operator", "observer")
 _PLACEMENT_KEYS = ("cpu", "memory", "instances")
@@ -115,6 +116,9 @@ class Security:
     roles: Mapping[str, tuple[str, ...]] = field(default_factory=dict, hash=False)
     #: With mode none: the operator means it to run open beyond loopback (a daemon refuses otherwise).
     open: bool = False
+    #: With mode password: each daemon authenticates as its own host's name (a line of the password file each),
+    #: and may then speak only for its own host (`drd.daemon.acl`); `user` stays the administrators' credential.
+    per_host: bool = False
 
     def role_of(self, name: str) -> str | None:
         """The role of a user (or certificate name): `daemon` for the daemons' own user, None when unknown."""
@@ -376,7 +380,7 @@ class _Parser(ConfigReader):
         mode = self.choice(data["mode"], f"{key}.mode", SecurityMode, "mode") if "mode" in data else None
         if mode is None:
             return Security()
-        for k in _SECURITY_ALLOWED[1:-2]:
+        for k in _SECURITY_ALLOWED[1:-3]:
             if k in data and k not in SECURITY_KEYS[mode]:
                 self.fail(f"{key}.{k}", f"does not apply to mode {mode}")
             elif k not in data and k in SECURITY_KEYS[mode]:
@@ -385,8 +389,12 @@ class _Parser(ConfigReader):
         is_open = data.get("open", False)
         if "open" in data and (mode is not SecurityMode.NONE or not isinstance(is_open, bool)):
             self.fail(f"{key}.open", "only `open: true` with mode none: an open cluster on a network, on purpose")
+        per_host = data.get("per_host", False)
+        if "per_host" in data and (mode is not SecurityMode.PASSWORD or not isinstance(per_host, bool)):
+            self.fail(f"{key}.per_host", "only `per_host: true` with mode password (each daemon its own user, its"
+                                         " host's name; a certificate per host is not supported yet)")
         return Security(mode, **{k: self.text(data[k], f"{key}.{k}") for k in SECURITY_KEYS[mode] if k in data},
-                        roles=roles, open=is_open is True)
+                        roles=roles, open=is_open is True, per_host=per_host is True)
 
     def access_roles(self, value: object, key: str, mode: SecurityMode) -> dict[str, tuple[str, ...]]:
         """`roles: {operator: [alice], observer: [bob]}`: each name in one role only; `none` has no identities."""

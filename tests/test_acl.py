@@ -103,3 +103,50 @@ def test_drd_start_refuses_an_open_cluster_on_a_network_before_anything_runs(tmp
                         str(tmp_path / "run")], cwd=ROOT, capture_output=True, text=True, timeout=60, check=False)
     assert r.returncode == 2 and "mode none on a network" in r.stderr and "Traceback" not in r.stderr, r.stderr
     assert not list((tmp_path / "run").rglob("*.pid"))
+
+
+PER_HOST = """\
+cluster:
+  name: lab
+  security: {mode: password, user: drd, password_file: users, per_host: true}
+hosts:
+  controller: {endpoint: tcp/127.0.0.1:7447, roles: [controller, simulator]}
+  ranger1: {endpoint: tcp/127.0.0.1:7448, roles: [worker]}
+  ranger2: {endpoint: tcp/127.0.0.1:7449, roles: [worker]}
+"""
+
+
+def test_per_host_identities_let_each_daemon_speak_only_for_its_own_host(tmp_path: Path) -> None:
+    """Issue #17: with `per_host`, a daemon's credentials are its host's, and the rules deny it every other host's
+    keys, the controller's and the simulator's unless it has those roles."""
+    from drd.daemon.security import transport
+
+    (tmp_path / "users").write_text("drd:a\ncontroller:b\nranger1:c\nranger2:d\n")
+    (tmp_path / "hosts.yaml").write_text(PER_HOST)
+    c = load_endpoints(tmp_path / "hosts.yaml")
+    acl = access_control(c)
+    assert acl is not None
+    policies = {p["subjects"][0]: set(p["rules"]) for p in acl["policies"]}
+    rules = {r["id"]: r for r in acl["rules"]}
+    subjects = {s["id"]: s["usernames"] for s in acl["subjects"]}
+    assert subjects["host-ranger1"] == ["ranger1"]
+    assert policies["host-ranger1"] == {"not-for-others-ranger1", "not-a-controller", "no-creator-calls",
+                                        "not-the-simulator"}
+    assert policies["host-controller"] == {"not-for-others-controller"}
+    others = rules["not-for-others-ranger1"]["key_exprs"]
+    assert "drd/lab/host/ranger2/**" in others and "drd/lab/host/controller" in others
+    assert not any("ranger1" in k for k in others)
+    assert {"put", "liveliness_token", "reply", "declare_queryable"} <= set(rules["not-for-others-ranger1"]["messages"])
+    assert "drd/lab/missions/run" in rules["not-a-controller"]["key_exprs"]
+    assert check_roles(c, ["drd", "controller", "ranger1", "ranger2"]) == []  # hosts' users are daemons
+    assert transport(c, daemon=True, host="ranger1").options["transport/auth/usrpwd/user"] == "ranger1"
+    assert transport(c, daemon=True, host="ranger1").options["transport/auth/usrpwd/password"] == "c"
+    assert transport(c).options["transport/auth/usrpwd/user"] == "drd"  # a client: the administrators' user
+
+
+@pytest.mark.parametrize("security", ["{mode: none, per_host: true}",
+                                      "{mode: password, user: drd, password_file: users, per_host: yes please}"])
+def test_per_host_is_for_password_clusters_only(tmp_path: Path, security: str) -> None:
+    with pytest.raises(HostsError) as e:
+        cluster_with(tmp_path, security)
+    assert any("cluster.security.per_host" in str(p) for p in e.value.problems), e.value.problems

@@ -170,7 +170,7 @@ def start(
     if problems:
         fail_all(problems, hint="see docs/drivers.md (drivers), docs/components.md (manifests), docs/worlds.md")
     try:
-        tr = transport(cluster, daemon=True)
+        tr = transport(cluster, daemon=True, host=host)
     except SecurityError as e:
         fail_all(e.problems, hint="security is configured, so drd will not start without it")
     rd = runfiles.run_dir(run_dir_opt)

@@ -24,20 +24,24 @@ from collections.abc import Iterable
 from typing import Any
 
 from drd.config import ConfigProblem
-from drd.hosts import Cluster, SecurityMode
+from drd.hosts import Cluster, Role, SecurityMode
 
 #: What only daemons may ask, and what an observer may not ask either, under `drd/<cluster>/`.
 DAEMONS_ONLY = ("host/*/creator", "sim")
 OPERATORS_ONLY = ("missions/run", "executive", "host/*/tune")
 #: What a client never sends: it publishes, serves and answers nothing.
 NEVER_FROM_CLIENTS = ["put", "delete", "declare_queryable", "reply", "liveliness_token"]
+#: What only the acting controller (or a standby) serves and publishes, and what only the simulator's host serves,
+#: under `drd/<cluster>/` (`security.per_host`).
+CONTROLLERS_ONLY = ("missions/run", "executive", "executive/**", "rcm/**", "mission/**")
+SIMULATORS_ONLY = ("sim", "world")
 
 
 def access_control(cluster: Cluster) -> dict[str, Any] | None:
     """zenoh's `access_control` for the cluster's daemons, or None when no roles are configured (then every
     authenticated peer may do everything, as before roles existed)."""
     sec = cluster.security
-    if not sec.roles or sec.mode is SecurityMode.NONE:
+    if not (sec.roles or sec.per_host) or sec.mode is SecurityMode.NONE:
         return None
     root = f"drd/{cluster.name}"
     field = "usernames" if sec.mode is SecurityMode.PASSWORD else "cert_common_names"
@@ -54,18 +58,59 @@ def access_control(cluster: Cluster) -> dict[str, Any] | None:
     roles = [role for role in grants if sec.roles.get(role)]
     subjects = [{"id": role, field: list(sec.roles[role])} for role in roles]
     policies = [{"id": f"{role}-policy", "rules": grants[role], "subjects": [role]} for role in roles]
+    if sec.per_host:
+        host_rules, host_subjects, host_policies = _per_host(cluster, root)
+        rules, subjects, policies = rules + host_rules, subjects + host_subjects, policies + host_policies
     if not policies:  # only daemons listed: nothing to restrict
         return None
     return {"enabled": True, "default_permission": "allow", "rules": rules, "subjects": subjects,
             "policies": policies}
 
 
+def _per_host(cluster: Cluster, root: str) -> tuple[list[dict[str, Any]], list[dict[str, Any]],
+                                                     list[dict[str, Any]]]:
+    """`security.per_host`: each daemon (user: its host's name) speaks for its own host only. It publishes, serves,
+    answers and declares tokens under no other host's keys (`host/<other>`, `instance/<other>`); a host that is no
+    controller serves and publishes none of the controller's keys and calls no Creator; a host that is not the
+    simulator's serves neither of its keys. So a daemon's credentials cannot fake another host's load, liveliness
+    or announcement, answer for it, or command a Creator. Where the rules apply: on every link the daemon opened
+    (zenoh's user/password authentication is one-way, `drd.daemon.acl`), so with routers on every link."""
+    sending = ["put", "delete", "declare_queryable", "reply", "liveliness_token"]
+    rules: list[dict[str, Any]] = []
+    subjects: list[dict[str, Any]] = []
+    policies: list[dict[str, Any]] = []
+    for host in cluster.hosts:
+        others = [h.name for h in cluster.hosts if h.name != host.name]
+        ids = []
+        if others:
+            keys = [k for o in others for k in (f"{root}/host/{o}", f"{root}/host/{o}/**", f"{root}/instance/{o}/**")]
+            rules.append({"id": f"not-for-others-{host.name}", "messages": sending, "flows": ["ingress"],
+                          "permission": "deny", "key_exprs": keys})
+            ids.append(f"not-for-others-{host.name}")
+        if Role.CONTROLLER not in host.roles:
+            ids += ["not-a-controller", "no-creator-calls"]
+        if Role.SIMULATOR not in host.roles:
+            ids.append("not-the-simulator")
+        subjects.append({"id": f"host-{host.name}", "usernames": [host.name]})
+        policies.append({"id": f"host-{host.name}-policy", "rules": ids, "subjects": [f"host-{host.name}"]})
+    rules += [
+        {"id": "not-a-controller", "messages": ["put", "declare_queryable", "reply"], "flows": ["ingress"],
+         "permission": "deny", "key_exprs": [f"{root}/{k}" for k in CONTROLLERS_ONLY]},
+        {"id": "no-creator-calls", "messages": ["query"], "flows": ["ingress"], "permission": "deny",
+         "key_exprs": [f"{root}/host/*/creator"]},
+        {"id": "not-the-simulator", "messages": ["declare_queryable", "reply"], "flows": ["ingress"],
+         "permission": "deny", "key_exprs": [f"{root}/{k}" for k in SIMULATORS_ONLY]},
+    ]
+    return rules, subjects, policies
+
+
 def check_roles(cluster: Cluster, users: Iterable[str]) -> list[ConfigProblem]:
     """Every user of the daemons' password file has a role (see the module); problems name the file and key."""
     sec = cluster.security
-    if not sec.roles or sec.mode is not SecurityMode.PASSWORD:
+    if not (sec.roles or sec.per_host) or sec.mode is not SecurityMode.PASSWORD:
         return []
+    hosts = {h.name for h in cluster.hosts} if sec.per_host else set()
     return [ConfigProblem(cluster.source, "cluster.security.roles",
                           f"user {u} of {sec.password_file} has no role: give it one (operator, observer) or remove"
                           " its line (a user with no role would be allowed everything)")
-            for u in users if sec.role_of(u) is None]
+            for u in users if sec.role_of(u) is None and u not in hosts]

@@ -148,7 +148,7 @@ class Daemon:
         self.cluster = config.cluster
         self.host = config.host
         self.keys = ClusterKeys(config.cluster.name)
-        self.transport = config.transport or transport(config.cluster, daemon=True)
+        self.transport = config.transport or transport(config.cluster, daemon=True, host=config.host)
         self.clock, self.wall = clock, wall
         self.digest = config_digest(config.cluster)
         self.started = wall()

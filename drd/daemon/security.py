@@ -66,10 +66,11 @@ class Transport:
         return [e for h, e in self.endpoints.items() if not self.routers or h in self.routers]
 
 
-def transport(cluster: Cluster, user: str | None = None, *, daemon: bool = False) -> Transport:
+def transport(cluster: Cluster, user: str | None = None, *, daemon: bool = False,
+              host: str | None = None) -> Transport:
     """The cluster's endpoints and zenoh options for its security mode. `user`: who a client presents itself as
     (password mode; default: `$DRD_USER`, else the daemons' user); `daemon`: a daemon's, which enforces the
-    roles of `security.roles` (`drd.daemon.acl`).
+    roles of `security.roles` (`drd.daemon.acl`); `host`: that daemon's host, its user with `security.per_host`.
 
     Raises:
         SecurityError: a file is missing, unreadable or badly formed, or an endpoint cannot carry TLS.
@@ -91,7 +92,8 @@ def transport(cluster: Cluster, user: str | None = None, *, daemon: bool = False
         return Transport(sec.mode, endpoints, routers=routers)
     if sec.mode is SecurityMode.PASSWORD:
         assert sec.user is not None and sec.password_file is not None  # parse_hosts requires both
-        who = sec.user if daemon else (user or os.environ.get(USER_ENV) or sec.user)
+        who = (host if sec.per_host and host else sec.user) if daemon else (user or os.environ.get(USER_ENV)
+                                                                              or sec.user)
         password = read_password(cluster.source, sec.password_file, who)
         unknown = check_roles(cluster, dictionary_users(sec.password_file)) if daemon else []
         if unknown:
