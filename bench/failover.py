@@ -92,7 +92,7 @@ def _mission_time(client: Any, mission: str) -> float | None:
     from drd.errors import BusFailure
 
     try:
-        missions = client.missions()
+        missions = client.missions(mission)  # that one only (`drd.paging`)
     except BusFailure:
         return None
     return next((float(m["time"]) for m in missions if m.get("id") == mission and m.get("outcome") is None

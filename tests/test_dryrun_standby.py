@@ -18,15 +18,10 @@ MISSION = "missions/corridor_surveillance.mission"
 
 
 @pytest.fixture(scope="module")
-def standby_hosts(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    """The repository's hosts.yaml with a replicated store and a second controller host, controller2 (a standby:
-    the first controller of the file acts)."""
-    text = (ROOT / "hosts.yaml").read_text()
-    text = text.replace("  world: corridor ", "  store: {etcd: [http://127.0.0.1:2379]}\n  world: corridor ", 1)
-    text = text.rstrip("\n") + "\n  controller2:\n    endpoint: tcp/127.0.0.1:7449\n    roles: [controller]\n"
-    path = tmp_path_factory.mktemp("standby") / "hosts.yaml"
-    path.write_text(text)
-    return path
+def standby_hosts() -> Path:
+    """The repository's hosts.standby.yaml: hosts.yaml with a replicated store and a second controller host,
+    controller2 (a standby: the first controller of the file acts)."""
+    return ROOT / "hosts.standby.yaml"
 
 
 def dry_run(hosts: Path, *args: str) -> tuple[int, dict[str, Any], str]:
