@@ -116,8 +116,8 @@ class Security:
     roles: Mapping[str, tuple[str, ...]] = field(default_factory=dict, hash=False)
     #: With mode none: the operator means it to run open beyond loopback (a daemon refuses otherwise).
     open: bool = False
-    #: With mode password: each daemon authenticates as its own host's name (a line of the password file each),
-    #: and may then speak only for its own host (`drd.daemon.acl`); `user` stays the administrators' credential.
+    #: Each daemon authenticates as its own host's name (mode password: a line of the password file each; mode tls:
+    #: its certificate's common name) and may then speak only for its own host (`drd.daemon.acl`).
     per_host: bool = False
 
     def role_of(self, name: str) -> str | None:
@@ -385,18 +385,19 @@ class _Parser(ConfigReader):
                 self.fail(f"{key}.{k}", f"does not apply to mode {mode}")
             elif k not in data and k in SECURITY_KEYS[mode]:
                 self.fail(f"{key}.{k}", f"required for mode {mode}")
-        roles = self.access_roles(data["roles"], f"{key}.roles", mode) if "roles" in data else {}
+        per_host = data.get("per_host", False)
+        roles = self.access_roles(data["roles"], f"{key}.roles", mode, per_host is True) if "roles" in data else {}
         is_open = data.get("open", False)
         if "open" in data and (mode is not SecurityMode.NONE or not isinstance(is_open, bool)):
             self.fail(f"{key}.open", "only `open: true` with mode none: an open cluster on a network, on purpose")
-        per_host = data.get("per_host", False)
-        if "per_host" in data and (mode is not SecurityMode.PASSWORD or not isinstance(per_host, bool)):
-            self.fail(f"{key}.per_host", "only `per_host: true` with mode password (each daemon its own user, its"
-                                         " host's name; a certificate per host is not supported yet)")
+        if "per_host" in data and (mode is SecurityMode.NONE or not isinstance(per_host, bool)):
+            self.fail(f"{key}.per_host", "only `per_host: true` with mode password or tls (each daemon its own"
+                                         " identity: its host's name as its user, or as its certificate's name)")
         return Security(mode, **{k: self.text(data[k], f"{key}.{k}") for k in SECURITY_KEYS[mode] if k in data},
                         roles=roles, open=is_open is True, per_host=per_host is True)
 
-    def access_roles(self, value: object, key: str, mode: SecurityMode) -> dict[str, tuple[str, ...]]:
+    def access_roles(self, value: object, key: str, mode: SecurityMode,
+                     per_host: bool = False) -> dict[str, tuple[str, ...]]:
         """`roles: {operator: [alice], observer: [bob]}`: each name in one role only; `none` has no identities."""
         if mode is SecurityMode.NONE:
             self.fail(key, "roles need identities: use mode password (user names) or tls (certificate names)")
@@ -415,7 +416,7 @@ class _Parser(ConfigReader):
                     self.fail(f"{key}.{role}", f"{n} is already a{'n' if seen[n][0] in 'aeiou' else ''} {seen[n]}")
                 seen[n] = role
             out[role] = tuple(names)
-        if mode is SecurityMode.TLS and not out.get("daemon"):
+        if mode is SecurityMode.TLS and not out.get("daemon") and not per_host:
             self.fail(f"{key}.daemon", "with tls, list the daemons' certificate names: they may do everything")
         return out
 

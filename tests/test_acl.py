@@ -146,7 +146,7 @@ def test_per_host_identities_let_each_daemon_speak_only_for_its_own_host(tmp_pat
 
 @pytest.mark.parametrize("security", ["{mode: none, per_host: true}",
                                       "{mode: password, user: drd, password_file: users, per_host: yes please}"])
-def test_per_host_is_for_password_clusters_only(tmp_path: Path, security: str) -> None:
+def test_per_host_needs_identities(tmp_path: Path, security: str) -> None:
     with pytest.raises(HostsError) as e:
         cluster_with(tmp_path, security)
     assert any("cluster.security.per_host" in str(p) for p in e.value.problems), e.value.problems

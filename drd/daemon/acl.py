@@ -59,7 +59,7 @@ def access_control(cluster: Cluster) -> dict[str, Any] | None:
     subjects = [{"id": role, field: list(sec.roles[role])} for role in roles]
     policies = [{"id": f"{role}-policy", "rules": grants[role], "subjects": [role]} for role in roles]
     if sec.per_host:
-        host_rules, host_subjects, host_policies = _per_host(cluster, root)
+        host_rules, host_subjects, host_policies = _per_host(cluster, root, field)
         rules, subjects, policies = rules + host_rules, subjects + host_subjects, policies + host_policies
     if not policies:  # only daemons listed: nothing to restrict
         return None
@@ -67,14 +67,16 @@ def access_control(cluster: Cluster) -> dict[str, Any] | None:
             "policies": policies}
 
 
-def _per_host(cluster: Cluster, root: str) -> tuple[list[dict[str, Any]], list[dict[str, Any]],
-                                                     list[dict[str, Any]]]:
-    """`security.per_host`: each daemon (user: its host's name) speaks for its own host only. It publishes, serves,
+def _per_host(cluster: Cluster, root: str, field: str) -> tuple[list[dict[str, Any]], list[dict[str, Any]],
+                                                                 list[dict[str, Any]]]:
+    """`security.per_host`: each daemon (its user, or its certificate's common name, `field`: its host's name)
+    speaks for its own host only. It publishes, serves,
     answers and declares tokens under no other host's keys (`host/<other>`, `instance/<other>`); a host that is no
     controller serves and publishes none of the controller's keys and calls no Creator; a host that is not the
     simulator's serves neither of its keys. So a daemon's credentials cannot fake another host's load, liveliness
-    or announcement, answer for it, or command a Creator. Where the rules apply: on every link the daemon opened
-    (zenoh's user/password authentication is one-way, `drd.daemon.acl`), so with routers on every link."""
+    or announcement, answer for it, or command a Creator. Where the rules apply: with tls on every link (mutual);
+    with a password on every link the daemon opened (that authentication is one-way), so with routers on every
+    link."""
     sending = ["put", "delete", "declare_queryable", "reply", "liveliness_token"]
     rules: list[dict[str, Any]] = []
     subjects: list[dict[str, Any]] = []
@@ -91,7 +93,7 @@ def _per_host(cluster: Cluster, root: str) -> tuple[list[dict[str, Any]], list[d
             ids += ["not-a-controller", "no-creator-calls"]
         if Role.SIMULATOR not in host.roles:
             ids.append("not-the-simulator")
-        subjects.append({"id": f"host-{host.name}", "usernames": [host.name]})
+        subjects.append({"id": f"host-{host.name}", field: [host.name]})
         policies.append({"id": f"host-{host.name}-policy", "rules": ids, "subjects": [f"host-{host.name}"]})
     rules += [
         {"id": "not-a-controller", "messages": ["put", "declare_queryable", "reply"], "flows": ["ingress"],
