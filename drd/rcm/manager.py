@@ -102,6 +102,7 @@ class ResourceManager:
         self._claims_memo: dict[tuple[int, bool, tuple[NeedRequest, ...]],
                                 tuple[list[Solution], dict[str, float], frozenset[str]]] = {}
         self._interned: dict[frozenset[str], frozenset[str]] = {}  # `_claim_set`'s shared sets
+        self._needs: dict[tuple[NeedRequest, ...], tuple[NeedRequest, ...]] = {}  # `_canonical`'s shared tuples
         #: `_blockers_of`' memo of the holders in the way of a claims' demand: (registry version, demand, them)
         self._held_memo: tuple[int, dict[str, float] | None, frozenset[str]] = (-1, None, frozenset())
 
@@ -183,7 +184,7 @@ class ResourceManager:
         """Ask for all needs of a behavior: `Granted`, `Waiting` or `Unsatisfiable` (+ effects)."""
         out = self._begin(now)
         self._check_new_holder(request.holder)
-        self._admit(request, now, out)
+        self._admit(self._canonical(request), now, out)
         return self._finish(now, out)
 
     def reserve(self, request: Request, now: float, at: float) -> tuple[Decision, ...]:
@@ -194,6 +195,7 @@ class ResourceManager:
         """
         out = self._begin(now)
         self._check_new_holder(request.holder)
+        request = self._canonical(request)
         problem = diagnose(request.needs, self._reg)
         if at <= now or problem is not None:
             self._admit(request, now, out, reserved_at=at)
@@ -407,10 +409,11 @@ class ResourceManager:
             for unit, quantity in solution.totals.items():
                 demand[unit] = max(quantity, demand.get(unit, 0.0))
         if capped:  # too many assignments to list: claim every unit of the need types
-            for need in wait.request.needs:
-                for candidate in self._reg.candidates(need.type):
-                    for unit in units_of(candidate):
-                        demand.setdefault(unit, need.quantity)
+            every: dict[str, float] = {}
+            for need in reversed(wait.request.needs):  # the first need of a type sets the quantity
+                every.update(dict.fromkeys(self._reg.units_of_type(need.type), need.quantity))
+            every.update(demand)  # an assignment's quantity, where there is one
+            return every
         return demand
 
     def _reconsider(self, holders: Iterable[str], now: float, out: list[Decision], extra: set[str]) -> None:
@@ -420,16 +423,27 @@ class ResourceManager:
         def touch(claims: frozenset[str]) -> None:
             seen.setdefault(id(claims), claims)
 
+        # Waiters of one behavior have one needs tuple (`_canonical`): their alternatives and claims are found
+        # once here, and each of a thousand waiters costs a dict lookup and an identity test.
+        shared: dict[int, tuple[tuple[NeedRequest, ...], list[Solution], frozenset[str]]] = {}
         for holder in holders:
             wait = self._queue.waits[holder]
-            alts, capped = self._reg.alternatives(wait.request.needs, wait.given, self.max_alternatives)
+            needs = wait.request.needs
             touch(wait.claims)
+            found = None if wait.given else shared.get(id(needs))
+            if found is not None and found[0] is needs:
+                alts, claims = found[1], found[2]
+            else:
+                alts, capped = self._reg.alternatives(needs, wait.given, self.max_alternatives)
+                claims = self._claim_set(wait, alts, capped) if alts else frozenset()
+                if not wait.given:
+                    shared[id(needs)] = (needs, alts, claims)
             if not alts:
                 self._queue.remove(wait)
-                need, reason = diagnose(wait.request.needs, self._reg, wait.given) or ("", "")
+                need, reason = diagnose(needs, self._reg, wait.given) or ("", "")
                 out.append(Unsatisfiable(holder, need, reason))
                 continue
-            self._queue.reclaim(wait, self._claim_set(wait, alts, capped))
+            self._queue.reclaim(wait, claims)
             touch(wait.claims)
         self._dispatch(extra, now, out, tuple(seen.values()))
 
@@ -722,6 +736,18 @@ class ResourceManager:
     def _rank(self, holder: str) -> tuple[tuple[int, int], int]:
         wait = self._queue.waits[holder]
         return wait.request.rank, wait.since
+
+    def _canonical(self, request: Request) -> Request:
+        """The request with the needs tuple of an equal earlier request, if any: equal needs behave alike (a
+        `where` equal to another reads nothing of its node), and one object lets `_reconsider` tell the waiters
+        of a behavior alike by identity rather than by hashing their needs each time."""
+        needs = self._needs.get(request.needs)
+        if needs is None:
+            if len(self._needs) > 1024:
+                self._needs.clear()
+            self._needs[request.needs] = request.needs
+            return request
+        return request if needs is request.needs else dataclasses.replace(request, needs=needs)
 
     def _check_new_holder(self, holder: str) -> None:
         if holder in self._holds or holder in self._queue or holder in self._pending:

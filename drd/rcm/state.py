@@ -14,7 +14,7 @@ from heapq import heappop, heappush
 from typing import Any
 
 from drd.rcm.deadlock import ancestors
-from drd.rcm.model import Aggregate, Candidate, NeedRequest, Request, Unit
+from drd.rcm.model import Aggregate, Candidate, NeedRequest, Request, Unit, units_of
 from drd.rcm.solver import EPS, Solution, alternatives, demand_of
 
 #: Queue order: (mission priority, priority, 0 for a due reservation else 1, reservation time, request order).
@@ -131,6 +131,7 @@ class Registry:
         self._by_type: dict[str, list[str]] = {}
         self._demands: dict[tuple[str, float], dict[str, float]] = {}
         self._typed: dict[str, tuple[Candidate, ...]] = {}
+        self._typed_units: dict[str, tuple[str, ...]] = {}
         self._alternatives: dict[tuple[NeedRequest, ...], tuple[list[Solution], bool]] = {}
 
     def candidates(self, type: str) -> tuple[Candidate, ...]:
@@ -138,6 +139,14 @@ class Registry:
         found = self._typed.get(type)
         if found is None:
             found = self._typed[type] = tuple(self.candidate(cid) for cid in self._by_type.get(type, ()))
+        return found
+
+    def units_of_type(self, type: str) -> tuple[str, ...]:
+        """The units of the candidates of a type, once each, in candidate order (cached like `candidates`)."""
+        found = self._typed_units.get(type)
+        if found is None:
+            units = dict.fromkeys(u for c in self.candidates(type) for u in units_of(c))
+            found = self._typed_units[type] = tuple(units)
         return found
 
     def unit(self, unit_id: str) -> Unit:
@@ -188,6 +197,7 @@ class Registry:
         self.version += 1
         insort(self._by_type.setdefault(candidate.type, []), candidate.id)
         self._typed.pop(candidate.type, None)
+        self._typed_units.pop(candidate.type, None)
         self._alternatives.clear()
 
     def replace(self, candidate: Candidate) -> None:
@@ -218,6 +228,7 @@ class Registry:
         self.full.discard(cid)
         self._demands.clear()
         self._typed.pop(candidate.type, None)
+        self._typed_units.pop(candidate.type, None)
         self._alternatives.clear()
 
     def describe(self) -> dict[str, Any]:

@@ -100,6 +100,8 @@ class ResourcePool:
         #: property -> (value -> ids with that string value, every id with a string value): `having`'s index,
         #: dropped on any change of the resources or their properties
         self._index: dict[str, tuple[dict[str, set[str]], set[str]]] = {}
+        #: `having`'s positions per (candidates tuple, property): (the tuple, id -> position, positions kept always)
+        self._order: dict[tuple[int, str], tuple[tuple[Candidate, ...], dict[str, int], set[int]]] = {}
 
     def live(self, robot: str, key: str) -> float | None:
         """A robot's live value (`x`, `y`, `heading`, `battery`), or None when nobody can tell."""
@@ -136,6 +138,7 @@ class ResourcePool:
     def add(self, resources: Iterable[Candidate], now: float) -> None:
         """Register units before the aggregates that use them (decisions go to the broker's listeners)."""
         self._index.clear()
+        self._order.clear()
         for c in sorted(resources, key=lambda c: isinstance(c, Aggregate)):
             self.candidates[c.id] = c
             self._props[c.id] = dict(c.properties)
@@ -157,6 +160,7 @@ class ResourcePool:
     def set_property(self, rid: str, key: str, value: object, now: float) -> None:
         """Change the Static Dependency Database (a launched Scout leaves its magazine)."""
         self._index.clear()
+        self._order.clear()
         self._props.setdefault(rid, {})[key] = value
         self.broker.set_property(rid, key, value, now)
 
@@ -179,8 +183,23 @@ class ResourcePool:
                     known.add(rid)
             index = self._index[prop] = (buckets, known)
         match, known = index[0].get(value, set()), index[1]
-        return [c for c in cands if c.id in match or c.id not in known
-                or (isinstance(c, Aggregate) and prop in c.parts)]
+        if not isinstance(cands, tuple):
+            return [c for c in cands if c.id in match or c.id not in known
+                    or (isinstance(c, Aggregate) and prop in c.parts)]
+        # The manager's candidates are one tuple per type: their positions, and those the index cannot rule out,
+        # are found once per change, so a Ranger's 19 Scouts cost 19 lookups, not a pass over 950.
+        key = (id(cands), prop)
+        order = self._order.get(key)
+        if order is None or order[0] is not cands:
+            if len(self._order) > 64:
+                self._order.clear()
+            at = {c.id: i for i, c in enumerate(cands)}
+            always = {i for i, c in enumerate(cands)
+                      if c.id not in known or (isinstance(c, Aggregate) and prop in c.parts)}
+            order = self._order[key] = (cands, at, always)
+        at, always = order[1], order[2]
+        picked = always.union(at[rid] for rid in match if rid in at)
+        return [cands[i] for i in sorted(picked)]
 
     def view(self, rid: str) -> ResourceView | None:
         c = self.candidates.get(rid)
