@@ -271,11 +271,11 @@ class _FakeClient:
         self.bus = _Bus(self)
         self.keys = _Keys()
 
-    def missions(self) -> list[dict[str, Any]]:
+    def missions(self, mission: str = "", **_options: Any) -> list[dict[str, Any]]:
         self.polls += 1
         done = self.polls >= self.polls_until_done
         return [{"id": m, "outcome": "success" if done else None, "reason": "", "time": 100.0 + 2.5 * self.polls}
-                for m in self.running]
+                for m in self.running if not mission or m == mission]
 
 
 def _capture(monkeypatch: pytest.MonkeyPatch, module: Any, width: int = 80) -> io.StringIO:
