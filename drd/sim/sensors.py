@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import math
 import random
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -172,14 +173,49 @@ class RayCaster:
 
 
 def scan(rays: RayCaster, origin: Point, heading: float, n: int, max_range: float, fov: float,
-         group: int, rng: random.Random, sigma: float) -> list[float]:
-    """Distances along `n` beams to the first shape of any kind; `max_range` exactly when nothing is hit."""
-    alphas = rays.fan(origin, beam_angles(heading, n, fov), max_range, pymunk.ShapeFilter(group=group))
+         group: int, rng: random.Random, sigma: float, still: RayCaster | None = None,
+         near: Sequence[tuple[float, float, float, float]] = ()) -> list[float]:
+    """Distances along `n` beams to the first shape of any kind; `max_range` exactly when nothing is hit.
+
+    With `still` (the same static shapes, alone) and `near` (the bounding boxes of every other shape a beam
+    could meet), a beam that passes no box is cast in `still`: the same walls give the same distance."""
+    angles = beam_angles(heading, n, fov)
+    flt = pymunk.ShapeFilter(group=group)
+    if still is None:
+        alphas = rays.fan(origin, angles, max_range, flt)
+    else:
+        alphas = still.fan(origin, angles, max_range, flt)
+        shadows = _shadows(origin, near)
+        if shadows is None:
+            alphas = rays.fan(origin, angles, max_range, flt)
+        elif shadows:
+            ox, oy = origin
+            for i, a in enumerate(angles):
+                if any(abs(wrap(a - mid)) <= half for mid, half in shadows):
+                    alphas[i] = rays.first(origin, (ox + max_range * math.cos(a), oy + max_range * math.sin(a)),
+                                           0.0, flt)
     if not sigma:
         return [max_range if a is None else min(a * max_range, max_range) for a in alphas]
     noise = iter(gaussians(rng, len(alphas) - alphas.count(None), sigma)).__next__  # one sample per hit, in order
     return [max_range if a is None else 0.0 if (d := a * max_range + noise()) < 0.0 else max_range if d > max_range
             else d for a in alphas]
+
+
+def _shadows(origin: Point, boxes: Sequence[tuple[float, float, float, float]],
+             pad: float = 1e-4) -> list[tuple[float, float]] | None:
+    """The directions (centre, half width, radians) in which a ray from `origin` may pass through one of the
+    boxes (left, bottom, right, top), widened by `pad`; None when `origin` is in (or next to) one of them."""
+    ox, oy = origin
+    out = []
+    for left, bottom, right, top in boxes:
+        left, bottom, right, top = left - 1e-6, bottom - 1e-6, right + 1e-6, top + 1e-6
+        if left <= ox <= right and bottom <= oy <= top:
+            return None
+        centre = math.atan2((bottom + top) / 2 - oy, (left + right) / 2 - ox)
+        spread = [wrap(math.atan2(y - oy, x - ox) - centre) for x in (left, right) for y in (bottom, top)]
+        low, high = min(spread), max(spread)
+        out.append((centre + (low + high) / 2, (high - low) / 2 + pad))
+    return out
 
 
 def gaussians(rng: random.Random, n: int, sigma: float) -> list[float]:
