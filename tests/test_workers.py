@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import math
 import os
+import time
 import signal
 import subprocess
 import sys
@@ -464,3 +465,25 @@ def test_a_host_refuses_the_calls_of_a_controller_older_than_one_it_heard(creato
     assert gate is not None and list(gate.holders) == [f"{MISSION}/M/A"], "the old controller's grant was ignored"
     again = creator.handle(ComponentCall("step", MISSION, "M/A", now=1.0, term=newer))
     assert not again.error, again  # the current controller goes on
+
+
+def test_a_pool_keeps_idle_workers_only_while_the_host_has_work(catalog_: Catalog) -> None:
+    """Issue #15 (lighter daemons): a cold pool starts nothing; a take or `warm()` makes it keep `size` idle
+    workers, and `keep_warm` seconds after the last of them it stops them (by pid, reaped)."""
+    from drd.daemon.creator import behavior_modules
+
+    p = WorkerPool(2, preload=behavior_modules(catalog_), call_timeout=10.0, keep_warm=1.0, warm=False)
+    try:
+        time.sleep(0.3)
+        assert p.pids() == [] and p.idle() == 0  # cold: not one process
+        taken = p.take(60.0)
+        assert p.wait_ready(60.0) and p.idle() == 2  # warm: ready for the next placements
+        idle = [pid for pid in p.pids() if pid != taken.pid]
+        deadline = time.monotonic() + 30.0
+        while p.idle() and time.monotonic() < deadline:  # bounded: a hang guard, not a measure
+            time.sleep(0.05)
+        assert p.idle() == 0 and not [pid for pid in idle if _alive(pid)]
+        assert taken.alive and p.pids() == [taken.pid]  # a taken worker is its Creator's until released
+        p.release(taken)
+    finally:
+        p.close()

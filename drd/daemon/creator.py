@@ -183,7 +183,9 @@ class Creator:
         self._command_errors: list[tuple[str, str]] = []  # (instance key, error) of setpoints that raised
         self._lock = threading.Lock()
         self._own_pool = pool is None
-        self.pool = pool if pool is not None else WorkerPool(_pool_size(workers), preload=behavior_modules(catalog))
+        # cold until a world starts or a component is placed here: an idle daemon runs no worker processes
+        self.pool = pool if pool is not None else WorkerPool(_pool_size(workers), preload=behavior_modules(catalog),
+                                                             warm=False)
         self._workers: dict[int, Worker] = {}  # the processes taken from the pool for the missions, by pid
         self._on_change = on_change
         self._dirty = False
@@ -726,8 +728,10 @@ class Creator:
 
     def _drivers_for(self, world: str, generation: int) -> Any:
         """This host's drivers and their gates for the world the controller runs (built again when the world is
-        reset: a new world, or the same one restarted for a mission that runs alone)."""
+        reset: a new world, or the same one restarted for a mission that runs alone). A new world warms the worker
+        pool: the mission's components are placed in the next moments."""
         if self._drivers is None or self._generation != (world, generation):
+            self.pool.warm()
             if self._make_drivers is not None:
                 self._drivers = self._make_drivers(world)
                 self._guard_gates()

@@ -230,7 +230,8 @@ class Daemon:
 
             self._become_controller(bus, SqliteJournal(self.config.journal) if self.config.journal else None, None)
         self._declared.append(bus.watch_tokens(keys.hosts, self._on_token, history=True))
-        if not self.creator.pool.wait_ready():  # up only once a component can be placed here in milliseconds
+        takes = Role.WORKER in roles or not any(Role.WORKER in h.roles for h in self.cluster.hosts)
+        if takes and not self.creator.pool.wait_ready():  # up once a component can be placed here in milliseconds
             log.warning("the Creator's worker processes are not all ready yet: the first starts here may be slow")
         self._token = bus.declare_token(keys.host(me))
         now = self.clock()

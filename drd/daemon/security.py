@@ -28,7 +28,7 @@ from typing import Any
 
 from drd.config import ConfigError, ConfigProblem
 from drd.daemon.acl import access_control, check_roles
-from drd.hosts import Cluster, Role, SecurityMode, check_files
+from drd.hosts import Cluster, Role, Security, SecurityMode, check_files
 
 #: The user a client presents itself as in password mode (`missionctl` on an operator's machine).
 USER_ENV = "DRD_USER"
@@ -92,8 +92,7 @@ def transport(cluster: Cluster, user: str | None = None, *, daemon: bool = False
         return Transport(sec.mode, endpoints, routers=routers)
     if sec.mode is SecurityMode.PASSWORD:
         assert sec.user is not None and sec.password_file is not None  # parse_hosts requires both
-        who = (host if sec.per_host and host else sec.user) if daemon else (user or os.environ.get(USER_ENV)
-                                                                              or sec.user)
+        who = _user(sec, user, host if daemon else None, daemon)
         password = read_password(cluster.source, sec.password_file, who)
         unknown = check_roles(cluster, dictionary_users(sec.password_file)) if daemon else []
         if unknown:
@@ -127,6 +126,15 @@ def transport(cluster: Cluster, user: str | None = None, *, daemon: bool = False
         "transport/link/tls/connect_private_key": sec.key,
         "transport/link/tls/enable_mtls": True,
     })
+
+
+def _user(sec: Security, user: str | None, host: str | None, daemon: bool) -> str:
+    """Who a session presents itself as: a daemon its host (`per_host`) or the daemons' user; a client `user`,
+    else `$DRD_USER`, else the daemons' user."""
+    assert sec.user is not None  # mode password requires it
+    if daemon:
+        return host if sec.per_host and host else sec.user
+    return user or os.environ.get(USER_ENV) or sec.user
 
 
 #: The PEM blocks zenoh looks for in each TLS file (rustls_pemfile): certificates, or an unencrypted key.

@@ -7,7 +7,10 @@ itself: the catalog check, the drivers, their fencing (`drd.runtime.fence.Fenced
 arbitration of actuator commands and the simulator.
 
 - `WorkerPool` keeps `size` idle workers started ahead of time (default 2, `DRD_WORKERS`) and refills in a
-  background thread, so placing an instance costs a pipe round trip, not a process start. Workers come from
+  background thread, so placing an instance costs a pipe round trip, not a process start, but only while the
+  host has work: the pool is **warm** from a `take` or a `warm()` (the Creator's, when a world starts) until
+  `keep_warm` seconds after the last of them, then its idle workers are stopped. An idle daemon has none, and one
+  that never runs a component (the controller, on its own host) never starts the fork server. Workers come from
   a `multiprocessing` **forkserver**: the daemon holds zenoh threads and must never fork; the fork server is a
   fresh single-threaded interpreter that imports the behavior modules once (`preload`), so a refill is a
   fork of a warm process (a few ms) and a first placement finds its module already imported.
@@ -78,8 +81,11 @@ from drd.errors import ComponentFailure
 
 log = logging.getLogger("drd.daemon.workers")
 
-#: Idle workers kept ready (`DRD_WORKERS` overrides it for a daemon).
+#: Idle workers kept ready while the host has work (`DRD_WORKERS` overrides it for a daemon).
 DEFAULT_SIZE = 2
+#: Seconds idle workers are kept after the last `take` or `warm()`: a mission's components start and stop within
+#: it; a daemon with no mission frees them (about 7 MB each) after it.
+KEEP_WARM = 60.0
 #: Seconds a worker may take to send its next message during a call before it is killed. Below the
 #: executive's 1 s per call (`drd.daemon.missions.CALL_TIMEOUT`): a component stuck in a loop fails its
 #: state with a clear error instead of making its whole host look lost.
@@ -220,12 +226,14 @@ class WorkerPool:
     """
 
     def __init__(self, size: int = DEFAULT_SIZE, *, preload: Iterable[str] = (), call_timeout: float = CALL_TIMEOUT,
-                 method: str = "forkserver") -> None:
+                 method: str = "forkserver", keep_warm: float = KEEP_WARM, warm: bool = True) -> None:
         global _open_pools
         if size < 0:
             raise ValueError(f"pool size must be >= 0, not {size}")
         self.size = size
         self.call_timeout = call_timeout
+        self.keep_warm = keep_warm
+        self._warm_until = time.monotonic() + keep_warm if warm else 0.0  # idle workers are kept until then
         self._ctx: Any = multiprocessing.get_context(method)
         if method == "forkserver":
             self._ctx.set_forkserver_preload(_preload(preload))
@@ -240,11 +248,18 @@ class WorkerPool:
         self._thread = threading.Thread(target=self._refill, name="drd-workers", daemon=True)
         self._thread.start()
 
+    def warm(self) -> None:
+        """Keep `size` idle workers from now until `keep_warm` seconds after the last call (starting them now)."""
+        with self._cond:
+            self._warm_until = time.monotonic() + self.keep_warm
+            self._cond.notify_all()
+
     def take(self, timeout: float = START_TIMEOUT) -> Worker:
         """An idle worker (started now if none is ready); the pool starts another in the background."""
         with self._cond:
             if self._closed:
                 raise RuntimeError("the worker pool is closed")
+            self._warm_until = time.monotonic() + self.keep_warm
             while self._idle:
                 w = self._idle.popleft()
                 if w.alive:
@@ -275,7 +290,8 @@ class WorkerPool:
             return [pid for pid, w in self._workers.items() if w.alive]
 
     def wait_ready(self, timeout: float = START_TIMEOUT) -> bool:
-        """Block until `size` workers are idle (bounded): for benches and tests."""
+        """Warm the pool and block until `size` workers are idle (bounded): for benches and tests."""
+        self.warm()
         deadline = time.monotonic() + timeout
         with self._cond:
             while sum(1 for w in self._idle if w.alive) < self.size:
@@ -333,11 +349,24 @@ class WorkerPool:
     def _refill(self) -> None:
         failures = 0
         while True:
+            idle: list[Worker] = []
             with self._cond:
-                while not self._closed and sum(1 for w in self._idle if w.alive) >= self.size:
-                    self._cond.wait()
+                while not self._closed:
+                    left = self._warm_until - time.monotonic()
+                    if left <= 0 and self._idle:  # nothing taken for `keep_warm` s: the idle workers go
+                        idle = [self._idle.popleft() for _ in range(len(self._idle))]
+                        for w in idle:
+                            self._forget(w)
+                        break
+                    if left > 0 and sum(1 for w in self._idle if w.alive) < self.size:
+                        break
+                    self._cond.wait(left if left > 0 else None)
                 if self._closed:
                     return
+            if idle:
+                for w in idle:  # outside the condition: a kill reaps, which may take a moment
+                    w.kill()
+                continue
             try:
                 w = self._spawn()
             except Exception as e:  # keep the daemon serving; try again a little later
