@@ -49,7 +49,6 @@ import signal
 import sys
 import threading
 import time
-import warnings
 from collections.abc import Iterable, Sequence
 from multiprocessing.connection import Connection
 from multiprocessing.process import BaseProcess
@@ -92,9 +91,11 @@ KEEP_WARM = 60.0
 CALL_TIMEOUT = 0.8
 #: Seconds a new worker may take to say hello.
 START_TIMEOUT = 20.0
-# A worker re-runs the daemon's `-m` main module as `__mp_main__` although the fork server preloaded it (on
-# purpose: it is cheap then); runpy warns about exactly that, once per worker, in every daemon's log.
-warnings.filterwarnings("ignore", message=r".* found in sys\.modules after import of package", category=RuntimeWarning)
+#: A worker re-runs the daemon's `-m` main module as `__mp_main__` although the fork server preloaded it (on
+#: purpose: it is cheap then); runpy warns about exactly that, once per worker, in every daemon's log. The fork
+#: server is started with this `-W` option (multiprocessing passes `sys.warnoptions` to the interpreters it
+#: starts), so only runpy's RuntimeWarnings, and only in those processes, are silenced.
+RUNPY_QUIET = "ignore::RuntimeWarning:runpy"
 
 #: Modules every worker needs, imported once by the fork server.
 BASE_PRELOAD = ("drd.daemon.workers", "drd.runtime.component", "drd.runtime.records", "drd.hw.interfaces")
@@ -237,6 +238,8 @@ class WorkerPool:
         self._ctx: Any = multiprocessing.get_context(method)
         if method == "forkserver":
             self._ctx.set_forkserver_preload(_preload(preload))
+            if RUNPY_QUIET not in sys.warnoptions:  # read when the fork server starts (see RUNPY_QUIET)
+                sys.warnoptions.append(RUNPY_QUIET)
         self._idle: collections.deque[Worker] = collections.deque()
         self._workers: dict[int, Worker] = {}  # every live worker of ours, idle or taken
         self._cond = threading.Condition()
