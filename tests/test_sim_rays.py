@@ -78,4 +78,20 @@ def test_shadows_cover_every_beam_through_a_box() -> None:
             continue
         px, py = rng.uniform(box4[0], box4[2]), rng.uniform(box4[1], box4[3])
         a = math.atan2(py - origin[1], px - origin[0]) + rng.choice([0.0, 2 * math.pi, -2 * math.pi])
-        assert any(abs(sensors.wrap(a - mid)) <= half for mid, half in shadows)
+        assert any(abs(sensors.wrap(a - mid)) <= half for mid, half, _ in shadows)
+        assert math.hypot(px - origin[0], py - origin[1]) >= min(d for _, _, d in shadows)
+
+
+@settings(max_examples=300, deadline=None)
+@given(st.floats(-10, 10), st.integers(1, 400), st.sampled_from([0.5, math.pi, 2 * math.pi]),
+       st.lists(st.tuples(st.floats(-10, 10), st.floats(0, 1.5)), max_size=6))
+def test_shaded_beams_are_every_beam_in_a_shadow(heading: float, n: int, fov: float,
+                                                 shadows: list[tuple[float, float]]) -> None:
+    """`_shaded`, by index arithmetic, keeps every beam the plain test puts in a shadow, with its nearest one."""
+    angles = sensors.beam_angles(heading, n, fov)
+    far = [(mid, half, float(k)) for k, (mid, half) in enumerate(shadows)]
+    shaded = dict(sensors._shaded(angles, far))
+    for i, a in enumerate(angles):
+        within = [d for mid, half, d in far if abs(sensors.wrap(a - mid)) <= half]
+        if within:
+            assert shaded[i] <= min(within)

@@ -181,19 +181,18 @@ def scan(rays: RayCaster, origin: Point, heading: float, n: int, max_range: floa
     could meet), a beam that passes no box is cast in `still`: the same walls give the same distance."""
     angles = beam_angles(heading, n, fov)
     flt = pymunk.ShapeFilter(group=group)
-    if still is None:
+    shadows = _shadows(origin, near) if still is not None else None
+    if still is None or shadows is None:
         alphas = rays.fan(origin, angles, max_range, flt)
     else:
         alphas = still.fan(origin, angles, max_range, flt)
-        shadows = _shadows(origin, near)
-        if shadows is None:
-            alphas = rays.fan(origin, angles, max_range, flt)
-        elif shadows:
-            ox, oy = origin
-            for i, a in enumerate(angles):
-                if any(abs(wrap(a - mid)) <= half for mid, half in shadows):
-                    alphas[i] = rays.first(origin, (ox + max_range * math.cos(a), oy + max_range * math.sin(a)),
-                                           0.0, flt)
+        # A beam is cast again, among the moving shapes too, only if it points at one's box and meets no wall
+        # before reaching it: a box farther than the wall cannot change the first hit.
+        shaded = [i for i, near_by in _shaded(angles, shadows)
+                  if (alpha := alphas[i]) is None or alpha * max_range >= near_by - 1e-6]
+        if shaded:
+            for i, alpha in zip(shaded, rays.fan(origin, [angles[i] for i in shaded], max_range, flt), strict=True):
+                alphas[i] = alpha
     if not sigma:
         return [max_range if a is None else min(a * max_range, max_range) for a in alphas]
     noise = iter(gaussians(rng, len(alphas) - alphas.count(None), sigma)).__next__  # one sample per hit, in order
@@ -202,9 +201,10 @@ def scan(rays: RayCaster, origin: Point, heading: float, n: int, max_range: floa
 
 
 def _shadows(origin: Point, boxes: Sequence[tuple[float, float, float, float]],
-             pad: float = 1e-4) -> list[tuple[float, float]] | None:
+             pad: float = 1e-4) -> list[tuple[float, float, float]] | None:
     """The directions (centre, half width, radians) in which a ray from `origin` may pass through one of the
-    boxes (left, bottom, right, top), widened by `pad`; None when `origin` is in (or next to) one of them."""
+    boxes (left, bottom, right, top), widened by `pad`, with the box's distance from `origin`; None when
+    `origin` is in (or next to) one of them."""
     ox, oy = origin
     out = []
     for left, bottom, right, top in boxes:
@@ -214,8 +214,33 @@ def _shadows(origin: Point, boxes: Sequence[tuple[float, float, float, float]],
         centre = math.atan2((bottom + top) / 2 - oy, (left + right) / 2 - ox)
         spread = [wrap(math.atan2(y - oy, x - ox) - centre) for x in (left, right) for y in (bottom, top)]
         low, high = min(spread), max(spread)
-        out.append((centre + (low + high) / 2, (high - low) / 2 + pad))
+        distance = math.hypot(max(left - ox, 0.0, ox - right), max(bottom - oy, 0.0, oy - top))
+        out.append((centre + (low + high) / 2, (high - low) / 2 + pad, distance))
     return out
+
+
+def _shaded(angles: list[float], shadows: list[tuple[float, float, float]]) -> list[tuple[int, float]]:
+    """The indexes of the evenly spaced `angles` within a shadow (centre, half width, distance), in order, and
+    a beam either side of each (a superset, computed per shadow rather than per beam and shadow), each with the
+    distance of the nearest shadow it is in."""
+    n = len(angles)
+    if not shadows or n == 0:
+        return []
+    if n == 1:
+        near = [d for mid, half, d in shadows if abs(wrap(angles[0] - mid)) <= half]
+        return [(0, min(near))] if near else []
+    start, step = angles[0], (angles[-1] - angles[0]) / (n - 1)
+    if step <= 0:
+        return [(i, min(d for _, _, d in shadows)) for i in range(n)]
+    picked: dict[int, float] = {}
+    for mid, half, distance in shadows:
+        offset = (mid - start) % _TAU
+        for centre in (offset - _TAU, offset, offset + _TAU):
+            low, high = math.floor((centre - half) / step) - 1, math.ceil((centre + half) / step) + 1
+            for i in range(max(low, 0), min(high, n - 1) + 1):
+                if distance < picked.get(i, math.inf):
+                    picked[i] = distance
+    return sorted(picked.items())
 
 
 def gaussians(rng: random.Random, n: int, sigma: float) -> list[float]:
