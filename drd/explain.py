@@ -217,7 +217,7 @@ def _active(records: Iterator[rec.Record], waiting: set[str]) -> list[dict[str, 
     def state(path: str) -> str:
         if path in waiting:
             return "waiting"
-        frozen = any(path == s or path.startswith((s + "/", s + "[")) for s in suspended)
+        frozen = bool(suspended) and (path in suspended or not suspended.isdisjoint(_owners(path)))
         return "suspended" if frozen else "running"
 
     return [{"path": p, "since": round(active[p], 6), "state": state(p)} for p in _leaves(active)]
@@ -253,6 +253,13 @@ def _name(path: str) -> str:
 
 
 def _leaves(paths: Iterator[str] | dict[str, Any]) -> list[str]:
-    """The paths with no other path below them, in their order."""
+    """The paths with no other path below them, in their order: those that are no other's `_owners` (one pass
+    over each path's characters rather than every pair: a 1,000-robot run has 2,000 active paths)."""
     every = list(paths)
-    return [p for p in every if not any(q.startswith((p + "/", p + "[")) for q in every)]
+    owners = {owner for q in every for owner in _owners(q)}
+    return [p for p in every if p not in owners]
+
+
+def _owners(path: str) -> list[str]:
+    """The prefixes of `path` that end just before a `/` or a `[`: the paths it is below."""
+    return [path[:i] for i, c in enumerate(path) if c in "/["]
