@@ -279,22 +279,12 @@ def run_many(missions: Sequence[Mission], cluster: Cluster, world: World, catalo
         recorder.watch(sim)  # what the sensors read, launches, landings and door changes, from now on
     results = [_submit(life, m, n, speed, trace, recorder) for n, m in enumerate(missions, 1)]
     next_progress = 0.0
-    electing: dict[str, Any] | None = None
-    pending = sorted(injections)
+    due = _Injections(injections, sim, life, cluster, results)
     while not life.finished() and sim.time < until - 1e-6:  # 0.1 s steps add up
         if stop is not None and stop.is_set():
             break
         sim.step(CONTROL_PERIOD)
-        while pending and pending[0].at <= sim.time + 1e-9:
-            before = life.takeover
-            effect = _inject(pending.pop(0), sim, life, cluster, pending)
-            for result in results:
-                result.injections.append(effect)
-            if life.takeover is not None and life.takeover is not before:
-                electing = effect  # the row that says a standby will take over: it says when it did
-        taken = life.tick(sim.time)
-        if taken is not None and electing is not None:
-            electing["effect"] += f"; at {sim.time:.1f} s {taken}"
+        due.now()
         if life.executive is not None:  # a dead controller steps nothing
             life.executive.step()
         if recorder is not None:
@@ -308,9 +298,7 @@ def run_many(missions: Sequence[Mission], cluster: Cluster, world: World, catalo
                 progress(sim, life.executive)
             next_progress = sim.time + progress_every
     why = "stopped by operator" if stop is not None and stop.is_set() else f"sim time limit of {until:g} s reached"
-    for inj in pending:  # the missions ended first: say so, rather than drop them without a word
-        for result in results:
-            result.injections.append(_not_injected(inj, sim.time))
+    due.left_over()
     life.end(why)
     _conclude(results, [life.interpreters[r.mission_id or ""] for r in results], sim, time.perf_counter() - start)
     close = getattr(sim, "close", None)
@@ -424,6 +412,37 @@ def _controllers(cluster: Cluster) -> dict[str, Any]:
     if cluster.store.replicated and len(cluster.controllers) > 1:
         return {"controllers": [h.name for h in cluster.controllers], "election": float(election_ttl(cluster.lease))}
     return {"controllers": [cluster.controller.name]}
+
+
+class _Injections:
+    """The injections of a dry-run, each applied in the control cycle that reaches its time, its effect added to
+    every report; a standby's takeover told on the row of the kill that caused it."""
+
+    def __init__(self, injections: Sequence[Injection], sim: Simulation, life: ControllerLife, cluster: Cluster,
+                 results: list[DryRun]) -> None:
+        self.pending = sorted(injections)
+        self.sim, self.life, self.cluster, self.results = sim, life, cluster, results
+        self.electing: dict[str, Any] | None = None  # the row that says a standby will take over
+
+    def now(self) -> None:
+        """Apply those due at the simulation's time, then let the controllers' life go on (an election)."""
+        sim, life = self.sim, self.life
+        while self.pending and self.pending[0].at <= sim.time + 1e-9:
+            before = life.takeover
+            effect = _inject(self.pending.pop(0), sim, life, self.cluster, self.pending)
+            for result in self.results:
+                result.injections.append(effect)
+            if life.takeover is not None and life.takeover is not before:
+                self.electing = effect  # it says when the standby took over
+        taken = life.tick(sim.time)
+        if taken is not None and self.electing is not None:
+            self.electing["effect"] += f"; at {sim.time:.1f} s {taken}"
+
+    def left_over(self) -> None:
+        """The missions ended first: say so of those never applied, rather than drop them without a word."""
+        for inj in self.pending:
+            for result in self.results:
+                result.injections.append(_not_injected(inj, self.sim.time))
 
 
 def _not_injected(inj: Injection, now: float) -> dict[str, Any]:

@@ -1065,14 +1065,17 @@ def _resources_view(data: dict[str, Any], width: int | None = None, compact: boo
     if data["queue"]:
         parts.append(Text("waiting: " + ", ".join(f"{name(w['holder'])} (priority {w['priority']})"
                                                   for w in data["queue"])))
+    return parts + _leaving(data)
+
+
+def _leaving(data: dict[str, Any]) -> list[RenderableType]:
+    """A line for each host whose resources are leaving the manager, or left it while the host is unresponsive."""
     states = data.get("hosts") or {}
-    for host, left in data["removing"].items():
-        parts.append(Text(f"{host} is {states.get(host, 'down')}: its resources leave the manager in {left:.1f} s",
-                          style="yellow"))
-    for host, state in states.items():
-        if host not in data["removing"] and state == "unresponsive":  # its resources already left: still name it
-            parts.append(Text(f"{host} is unresponsive: its resources left the manager until it reports again",
-                              style="yellow"))
+    parts: list[RenderableType] = [
+        Text(f"{host} is {states.get(host, 'down')}: its resources leave the manager in {left:.1f} s", style="yellow")
+        for host, left in data["removing"].items()]
+    parts += [Text(f"{host} is unresponsive: its resources left the manager until it reports again", style="yellow")
+              for host, state in states.items() if host not in data["removing"] and state == "unresponsive"]
     return parts
 
 
