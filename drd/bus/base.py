@@ -326,6 +326,40 @@ class Bus(ABC):
         return Reply(msg, key)
 
 
+class BusWrapper(Bus):
+    """A bus that hands everything to `inner` but what a subclass changes (a controller's fenced bus, the
+    executive's serialized one). Closing it does not close `inner`: whoever made `inner` owns it."""
+
+    def __init__(self, inner: Bus) -> None:
+        super().__init__(inner.name)
+        self.inner = inner
+        self.stats = inner.stats
+
+    def put_raw(self, key: str, data: bytes) -> None:
+        self.inner.put_raw(key, data)
+
+    def subscribe(self, key_expr: str, callback: SampleCallback) -> Subscription:
+        return self.inner.subscribe(key_expr, callback)
+
+    def serve(self, key_expr: str, handler: Handler) -> Queryable:
+        return self.inner.serve(key_expr, handler)
+
+    def request_raw(self, key: str, data: bytes | None, timeout: float = DEFAULT_TIMEOUT) -> list[Reply]:
+        return self.inner.request_raw(key, data, timeout)
+
+    def declare_token(self, key: str) -> Token:
+        return self.inner.declare_token(key)
+
+    def watch_tokens(self, key_expr: str, on_change: TokenCallback, history: bool = True) -> Subscription:
+        return self.inner.watch_tokens(key_expr, on_change, history)
+
+    def alive(self, key_expr: str, timeout: float = 1.0) -> list[str]:
+        return self.inner.alive(key_expr, timeout)
+
+    def close(self) -> None:
+        self._closed = True
+
+
 class Answer(msgspec.Struct, frozen=True, gc=False):
     """The wire form of a handler's reply: what the implementations send back (built on every request; holds no
     container, so the garbage collector need not track it)."""

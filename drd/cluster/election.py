@@ -29,8 +29,7 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass
 
-from drd.bus import Bus, BusError, Handler, Query, Queryable, Reply, Subscription, Token
-from drd.bus.base import SampleCallback, TokenCallback
+from drd.bus import Bus, BusError, BusWrapper, Handler, Query, Queryable, Reply
 from drd.bus.messages import Message
 from drd.etcd import Etcd, EtcdError, created_at, get, put
 
@@ -274,14 +273,12 @@ class Election:
         threading.Thread(target=self.on_fenced, args=(reason,), name="drd-fenced", daemon=True).start()
 
 
-class FencedBus(Bus):
+class FencedBus(BusWrapper):
     """The bus of a controller that may be fenced: every publication, request and answer goes through it only while
     `acting()` says this controller acts (see the module). Closing it does not close `inner` (the daemon owns it)."""
 
     def __init__(self, inner: Bus, acting: Callable[[], bool], what: str = "") -> None:
-        super().__init__(inner.name)
-        self.inner = inner
-        self.stats = inner.stats
+        super().__init__(inner)
         self.acting = acting
         self.what = what
         self.dropped = 0  # messages it kept from going out since it was fenced
@@ -310,18 +307,3 @@ class FencedBus(Bus):
             return handler(query)
 
         return self.inner.serve(key_expr, fenced)
-
-    def subscribe(self, key_expr: str, callback: SampleCallback) -> Subscription:
-        return self.inner.subscribe(key_expr, callback)
-
-    def declare_token(self, key: str) -> Token:
-        return self.inner.declare_token(key)
-
-    def watch_tokens(self, key_expr: str, on_change: TokenCallback, history: bool = True) -> Subscription:
-        return self.inner.watch_tokens(key_expr, on_change, history)
-
-    def alive(self, key_expr: str, timeout: float = 1.0) -> list[str]:
-        return self.inner.alive(key_expr, timeout)
-
-    def close(self) -> None:
-        self._closed = True

@@ -14,8 +14,7 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from typing import Any
 
-from drd.bus import Bus, Handler, Message, Query, Queryable, Reply, Subscription, Token
-from drd.bus.base import SampleCallback, TokenCallback
+from drd.bus import Bus, BusWrapper, Handler, Message, Query, Queryable, Reply
 from drd.bus.keys import is_concrete
 from drd.daemon.keys import ClusterKeys
 from drd.daemon.messages import ResourcesReply, RobotInfo, UnitInfo, ViewRequest, WaiterInfo
@@ -112,7 +111,7 @@ BUSY_WAIT = 0.5
 LOCK_FREE = frozenset({"records"})
 
 
-class SerializedBus(Bus):
+class SerializedBus(BusWrapper):
     """A bus whose handlers run under a lock: hands a single-threaded object (the executive) a bus.
 
     Everything else is delegated to `inner`; closing it does not close `inner` (the daemon owns it).
@@ -123,9 +122,7 @@ class SerializedBus(Bus):
     def __init__(self, inner: Bus, lock: threading.RLock | threading.Lock, *,
                  expect: Mapping[str, tuple[type, ...]] | None = None,
                  on_reject: Callable[[str, str], None] | None = None) -> None:
-        super().__init__(inner.name)
-        self.inner = inner
-        self.stats = inner.stats
+        super().__init__(inner)
         self._lock = lock
         self._expect = dict(expect or {})
         self._on_reject = on_reject
@@ -134,12 +131,6 @@ class SerializedBus(Bus):
         # plain one (the first page of a status, a view), refreshed by `refresh`
         self._last: dict[tuple[str, tuple[Any, ...]], Message] = {}
         self._readers: dict[str, Callable[[], Message]] = {}  # key -> how to answer it anew (`keep`)
-
-    def put_raw(self, key: str, data: bytes) -> None:
-        self.inner.put_raw(key, data)
-
-    def subscribe(self, key_expr: str, callback: SampleCallback) -> Subscription:
-        return self.inner.subscribe(key_expr, callback)
 
     def serve(self, key_expr: str, handler: Handler) -> Queryable:
         wanted = self._expect.get(key_expr)
@@ -193,20 +184,6 @@ class SerializedBus(Bus):
         for key, read in self._readers.items():
             self._last[(key, DEFAULT)] = read()
 
-    def request_raw(self, key: str, data: bytes | None, timeout: float = 2.0) -> list[Reply]:
-        return self.inner.request_raw(key, data, timeout)
-
-    def declare_token(self, key: str) -> Token:
-        return self.inner.declare_token(key)
-
-    def watch_tokens(self, key_expr: str, on_change: TokenCallback, history: bool = True) -> Subscription:
-        return self.inner.watch_tokens(key_expr, on_change, history)
-
-    def alive(self, key_expr: str, timeout: float = 1.0) -> list[str]:
-        return self.inner.alive(key_expr, timeout)
-
-    def close(self) -> None:
-        self._closed = True
 
 
 #: What the kept answer of a key answers (`SerializedBus.keep`): the plain query (a view, a status's first page).
