@@ -15,6 +15,7 @@ import signal
 import socket
 import subprocess
 import sys
+import threading
 import time
 from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
@@ -234,3 +235,46 @@ def corridor_hosts(cluster: DaemonCluster, *, simulator_on_controller: bool = Fa
 def read_trace(path: Path) -> list[dict[str, Any]]:
     """A `--trace` file's records."""
     return [json.loads(line) for line in path.read_text().splitlines() if line.strip()]
+
+
+@contextmanager
+def password_cluster(folder: Path, names: Sequence[str], security: str, users: dict[str, str],
+                     hosts: Callable[[DaemonCluster], str], started: Sequence[str]) -> Iterator[DaemonCluster]:
+    """A cluster of `hosts(cluster)` with the password file `users` (user -> password) beside it, the daemons
+    `started` running and ready; all killed by pid afterwards."""
+    (folder / "users").write_text("".join(f"{u}:{p}\n" for u, p in users.items()))
+    with running_cluster(folder, names, security=security) as c:
+        c.hosts_file.write_text(hosts(c))
+        for name in started:
+            c.start(name)
+        c.wait_ready(started)
+        yield c
+
+
+def assert_spoofing_fails(cluster: DaemonCluster, rogue: Any, victim: str,
+                          view: Callable[[], dict[str, dict[str, Any]]]) -> None:
+    """`rogue` (a client session) fakes `victim`'s load twice as often as it reports, and calls its Creator: the
+    call gets no answer, and the hosts' `view()` (host -> its row) never shows the fake load."""
+    from drd.bus import BusTimeout, LoadReport
+    from drd.cluster.remote import ComponentCall
+
+    stop = threading.Event()
+
+    def fake_loads() -> None:
+        while not stop.is_set():
+            rogue.bus.put(f"drd/{cluster.name}/host/{victim}/load", LoadReport(victim, 99.5, 99.5, 9.5, 42,
+                                                                                time.time()))
+            time.sleep(0.1)
+
+    thread = threading.Thread(target=fake_loads, daemon=True)
+    thread.start()
+    try:
+        with pytest.raises(BusTimeout):  # only a controller calls a Creator: dropped where it arrives
+            rogue.bus.call(f"drd/{cluster.name}/host/{victim}/creator", ComponentCall("retire", "Short-1", ""),
+                           timeout=2.0)
+        for _ in range(3):
+            row = view()[victim]
+            assert row["cpu"] != 99.5 and row["instances"] != 42, row
+    finally:
+        stop.set()
+        thread.join(timeout=5)

@@ -18,7 +18,7 @@ from pathlib import Path
 from typing import Any
 
 import pytest
-from cluster_support import MISSIONCTL, ROOT, DaemonCluster, eventually, running_cluster
+from cluster_support import MISSIONCTL, ROOT, DaemonCluster, eventually, password_cluster
 
 from drd.bus import BusTimeout, LoadReport
 from drd.cluster.remote import ComponentCall
@@ -46,13 +46,7 @@ def hosts(cluster: DaemonCluster) -> str:
 
 @pytest.fixture(scope="module")
 def cluster(tmp_path_factory: pytest.TempPathFactory) -> Iterator[DaemonCluster]:
-    folder = tmp_path_factory.mktemp("roles")
-    (folder / "users").write_text("".join(f"{u}:{p}\n" for u, p in USERS.items()))
-    with running_cluster(folder, NAMES, security=SECURITY) as c:
-        c.hosts_file.write_text(hosts(c))
-        for name in NAMES[:2]:
-            c.start(name)
-        c.wait_ready(NAMES[:2])
+    with password_cluster(tmp_path_factory.mktemp("roles"), NAMES, SECURITY, USERS, hosts, NAMES[:2]) as c:
         eventually(lambda: _up(c) >= {"controller", "ranger1"}, "both daemons to see each other", 30, poll=0.2)
         yield c
 
