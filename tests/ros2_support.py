@@ -15,6 +15,7 @@ from collections.abc import Callable, Iterable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
 from types import ModuleType
+from typing import Any
 
 import pytest
 
@@ -108,4 +109,17 @@ def served_team(cluster: Cluster, speed: float) -> Iterator[tuple[ServedRobots, 
         stop.set()
         thread.join(timeout=5)
         robots.close()
+        session.close()
+
+
+@contextmanager
+def listening_router() -> Iterator[tuple[Any, int]]:
+    """A drd session in router mode on a free loopback port (what the served simulator is), and its port."""
+    from drd.bus.ros2 import Ros2Session
+
+    port = free_port()
+    session = Ros2Session.listen(f"tcp/127.0.0.1:{port}", options=FAST_OPEN)
+    try:
+        yield session, port
+    finally:
         session.close()

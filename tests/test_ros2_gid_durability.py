@@ -20,7 +20,7 @@ import zenoh.ext
 
 from drd.bus.ros2 import Attachment, EntityKind, MessageInfo, QoS, Ros2Node, Ros2Session, jazzy
 from drd.bus.ros2.names import Durability, entity_gid
-from tests.ros2_support import FAST_OPEN, eventually, free_port, ros2_sdk
+from tests.ros2_support import eventually, listening_router, ros2_sdk
 
 STRING = "std_msgs/msg/String"
 LATCHED = QoS(durability=Durability.TRANSIENT_LOCAL, depth=2)  # a map's or /tf_static's profile, 2 kept
@@ -35,12 +35,8 @@ def rmw_zenoh_gid(token: str) -> bytes:
 
 @pytest.fixture
 def router() -> Iterator[tuple[Ros2Session, int]]:
-    port = free_port()
-    session = Ros2Session.listen(f"tcp/127.0.0.1:{port}", options=FAST_OPEN)
-    try:
-        yield session, port
-    finally:
-        session.close()
+    with listening_router() as served:
+        yield served
 
 
 def test_xxh3_is_the_reference_algorithm() -> None:

@@ -34,7 +34,7 @@ from drd.bus.ros2 import (
 )
 from drd.bus.ros2.names import Durability, Reliability, entity_gid
 from drd.bus.zenoh_bus import ZenohBus
-from tests.ros2_support import eventually, free_port, ros2_sdk
+from tests.ros2_support import eventually, free_port, listening_router, ros2_sdk
 
 TWIST = "geometry_msgs/msg/Twist"
 TWIST_HASH = "RIHS01_9c45bf16fe0983d80e3cfe750d6835843d265a9a6c46bd2e609fcddde6fb8d2a"
@@ -190,12 +190,8 @@ def test_the_attachment_is_rmw_zenohs_33_bytes_and_reads_the_sdks() -> None:
 @pytest.fixture
 def router() -> Iterator[tuple[Ros2Session, int]]:
     """A drd session in router mode on a free loopback port: what the served simulator will be."""
-    port = free_port()
-    session = Ros2Session.listen(f"tcp/127.0.0.1:{port}", options=FAST_OPEN)
-    try:
-        yield session, port
-    finally:
-        session.close()
+    with listening_router() as served:
+        yield served
 
 
 @pytest.fixture
