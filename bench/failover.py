@@ -112,16 +112,11 @@ def _kill_and_wait(cluster: Any, victim: str, restart: bool, standby: str | None
     the mission runs again (and until `standby` was elected, if given)."""
     import signal
 
-    from tests.cluster_support import MISSIONCTL, eventually, read_trace, running
+    from tests.cluster_support import corridor_run, eventually
 
     with tempfile.TemporaryDirectory() as tmp:
         trace = Path(tmp) / "run.jsonl"
-        cmd = [*MISSIONCTL, "run", str(ROOT / "missions" / "corridor_surveillance.mission"), "--config",
-               str(cluster.hosts_file), "--speed", "20", "--json", "--trace", str(trace)]
-        with running(cmd) as run:
-            eventually(lambda: trace.exists() and any(r["kind"] == "granted" for r in read_trace(trace)),
-                       "the mission to run", 60, poll=0.1)
-            mission = read_trace(trace)[0]["mission"]
+        with corridor_run(cluster, trace) as (run, mission):
             client = cluster.client(timeout=0.5)
             eventually(lambda: (_mission_time(client, mission) or 0.0) > 30.0, "30 s of the mission", 60, poll=0.1)
             last = _mission_time(client, mission) or 0.0

@@ -278,3 +278,16 @@ def assert_spoofing_fails(cluster: DaemonCluster, rogue: Any, victim: str,
     finally:
         stop.set()
         thread.join(timeout=5)
+
+
+@contextmanager
+def corridor_run(cluster: DaemonCluster, trace: Path, speed: float = 20.0) -> Iterator[tuple[Any, str]]:
+    """`missionctl run` of the corridor mission at `speed`, its records in `trace`, in the background: once the
+    mission holds its first grant, the running process and the mission's id (the process is killed if still
+    running afterwards)."""
+    cmd = [*MISSIONCTL, "run", str(ROOT / "missions" / "corridor_surveillance.mission"), "--config",
+           str(cluster.hosts_file), "--speed", f"{speed:g}", "--json", "--trace", str(trace)]
+    with running(cmd) as run:
+        eventually(lambda: trace.exists() and any(r["kind"] == "granted" for r in read_trace(trace)),
+                   "the mission to run", 60, poll=0.1)
+        yield run, str(read_trace(trace)[0]["mission"])

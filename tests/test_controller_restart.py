@@ -19,6 +19,7 @@ from cluster_support import (
     ROOT,
     DaemonCluster,
     corridor_hosts,
+    corridor_run,
     eventually,
     read_trace,
     running,
@@ -44,12 +45,7 @@ def mission_time(cluster: DaemonCluster, mission: str) -> float | None:
 def test_a_mission_goes_on_after_its_controller_is_killed_and_started_again(cluster: DaemonCluster,
                                                                           tmp_path: Path) -> None:
     trace = tmp_path / "run.jsonl"
-    cmd = [*MISSIONCTL, "run", str(ROOT / "missions" / "corridor_surveillance.mission"), "--config",
-           str(cluster.hosts_file), "--speed", "20", "--json", "--trace", str(trace)]
-    with running(cmd) as run:
-        eventually(lambda: trace.exists() and any(r["kind"] == "granted" for r in read_trace(trace)),
-                   "the mission to run", 60, poll=0.1)
-        mission = read_trace(trace)[0]["mission"]
+    with corridor_run(cluster, trace) as (run, mission):
         eventually(lambda: (mission_time(cluster, mission) or 0.0) > 60.0, "a minute of the mission", 60, poll=0.2)
         cluster.procs["controller"].send_signal(signal.SIGKILL)
         cluster.procs["controller"].wait(timeout=10)
