@@ -260,7 +260,8 @@ def test_a_missing_key_points_at_its_parents_line(tmp_path: Path, catalog: Catal
 
 
 def test_every_number_hosts_yaml_defines_has_a_declared_range() -> None:
-    assert set(RANGES) == {"lease", "slice", "capacity", "cores", "history", "placement", "instances", "compile"}
+    assert set(RANGES) == {"lease", "slice", "capacity", "cores", "history", "placement", "instances", "compile",
+                           "domain_id"}
     assert all(limit.bounded for limit in RANGES.values())
     assert (ROOT / "docs" / "hosts.md").read_text(encoding="utf-8").count("100ms..10min") >= 1
 

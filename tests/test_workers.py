@@ -11,10 +11,10 @@ from __future__ import annotations
 
 import math
 import os
-import time
 import signal
 import subprocess
 import sys
+import time
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
