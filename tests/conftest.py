@@ -27,10 +27,17 @@ def kind_of(path: Path) -> str:
     return "properties" if "hypothesis" in source else "unit"
 
 
+#: The folders of tests/, one per kind: `pytest tests/unit` (or `-m unit`) runs the fast set.
+KINDS = ("unit", "properties", "e2e")
+
+
 def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
-    """Mark every test by its module's kind: `pytest -m unit` runs the fast set, `-m "not e2e"` skips processes."""
+    """Mark every test by its folder's kind (`kind_of` for a module outside them): `pytest -m unit` runs the fast
+    set, `-m "not e2e"` skips processes."""
     for item in items:
-        item.add_marker(getattr(pytest.mark, kind_of(Path(str(item.path)))))
+        path = Path(str(item.path))
+        kind = path.parent.name if path.parent.name in KINDS else kind_of(path)
+        item.add_marker(getattr(pytest.mark, kind))
 
 
 @pytest.fixture(scope="session")

@@ -2,7 +2,7 @@
 
 Two implementations: :class:`drd.bus.local.LocalBus` (in-process, deterministic: dry-runs
 and unit tests) and :class:`drd.bus.zenoh_bus.ZenohBus` (every multi-process run). Both pass
-``tests/test_bus_contract.py``. The receive-side rules live here, once, so they cannot
+``tests/e2e/test_bus_contract.py``. The receive-side rules live here, once, so they cannot
 drift: decode on receipt, reject/log/count malformed bytes, turn handler exceptions into
 error replies, never let a callback take the bus down.
 """

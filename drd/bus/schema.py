@@ -7,7 +7,7 @@ would fill a missing field from its default and ignore an unknown one), which ch
 
 When msgspec refuses something, :func:`check` walks the value against the annotations in Python, off the hot
 path, to say where and what: ``body.reports[0].cpu: expected float, got string``. It reads the schema as its
-docstring in ``messages.message`` states it; ``tests/test_schema_properties.py`` holds both to one reading.
+docstring in ``messages.message`` states it; ``tests/properties/test_schema_properties.py`` holds both to one reading.
 """
 
 from __future__ import annotations

@@ -87,7 +87,7 @@ class RayCaster:
     A scan is ~181 casts, ten times a second, per Ranger, and pymunk's wrapper (a SegmentQueryInfo
     and two Vec2d per cast) costs three times the query itself. So when pymunk's cffi layer is
     there, chipmunk's own function is called directly with one reused result buffer: the same
-    query, the same numbers (tests/test_sim_physics.py checks both paths agree); else the public API.
+    query, the same numbers (tests/unit/test_sim_physics.py checks both paths agree); else the public API.
     `fan` casts a whole scan in one loop (the filter converted to C once), and `crossings` counts the
     walls on a line by walking its first hits instead of building pymunk's list of every hit.
     """

@@ -1,0 +1,126 @@
+"""`dry-run --record run.mcap` and `missionctl replay run.mcap` (issue #13, first part): the recording is an MCAP
+file any MCAP reader opens (here the `mcap` library's own reader), with sim-time log times and Foxglove's frame
+transforms, and a replay rebuilds the very report the run printed, from the recording alone."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+from mcap.reader import make_reader
+
+ROOT = Path(__file__).resolve().parents[2]
+MISSIONCTL = [sys.executable, "-c", "from drd.cli.missionctl import main; main()"]
+CORRIDOR = ROOT / "missions" / "corridor_surveillance.mission"
+
+
+def missionctl(*args: str, cwd: Path) -> subprocess.CompletedProcess[str]:
+    return subprocess.run([*MISSIONCTL, *args], cwd=cwd, capture_output=True, text=True, timeout=300, check=False)
+
+
+def test_a_replay_prints_the_report_the_run_printed(tmp_path: Path) -> None:
+    run = missionctl("dry-run", str(CORRIDOR), "--config", str(ROOT / "hosts.yaml"), "--inject",
+                     "lose scout1 at 40s", "--record", "run.mcap", "--trace", "run.jsonl", "--json", cwd=tmp_path)
+    assert run.returncode in (0, 1), run.stderr[-2000:]
+    (tmp_path / "elsewhere").mkdir()  # no hosts file, no world: the recording alone
+    replay = missionctl("replay", str(tmp_path / "run.mcap"), "--json", cwd=tmp_path / "elsewhere")
+    assert replay.returncode == run.returncode, replay.stderr[-2000:]
+    assert json.loads(replay.stdout) == json.loads(run.stdout)
+    text_run = missionctl("replay", str(tmp_path / "run.mcap"), cwd=tmp_path / "elsewhere")
+    assert text_run.stdout.startswith("mission CorridorSurveillance  ")
+
+
+def test_the_recording_is_plain_mcap_with_sim_time_and_foxglove_transforms(tmp_path: Path) -> None:
+    run = missionctl("dry-run", str(CORRIDOR), "--config", str(ROOT / "hosts.yaml"), "--until", "20", "--record",
+                     "run.mcap", "--trace", "run.jsonl", cwd=tmp_path)
+    assert run.returncode == 1, run.stderr[-2000:]  # stopped at --until
+    trace = [json.loads(line) for line in (tmp_path / "run.jsonl").read_text().splitlines()]
+    with (tmp_path / "run.mcap").open("rb") as fh:
+        reader = make_reader(fh)
+        summary = reader.get_summary()
+        assert summary is not None
+        topics = {c.topic: c for c in summary.channels.values()}
+        assert topics["/drd/tf"].message_encoding == "protobuf"
+        assert summary.schemas[topics["/drd/tf"].schema_id].name == "foxglove.FrameTransforms"
+        assert summary.schemas[topics["/drd/world"].schema_id].name == "foxglove.SceneUpdate"
+        assert summary.schemas[topics["/drd/records"].schema_id].name == "drd.Record"
+        counts = {summary.channels[c].topic: n for c, n in summary.statistics.channel_message_counts.items()}
+        assert counts["/drd/world"] == 1 and counts["/drd/runs"] == 1
+        records, tf_times = [], []
+        for _schema, channel, message in reader.iter_messages():
+            if channel.topic == "/drd/records":
+                records.append(json.loads(message.data))
+                assert message.log_time == max(0, int(round(records[-1]["at"] * 1e9)))  # sim time, in ns
+                records[-1]["at"] = round(records[-1]["at"], 6)  # exact in the recording, rounded in a trace
+            elif channel.topic == "/drd/tf":
+                tf_times.append(message.log_time)
+    assert records == trace  # every record, as the trace has it
+    assert len(tf_times) == 200 and tf_times == sorted(tf_times) and tf_times[-1] == 20_000_000_000
+
+
+def test_a_file_that_is_not_a_recording_is_refused_clearly(tmp_path: Path) -> None:
+    (tmp_path / "x.mcap").write_bytes(b"not an mcap file at all")
+    done = missionctl("replay", "x.mcap", cwd=tmp_path)
+    assert done.returncode == 2 and "x.mcap: cannot read it as a drd recording" in done.stderr
+    assert "Traceback" not in done.stderr
+
+
+def test_replay_at_shows_the_mission_and_every_robot_at_that_time(tmp_path: Path) -> None:
+    run = missionctl("dry-run", str(CORRIDOR), "--config", str(ROOT / "hosts.yaml"), "--until", "30", "--record",
+                     "run.mcap", cwd=tmp_path)
+    assert run.returncode == 1, run.stderr[-2000:]
+
+    def at(when: str) -> dict[str, object]:
+        done = missionctl("replay", "run.mcap", "--at", when, "--json", cwd=tmp_path)
+        assert done.returncode == 0, done.stderr
+        state: dict[str, object] = json.loads(done.stdout)
+        return state
+
+    start, later = at("0.1"), at("10s")
+    robots0, robots10 = start["robots"], later["robots"]
+    assert isinstance(robots0, dict) and isinstance(robots10, dict)
+    assert set(robots0) == {"ranger1", *(f"scout{i}" for i in range(1, 7))}
+    assert robots0["ranger1"]["x"] == pytest.approx(1.0, abs=0.1)  # the world's spawn point
+    assert robots10["ranger1"]["x"] > robots0["ranger1"]["x"] + 1  # it drove east along the corridor
+    [mission] = later["missions"]  # type: ignore[misc]
+    assert mission["outcome"] is None
+    assert any(row["path"].endswith("/FindNewDoor/FollowCorridor") and row["state"] == "running"
+               for row in mission["active"])
+    assert any(held.get("ranger") == "ranger1" for held in mission["holds"].values())  # someone drives it
+    assert at("1h")["missions"][0]["outcome"] == "stopped"  # type: ignore[index]
+    refused = missionctl("replay", "run.mcap", "--at", "soon", cwd=tmp_path)
+    assert refused.returncode == 2 and "expected a time such as 90s" in refused.stderr
+
+
+def test_replay_writes_the_trace_back_out_and_draws_the_run_from_the_recording_alone(tmp_path: Path) -> None:
+    run = missionctl("dry-run", str(CORRIDOR), "--config", str(ROOT / "hosts.yaml"), "--until", "60", "--record",
+                     "run.mcap", "--trace", "run.jsonl", cwd=tmp_path)
+    assert run.returncode == 1, run.stderr[-2000:]
+    (tmp_path / "elsewhere").mkdir()
+    done = missionctl("replay", str(tmp_path / "run.mcap"), "--trace", "again.jsonl", "--render", "run.png",
+                      cwd=tmp_path / "elsewhere")
+    assert done.returncode == 1, done.stderr[-2000:]
+    assert (tmp_path / "elsewhere" / "again.jsonl").read_text() == (tmp_path / "run.jsonl").read_text()
+    png = (tmp_path / "elsewhere" / "run.png").read_bytes()
+    assert png.startswith(b"\x89PNG") and len(png) > 10_000
+    assert "drew run.png" in done.stderr
+
+
+def test_a_recording_cut_short_by_a_crash_replays_what_it_holds(tmp_path: Path) -> None:
+    """Small chunks, flushed each second of sim time: a file cut at 60 % (a crash mid-write) still reads."""
+    run = missionctl("dry-run", str(CORRIDOR), "--config", str(ROOT / "hosts.yaml"), "--record", "run.mcap",
+                     "--json", cwd=tmp_path)
+    assert run.returncode == 0, run.stderr[-2000:]
+    data = (tmp_path / "run.mcap").read_bytes()
+    (tmp_path / "cut.mcap").write_bytes(data[:len(data) * 6 // 10])
+    replay = missionctl("replay", "cut.mcap", "--json", cwd=tmp_path)
+    assert replay.returncode == 1, replay.stderr[-2000:]
+    report = json.loads(replay.stdout)
+    full = json.loads(run.stdout)
+    assert report["outcome"] == "unfinished" and report["reason"].startswith("the recording ends at ")
+    assert 30 < report["sim_time"] < full["sim_time"]
+    kept = [row for row in full["timeline"] if row["entered"] <= report["sim_time"] - 2]
+    assert {row["path"] for row in kept} <= {row["path"] for row in report["timeline"]}

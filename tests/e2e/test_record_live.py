@@ -1,0 +1,131 @@
+"""`missionctl dry-run --foxglove HOST:PORT` (issue #13): the run served live over the Foxglove WebSocket protocol.
+A WebSocket client (the `websockets` package: the Foxglove SDK has a server, not a client) subscribes to the scan,
+records and world channels while a dry-run runs and decodes what it receives; the server listens on the loopback
+port given and nowhere else. Every process is ours and killed by pid."""
+
+from __future__ import annotations
+
+import base64
+import json
+import socket
+import struct
+import subprocess
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+import psutil
+import pytest
+from mcap.records import Schema
+from mcap_protobuf.decoder import DecoderFactory
+from websockets.sync.client import ClientConnection, connect
+
+from drd.cli.missionctl import live_default
+
+ROOT = Path(__file__).resolve().parents[2]
+MISSIONCTL = [sys.executable, "-c", "from drd.cli.missionctl import main; main()"]
+CORRIDOR = ROOT / "missions" / "corridor_surveillance.mission"
+#: The subprotocols of the Foxglove WebSocket protocol: the SDK's server speaks the first.
+SUBPROTOCOLS = ["foxglove.sdk.v1", "foxglove.websocket.v1"]
+
+
+def free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        port: int = s.getsockname()[1]
+        return port
+
+
+def connect_when_up(port: int, proc: subprocess.Popen[bytes], limit: float = 60.0) -> ClientConnection:
+    deadline = time.monotonic() + limit
+    while True:
+        try:
+            return connect(f"ws://127.0.0.1:{port}", subprotocols=SUBPROTOCOLS, open_timeout=5)
+        except OSError:
+            if proc.poll() is not None or time.monotonic() > deadline:
+                raise
+            time.sleep(0.1)
+
+
+def receive(ws: ClientConnection, wanted: dict[str, int], limit: float = 60.0) -> dict[str, list[tuple[int, Any]]]:
+    """Subscribe to each wanted topic as it is advertised; (log time, decoded message) of each topic, until every
+    topic has its count."""
+    channels: dict[int, dict[str, Any]] = {}  # subscription id -> the channel advertised
+    got: dict[str, list[tuple[int, Any]]] = {topic: [] for topic in wanted}
+    factory = DecoderFactory()
+    deadline = time.monotonic() + limit
+    while any(len(got[t]) < n for t, n in wanted.items()):
+        assert time.monotonic() < deadline, {t: len(m) for t, m in got.items()}
+        frame = ws.recv(timeout=limit)
+        if isinstance(frame, str):
+            op = json.loads(frame)
+            for c in op.get("channels", []) if op["op"] == "advertise" else []:
+                if c["topic"] in wanted and all(x["topic"] != c["topic"] for x in channels.values()):
+                    channels[len(channels) + 1] = c
+                    ws.send(json.dumps({"op": "subscribe", "subscriptions": [{"id": len(channels),
+                                                                              "channelId": c["id"]}]}))
+            continue
+        assert frame[0] == 1  # message data: opcode, subscription id, log time, payload
+        sub, log_time = struct.unpack_from("<IQ", frame, 1)
+        c, payload = channels[sub], frame[13:]
+        if c["encoding"] == "json":
+            got[c["topic"]].append((log_time, json.loads(payload)))
+        else:
+            schema = Schema(id=sub, name=c["schemaName"], encoding=c["schemaEncoding"],
+                            data=base64.b64decode(c["schema"]))
+            decode = factory.decoder_for(c["encoding"], schema)
+            assert decode is not None
+            got[c["topic"]].append((log_time, decode(payload)))
+    return got
+
+
+def test_the_live_view_serves_scans_records_and_the_world_while_a_dry_run_runs(tmp_path: Path) -> None:
+    port = free_port()
+    with (tmp_path / "stderr").open("wb") as stderr:
+        proc = subprocess.Popen([*MISSIONCTL, "dry-run", str(CORRIDOR), "--config", str(ROOT / "hosts.yaml"),
+                                 "--foxglove", f"127.0.0.1:{port}", "--speed", "4", "--until", "300"], cwd=tmp_path,
+                                stdout=subprocess.DEVNULL, stderr=stderr)
+        try:
+            with connect_when_up(port, proc) as ws:
+                got = receive(ws, {"/drd/scan/ranger1": 3, "/drd/records": 3, "/drd/world": 1, "/drd/tf": 3})
+                listening = [(c.laddr.ip, c.laddr.port) for c in psutil.Process(proc.pid).net_connections("inet")
+                             if c.status == psutil.CONN_LISTEN]
+        finally:
+            proc.kill()
+            proc.wait(timeout=30)
+    assert listening == [("127.0.0.1", port)]  # the port given, on loopback, and nothing else
+    assert f"live view on ws://127.0.0.1:{port}" in (tmp_path / "stderr").read_text()
+    records = [m for _t, m in got["/drd/records"]]
+    assert all(m["path"].startswith("CorridorSurveillance") and m["mission"] == "CorridorSurveillance-1"
+               for m in records)
+    assert all(t == round(m["at"] * 1e9) for t, m in got["/drd/records"])  # sim time
+    for t, scan in got["/drd/scan/ranger1"]:
+        assert scan.frame_id == "ranger1" and len(scan.ranges) == 181 and scan.timestamp.ToNanoseconds() == t
+    [(_t, world), *_] = got["/drd/world"]  # sent again to a viewer that came after the start
+    assert {"walls", "door/door_n1", "body/ranger1"} <= {e.id for e in world.entities}
+
+
+def test_a_live_view_that_cannot_be_served_says_where_and_why(tmp_path: Path) -> None:
+    with socket.socket() as taken:
+        taken.bind(("127.0.0.1", 0))
+        taken.listen()
+        port = taken.getsockname()[1]
+        done = subprocess.run([*MISSIONCTL, "dry-run", str(CORRIDOR), "--config", str(ROOT / "hosts.yaml"),
+                               "--foxglove", f"127.0.0.1:{port}", "--until", "1"], cwd=tmp_path,
+                              capture_output=True, text=True, timeout=120, check=False)
+    assert done.returncode == 2 and f"cannot serve the live view on 127.0.0.1:{port}" in done.stderr, done.stderr
+    assert "Traceback" not in done.stderr
+
+
+@pytest.mark.parametrize(("argv", "expected"), [
+    (["dry-run", "m.mission", "--foxglove"], ["dry-run", "m.mission", "--foxglove", "127.0.0.1:8765"]),
+    (["dry-run", "--foxglove", "m.mission"], ["dry-run", "--foxglove", "127.0.0.1:8765", "m.mission"]),
+    (["dry-run", "--foxglove", "--json", "m"], ["dry-run", "--foxglove", "127.0.0.1:8765", "--json", "m"]),
+    (["run", "--foxglove", "0.0.0.0:9000", "m"], ["run", "--foxglove", "0.0.0.0:9000", "m"]),
+    (["run", "--foxglove", "9000", "m"], ["run", "--foxglove", "9000", "m"]),
+    (["run", "--foxglove", "[::1]:9000", "m"], ["run", "--foxglove", "[::1]:9000", "m"]),
+    (["run", "--", "--foxglove"], ["run", "--", "--foxglove"]),
+])
+def test_foxglove_alone_is_loopbacks_default_port(argv: list[str], expected: list[str]) -> None:
+    assert live_default(argv) == expected

@@ -1,0 +1,257 @@
+"""Several controllers, one acting (issue #16): the election's pure rule (`drd.cluster.election`), its fence, the
+journal's two backends behind one interface (`drd.journal`: SQLite and etcd), and hosts.yaml's `cluster.store`.
+
+The etcd parts run against a real one-member etcd started here (skipped, saying why, where `etcd` is absent); the
+three-member cluster and real daemons are in tests/e2e/test_controller_failover.py."""
+
+from __future__ import annotations
+
+import copy
+import time
+from collections.abc import Callable, Iterator
+from pathlib import Path
+from typing import Any
+
+import pytest
+import yaml
+from etcd_support import EtcdCluster, etcd_cluster, need_etcd
+
+from drd.bus import BusError, Ping, Pong, Query
+from drd.bus.local import LocalNetwork
+from drd.cluster.election import LEADER, STANDBY, Election, ElectionState, FencedBus, LeaseClock, leader_key
+from drd.etcd import Etcd, EtcdUnavailable, created_at, delete, put
+from drd.hosts import HostsError, Store, parse_hosts
+from drd.journal import EtcdJournal, Journal, JournalError, SqliteJournal, WorldState
+from dsl.catalog import Catalog
+
+ROOT = Path(__file__).resolve().parents[2]
+
+# -- the pure rule -------------------------------------------------------------------------------------------------
+
+
+def test_a_lease_is_trusted_from_the_renewal_sent_not_from_its_answer() -> None:
+    lease = LeaseClock(margin=0.25)
+    lease.renewed(sent=10.0, ttl=2.0)
+    assert lease.valid(11.7) and not lease.valid(11.75)
+    lease.renewed(sent=9.0, ttl=2.0)  # an older renewal answered late never shortens it
+    assert lease.valid(11.7)
+
+
+def test_a_leader_whose_lease_ran_out_by_its_own_clock_is_fenced_once_and_acts_no_more() -> None:
+    state = ElectionState()
+    assert not state.acting(0.0)
+    state.won(term=7, host="c1", renewed=100.0, ttl=2.0)
+    assert state.role == LEADER and state.acting(101.0) and state.acting(101.0, term=7)
+    assert not state.acting(101.0, term=6)  # a fence of an older term stays shut after a new election
+    state.kept(sent=101.0, ttl=2.0)
+    assert state.acting(102.5)
+    assert not state.check(102.5)
+    assert state.check(103.0)  # woke from a freeze: no renewal answered in time
+    assert state.role == "fenced" and "ran out" in state.reason
+    assert not state.check(103.0) and not state.fence("again")  # said once
+    assert not state.acting(103.0)
+    state.kept(sent=103.0, ttl=2.0)  # a late answer does not revive a fenced leader
+    assert not state.acting(103.1)
+    state.standby()
+    assert state.role == STANDBY and state.term == 0 and not state.acting(103.1)
+
+
+def test_a_standby_notes_each_new_holder_once() -> None:
+    state = ElectionState()
+    assert state.saw("c1", 3) and not state.saw("c1", 3)
+    assert state.saw("c2", 9)
+
+
+def echo(query: Query) -> Pong:
+    assert isinstance(query.payload, Ping)
+    return Pong(query.payload.nonce, "c1")
+
+
+def test_the_fence_lets_nothing_out_once_the_controller_no_longer_acts() -> None:
+    network = LocalNetwork()
+    controller, other = network.session("c1"), network.session("ranger1")
+    heard: list[str] = []
+    other.subscribe("drd/t/mission/*/record", lambda s: heard.append(s.key))
+    other.serve("drd/t/host/ranger1/creator", lambda q: Pong(0, "ranger1"))
+    acting = [True]
+    fenced = FencedBus(controller, lambda: acting[0], "controller c1 (term 7)")
+    fenced.serve("drd/t/executive/status", echo)
+    fenced.put("drd/t/mission/M/record", Ping(1))
+    assert isinstance(fenced.call("drd/t/host/ranger1/creator", Ping(2)), Pong)
+    assert isinstance(other.call("drd/t/executive/status", Ping(3)), Pong)
+    assert len(heard) == 1
+    acting[0] = False
+    fenced.put("drd/t/mission/M/record", Ping(4))
+    with pytest.raises(BusError, match="no longer acts"):
+        fenced.call("drd/t/host/ranger1/creator", Ping(5))
+    assert other.request("drd/t/executive/status", Ping(6), timeout=0.2) == []  # no answer at all, not an error
+    assert len(heard) == 1 and fenced.dropped == 3
+    fenced.close()
+    assert not controller.closed  # the daemon owns its bus
+
+
+# -- hosts.yaml: cluster.store -------------------------------------------------------------------------------------
+
+
+def hosts_data(store: object = None, second_controller: bool = True) -> dict[str, Any]:
+    data: dict[str, Any] = copy.deepcopy(yaml.safe_load((ROOT / "hosts.yaml").read_text()))
+    if second_controller:
+        data["hosts"]["controller2"] = {"endpoint": "tcp/127.0.0.1:7460", "roles": ["controller"]}
+    if store is not None:
+        data["cluster"]["store"] = store
+    return data
+
+
+def test_several_controllers_need_a_replicated_store(catalog: Catalog) -> None:
+    with pytest.raises(HostsError) as e:
+        parse_hosts(hosts_data(), "hosts.yaml", catalog)
+    assert "hosts.yaml: hosts.controller2.roles: controller is already a role of host controller" in str(e.value)
+    assert "several controllers need a replicated store" in str(e.value) and "cluster.store" in str(e.value)
+    cluster = parse_hosts(hosts_data({"etcd": ["http://127.0.0.1:2379", "http://10.0.0.2:2379"]}), "hosts.yaml",
+                          catalog)
+    assert cluster.store == Store(("http://127.0.0.1:2379", "http://10.0.0.2:2379")) and cluster.store.replicated
+    assert [h.name for h in cluster.controllers] == ["controller", "controller2"]
+    assert not parse_hosts(hosts_data(second_controller=False), "hosts.yaml", catalog).store.replicated
+
+
+@pytest.mark.parametrize(("store", "key", "says"), [
+    ({"etcd": []}, "cluster.store.etcd", "non-empty list"),
+    ({"etcd": "http://127.0.0.1:2379"}, "cluster.store.etcd", "non-empty list"),
+    ({"etcd": ["127.0.0.1:2379"]}, "cluster.store.etcd[0]", "http://HOST:PORT"),
+    ({"etcd": ["https://127.0.0.1:2379"]}, "cluster.store.etcd[0]", "http://HOST:PORT"),
+    ({"etcd": ["http://127.0.0.1:99999"]}, "cluster.store.etcd[0]", "http://HOST:PORT"),
+    ({"etcd": ["http://a:1", "http://a:1"]}, "cluster.store.etcd[1]", "listed twice"),
+    ({"etcd": ["http://a:1"], "zookeeper": ["x"]}, "cluster.store.zookeeper", "unknown key"),
+    ({}, "cluster.store.etcd", "required"),
+    ("etcd", "cluster.store", "mapping"),
+])
+def test_a_bad_store_is_refused_naming_the_file_and_key(catalog: Catalog, store: object, key: str,
+                                                        says: str) -> None:
+    with pytest.raises(HostsError) as e:
+        parse_hosts(hosts_data(store, second_controller=False), "hosts.yaml", catalog)
+    text = str(e.value)
+    assert f"hosts.yaml: {key}:" in text and says in text, text
+
+
+# -- the journal's two backends ------------------------------------------------------------------------------------
+
+
+@pytest.fixture(scope="module")
+def etcd(tmp_path_factory: pytest.TempPathFactory) -> Iterator[EtcdCluster]:
+    need_etcd()
+    with etcd_cluster(tmp_path_factory.mktemp("etcd1"), 1) as e:
+        yield e
+
+
+_clusters = iter(range(10_000))
+
+
+def lead(client: Etcd, cluster: str) -> int:
+    """Make a leader key for `cluster` (no lease): its revision, the term a journal writes under."""
+    ok, revision, _ = client.txn([created_at(leader_key(cluster), 0)], [put(leader_key(cluster), "test")])
+    assert ok
+    return revision
+
+
+@pytest.fixture(params=["sqlite", "etcd"])
+def backend(request: pytest.FixtureRequest, tmp_path: Path) -> Iterator[Callable[[int], Journal]]:
+    """A factory of journals of one backend, each new one reading what the others wrote (keep = its argument)."""
+    if request.param == "sqlite":
+        yield lambda keep: SqliteJournal(tmp_path / "journal.sqlite", keep=keep)
+        return
+    e: EtcdCluster = request.getfixturevalue("etcd")
+    client = Etcd(e.urls)
+    name = f"j{next(_clusters)}"
+    term = lead(client, name)
+    yield lambda keep: EtcdJournal(client, name, term, leader=leader_key(name), keep=keep)
+
+
+def world(seq: int) -> WorldState:
+    return WorldState("corridor", 3, 10.0, 12.5 + seq, seq, {"scout1": {"carrier": ""}})
+
+
+def test_both_backends_keep_what_resuming_needs(backend: Callable[[int], Journal]) -> None:
+    journal = backend(2)
+    assert journal.running() == [] and journal.world() is None
+    for i, mid in enumerate(["A-1", "B-2", "C-3", "D-4"]):
+        journal.begin(mid, {"source": f"mission {mid} {{ }}", "speed": 20.0}, i + 1, 10.0 + i, 600.0)
+        time.sleep(0.002)  # their start order is their order
+    journal.save({"A-1": (12.5, {"path": "A", "children": []})}, world(7))
+    journal.save({"B-2": (13.0, {"path": "B"})}, world(8))
+    again = backend(2)  # another process (a restart, a standby) reads the same
+    running = again.running()
+    assert [j.id for j in running] == ["A-1", "B-2", "C-3", "D-4"]
+    assert running[0].snapshot == {"path": "A", "children": []} and running[0].at == 12.5
+    assert running[2].snapshot is None and running[2].at == running[2].base == 12.0
+    assert running[1].request == {"source": "mission B-2 { }", "speed": 20.0} and running[1].priority == 2
+    assert again.world() == WorldState("corridor", 3, 10.0, 20.5, 8, {"scout1": {"carrier": ""}},
+                                       again.world().saved)  # type: ignore[union-attr]
+    for mid in ["A-1", "B-2", "C-3"]:
+        again.finish(mid, "success", "")
+        time.sleep(0.002)
+    assert [j.id for j in backend(2).running()] == ["D-4"]
+    journal.close()
+    again.close()
+
+
+def test_an_etcd_journal_of_a_lost_election_writes_nothing(etcd: EtcdCluster) -> None:
+    client = Etcd(etcd.urls)
+    name = f"j{next(_clusters)}"
+    old = lead(client, name)
+    told: list[str] = []
+    stale = EtcdJournal(client, name, old, leader=leader_key(name), on_fenced=told.append)
+    stale.begin("M-1", {"source": "x"}, 1, 0.0, 60.0)
+    client.txn([], [delete(leader_key(name))])
+    new = lead(client, name)  # another controller won meanwhile
+    assert new > old
+    stale.save({"M-1": (5.0, {"path": "stale"})}, world(1))
+    stale.finish("M-1", "failure", "the old controller says so")
+    assert len(told) == 1 and "another one acts" in told[0] and stale.fenced
+    current = EtcdJournal(client, name, new, leader=leader_key(name))
+    [job] = current.running()
+    assert job.id == "M-1" and job.snapshot is None  # nothing of the stale one's after it lost
+    assert current.world() is None
+
+
+def test_an_etcd_journal_of_another_version_is_refused(etcd: EtcdCluster) -> None:
+    client = Etcd(etcd.urls)
+    name = f"j{next(_clusters)}"
+    client.txn([], [put(f"drd/{name}/journal/version", "99")])
+    with pytest.raises(JournalError, match="journal version 99"):
+        EtcdJournal(client, name, lead(client, name), leader=leader_key(name))
+
+
+def test_no_etcd_member_answering_is_said_naming_them() -> None:
+    with pytest.raises(EtcdUnavailable, match="no etcd member answered: http://127.0.0.1:9"):
+        Etcd(["http://127.0.0.1:9"], timeout=0.5).get("x")
+
+
+# -- the election against etcd -------------------------------------------------------------------------------------
+
+
+def test_one_of_two_campaigns_wins_and_a_clean_stop_hands_over_to_the_other(etcd: EtcdCluster) -> None:
+    name = f"e{next(_clusters)}"
+    elected: list[tuple[str, int]] = []
+    fenced: list[str] = []
+
+    def campaign(host: str) -> Election:
+        return Election(Etcd(etcd.urls), name, host, 2, on_elected=lambda t: elected.append((host, t)),
+                        on_fenced=fenced.append, poll=0.05)
+
+    first, second = campaign("c1"), campaign("c2")
+    first.start()
+    deadline = time.monotonic() + 10
+    while not elected and time.monotonic() < deadline:
+        time.sleep(0.02)
+    second.start()
+    time.sleep(0.5)
+    assert [h for h, _ in elected] == ["c1"] and first.acting() and not second.acting()
+    assert second.state.holder == "c1" and second.state.holder_term == elected[0][1]
+    first.close(revoke=True)  # a clean stop: the standby takes over without waiting for the lease
+    deadline = time.monotonic() + 10
+    while len(elected) < 2 and time.monotonic() < deadline:
+        time.sleep(0.02)
+    assert [h for h, _ in elected] == ["c1", "c2"] and elected[1][1] > elected[0][1]
+    assert second.acting(elected[1][1]) and not second.acting(elected[0][1])
+    assert fenced == []  # a clean stop is not a fencing
+    second.close()
