@@ -288,11 +288,11 @@ def run_app(app: Callable[..., object], prog: str,
     except SystemExit as e:
         zenoh_bus = sys.modules.get("drd.bus.zenoh_bus")
         if zenoh_bus is not None and zenoh_bus.still_closing():  # see drd.bus.zenoh_bus.still_closing
-            _end_now(e.code)
+            end_now(e.code)
         raise
 
 
-def _end_now(code: object) -> NoReturn:
+def end_now(code: object) -> NoReturn:
     """End the process without the interpreter's shutdown: a session's close that still runs in zenoh (it waits on
     a peer) would be torn down by it mid-call, and the process would abort ("FATAL: exception not rethrown", exit
     -6) after its output. What the command wrote is flushed first; its files are closed by then."""

@@ -27,6 +27,7 @@ from drd.cli.common import (
     OK,
     catalog,
     duration_text,
+    end_now,
     err,
     fail,
     fail_all,
@@ -237,7 +238,27 @@ def _serve(cluster: Cluster, host: str, cat: Catalog, tr: Transport, rd: Path, c
     if daemon.stop_reason.startswith("conflict"):  # met another drd of this host name, which started first
         fail(f"drd {host} stopped: {daemon.stop_reason.removeprefix('conflict: ')}",
              hint="host names are unique in a cluster: stop one of them, or start this one as another host")
+    _exit_if_lingering()
     return OK
+
+
+#: Seconds a stopped daemon waits for the threads still running (a library's callback threads) before it exits.
+LINGER = 2.0
+
+
+def _exit_if_lingering() -> None:
+    """A stopped daemon exits even if a library left a thread running: the interpreter would wait for it forever
+    (zenoh's callback threads of a session nobody closed), and `drd stop` would have to kill it."""
+    deadline = time.monotonic() + LINGER
+    for t in threading.enumerate():
+        if t is not threading.main_thread() and not t.daemon:
+            t.join(max(0.0, deadline - time.monotonic()))
+    left = [t.name for t in threading.enumerate() if t is not threading.main_thread() and not t.daemon
+            and t.is_alive()]
+    if left:
+        logging.getLogger("drd.daemon").warning("exiting with %d thread(s) still running: %s", len(left),
+                                                ", ".join(sorted(left)[:5]))
+        end_now(OK)
 
 
 def _configure_logging(host: str, log_file: Path | None, level: int) -> None:

@@ -204,6 +204,7 @@ class Creator:
                 served.close()
         with self._lock:
             self._retire_all()
+            self._close_drivers()
             self.instances.clear()
             self._dirty = False
             self._infos = []
@@ -732,6 +733,7 @@ class Creator:
         pool: the mission's components are placed in the next moments."""
         if self._drivers is None or self._generation != (world, generation):
             self.pool.warm()
+            self._close_drivers()
             if self._make_drivers is not None:
                 self._drivers = self._make_drivers(world)
                 self._guard_gates()
@@ -756,6 +758,12 @@ class Creator:
             self._world = sim
             self._generation = (world, generation)
         return self._drivers
+
+    def _close_drivers(self) -> None:
+        """Close the drivers of the last world (what they hold: a ROS 2 driver's subscriptions), if any."""
+        close = getattr(self._drivers, "close", None)
+        if callable(close):
+            close()
 
     def _guard_gates(self) -> None:
         """Gates over the drivers just built, guarded by the constraints the controller says are in force."""

@@ -15,6 +15,7 @@ names.
 
 from __future__ import annotations
 
+import logging
 import re
 from collections.abc import Mapping
 from dataclasses import dataclass, field
@@ -27,6 +28,8 @@ from drd.hosts import Cluster, Device
 from drd.hw.commands import DriverDeclarationError, declared, spec_of
 from drd.manifests import show
 from dsl.catalog import Catalog
+
+log = logging.getLogger(__name__)
 
 if TYPE_CHECKING:  # the simulator (pymunk) is imported only by hosts that run sim drivers
     from drd.sim import Simulation
@@ -109,6 +112,19 @@ class HostDrivers:
 
     devices: dict[str, object] = field(default_factory=dict)
     robots: dict[str, dict[str, object]] = field(default_factory=dict)
+
+    def close(self) -> None:
+        """Close every driver that holds something (a ROS 2 driver's publishers and subscriptions): a host builds
+        them again for each world, and a daemon that stops leaves nothing running."""
+        every = {id(d): d for d in [*self.devices.values(), *(d for parts in self.robots.values()
+                                                              for d in parts.values())]}
+        for driver in every.values():
+            close = getattr(driver, "close", None)
+            if callable(close):
+                try:
+                    close()
+                except Exception:  # one driver's failure to close must not keep the others open
+                    log.warning("could not close driver %r", driver, exc_info=True)
 
 
 def drivers_for(cluster: Cluster, host_name: str, sim: Simulation | None = None,

@@ -168,3 +168,13 @@ def test_the_robot_gets_a_zero_twist_when_the_controller_dies(cluster: DaemonClu
             if run.poll() is None:
                 run.kill()
             run.wait(timeout=10)
+
+
+def test_the_simulator_host_stops_cleanly_after_its_missions(cluster: DaemonCluster) -> None:
+    """Its drivers' ROS 2 subscriptions are closed with them: nothing keeps the stopped daemon's process alive
+    (it had to be killed: `drd stop` waited 10 s for zenoh's callback threads)."""
+    r = cluster.drd("stop", "--host", "ranger1", "--run-dir", str(cluster.run_dir), "--json")
+    assert r.returncode == 0, r.stderr
+    [row] = [d for d in json.loads(r.stdout)["daemons"] if d["host"] == "ranger1"]
+    assert row["outcome"] == "stopped", row
+    assert "still running" not in cluster.log("ranger1")  # no thread was left to give up on
