@@ -291,3 +291,16 @@ def corridor_run(cluster: DaemonCluster, trace: Path, speed: float = 20.0) -> It
         eventually(lambda: trace.exists() and any(r["kind"] == "granted" for r in read_trace(trace)),
                    "the mission to run", 60, poll=0.1)
         yield run, str(read_trace(trace)[0]["mission"])
+
+
+def two_rangers_hosts(cluster: DaemonCluster, security: str) -> str:
+    """The repository's two-Ranger team (controller, ranger1, ranger2) on the cluster's first three ports, with
+    `security`, the test lease and the simulator on the controller."""
+    text = (ROOT / "hosts.two_rangers.yaml").read_text()
+    text = text.replace("name: corridor_two_rangers", f"name: {cluster.name}").replace("lease: 3s", "lease: 1000ms")
+    text = text.replace("security: {mode: none}", f"security: {security}")
+    text = text.replace("roles: [worker, simulator]", "roles: [worker]").replace("roles: [controller]",
+                                                                                  "roles: [controller, simulator]")
+    for port, default in zip(cluster.ports, (7447, 7448, 7449), strict=False):
+        text = text.replace(f"127.0.0.1:{default}", f"127.0.0.1:{port}")
+    return text

@@ -17,7 +17,15 @@ from pathlib import Path
 from typing import Any
 
 import pytest
-from cluster_support import MISSIONCTL, ROOT, DaemonCluster, assert_spoofing_fails, eventually, password_cluster
+from cluster_support import (
+    MISSIONCTL,
+    ROOT,
+    DaemonCluster,
+    assert_spoofing_fails,
+    eventually,
+    password_cluster,
+    two_rangers_hosts,
+)
 
 from drd.daemon.client import ClusterClient
 
@@ -29,16 +37,9 @@ SECURITY = ("{mode: password, user: admin, password_file: users, per_host: true,
 
 def hosts(cluster: DaemonCluster) -> str:
     """The two-Ranger team (ranger2 never starts: its credentials are the attacker's) on our ports, with per-host
-    identities, the test lease and the simulator on the controller."""
-    text = (ROOT / "hosts.two_rangers.yaml").read_text()
-    text = text.replace("name: corridor_two_rangers", f"name: {cluster.name}").replace("lease: 3s", "lease: 1000ms")
-    text = text.replace("security: {mode: none}", f"security: {SECURITY}")
-    text = text.replace("roles: [worker, simulator]", "roles: [worker]").replace("roles: [controller]",
-                                                                                  "roles: [controller, simulator]")
-    for port, default in zip(cluster.ports, (7447, 7448, 7449), strict=False):
-        text = text.replace(f"127.0.0.1:{default}", f"127.0.0.1:{port}")
-    return text.replace("\nhosts:\n", f"\nhosts:\n  ranger3:\n    endpoint: tcp/127.0.0.1:{cluster.ports[3]}\n"
-                        "    roles: [worker]\n", 1)  # never started either
+    identities, and a ranger3 that never starts either."""
+    return two_rangers_hosts(cluster, SECURITY).replace(
+        "\nhosts:\n", f"\nhosts:\n  ranger3:\n    endpoint: tcp/127.0.0.1:{cluster.ports[3]}\n    roles: [worker]\n", 1)
 
 
 @pytest.fixture(scope="module")

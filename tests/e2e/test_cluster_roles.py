@@ -18,7 +18,7 @@ from pathlib import Path
 from typing import Any
 
 import pytest
-from cluster_support import MISSIONCTL, ROOT, DaemonCluster, eventually, password_cluster
+from cluster_support import MISSIONCTL, ROOT, DaemonCluster, eventually, password_cluster, two_rangers_hosts
 
 from drd.bus import BusTimeout, LoadReport
 from drd.cluster.remote import ComponentCall
@@ -32,16 +32,8 @@ MISSION = "mission Short {\n    Wait(duration: 1s)\n}\n"
 
 
 def hosts(cluster: DaemonCluster) -> str:
-    """The repository's two-Ranger team (ranger2 never starts) on our ports, with the roles, the test lease and
-    the simulator on the controller."""
-    text = (ROOT / "hosts.two_rangers.yaml").read_text()
-    text = text.replace("name: corridor_two_rangers", f"name: {cluster.name}").replace("lease: 3s", "lease: 1000ms")
-    text = text.replace("security: {mode: none}", f"security: {SECURITY}")
-    text = text.replace("roles: [worker, simulator]", "roles: [worker]").replace("roles: [controller]",
-                                                                                  "roles: [controller, simulator]")
-    for port, default in zip(cluster.ports, (7447, 7448, 7449), strict=True):
-        text = text.replace(f"127.0.0.1:{default}", f"127.0.0.1:{port}")
-    return text
+    """The repository's two-Ranger team (ranger2 never starts) on our ports, with the roles."""
+    return two_rangers_hosts(cluster, SECURITY)
 
 
 @pytest.fixture(scope="module")
