@@ -81,11 +81,26 @@ def test_the_gid_in_drds_attachment_is_xxh3_of_its_token_on_the_graph(router: tu
         robot.close()
 
 
-def _publish_three(node: Ros2Node, topic: str) -> Any:
+def _publish_three(node: Ros2Node, topic: str, router: Ros2Session) -> Any:
+    """Three samples, routed before this returns: a subscriber declared after must get them from the cache, not
+    live (puts still on their way to the router would reach a subscriber declared meanwhile)."""
     pub = node.publisher(topic, STRING, LATCHED)
     for text in ("first", "second", "third"):
         pub.publish({"data": text})
+    _flush(node, router)
     return pub
+
+
+def _flush(node: Ros2Node, router: Ros2Session) -> None:
+    """A query from the node's session answered by the router: it travels behind the puts (same link, same
+    priority, in order), so its reply means the router has routed them."""
+    key = f"drd_test/flush/{node.info.node_id}"
+    queryable = router.session.declare_queryable(key, lambda query: query.reply(key, b""))
+    try:
+        eventually(lambda: any(r.ok is not None for r in node.session.session.get(key, timeout=1.0)),
+                   "the router to answer behind the puts")
+    finally:
+        queryable.undeclare()
 
 
 def test_a_late_advanced_subscriber_gets_the_last_transient_local_samples(router: tuple[Ros2Session, int]) -> None:
@@ -106,7 +121,7 @@ def test_a_late_advanced_subscriber_gets_the_last_transient_local_samples(router
 
     sub = None
     try:
-        pub = _publish_three(drd, "map")  # published before anyone listens
+        pub = _publish_three(drd, "map", session)  # published before anyone listens
         sub = zenoh.ext.declare_advanced_subscriber(
             late, pub.key, on_sample, history=zenoh.ext.HistoryConfig(detect_late_publishers=True, max_samples=2),
             recovery=zenoh.ext.RecoveryConfig(periodic_queries=None, heartbeat=True), subscriber_detection=True)
@@ -131,7 +146,7 @@ def test_the_sdk_and_drd_subscriptions_joining_late_get_them_too(router: tuple[R
     listener = Ros2Node(session, "late_listener")
     mine: list[str] = []
     try:
-        _publish_three(drd, "/map")
+        _publish_three(drd, "/map", session)
         listener.subscribe("/map", STRING, lambda msg, info: mine.append(msg.data), LATCHED)
         eventually(lambda: len(mine) >= 2, "drd's transient-local subscription to get the cache")
         assert mine[:2] == ["second", "third"]
