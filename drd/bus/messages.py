@@ -128,7 +128,10 @@ def message(type_name: str, version: int = 1) -> Callable[[type[M]], type[M]]:
 
 
 def registered() -> dict[tuple[str, int], type[Message]]:
-    """All registered (type, version) pairs: for docs, diagnostics and tests."""
+    """All registered (type, version) pairs, every module of the catalog loaded: for docs, diagnostics, tests."""
+    from drd.bus import catalog
+
+    catalog.load()
     return dict(_REGISTRY)
 
 
@@ -250,8 +253,15 @@ def _forget(cls: type, key: tuple[str, int]) -> None:
 
 
 def _registered(name: str, version: int) -> type[Message]:
-    """The class registered as (type, version); MalformedMessage names what is known."""
+    """The class registered as (type, version); MalformedMessage names what is known. A type not known yet
+    loads every message module of the catalog first (`drd.bus.catalog`), so what decodes never depends on what
+    the process happened to import."""
     cls = _REGISTRY.get((name, version))
+    if cls is None:
+        from drd.bus import catalog  # the catalog imports the modules that import this one
+
+        catalog.load()
+        cls = _REGISTRY.get((name, version))
     if cls is None:
         known = sorted(v for (t, v) in _REGISTRY if t == name)
         if not known:
