@@ -48,7 +48,7 @@ _COMMON = ("name", "kind", "description")
 _RUNNABLE = ("entry_point", "process", "multiplicity", "scheduling", "params")
 #: The keys each kind may use, in the order manifests write them.
 KEYS: Mapping[Kind, tuple[str, ...]] = {
-    Kind.BEHAVIOR: (*_COMMON, *_RUNNABLE, "needs", "inputs", "outputs", "events", "interfaces"),
+    Kind.BEHAVIOR: (*_COMMON, *_RUNNABLE, "movable", "needs", "inputs", "outputs", "events", "interfaces"),
     Kind.RC: (*_COMMON, *_RUNNABLE, "interfaces", "sharable", "capacity", "properties", "limits"),
     Kind.ARC: (*_COMMON, "properties", "limits", "parts"),
     Kind.DATA: (*_COMMON, "fields"),
@@ -113,6 +113,8 @@ def _check_rules(c: _Checker, kind: Kind, data: Mapping[str, Any], fields: Mappi
     """Rules that tie keys of one manifest together."""
     if kind is Kind.RC and isinstance(data.get("interfaces"), list) and len(fields["interfaces"]) != 1:
         c.fail("interfaces", f"an rc implements exactly one interface, got {len(fields['interfaces'])}")
+    if fields.get("movable") and data.get("needs"):  # its devices are on one host: it runs there
+        c.fail("movable", "a behavior with device needs runs where its devices are: it cannot move")
     if fields.get("sharable") and data.get("capacity") is None:
         c.fail("capacity", "required when sharable is true")
     if not data.get("sharable") and data.get("capacity") is not None:
@@ -365,6 +367,7 @@ _PARSERS: dict[str, _Parser] = {
     "events": _records,
     "interfaces": _Checker.names,
     "sharable": _Checker.flag,
+    "movable": _Checker.flag,
     "capacity": lambda c, v, k: None if v is None else c.positive(v, k),
     "properties": _properties,
     "limits": _limits,

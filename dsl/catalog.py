@@ -180,6 +180,8 @@ class ComponentType:
     entry_point: str | None = None
     process: Process = Process.CONTAINER
     scheduling: Scheduling = Scheduling()
+    #: a behavior whose state can be snapshotted and restored elsewhere (`missionctl migrate`); no device needs
+    movable: bool = False
     source: str = "<builtin>"
 
     def param(self, name: str) -> ParamSpec | None:

@@ -6,9 +6,13 @@ Fig. 8) no frame is taken and the clock does not count, so `Observe(duration: 12
 One frame per control cycle: the region brightness (the image, coarsely) and the people in it are read
 and kept in memory (`self.frames`, `self.detections`: the number of detections over all frames).
 Output `observation` {frames}. Param: `duration` (its default in the manifest, as every parameter's).
+Its snapshot (camera time observed, frames, detections) lets it go on with them when entered again.
 """
 
 from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import Any
 
 from drd.runtime.component import Component, Status
 
@@ -18,6 +22,14 @@ N_REGIONS = 16
 
 
 class Observe(Component):
+    restored: Mapping[str, Any] | None = None
+
+    def restore(self, state: Mapping[str, Any] | None) -> None:
+        self.restored = state
+
+    def snapshot(self) -> Mapping[str, Any] | None:
+        return {"observed": self.observed, "frames": self.frames, "detections": self.detections}
+
     def start(self) -> None:
         self.duration = float(self.ctx.params["duration"])
         self.camera = self.device("camera")
@@ -25,6 +37,10 @@ class Observe(Component):
         self.last: float | None = self.ctx.now()
         self.frames = 0
         self.detections = 0
+        state, self.restored = self.restored, None
+        if state is not None:
+            self.observed, self.frames = float(state["observed"]), int(state["frames"])
+            self.detections = int(state["detections"])
 
     def step(self, now: float) -> Status:
         if self.last is not None:

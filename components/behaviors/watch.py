@@ -10,11 +10,16 @@ manifest needs only `camera`); without one, x and y are in the robot's own frame
 One event when a person first shows up, then one each time they have moved `MIN_MOVE` (0.5 m) since the
 last event about them, so a person standing still is not reported over and over.
 Params: `duration`, `threshold` (their defaults in the manifest).
+
+Its snapshot (when it began, the events emitted, where each person was last reported) lets a Watch entered again
+by a new controller go on with its count and its deadline instead of reporting everyone again.
 """
 
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
+from typing import Any
 
 from components.behaviors.locate_dark_corner import optional_device
 from drd.runtime.component import Component, Status
@@ -27,6 +32,15 @@ MIN_MOVE = 0.5
 
 
 class Watch(Component):
+    restored: Mapping[str, Any] | None = None
+
+    def restore(self, state: Mapping[str, Any] | None) -> None:
+        self.restored = state
+
+    def snapshot(self) -> Mapping[str, Any] | None:
+        return {"t0": self.t0, "events": self.events,
+                "reported": {k: [x, y] for k, (x, y) in self.reported.items()}}
+
     def start(self) -> None:
         p = self.ctx.params
         self.duration = float(p["duration"])
@@ -36,6 +50,10 @@ class Watch(Component):
         self.t0 = self.ctx.now()
         self.reported: dict[str, tuple[float, float]] = {}  # label -> position of its last event
         self.events = 0
+        state, self.restored = self.restored, None
+        if state is not None:
+            self.t0, self.events = float(state["t0"]), int(state["events"])
+            self.reported = {str(k): (float(v[0]), float(v[1])) for k, v in dict(state["reported"]).items()}
 
     def step(self, now: float) -> Status:
         x0, y0, h = self.drive.odometry() if self.drive is not None else (0.0, 0.0, 0.0)

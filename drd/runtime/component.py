@@ -6,6 +6,11 @@ resources, emit), `start` on entry, `step` each control cycle (non-blocking, ret
 and gives it back, `terminate` on exit whatever the reason, and `shutdown` once when the
 instance is dropped for good (a state entered again reuses it until then). A component that raises fails
 its state (an `error` trigger), never the executive.
+
+A component may also say what its state is (`snapshot`: plain data) and take it back (`restore`, between
+`setup` and `start`) when its instance is entered again somewhere else: moved to another host (`missionctl
+migrate`), placed again after its host was lost, or entered again by a new controller after a restart or a
+failover. `restore(None)` tells it its state is lost: it was restarted.
 """
 
 from __future__ import annotations
@@ -116,6 +121,19 @@ class Component:
     def resume(self) -> None:
         """The resource is back."""
 
+    def snapshot(self) -> Mapping[str, Any] | None:
+        """This instance's state as plain data (JSON: str, numbers, bool, None, lists, string-keyed dicts), small
+        (at most `MAX_SNAPSHOT` bytes encoded), enough for `restore` to go on where it was; None (the default):
+        "my state cannot be restored". Called after `start` and every few steps while it runs (a copy travels
+        only when it changed), and once more when it is moved: it must not change anything."""
+        return None
+
+    def restore(self, state: Mapping[str, Any] | None) -> None:
+        """Before `start`, after `setup`, when this instance is entered again elsewhere (moved, placed again after
+        its host was lost, or re-entered by a new controller): `state` is its last `snapshot`, or None when
+        that is lost (it is restarted, and told so). `start` follows: it goes on from the state given here
+        instead of starting afresh. The default ignores it (the component starts afresh)."""
+
     def terminate(self, status: Status) -> None:
         """On exit, whatever the reason (success, failure, or stopped while RUNNING)."""
 
@@ -124,6 +142,9 @@ class Component:
         `setup` acquired (files, sockets, threads). A state entered again before that reuses the instance, so
         `terminate` is the end of one entry, this the end of the object; nothing is called after it."""
 
+
+#: The largest snapshot (bytes, encoded as JSON) that travels or is journaled; a larger one is dropped, and said so.
+MAX_SNAPSHOT = 64 * 1024
 
 #: How the executive finds component classes by name.
 Registry = Mapping[str, Callable[[], Component]]
