@@ -45,7 +45,7 @@ from drd.runtime.constraints import Breach
 from drd.runtime.records import Record, plain
 
 
-@message("drd.component.call", 4)
+@message("drd.component.call", 5)
 class ComponentCall(Message):
     """One lifecycle call for the instance `path` of mission `mission` (see the module docstring).
 
@@ -53,7 +53,9 @@ class ComponentCall(Message):
     `epochs`: need -> the epoch it is bound at (None: unbound); `rank`: [-priority, declaration order], for the
     host's per-cycle arbitration of actuator commands; `sim_time`/`sim_version`: the simulation's clock;
     `gates`: the gate operations for this host, applied before the call (`drd.cluster.gates.GateUpdate`);
-    `retire` (no path) ends mission `mission` on that host: its instances and processes go."""
+    `retire` (no path) ends mission `mission` on that host: its instances and processes go; `restore`, on a
+    start: `[state]`, the instance's state to go on from (`Component.restore`; state None: it was lost); a
+    `terminate` whose status is `moved` brings back the instance's snapshot and drops it there."""
 
     op: str
     mission: str
@@ -75,13 +77,15 @@ class ComponentCall(Message):
     generation: int = 0  # the world's reset count: a new one means new drivers on the device's host
     term: float = 0.0  # when the calling controller started: a host refuses calls of a controller older than one
     #                    it has heard (one revived after another took over must not act)
+    restore: list[Any] | None = None
 
 
-@message("drd.component.reply", 2)
+@message("drd.component.reply", 3)
 class ComponentReply(Message):
     """What the call did: `status` (after a step), outputs, events `[name, fields]`, log lines, shared data,
     dependency changes `[resource, key, value]`, and `error` if the component raised (the state fails);
-    `records`: what the host's gates recorded meanwhile (`drd.cluster.gates.wire_record`)."""
+    `records`: what the host's gates recorded meanwhile (`drd.cluster.gates.wire_record`); `snapshot`:
+    `[state]` when the instance's snapshot changed (after its start, every few steps, when it is moved)."""
 
     status: str = ""
     outputs: dict[str, Any] | None = None
@@ -91,9 +95,10 @@ class ComponentReply(Message):
     dependencies: list[list[Any]] | None = None
     error: str = ""
     records: list[dict[str, Any]] | None = None
+    snapshot: list[Any] | None = None
 
 
-@message("drd.component.batch", 2)
+@message("drd.component.batch", 3)
 class ComponentBatch(Message):
     """The `step` calls of one control cycle for one host, in the interpreter's order (see `ComponentRouter.step`).
 
@@ -111,7 +116,7 @@ class ComponentBatch(Message):
     gates: list[list[Any]] | None = None
 
 
-@message("drd.component.batch-reply", 2)
+@message("drd.component.batch-reply", 3)
 class ComponentBatchReply(Message):
     """One reply per call that ran, in order (a prefix of the batch's calls); the simulation's time and version
     after the step, when the batch carried one; what the host's gates recorded meanwhile."""
@@ -422,26 +427,41 @@ class RemoteComponent(Component):
         self._params: dict[str, Any] = {}
         self._bindings: dict[str, list[str]] = {}
         self._rank: list[int] = [0, 0]
+        self.state: list[Any] | None = None  # [its last snapshot] as its host sent it (None: none yet)
+        self._restore: list[Any] | None = None  # [state] to restore at its next start (`restore`)
 
     # -- lifecycle ------------------------------------------------------------------------------------
 
     def setup(self, ctx: Context) -> None:
         super().setup(ctx)  # the remote instance is set up at its first start, once its host is known
 
+    def snapshot(self) -> Mapping[str, Any] | None:
+        """Its last snapshot as its host sent it (a local one's own)."""
+        if self.local is not None and self.host is None:
+            return self.local.snapshot()
+        return self.state[0] if self.state else None
+
+    def restore(self, state: Mapping[str, Any] | None) -> None:
+        """Given to the instance with its next start (wherever it is started)."""
+        self._restore = [dict(state) if state is not None else None]
+
     def start(self) -> None:
         self._resolve()
+        restore, self._restore, self.state = self._restore, None, None
         if self.host is None and not self.movable:
             if self.local is None:
                 self.local = self.router.local[self.name]()
                 self.local.setup(self._ctx)
+            if restore is not None:
+                self.local.restore(restore[0])
             self.local.start()
             return
         names = self.router.param_names(self.name)
         self._params = {k: plain(v) for k, v in self._ctx.params.items() if names is None or k in names}
         if self.movable:
-            self._place("placed", set())
+            self._place("placed", set(), restore)
         else:
-            self._call("start", params=self._params, bindings=self._bindings, rank=self._rank)
+            self._call("start", params=self._params, bindings=self._bindings, rank=self._rank, restore=restore)
 
     def step(self, now: float) -> Status:
         if self.local is not None and self.host is None:
@@ -501,8 +521,9 @@ class RemoteComponent(Component):
                 if op == "suspend":
                     self._call(op)
 
-    def _place(self, how: str, avoid: set[str]) -> None:
-        """Start on the host the policy picks, excluding each host that does not answer (`PLACE_TRIES`)."""
+    def _place(self, how: str, avoid: set[str], restore: list[Any] | None = None) -> None:
+        """Start on the host the policy picks, excluding each host that does not answer (`PLACE_TRIES`), with
+        `restore` (`[state]`) if given."""
         place = self.router.place
         assert place is not None
         path, tried = self._ctx.path, set(avoid)
@@ -512,7 +533,7 @@ class RemoteComponent(Component):
             # hosts that timed out in this mission are left out (down ones the policy refuses itself)
             self.host = place(self.name, self._params, frozenset(tried | self.router.gone))  # or ComponentError
             try:
-                self._call("start", params=self._params, bindings={}, rank=self._rank)
+                self._call("start", params=self._params, bindings={}, rank=self._rank, restore=restore)
             except ComponentError as e:  # it did not answer, or the start failed there: the next host by policy
                 tried.add(self.host)
                 last = e
@@ -523,11 +544,42 @@ class RemoteComponent(Component):
         raise ComponentError(f"{path}: {self.name} could not be started on {', '.join(sorted(tried))}: {last}")
 
     def _replace(self) -> None:
-        """Its host is lost: start the instance again on another host (its code state went with the host)."""
+        """Its host is lost: start the instance again on another host, from its last snapshot (None if it sent
+        none: its state went with the host, and it is told so)."""
         lost = self.host or ""
         self.router.forget_reply(self)  # a step reply batched from the lost host is no longer ours
-        self._place("re-placed", {lost})
-        self._ctx.log(f"{self.name} placed again on {self.host}: its host {lost} was lost")
+        restore = self.state if self.state is not None else [None]
+        self._place("re-placed", {lost}, restore)
+        said = "from its last snapshot" if restore[0] is not None else "afresh (no snapshot)"
+        self._ctx.log(f"{self.name} placed again on {self.host} {said}: its host {lost} was lost")
+
+    def migrate(self, host: str) -> list[Any]:
+        """Move the running instance to `host`: stopped where it runs as `moved` (its fresh snapshot comes back,
+        nothing of it stays there; from its last snapshot if that host is lost), then set up, restored and
+        started on `host`. The state in the mission does not change. `[state]` moved; ComponentError if `host`
+        refused it (the instance is then started again where it was, from that state, when that host is up)."""
+        old = self.host
+        if old is None or not self.movable:
+            raise ComponentError(f"{self._ctx.path}: {self.name} runs where its devices are: it cannot move")
+        self.router.forget_reply(self)
+        moved = self.state if self.state is not None else [None]
+        if not self.router.is_down(old):
+            reply = self._call("terminate", status="moved")  # ComponentError: it stays where it is
+            moved = reply.snapshot if reply.snapshot is not None else moved
+        self.state = moved
+        try:
+            self.host = host
+            self._call("start", params=self._params, bindings={}, rank=self._rank, restore=moved)
+        except ComponentError as e:
+            self.host = None if self.router.is_down(old) else old
+            if self.host is None:
+                self._place("re-placed", {host, old}, moved)
+            else:
+                self._call("start", params=self._params, bindings={}, rank=self._rank, restore=moved)
+            raise ComponentError(f"{host} did not start {self._ctx.path}: {e}; it goes on on {self.host}") from None
+        self.router.placed.append((self._ctx.path, host, "migrated"))
+        self._ctx.log(f"{self.name} moved from {old} to {host}")
+        return moved
 
     def _resolve(self) -> None:
         """Which unit (and robot part) each need is bound to, from the context's bindings, and so the host."""
@@ -582,6 +634,8 @@ class RemoteComponent(Component):
 
     def _apply(self, reply: ComponentReply) -> None:
         ctx = self._ctx
+        if reply.snapshot is not None:
+            self.state = list(reply.snapshot)
         if reply.outputs is not None:
             ctx.outputs.clear()
             ctx.outputs.update(reply.outputs)

@@ -6,8 +6,8 @@ Every daemon enforces the same rules on the links clients open to it (zenoh's `a
 - `operator`: ask what it likes of the daemons but a Creator's or the simulator's own key (the controller's to
   call), so it runs, stops and tunes missions and reads everything; it sends nothing else: no publication (no
   load report, no announcement, no record), no liveliness token, no queryable, no reply;
-- `observer`: as an operator, but it may not ask to run, stop or tune (`missions/run`, `executive`,
-  `host/*/tune`): it reads status, the Component Database, the manager's resources, and missions' records.
+- `observer`: as an operator, but it may not ask to run, stop, move or tune (`missions/run`, `missions/migrate`,
+  `executive`, `host/*/tune`): it reads status, the Component Database, the manager's resources, and missions' records.
 
 Why deny rules over `default_permission: allow` (and not allow rules over `deny`): zenoh's user/password
 authentication is one-way, so the daemon that *opens* a link to another daemon does not learn the other's user:
@@ -28,12 +28,12 @@ from drd.hosts import Cluster, Role, SecurityMode
 
 #: What only daemons may ask, and what an observer may not ask either, under `drd/<cluster>/`.
 DAEMONS_ONLY = ("host/*/creator", "sim")
-OPERATORS_ONLY = ("missions/run", "executive", "host/*/tune")
+OPERATORS_ONLY = ("missions/run", "missions/migrate", "executive", "host/*/tune")
 #: What a client never sends: it publishes, serves and answers nothing.
 NEVER_FROM_CLIENTS = ["put", "delete", "declare_queryable", "reply", "liveliness_token"]
 #: What only the acting controller (or a standby) serves and publishes, and what only the simulator's host serves,
 #: under `drd/<cluster>/` (`security.per_host`).
-CONTROLLERS_ONLY = ("missions/run", "executive", "executive/**", "rcm/**", "mission/**")
+CONTROLLERS_ONLY = ("missions/run", "missions/migrate", "executive", "executive/**", "rcm/**", "mission/**")
 SIMULATORS_ONLY = ("sim", "world")
 
 

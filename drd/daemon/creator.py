@@ -72,6 +72,7 @@ from drd.daemon.pipe import (
 )
 from drd.daemon.workers import (
     DEFAULT_SIZE,
+    MOVED,
     Tune,
     Tuned,
     Worker,
@@ -451,7 +452,8 @@ class Creator:
             ahead = self._read_ahead(inst) if call.op == "step" else None
             aheads.append(ahead)
             calls.append(Call(call.path, call.op, call.now, call.status, call.shared, call.shared_ids, call.inputs,
-                              call.params if call.op == "start" else None, inst.setup, ahead))
+                              call.params if call.op == "start" else None, inst.setup, ahead,
+                              call.restore if call.op == "start" else None))
             inst.setup = None
         try:
             got = self._exchange(worker, Run(tuple(calls), latest))
@@ -486,8 +488,10 @@ class Creator:
         if state is not None and state != inst.state:
             inst.state = state
             self._dirty = True
+        if call.op == "terminate" and call.status == MOVED:  # it goes on elsewhere: nothing of it stays here
+            self._forget(_key(call))
         return ComponentReply(reply.status, reply.outputs, reply.events, logs, reply.shared, reply.dependencies,
-                              reply.error)
+                              reply.error, snapshot=reply.snapshot)
 
     def _exchange(self, worker: Worker, run: Run) -> tuple[CallReply, ...]:
         """Send `run`, serve the worker's driver requests until its final `Done`; WorkerDied if it goes."""

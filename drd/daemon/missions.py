@@ -34,6 +34,7 @@ from drd.cluster.gates import GateUpdate, GateUpdateReply, RemoteGates, deliver
 from drd.cluster.guard import SharedGuard
 from drd.cluster.remote import ComponentCall, ComponentError, ComponentRouter, SimCycle
 from drd.cluster.telemetry import RemoteTelemetry
+from drd.daemon.migrate import Migrations
 from drd.daemon.resume import Checkpoints, resume, wait_for_hosts
 from drd.hosts import Cluster, Role
 from drd.journal import Journal
@@ -177,6 +178,7 @@ class MissionRunner:
         self.journal = journal
         self.checkpoints = Checkpoints(journal) if journal is not None else None
         self._queryable = bus.serve(run_key(cluster.name), self._serve)
+        self._migrations = Migrations(bus, self)  # `missionctl migrate` (drd.daemon.migrate)
         threading.Thread(target=self._warm_up, name="drd-compiler-warm-up", daemon=True).start()
         if journal is not None and journal.running():
             threading.Thread(target=self._resume, name="drd-resume", daemon=True).start()
@@ -218,6 +220,7 @@ class MissionRunner:
 
     def close(self) -> None:
         self._queryable.close()
+        self._migrations.close()
         world = self.world
         if world is not None:
             world.stopping.set()

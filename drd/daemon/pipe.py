@@ -62,7 +62,8 @@ class Setup:
 class Call:
     """One lifecycle call of an instance in a worker (see `drd.daemon.workers.run_calls`): `shared_ids` chain
     shared dicts through a run, `params` come with `start` only, `setup` with an instance's first call, `ahead`
-    holds the readings the Creator read ahead of a step (`{reading_key: value}`)."""
+    holds the readings the Creator read ahead of a step (`{reading_key: value}`); `restore`, on a start only:
+    `[state]` to give the instance (`Component.restore(state)`, state None: "it was lost") before it starts."""
 
     path: str
     op: str
@@ -74,12 +75,14 @@ class Call:
     params: dict[str, Any] | None
     setup: Setup | None
     ahead: dict[ReadingKey, Any] | None
+    restore: list[Any] | None = None
 
 
 @dataclass(frozen=True, slots=True)
 class CallReply:
     """What one call did, as `drd.cluster.remote.ComponentReply` carries it; `setup_failed`: the instance could
-    not be built (the Creator forgets it); `unused`: the keys of the call's `ahead` it did not read."""
+    not be built (the Creator forgets it); `unused`: the keys of the call's `ahead` it did not read; `snapshot`:
+    `[state]` when the instance's snapshot changed since the last one sent (None: unchanged, or not taken)."""
 
     status: str = ""
     outputs: dict[str, Any] | None = None
@@ -90,6 +93,7 @@ class CallReply:
     error: str = ""
     setup_failed: bool = False
     unused: list[ReadingKey] = field(default_factory=list)
+    snapshot: list[Any] | None = None
 
 
 # -- the messages ---------------------------------------------------------------------------------------------
@@ -250,7 +254,7 @@ def _fields(record: Any) -> tuple[Any, ...]:
 def _call_wire(call: Call) -> tuple[Any, ...]:
     setup = _fields(call.setup) if call.setup is not None else None
     return (call.path, call.op, call.now, call.status, call.shared, call.shared_ids, call.inputs, call.params,
-            setup, call.ahead)
+            setup, call.ahead, call.restore)
 
 
 def _short(value: Any) -> str:
@@ -309,12 +313,12 @@ def _optional_record(cls: type[Any]) -> Check:
 
 _NONE = type(None)
 _ANY, _STR, _BOOL, _DICT, _LIST = _is(object), _is(str), _is(bool), _is(dict), _is(list)
-_OPT_DICT, _SEQUENCE = _is(dict, _NONE), _is(list, tuple)
+_OPT_DICT, _OPT_LIST, _SEQUENCE = _is(dict, _NONE), _is(list, _NONE), _is(list, tuple)
 _CHECKS: dict[type[Any], tuple[Check, ...]] = {
     Setup: (_STR, _DICT, _DICT, _DICT),
     Call: (_STR, _STR, _is(int, float), _STR, _OPT_DICT, _OPT_DICT, _OPT_DICT, _OPT_DICT, _optional_record(Setup),
-           _OPT_DICT),
-    CallReply: (_STR, _OPT_DICT, _LIST, _LIST, _OPT_DICT, _LIST, _STR, _BOOL, _LIST),
+           _OPT_DICT, _OPT_LIST),
+    CallReply: (_STR, _OPT_DICT, _LIST, _LIST, _OPT_DICT, _LIST, _STR, _BOOL, _LIST, _OPT_LIST),
     Run: (_records(Call), _DICT),
     Drop: (_seq(str),),
     Ok: (_ANY, _BOOL),

@@ -40,6 +40,7 @@ from __future__ import annotations
 import collections
 import functools
 import importlib
+import json
 import logging
 import multiprocessing
 import os
@@ -549,7 +550,7 @@ class DeviceProxy:
 class _Hosted:
     """One component instance in a worker, and what it emitted since the last reply."""
 
-    __slots__ = ("comp", "ctx", "events", "logs", "deps", "now")
+    __slots__ = ("comp", "ctx", "events", "logs", "deps", "now", "sent", "steps")
 
     def __init__(self) -> None:
         self.comp: Any = None
@@ -558,6 +559,8 @@ class _Hosted:
         self.logs: list[str] = []
         self.deps: list[list[Any]] = []
         self.now = 0.0
+        self.sent: str | None = None  # its last snapshot sent, as JSON (None: none sent yet)
+        self.steps = 0  # steps since the last snapshot taken
 
 
 def worker_main(conn: Connection) -> None:
@@ -623,6 +626,12 @@ def run_calls(calls: Sequence[Call], latest: dict[str, Any], link: _Link,
             hosted[call.path] = h
         elif call.op == "start" and h is not None:
             h.ctx.params, h.ctx.outputs = dict(call.params or {}), {}
+        if h is not None and call.op == "start" and call.restore is not None:
+            try:  # before start: the state it had elsewhere (or None: it was lost)
+                h.comp.restore(call.restore[0] if call.restore else None)
+            except Exception as e:  # component code is not ours to trust: its start fails
+                replies.append(CallReply(error=f"component raised {type(e).__name__} in restore: {e}"))
+                break
         if h is None:
             replies.append(CallReply(error=f"no instance {call.path} in worker {os.getpid()}"))
             break
@@ -659,6 +668,7 @@ def _run_call(h: _Hosted, call: Call, link: _Link) -> CallReply:
     h.ctx.inputs = {**(call.inputs or {}), **services.shared}  # shared data: the objects sent back
     result = ""
     error = ""
+    snapshot: list[Any] | None = None
     link.begin(call.ahead)
     try:
         op = call.op
@@ -672,15 +682,54 @@ def _run_call(h: _Hosted, call: Call, link: _Link) -> CallReply:
             h.comp.resume()
         elif op == "terminate":
             status = call.status
+            if status == MOVED:  # stopped to go on elsewhere: its state as it leaves, then stopped while running
+                snapshot = take_snapshot(h, force=True)
             h.comp.terminate(Status(status) if status in Status.__members__.values() else Status.RUNNING)
         else:
             error = f"unknown op {op!r}"
     except Exception as e:  # component code is not ours to trust: the state fails, the worker goes on
         error = f"component raised {type(e).__name__}: {e}"
+    if not error and (call.op == "start" or call.op == "step" and _due(h)):
+        snapshot = take_snapshot(h, force=call.op == "start")  # a new entry: the controller forgot the last
     reply = CallReply(result, plain(h.ctx.outputs), h.events, h.logs, plain(services.shared), h.deps, error, False,
-                  link.unused())
+                      link.unused(), snapshot)
     h.events, h.logs, h.deps = [], [], []
     return reply
+
+
+#: A running instance's snapshot is taken after its start and every this many steps (and when it is moved); it
+#: travels with the reply only when it changed.
+SNAPSHOT_EVERY = 10
+#: The status of a `terminate` that moves an instance elsewhere: its snapshot comes back with the reply.
+MOVED = "moved"
+
+
+def _due(h: _Hosted) -> bool:
+    h.steps += 1
+    return h.steps >= SNAPSHOT_EVERY
+
+
+def take_snapshot(h: _Hosted, force: bool = False) -> list[Any] | None:
+    """`[state]` if the instance's snapshot changed since the last sent (or `force`), else None. A snapshot that
+    raises, is not plain data or is larger than `MAX_SNAPSHOT` is not sent, and said so in its logs."""
+    from drd.runtime.component import MAX_SNAPSHOT
+    from drd.runtime.records import plain
+
+    h.steps = 0
+    try:
+        state = h.comp.snapshot()
+        state = None if state is None else plain(dict(state))
+        text = json.dumps(state, sort_keys=True, allow_nan=False)
+    except Exception as e:  # component code is not ours to trust
+        h.logs.append(f"its snapshot was not taken: {type(e).__name__}: {e}")
+        return None
+    if len(text) > MAX_SNAPSHOT:
+        h.logs.append(f"its snapshot ({len(text)} bytes) is over {MAX_SNAPSHOT} bytes: not kept")
+        return None
+    if text == h.sent and not force:
+        return None
+    h.sent = text
+    return [state]
 
 
 def _setup(path: str, setup: Setup, params: dict[str, Any] | None, link: _Link) -> _Hosted:

@@ -35,12 +35,13 @@ from drd.daemon.pipe import (
 SETUP = Setup("tests.test_workers:Probe", {"drive": "ranger1.drive"}, {"drive": ["odometry", "set_velocity"]},
               {"drive": ["set_velocity"]})
 AHEAD = {("dev", "drive", "odometry", (), ()): (1.0, 2.0, 0.5), ("attr", "camera", "fov", (), ()): 1.2}
-CALLS = (Call("M/A", "start", 0.0, "", None, None, {"x": 1}, {"mode": "drive"}, SETUP, None),
+CALLS = (Call("M/A", "start", 0.0, "", None, None, {"x": 1}, {"mode": "drive"}, SETUP, None, [{"began": 2.5}]),
          Call("M/B", "step", 1.5, "", {"log": ["M/A"]}, {"log": "7"}, None, None, None, AHEAD),
          Call("M/C", "terminate", 2, "success", None, None, None, None, None, None))
 REPLIES = (CallReply("running", {"pid": 12}, [["Seen", {"at": 1.0}]], ["a line"], {"log": ["M/A", "M/B"]},
                      [["r1", "k", 3]], "", False, [("attr", "camera", "fov", (), ())]),
-           CallReply(error="ValueError: no", setup_failed=True))
+           CallReply(error="ValueError: no", setup_failed=True),
+           CallReply("running", snapshot=[{"began": 2.5, "steps": 40}]), CallReply("success", snapshot=[None]))
 
 #: Every message a worker sends the Creator: the Creator reads them with the plain decoder.
 FROM_WORKER: list[Message] = [
@@ -122,7 +123,8 @@ def test_a_wrong_number_of_fields_is_refused(wire: tuple[Any, ...]) -> None:
     ("cmd", "M/A", "drive", "set_velocity", 0.5, {}),
     ("drop", ["M/A", 7]),
     ("done", "replies"),
-    ("done", [("running", "outputs", [], [], None, [], "", False, [])]),
+    ("done", [("running", "outputs", [], [], None, [], "", False, [], None)]),
+    ("done", [("running", None, [], [], None, [], "", False, [], "a snapshot not in a list")]),
     ("ok", 1, "changed"),
 ], ids=repr)
 def test_a_field_of_a_wrong_type_is_refused(wire: tuple[Any, ...]) -> None:
