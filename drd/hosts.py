@@ -84,7 +84,7 @@ _SECURITY_ALLOWED = ("mode", *dict.fromkeys(k for keys in SECURITY_KEYS.values()
                      "per_host")
 #: The roles of `cluster.security.roles`, most powerful first (docs/security.md).
 ACCESS_ROLES = ("daemon", "operator", "observer")
-_PLACEMENT_KEYS = ("cpu", "memory", "instances")
+_PLACEMENT_KEYS = ("cpu", "memory", "instances", "affinity")
 #: The range and unit of every number hosts.yaml itself defines (device options and robot properties declare theirs
 #: in their manifests, `limits:`): a value outside is refused at load with the file, the key and the range.
 RANGES: Mapping[str, Limit] = {
@@ -135,11 +135,13 @@ class Security:
 
 @dataclass(frozen=True, slots=True)
 class Placement:
-    """Weights of the Load Balancer's policy: a host's score is the weighted sum of its loads."""
+    """Weights of the Load Balancer's policy: a host's score is the weighted sum of its loads, less `affinity`
+    times its share of the devices the instance's mission state uses (docs/placement.md)."""
 
     cpu: float = 1.0
     memory: float = 0.5
     instances: float = 0.2
+    affinity: float = 0.2
 
 
 @dataclass(frozen=True, slots=True)

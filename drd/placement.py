@@ -1,17 +1,21 @@
 """The Load Balancer's policy: which host should run a component. Pure: no I/O, no clock, no randomness.
 
 The daemon gathers what it knows about every host into `HostView`s (its latest load report, its
-devices, the instances it runs) and asks `place`. Only hosts that are up, not excluded (a start there
-timed out), able to run the component (devices, core indices, the caller's affinity) and below the
-component's cluster-wide multiplicity are eligible; among them the lowest weighted score wins, ties
-going to the smaller host name. See docs/placement.md.
+devices, roles and the instances it runs) and asks `place`. The policy is a small framework on the
+model of the Kubernetes scheduler: **filters** (`FILTERS`), each saying why a host cannot take the
+component (down, excluded after a failed start, missing devices, too few cores, no worker role,
+outside the caller's affinity, multiplicity reached), then **scores** (`SCORES`) of the hosts left,
+each plugin giving a value on one scale (percentage points) and a weight; the lowest total wins, ties
+going to the smaller host name. Every answer carries a `Decision` record of it all, for the logs and
+`missionctl status`. See docs/placement.md.
 """
 
 from __future__ import annotations
 
 import math
-from collections.abc import Collection, Iterable, Mapping, Sequence
-from dataclasses import dataclass, field
+from collections.abc import Callable, Collection, Iterable, Mapping, Sequence
+from dataclasses import dataclass, field, replace
+from typing import Any
 
 from drd.hosts import Host, Placement
 from dsl.catalog import ComponentType, Kind, ParamSpec
@@ -21,6 +25,8 @@ from dsl.errors import did_you_mean
 INSTANCE_SCALE = 10.0
 #: Subtracted from the score of a host the caller prefers (one of `prefer_hosts`).
 PREFER_BONUS = 50.0
+#: Points of a host holding all the devices the instance's mission state uses (`near`), before weighting.
+AFFINITY_SCALE = 100.0
 
 
 @dataclass(frozen=True, slots=True)
@@ -28,7 +34,7 @@ class HostView:
     """What the placer knows of one host: its last load report, hardware and running instances.
 
     `cpu` and `memory` are percentages (0-100); `devices` the RC types it has (`Camera`); `running`
-    counts instances by component name; `cores` is None when unknown.
+    counts instances by component name; `cores` is None when unknown; `roles` as in hosts.yaml.
     """
 
     name: str
@@ -39,23 +45,87 @@ class HostView:
     devices: frozenset[str] = frozenset()
     running: Mapping[str, int] = field(default_factory=dict, hash=False)
     cores: int | None = None
+    roles: frozenset[str] = frozenset()
 
 
 def view_of(host: Host, *, cpu: float = 0.0, memory: float = 0.0, up: bool = True,
             running: Mapping[str, int] | None = None) -> HostView:
-    """A `HostView` of a configured host: devices and cores from `hosts.yaml`, load from a report."""
+    """A `HostView` of a configured host: devices, cores and roles from `hosts.yaml`, load from a report."""
     running = dict(running or {})
     return HostView(host.name, cpu, memory, sum(running.values()), up, frozenset(d.type for d in host.devices),
-                    running, host.cores)
+                    running, host.cores, frozenset(str(r) for r in host.roles))
+
+
+# ---------------------------------------------------------------- the decision record
+
+
+@dataclass(frozen=True, slots=True)
+class Part:
+    """One score plugin's say on one host: `value` in points (lower is better), times `weight`."""
+
+    plugin: str
+    weight: float
+    value: float
+
+    @property
+    def points(self) -> float:
+        return self.weight * self.value
+
+
+@dataclass(frozen=True, slots=True)
+class Scored:
+    """A host that passed every filter: its total (the sum of its parts' points) and the parts."""
+
+    host: str
+    total: float
+    parts: tuple[Part, ...]
+
+    def part(self, plugin: str) -> Part | None:
+        return next((p for p in self.parts if p.plugin == plugin), None)
+
+
+@dataclass(frozen=True, slots=True)
+class Decision:
+    """Why a host was chosen (or none): the candidates, each filtered host with its reasons, each scored host
+    with its parts (best first), the winner (None: unplaceable, `problem` says why when no host was looked at)."""
+
+    component: str
+    candidates: tuple[str, ...] = ()
+    filtered: Mapping[str, tuple[str, ...]] = field(default_factory=dict, hash=False)
+    scored: tuple[Scored, ...] = ()
+    winner: str | None = None
+    problem: str = ""
+
+    def summary(self) -> str:
+        """One short line: the winner, the parts that made it beat the runner-up, the hosts filtered and why."""
+        if self.winner is None:
+            return f"unplaceable: {self.problem or _listed(self.filtered)}"
+        best = self.scored[0]
+        why = _versus(best, self.scored[1]) if len(self.scored) > 1 else "the only host left"
+        out = f"{self.winner} ({why}"
+        if self.filtered:
+            out += "; filtered " + _listed(self.filtered)
+        return out + ")"
+
+    def as_dict(self) -> dict[str, Any]:
+        """The whole record as plain JSON."""
+        return {"component": self.component, "winner": self.winner, "candidates": list(self.candidates),
+                "filtered": {h: list(r) for h, r in sorted(self.filtered.items())},
+                "scored": [{"host": s.host, "total": s.total,
+                            "parts": [{"plugin": p.plugin, "weight": p.weight, "value": p.value, "points": p.points}
+                                      for p in s.parts]} for s in self.scored],
+                "problem": self.problem, "summary": self.summary()}
 
 
 @dataclass(frozen=True, slots=True)
 class Placed:
-    """The chosen host, its score (lowest wins) and why: the score's terms, then the refused hosts."""
+    """The chosen host, its score (lowest wins) and why: the score's terms, then the refused hosts; `decision`
+    is the full record (left out of equality: two answers are the same when they choose the same)."""
 
     host: str
     score: float
     reasons: tuple[str, ...] = ()
+    decision: Decision | None = field(default=None, compare=False)
 
 
 @dataclass(frozen=True, slots=True)
@@ -64,16 +134,101 @@ class Unplaceable:
 
     reason: str
     refused: Mapping[str, tuple[str, ...]] = field(default_factory=dict, hash=False)
+    decision: Decision | None = field(default=None, compare=False)
 
 
-Decision = Placed | Unplaceable
+Outcome = Placed | Unplaceable
+
+
+# ---------------------------------------------------------------- plugins
+
+
+@dataclass(frozen=True, slots=True)
+class Context:
+    """What the plugins know besides the host: the component, the caller's constraints and the weights."""
+
+    component: ComponentType
+    weights: Placement
+    cluster_count: int = 0
+    exclude: frozenset[str] = frozenset()
+    affinity: frozenset[str] | None = None
+    role: str | None = None  # only hosts with it (None: the caller asks for none, or no candidate has it)
+    prefer: frozenset[str] = frozenset()
+    near: Mapping[str, float] = field(default_factory=dict, hash=False)  # host -> share of the devices, 0-1
+
+
+@dataclass(frozen=True, slots=True)
+class Filter:
+    """A rule a host must pass: `check` says why it fails (None: it passes). `final`: a failure hides the others
+    (a down host is only `down`); `alone`: checked only when no other filter refused the host (cluster-wide)."""
+
+    name: str
+    check: Callable[[HostView, Context], str | None]
+    final: bool = False
+    alone: bool = False
+
+
+@dataclass(frozen=True, slots=True)
+class Score:
+    """A score plugin: its weight (from the configured `Placement`) and a host's value in points."""
+
+    name: str
+    weight: Callable[[Placement], float]
+    value: Callable[[HostView, Context], float]
+
+
+def _missing_devices(host: HostView, ctx: Context) -> str | None:
+    missing = sorted(required_devices(ctx.component) - host.devices)
+    return f"no {', '.join(missing)} device{'s' if len(missing) > 1 else ''}" if missing else None
+
+
+def _cores(host: HostView, ctx: Context) -> str | None:
+    wanted = ctx.component.scheduling.cores
+    if wanted and host.cores is not None and max(wanted) >= host.cores:
+        return f"has {host.cores} core{'s' if host.cores != 1 else ''}, the manifest pins core {max(wanted)}"
+    return None
+
+
+def _outside(host: HostView, ctx: Context) -> str | None:
+    if ctx.affinity is not None and host.name not in ctx.affinity:
+        return f"outside its affinity ({', '.join(sorted(ctx.affinity)) or 'none'})"
+    return None
+
+
+def _multiplicity(host: HostView, ctx: Context) -> str | None:
+    limit = ctx.component.multiplicity
+    return f"multiplicity {limit} reached" if limit is not None and ctx.cluster_count >= limit else None
+
+
+#: The filters, in the order their reasons are given.
+FILTERS: tuple[Filter, ...] = (
+    Filter("up", lambda h, c: None if h.up else "down", final=True),
+    Filter("excluded", lambda h, c: "excluded (a start there failed or timed out)" if h.name in c.exclude else None),
+    Filter("devices", _missing_devices),
+    Filter("cores", _cores),
+    Filter("role", lambda h, c: f"no {c.role} role" if c.role is not None and c.role not in h.roles else None),
+    Filter("affinity", _outside),
+    Filter("multiplicity", _multiplicity, alone=True),
+)
+
+#: The score plugins, in the order their parts are listed; a total sums them in this order.
+SCORES: tuple[Score, ...] = (
+    Score("cpu", lambda w: w.cpu, lambda h, c: _percent(h.cpu)),
+    Score("memory", lambda w: w.memory, lambda h, c: _percent(h.memory)),
+    Score("instances", lambda w: w.instances, lambda h, c: max(0, h.instances) * INSTANCE_SCALE),
+    Score("preferred", lambda w: 1.0, lambda h, c: -PREFER_BONUS if h.name in c.prefer else 0.0),
+    Score("affinity", lambda w: w.affinity, lambda h, c: -AFFINITY_SCALE * _share(c.near.get(h.name, 0.0))),
+)
+
+
+# ---------------------------------------------------------------- the policy
 
 
 def with_more(view: HostView, component: str, n: int = 1) -> HostView:
     """The view with `n` more instances of `component`: placements made since the host last reported, so that
     several placed in one cycle spread instead of all going to the host that looked emptiest."""
-    running = {**view.running, component: view.running.get(component, 0) + n}
-    return HostView(view.name, view.cpu, view.memory, view.instances + n, view.up, view.devices, running, view.cores)
+    return replace(view, instances=view.instances + n,
+                   running={**view.running, component: view.running.get(component, 0) + n})
 
 
 def required_devices(component: ComponentType) -> frozenset[str]:
@@ -90,72 +245,107 @@ def running_count(component: str, hosts: Iterable[HostView]) -> int:
     return sum(max(0, h.running.get(component, 0)) for h in hosts if h.up)
 
 
-def score(host: HostView, weights: Placement, preferred: bool = False) -> float:
-    """`cpu*w.cpu + memory*w.memory + instances*10*w.instances`, minus `PREFER_BONUS` if preferred.
+def shares(devices: Mapping[str, int]) -> dict[str, float]:
+    """Each host's share (0-1) of the devices counted by host: what `near` takes from device counts."""
+    total = sum(max(0, n) for n in devices.values())
+    return {h: max(0, n) / total for h, n in devices.items() if n > 0} if total else {}
+
+
+def parts(host: HostView, ctx: Context) -> tuple[Part, ...]:
+    """Every score plugin's part for `host`."""
+    return tuple(Part(s.name, s.weight(ctx.weights), s.value(host, ctx)) for s in SCORES)
+
+
+def total(of: Iterable[Part]) -> float:
+    value = 0.0
+    for p in of:
+        value += p.points
+    return value
+
+
+def score(host: HostView, weights: Placement, preferred: bool = False,
+          near: Mapping[str, float] | None = None) -> float:
+    """`cpu*w.cpu + memory*w.memory + instances*10*w.instances`, minus `PREFER_BONUS` if preferred, minus
+    `w.affinity * 100 * share` for `near` (host -> its share of the devices).
 
     Loads are clamped to 0-100 (an unknown, NaN, load counts as full) and instances to >= 0.
     """
-    value = (weights.cpu * _percent(host.cpu) + weights.memory * _percent(host.memory)
-             + weights.instances * max(0, host.instances) * INSTANCE_SCALE)
-    return value - PREFER_BONUS if preferred else value
+    ctx = Context(_ANY, weights, prefer=frozenset({host.name}) if preferred else frozenset(), near=near or {})
+    return total(parts(host, ctx))
 
 
 def refusals(component: ComponentType, host: HostView, *, cluster_count: int = 0,
              exclude: Collection[str] = (), affinity: Collection[str] | None = None) -> tuple[str, ...]:
     """Why `host` cannot run `component` (empty: it can). `cluster_count` is `running_count` of it."""
-    if not host.up:
-        return ("down",)
+    ctx = Context(component, Placement(), cluster_count, frozenset(exclude),
+                  None if affinity is None else frozenset(affinity))
+    return filtered(host, ctx)
+
+
+def filtered(host: HostView, ctx: Context) -> tuple[str, ...]:
+    """The reasons of every filter `host` fails (empty: it passes them all)."""
     out: list[str] = []
-    if host.name in exclude:
-        out.append("excluded (a start there failed or timed out)")
-    missing = sorted(required_devices(component) - host.devices)
-    if missing:
-        out.append(f"no {', '.join(missing)} device{'s' if len(missing) > 1 else ''}")
-    wanted = component.scheduling.cores
-    if wanted and host.cores is not None and max(wanted) >= host.cores:
-        out.append(f"has {host.cores} core{'s' if host.cores != 1 else ''}, the manifest pins core {max(wanted)}")
-    if affinity is not None and host.name not in affinity:
-        out.append(f"outside its affinity ({', '.join(sorted(affinity)) or 'none'})")
-    limit = component.multiplicity
-    if not out and limit is not None and cluster_count >= limit:  # cluster-wide: named where it is the only bar
-        out.append(f"multiplicity {limit} reached")
+    for f in FILTERS:
+        if f.alone and out:
+            continue
+        why = f.check(host, ctx)
+        if why is not None:
+            out.append(why)
+            if f.final:
+                break
     return tuple(out)
 
 
 def place(component: ComponentType, candidates: Sequence[HostView], weights: Placement, *,
           params: Mapping[str, object] | None = None, prefer_hosts: Collection[str] = (),
-          exclude: Collection[str] = (), affinity: Collection[str] | None = None) -> Decision:
-    """Choose the host for one more instance of `component`, or say why none can take it.
+          exclude: Collection[str] = (), affinity: Collection[str] | None = None, role: str | None = None,
+          near: Mapping[str, float] | None = None) -> Outcome:
+    """Choose the host for one more instance of `component`, or say why none can take it; either answer carries
+    the `Decision` record.
 
     `params` are checked against the manifest's (unknown names, missing required ones, scalar types)
-    before any host is considered; `exclude` are hosts where a start already timed out (the retry path);
-    `affinity`, when given, restricts the choice to those hosts (where the behavior's robot lives).
-    Candidates are taken by name: a name given twice keeps its first view.
+    before any host is considered; `exclude` are hosts where a start already failed (the retry path);
+    `affinity`, when given, restricts the choice to those hosts; `role`, when some candidate has it, to
+    the hosts with that role (`worker`); `near` gives each host's share (0-1) of the devices the
+    instance's mission state uses (`shares`), scored by the `affinity` weight. Candidates are taken by
+    name: a name given twice keeps its first view.
     """
     problems = check_params(component, params or {})
     if problems:
-        return Unplaceable(f"{component.name}: {'; '.join(problems)}")
+        reason = f"{component.name}: {'; '.join(problems)}"
+        return Unplaceable(reason, decision=Decision(component.name, problem=reason))
     views: dict[str, HostView] = {}
     for h in candidates:
         views.setdefault(h.name, h)
     hosts = list(views.values())
     if not hosts:
-        return Unplaceable(f"{component.name}: no hosts known")
-    count = running_count(component.name, hosts)
-    refused = {h.name: r for h in hosts if (r := refusals(component, h, cluster_count=count, exclude=exclude,
-                                                          affinity=affinity))}
-    eligible = [h for h in hosts if h.name not in refused]
-    listed = "; ".join(f"{name}: {', '.join(why)}" for name, why in sorted(refused.items()))
-    if not eligible:
-        return Unplaceable(f"no host can run {component.name}: {listed}", refused)
-    ranked = sorted((score(h, weights, h.name in prefer_hosts), h.name, h) for h in eligible)
-    best, name, host = ranked[0]
-    reasons = [_explain(host, weights, best, name in prefer_hosts)]
+        reason = f"{component.name}: no hosts known"
+        return Unplaceable(reason, decision=Decision(component.name, problem=reason))
+    ctx = Context(component, weights, running_count(component.name, hosts), frozenset(exclude),
+                  None if affinity is None else frozenset(affinity),
+                  role if role is not None and any(role in h.roles for h in hosts) else None,
+                  frozenset(prefer_hosts), dict(near or {}))
+    return decide(hosts, ctx)
+
+
+def decide(hosts: Sequence[HostView], ctx: Context) -> Outcome:
+    """Filters, then scores, over distinct hosts: the framework's core."""
+    refused = {h.name: r for h in hosts if (r := filtered(h, ctx))}
+    ranked = sorted((Scored(h.name, total(ps), ps) for h in hosts if h.name not in refused
+                     for ps in (parts(h, ctx),)), key=lambda s: (s.total, s.host))
+    listed = _listed(refused)
+    name = ctx.component.name
+    record = Decision(name, tuple(sorted(h.name for h in hosts)), refused, tuple(ranked),
+                      ranked[0].host if ranked else None)
+    if not ranked:
+        return Unplaceable(f"no host can run {name}: {listed}", refused, record)
+    best = ranked[0]
+    reasons = [_explain(best)]
     if len(ranked) > 1:
-        reasons.append("next: " + ", ".join(f"{n} {s:g}" for s, n, _ in ranked[1:4]))
+        reasons.append("next: " + ", ".join(f"{s.host} {s.total:g}" for s in ranked[1:4]))
     if refused:
         reasons.append(f"refused: {listed}")
-    return Placed(name, best, tuple(reasons))
+    return Placed(best.host, best.total, tuple(reasons), record)
 
 
 def check_params(component: ComponentType, params: Mapping[str, object]) -> list[str]:
@@ -173,6 +363,9 @@ def check_params(component: ComponentType, params: Mapping[str, object]) -> list
     return out
 
 
+_ANY = ComponentType("", Kind.BEHAVIOR)
+
+
 def _fits(spec: ParamSpec, value: object) -> bool:
     """Scalars are checked; resource and data types (ids chosen by the executive) are left to the Creator."""
     number = isinstance(value, int | float) and not isinstance(value, bool)
@@ -185,12 +378,39 @@ def _percent(value: float) -> float:
     return 100.0 if math.isnan(value) else min(100.0, max(0.0, value))
 
 
-def _explain(host: HostView, weights: Placement, total: float, preferred: bool) -> str:
-    terms = (f"cpu {weights.cpu:g}*{_percent(host.cpu):g} + memory {weights.memory:g}*{_percent(host.memory):g}"
-             f" + instances {weights.instances:g}*{max(0, host.instances)}*{INSTANCE_SCALE:g}")
-    bonus = f" - preferred {PREFER_BONUS:g}" if preferred else ""
-    return f"{host.name}: score {total:g} = {terms}{bonus}"
+def _share(value: float) -> float:
+    """A share clamped to 0-1 (NaN: none), so a caller's odd figure cannot outweigh the loads."""
+    return 0.0 if math.isnan(value) else min(1.0, max(0.0, value))
 
 
-__all__ = ["INSTANCE_SCALE", "PREFER_BONUS", "Decision", "HostView", "Placed", "Unplaceable", "check_params",
-           "place", "refusals", "required_devices", "running_count", "score", "view_of", "with_more"]
+def _listed(refused: Mapping[str, tuple[str, ...]]) -> str:
+    return "; ".join(f"{name}: {', '.join(why)}" for name, why in sorted(refused.items()))
+
+
+def _explain(best: Scored) -> str:
+    """`c: score 11 = cpu 1*5 + memory 0.5*0 + instances 0.2*3*10` (then the bonuses that applied)."""
+    cpu, memory, instances = (best.part(n) or Part(n, 0.0, 0.0) for n in ("cpu", "memory", "instances"))
+    terms = (f"cpu {cpu.weight:g}*{cpu.value:g} + memory {memory.weight:g}*{memory.value:g}"
+             f" + instances {instances.weight:g}*{instances.value / INSTANCE_SCALE:g}*{INSTANCE_SCALE:g}")
+    preferred, near = best.part("preferred"), best.part("affinity")
+    if preferred is not None and preferred.value:
+        terms += f" - preferred {-preferred.points:g}"
+    if near is not None and near.points:
+        terms += f" - affinity {near.weight:g}*{-near.value:g}"
+    return f"{best.host}: score {best.total:g} = {terms}"
+
+
+def _versus(best: Scored, runner: Scored) -> str:
+    """`score 2 vs spare 12: instances 10 vs 10, affinity -20 vs 0`: the parts that told them apart, most first."""
+    gaps = sorted(((r.points - b.points, b, r) for b, r in zip(best.parts, runner.parts, strict=True)
+                   if r.points != b.points), key=lambda g: (-abs(g[0]), g[1].plugin))
+    said = ", ".join(f"{b.plugin} {b.points:.3g} vs {r.points:.3g}" for _gap, b, r in gaps[:2])
+    if not said:
+        return f"score {best.total:.3g}, tied with {runner.host}: the smaller name"
+    return f"score {best.total:.3g} vs {runner.host} {runner.total:.3g}: {said}"
+
+
+__all__ = ["AFFINITY_SCALE", "FILTERS", "INSTANCE_SCALE", "PREFER_BONUS", "SCORES", "Context", "Decision", "Filter",
+           "HostView", "Outcome", "Part", "Placed", "Score", "Scored", "Unplaceable", "check_params", "decide",
+           "filtered", "parts", "place", "refusals", "required_devices", "running_count", "score", "shares",
+           "total", "view_of", "with_more"]
