@@ -768,6 +768,10 @@ from drd.cli import tune  # noqa: E402  # `missionctl tune INSTANCE --cores --ni
 
 tune.register(app)
 
+from drd.cli import migrate  # noqa: E402  # `missionctl migrate INSTANCE --to HOST`: move a running component
+
+migrate.register(app)
+
 from drd.cli import world as world_cli  # noqa: E402  # `missionctl world generate`: a building and its hosts file
 
 world_cli.register(app)

@@ -1,0 +1,55 @@
+"""`missionctl migrate INSTANCE --to HOST`: move a running movable component to another host (issue #15).
+
+The controller (`drd.daemon.migrate`) stops the instance where it runs as `moved`, takes its state along (its
+snapshot) and starts it on HOST from that state: the mission's state neither fails nor restarts. INSTANCE is
+`<mission>/<path>` as `missionctl components` lists it, or its path when one mission runs it. Refused with exit
+code 2 and the reason: an unknown instance, a component that is not movable (its manifest says so), an unknown
+host, one that is down or does not run components. An operator's command: an observer is refused.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import asdict
+from pathlib import Path
+
+import typer
+from rich.text import Text
+
+from drd.cli.cluster import cluster_client
+from drd.cli.common import OK, fail, out
+from drd.cli.options import ConfigOption, ConnectOption, JsonOption
+
+#: Seconds the controller may take by default: the instance is stopped on one host and started on another (a
+#: first start on a host may load the component's module).
+TIMEOUT = 15.0
+
+
+def register(app: typer.Typer) -> None:
+    """Add `migrate` to `missionctl`."""
+    app.command("migrate")(migrate)
+
+
+def migrate(instance: str = typer.Argument(..., metavar="INSTANCE", show_default=False,
+                                           help="The instance: <mission>/<path> as `missionctl components` lists"
+                                                " it, or its path when one mission runs it."),
+            to: str = typer.Option(..., "--to", metavar="HOST", show_default=False,
+                                   help="The host to move it to: up, and one that runs components."),
+            config: Path = ConfigOption, connect: list[str] = ConnectOption, as_json: bool = JsonOption,
+            timeout: float = typer.Option(TIMEOUT, "--timeout", min=0.05,
+                                          help="Seconds to wait for the controller to move it.")) -> int:
+    """Move a running movable component to another host; it goes on from its state there."""
+    from drd.daemon.migrate import Migrate, Migrated, migrate_key
+
+    with cluster_client(config, connect, timeout, to="move a component") as client:
+        reply = client.bus.call(migrate_key(client.cluster), Migrate(instance, to), timeout=timeout)
+    if not isinstance(reply, Migrated):
+        fail(f"the controller answered a {type(reply).TYPE}")
+    if as_json:
+        out.print_json(json.dumps(asdict(reply)))
+        return OK
+    state = reply.state[0] if reply.state else None
+    took = f"with its state {json.dumps(state)}" if state is not None else "afresh (its component keeps no state)"
+    out.print(Text.assemble((f"{reply.mission}/{reply.path}", "bold"), f" ({reply.component}) moved from"
+                            f" {reply.source} to {reply.host}, {took}"))
+    return OK
