@@ -108,6 +108,8 @@ class Executive:
         self._ordinals = itertools.count(1)
         self.sent = 0  # records sent, of every mission: each is numbered in the order they happened
         self.kept: dict[str, collections.deque[MissionRecord]] = {}  # each mission's latest records, for catch-up
+        #: More of a mission's status from its host (the cluster controller's placement decisions), if any.
+        self.status_extras: Callable[[str], Mapping[str, Any]] | None = None
         self._queryable = bus.serve(f"drd/{cluster}/executive", self._command)
         self._reads = bus.serve(f"drd/{cluster}/executive/status", self._read)  # what an observer may ask
 
@@ -236,7 +238,8 @@ class Executive:
             for mid, interp in list(self.missions.items()):
                 n = self.order.get(mid, 0)
                 if n > after and (wanted is None or mid in wanted):
-                    yield n, _sized({"id": mid, **plain(interp.snapshot())})
+                    extras = self.status_extras(mid) if self.status_extras is not None else {}
+                    yield n, _sized({"id": mid, **plain(interp.snapshot()), **extras})
 
         page, nxt = fill(items(), lambda item: item[1], count)
         return MissionStatus(self.clock.now(), [item for item, _size in page], nxt)

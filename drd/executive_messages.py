@@ -53,7 +53,9 @@ class MissionRecords(Message):
 @message("drd.mission.status", 2)
 class MissionStatus(Message):
     """A page of the missions the executive knows, in the order they started, each with its outcome and active
-    state tree; `next`: the `after` to ask the next page with (0: this is the last)."""
+    state tree (and on a cluster `placements`: the controller's last placement decision of each movable
+    instance, `drd.daemon.placements.status_entry`); `next`: the `after` to ask the next page with (0: this is
+    the last)."""
 
     time: float
     missions: list[dict[str, Any]]

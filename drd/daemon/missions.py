@@ -35,6 +35,7 @@ from drd.cluster.guard import SharedGuard
 from drd.cluster.remote import ComponentCall, ComponentError, ComponentRouter, SimCycle
 from drd.cluster.telemetry import RemoteTelemetry
 from drd.daemon.migrate import Migrations
+from drd.daemon.placements import PlacementLog
 from drd.daemon.resume import Checkpoints, resume, wait_for_hosts
 from drd.hosts import Cluster, Role
 from drd.journal import Journal
@@ -155,6 +156,7 @@ class MissionRunner:
         self.host_down = host_down
         self.host_views = host_views
         self._recent: list[tuple[float, str, str]] = []  # (when, host, component) of placements not yet reported
+        self.placements = PlacementLog(lambda: controller.executive.missions)  # for `missionctl status`
         self.resource_hosts = {r.id: r.host for r in cluster.resources() if r.host}
         self.patience = max(CALL_TIMEOUT, cluster.lease)  # how long a call waits for a host that does not answer
         # this controller's term: hosts refuse the calls of an older one (`Creator`)
@@ -164,6 +166,7 @@ class MissionRunner:
         self.gates = RemoteGates({u.id: u.host for u in cluster.resources() if u.host and type(u).__name__ == "Unit"})
         executive = controller.executive
         executive.gates = self.gates
+        executive.status_extras = self.placements.extras
         # robots' pose and battery come with the hosts' replies; constraints are guarded on the devices' hosts
         self.telemetry = RemoteTelemetry({r.id: r.host for r in cluster.robots if r.host}, self._fetch,
                                          self.gates.send, clock.now)
@@ -340,7 +343,8 @@ class MissionRunner:
                                  local=executive.registry, mission=mid, world=world.name,
                                  active=functools.partial(_active, executive, mid), timeout=self.patience,
                                  dead=self.host_down, catalog=self.catalog,
-                                 place=self.place if self.host_views else None, gates=self.gates,
+                                 place=functools.partial(self.place, mission=mid) if self.host_views else None,
+                                 gates=self.gates,
                                  records=executive.record, cycle=world.cycle, generation=world.generation,
                                  term=self.term)
         world.add(mid, router, base, until)
@@ -381,22 +385,29 @@ class MissionRunner:
         self.world, self.lost = world, []
         return world
 
-    def place(self, component: str, params: Mapping[str, Any], exclude: frozenset[str]) -> str:
+    def place(self, component: str, params: Mapping[str, Any], exclude: frozenset[str], mission: str = "") -> str:
         """The host for one more instance of a movable component (`drd.placement.place` over the Component
         Database's view of the hosts), or ComponentError naming every refused host and why. The hosts with the
-        `worker` role take them (every host when none has it): the controller keeps its cycles for the mission."""
-        from drd.placement import Placed, place, with_more
+        `worker` role take them (every host when none has it): the controller keeps its cycles for the mission.
+        With `mission`, the hosts of the devices its instance's state uses count (device affinity) and the
+        decision is kept for `missionctl status` (`self.placements`)."""
+        from drd.daemon.placements import near_devices
+        from drd.placement import Placed, place, shares, with_more
 
         ct = self.catalog.get(component)
         if ct is None or self.host_views is None:
             raise ComponentError(f"{component} is not in the controller's catalog")
-        workers = [h.name for h in self.cluster.hosts if Role.WORKER in h.roles]
         now = time.monotonic()
         self._recent = [p for p in self._recent if now - p[0] < RECENT_PLACEMENT]
         views = self.host_views()
         for _at, host, name in self._recent:  # not yet in the hosts' reports: counted, so a cycle's starts spread
             views = [with_more(v, name) if v.name == host else v for v in views]
-        decision = place(ct, views, self.cluster.placement, params=params, exclude=exclude, affinity=workers or None)
+        interp = self.controller.executive.missions.get(mission) if mission else None
+        path, devices = near_devices(getattr(interp, "root", None), component, self.resource_hosts)
+        decision = place(ct, views, self.cluster.placement, params=params, exclude=exclude, role=str(Role.WORKER),
+                         near=shares(devices))
+        if decision.decision is not None and mission:
+            self.placements.note(mission, path or component, decision.decision)
         if not isinstance(decision, Placed):
             raise ComponentError(decision.reason)
         self._recent.append((now, decision.host, component))
