@@ -251,17 +251,21 @@ def status(config: Path = ConfigOption, connect: list[str] = ConnectOption, as_j
            timeout: float = TimeoutOption,
            watch: bool = typer.Option(False, "--watch", "-w", help="Refresh until Ctrl-C (JSON: one line each)."),
            interval: float = typer.Option(1.0, "--interval", min=0.1, help="Seconds between refreshes with --watch."),
-           events: int = typer.Option(20, "--events", min=0, help="How many recent events to show.")) -> int:
-    """One view of the cluster: hosts, instances, resources, missions and recent events."""
+           events: int = typer.Option(20, "--events", min=0, help="How many recent events to show."),
+           explain: bool = typer.Option(False, "--explain", help="Every placement decision of every mission, each "
+                                        "with its hosts' scores and the hosts filtered and why (default: the last "
+                                        "few of the running missions, one line each; --json has them all).")) -> int:
+    """One view of the cluster: hosts, instances, resources, missions (with where their movable instances were
+    placed, and why) and recent events."""
     with cluster_client(config, connect, timeout) as client:
         if not watch:
             data = client.status(events, deadline=client.budget)
             if as_json:
                 print_json(data)
             else:
-                out.print(_status_view(data))
+                out.print(_status_view(data, explain=explain))
             return OK
-        _watch(lambda: client.status(events), as_json, interval)
+        _watch(lambda: client.status(events), as_json, interval, explain)
     return OK
 
 
@@ -915,7 +919,7 @@ def _rebased(data: dict[str, Any], base: float) -> dict[str, Any]:
 # --- rendering -------------------------------------------------------------------------------------
 
 
-def _watch(fetch: Callable[[], dict[str, Any]], as_json: bool, interval: float) -> None:
+def _watch(fetch: Callable[[], dict[str, Any]], as_json: bool, interval: float, explain: bool = False) -> None:
     """Refresh until Ctrl-C: a live view on a terminal, one JSON line per refresh with --json."""
     from rich.live import Live
 
@@ -924,15 +928,15 @@ def _watch(fetch: Callable[[], dict[str, Any]], as_json: bool, interval: float) 
             while True:
                 out.out(json.dumps(fetch()), highlight=False)
                 time.sleep(interval)
-        with Live(_status_view(fetch()), console=out, auto_refresh=False) as live:
+        with Live(_status_view(fetch(), explain=explain), console=out, auto_refresh=False) as live:
             while True:
                 time.sleep(interval)
-                live.update(_status_view(fetch()), refresh=True)
+                live.update(_status_view(fetch(), explain=explain), refresh=True)
     except KeyboardInterrupt:
         return
 
 
-def _status_view(data: dict[str, Any], width: int | None = None) -> RenderableType:
+def _status_view(data: dict[str, Any], width: int | None = None, explain: bool = False) -> RenderableType:
     """The cluster at a glance, what matters first (a terminal of 24 rows shows the top): the missions and their
     active trees, the hosts, the resources grouped by robot, then instances and recent events; long paths are cut
     from the middle to fit `width` (default: the console's)."""
@@ -943,7 +947,7 @@ def _status_view(data: dict[str, Any], width: int | None = None) -> RenderableTy
     parts: list[RenderableType] = [
         Text.assemble(("cluster ", "bold"), data["cluster"], (f"  (answered by {data['answered_by']})", "dim"))]
     if data["missions"] is not None:
-        parts += _missions_view(data["missions"], width)
+        parts += _missions_view(data["missions"], width, explain)
     parts.append(_hosts_table(data["hosts"], data["at"]))
     if data["resources"] is not None:
         parts += _resources_view(data["resources"], width, compact=True)
@@ -1083,10 +1087,12 @@ def _leaving(data: dict[str, Any]) -> list[RenderableType]:
 TREE_NODES = 12
 
 
-def _missions_view(missions: list[dict[str, Any]], width: int = 80) -> list[RenderableType]:
+def _missions_view(missions: list[dict[str, Any]], width: int = 80, explain: bool = False) -> list[RenderableType]:
     """Each mission with its active tree: chains of single children in one line (`RoomSurveillance[2]/
-    HideInCorner/Watch`), the resources each holds beside it."""
+    HideInCorner/Watch`), the resources each holds beside it, then where its movable instances were placed."""
     from rich.tree import Tree
+
+    from drd.cli.report import placement_lines
 
     if not missions:
         return [Text("missions: none", style="dim")]
@@ -1111,6 +1117,8 @@ def _missions_view(missions: list[dict[str, Any]], width: int = 80) -> list[Rend
                 _grow_active(tree, child, root.get("path", ""), 1, width, shown)
             if shown[0] > TREE_NODES:
                 tree.add(Text(f"… {shown[0] - TREE_NODES} more active (missionctl status --json)", style="dim"))
+        for line in placement_lines(m, width, explain):
+            tree.add(line)
         parts.append(tree)
     return parts
 

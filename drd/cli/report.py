@@ -241,3 +241,47 @@ def print_state(state: dict[str, Any], console: Console | None = None) -> None:
         for rid, p in state["robots"].items():
             table.add_row(rid, f"{p['x']:.2f}", f"{p['y']:.2f}", f"{math.degrees(p['heading']):.0f}°")
         console.print(table)
+
+
+#: Placement lines `missionctl status` shows under a running mission by default (`--explain`: all, with detail).
+PLACEMENTS_SHOWN = 4
+
+
+def placement_lines(mission: dict[str, Any], width: int = 80, explain: bool = False) -> list[Text]:
+    """`missionctl status`: one line per placed instance of the mission (`Wait -> spare (score 10 vs ranger1 20:
+    instances 10 vs 20; filtered controller: no worker role)`), by default only while it runs and at most
+    `PLACEMENTS_SHOWN`; with `explain`, every one, each followed by its scored hosts' parts."""
+    entries = [e for e in mission.get("placements") or [] if isinstance(e, dict)]
+    if not entries or not (explain or mission.get("outcome") is None):
+        return []
+    root = str(mission.get("mission") or "")
+    shown = entries if explain else entries[-PLACEMENTS_SHOWN:]
+    lines: list[Text] = []
+    for e in shown:
+        name = shorten(_relative(str(e.get("instance", "")), root), max(16, width // 3))
+        line = Text.assemble(("placement ", "dim"), name, " -> ", str(e.get("summary", "")))
+        if e.get("how") == "re-placed":
+            line.append("  re-placed", style="yellow")
+        lines.append(line)
+        if explain:
+            lines += _decision_detail(e.get("decision") or {})
+    if len(shown) < len(entries):
+        lines.append(Text(f"… {len(entries) - len(shown)} more placements (missionctl status --explain)",
+                          style="dim"))
+    return lines
+
+
+def _decision_detail(record: dict[str, Any]) -> list[Text]:
+    """Each scored host with its parts in points (`spare 12 = cpu 0 + memory 0 + instances 12`), then each filtered
+    host and why."""
+    out_lines = []
+    for s in record.get("scored") or []:
+        terms = " + ".join(f"{p['plugin']} {p['points']:.3g}" for p in s.get("parts", []) if p.get("points"))
+        out_lines.append(Text(f"    {s.get('host')} {s.get('total', 0):.3g} = {terms or '0'}", style="dim"))
+    for host, why in (record.get("filtered") or {}).items():
+        out_lines.append(Text(f"    {host} filtered: {', '.join(why)}", style="dim"))
+    left = record.get("left_out") or {}
+    if any(left.values()):
+        out_lines.append(Text(f"    … {left.get('scored', 0)} scored and {left.get('filtered', 0)} filtered hosts "
+                              "more (the controller's log)", style="dim"))
+    return out_lines
