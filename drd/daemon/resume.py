@@ -7,6 +7,9 @@ hosts are back (or a grace period passed): it rejoins the world the simulator st
 they stopped; a simulator that lost its world starts it again, and says so), with the hosts' drivers built anew
 (fresh fences), numbers its records on from the journal's, and enters each mission again from its last state
 under its own id. A mission that can no longer be compiled is ended in the journal with the reason, not resumed.
+Its running components are given back their journaled snapshots (`Component.restore`), or None when they kept
+none: restarted, and told so. A mission whose components' snapshots changed (a Wait's start, a Watch's count)
+is saved again at most once a second (`CLOCK_EVERY`), even when its states did not change.
 """
 
 from __future__ import annotations
@@ -16,7 +19,7 @@ import time
 from typing import Any
 
 from drd.journal import Journal, Journaled, WorldState
-from drd.runtime.snapshot import NodeImage, capture, property_changes
+from drd.runtime.snapshot import NodeImage, capture, component_states, property_changes
 
 log = logging.getLogger("drd.daemon.resume")
 
@@ -36,12 +39,14 @@ CLOCK_EVERY = 1.0
 
 class Checkpoints:
     """Saves a mission's state after a control cycle in which it changed (`note` hears its records), and the
-    world's clock at most once a second otherwise: a cycle that changed nothing costs nothing."""
+    world's clock at most once a second otherwise, with the missions whose components' snapshots changed since
+    they were saved: a cycle that changed nothing costs nothing."""
 
     def __init__(self, journal: Journal) -> None:
         self.journal = journal
         self._dirty: set[str] = set()
         self._clock_saved = 0.0
+        self._components: dict[str, dict[str, Any]] = {}  # mission -> its components' snapshots as last saved
 
     def note(self, mission: str, record: Any) -> None:
         """A record of `mission` (a listener of its interpreter): a structural one makes its state worth saving."""
@@ -58,10 +63,15 @@ class Checkpoints:
         with runner.lock:
             now = runner.clock.now()
             dirty, self._dirty = self._dirty, set()
-            for mid in sorted(dirty & set(world.missions())):
+            for mid in world.missions():
                 interp = executive.missions.get(mid)
-                if interp is not None and interp.root is not None and not interp.finished:
+                if interp is None or interp.root is None or interp.finished:
+                    self._components.pop(mid, None)
+                    continue
+                states = component_states(interp.root)
+                if mid in dirty or states != self._components.get(mid):
                     changed[mid] = (now, capture(interp.root).to_dict())
+                    self._components[mid] = states
             state = WorldState(world.name, world.generation, runner.clock.base, now, executive.sent,
                                property_changes(runner.cluster.resources(), executive.pool))
         self._clock_saved = wall

@@ -50,10 +50,11 @@ class ComponentHost:
             if node.phase is ACTIVE and comp is not None:
                 yield node, comp
 
-    def start(self, node: Node) -> None:
+    def start(self, node: Node, restore: list[Any] | None = None) -> None:
         """Set the leaf's component up (first entry of this path only) and start it. Its needs are bound the first
         time it (or its proxy) asks for one: most components of most states never do, and nothing is built for
-        nobody."""
+        nobody. `restore` (`[state]`, a leaf entered again after its controller was lost): given to the
+        component's `restore` before it starts (state None: its state is lost, it is restarted)."""
         made = self._made.get(node.path)
         if made is not None:
             comp, ctx, lazy = made
@@ -86,6 +87,8 @@ class ComponentHost:
         if node.state.inputs:
             self.read_inputs(node, entry=True)
         try:
+            if restore is not None:
+                comp.restore(restore[0])
             comp.start()
         except Exception as e:  # component code is not ours to trust
             self.failed(node, e)

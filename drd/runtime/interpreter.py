@@ -320,7 +320,7 @@ class Interpreter:
                 needs = {n.name for n in state.needs}
                 self.resources.pins[self.resources.holder(node)] = {
                     k: v for k, v in image.grant.items() if k in needs}
-            if image is not None and state.kind is not LEAF:
+            if image is not None:  # a leaf's too: its component is restored with its snapshot (or told it is lost)
                 self._restoring[path] = image
             if not self._restore:
                 self._restore = None
@@ -429,7 +429,7 @@ class Interpreter:
             for sid, index in live_children(image):  # the children it had live, not its initial ones
                 self._enter_child(node, self._states[sid], index)
         elif kind is LEAF:
-            self.host.start(node)
+            self.host.start(node, None if image is None else [image.component[0] if image.component else None])
         elif kind is COMPOUND:
             target = self._initial(node)
             if target is not None:

@@ -7,22 +7,27 @@ parallel state's finished regions, a multiplicity's counters and live instances,
 epochs). `Restore` is what the interpreter consults while it enters the mission again: instead of a compound
 state's initial child it enters the child that was active, a parallel state only its unfinished regions, a
 multiplicity its live instances with their counters, and each node takes back its entry time and variables.
-Grants are asked for again (new epochs, so nothing the old controller sent is obeyed) and leaf components start
-afresh. Pure: no I/O; values are tagged so a resource comes back as the pool's resource, not as its id.
+Grants are asked for again (new epochs, so nothing the old controller sent is obeyed). A running leaf's
+image holds its component's snapshot (`Component.snapshot`, plain data), and a leaf entered again is given it
+(`Component.restore`), or None when it had none: it is restarted, and told so. Pure: no I/O (but the
+components' `snapshot`); values are tagged so a resource comes back as the pool's resource, not as its id.
 """
 
 from __future__ import annotations
 
+import json
 import math
 import re
 from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
+from drd.runtime.component import MAX_SNAPSHOT
 from drd.runtime.pool import ResourceView
 from drd.runtime.tree import DONE, Node
 
-#: The version of the snapshot format (`drd.journal` refuses another).
+#: The version of the snapshot format (`drd.journal` refuses another). Version 1 images (no `component`) read as
+#: leaves without a snapshot: their components are restarted, and told so.
 VERSION = 1
 
 _INDEX = re.compile(r"\[(\d+)\]$")
@@ -79,12 +84,16 @@ class NodeImage:
     released: list[str] = field(default_factory=list)  # needs it gave back early (`release(x)`)
     epochs: dict[str, int] = field(default_factory=dict)  # unit -> epoch
     children: list[NodeImage] = field(default_factory=list)
+    component: list[Any] | None = None  # a running leaf's: [its component's snapshot] (plain data, or None)
 
     def to_dict(self) -> dict[str, Any]:
-        return {"path": self.path, "state": self.state, "phase": self.phase, "entered": self.entered,
-                "data": self.data, "outputs": self.outputs, "finished": self.finished, "counters": self.counters,
-                "grant": self.grant, "released": self.released, "epochs": self.epochs,
-                "children": [c.to_dict() for c in self.children]}
+        d = {"path": self.path, "state": self.state, "phase": self.phase, "entered": self.entered,
+             "data": self.data, "outputs": self.outputs, "finished": self.finished, "counters": self.counters,
+             "grant": self.grant, "released": self.released, "epochs": self.epochs,
+             "children": [c.to_dict() for c in self.children]}
+        if self.component is not None:
+            d["component"] = self.component
+        return d
 
     @classmethod
     def from_dict(cls, d: Mapping[str, Any]) -> NodeImage:
@@ -92,7 +101,7 @@ class NodeImage:
                    dict(d.get("outputs", {})), [str(x) for x in d.get("finished", [])],
                    [int(x) for x in d.get("counters", [])], {str(k): str(v) for k, v in d.get("grant", {}).items()},
                    [str(x) for x in d.get("released", [])], {str(k): int(v) for k, v in d.get("epochs", {}).items()},
-                   [cls.from_dict(c) for c in d.get("children", [])])
+                   [cls.from_dict(c) for c in d.get("children", [])], _component(d.get("component")))
 
     def walk(self) -> list[NodeImage]:
         out, stack = [], [self]
@@ -101,6 +110,39 @@ class NodeImage:
             out.append(n)
             stack.extend(reversed(n.children))
         return out
+
+
+def _component(value: Any) -> list[Any] | None:
+    return [value[0] if isinstance(value[0], dict) else None] if isinstance(value, list) and value else None
+
+
+def component_state(node: Node) -> list[Any] | None:
+    """`[snapshot]` of a leaf's running component (`[None]`: it keeps none, its `snapshot` raised, or it is larger
+    than `MAX_SNAPSHOT`), None for a node without one."""
+    comp = node.component
+    if comp is None or node.context is None:
+        return None
+    try:
+        state = comp.snapshot()
+        if state is None:
+            return [None]
+        plain = json.loads(json.dumps(dict(state), allow_nan=False))  # plain JSON, or it raises
+    except Exception:  # component code is not ours to trust: it is restarted, and told so
+        return [None]
+    return [plain] if len(json.dumps(plain)) <= MAX_SNAPSHOT else [None]
+
+
+def component_states(root: Node) -> dict[str, Any]:
+    """The snapshots of the running components under `root`, by path (to tell whether they changed)."""
+    out, stack = {}, [root]
+    while stack:
+        n = stack.pop()
+        if n.phase is not DONE:
+            state = component_state(n)
+            if state is not None:
+                out[n.path] = state[0]
+            stack.extend(n.children)
+    return out
 
 
 def capture(root: Node) -> NodeImage:
@@ -113,7 +155,8 @@ def capture(root: Node) -> NodeImage:
         grant = {k: v for k, v in (n.grant or {}).items() if k.partition(".")[0] not in gone}
         return NodeImage(n.path, n.state.id, n.phase.value, n.entered, data,
                          {k: encode(v) for k, v in n.outputs.items()}, sorted(n.finished), counters,
-                         grant, sorted(gone), dict(n.epochs), [image(c) for c in n.children if c.phase is not DONE])
+                         grant, sorted(gone), dict(n.epochs), [image(c) for c in n.children if c.phase is not DONE],
+                         component_state(n))
     return image(root)
 
 
