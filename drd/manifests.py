@@ -37,6 +37,7 @@ from dsl.catalog import (
     Process,
     RecordSpec,
     Scheduling,
+    inherit,
 )
 from dsl.errors import did_you_mean
 
@@ -47,10 +48,11 @@ ENV_VAR = "DRD_COMPONENTS"
 _COMMON = ("name", "kind", "description")
 _RUNNABLE = ("entry_point", "process", "multiplicity", "scheduling", "params")
 #: The keys each kind may use, in the order manifests write them.
+_TYPE = ("abstract", "extends")  # type inheritance: a resource type is a kind of the abstract types it extends
 KEYS: Mapping[Kind, tuple[str, ...]] = {
     Kind.BEHAVIOR: (*_COMMON, *_RUNNABLE, "movable", "needs", "inputs", "outputs", "events", "interfaces"),
-    Kind.RC: (*_COMMON, *_RUNNABLE, "interfaces", "sharable", "capacity", "properties", "limits"),
-    Kind.ARC: (*_COMMON, "properties", "limits", "parts"),
+    Kind.RC: (*_COMMON, *_TYPE, *_RUNNABLE, "interfaces", "sharable", "capacity", "properties", "limits"),
+    Kind.ARC: (*_COMMON, *_TYPE, "properties", "limits", "parts"),
     Kind.DATA: (*_COMMON, "fields"),
 }
 REQUIRED: Mapping[Kind, tuple[str, ...]] = {
@@ -59,6 +61,8 @@ REQUIRED: Mapping[Kind, tuple[str, ...]] = {
     Kind.ARC: (*_COMMON, "parts"),
     Kind.DATA: _COMMON,
 }
+#: The keys of an abstract type (`abstract: true`): properties for its subtypes, nothing to run or hold.
+ABSTRACT_KEYS = (*_COMMON, *_TYPE, "properties", "limits")
 #: Every manifest key, in canonical order.
 KEY_ORDER: tuple[str, ...] = tuple(dict.fromkeys(k for keys in KEYS.values() for k in keys))
 
@@ -90,12 +94,15 @@ def parse_manifest(data: object, source: str) -> tuple[ComponentType | None, lis
         return None, c.problems
     kind = c.choice(data["kind"], "kind", Kind) if "kind" in data else None
     allowed = KEYS[kind] if kind else KEY_ORDER
+    abstract = data.get("abstract") is True and kind in (Kind.RC, Kind.ARC)
+    if abstract:
+        allowed = ABSTRACT_KEYS
     for key in data:
         if kind and key in KEY_ORDER and key not in allowed:
-            c.fail(key, f"does not apply to {_A[kind]} manifest")
+            c.fail(key, f"does not apply to {'an abstract' if abstract else _A[kind]} manifest")
         elif key not in allowed:
             c.fail(str(key), f"unknown key{_hint(str(key), allowed)}")
-    for key in REQUIRED[kind] if kind else _COMMON:
+    for key in _COMMON if abstract else REQUIRED[kind] if kind else _COMMON:
         if key not in data:
             c.fail(key, "required key missing")
     name = c.name(data["name"], "name") if "name" in data else None
@@ -372,6 +379,8 @@ _PARSERS: dict[str, _Parser] = {
     "properties": _properties,
     "limits": _limits,
     "parts": _typemap,
+    "abstract": _Checker.flag,
+    "extends": lambda c, v, k: c.names([v] if isinstance(v, str) else v, k),
 }
 
 
@@ -385,12 +394,59 @@ def check_references(types: Iterable[ComponentType]) -> list[ManifestProblem]:
     events: dict[str, tuple[RecordSpec, ComponentType]] = {}
     for t in by_name.values():
         problems += _References(t, by_name).check()
+        problems += _supertype_problems(t, by_name)
         for e in t.events:
             first, owner = events.setdefault(e.name, (e, t))
             if dict(first.fields) != dict(e.fields):
                 message = f"fields differ from {e.name} in {owner.name} ({owner.source})"
                 problems.append(ManifestProblem(t.source, f"events.{e.name}", message))
     return problems
+
+
+def _supertype_problems(t: ComponentType, types: Mapping[str, ComponentType]) -> list[ManifestProblem]:
+    """`extends`: known abstract types of the same kind, no cycle, and one type per inherited property."""
+    out: list[ManifestProblem] = []
+    for sup in t.extends:
+        s = types.get(sup)
+        if s is None:
+            known = [n for n, o in types.items() if o.abstract and o.kind is t.kind]
+            out.append(ManifestProblem(t.source, "extends", f"unknown type {sup!r}{_hint(sup, known)}"))
+        elif s.kind is not t.kind or not s.abstract:
+            what = f"{_A[s.kind]}, not {_A[t.kind]}" if s.kind is not t.kind else "not abstract"
+            out.append(ManifestProblem(t.source, "extends", f"{sup} is {what}: a type extends abstract types of its"
+                                       " own kind (abstract: true)"))
+    cycle = _cycle(t.name, types)
+    if cycle:
+        out.append(ManifestProblem(t.source, "extends", f"a cycle: {' -> '.join(cycle)}"))
+        return out
+    declared: dict[str, tuple[str, str]] = {n: (ty, t.name) for n, ty in t.properties.items()}
+    for sup in Catalog(types).supertypes(t.name):
+        for name, type_ in getattr(types.get(sup), "properties", {}).items():
+            first, owner = declared.setdefault(name, (type_, sup))
+            if first != type_:
+                out.append(ManifestProblem(t.source, f"properties.{name}" if owner == t.name else "extends",
+                                           f"{name} is {first} in {owner} but {type_} in {sup}"))
+    return out
+
+
+def _cycle(name: str, types: Mapping[str, ComponentType]) -> list[str]:
+    """The way back to `name` through `extends` (`Robot -> Machine -> Robot`), if there is one, else []."""
+    path: list[str] = [name]
+    seen: set[str] = set()
+
+    def walk(at: str) -> bool:
+        for sup in getattr(types.get(at), "extends", ()):
+            path.append(sup)
+            if sup == name:
+                return True
+            if sup not in seen:
+                seen.add(sup)
+                if walk(sup):
+                    return True
+            path.pop()
+        return False
+
+    return path if walk(name) else []
 
 
 class _References:
@@ -444,7 +500,7 @@ class _References:
         for name, type_ in t.properties.items():
             self.ref(type_, f"properties.{name}", scalars=True)
         for name, type_ in t.parts.items():
-            self.ref(type_, f"parts.{name}", Kind.RC)
+            self.concrete(self.ref(type_, f"parts.{name}", Kind.RC), f"parts.{name}")
         for i in t.interfaces:
             self.ref(i, "interfaces", Kind.RC)
         if t.kind is Kind.BEHAVIOR:
@@ -453,9 +509,16 @@ class _References:
                     self.fail("interfaces", f"does not list {n.type}, used by needs.{n.name}")
         return self.problems
 
+    def concrete(self, target: ComponentType | None, key: str) -> ComponentType | None:
+        """A part or a need names a type of devices or robots that exist, not an abstract one (`Robot`)."""
+        if target is not None and target.abstract:
+            self.fail(key, f"{target.name} is abstract: name one of its subtypes")
+            return None
+        return target
+
     def need(self, n: NeedSpec) -> None:
         key = f"needs.{n.name}"
-        target = self.ref(n.type, f"{key}.type", Kind.RC, Kind.ARC)
+        target = self.concrete(self.ref(n.type, f"{key}.type", Kind.RC, Kind.ARC), f"{key}.type")
         for arc_name in n.of:
             arc = self.ref(arc_name, f"{key}.of", Kind.ARC)
             hits = [p for p, ty in arc.parts.items() if ty == n.type] if arc and target else [""]
@@ -513,7 +576,7 @@ def load_catalog(dirs: Sequence[Path] | None = None) -> Catalog:
     problems += check_references(merged.values())
     if problems:
         raise ManifestError(sorted(problems, key=lambda p: p.file))
-    return Catalog.of(merged.values())
+    return Catalog.of(inherit(merged.values()))
 
 
 def _read(path: Path, source: str) -> tuple[ComponentType | None, list[ManifestProblem]]:

@@ -2,7 +2,8 @@
 
     TYPE [where EXPR] [prefer min(EXPR) | prefer max(EXPR) | prefer random | prefer first]
 
-`Camera where resolution >= 640 prefer min(host.load)`. EXPR is the mission language's expression,
+`Camera where resolution >= 640 prefer min(host.load)`. TYPE matches offers of that type and of every type that
+extends it (`Robot` matches Rangers and Scouts: `extends` in their manifests). EXPR is the mission language's expression,
 parsed by dsl's `expr` rule and evaluated by `dsl.evaluate` (never Python's eval); an offer's
 properties are names, with `id` and `host` (a mapping: name, load, cpu, memory, up). As in CORBA, an
 offer whose constraint cannot be evaluated does not match, and one whose preference cannot be (or is
@@ -57,12 +58,16 @@ class TraderError(MissionInputError):
 
 @dataclass(frozen=True, slots=True)
 class Offer:
-    """A resource or component instance the Component Database knows of, with its host's latest view."""
+    """A resource or component instance the Component Database knows of, with its host's latest view.
+
+    `live`: the properties that are the cluster's live state rather than hosts.yaml's (`carrier` after a launch, a
+    robot's `x`, `y`, `heading`, `battery`), each with its age in seconds."""
 
     id: str
     type: str
     properties: Mapping[str, object] = field(default_factory=dict, hash=False)
     host: Mapping[str, object] = field(default_factory=dict, hash=False)
+    live: Mapping[str, float] = field(default_factory=dict, hash=False)
 
     def names(self) -> dict[str, object]:
         """The names an expression sees: the properties, then `id` and `host` (which win)."""
@@ -82,16 +87,18 @@ class Order(StrEnum):
 
 @dataclass(frozen=True, slots=True)
 class Query:
-    """A parsed and checked query; `run` it against offers as often as needed."""
+    """A parsed and checked query; `run` it against offers as often as needed. `types`: the queried type and its
+    subtypes (just the type when compiled without a catalog)."""
 
     type: str
     where: ast.Expr | None = None
     order: Order = Order.FIRST
     key: ast.Expr | None = None
+    types: frozenset[str] = frozenset()
 
     def matches(self, offer: Offer) -> bool:
-        """Of the type and satisfying the constraint; an evaluation error means no match."""
-        if offer.type != self.type:
+        """Of the type (or a subtype) and satisfying the constraint; an evaluation error means no match."""
+        if offer.type != self.type and offer.type not in self.types:
             return False
         try:
             return truthy(self.where, offer.names())
@@ -129,7 +136,9 @@ def query(text: str, offers: Iterable[Offer], *, catalog: Catalog | None = None,
 
 
 def compile_query(text: str, catalog: Catalog | None = None) -> Query:
-    """Parse and check a query. With a catalog, the type and (for RC/ARC types) its properties are known.
+    """Parse and check a query. With a catalog, the type and (for RC/ARC types) its properties are known, and the
+    query matches the type's subtypes too; the properties are the queried type's (`Robot where magazine > 0` is an
+    error: only a Ranger has a magazine).
 
     Raises:
         TraderError: with a message in the user's words and the column of the problem.
@@ -159,7 +168,8 @@ def compile_query(text: str, catalog: Catalog | None = None) -> Query:
     prefer = _clause(flat, prefer_at, "prefer", end, "min(...), max(...), random or first") if prefer_at else None
     order, key = _preference(prefer) if prefer is not None else (Order.FIRST, None)
     _check(type_name, type_col, where, key, catalog)
-    return Query(type_name, where, order, key)
+    types = frozenset(catalog.subtypes(type_name)) if catalog is not None else frozenset({type_name})
+    return Query(type_name, where, order, key, types)
 
 
 # ---------------------------------------------------------------- parsing
@@ -295,10 +305,10 @@ def _check(type_name: str, type_col: int, where: ast.Expr | None, key: ast.Expr 
     if catalog is not None:
         t = catalog.get(type_name)
         if t is None:
-            kinds = ", ".join(sorted(catalog.names(Kind.RC, Kind.ARC)))
+            kinds = ", ".join(sorted(n for n, c in catalog.components.items() if c.kind in (Kind.RC, Kind.ARC)))
             hint = did_you_mean(type_name, catalog.names()) or (f"resource types: {kinds}" if kinds else None)
             _fail(f"unknown type {type_name}" + (f" ({hint})" if hint else ""), type_col)
-        elif t.is_resource:
+        elif t.kind in (Kind.RC, Kind.ARC):  # abstract ones too: `Robot where battery > 0.5`
             closed = True
             names = {n: _trader_type(ty, catalog) for n, ty in catalog.properties(type_name).items()} | names
     if closed:

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Iterable, Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from enum import StrEnum
 from types import MappingProxyType
 
@@ -183,6 +183,10 @@ class ComponentType:
     #: a behavior whose state can be snapshotted and restored elsewhere (`missionctl migrate`); no device needs
     movable: bool = False
     source: str = "<builtin>"
+    #: The abstract types this one is a kind of (`extends: [Robot]`): a trader query for one matches this one.
+    extends: tuple[str, ...] = ()
+    #: Declares properties only (`Robot`, `Sensor`): never a device or robot itself, nor a mission's need.
+    abstract: bool = False
 
     def param(self, name: str) -> ParamSpec | None:
         return next((p for p in self.params if p.name == name), None)
@@ -195,7 +199,8 @@ class ComponentType:
 
     @property
     def is_resource(self) -> bool:
-        return self.kind in (Kind.RC, Kind.ARC)
+        """A type a mission may need and hosts.yaml may name: an rc or arc, not an abstract one."""
+        return self.kind in (Kind.RC, Kind.ARC) and not self.abstract
 
 
 #: Properties every resource has, whatever its manifest says.
@@ -225,7 +230,23 @@ class Catalog:
         return self.components.get(name)
 
     def names(self, *kinds: Kind) -> list[str]:
-        return [n for n, t in self.components.items() if not kinds or t.kind in kinds]
+        """Every name, or those of `kinds` less the abstract types (what a mission or hosts.yaml may name)."""
+        return [n for n, t in self.components.items() if not kinds or (t.kind in kinds and not t.abstract)]
+
+    def supertypes(self, name: str) -> list[str]:
+        """Every type `name` extends, directly or not, nearest first (a cycle, refused at load, ends the walk)."""
+        out: list[str] = []
+        todo = list(getattr(self.components.get(name), "extends", ()))
+        while todo:
+            sup = todo.pop(0)
+            if sup not in out and sup != name:
+                out.append(sup)
+                todo += getattr(self.components.get(sup), "extends", ())
+        return out
+
+    def subtypes(self, name: str) -> list[str]:
+        """`name` and every type that extends it, directly or not: what a trader query for `name` matches."""
+        return [name] + [n for n in self.components if n != name and name in self.supertypes(n)]
 
     @property
     def events(self) -> dict[str, RecordSpec]:
@@ -253,3 +274,24 @@ class Catalog:
             return None
         hits = [n for n, ty in t.parts.items() if ty == rc_type]
         return hits[0] if len(hits) == 1 else None
+
+
+def inherit(types: Iterable[ComponentType]) -> list[ComponentType]:
+    """The types with their supertypes' properties and limits added (nearest first; their own win), so every reader
+    of `properties` sees a Ranger's `battery` declared once, in `Robot`. Unknown supertypes and cycles are skipped
+    here: `drd.manifests.check_references` refuses them first."""
+    by_name = {t.name: t for t in types}
+    catalog = Catalog(by_name)
+    out = []
+    for t in by_name.values():
+        props: dict[str, str] = {}
+        limits: dict[str, Limit] = {}
+        for sup in reversed(catalog.supertypes(t.name)):  # the farthest first: nearer ones override
+            s = by_name.get(sup)
+            if s is not None:
+                props.update(s.properties)
+                limits.update(s.limits)
+        if props or limits:
+            t = replace(t, properties={**props, **t.properties}, limits={**limits, **t.limits})
+        out.append(t)
+    return out

@@ -63,8 +63,8 @@ def test_random_is_seeded(catalog: Catalog) -> None:
 @pytest.mark.parametrize(("text", "message", "column"), [
     ("", "expected a component type, such as Camera", 1),
     ("Camra", "unknown type Camra (did you mean Camera?)", 1),
-    ("  Robot", "unknown type Robot (resource types: Camera, Drive, Jump, Launcher, RadioChannel, RangeSensor, "
-                "Ranger, Scout)", 3),
+    ("  Zeppelin", "unknown type Zeppelin (resource types: Camera, Drive, Jump, Launcher, RadioChannel, RangeSensor, "
+                "Ranger, Robot, Scout, Sensor)", 3),
     ("Camera where resolutin >= 640", "unknown property resolutin (did you mean resolution?)", 14),
     ("Camera where colour", "unknown property colour (Camera has fov, host, id, resolution)", 14),
     ("Camera where host.lod > 1", "host has no field lod (did you mean load?)", 14),
