@@ -69,7 +69,7 @@ class Part:
 
     @property
     def points(self) -> float:
-        return self.weight * self.value
+        return self.weight * self.value + 0.0  # never -0.0 in an explanation
 
 
 @dataclass(frozen=True, slots=True)
@@ -217,7 +217,7 @@ SCORES: tuple[Score, ...] = (
     Score("memory", lambda w: w.memory, lambda h, c: _percent(h.memory)),
     Score("instances", lambda w: w.instances, lambda h, c: max(0, h.instances) * INSTANCE_SCALE),
     Score("preferred", lambda w: 1.0, lambda h, c: -PREFER_BONUS if h.name in c.prefer else 0.0),
-    Score("affinity", lambda w: w.affinity, lambda h, c: -AFFINITY_SCALE * _share(c.near.get(h.name, 0.0))),
+    Score("affinity", lambda w: w.affinity, lambda h, c: 0.0 - AFFINITY_SCALE * _share(c.near.get(h.name, 0.0))),
 )
 
 

@@ -1,0 +1,183 @@
+"""Placement as filters then scores (issue #15): the decision record, the worker-role filter, device affinity, the
+controller's log of decisions and their lines in `missionctl status`. Pure: no bus, no process."""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from dataclasses import dataclass, field
+from typing import Any
+
+import pytest
+
+from drd.cli.report import PLACEMENTS_SHOWN, placement_lines
+from drd.daemon.placements import KEPT_PER_MISSION, PlacementLog, near_devices, status_entry
+from drd.hosts import Placement
+from drd.placement import AFFINITY_SCALE, Decision, HostView, Placed, Unplaceable, place, score, shares
+from dsl.catalog import ComponentType, Kind
+
+WAIT = ComponentType("Wait", Kind.BEHAVIOR)
+W = Placement()
+
+
+def hv(name: str, cpu: float = 0.0, instances: int = 0, roles: tuple[str, ...] = ("worker",),
+       up: bool = True) -> HostView:
+    return HostView(name, cpu, 0.0, instances, up, roles=frozenset(roles))
+
+
+def test_the_decision_records_the_candidates_the_filtered_hosts_and_every_scored_part() -> None:
+    hosts = [hv("w2", cpu=40), hv("controller", roles=("controller",)), hv("w1", cpu=12), hv("gone", up=False)]
+    decision = place(WAIT, hosts, W, role="worker")
+    assert isinstance(decision, Placed) and decision.host == "w1"
+    record = decision.decision
+    assert record is not None
+    assert record.candidates == ("controller", "gone", "w1", "w2")
+    assert dict(record.filtered) == {"controller": ("no worker role",), "gone": ("down",)}
+    assert [s.host for s in record.scored] == ["w1", "w2"] and record.winner == "w1"
+    assert [(p.plugin, p.weight, p.value) for p in record.scored[0].parts] == [
+        ("cpu", 1.0, 12.0), ("memory", 0.5, 0.0), ("instances", 0.2, 0.0), ("preferred", 1.0, 0.0),
+        ("affinity", 0.2, 0.0)]
+    assert record.summary() == ("w1 (score 12 vs w2 40: cpu 12 vs 40; filtered controller: no worker role; "
+                                "gone: down)")
+    assert record.as_dict()["scored"][1]["total"] == 40.0
+
+
+def test_the_worker_role_filters_only_when_some_host_has_it() -> None:
+    hosts = [hv("controller", roles=("controller",)), hv("ranger1", cpu=90, roles=("worker", "simulator"))]
+    decision = place(WAIT, hosts, W, role="worker")
+    assert isinstance(decision, Placed) and decision.host == "ranger1", "the idle controller is not a worker"
+    nobody = [hv("a", cpu=50, roles=()), hv("b", cpu=10, roles=())]
+    decision = place(WAIT, nobody, W, role="worker")
+    assert isinstance(decision, Placed) and decision.host == "b", "no worker anywhere: every host may take it"
+
+
+def test_device_affinity_draws_the_instance_to_its_robots_host_while_that_is_cheaper() -> None:
+    hosts = [hv("ranger1", cpu=15), hv("spare", cpu=5)]
+    assert place(WAIT, hosts, W).host == "spare"  # type: ignore[union-attr]
+    near = shares({"ranger1": 3})
+    decision = place(WAIT, hosts, W, near=near)
+    assert isinstance(decision, Placed) and decision.host == "ranger1"
+    assert decision.score == pytest.approx(15 - W.affinity * AFFINITY_SCALE)
+    assert decision.reasons[0] == "ranger1: score -5 = cpu 1*15 + memory 0.5*0 + instances 0.2*0*10 - affinity 0.2*100"
+    assert decision.decision is not None and "affinity -20 vs 0" in decision.decision.summary()
+    busy = [hv("ranger1", cpu=35), hv("spare", cpu=5)]
+    decision = place(WAIT, busy, W, near=near)
+    assert isinstance(decision, Placed) and decision.host == "spare", "a far busier robot host loses"
+    off = place(WAIT, hosts, Placement(affinity=0.0), near=near)
+    assert isinstance(off, Placed) and off.host == "spare", "affinity 0: devices do not count"
+
+
+def test_shares_split_the_devices_between_hosts_and_odd_figures_are_clamped() -> None:
+    assert shares({"ranger1": 3, "ranger2": 1, "none": 0}) == {"ranger1": 0.75, "ranger2": 0.25}
+    assert shares({}) == {} and shares({"a": 0}) == {}
+    assert score(hv("a"), W, near={"a": 7.0}) == -W.affinity * AFFINITY_SCALE
+    assert score(hv("a"), W, near={"a": float("nan")}) == 0.0
+
+
+def test_an_unplaceable_answer_carries_its_record() -> None:
+    decision = place(WAIT, [hv("a", up=False)], W)
+    assert isinstance(decision, Unplaceable) and decision.decision is not None
+    assert decision.decision.winner is None and decision.decision.summary() == "unplaceable: a: down"
+
+
+# ---------------------------------------------------------------- the devices near an instance
+
+
+@dataclass(eq=False)
+class Proxy:
+    movable: bool = True
+    host: str | None = None
+
+
+@dataclass(eq=False)
+class N:
+    """The part of a live node (`drd.runtime.tree.Node`) that near_devices reads."""
+
+    path: str
+    component_name: str | None = None
+    grant: dict[str, str] | None = None
+    units: tuple[str, ...] = ()
+    component: Proxy | None = None
+    parent: N | None = None
+    children: list[N] = field(default_factory=list)
+
+    @property
+    def state(self) -> Any:
+        return type("S", (), {"component": self.component_name})()
+
+    def add(self, child: N) -> N:
+        child.parent = self
+        self.children.append(child)
+        return child
+
+    def ancestors(self) -> list[N]:
+        return [self.parent, *self.parent.ancestors()] if self.parent else []
+
+    def subtree(self) -> Iterator[N]:
+        yield self
+        for c in self.children:
+            yield from c.subtree()
+
+
+def test_the_devices_near_an_instance_are_its_ancestors_and_its_siblings_grants() -> None:
+    hosts_of = {"ranger1": "ranger1", "ranger1.camera": "ranger1", "scout1": "scout1", "ranger2": "ranger2"}
+    root = N("M")
+    escort = root.add(N("M/Escort", grant={"ranger": "ranger1"}))
+    escort.add(N("M/Escort/Watch", "Watch", grant={"camera": "ranger1.camera"}, component=Proxy(False, "ranger1")))
+    waiting = escort.add(N("M/Escort/Wait", "Wait", component=Proxy()))
+    root.add(N("M/Other", grant={"ranger": "ranger2"}))  # a cousin: not near
+    escort.add(N("M/Escort/Scout", grant={"s": "scout1"}))
+    assert near_devices(root, "Wait", hosts_of) == ("M/Escort/Wait", {"ranger1": 2, "scout1": 1})
+    waiting.component = Proxy(host="spare")  # placed already: nothing is being placed
+    assert near_devices(root, "Wait", hosts_of) == (None, {})
+    assert near_devices(None, "Wait", hosts_of) == (None, {})
+
+
+# ---------------------------------------------------------------- the controller's log and the status lines
+
+
+def _decision(winner: str) -> Decision:
+    outcome = place(WAIT, [hv(winner), hv("zz", cpu=50), hv("controller", roles=("controller",))], W, role="worker")
+    assert outcome.decision is not None
+    return outcome.decision
+
+
+def test_the_log_keeps_the_last_decision_per_instance_and_drops_forgotten_missions() -> None:
+    known = {"M-1", "M-2"}
+    log = PlacementLog(lambda: known)
+    log.note("M-1", "M/a", _decision("a"))
+    log.note("M-1", "M/a", _decision("b"))
+    log.note("M-2", "N/x", _decision("a"))
+    entries = log.of("M-1")
+    assert [(e["instance"], e["host"], e["how"]) for e in entries] == [("M/a", "b", "re-placed")]
+    assert entries[0]["decision"]["filtered"] == {"controller": ["no worker role"]}
+    known.discard("M-1")
+    log.note("M-2", "N/y", _decision("a"))
+    assert log.of("M-1") == [] and log.extras("M-1") == {}
+    assert [e["instance"] for e in log.extras("M-2")["placements"]] == ["N/x", "N/y"]
+    for i in range(KEPT_PER_MISSION + 5):
+        log.note("M-2", f"N/{i}", _decision("a"))
+    assert len(log.of("M-2")) == KEPT_PER_MISSION and log.of("M-2")[-1]["instance"] == f"N/{KEPT_PER_MISSION + 4}"
+
+
+def test_a_status_entry_shows_a_few_hosts_and_counts_the_others() -> None:
+    many = [hv(f"w{i:02d}", cpu=i) for i in range(9)] + [hv(f"c{i}", roles=()) for i in range(7)]
+    outcome = place(WAIT, many, W, role="worker")
+    assert outcome.decision is not None
+    entry = status_entry("M/a", "placed", outcome.decision, shown=3)
+    assert [s["host"] for s in entry["decision"]["scored"]] == ["w00", "w01", "w02"]
+    assert list(entry["decision"]["filtered"]) == ["c0", "c1", "c2"]
+    assert entry["decision"]["left_out"] == {"scored": 6, "filtered": 4}
+
+
+def test_status_lines_one_per_placement_of_a_running_mission_all_with_explain() -> None:
+    entries = [status_entry(f"Near/Escort/Wait{i}", "placed", _decision("ranger1")) for i in range(6)]
+    running = {"mission": "Near", "outcome": None, "placements": entries}
+    lines = [t.plain for t in placement_lines(running, 120)]
+    assert len(lines) == PLACEMENTS_SHOWN + 1
+    assert lines[0] == ("placement Escort/Wait2 -> ranger1 (score 0 vs zz 50: cpu 0 vs 50; filtered controller: "
+                        "no worker role)")
+    assert lines[-1].startswith("… 2 more placements")
+    assert placement_lines({**running, "outcome": "success"}) == [], "finished: only with --explain"
+    explained = [t.plain for t in placement_lines({**running, "outcome": "success"}, 120, explain=True)]
+    assert "    zz 50 = cpu 50" in explained and "    controller filtered: no worker role" in explained
+    assert sum(line.startswith("placement ") for line in explained) == 6
