@@ -317,7 +317,9 @@ def query(text: str = typer.Argument(..., metavar="QUERY", show_default=False,
           config: Path = ConfigOption, connect: list[str] = ConnectOption, as_json: bool = JsonOption,
           timeout: float = TimeoutOption,
           seed: int = typer.Option(0, "--seed", help="Seed of `prefer random`.")) -> int:
-    """Ask the trader: `Camera where resolution >= 640 prefer min(host.load)`."""
+    """Ask the trader: `Camera where resolution >= 640 prefer min(host.load)`. A type matches its subtypes too
+    (`Robot`: Rangers and Scouts). A robot's carrier, pose (x, y, heading) and battery are live where the cluster
+    knows them; --json lists those under `live`, each with its age in seconds."""
     from drd.bus import RemoteError
 
     with cluster_client(config, connect, timeout) as client:
@@ -334,7 +336,9 @@ def query(text: str = typer.Argument(..., metavar="QUERY", show_default=False,
     for col in ("id", "type", "host", "load", "properties"):
         table.add_column(col)
     for o in reply.offers:
-        props = ", ".join(f"{k}={v}" for k, v in o["properties"].items())
+        live = o.get("live") or {}
+        props = ", ".join(f"{k}={v}" + (f" (live, {live[k]:.1f} s)" if k in live else "")
+                          for k, v in o["properties"].items())
         table.add_row(o["id"], o["type"], str(o["host"]), _pct(o["load"] * 100 if o["load"] is not None else None),
                       props)
     out.print(table)

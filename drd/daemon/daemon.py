@@ -41,7 +41,7 @@ from drd.bus import Bus, BusError, LoadReport, Message, Ping, Pong, Query, Reply
 from drd.bus.base import Declaration
 from drd.daemon.controller import Controller
 from drd.daemon.keys import ClusterKeys, cluster_of
-from drd.daemon.load import LoadSampler
+from drd.daemon.load import LoadSampler, live_robots
 from drd.daemon.messages import (
     Announcement,
     ClusterEvent,
@@ -51,6 +51,7 @@ from drd.daemon.messages import (
     HostsReply,
     InstanceInfo,
     Leaving,
+    LiveReport,
     Lookup,
     TraderReply,
     TraderRequest,
@@ -168,6 +169,7 @@ class Daemon:
         self._token: Declaration | None = None
         self._sampler = LoadSampler(config.host)
         self._announce_due = True
+        self._watching = False  # a thread is asking the robots' hosts to watch them (`_publish_live`)
         self._next_load = 0.0
         self._next_peer_check = 0.0
         self._checking = False
@@ -200,7 +202,8 @@ class Daemon:
                             "the bus): host names are unique in a cluster, and one controller acts",
                             hint=f"stop that one first (drd stop --host {me} where it runs), or start this one as"
                                  " another host")
-        self._declared += [bus.subscribe(keys.loads, self._on_load), bus.subscribe(keys.announces, self._on_announce)]
+        self._declared += [bus.subscribe(keys.loads, self._on_load), bus.subscribe(keys.announces, self._on_announce),
+                           bus.subscribe(keys.lives, self._on_live)]
         self._serve(keys.ping(me), self._ping, Ping)
         self._serve(keys.status(me), self._status, ViewRequest, type(None))
         self._serve(keys.db(me, "hosts"), self._hosts, ViewRequest, type(None))
@@ -352,6 +355,7 @@ class Daemon:
         if now >= self._next_load:
             self._next_load = now + self.config.period
             self.bus.put(self.keys.load(self.host), self._sampler.sample(len(self._instances()), self.wall()))
+            self._publish_live()
         with self._lock:
             self._handle(self.view.tick(now))
             if self.controller is not None:
@@ -464,6 +468,45 @@ class Daemon:
             self._reject(sample.key, f"expected a drd.load, got a {type(report).TYPE}")
             return
         self._apply(lambda now: self.view.load(report, now, _host_of(sample.key)))
+
+    def _on_live(self, sample: Sample) -> None:
+        report = sample.payload
+        if not isinstance(report, LiveReport):
+            self._reject(sample.key, f"expected a drd.daemon.live, got a {type(report).TYPE}")
+            return
+        self._apply(lambda now: self.view.live_report(report, now, _host_of(sample.key)))
+
+    def _publish_live(self) -> None:
+        """On the acting controller, with the load report: the robots' live properties (`live_robots`), and while a
+        world runs every robot watched, so its host sends its pose and battery with its replies (once per world)."""
+        controller, runner = self.controller, self.runner
+        if controller is None or runner is None:
+            return
+        telemetry = runner.telemetry
+        unwatched = [r.id for r in self.cluster.robots
+                     if r.host and r.id not in telemetry.wanted.get(r.host, ()) and runner.world is not None]
+        if unwatched and not self._watching:
+            self._watching = True
+            threading.Thread(target=self._watch, args=(telemetry, unwatched), name="drd-live-watch",
+                             daemon=True).start()
+        try:
+            latest = dict(telemetry.latest)
+        except RuntimeError:  # a reply is being delivered right now: the next report has it
+            latest = {}
+        robots = live_robots(self.cluster.robots, controller.executive.pool.properties, latest)
+        self.bus.put(self.keys.live(self.host), LiveReport(self.host, self.wall(), robots))
+
+    def _watch(self, telemetry: Any, robots: list[str]) -> None:
+        """Read each robot once as an expression would (its first read asks its host to watch it), under the
+        executive's lock as the mission loop reads it; off the daemon's thread (each first read is a round trip)."""
+        try:
+            with self._exec_lock:
+                for robot in robots:
+                    telemetry(robot)
+        except Exception:  # a host that does not answer now is asked again at the next report
+            log.debug("watching the robots for their live properties", exc_info=True)
+        finally:
+            self._watching = False
 
     def _on_announce(self, sample: Sample) -> None:
         msg, host = sample.payload, _host_of(sample.key)
@@ -582,9 +625,9 @@ class Daemon:
         except TraderError as e:
             return query.error(e.render(text))
         with self._lock:
-            offers = self.view.offers()
+            offers = self.view.offers(self.clock())
         found = compiled.run(offers, query.payload.seed)
-        return TraderReply(text, [_offer_dict(o.id, o.type, o.host, o.properties) for o in found])
+        return TraderReply(text, [_offer_dict(o.id, o.type, o.host, o.properties, o.live) for o in found])
 
     # -- helpers ---------------------------------------------------------------------------------
 
@@ -639,9 +682,9 @@ def _host_of(key: str) -> str | None:
     return parts[3] if len(parts) > 3 else None
 
 
-def _offer_dict(oid: str, type_: str, host: Any, properties: Any) -> dict[str, Any]:
+def _offer_dict(oid: str, type_: str, host: Any, properties: Any, live: Any) -> dict[str, Any]:
     facts = dict(host)
     load = facts.get("load")
     return {"id": oid, "type": type_, "host": facts.get("name"),
             "load": load if isinstance(load, float) and load == load else None,
-            "properties": dict(properties)}
+            "properties": dict(properties), "live": {k: round(v, 3) for k, v in live.items()}}

@@ -42,6 +42,14 @@ class ClusterKeys:
     def loads(self) -> str:
         return f"{self.root}/host/*/load"
 
+    def live(self, host: str) -> str:
+        """The acting controller's `LiveReport`s: the robots' live properties, for every daemon's trader."""
+        return f"{self.host(host)}/live"
+
+    @property
+    def lives(self) -> str:
+        return f"{self.root}/host/*/live"
+
     def announce(self, host: str) -> str:
         """`Announcement` and `Leaving` publications."""
         return f"{self.host(host)}/announce"

@@ -143,10 +143,23 @@ class TraderRequest(Message):
 
 @message("drd.daemon.trader-reply", 1)
 class TraderReply(Message):
-    """The matching offers, best first: each `{id, type, host, load, properties}`."""
+    """The matching offers, best first: each `{id, type, host, load, properties, live}`; `live` maps the properties
+    that are the cluster's live state (not hosts.yaml's) to their age in seconds (an older daemon's reply has none)."""
 
     query: str
     offers: list[dict[str, Any]]
+
+
+@message("drd.daemon.live", 1)
+class LiveReport(Message):
+    """The acting controller's live view of the robots, every load period (`drd.daemon.load.live_robots`): robot id ->
+    the properties its Static Dependency Database changed from hosts.yaml (a launched Scout's `carrier`) and, while a
+    world runs, the `x`, `y`, `heading` and `battery` its drivers' odometry reported. Every daemon merges them over
+    hosts.yaml's in its trader's offers (`drd.daemon.view`)."""
+
+    host: str
+    at: float
+    robots: dict[str, dict[str, Any]]
 
 
 @message("drd.daemon.status", 1)

@@ -18,6 +18,10 @@ adds and removes resources). The rules:
 - The view's own host is always up: it is the process answering.
 
 Hosts are those of `hosts.yaml`; anything about another host is refused (`Change("rejected")`).
+
+A robot's offer carries hosts.yaml's properties with the live ones over them (`live_report`): those the acting
+controller's last `LiveReport` gave (a launched Scout's `carrier`, the robot's pose and battery), while that
+controller is up and its report is at most a lease old, each with its age (`Offer.live`).
 """
 
 from __future__ import annotations
@@ -28,8 +32,9 @@ from dataclasses import dataclass
 from enum import StrEnum
 
 from drd.bus import LoadReport
-from drd.daemon.messages import Announcement, InstanceInfo, Location
-from drd.hosts import Cluster, Host
+from drd.daemon.load import TELEMETRY, live_value
+from drd.daemon.messages import Announcement, InstanceInfo, LiveReport, Location
+from drd.hosts import Cluster, Host, Role
 from drd.placement import HostView, required_devices, view_of
 from drd.trader import Offer
 from dsl.catalog import Catalog
@@ -94,6 +99,9 @@ class ClusterView:
             raise ValueError(f"lease must be positive, not {self.lease!r}")
         self.digest = digest
         self.records: dict[str, HostRecord] = {h.name: HostRecord(h) for h in cluster.hosts}
+        self.live: dict[str, dict[str, object]] = {}  # robot id -> its live properties (the controller's last report)
+        self.live_from: str | None = None  # the controller that sent them
+        self.live_at: float | None = None  # when they arrived (monotonic)
         mine = self.records[self.me]
         mine.state, mine.since, mine.reason = HostState.UP, now, "this host"
 
@@ -134,6 +142,33 @@ class ClusterView:
         if host != self.me and rec.state is HostState.DOWN and rec.token:
             return [self._set(rec, HostState.UP, now, "reporting again" if rec.since is not None else "joined")]
         return []
+
+    def live_report(self, report: LiveReport, now: float, key_host: str | None = None) -> list[Change]:
+        """The acting controller's live properties of the robots: they replace the last ones. Only a controller
+        host's (a standby never sends any), only hosts.yaml's robots and their own keys, only scalar values."""
+        host = report.host
+        rec = self.records.get(host)
+        if rec is None:
+            return [Change(now, "rejected", host, "live properties from a host not in the hosts file")]
+        if key_host is not None and key_host != host:
+            return [Change(now, "rejected", key_host, f"live properties for {host} published under {key_host}")]
+        if Role.CONTROLLER not in rec.config.roles:
+            return [Change(now, "rejected", host, "live properties from a host that is not a controller")]
+        robots = {r.id: r for r in self.cluster.robots}
+        self.live = {rid: {k: v for k, v in values.items()
+                           if (k in TELEMETRY or k in robots[rid].properties) and live_value(v)}
+                     for rid, values in report.robots.items() if rid in robots and isinstance(values, dict)}
+        self.live_from, self.live_at = host, now
+        return []
+
+    def live_of(self, robot: str, now: float) -> tuple[dict[str, object], float]:
+        """A robot's live properties and their age (seconds): none when the controller that sent them is not up or
+        its report is more than a lease old (it stopped, or no longer acts)."""
+        if self.live_at is None or self.live_from is None or now - self.live_at > self.lease:
+            return {}, 0.0
+        if self.records[self.live_from].state is not HostState.UP:
+            return {}, 0.0
+        return self.live.get(robot, {}), max(0.0, now - self.live_at)
 
     def announce(self, ann: Announcement, now: float, key_host: str | None = None) -> list[Change]:
         """A daemon's announcement: its runnable components, instances and services."""
@@ -227,13 +262,16 @@ class ClusterView:
         return {"name": host, "load": cpu / 100.0, "cpu": cpu, "memory": memory,
                 "up": rec.state is HostState.UP}
 
-    def offers(self) -> list[Offer]:
-        """Trader offers: the devices, robots and instances of the hosts that are up, in hosts-file order."""
+    def offers(self, now: float | None = None) -> list[Offer]:
+        """Trader offers: the devices, robots and instances of the hosts that are up, in hosts-file order; at `now`,
+        a robot's live properties over hosts.yaml's (`live_of`)."""
         out: list[Offer] = []
         for r in self._up_records():
             facts = self.host_facts(r.name)
             out += [Offer(d.id, d.type, {**d.options, "driver": d.driver}, facts) for d in r.config.devices]
-            out += [Offer(b.id, b.type, {**b.properties, **b.parts}, facts) for b in r.config.robots]
+            for b in r.config.robots:
+                live, age = self.live_of(b.id, now) if now is not None else ({}, 0.0)
+                out.append(Offer(b.id, b.type, {**b.properties, **b.parts, **live}, facts, dict.fromkeys(live, age)))
             out += [Offer(i.name, i.component, {"state": i.state}, facts) for i in r.instances]
         return out
 
