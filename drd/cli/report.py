@@ -254,12 +254,13 @@ def placement_lines(mission: dict[str, Any], width: int = 80, explain: bool = Fa
     entries = [e for e in mission.get("placements") or [] if isinstance(e, dict)]
     if not entries or not (explain or mission.get("outcome") is None):
         return []
-    root = str(mission.get("mission") or "")
     shown = entries if explain else entries[-PLACEMENTS_SHOWN:]
     lines: list[Text] = []
     for e in shown:
-        name = shorten(_relative(str(e.get("instance", "")), root), max(16, width // 3))
-        line = Text.assemble(("placement ", "dim"), name, " -> ", str(e.get("summary", "")))
+        instance = str(e.get("instance", ""))  # below the mission's root state, as in the active tree
+        name = shorten(instance.split("/", 1)[1] if "/" in instance else instance, max(16, width // 3))
+        line = Text.assemble(("placement ", "dim"), name, " -> ", str(e.get("summary", "")), no_wrap=False,
+                             overflow="fold")  # wrapped, never cut: the reasons come last
         if e.get("how") == "re-placed":
             line.append("  re-placed", style="yellow")
         lines.append(line)
