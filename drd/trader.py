@@ -3,8 +3,8 @@
     TYPE [where EXPR] [prefer min(EXPR) | prefer max(EXPR) | prefer random | prefer first]
 
 `Camera where resolution >= 640 prefer min(host.load)`. TYPE matches offers of that type and of every type that
-extends it (`Robot` matches Rangers and Scouts: `extends` in their manifests). EXPR is the mission language's expression,
-parsed by dsl's `expr` rule and evaluated by `dsl.evaluate` (never Python's eval); an offer's
+extends it (`Robot` matches Rangers and Scouts: `extends` in their manifests). EXPR is the mission language's
+expression, parsed by dsl's `expr` rule and evaluated by `dsl.evaluate` (never Python's eval); an offer's
 properties are names, with `id` and `host` (a mapping: name, load, cpu, memory, up). As in CORBA, an
 offer whose constraint cannot be evaluated does not match, and one whose preference cannot be (or is
 not a number) comes after the others. Pure: no I/O, no clock; `random` is seeded. See docs/placement.md.
