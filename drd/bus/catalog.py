@@ -19,6 +19,7 @@ MESSAGE_MODULES: tuple[str, ...] = (
     "drd.executive_messages",
     "drd.daemon.messages",
     "drd.daemon.missions",
+    "drd.daemon.migrate",
     "drd.daemon.workers",
     "drd.cluster.gates",
     "drd.cluster.remote",

@@ -12,7 +12,7 @@ from __future__ import annotations
 import threading
 import time
 from collections.abc import Callable, Iterator, Mapping, Sequence
-from dataclasses import asdict
+from dataclasses import asdict, replace
 from typing import Any, Self, TypeVar
 
 from drd.bus import Bus, BusError, BusTimeout, Message, Ping, Pong
@@ -24,6 +24,7 @@ from drd.daemon.messages import (
     Location,
     Lookup,
     ResourcesReply,
+    ResourcesRequest,
     TraderReply,
     TraderRequest,
     ViewRequest,
@@ -153,14 +154,38 @@ class ClusterClient:
     def ping(self, host: str) -> Pong:
         return _expect(self.bus.call(self.keys.ping(host), Ping(1, time.time()), timeout=self.timeout), Pong)
 
-    def resources(self, *, deadline: float | None = None) -> ResourcesReply:
-        """The controller's manager. Raises ClientError when the controller does not answer."""
-        wait = self._left(deadline)
+    def resources(self, *, deadline: float | None = None, count: int = 0) -> ResourcesReply:
+        """The controller's manager, asked page by page (`drd.paging`, `count` items a page) by `deadline`, and
+        assembled; asked again from the start (three tries) when a host came or went between two pages. Raises
+        ClientError when the controller does not answer in time."""
+        end = time.monotonic() + self._left(deadline)
+        for _attempt in range(3):
+            first = page = self._resources_page(0, count, end)
+            pages = [first]
+            while page.next and page.layout == first.layout:
+                after = page.next
+                page = self._resources_page(after, count, end)
+                pages.append(page)
+                if page.next and page.next <= after:  # a server that does not move on: never loop
+                    break
+            if page.layout == first.layout:
+                return replace(first, units=[u for p in pages for u in p.units],
+                               robots=[r for p in pages for r in p.robots], queue=[w for p in pages for w in p.queue],
+                               next=0)
+        raise ClientError(f"the controller's resources kept changing while {self.keys.resources} was read page by "
+                          "page; try again")
+
+    def _resources_page(self, after: int, count: int, end: float) -> ResourcesReply:
+        """One page of the manager, asked within what is left until `end`."""
+        wait = end - time.monotonic()
         try:
-            return _expect(self.bus.call(self.keys.resources, ViewRequest(), timeout=wait), ResourcesReply)
+            if wait <= 0:
+                raise BusTimeout("no time left")
+            return _expect(self.bus.call(self.keys.resources, ResourcesRequest(after, count), timeout=wait),
+                           ResourcesReply)
         except BusTimeout:
-            raise ClientError(f"the controller does not answer on {self.keys.resources}"
-                              f" within {wait:.2g} s (is its drd up, or frozen?)") from None
+            raise ClientError(f"the controller does not answer on {self.keys.resources} in time"
+                              " (is its drd up, or frozen?)") from None
 
     def missions(self, mission: str = "", *, count: int = 0, timeout: float | None = None) -> list[dict[str, Any]]:
         """The controller's missions (`MissionStatus.missions`; only `mission`, if given: none when it is not

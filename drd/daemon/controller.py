@@ -10,15 +10,18 @@ the executive is single-threaded, and bus handlers run on zenoh's threads (`Seri
 from __future__ import annotations
 
 import threading
+import zlib
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 from drd.bus import Bus, BusWrapper, Handler, Message, Query, Queryable, Reply
 from drd.bus.keys import is_concrete
+from drd.bus.messages import encode
 from drd.daemon.keys import ClusterKeys
-from drd.daemon.messages import ResourcesReply, RobotInfo, UnitInfo, ViewRequest, WaiterInfo
+from drd.daemon.messages import ResourcesReply, ResourcesRequest, RobotInfo, UnitInfo, ViewRequest, WaiterInfo
 from drd.hosts import Cluster
+from drd.paging import fill
 from drd.rcm import Aggregate, Unit
 from drd.runtime.clock import Clock, WallClock
 from dsl.catalog import Catalog
@@ -101,7 +104,22 @@ def resources_reply(snapshot: Mapping[str, Any], cluster: str, answered_by: str,
                         {str(k): str(v) for k, v in dict(a["parts"]).items()},
                         sorted(h for h, hold in holds.items() if aid in dict(hold.get("assignment", {})).values()))
               for aid, a in aggregates.items()]
+    units.sort(key=lambda u: u.id)
+    robots.sort(key=lambda r: r.id)
     return ResourcesReply(cluster, answered_by, units, robots, queue, dict(removing), dict(hosts or {}))
+
+
+def resources_page(whole: ResourcesReply, after: int = 0, count: int = 0) -> ResourcesReply:
+    """A page of `whole` (`drd.paging`): one cursor over its units, then its robots, then its queue (1-based
+    positions); the page's `layout` is a checksum of the unit and robot ids, so a client that sees it change
+    between pages knows positions moved (a host came or went) and starts again. Pure."""
+    items: list[tuple[int, Message]] = [(n, item) for n, item in enumerate(
+        [*whole.units, *whole.robots, *whole.queue], start=1) if n > after]
+    page, nxt = fill(items, lambda item: len(encode(item)), count)
+    layout = zlib.crc32("\n".join([u.id for u in whole.units] + ["|"] + [r.id for r in whole.robots]).encode())
+    return replace(
+        whole, units=[i for i in page if isinstance(i, UnitInfo)], robots=[i for i in page if isinstance(i, RobotInfo)],
+        queue=[i for i in page if isinstance(i, WaiterInfo)], next=nxt, layout=layout)
 
 
 #: Seconds a query waits for the executive's lock; then a read gets the last answer given, a command a refusal.
@@ -234,7 +252,7 @@ class Controller:
         self._on_change = on_change
         self._host_states = host_states
         expect = {self.keys.executive: (MissionCommand,), self.keys.executive_status: (MissionCommand,),
-                  self.keys.resources: (ViewRequest, type(None))}
+                  self.keys.resources: (ResourcesRequest, ViewRequest, type(None))}
         serialized = SerializedBus(bus, lock, expect=expect, on_reject=on_reject)
         # The executive runs on the simulator's time (`drd.daemon.missions`); membership on this clock.
         from drd.daemon.missions import SimTimeClock
@@ -248,7 +266,7 @@ class Controller:
         self._pending_lock = threading.Lock()
         self._queryable = serialized.serve(self.keys.resources, self._resources)
         self.serialized = serialized
-        serialized.keep(self.keys.resources, self.resources)
+        serialized.keep(self.keys.resources, lambda: resources_page(self.resources()))
         serialized.keep(self.keys.executive, self.executive.status)
         serialized.keep(self.keys.executive_status, self.executive.status)
 
@@ -296,7 +314,10 @@ class Controller:
         self.executive.close()
 
     def _resources(self, query: Query) -> Message:
-        return self.resources()
+        asked = query.payload
+        if isinstance(asked, ResourcesRequest):
+            return resources_page(self.resources(), asked.after, asked.count)
+        return resources_page(self.resources())  # a plain view: its first page
 
     def _apply(self, actions: list[Action]) -> None:
         pool, now = self.executive.pool, self.executive.clock.now()

@@ -217,11 +217,24 @@ class WaiterInfo(Message):
     needs: dict[str, str]
 
 
-@message("drd.rcm.resources", 2)
+@message("drd.rcm.resources-request", 1)
+class ResourcesRequest(Message):
+    """Asks the controller for a page of its manager (`drd.paging`): the items after cursor `after`, `count` at
+    most (0: the default)."""
+
+    after: int = 0
+    count: int = 0
+
+
+@message("drd.rcm.resources", 3)
 class ResourcesReply(Message):
     """The controller's Resource Controller Manager: units, robots, the queue, hosts whose
     resources will be removed (`removing`: host -> seconds left of the lease) unless they come back, and
-    the configured hosts that are not up (`hosts`: host -> `down` or `unresponsive`, as `HostInfo.state`)."""
+    the configured hosts that are not up (`hosts`: host -> `down` or `unresponsive`, as `HostInfo.state`).
+
+    In pages (`drd.paging`): units by id, then robots by id, then the queue in service order, one cursor over the
+    three; `next` is the cursor to ask after (0: the last page), `layout` a number that changes when units or robots
+    come or go (a client that sees it change between pages starts again)."""
 
     cluster: str
     answered_by: str
@@ -230,3 +243,5 @@ class ResourcesReply(Message):
     queue: list[WaiterInfo]
     removing: dict[str, float]
     hosts: dict[str, str] = dataclasses.field(default_factory=dict)
+    next: int = 0
+    layout: int = 0
