@@ -11,9 +11,9 @@ import pytest
 
 from drd.cli.report import PLACEMENTS_SHOWN, placement_lines
 from drd.daemon.placements import KEPT_PER_MISSION, PlacementLog, near_devices, status_entry
-from drd.hosts import Placement
+from drd.hosts import HostsError, Placement, parse_hosts
 from drd.placement import AFFINITY_SCALE, Decision, HostView, Placed, Unplaceable, place, score, shares
-from dsl.catalog import ComponentType, Kind
+from dsl.catalog import Catalog, ComponentType, Kind
 
 WAIT = ComponentType("Wait", Kind.BEHAVIOR)
 W = Placement()
@@ -181,3 +181,19 @@ def test_status_lines_one_per_placement_of_a_running_mission_all_with_explain() 
     explained = [t.plain for t in placement_lines({**running, "outcome": "success"}, 120, explain=True)]
     assert "    zz 50 = cpu 50" in explained and "    controller filtered: no worker role" in explained
     assert sum(line.startswith("placement ") for line in explained) == 6
+
+
+def test_the_affinity_weight_is_configured_in_hosts_yaml_with_a_range(catalog: Catalog) -> None:
+    def cluster(placement: dict[str, Any]) -> dict[str, Any]:
+        return {"cluster": {"name": "lab", "placement": placement},
+                "hosts": {"ctl": {"endpoint": "tcp/127.0.0.1:7447", "roles": ["controller"]}}}
+
+    assert parse_hosts(cluster({}), "hosts.yaml", catalog).placement.affinity == 0.2
+    assert parse_hosts(cluster({"affinity": 5}), "hosts.yaml", catalog).placement == Placement(affinity=5.0)
+    for bad, message in (({"affinity": -1}, "cluster.placement.affinity: -1 is out of range: 0..1000"),
+                         ({"afinity": 1}, "cluster.placement.afinity: unknown key (did you mean affinity?)"),
+                         ({"cpu": 0, "memory": 0, "instances": 0, "affinity": 3},
+                          "cluster.placement: at least one weight must be positive")):
+        with pytest.raises(HostsError) as e:
+            parse_hosts(cluster(bad), "hosts.yaml", catalog)
+        assert [str(p) for p in e.value.problems] == [f"hosts.yaml: {message}"]
