@@ -1,7 +1,8 @@
 """Placement benchmark: starting a component instance in a warm container, in a dedicated process, and a warm
 forkserver spawn of a process as the peer, in the same run.
 
-Run `python bench/placement.py [--repeat 200] [--json]` (never by pytest). It builds a Component Creator
+Run `python bench/placement.py [--repeat 200] [--json]` (never by pytest); `--policy HOSTS` times only the pure
+policy (`drd.placement.place`) over HOSTS hosts. It builds a Component Creator
 (`drd.daemon.creator.Creator`, no bus) for host ranger1 of a generated hosts file, with its own pool of
 pre-started worker processes (fork server warm, behavior modules preloaded), and times with
 `time.perf_counter`, `--repeat` times each (median and p90):
@@ -50,11 +51,32 @@ def timed(fn: Callable[[], Any]) -> float:
     return time.perf_counter() - t0
 
 
+def policy_samples(hosts: int, repeat: int) -> list[float]:
+    """Seconds of each `place` of a movable component over `hosts` views (the decision record included)."""
+    from drd.hosts import Placement
+    from drd.placement import HostView, place
+    from dsl.catalog import ComponentType, Kind
+
+    views = [HostView(f"h{i:04d}", cpu=(i * 37) % 100, memory=(i * 11) % 100, instances=i % 7,
+                      roles=frozenset() if i % 3 == 0 else frozenset({"worker"})) for i in range(hosts)]
+    wait = ComponentType("Wait", Kind.BEHAVIOR)
+    return [timed(lambda: place(wait, views, Placement(), role="worker", near={"h0001": 1.0}))
+            for _ in range(repeat)]
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--repeat", type=int, default=200, help="timed placements of each kind")
     parser.add_argument("--json", action="store_true", help="print the figures as JSON")
+    parser.add_argument("--policy", type=int, metavar="HOSTS", default=0,
+                        help="time only the pure policy (drd.placement.place, filters then scores, with its Decision "
+                             "record) over HOSTS hosts, a third without the worker role, with devices near one")
     args = parser.parse_args()
+    if args.policy:
+        report = {"hosts": args.policy, **figures(policy_samples(args.policy, args.repeat))}
+        print(json.dumps(report, indent=2) if args.json else
+              f"place over {args.policy} hosts: median {report['median_ms']:.3f} ms, p90 {report['p90_ms']:.3f} ms")
+        return
 
     from drd.cluster.remote import ComponentCall
     from drd.daemon.creator import Creator, behavior_modules
