@@ -17,6 +17,7 @@ from drd.explain import Explainer
 from drd.hosts import Cluster, Role
 from drd.placement import Placed, place, view_of, with_more
 from drd.runtime import records as rec
+from drd.runtime.resources import BindingError
 from drd.sim.world import World
 from dsl.catalog import Catalog, ComponentType, Kind
 from dsl.statechart import State, Statechart
@@ -101,7 +102,7 @@ def _at_start(chart: Statechart, mid: str, at_start: list[rec.Record], interp: A
         if component is None or component.kind is not Kind.BEHAVIOR or any(
                 q.startswith((path + "/", path + "[")) for q in active):
             continue
-        devices = _devices(path, state, states, grants)
+        devices = _devices(interp, path, state)
         if len(devices) < len(state.needs):
             continue  # it waits for its needs: it starts only once they are granted
         node = interp.find(path)
@@ -131,26 +132,17 @@ def _active(records: Sequence[rec.Record]) -> list[str]:
     return list(active)
 
 
-def _devices(path: str, state: State, states: Mapping[str, State],
-             grants: Mapping[str, Mapping[str, str]]) -> dict[str, str]:
-    """The unit each need of the leaf at `path` is bound to: its own grant, or its binding's ancestor's."""
+def _devices(interp: Any, path: str, state: State) -> dict[str, str]:
+    """The unit each need of the leaf at `path` is bound to, resolved as the run binds it
+    (`ResourceClient.resolve`: the whole binding chain, a part of a held robot); a need not held yet is left out."""
+    node = interp.find(path)
     out: dict[str, str] = {}
+    if node is None:
+        return out
     for need in state.needs:
-        if need.bound_to is None:
-            unit = grants.get(path, {}).get(need.name)
-        else:
-            holder_state, name, part = need.bound_to
-            key = f"{name}.{part}" if part else name
-            holder = _ancestor(path, holder_state, states)
-            unit = grants.get(holder, {}).get(key) if holder is not None else None
-        if unit is not None:
-            out[need.name] = unit
+        try:
+            _holder, unit, _robot, _part = interp.resources.resolve(node, need)
+        except BindingError:
+            continue
+        out[need.name] = unit
     return out
-
-
-def _ancestor(path: str, state_id: str, states: Mapping[str, State]) -> str | None:
-    """The nearest path above `path` (or itself) that is an instance of the state `state_id`."""
-    for candidate, state in sorted(states.items(), key=lambda kv: -len(kv[0])):
-        if state.id == state_id and (path == candidate or path.startswith((candidate + "/", candidate + "["))):
-            return candidate
-    return None

@@ -79,3 +79,19 @@ def test_movable_components_are_placed_by_the_policy_on_worker_hosts(tmp_path: P
 def test_a_missing_hosts_file_says_where_it_looked(tmp_path: Path) -> None:
     done = missionctl("plan", str(CORRIDOR), "--config", str(tmp_path / "nope.yaml"))
     assert done.returncode == 2 and "nope.yaml" in done.stderr and "Traceback" not in done.stderr
+
+
+def test_a_need_bound_through_two_behaviors_is_resolved_as_the_run_binds_it(tmp_path: Path) -> None:
+    """The preview binds a leaf's needs with the runtime's own resolver (issue #14: one need-binding resolver): a
+    Ranger re-declared by two nested behaviors reaches FollowCorridor's drive and ranges (one hop of the chain
+    used to lose the component from the preview altogether)."""
+    mission = tmp_path / "nested.mission"
+    mission.write_text("mission Nested {\n    needs ranger: Ranger\n    Outer\n}\n\n"
+                       "behavior Outer {\n    needs ranger: Ranger\n    Inner\n}\n\n"
+                       "behavior Inner {\n    needs ranger: Ranger\n    FollowCorridor(speed: 0.3)\n}\n",
+                       encoding="utf-8")
+    rc, p = preview(mission)
+    assert rc == 0 and p["problems"] == []
+    assert p["components"] == [{"path": "Nested/Outer/Inner/FollowCorridor", "component": "FollowCorridor",
+                                "devices": {"drive": "ranger1.drive", "ranges": "ranger1.ranges"},
+                                "host": "ranger1", "why": "its devices are there"}]
