@@ -710,9 +710,12 @@ class _Parser(ConfigReader):
         name = self.text(value, key)
         assert self.catalog is not None  # hardware is read only with a catalog
         t = self.catalog.get(name)
-        if t is not None and t.kind is kind:
+        if t is not None and t.kind is kind and not t.abstract:
             return t
-        if t is not None:
+        if t is not None and t.abstract:  # `Robot`, `Sensor`: properties for the types that extend them
+            concrete = [n for n in self.catalog.names(kind) if name in self.catalog.supertypes(n)]
+            self.fail(key, f"{name} is abstract: name one of its types ({', '.join(concrete) or 'none'})")
+        elif t is not None:
             self.fail(key, f"{name} is {_A[t.kind]}, expected {_A[kind]}")
         elif name:
             self.fail(key, f"unknown type {name!r}{_hint(name, self.catalog.names(kind), '')}")

@@ -128,3 +128,19 @@ def test_a_need_or_a_part_of_an_abstract_type_is_refused() -> None:
     assert ("components/Watcher/manifest.yaml", "needs.robot.type", "Robot is abstract: name one of its subtypes") \
         in found
     assert ("components/Rover/manifest.yaml", "parts.eye", "Sense is abstract: name one of its subtypes") in found
+
+
+def test_hosts_yaml_names_concrete_types(catalog: Catalog) -> None:
+    from drd.config import ConfigError
+    from drd.hosts import parse_hosts
+
+    data = {"cluster": {"name": "lab", "security": {"mode": "none"}, "lease": "1000ms"},
+            "hosts": {"controller": {"endpoint": "tcp/127.0.0.1:7447", "roles": ["controller"]},
+                      "r1": {"endpoint": "tcp/127.0.0.1:7448", "roles": ["worker"],
+                             "devices": {"s": {"type": "Sensor", "driver": "sim"}},
+                             "robots": {"bot": {"type": "Robot", "parts": {}}}}}}
+    with pytest.raises(ConfigError) as info:
+        parse_hosts(data, "hosts.yaml", catalog)
+    text = str(info.value)
+    assert "hosts.r1.devices.s.type: Sensor is abstract: name one of its types (Camera, RangeSensor)" in text
+    assert "hosts.r1.robots.bot.type: Robot is abstract: name one of its types (Ranger, Scout)" in text
