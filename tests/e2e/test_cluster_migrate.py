@@ -1,0 +1,146 @@
+"""Issue #15: a running movable component moved between hosts (`missionctl migrate`), and resumed from its last
+snapshot when its host is killed, on a real cluster (real `drd start` processes on loopback, killed by pid).
+
+A `Wait` is placed on a worker host (ranger1 or spare). Moved to the other one mid-wait, and back, it keeps its
+deadline (its state's exit, in the trace's mission time, is its entry plus its duration: a Wait started afresh
+after the move would end a whole duration after it) and its step count (the state the second move takes along
+has counted on from the first's). Moving what cannot move, or to a host that cannot take it, is refused with
+exit code 2 and nothing moves. Last, the host running a Wait is killed with SIGKILL: the Wait goes on elsewhere
+from its last snapshot and still ends at its original deadline.
+"""
+
+from __future__ import annotations
+
+import json
+import re
+import signal
+import subprocess
+import time
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+import pytest
+from cluster_support import MISSIONCTL, DaemonCluster, eventually, read_trace, running, serving_cluster, succeeded
+from test_cluster_run import NAMES, corridor_hosts
+
+PLACED = re.compile(r"placement: Wait on (\w+)")
+WORKERS = {"ranger1", "spare"}
+DURATION = 40.0
+#: The trace's times are the executive's cycles: an exit is at most a couple of cycles after its due time.
+SLACK = 0.5
+
+
+@pytest.fixture(scope="module")
+def cluster(tmp_path_factory: pytest.TempPathFactory) -> Iterator[DaemonCluster]:
+    with serving_cluster(tmp_path_factory.mktemp("cluster_migrate"), NAMES, lambda c: corridor_hosts(c).replace(
+            "placement: {cpu: 1.0, memory: 0.5, instances: 0.2}", "placement: {cpu: 0, memory: 0, instances: 1}")) as c:
+        yield c
+
+
+def migrate(cluster: DaemonCluster, instance: str, host: str) -> subprocess.CompletedProcess[str]:
+    return cluster.missionctl("migrate", instance, "--to", host, "--config", str(cluster.hosts_file), "--json",
+                              "--timeout", "20", timeout=60)
+
+
+def started_wait(cluster: DaemonCluster, proc: subprocess.Popen[str], name: str) -> tuple[str, str]:
+    """Once mission `name` runs (the controller says so; the trace `missionctl run` writes may lag): its id, and
+    the host its Wait was placed on."""
+    before = cluster.log("controller")
+    started = re.compile(rf"mission ({name}-\d+) started")
+
+    def running() -> bool:
+        assert proc.poll() is None, proc.communicate()
+        return started.search(cluster.log("controller")[len(before):]) is not None
+
+    eventually(running, f"mission {name} to start", 60, poll=0.05)
+    now = cluster.log("controller")[len(before):]
+    hosts = PLACED.findall(now)
+    assert hosts and hosts[-1] in WORKERS, "a worker takes it, never the controller"
+    found = started.search(now)
+    assert found is not None
+    return found.group(1), hosts[-1]
+
+
+def span(trace: Path, path: str) -> tuple[float, float]:
+    """When the state at `path` was entered and exited (mission time), each once."""
+    recs = read_trace(trace)
+    entered = [r["at"] for r in recs if r["kind"] == "entered" and r["path"] == path]
+    exited = [r["at"] for r in recs if r["kind"] == "exited" and r["path"] == path]
+    assert len(entered) == 1 and len(exited) == 1, (entered, exited)
+    return float(entered[0]), float(exited[0])
+
+
+def moved(r: subprocess.CompletedProcess[str]) -> dict[str, Any]:
+    assert r.returncode == 0, r.stderr[-2000:]
+    reply: dict[str, Any] = json.loads(r.stdout)
+    return reply
+
+
+def test_a_wait_moved_twice_keeps_its_deadline_and_its_count(cluster: DaemonCluster, tmp_path: Path) -> None:
+    mission, trace = tmp_path / "pause.mission", tmp_path / "trace.jsonl"
+    mission.write_text(f"mission Pause {{\n    Wait(duration: {DURATION:g}s) as Hold\n}}\n")
+    cmd = [*MISSIONCTL, "run", str(mission), "--config", str(cluster.hosts_file), "--speed", "2", "--json",
+           "--trace", str(trace)]
+    with running(cmd) as proc:
+        mid, first = started_wait(cluster, proc, "Pause")
+        other = (WORKERS - {first}).pop()
+        time.sleep(1.0)  # a few seconds of mission time on the first host
+        there = moved(migrate(cluster, f"{mid}/Pause/Hold", other))
+        assert (there["source"], there["host"], there["component"]) == (first, other, "Wait")
+        time.sleep(1.0)
+        back = moved(migrate(cluster, "Pause/Hold", first))  # its path alone: one mission runs it
+        assert (back["source"], back["host"]) == (other, first)
+        out, err = proc.communicate(timeout=90)
+    succeeded(cluster, proc, out, err)
+    entered, exited = span(trace, "Pause/Hold")
+    assert there["state"][0]["began"] == back["state"][0]["began"] == pytest.approx(entered, abs=SLACK)
+    assert back["state"][0]["steps"] > there["state"][0]["steps"] > 0  # counted on across the first move
+    assert exited - entered == pytest.approx(DURATION, abs=SLACK)  # its deadline, not a whole duration after a move
+    log = cluster.log("controller")
+    assert f"moved from {first} to {other}" in log and f"moved from {other} to {first}" in log
+
+
+def test_what_cannot_move_is_refused_and_nothing_moves(cluster: DaemonCluster, tmp_path: Path) -> None:
+    mission, trace = tmp_path / "look.mission", tmp_path / "trace.jsonl"
+    mission.write_text("mission Look {\n    parallel all {\n        Wait(duration: 40s) as Hold\n"
+                       "        Observe(duration: 40s) as Film\n    }\n}\n")
+    cmd = [*MISSIONCTL, "run", str(mission), "--config", str(cluster.hosts_file), "--speed", "2", "--json",
+           "--trace", str(trace)]
+    with running(cmd) as proc:
+        mid, host = started_wait(cluster, proc, "Look")
+        other = (WORKERS - {host}).pop()
+        refusals = {
+            f"{mid}/Look/Film": (other, "cannot move: its manifest does not say `movable: true`"),
+            f"{mid}/Look/Nowhere": (other, f"no running instance {mid}/Look/Nowhere"),
+            f"{mid}/Look/Hold": ("mars", "unknown host 'mars'"),
+        }
+        for instance, (to, reason) in refusals.items():
+            r = migrate(cluster, instance, to)
+            assert r.returncode == 2 and reason in json.loads(r.stderr)["error"], (instance, r.stderr)
+        r = migrate(cluster, f"{mid}/Look/Hold", "controller")
+        assert r.returncode == 2 and "does not run components" in r.stderr, r.stderr
+        out, err = proc.communicate(timeout=90)
+    succeeded(cluster, proc, out, err)
+    assert "moved from" not in cluster.log("controller").split(f"mission {mid} started")[-1]
+
+
+def test_a_wait_whose_host_is_killed_resumes_elsewhere_with_its_remaining_time(cluster: DaemonCluster,
+                                                                                tmp_path: Path) -> None:
+    """Last in this module: a worker host is killed."""
+    mission, trace = tmp_path / "pause.mission", tmp_path / "trace.jsonl"
+    mission.write_text(f"mission Pause {{\n    Wait(duration: {DURATION:g}s) as Hold\n}}\n")
+    cmd = [*MISSIONCTL, "run", str(mission), "--config", str(cluster.hosts_file), "--speed", "2", "--json",
+           "--trace", str(trace)]
+    with running(cmd) as proc:
+        _mid, first = started_wait(cluster, proc, "Pause")
+        time.sleep(1.5)  # some of its time goes by on the first host
+        cluster.procs[first].send_signal(signal.SIGKILL)
+        out, err = proc.communicate(timeout=90)
+    succeeded(cluster, proc, out, err)
+    other = (WORKERS - {first}).pop()
+    assert f"Pause/Hold re-placed on {other}" in cluster.log("controller")
+    said = [r["text"] for r in read_trace(trace) if r["kind"] == "log"]
+    assert f"Wait placed again on {other} from its last snapshot: its host {first} was lost" in said, said
+    entered, exited = span(trace, "Pause/Hold")
+    assert exited - entered == pytest.approx(DURATION, abs=SLACK)  # its remaining time, not its whole duration
