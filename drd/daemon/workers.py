@@ -32,6 +32,10 @@ arbitration of actuator commands and the simulator.
 - A worker that dies, or does not answer within `call_timeout` (it is then killed), raises `WorkerDied`
   with its exit code; the Creator fails the calls of its instances and takes another worker.
 
+- Snapshots: a `start` may carry the state to restore (`Component.restore` before `start`); a reply carries the
+  instance's snapshot after its start and every `SNAPSHOT_EVERY` steps when it changed, and always after a
+  `terminate` whose status is `moved` (the instance goes on on another host).
+
 `Tune`/`Tuned` are the Creator's run-time scheduling request and answer (`missionctl tune`).
 """
 
