@@ -16,12 +16,11 @@ A component with no device needs is *movable*. With a placer (`ComponentRouter.p
 policy over the hosts that are up, `drd.placement`), its `start` goes to the host the policy picks; a host that
 does not register it within `START_TIMEOUT` (every `start` may take that long: a first start on a host may
 load the component's module), or whose start fails, is excluded and the next best is tried (`PLACE_TRIES`
-hosts in all). When its
-host is lost later, the instance is started again on another host before its next call, restored from the last
-snapshot its host sent (`Component.snapshot`, which comes back with the replies when it changed): the mission
-sees the same component go on (it gets its parameters and inputs again with every call). `migrate` moves a
-running one on purpose (`missionctl migrate`, `drd.daemon.migrate`). Without a placer (the router of a test), a movable component runs right here, in the
-controller (`local`).
+hosts in all). When its host is lost later, the instance is started again on another host before its next
+call, restored from the last snapshot its host sent (`Component.snapshot`, which comes back with the replies
+when it changed): the mission sees the same component go on (it gets its parameters and inputs again with
+every call). `migrate` moves a running one on purpose (`missionctl migrate`, `drd.daemon.migrate`). Without a
+placer (the router of a test), a movable component runs right here, in the controller (`local`).
 
 A component bound to devices runs on the host that owns them, and only there: when that host does not answer
 within `timeout` (or the daemon already saw it go down), the call raises at once and the interpreter fails just
