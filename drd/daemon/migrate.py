@@ -24,6 +24,7 @@ from typing import Any
 from drd.bus import Bus, Message, Query, Reply, message
 from drd.bus.keys import is_concrete
 from drd.cluster.remote import ComponentError, RemoteComponent
+from drd.errors import MissionInputError
 from drd.hosts import Cluster, Role
 
 log = logging.getLogger("drd.daemon.migrate")
@@ -54,7 +55,7 @@ class Migrated(Message):
     state: list[Any]
 
 
-class MigrateError(ValueError):
+class MigrateError(MissionInputError):
     """A refused migration: the reason, for the operator (exit 2)."""
 
 
