@@ -18,8 +18,9 @@ from dataclasses import dataclass, field, replace
 from typing import Any
 
 from drd.hosts import Host, Placement
-from dsl.catalog import ComponentType, Kind, ParamSpec
+from dsl.catalog import ComponentType, Kind
 from dsl.errors import did_you_mean
+from dsl.param_values import refuses
 
 #: One running instance weighs as much as 10 percentage points of CPU or memory (before weighting).
 INSTANCE_SCALE = 10.0
@@ -349,7 +350,8 @@ def decide(hosts: Sequence[HostView], ctx: Context) -> Outcome:
 
 
 def check_params(component: ComponentType, params: Mapping[str, object]) -> list[str]:
-    """What is wrong with instance parameters: unknown or missing names, values of the wrong scalar type."""
+    """What is wrong with instance parameters: unknown or missing names, and each value by the one rule the
+    checker applies to a mission's constants (`dsl.param_values.refuses`: type, negative duration, range)."""
     specs = {p.name: p for p in component.params}
     out = []
     for name, value in params.items():
@@ -357,21 +359,13 @@ def check_params(component: ComponentType, params: Mapping[str, object]) -> list
         if spec is None:
             hint = did_you_mean(name, specs) or (f"parameters: {', '.join(specs)}" if specs else "it has none")
             out.append(f"unknown parameter {name} ({hint})")
-        elif not _fits(spec, value):
-            out.append(f"parameter {name} expects {spec.type}, got {type(value).__name__} {value!r}")
+        elif why := refuses(spec, value):
+            out.append(f"parameter {name} {why}")
     out.extend(f"parameter {p.name} is required" for p in component.params if p.required and p.name not in params)
     return out
 
 
 _ANY = ComponentType("", Kind.BEHAVIOR)
-
-
-def _fits(spec: ParamSpec, value: object) -> bool:
-    """Scalars are checked; resource and data types (ids chosen by the executive) are left to the Creator."""
-    number = isinstance(value, int | float) and not isinstance(value, bool)
-    checks = {"int": isinstance(value, int) and not isinstance(value, bool), "float": number,
-              "duration": number, "bool": isinstance(value, bool), "str": isinstance(value, str)}
-    return checks.get(spec.type, True)
 
 
 def _percent(value: float) -> float:

@@ -20,6 +20,7 @@ from dsl.errors import Reporter, Span, did_you_mean
 from dsl.exprtypes import ANY, Scope, Type, Typer, assignable, constant, show
 from dsl.limits import DEFAULT_INSTANCES
 from dsl.linearize import find_cycle, plan_graph
+from dsl.param_values import out_of_bounds
 
 #: Deeper chains of behaviors calling behaviors are rejected (they only come from generators).
 MAX_BEHAVIOR_DEPTH = 64
@@ -351,24 +352,23 @@ class Checker:
                                   + (f"; its inputs: {', '.join(inputs)}" if inputs else ""))
                 continue
             self.typer.expect(arg.value, spec.type, scope, arg.name)
-            value = constant(arg.value) if spec.type == "duration" else None
-            if value is not None and value < 0:
-                self.report.error("duration", f"{arg.name}: a duration cannot be negative ({value:g} s)", arg.span)
-            elif isinstance(target, ComponentType):
-                self._in_range(target, spec, arg)
+            self._in_range(target, spec, arg)
         for spec in params.values():
             if spec.required and spec.name not in given:
                 self.report.error("missing-parameter", f"{child.name} needs parameter {spec.name}", child.span,
                                   f"write {child.name}({spec.name}: ...)")
 
-    def _in_range(self, target: ComponentType, spec: ParamSpec, arg: ast.Arg) -> None:
-        """A constant argument inside the range its manifest declares (`FollowCorridor(speed: 50)` is refused here,
-        where it is written); an expression is checked when the state is entered (`drd.runtime.interpreter`)."""
-        value = constant(arg.value) if spec.limit is not None and spec.type in NUMERIC else None
-        if value is None or spec.limit is None:
-            return
-        why = spec.limit.refuses(value)
+    def _in_range(self, target: ast.Behavior | ComponentType, spec: ParamSpec, arg: ast.Arg) -> None:
+        """A constant argument within the bounds of its parameter (`dsl.param_values.out_of_bounds`: no negative
+        duration, inside the range its manifest declares: `FollowCorridor(speed: 50)` is refused here, where it is
+        written); an expression is checked when the state is entered (`drd.runtime.interpreter`)."""
+        value = constant(arg.value) if spec.type in NUMERIC else None
+        why = out_of_bounds(spec, value) if value is not None else ""
         if not why:
+            return
+        negative = spec.type == "duration" and value is not None and value < 0
+        if negative or spec.limit is None or not isinstance(target, ComponentType):
+            self.report.error("duration" if negative else "range", f"{arg.name}: {why}", arg.span)
             return
         default = spec.default
         keep = (f", or leave it out for the default {spec.limit.show(default)}"
