@@ -69,18 +69,19 @@ _PLAIN_NUMBER = {int: re.compile(r"0|[1-9][0-9]*"), float: re.compile(r"[0-9]+(?
 _COSMETIC = frozenset({"default", "param_decls", "help", "min", "show_default", "metavar", "rich_help_panel", "hidden"})
 
 
-def fast_command(app: typer.Typer, argv: Sequence[str]) -> Callable[[], object] | None:
+def fast_command(app: typer.Typer, argv: Sequence[str],
+                 commands: Sequence[str] = FAST_COMMANDS) -> Callable[[], object] | None:
     """The call of `missionctl COMMAND ...` when `argv` is a plain, valid use of a fast command; else None.
 
     Typer 0.29 checks every parameter through pydantic, whose first import costs about 0.25 s: a
-    quarter of a `missionctl status`. For the commands of FAST_COMMANDS this parses the options
+    quarter of a `missionctl status`. For the commands of `commands` this parses the options
     itself, reading them (names, defaults, minimums, types) from the command's typer signature,
     so nothing is declared twice. It accepts only what it is sure typer would accept with the same
     values: `--help`, an unknown or repeated option, a value that is not a plain number, a number
     below its minimum, an option typer would treat specially (env var, callback, parser...) all
     return None, and typer then parses, answers or refuses as always (the same help, the same errors).
     """
-    if not argv or argv[0] not in FAST_COMMANDS or app.registered_callback is not None or app.info.context_settings:
+    if not argv or argv[0] not in commands or app.registered_callback is not None or app.info.context_settings:
         return None
     fn = _registered(app, argv[0])
     spec = _option_spec(fn) if fn is not None else None
