@@ -231,15 +231,16 @@ def cpu_seconds(pid: int) -> dict[int, float]:
 
 
 def memory_mb(pid: int) -> dict[str, float]:
-    """PSS and USS of the tree in MB (PSS: shared pages split among their users; USS: pages only it has), and
+    """PSS, USS and RSS of the tree in MB (PSS: shared pages split among their users; USS: pages only it has;
+    RSS: every page it maps, what it would hold alone on a machine, summed over processes that share some), and
     how many processes it holds."""
-    pss = uss = 0
+    pss = uss = rss = 0
     procs = tree(pid)
     for proc in procs:
         with contextlib.suppress(psutil.NoSuchProcess):
             info = proc.memory_full_info()
-            pss, uss = pss + info.pss, uss + info.uss
-    return {"pss_mb": pss / 2**20, "uss_mb": uss / 2**20, "processes": len(procs)}
+            pss, uss, rss = pss + info.pss, uss + info.uss, rss + info.rss
+    return {"pss_mb": pss / 2**20, "uss_mb": uss / 2**20, "rss_mb": rss / 2**20, "processes": len(procs)}
 
 
 def idle(pids: dict[str, int], seconds: float) -> dict[str, dict[str, float]]:
@@ -251,6 +252,21 @@ def idle(pids: dict[str, int], seconds: float) -> dict[str, dict[str, float]]:
     wall = time.perf_counter() - t0
     return {name: {"cpu_percent": 100 * sum(v - before[name].get(p, 0.0) for p, v in after[name].items()) / wall,
                    **memory_mb(pid)} for name, pid in pids.items()}
+
+
+def router_links(cluster: Cluster) -> dict[str, int]:
+    """How many of the other daemons hold a TCP link to each router, as the operating system sees them (a zenoh
+    client keeps one link, to the first router of its list that answered)."""
+    ports = {p: n for n, p in zip(cluster.names, cluster.ports, strict=True) if n in cluster.routers}
+    links = dict.fromkeys(cluster.routers, 0)
+    for name, proc in cluster.procs.items():
+        if name in cluster.routers:
+            continue
+        with contextlib.suppress(psutil.NoSuchProcess):
+            for router in {ports[c.raddr.port] for c in psutil.Process(proc.pid).net_connections(kind="tcp")
+                           if c.raddr and c.status == psutil.CONN_ESTABLISHED and c.raddr.port in ports}:
+                links[router] += 1
+    return links
 
 
 def by_role(per: dict[str, dict[str, float]], role: Callable[[str], str]) -> dict[str, dict[str, float]]:
@@ -429,13 +445,17 @@ def report_idle(console: Any, result: dict[str, Any]) -> None:
     table = Table(title=f"idle, per daemon with its children, over {idle_s:g} s (median by role); the peer: "
                         f"`python -m drd.bus.peer` x {peer['count']}, up in {peer['startup_s']:.1f} s",
                   title_justify="left")
-    for col in ("role", "daemons", "processes", "PSS MB", "max PSS MB", "USS MB", "CPU % of a core",
+    for col in ("role", "daemons", "processes", "PSS MB", "max PSS MB", "USS MB", "RSS MB", "CPU % of a core",
                 "PSS / peer's"):
         table.add_column(col, justify="left" if col == "role" else "right")
     for role, f in [*result["idle"].items(), ("peer", peer["idle"])]:
         table.add_row(role, str(f["daemons"]), f"{f['processes']:g}", f"{f['pss_mb']:.1f}", f"{f['max_pss_mb']:.1f}",
-                      f"{f['uss_mb']:.1f}", f"{f['cpu_percent']:.2f}", f"{f['pss_mb'] / peer['idle']['pss_mb']:.2f}x")
+                      f"{f['uss_mb']:.1f}", f"{f['rss_mb']:.1f}", f"{f['cpu_percent']:.2f}",
+                      f"{f['pss_mb'] / peer['idle']['pss_mb']:.2f}x")
     console.print(table)
+    if result["router_links"]:
+        console.print("clients linked to each router: " + ", ".join(f"{r} {n}" for r, n in
+                                                                    result["router_links"].items()))
     console.print(f"start: {result['daemons']} daemons {result['startup_s']:.1f} s, {peer['count']} peers "
                   f"{peer['startup_s']:.1f} s ({result['startup_s'] / peer['startup_s']:.2f}x the peer)")
 
@@ -468,6 +488,7 @@ def run(args: argparse.Namespace, tmp: Path) -> dict[str, Any]:
         startup = cluster.wait_up(START_TIMEOUT + 5.0 * args.daemons)
         up_at = time.monotonic()
         result = measure(cluster, args.repeat)
+        result["router_links"] = router_links(cluster)
         if args.idle:
             time.sleep(max(0.0, up_at + args.settle - time.monotonic()))  # the workers kept warm at start go
             result["peer"] = {"count": args.daemons, "startup_s": peers.start(START_TIMEOUT + 5.0 * args.daemons)}
