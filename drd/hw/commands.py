@@ -7,17 +7,22 @@ with `epoch=None` when the behavior that set it in motion loses its authority). 
 and goes straight to the driver. Whether a method commands is declared, never guessed: a public method that takes
 an `epoch` (the mark of a command) but is not declared is refused when the driver is loaded, so no command can
 slip past the gate (`drd.runtime.ownership`).
+
+Readings are declared too (`READINGS`: the methods and attributes a behavior may read), and a behavior reaches
+nothing else of a driver: its device handle forwards declared names only. A driver that declares nothing, a
+reading it does not have, or an interface member (`drd.hw.interfaces`: what its device type promises behaviors)
+it declares neither as a reading nor as a command, is refused when it is loaded.
 """
 
 from __future__ import annotations
 
 import inspect
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 from drd.errors import ComponentFailure
 
-__all__ = ["DriverDeclarationError", "DriverSpec", "declared", "spec_of"]
+__all__ = ["DriverDeclarationError", "DriverSpec", "conforms", "declared", "spec_of"]
 
 
 class DriverDeclarationError(ComponentFailure, TypeError):
@@ -26,11 +31,17 @@ class DriverDeclarationError(ComponentFailure, TypeError):
 
 @dataclass(frozen=True, slots=True)
 class DriverSpec:
-    """A driver's declared setpoints, actions and safe stop."""
+    """A driver's declared readings, setpoints, actions and safe stop."""
 
     setpoints: frozenset[str] = frozenset()
     actions: frozenset[str] = frozenset()
     stop: str | None = None
+    readings: frozenset[str] = frozenset()
+    #: Everything a behavior may use of the driver (read on every access through a device handle: computed once).
+    names: frozenset[str] = field(init=False)
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "names", self.readings | self.setpoints | self.actions)
 
     @property
     def commands(self) -> frozenset[str]:
@@ -41,13 +52,30 @@ _SPECS: dict[type, DriverSpec] = {}
 
 
 def spec_of(driver: object) -> DriverSpec:
-    """The declared commands of `driver`'s class, checked once per class.
+    """The declarations of `driver`'s class, checked once per class, and its readings on the driver itself (an
+    attribute such as `max_speed` may be set when it is built).
 
     Raises:
-        DriverDeclarationError: a declared command is missing or not callable, `STOP` is not a declared command,
-            or a public method takes an `epoch` without being declared.
+        DriverDeclarationError: as `declared`, or a declared reading the built driver does not have.
     """
-    return declared(type(driver))
+    spec = declared(type(driver))
+    missing = sorted(r for r in spec.readings if not hasattr(driver, r))
+    if missing:
+        cls = type(driver)
+        raise DriverDeclarationError(f"driver {cls.__module__}.{cls.__qualname__}: READINGS names "
+                                     f"{', '.join(missing)}, which it does not have")
+    return spec
+
+
+def conforms(cls: type, interface: type) -> list[str]:
+    """What of `interface` (a protocol of `drd.hw.interfaces`) the driver class declares neither as a reading nor
+    as a command: a behavior written against the interface would find it missing."""
+    spec = declared(cls)
+    members = {n for n in getattr(interface, "__annotations__", {}) if not n.startswith("_")}
+    members |= {n for n, v in vars(interface).items() if callable(v) and not n.startswith("_")}
+    missing = sorted(members - spec.names)
+    return [f"{', '.join(missing)} of the {interface.__name__} interface: declare "
+            f"{'it' if len(missing) == 1 else 'them'} in READINGS, SETPOINTS or ACTIONS"] if missing else []
 
 
 def declared(cls: type) -> DriverSpec:
@@ -61,9 +89,19 @@ def declared(cls: type) -> DriverSpec:
 def _declared(cls: type) -> DriverSpec:
     setpoints = frozenset(getattr(cls, "SETPOINTS", ()))
     actions = frozenset(getattr(cls, "ACTIONS", ()))
+    readings = frozenset(getattr(cls, "READINGS", ()))
     stop = getattr(cls, "STOP", None)
     problems = [f"{m} is declared but is not a method" for m in sorted(setpoints | actions)
                 if not callable(getattr(cls, m, None))]
+    if not (setpoints or actions or readings):
+        problems.append("it declares nothing: list what behaviors may read in READINGS and its commands in "
+                        "SETPOINTS or ACTIONS")
+    if readings & (setpoints | actions):
+        problems.append(f"{', '.join(sorted(readings & (setpoints | actions)))} declared both a reading and a command")
+    readings_taking_epoch = sorted(r for r in readings if callable(getattr(cls, r, None))
+                                   and _takes_epoch(getattr(cls, r)))
+    if readings_taking_epoch:
+        problems.append(f"{', '.join(readings_taking_epoch)} take an epoch (a command) but are declared READINGS")
     if setpoints & actions:
         problems.append(f"{', '.join(sorted(setpoints & actions))} declared both in SETPOINTS and in ACTIONS")
     if stop is not None and stop not in setpoints:
@@ -76,7 +114,7 @@ def _declared(cls: type) -> DriverSpec:
             problems.append(f"{attr} takes an epoch (a command) but is in neither SETPOINTS nor ACTIONS")
     if problems:
         raise DriverDeclarationError(f"driver {cls.__module__}.{cls.__qualname__}: {'; '.join(problems)}")
-    return DriverSpec(setpoints, actions, stop)
+    return DriverSpec(setpoints, actions, stop, readings)
 
 
 def _takes_epoch(method: Any) -> bool:

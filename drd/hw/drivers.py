@@ -25,7 +25,8 @@ from drd import entrypoints
 from drd.entrypoints import EntryPointError
 from drd.errors import HardwareFailure
 from drd.hosts import Cluster, Device
-from drd.hw.commands import DriverDeclarationError, declared, spec_of
+from drd.hw.commands import DriverDeclarationError, conforms, declared, spec_of
+from drd.hw.interfaces import INTERFACES
 from drd.manifests import show
 from dsl.catalog import Catalog
 
@@ -99,10 +100,14 @@ def load_driver(device: Device, robot_id: str, services: Mapping[str, Any]) -> o
         raise
     except Exception as e:
         raise DriverError(f"{where}: {entry} could not be built for {robot_id}: {e}") from e
+    interface = INTERFACES.get(device.type)
     try:
         spec_of(driver)
+        gaps = conforms(cls, interface) if interface is not None else []
     except DriverDeclarationError as e:
         raise DriverError(f"{where}: {e} (see docs/drivers.md: declaring commands)") from None
+    if gaps:
+        raise DriverError(f"{where}: {entry} lacks {gaps[0]} (see docs/drivers.md)")
     return driver
 
 
@@ -183,6 +188,9 @@ def check_driver_classes(cluster: Cluster, host: str, catalog: Catalog | None = 
         except (DriverError, EntryPointError, DriverDeclarationError) as e:
             problems.append(f"{key}: {e}")
             continue
+        interface = INTERFACES.get(device.type)
+        problems += [f"{key}: {device.driver} driver of a {device.type} lacks {gap}"
+                     for gap in (conforms(cls, interface) if interface is not None else [])]
         check = getattr(cls, "check_options", None)  # a driver that reads `driver_options` checks them itself
         if callable(check):
             where = f"{cluster.source}: hosts.{host}.devices.{device.id.removeprefix(host + '.')}"

@@ -366,11 +366,14 @@ class BoundDevice:
     def __getattr__(self, name: str) -> Any:
         binding = self._binding
         gate, driver = binding.gate, binding.driver
-        if name.startswith("_"):
-            raise AttributeError(name)
+        spec = gate.spec if gate is not None else spec_of(driver)
+        if name not in spec.names:  # a behavior reaches what the driver declares, nothing else (drd.hw.commands)
+            raise AttributeError(f"{binding.unit}: {name} is neither a reading nor a command its driver declares"
+                                 f" (readings: {', '.join(sorted(spec.readings)) or 'none'}; commands:"
+                                 f" {', '.join(sorted(spec.commands)) or 'none'})")
         value = getattr(driver, name)
         if gate is None or name not in gate.spec.commands:
-            return value  # a reading (or an attribute): no authority needed
+            return value  # a reading: no authority needed
         issuer, arbiter = self._issuer, self._arbiter
         if arbiter is not None and name in gate.spec.setpoints:
             rank, owner = self._rank, self._owner

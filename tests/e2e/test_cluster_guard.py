@@ -34,6 +34,7 @@ def cluster(catalog: Catalog) -> Cluster:
 class Wheels:
     """A drive standing where the test puts it, recording what reached it."""
 
+    READINGS = frozenset({"odometry", "battery", "max_speed"})
     SETPOINTS = ("set_velocity", "stop")
     STOP = "stop"
     max_speed = 0.8

@@ -89,6 +89,7 @@ class Reader(Component):
 class FakeDrive:
     """A fenced drive that records what reached it (in the Creator's process)."""
 
+    READINGS = frozenset({"odometry", "max_speed", "jam"})
     SETPOINTS = ("set_velocity",)
     max_speed = 0.8
 

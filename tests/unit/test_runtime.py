@@ -411,6 +411,7 @@ def test_a_livelock_fails_the_mission_instead_of_hanging(catalog: Catalog) -> No
 class RecordingDrive:
     """A driver that records what reaches the hardware."""
 
+    READINGS = frozenset({"odometry"})
     SETPOINTS = ("set_velocity",)
 
     def __init__(self) -> None:
