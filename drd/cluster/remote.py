@@ -308,7 +308,8 @@ class ComponentRouter:
         if ops:  # the gate operations queued for that host go first
             msg = dataclasses.replace(msg, gates=ops)
         t0 = time.perf_counter()
-        timeout = max(self.timeout, START_TIMEOUT) if op == "start" else self.timeout
+        moving = op == "start" or isinstance(msg, ComponentCall) and msg.status == "moved"  # a migration's two calls
+        timeout = max(self.timeout, START_TIMEOUT) if moving else self.timeout
         try:
             reply = self.bus.call(self.creator_key(host), msg, timeout=timeout)
         except RemoteError as e:
