@@ -12,7 +12,6 @@ from __future__ import annotations
 import json
 import os
 import signal
-import socket
 import subprocess
 import sys
 import threading
@@ -25,6 +24,7 @@ from typing import Any
 import pytest
 
 from drd.daemon.client import ClusterClient
+from tests.net_support import eventually, free_ports
 
 ROOT = Path(__file__).resolve().parents[1]
 DRD = [sys.executable, "-m", "drd.cli.drd"]
@@ -34,25 +34,8 @@ LOAD_PERIOD = 0.2
 START_TIMEOUT = 45.0  # a loaded 2-core machine imports three daemons at once
 
 
-def eventually(predicate: Callable[[], object], what: str, timeout: float = 10.0, poll: float = 0.02) -> None:
-    """Wait (bounded) until `predicate()` is true; fail naming `what`."""
-    deadline = time.monotonic() + timeout
-    while not predicate():
-        if time.monotonic() > deadline:
-            pytest.fail(f"timed out after {timeout:g} s waiting for {what}")
-        time.sleep(poll)
 
 
-def free_ports(n: int) -> list[int]:
-    """`n` distinct free ports on 127.0.0.1 (held open together, so they differ)."""
-    socks = [socket.socket() for _ in range(n)]
-    try:
-        for s in socks:
-            s.bind(("127.0.0.1", 0))
-        return [s.getsockname()[1] for s in socks]
-    finally:
-        for s in socks:
-            s.close()
 
 
 RANGER = """\

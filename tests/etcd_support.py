@@ -11,7 +11,6 @@ from __future__ import annotations
 import os
 import shutil
 import signal
-import socket
 import subprocess
 import time
 from collections.abc import Iterator
@@ -21,6 +20,7 @@ from pathlib import Path
 import pytest
 
 from drd.etcd import Etcd, EtcdError
+from tests.net_support import free_ports
 
 ETCD = shutil.which("etcd")
 SKIP = ("etcd is not installed (the Debian package etcd-server; .ci/run installs it): the standby-controller"
@@ -28,16 +28,6 @@ SKIP = ("etcd is not installed (the Debian package etcd-server; .ci/run installs
 START_TIMEOUT = 30.0
 
 
-def free_ports(n: int) -> list[int]:
-    """`n` distinct free ports on 127.0.0.1 (held open together, so they differ)."""
-    socks = [socket.socket() for _ in range(n)]
-    try:
-        for sock in socks:
-            sock.bind(("127.0.0.1", 0))
-        return [sock.getsockname()[1] for sock in socks]
-    finally:
-        for sock in socks:
-            sock.close()
 
 
 def need_etcd() -> None:

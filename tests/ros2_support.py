@@ -8,9 +8,7 @@ points the SDK at them and at a router port, and closes its singleton session af
 from __future__ import annotations
 
 import re
-import socket
 import threading
-import time
 from collections.abc import Callable, Iterable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
@@ -24,6 +22,8 @@ from drd.hosts import Cluster
 from drd.hw.ros2 import message_types
 from drd.sim import Simulation, load_world
 from drd.sim.ros2 import ServedRobots, serve
+from tests.net_support import eventually as wait
+from tests.net_support import free_port
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -32,19 +32,11 @@ _SHORT = re.compile(r"^([A-Za-z_][A-Za-z0-9_]*)/([A-Za-z][A-Za-z0-9_]*)$")
 WAIT = 5.0
 
 
-def free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        port: int = s.getsockname()[1]
-        return port
 
 
 def eventually(predicate: Callable[[], object], what: str, timeout: float = WAIT) -> None:
-    deadline = time.monotonic() + timeout
-    while not predicate():
-        if time.monotonic() > deadline:
-            pytest.fail(f"timed out after {timeout:g} s waiting for {what}")
-        time.sleep(0.02)
+    """`net_support.eventually`, waiting `WAIT` by default."""
+    wait(predicate, what, timeout)
 
 
 def msg_definitions(types: MessageTypes, type_names: Iterable[str]) -> dict[str, str]:

@@ -13,7 +13,6 @@ import logging
 import os
 import select
 import signal
-import socket
 import subprocess
 import sys
 import threading
@@ -49,6 +48,8 @@ from drd.bus import (
     message,
 )
 from drd.bus.messages import MAX_SIZE
+from tests.net_support import eventually as wait
+from tests.net_support import free_port
 
 try:
     import zenoh  # noqa: F401
@@ -86,18 +87,10 @@ PROBE = Chat("__probe__")
 
 
 def eventually(predicate: Callable[[], object], what: str, timeout: float = WAIT) -> None:
-    deadline = time.monotonic() + timeout
-    while not predicate():
-        if time.monotonic() > deadline:
-            pytest.fail(f"timed out after {timeout:g} s waiting for {what}")
-        time.sleep(0.01)
+    """`net_support.eventually`, waiting `WAIT` by default."""
+    wait(predicate, what, timeout, poll=0.01)
 
 
-def free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        port: int = s.getsockname()[1]
-        return port
 
 
 @dataclass

@@ -8,7 +8,6 @@ alike. The zenoh tests skip when eclipse-zenoh cannot be imported.
 
 from __future__ import annotations
 
-import socket
 import threading
 import time
 from collections.abc import Callable, Iterator
@@ -17,6 +16,8 @@ from typing import TYPE_CHECKING
 import pytest
 
 from drd.bus import BusClosed, BusError, Ping, Pong, Query, Reply, Sample
+from tests.net_support import eventually as wait
+from tests.net_support import free_port
 
 if TYPE_CHECKING:
     from drd.bus.zenoh_bus import ZenohBus
@@ -32,19 +33,11 @@ FAST_OPEN = {"scouting/delay": 50}
 WAIT = 5.0
 
 
-def eventually(predicate: Callable[[], object], what: str) -> None:
-    deadline = time.monotonic() + WAIT
-    while not predicate():
-        if time.monotonic() > deadline:
-            pytest.fail(f"timed out after {WAIT:g} s waiting for {what}")
-        time.sleep(0.01)
+def eventually(predicate: Callable[[], object], what: str, timeout: float = WAIT) -> None:
+    """`net_support.eventually`, waiting `WAIT` by default."""
+    wait(predicate, what, timeout, poll=0.01)
 
 
-def free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        port: int = s.getsockname()[1]
-        return port
 
 
 @pytest.fixture
