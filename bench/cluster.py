@@ -39,7 +39,8 @@ from typing import Any
 
 import psutil
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))  # the tests' helpers import each other
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # ... imported as `tests.*`
 
 from drd.daemon.client import ClusterClient  # noqa: E402
 from drd.daemon.workers import KEEP_WARM  # noqa: E402

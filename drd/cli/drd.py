@@ -504,7 +504,7 @@ def _json_line(data: dict[str, Any]) -> None:
 
 def fast_start(argv: Sequence[str]) -> Callable[[], object] | None:
     """`drd start ...` parsed from the command's own typer signature, without typer's parameter building (its
-    pydantic costs each daemon 0.07-0.1 s of CPU and 2 MB for good: 50 daemons starting on one machine pay it 50
+    pydantic costs each daemon 0.07-0.1 s of CPU and 7.5 MB for good: 50 daemons starting on one machine pay it 50
     times). Only a plain, complete use: anything else (--help, a missing --host, an odd value) goes to typer."""
     from drd.cli.cluster import fast_command
 

@@ -18,7 +18,7 @@ from pathlib import Path
 
 import psutil
 import pytest
-from cluster_support import DaemonCluster, corridor_hosts, running_cluster
+from cluster_support import DaemonCluster, corridor_hosts, eventually, running_cluster
 
 N = int(os.environ.get("DRD_SCALE_DAEMONS", "12"))
 ROUTERS = ("controller", "ranger1")
@@ -50,9 +50,18 @@ def fleet(tmp_path_factory: pytest.TempPathFactory) -> Iterator[DaemonCluster]:
         c.endpoints = [e for name, e in zip(c.names, c.endpoints, strict=True) if name in ROUTERS]
         for name in sorted(NAMES, key=lambda n: n not in ROUTERS):
             c.start(name, extra=("--load-period", "1"))  # the last one counts: a daemon's default period
-        c.wait_ready()
+        eventually(lambda: all_running(c), f"{N} daemons to start", timeout=60.0 + 2.0 * N, poll=0.2)
         c.wait_up(timeout=60.0 + 2.0 * N)
         yield c
+
+
+def all_running(c: DaemonCluster) -> bool:
+    """Every daemon has declared its services (its pidfile says `running`); one that exited fails the test. The
+    whole fleet shares one deadline: fifty daemons on two cores start together, not one after the other."""
+    for name, proc in c.procs.items():
+        if proc.poll() is not None:
+            pytest.fail(f"drd {name} exited with {proc.returncode}:\n{c.log(name)[-3000:]}")
+    return all((c.pidfile(name) or {}).get("state") == "running" for name in c.names)
 
 
 def test_every_host_is_up_and_status_is_the_whole_fleet(fleet: DaemonCluster) -> None:
