@@ -63,8 +63,9 @@ REQUIRED: Mapping[Kind, tuple[str, ...]] = {
 }
 #: The keys of an abstract type (`abstract: true`): properties for its subtypes, nothing to run or hold.
 ABSTRACT_KEYS = (*_COMMON, *_TYPE, "properties", "limits")
-#: Every manifest key, in canonical order.
-KEY_ORDER: tuple[str, ...] = tuple(dict.fromkeys(k for keys in KEYS.values() for k in keys))
+#: Every manifest key, in canonical order (each kind's keys keep their order in it: the type keys come right
+#: after the common ones, before a runnable's).
+KEY_ORDER: tuple[str, ...] = tuple(dict.fromkeys((*_COMMON, *_TYPE, *(k for keys in KEYS.values() for k in keys))))
 
 _NAME = re.compile(r"[A-Za-z_][A-Za-z0-9_]*")
 _A = {Kind.BEHAVIOR: "a behavior", Kind.RC: "an rc", Kind.ARC: "an arc", Kind.DATA: "a data type"}
