@@ -27,7 +27,7 @@ import socket
 import threading
 import time
 from collections import Counter
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -51,6 +51,12 @@ PUBLISH_PERIOD = 0.1
 IMAGE_WIDTH = 16
 #: How long a lockstep waits for the other side before it says so and goes on.
 LOCKSTEP_WAIT = 5.0
+#: The zenoh settings of the lockstep's two sessions: a message that waits for room in a link's queue (its sending
+#: thread starved of CPU on a loaded machine) waits up to `LOCKSTEP_WAIT` instead of rmw_zenoh's 1 ms, then is
+#: dropped. A dropped reading would leave the lockstep one message short for the rest of the run (every step then
+#: waits `LOCKSTEP_WAIT`). Local settings: nothing on the wire changes.
+LOCKSTEP_ZENOH = {"scouting/delay": 0,
+                  "transport/link/tx/queue/congestion_control/drop/wait_before_drop": int(LOCKSTEP_WAIT * 1e6)}
 #: The battery and the radio links go out every this many publications (0.5 s of sim time: well within a driver's
 #: `status_max_age`); the magazine too, and at once when a launch changes it.
 STATUS_EVERY = 5
@@ -79,6 +85,7 @@ class ServedRobots:
         self.published: Counter[str] = Counter()  # messages published per key
         self._queue: list[Callable[[], None]] = []
         self._streams: list[tuple[Callable[[Any], None], bool]] = []  # (send, a status stream)
+        self._publishers: dict[str, Publisher] = {}  # the streams' publishers by key
         self._count = 0  # publications so far
         self.robots: dict[str, _Served] = {}
         self._nodes: dict[str, Ros2Node] = {}
@@ -170,6 +177,7 @@ class ServedRobots:
 
         if pub is not None:
             self._streams.append((send, status))
+            self._publishers[pub.key] = pub
         return send
 
     def now(self) -> Any:
@@ -204,6 +212,18 @@ class ServedRobots:
                 if status or not is_status:
                     send(st)
             self._clock.publish_cdr(self.types.serialize(self.msg(mapping.CLOCK)(clock=st), mapping.CLOCK))
+
+    def wait_matched(self, keys: Iterable[str], timeout: float) -> list[str]:
+        """Wait (up to `timeout` s) until the session knows a subscription to each of these keys that a stream
+        publishes (a subscription declared elsewhere reaches the router a moment later; a put before that is lost);
+        the keys still unmatched."""
+        pubs = [p for k in keys if (p := self._publishers.get(k)) is not None]
+        deadline = time.monotonic() + timeout
+        while True:
+            unmatched = [p.key for p in pubs if not p.matched()]
+            if not unmatched or time.monotonic() > deadline:
+                return unmatched
+            time.sleep(0.001)
 
     def wait_received(self, sent: Mapping[str, int], timeout: float) -> list[str]:
         """Wait (up to `timeout` s) until every command of `sent` (key -> count) has arrived; the keys still short."""
@@ -469,7 +489,7 @@ class LockstepSimulation(Simulation):
         for _attempt in range(3):  # a free port may be taken between the look and the listen
             endpoint = free_endpoint()
             try:
-                router = Ros2Session.listen(endpoint, options={"scouting/delay": 0}, types=mapping.message_types())
+                router = Ros2Session.listen(endpoint, options=LOCKSTEP_ZENOH, types=mapping.message_types())
                 break
             except BusError:
                 continue
@@ -477,7 +497,7 @@ class LockstepSimulation(Simulation):
             raise BusError("the dry-run's ROS 2 router could not listen on a loopback port")
         sessions = [router]
         try:
-            client = Ros2Session.connect(endpoint, options={"scouting/delay": 0}, types=router.types) if loopback \
+            client = Ros2Session.connect(endpoint, options=LOCKSTEP_ZENOH, types=router.types) if loopback \
                 else Ros2Session(router.bus, types=router.types)
             sessions.insert(0, client)
             self.served = ServedRobots(self, cluster, router, domain_id=domain_id, lockstep=True)
@@ -494,6 +514,9 @@ class LockstepSimulation(Simulation):
         """Publish the state now and wait until the drivers have it (before the first cycle)."""
         if self.served is None or self.link is None:
             return
+        unmatched = self.served.wait_matched([k for k, n in self.link.listeners.items() if n > 0], LOCKSTEP_WAIT)
+        if unmatched:
+            log.warning("lockstep: the subscriptions to %s did not reach the served simulator", ", ".join(unmatched))
         self.served.publish()
         self._wait_readings()
 

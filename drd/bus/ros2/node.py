@@ -222,6 +222,12 @@ class Publisher(_Entity):
                                       congestion_control=congestion, reliability=reliability)
         self._declare_token()
 
+    def matched(self) -> bool:
+        """Whether this session knows a subscription to the topic now (zenoh's matching status: a put before that
+        reaches no one). Always true for a TRANSIENT_LOCAL publisher: its cache serves a late subscriber."""
+        status = getattr(self._entity, "matching_status", None)
+        return True if status is None else bool(status.matching)
+
     def publish(self, message: object) -> None:
         """Publish a message object of the topic's type, or a mapping of its fields (see ``MessageTypes.make``)."""
         type_name = self.topic.type_name
@@ -261,11 +267,11 @@ class Subscription(_Entity):
                                       subscriber_detection=True)
         else:
             self._entity = zenoh_call(f"subscription to {topic.name}", session.declare_subscriber, self.key,
-                                      self._on_sample)
+                                      node.session.dispatcher.handler(self._on_sample))
         self._declare_token()
 
     def _on_sample(self, sample: zenoh.Sample) -> None:
-        if sample.kind != zenoh.SampleKind.PUT:
+        if sample.kind != zenoh.SampleKind.PUT or self._closed:  # one queued before the close: not delivered
             return
         received = time.time()
         raw = sample.attachment  # each read builds a new object: read once

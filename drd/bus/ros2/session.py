@@ -10,6 +10,8 @@ and closed (bounded) as every drd bus is; one can be borrowed from a daemon.
 from __future__ import annotations
 
 import itertools
+import logging
+import queue
 import threading
 import weakref
 from collections.abc import Callable, Iterator, Mapping, Sequence
@@ -23,6 +25,8 @@ from drd.bus.zenoh_bus import ZenohBus
 
 from .msgtypes import MessageTypes, jazzy
 from .names import ADMIN_SPACE, GraphEntity, parse_token
+
+log = logging.getLogger("drd.bus.ros2")
 
 #: One entity counter per zenoh session, as per rmw context: ids in tokens never repeat within a zid.
 _COUNTERS: weakref.WeakKeyDictionary[ZenohBus, Iterator[int]] = weakref.WeakKeyDictionary()
@@ -45,6 +49,48 @@ def undeclare(entity: Any) -> None:
         pass  # already undeclared, or its session closed first
 
 
+class Dispatcher:
+    """Runs a session's subscription callbacks, in arrival order, on one Python thread of its own.
+
+    zenoh-python's default runs each subscriber's callbacks on a thread per subscriber (a robot's 30 topics: 30
+    threads woken per control cycle, each waiting for the GIL); here zenoh's receiving thread only queues the sample
+    (`handler`, never blocking on a lock of ours) and one thread takes them in turn: one wake-up per burst.
+    """
+
+    def __init__(self, name: str) -> None:
+        self.name = name
+        self._queue: queue.SimpleQueue[tuple[Callable[[Any], None], Any] | None] = queue.SimpleQueue()
+        self._lock = threading.Lock()
+        self._thread: threading.Thread | None = None
+        self._closed = False
+
+    def handler(self, callback: Callable[[Any], None]) -> zenoh.handlers.Callback[Any]:
+        """A zenoh handler that queues `callback(sample)` for this dispatcher's thread (started on first use)."""
+        with self._lock:
+            if self._thread is None and not self._closed:
+                self._thread = threading.Thread(target=self._run, name=f"drd ros2 {self.name}", daemon=True)
+                self._thread.start()
+        put = self._queue.put
+        return zenoh.handlers.Callback(lambda sample: put((callback, sample)), indirect=False)
+
+    def _run(self) -> None:
+        get = self._queue.get
+        while (item := get()) is not None:
+            callback, sample = item
+            try:
+                callback(sample)
+            except Exception:  # a callback's own error: logged, the others still run
+                log.exception("ros2 %s: a subscription callback raised", self.name)
+
+    def close(self) -> None:
+        """Stop the thread once the samples already queued have run (not waited for: a callback may be the closer)."""
+        with self._lock:
+            self._closed = True
+            thread, self._thread = self._thread, None
+        if thread is not None:
+            self._queue.put(None)
+
+
 class Ros2Session:
     """A zenoh session speaking rmw_zenoh (the counterpart of an rmw context); holds or borrows a ZenohBus."""
 
@@ -54,6 +100,7 @@ class Ros2Session:
         self.types = types if types is not None else jazzy()
         with _COUNTERS_LOCK:
             self._ids = _COUNTERS.setdefault(bus, itertools.count())
+        self.dispatcher = Dispatcher(bus.name or "session")
 
     @classmethod
     def connect(cls, endpoints: str | Sequence[str], *, options: Mapping[str, Any] | None = None,
@@ -92,7 +139,9 @@ class Ros2Session:
         return [e for e in entities if e is not None]
 
     def close(self) -> None:
-        """Close the zenoh session if this object opened it (bounded, as ZenohBus closes)."""
+        """Stop the callbacks' thread; close the zenoh session if this object opened it (bounded, as ZenohBus
+        closes)."""
+        self.dispatcher.close()
         if self.owned:
             self.bus.close()
 
