@@ -833,7 +833,7 @@ class Creator:
             inst.devices[need] = BoundDevice(binding, issuer, self.arbiter, rank, f"{inst.mission}/{inst.path}",
                                              lambda: self._now)
             methods[need] = device_methods(driver)
-            inst.readings[need] = frozenset(getattr(driver, "READINGS", ()))
+            inst.readings[need] = spec_of(driver).readings
             commands[need] = sorted(spec_of(driver).setpoints)
         return methods, commands
 

@@ -43,7 +43,6 @@ from __future__ import annotations
 
 import collections
 import functools
-import importlib
 import json
 import logging
 import multiprocessing
@@ -61,6 +60,7 @@ from typing import Any
 
 import psutil
 
+from drd import entrypoints
 from drd.bus import Message, message
 from drd.daemon.pipe import (
     AttrRead,
@@ -82,6 +82,7 @@ from drd.daemon.pipe import (
 )
 from drd.daemon.pipe import Message as PipeMessage
 from drd.errors import ComponentFailure
+from drd.hw.commands import spec_of
 
 log = logging.getLogger("drd.daemon.workers")
 
@@ -446,9 +447,10 @@ def scheduling_of(pid: int) -> tuple[list[int], int]:
 
 
 def device_methods(driver: object) -> list[str]:
-    """The public methods of a driver's class: the calls a worker's proxy forwards (other names are attributes)."""
+    """The declared names of a driver that are methods (`drd.hw.commands`): the calls a worker's proxy forwards
+    (its other declared names are attributes; the Creator's device handle refuses anything undeclared)."""
     cls = type(driver)
-    return sorted(n for n in dir(cls) if not n.startswith("_") and callable(getattr(cls, n, None)))
+    return sorted(n for n in spec_of(driver).names if callable(getattr(cls, n, None)))
 
 
 # -- the worker's side ----------------------------------------------------------------------------------
@@ -740,8 +742,7 @@ def _setup(path: str, setup: Setup, params: dict[str, Any] | None, link: _Link) 
     from drd.runtime.component import Context, Services
     from drd.runtime.records import plain
 
-    module, _, cls_name = setup.entry_point.partition(":")
-    factory = getattr(importlib.import_module(module), cls_name)
+    factory = entrypoints.load(setup.entry_point)  # the one loader: says which of module, import or name failed
     h = _Hosted()
     devices = {need: DeviceProxy(link, path, need, names, setup.commands.get(need, ()))
                for need, names in setup.methods.items()}
