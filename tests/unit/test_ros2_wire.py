@@ -170,6 +170,17 @@ def test_make_fills_in_defaults_and_refuses_what_the_type_lacks() -> None:
         types.make("vision_msgs/msg/Detection2DArray")
 
 
+def test_made_messages_share_no_nested_message_or_array() -> None:
+    """`make` works out each type's defaults once: a second message must still get its own header and arrays."""
+    types = jazzy()
+    first, second = types.make("sensor_msgs/msg/LaserScan"), types.make("sensor_msgs/msg/LaserScan", range_max=8.0)
+    first.header.frame_id = "ranger1/laser"
+    assert second.header.frame_id == "" and first.ranges is not second.ranges
+    assert (first.range_max, second.range_max) == (0.0, 8.0)
+    pose = types.make("geometry_msgs/msg/Pose", orientation={"z": 1.0})
+    assert (pose.orientation.z, pose.orientation.w) == (1.0, 1.0)  # the .msg default w = 1 still applies
+
+
 def test_the_attachment_is_rmw_zenohs_33_bytes_and_reads_the_sdks() -> None:
     gid = bytes(range(16))
     data = Attachment(7, 1_700_000_000_123456789, gid).encode()

@@ -28,6 +28,9 @@ _DTYPES: dict[str, type[np.generic]] = {
 _STRINGS = ("string", "wstring")
 #: Default values the .msg files give and rosbags does not keep (the others are zero, empty, false).
 _MSG_DEFAULTS: dict[str, dict[str, Any]] = {"geometry_msgs/msg/Quaternion": {"w": 1.0}}
+#: A type's plan for `MessageTypes.make`: class, field names, .msg defaults, and per field (name, descriptor,
+#: constant default, or the function that makes a fresh one: nested messages and arrays are never shared).
+_Plan = tuple[Any, frozenset[str], dict[str, Any], tuple[tuple[str, Any, Any, Any], ...]]
 
 
 class MessageTypes:
@@ -37,6 +40,7 @@ class MessageTypes:
         self.store = store if store is not None else get_typestore(Stores.ROS2_JAZZY)
         self._lock = threading.Lock()
         self._hashes: dict[str, str] = {}
+        self._plans: dict[str, _Plan] = {}
 
     def known(self, type_name: str) -> bool:
         return type_name in self.store.types
@@ -53,6 +57,7 @@ class MessageTypes:
         with self._lock:
             self.store.register(get_types_from_msg(msgdef, type_name))
             self._hashes.clear()
+            self._plans = {}
 
     def type_hash(self, type_name: str) -> str:
         """``RIHS01_<sha256 hex>``, as rmw_zenoh puts it in keys and tokens."""
@@ -74,15 +79,37 @@ class MessageTypes:
 
         A nested message may be given as a mapping of its fields; a number array as any sequence.
         """
+        plan = self._plans.get(type_name) or self._plan(type_name)
+        cls, names, defaults, slots = plan
+        if not fields.keys() <= names:
+            unknown = set(fields) - names
+            raise ValueError(f"{type_name} has no field {', '.join(sorted(unknown))}")
+        if defaults:
+            fields = {**defaults, **fields}
+        values = []
+        for name, desc, constant, fresh in slots:
+            if name in fields:
+                value = fields[name]
+                values.append(value if desc[0] == Nodetype.BASE else self._value(desc, value))
+            else:
+                values.append(constant if fresh is None else fresh(desc))
+        return cls(*values)
+
+    def _plan(self, type_name: str) -> _Plan:
+        """How ``make`` builds a ``type_name`` (its class, field names, and per field a constant default or how to
+        make a fresh one), worked out once: a message built every control cycle should not re-read its definition."""
         cls = self.store.types[self.check(type_name)]
         _consts, fielddefs = self.store.fielddefs[type_name]
-        unknown = set(fields) - {name for name, _ in fielddefs}
-        if unknown:
-            raise ValueError(f"{type_name} has no field {', '.join(sorted(unknown))}")
-        given = {**_MSG_DEFAULTS.get(type_name, {}), **fields}
-        values = {name: self._value(desc, given[name]) if name in given else self._default(desc)
-                  for name, desc in fielddefs}
-        return cls(**values)
+        slots: list[tuple[str, Any, Any, Any]] = []
+        for name, desc in fielddefs:
+            if desc[0] == Nodetype.BASE:
+                slots.append((name, desc, self._default(desc), None))
+            else:
+                slots.append((name, desc, None, self._default))
+        plan = (cls, frozenset(name for name, _ in fielddefs), _MSG_DEFAULTS.get(type_name, {}), tuple(slots))
+        with self._lock:
+            self._plans[type_name] = plan
+        return plan
 
     def _default(self, desc: tuple[Any, Any]) -> Any:
         kind, rest = desc
