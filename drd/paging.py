@@ -10,7 +10,7 @@ position: an item dropped or added between two pages shifts nothing.
 
 from __future__ import annotations
 
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Iterable, Sequence
 from typing import TypeVar
 
 from drd.bus.messages import MAX_SIZE
@@ -46,3 +46,11 @@ def fill(items: Iterable[tuple[int, T]], size: Callable[[T], int], count: int,
         used += cost
         last = cursor
     return taken, 0
+
+
+def by_position(items: Sequence[T], after: int, count: int, size: Callable[[T], int],
+                budget: int = PAGE_BYTES) -> tuple[list[T], int]:
+    """A page of a list served whole each time (a view): its items after position `after` (1-based), as `fill`
+    takes them. Positions move when items come or go between two pages: a view's pages may miss or repeat one
+    (the caller says what it does about it)."""
+    return fill(((n, item) for n, item in enumerate(items, start=1) if n > after), size, count, budget)

@@ -138,14 +138,46 @@ class ClusterClient:
         where those that did not answer in time are added)."""
         return self._ask(lambda h: self.keys.db(h, "hosts"), ViewRequest(events), HostsReply, deadline, slow)
 
-    def components(self, *, deadline: float | None = None, slow: set[str] | None = None) -> ComponentsReply:
-        return self._ask(lambda h: self.keys.db(h, "components"), ViewRequest(), ComponentsReply, deadline, slow)
+    def components(self, *, deadline: float | None = None, slow: set[str] | None = None,
+                   count: int = 0) -> ComponentsReply:
+        """Any daemon's Component Database, page after page from the daemon that answered first (`drd.paging`),
+        assembled; an instance that moved between two pages is listed once."""
+        first = self._ask(lambda h: self.keys.db(h, "components"), ViewRequest(count=count), ComponentsReply,
+                          deadline, slow)
+        pages = self._following(first, self.keys.db(first.answered_by, "components"),
+                                lambda after: ViewRequest(after=after, count=count), ComponentsReply, deadline)
+        instances = {(i.host, i.mission, i.name): i for p in pages for i in p.instances}
+        services = {(i.host, i.name): i for p in pages for i in p.services}
+        return replace(first, instances=list(instances.values()), services=list(services.values()), next=0)
 
     def lookup(self, name: str) -> Location:
         return self._ask(lambda h: self.keys.db(h, "lookup"), Lookup(name), Location)
 
-    def query(self, text: str, seed: int = 0, *, deadline: float | None = None) -> TraderReply:
-        return self._ask(lambda h: self.keys.db(h, "query"), TraderRequest(text, seed), TraderReply, deadline)
+    def query(self, text: str, seed: int = 0, *, deadline: float | None = None, count: int = 0) -> TraderReply:
+        """The trader's offers for `text`, best first, page after page from the daemon that answered first."""
+        first = self._ask(lambda h: self.keys.db(h, "query"), TraderRequest(text, seed, count=count), TraderReply,
+                          deadline)
+        if not first.answered_by:
+            return first
+        pages = self._following(first, self.keys.db(first.answered_by, "query"),
+                                lambda after: TraderRequest(text, seed, after, count), TraderReply, deadline)
+        return replace(first, offers=[o for p in pages for o in p.offers], next=0)
+
+    def _following(self, first: M, key: str, ask: Callable[[int], Message], want: type[M],
+                   deadline: float | None) -> list[M]:
+        """`first` and the pages after it (`drd.paging`), asked of the daemon that answered it (the cursors are its
+        own) by `deadline`. Raises ClientError when a page does not come in time."""
+        pages, after = [first], 0
+        end = time.monotonic() + self._left(deadline)
+        while (nxt := int(getattr(pages[-1], "next", 0))) > after:
+            after, wait = nxt, end - time.monotonic()
+            try:
+                if wait <= 0:
+                    raise BusTimeout("no time left")
+                pages.append(_expect(self.bus.call(key, ask(after), timeout=wait), want))
+            except BusTimeout:
+                raise ClientError(f"{key} did not answer the page after {after} in time") from None
+        return pages
 
     def daemon_status(self, host: str, *, deadline: float | None = None) -> DaemonStatus:
         return _expect(self.bus.call(self.keys.status(host), ViewRequest(), timeout=self._left(deadline)),

@@ -21,7 +21,7 @@ from drd.bus.messages import encode
 from drd.daemon.keys import ClusterKeys
 from drd.daemon.messages import ResourcesReply, ResourcesRequest, RobotInfo, UnitInfo, ViewRequest, WaiterInfo
 from drd.hosts import Cluster
-from drd.paging import fill
+from drd.paging import by_position
 from drd.rcm import Aggregate, Unit
 from drd.runtime.clock import Clock, WallClock
 from dsl.catalog import Catalog
@@ -113,9 +113,8 @@ def resources_page(whole: ResourcesReply, after: int = 0, count: int = 0) -> Res
     """A page of `whole` (`drd.paging`): one cursor over its units, then its robots, then its queue (1-based
     positions); the page's `layout` is a checksum of the unit and robot ids, so a client that sees it change
     between pages knows positions moved (a host came or went) and starts again. Pure."""
-    items: list[tuple[int, Message]] = [(n, item) for n, item in enumerate(
-        [*whole.units, *whole.robots, *whole.queue], start=1) if n > after]
-    page, nxt = fill(items, lambda item: len(encode(item)), count)
+    items: list[Message] = [*whole.units, *whole.robots, *whole.queue]
+    page, nxt = by_position(items, after, count, lambda item: len(encode(item)))
     layout = zlib.crc32("\n".join([u.id for u in whole.units] + ["|"] + [r.id for r in whole.robots]).encode())
     return replace(
         whole, units=[i for i in page if isinstance(i, UnitInfo)], robots=[i for i in page if isinstance(i, RobotInfo)],

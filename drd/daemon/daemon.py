@@ -39,6 +39,7 @@ from typing import Any
 
 from drd.bus import Bus, BusError, LoadReport, Message, Ping, Pong, Query, Reply, Sample
 from drd.bus.base import Declaration
+from drd.bus.messages import encode
 from drd.daemon.controller import Controller
 from drd.daemon.keys import ClusterKeys, cluster_of
 from drd.daemon.load import LoadSampler, live_robots
@@ -62,6 +63,7 @@ from drd.daemon.security import Transport, describe, transport
 from drd.daemon.view import Change, ClusterView, HostState, runnable_components
 from drd.errors import ConfigurationError
 from drd.hosts import Cluster, Role
+from drd.paging import by_position
 from drd.runtime.clock import Clock
 from drd.trader import TraderError, compile_query
 from dsl.catalog import Catalog
@@ -448,10 +450,12 @@ class Daemon:
             recent = list(self.events)[-events:] if events > 0 else []
         return HostsReply(self.cluster.name, self.host, self.wall(), infos, recent)
 
-    def components(self) -> ComponentsReply:
+    def components(self, after: int = 0, count: int = 0) -> ComponentsReply:
+        """A page of the Component Database (`drd.paging`): the instances, then the services, after `after`."""
         with self._briefly():
-            return ComponentsReply(self.cluster.name, self.host, self.view.runnable(self.config.catalog),
-                                   self.view.instances(), self.view.services())
+            whole = ComponentsReply(self.cluster.name, self.host, self.view.runnable(self.config.catalog),
+                                    self.view.instances(), self.view.services())
+        return components_page(whole, after, count)
 
     # -- bus callbacks (zenoh threads) -----------------------------------------------------------
 
@@ -605,7 +609,8 @@ class Daemon:
         return self.hosts(max(0, min(events, MAX_EVENTS)))
 
     def _components(self, query: Query) -> Message:
-        return self.components()
+        asked = query.payload if isinstance(query.payload, ViewRequest) else ViewRequest()
+        return self.components(asked.after, asked.count)
 
     def _lookup(self, query: Query) -> Message | Reply:
         assert isinstance(query.payload, Lookup)
@@ -627,7 +632,11 @@ class Daemon:
         with self._lock:
             offers = self.view.offers(self.clock())
         found = compiled.run(offers, query.payload.seed)
-        return TraderReply(text, [_offer_dict(o.id, o.type, o.host, o.properties, o.live) for o in found])
+        page, nxt = by_position(found, query.payload.after, query.payload.count,
+                                lambda o: len(json.dumps(_offer_dict(o.id, o.type, o.host, o.properties, o.live),
+                                                         default=str)))
+        return TraderReply(text, [_offer_dict(o.id, o.type, o.host, o.properties, o.live) for o in page], nxt,
+                           self.host)
 
     # -- helpers ---------------------------------------------------------------------------------
 
@@ -680,6 +689,13 @@ class Daemon:
 def _host_of(key: str) -> str | None:
     parts = key.split("/")
     return parts[3] if len(parts) > 3 else None
+
+
+def components_page(whole: ComponentsReply, after: int = 0, count: int = 0) -> ComponentsReply:
+    """A page of `whole` (`drd.paging.by_position`): one cursor over its instances, then its services. Pure."""
+    cut = max(0, len(whole.instances) - after)  # how many of the page's first items are instances
+    page, nxt = by_position([*whole.instances, *whole.services], after, count, lambda i: len(encode(i)))
+    return ComponentsReply(whole.cluster, whole.answered_by, whole.types, page[:cut], page[cut:], nxt)
 
 
 def _offer_dict(oid: str, type_: str, host: Any, properties: Any, live: Any) -> dict[str, Any]:

@@ -56,11 +56,14 @@ class Leaving(Message):
     reason: str
 
 
-@message("drd.daemon.view-request", 1)
+@message("drd.daemon.view-request", 2)
 class ViewRequest(Message):
-    """Asks a daemon for part of its view; `events` bounds how many recent events come back."""
+    """Asks a daemon for part of its view; `events` bounds how many recent events come back; `after` and `count`
+    ask a page of a list that can grow with the cluster (the components' instances: `drd.paging`)."""
 
     events: int = 50
+    after: int = 0
+    count: int = 0
 
 
 @message("drd.daemon.host", 1)
@@ -105,15 +108,17 @@ class HostsReply(Message):
     events: list[ClusterEvent]
 
 
-@message("drd.daemon.components", 1)
+@message("drd.daemon.components", 2)
 class ComponentsReply(Message):
-    """Component types with the hosts (up) that can run them, running instances, and daemon services."""
+    """Component types with the hosts (up) that can run them, running instances, and daemon services. In pages
+    (`drd.paging`): one cursor over the instances then the services, `next` the cursor to ask after (0: the last)."""
 
     cluster: str
     answered_by: str
     types: dict[str, list[str]]
     instances: list[InstanceInfo]
     services: list[InstanceInfo]
+    next: int = 0
 
 
 @message("drd.daemon.lookup", 1)
@@ -133,21 +138,26 @@ class Location(Message):
     key: str
 
 
-@message("drd.daemon.trader-request", 1)
+@message("drd.daemon.trader-request", 2)
 class TraderRequest(Message):
-    """A trader query (`Camera where resolution >= 640 prefer min(host.load)`), `seed` for `prefer random`."""
+    """A trader query (`Camera where resolution >= 640 prefer min(host.load)`), `seed` for `prefer random`; `after`
+    and `count` ask a page of the offers (`drd.paging`)."""
 
     query: str
     seed: int = 0
+    after: int = 0
+    count: int = 0
 
 
-@message("drd.daemon.trader-reply", 1)
+@message("drd.daemon.trader-reply", 2)
 class TraderReply(Message):
     """The matching offers, best first: each `{id, type, host, load, properties, live}`; `live` maps the properties
-    that are the cluster's live state (not hosts.yaml's) to their age in seconds (an older daemon's reply has none)."""
+    that are the cluster's live state (not hosts.yaml's) to their age in seconds. In pages, as `ComponentsReply`."""
 
     query: str
     offers: list[dict[str, Any]]
+    next: int = 0  # the page after (`drd.paging`); 0: the last
+    answered_by: str = ""
 
 
 @message("drd.daemon.live", 1)
