@@ -2,7 +2,8 @@
 
 Hypothesis writes missions (the ownership property test's generator: nesting, `parallel`, plans,
 multiplicities, slices, `release(x)`, timeouts, components that fail), runs each in the dry-run's executive for a
-random number of control cycles, saves its state through JSON as the journal does, then gives it to a new
+random number of control cycles, journaling its state after every cycle in the controller's SQLite journal, reads
+that prefix of the journal back (it must equal the live state of that instant), then gives it to a new
 executive over the same world (the robots where they are) and enters it again. Right after, the state tree read
 back equals the saved one: the same states at the same paths, entered at the same times, with the same data,
 outputs, finished regions and multiplicity counters. And the resumed mission keeps ownership to its end.
@@ -12,6 +13,8 @@ from __future__ import annotations
 
 import io
 import json
+import tempfile
+from pathlib import Path
 from typing import Any
 
 from hypothesis import HealthCheck, given, note, settings
@@ -21,6 +24,7 @@ from drd.bus import LocalNetwork
 from drd.dryrun import SimulationClock, merged_drivers
 from drd.executive import EntryPoints, Executive
 from drd.hosts import Cluster
+from drd.journal import SqliteJournal, WorldState
 from drd.runtime.snapshot import NodeImage, capture
 from drd.runtime.trace import TraceWriter
 from drd.sim.physics import Simulation
@@ -76,14 +80,24 @@ def resume_once(catalog: Catalog, setting: tuple[Cluster, World], text: str, cyc
     first = executive(cluster, world, sim, catalog, network)
     first.submit(chart, "M-1", listeners=[TraceWriter(trace, "M-1")])
     interp = first.missions["M-1"]
-    for _ in range(cycles):
-        if interp.finished:
-            break
-        sim.step(CONTROL_PERIOD)
-        first.step()
-    if interp.finished or interp.root is None:
-        return []
-    saved = NodeImage.from_dict(json.loads(json.dumps(capture(interp.root).to_dict())))
+    with tempfile.TemporaryDirectory() as folder:  # the controller's journal, written after every cycle
+        journal = SqliteJournal(Path(folder) / "journal.sqlite")
+        journal.begin("M-1", {}, 1, 0.0, 0.0)
+        for _ in range(cycles):
+            if interp.finished:
+                break
+            sim.step(CONTROL_PERIOD)
+            first.step()
+            if interp.root is not None:
+                journal.save({"M-1": (sim.time, capture(interp.root).to_dict())}, WorldState("w", 1, 0.0, sim.time, 0))
+        if interp.finished or interp.root is None:
+            journal.close()
+            return []
+        recorded = journal.running()[0].snapshot  # the journal's prefix, read back as a restart reads it
+        journal.close()
+    assert recorded is not None
+    saved = NodeImage.from_dict(recorded)
+    assert shape(saved) == shape(capture(interp.root))  # the journal holds the live state of that instant
     first.gates.orphan_all(sim.time, "controller lost")  # type: ignore[attr-defined]
     first.close()
 
