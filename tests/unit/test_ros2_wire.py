@@ -195,6 +195,14 @@ def test_the_attachment_is_rmw_zenohs_33_bytes_and_reads_the_sdks() -> None:
     assert Attachment.decode(data + b"\x00") == Attachment.decode(data)  # bytes after, as rmw_zenoh: ignored
 
 
+def test_a_messages_attachment_is_read_when_asked_and_none_when_it_is_not_rmw_zenohs() -> None:
+    data = Attachment(7, 42, bytes(range(16))).encode()
+    info = MessageInfo("0/x", 1.0, data)
+    assert info.attachment == Attachment(7, 42, bytes(range(16))) and info.attachment is info.attachment
+    assert MessageInfo("0/x", 1.0, data[:-1]).attachment is None
+    assert MessageInfo("0/x", 1.0, None).attachment is None
+
+
 # --- over zenoh, against zenoh-ros2-sdk ---------------------------------------------------------
 
 

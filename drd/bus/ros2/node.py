@@ -26,7 +26,6 @@ import logging
 import threading
 import time
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass
 from types import TracebackType
 from typing import Any, Self, TypeVar
 
@@ -63,13 +62,28 @@ log = logging.getLogger("drd.bus.ros2")
 HEARTBEAT_PERIOD = 0.5
 
 
-@dataclass(frozen=True, slots=True)
 class MessageInfo:
-    """How a message arrived: its key, when (``time.time()``), and the publisher's attachment, if it sent one."""
+    """How a message arrived: its key, when (``time.time()``), and the publisher's attachment, if it sent a valid
+    one. The attachment is decoded when first read: most callbacks never look, and a control cycle gets ~30 messages."""
 
-    key: str
-    received: float
-    attachment: Attachment | None
+    __slots__ = ("key", "received", "_raw", "_attachment")
+
+    def __init__(self, key: str, received: float, raw: bytes | None) -> None:
+        self.key, self.received, self._raw = key, received, raw
+        self._attachment: Attachment | None = None
+
+    @property
+    def attachment(self) -> Attachment | None:
+        if self._attachment is None and self._raw is not None:
+            raw, self._raw = self._raw, None
+            try:
+                self._attachment = Attachment.decode(raw)
+            except ValueError as exc:
+                log.debug("ros2 %s: %s", self.key, exc)
+        return self._attachment
+
+    def __repr__(self) -> str:
+        return f"MessageInfo({self.key!r}, {self.received}, {self.attachment!r})"
 
 
 MessageCallback = Callable[[Any, MessageInfo], None]
@@ -125,7 +139,9 @@ class Ros2Node:
 
     def subscribe(self, topic: str, type_name: str, callback: MessageCallback,
                   qos: QoS | None = None) -> Subscription:
-        """Declare a subscription; ``callback(message, info)`` runs on a zenoh thread (keep it short)."""
+        """Declare a subscription; ``callback(message, info)`` runs on the session's callback thread, one message of
+        the session's subscriptions at a time, in arrival order: keep it short, and never wait in it for another
+        message of the same session (a TRANSIENT_LOCAL subscription's run on a zenoh thread of their own)."""
         return self._add(Subscription(self, self.topic(topic, type_name, qos), callback))
 
     def _add(self, entity: E) -> E:
@@ -275,12 +291,6 @@ class Subscription(_Entity):
             return
         received = time.time()
         raw = sample.attachment  # each read builds a new object: read once
-        attachment = None
-        if raw is not None:
-            try:
-                attachment = Attachment.decode(raw.to_bytes())
-            except ValueError as exc:
-                log.debug("ros2 %s: %s", self.topic.name, exc)
         try:
             message = self.node.types.deserialize(sample.payload.to_bytes(), self.topic.type_name)
         except Exception as exc:  # rosbags raises several kinds on bad bytes
@@ -289,6 +299,6 @@ class Subscription(_Entity):
             return
         self.received += 1
         try:
-            self.callback(message, MessageInfo(str(sample.key_expr), received, attachment))
+            self.callback(message, MessageInfo(str(sample.key_expr), received, None if raw is None else raw.to_bytes()))
         except Exception:
             log.exception("ros2 %s: the callback raised", self.topic.name)
