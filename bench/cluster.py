@@ -1,20 +1,24 @@
-"""Cluster benchmark: `missionctl status` of a real N-daemon cluster on loopback, end to end.
+"""Cluster benchmark: a real N-daemon cluster on loopback: start time, `missionctl status`, idle memory and CPU.
 
-Run `python bench/cluster.py [--daemons 10] [--repeat 10] [--json] [--profile]` (never by pytest). It
-writes a hosts file in a temporary folder (1 controller and N-1 workers, each worker with a Ranger's
-five simulated devices, every endpoint a free tcp/127.0.0.1 port), starts every daemon as its own
-`python -m drd.cli.drd start` process, waits (bounded) until the controller sees all N hosts up, then
-times, with `time.perf_counter`, N runs (median and p90) of:
+Run `python bench/cluster.py [--daemons 10] [--routers R] [--repeat 10] [--idle 30] [--json] [--profile]` (never by
+pytest). It writes a hosts file in a temporary folder (1 controller and N-1 Ranger hosts, each with a Ranger's
+five simulated devices, every endpoint a free tcp/127.0.0.1 port; with `--routers R`, 2 by default from 20
+daemons, the controller and the first R-1 Rangers are also zenoh routers and every other daemon is their client),
+starts every daemon at once (the routers first) as its own `python -m drd.cli.drd start` process, and measures:
 
-- `missionctl status --json --config FILE`: a subprocess, as a user runs it (wall time, output read
-  and checked: every host up);
-- floors of that subprocess: `python -c pass` (interpreter start-up) and `python -c "import
-  drd.cli.missionctl"` (start-up and every import missionctl does before it talks to a daemon);
-- in this process, already imported: `ClusterClient.connect`, `client.status()` (the call
-  `missionctl status` makes) and `close`, and each request status makes on its own.
+- start: seconds from the first `drd start` until the controller sees all N hosts up;
+- `missionctl status --json --config FILE`, N runs (median and p90): a subprocess, as a user runs it (wall time,
+  output read and checked: every host up, no error; an incomplete answer is counted), beside its floors
+  `python -c pass` and `python -c "import drd.cli.missionctl"`; in this process, already imported:
+  `ClusterClient.connect`, `client.status()`, `close`, each request status makes, and reading the hosts file;
+- how many client daemons hold a link to each router;
+- idle, once the worker pools kept warm at start have gone (`--settle`): each daemon's CPU (with its children)
+  over `--idle` seconds, then its PSS, USS and RSS, by role; and the same of N `python -m drd.bus.peer`
+  processes started the same way (the peer: an interpreter with a zenoh session, a token and a queryable).
 
-Goal: `missionctl status` of a 10-daemon cluster < 1 s (median). Every daemon started is stopped in a
-`finally` (SIGTERM to its process group, then SIGKILL, bounded), also on Ctrl-C, SIGTERM or an error.
+Goals (issue #15): `status` < 0.5 s (median); an idle daemon with its workers <= 60 MB PSS; all up <= 30 s.
+Every process started is stopped in a `finally` (SIGTERM to its process group, then SIGKILL, bounded), also on
+Ctrl-C, SIGTERM or an error.
 """
 
 from __future__ import annotations
@@ -330,10 +334,12 @@ def measure(cluster: Cluster, repeat: int) -> dict[str, Any]:
     from rich.console import Console
 
     from drd.cli.common import print_json
+    from drd.hosts import load_endpoints
 
     phases: dict[str, list[float]] = {k: [] for k in ("connect", "status()", "close", "connect+status+close",
                                                       "print_json (rich, to a pipe)",
-                                                      "print_json (missionctl's, to a pipe)")}
+                                                      "print_json (missionctl's, to a pipe)",
+                                                      "load_endpoints (reading the hosts file)")}
     calls: dict[str, list[float]] = {k: [] for k in ("daemons()", "hosts()", "components()", "daemon_status()",
                                                       "resources()", "missions()")}
     for i in range(repeat + 1):  # the first round is a warm-up
@@ -369,6 +375,9 @@ def measure(cluster: Cluster, repeat: int) -> dict[str, Any]:
                 s = time.perf_counter()
                 print_json(data)
                 phases["print_json (missionctl's, to a pipe)"].append(time.perf_counter() - s)
+            s = time.perf_counter()  # what `missionctl status --config FILE` does before it connects
+            load_endpoints(cluster.hosts_file)
+            phases["load_endpoints (reading the hosts file)"].append(time.perf_counter() - s)
     return {"status_incomplete": incomplete,
             "subprocess": {k: stats(v) for k, v in wall.items()},
             "in_process": {k: stats(v) for k, v in phases.items()},
