@@ -681,7 +681,8 @@ class _RecordWatch:
             if self.away_since is None:
                 self.away_since = time.monotonic()
                 err.print(Text.assemble(("⚠ ", "bold yellow"), "the controller does not answer: waiting for it (a"
-                                        " controller started again resumes the mission from its journal)"))
+                                        " standby takes over, or the controller started again, and resumes the"
+                                        " mission from its journal)"))
             return []
         if self.away_since is not None:
             if not any(m.get("id") == mission for m in missions):  # back, but not resumed yet (it waits for the
