@@ -411,5 +411,12 @@ def _num(value: float) -> str:
 
 
 def _on_boundary(p: Point, room: Room) -> bool:
+    """Whether `p` lies on a side of `room` (within `geometry.EPS`). A point outside the room's box widened by
+    twice that is farther from every side, so it is turned away before the four distances (a door looks at
+    every room: 1,000 doors x 1,000 rooms in a generated building)."""
+    x, y = p
+    margin = 2 * geometry.EPS
+    if not (room.x0 - margin <= x <= room.x1 + margin and room.y0 - margin <= y <= room.y1 + margin):
+        return False
     return any(geometry.point_segment_distance(p, a, b) <= geometry.EPS
                for a, b in geometry.rect_sides(room.x0, room.y0, room.x1, room.y1))
