@@ -11,7 +11,9 @@ camera behaviors share (`wrap`, `region_bearings`, `circular_mean`).
 
 Every function is pure. The costly ones (a side's points, a wall fit, the clearance) take an optional `ScanMemo`
 that the calling component owns, so what several of them derive from the one scan of a control cycle is computed
-once for that component; nothing is kept in this module between calls.
+once for that component; nothing is kept in this module between calls. The per-beam arithmetic of the fits, the
+clearance and the end wall is elementwise on numpy arrays (each operation rounds as the same one on floats does)
+and every sum adds Python floats in beam order, so they give the floats the plain loops gave, bit for bit.
 """
 
 from __future__ import annotations
@@ -23,9 +25,14 @@ from dataclasses import dataclass
 from types import MappingProxyType
 from typing import Any, TypeVar
 
+import numpy as np
+import numpy.typing as npt
+
 from drd.hw.interfaces import Beams, Scan
 
 T = TypeVar("T")
+Floats = npt.NDArray[np.float64]
+Mask = npt.NDArray[np.bool_]
 
 # -- bearings ------------------------------------------------------------------------------------------------------
 
@@ -110,13 +117,16 @@ class ScanMemo:
 
     One per component instance, kept by the component (never in module state, so nothing is shared between
     instances or missions). It holds one scan: a new scan (another object) starts it afresh. A scan whose ranges
-    are not a tuple could change, so nothing is kept for it. Results are the same with or without a memo."""
+    are not a tuple could change, so nothing is kept for it. Results are the same with or without a memo.
+    It also keeps its laser's beam directions as arrays (`Beams` never changes for a laser), so a scan costs
+    one conversion of its ranges."""
 
-    __slots__ = ("_data", "_scan")
+    __slots__ = ("_beams", "_data", "_scan")
 
     def __init__(self) -> None:
         self._scan: Scan | None = None
         self._data: dict[Any, Any] = {}
+        self._beams: tuple[Beams, tuple[Floats, Floats]] | None = None
 
     def of(self, scan: Scan) -> dict[Any, Any] | None:
         """The derived data of `scan` (empty at first), or None for a scan that is not kept."""
@@ -124,8 +134,36 @@ class ScanMemo:
             return self._data
         if not isinstance(scan.ranges, tuple):
             return None
-        self._scan, self._data = scan, {}
+        b = scan.beams()
+        if self._beams is None or self._beams[0] is not b:
+            self._beams = (b, _beam_arrays(b))
+        self._scan, self._data = scan, _Derived(self._beams[1])
         return self._data
+
+
+class _Derived(dict[Any, Any]):
+    """A scan's derived data (empty at first), with the arrays of its laser's beams, which outlive the scan."""
+
+    __slots__ = ("beams",)
+
+    def __init__(self, beams: tuple[Floats, Floats]) -> None:
+        super().__init__()
+        self.beams = beams
+
+
+def _beam_arrays(b: Beams) -> tuple[Floats, Floats]:
+    """The cosines and sines of a laser's beams as arrays."""
+    return np.array(b.cos, dtype=np.float64), np.array(b.sin, dtype=np.float64)
+
+
+def _arrays(scan: Scan, data: dict[Any, Any]) -> tuple[Floats, Floats, Floats]:
+    """The scan's ranges, and its beams' cosines and sines, as arrays: elementwise arithmetic on them rounds
+    exactly as the same operations on floats do (reductions that add are done on lists, in order, as before)."""
+    arrays: tuple[Floats, Floats, Floats] | None = data.get("arrays")
+    if arrays is None:
+        cos, sin = data.beams if isinstance(data, _Derived) else _beam_arrays(scan.beams())
+        arrays = data["arrays"] = (np.array(scan.ranges, dtype=np.float64), cos, sin)
+    return arrays
 
 
 def _scratch(scan: Scan, memo: ScanMemo | None) -> dict[Any, Any]:
@@ -161,24 +199,24 @@ def fit_wall(scan: Scan, side: int, expect: float | None = None, memo: ScanMemo 
     return _kept(data, ("fit", side, expect), lambda: _fit(scan, side, expect, data))
 
 
-def _side(scan: Scan, side: int) -> tuple[list[float], list[float], list[float]]:
-    """The hits on one side, as x and lateral distance (parallel lists), and the supported starting distances."""
+def _side(scan: Scan, side: int, data: dict[Any, Any]) -> tuple[Floats, Floats, list[float]]:
+    """The hits on one side, as x and lateral distance (parallel arrays), and the supported starting distances."""
     lo, hi = SECTORS[1 if side > 0 else -1]
-    b, far = scan.beams(), scan.max_range
-    i0, i1 = b.span(lo, hi)
-    beams = zip(scan.ranges[i0:i1], b.cos[i0:i1], b.sin[i0:i1], strict=True)
-    if side > 0:
-        pts = [(r * c, y) for r, c, s in beams if r < far and (y := r * s) > 0.05]
-    else:
-        pts = [(r * c, y) for r, c, s in beams if r < far and (y := -(r * s)) > 0.05]
-    abeam = sorted([y for x, y in pts if abs(x) <= 2 * y])  # within about 60 degrees of the perpendicular
+    ranges, cos, sin = _arrays(scan, data)
+    i0, i1 = scan.beams().span(lo, hi)
+    r = ranges[i0:i1]
+    y = r * sin[i0:i1] if side > 0 else -(r * sin[i0:i1])
+    hit = (r < scan.max_range) & (y > 0.05)
+    xs, ys = (r * cos[i0:i1])[hit], y[hit]
+    abeam = np.sort(ys[np.abs(xs) <= 2 * ys])  # within about 60 degrees of the perpendicular
     # abeam is sorted: abeam[i] has SUPPORT values within SPREAD above it exactly when abeam[i + SUPPORT - 1] does
-    support = [y for y, z in zip(abeam, abeam[SUPPORT - 1:], strict=False) if z - y < SPREAD]
-    return [x for x, _ in pts], [y for _, y in pts], support
+    k = len(abeam) - SUPPORT + 1
+    support: list[float] = abeam[:k][abeam[SUPPORT - 1:] - abeam[:k] < SPREAD].tolist() if k > 0 else []
+    return xs, ys, support
 
 
 def _fit(scan: Scan, side: int, expect: float | None, data: dict[Any, Any]) -> Wall | None:
-    xs, ys, support = _kept(data, ("side", side), lambda: _side(scan, side))
+    xs, ys, support = _kept(data, ("side", side), lambda: _side(scan, side, data))
     if not support:
         return None
     if expect is None:
@@ -188,27 +226,31 @@ def _fit(scan: Scan, side: int, expect: float | None, data: dict[Any, Any]) -> W
         d0 = support[j - 1] if j == len(support) or (j > 0 and expect - support[j - 1] <= support[j] - expect) \
             else support[j]
     # first pass: the points within 0.25 m of the line y = d0; the rest depends on d0 only through them
-    first = tuple([i for i, y in enumerate(ys) if -0.25 < y - d0 < 0.25])
-    return _kept(data, ("refine", side, first), lambda: _refine(xs, ys, first, side))
+    off = ys - d0
+    first = (-0.25 < off) & (off < 0.25)
+    return _kept(data, ("refine", side, first.tobytes()), lambda: _refine(xs, ys, first, side))
 
 
-def _refine(xs: list[float], ys: list[float], first: tuple[int, ...], side: int) -> Wall | None:
-    """Least squares on the `first` inliers, then again on the points within 0.1 m of that line."""
+def _refine(xs: Floats, ys: Floats, first: Mask, side: int) -> Wall | None:
+    """Least squares on the `first` inliers, then again on the points within 0.1 m of that line. The sums add
+    Python floats in order (numpy's own sums group terms differently, which would round differently)."""
     inl = first
     m = c = 0.0
+    n = 0
     for gate in (None, 0.1):
         if gate is not None:
-            inl = tuple([i for i, (x, y) in enumerate(zip(xs, ys, strict=True)) if -gate < y - (m * x + c) < gate])
-        n = len(inl)
+            off = ys - (m * xs + c)
+            inl = (-gate < off) & (off < gate)
+        ix, iy = xs[inl], ys[inl]
+        n = len(ix)
         if n < 5:
             return None
-        ix, iy = [xs[i] for i in inl], [ys[i] for i in inl]
-        mx, my = sum(ix) / n, sum(iy) / n
-        dxs = [x - mx for x in ix]
-        sxx = sum([dx * dx for dx in dxs])
+        mx, my = sum(ix.tolist()) / n, sum(iy.tolist()) / n
+        dxs = ix - mx
+        sxx = sum((dxs * dxs).tolist())
         if sxx < 1e-6:
             return None
-        m = sum([dx * (y - my) for dx, y in zip(dxs, iy, strict=True)]) / sxx
+        m = sum((dxs * (iy - my)).tolist()) / sxx
         c = my - m * mx
     a = math.atan(m)
     return Wall(c * math.cos(a), side * a, n)
@@ -245,16 +287,22 @@ ACROSS, WIDER = 0.9, 1.0
 def clearance_ahead(scan: Scan, half_width: float = BODY, memo: ScanMemo | None = None) -> float:
     """Free distance straight ahead (m) in a swath `2 * half_width` wide: the nearest hit in front of the robot
     within that lateral distance of its axis, or the laser's range when nothing is there."""
-    far = scan.max_range
-    return _kept(_scratch(scan, memo), ("clearance", half_width), lambda: min(
-        [r * c for r, c, s in _ahead(scan) if r < far and -half_width < r * s < half_width], default=far))
+    data = _scratch(scan, memo)
+    return _kept(data, ("clearance", half_width), lambda: _clearance(scan, half_width, data))
 
 
-def _ahead(scan: Scan) -> zip[tuple[float, float, float]]:
-    """(range, cos, sin) of the beams in front of the robot (`ahead`)."""
-    b = scan.beams()
-    i0, i1 = ahead(b)
-    return zip(scan.ranges[i0:i1], b.cos[i0:i1], b.sin[i0:i1], strict=True)
+def _clearance(scan: Scan, half_width: float, data: dict[Any, Any]) -> float:
+    r, c, s = _ahead(scan, data)
+    lateral = r * s
+    xs = (r * c)[(r < scan.max_range) & (-half_width < lateral) & (lateral < half_width)]
+    return float(xs.min()) if len(xs) else scan.max_range
+
+
+def _ahead(scan: Scan, data: dict[Any, Any]) -> tuple[Floats, Floats, Floats]:
+    """Range, cosine and sine of the beams in front of the robot (`ahead`), as arrays."""
+    ranges, cos, sin = _arrays(scan, data)
+    i0, i1 = ahead(scan.beams())
+    return ranges[i0:i1], cos[i0:i1], sin[i0:i1]
 
 
 def wall_across(scan: Scan, within: float = END, memo: ScanMemo | None = None) -> bool:
@@ -263,6 +311,8 @@ def wall_across(scan: Scan, within: float = END, memo: ScanMemo | None = None) -
     corridor's side walls), so an intruder walking by is not taken for the end."""
     if clearance_ahead(scan, memo=memo) >= within:
         return False
-    far, depth = scan.max_range, within + 0.25
-    across = [y for r, c, s in _ahead(scan) if r < far and 0 < r * c < depth and -ACROSS < (y := r * s) < ACROSS]
-    return bool(across) and max(across) - min(across) >= WIDER
+    depth = within + 0.25
+    r, c, s = _ahead(scan, _scratch(scan, memo))
+    x, y = r * c, r * s
+    across = y[(r < scan.max_range) & (0 < x) & (x < depth) & (-ACROSS < y) & (y < ACROSS)]
+    return bool(len(across)) and float(across.max()) - float(across.min()) >= WIDER
