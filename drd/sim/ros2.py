@@ -489,7 +489,8 @@ class LockstepSimulation(Simulation):
         for _attempt in range(3):  # a free port may be taken between the look and the listen
             endpoint = free_endpoint()
             try:
-                router = Ros2Session.listen(endpoint, options=LOCKSTEP_ZENOH, types=mapping.message_types())
+                router = Ros2Session.listen(endpoint, options=LOCKSTEP_ZENOH, types=mapping.message_types(),
+                                            one_thread=True)
                 break
             except BusError:
                 continue
@@ -497,8 +498,8 @@ class LockstepSimulation(Simulation):
             raise BusError("the dry-run's ROS 2 router could not listen on a loopback port")
         sessions = [router]
         try:
-            client = Ros2Session.connect(endpoint, options=LOCKSTEP_ZENOH, types=router.types) if loopback \
-                else Ros2Session(router.bus, types=router.types)
+            client = Ros2Session.connect(endpoint, options=LOCKSTEP_ZENOH, types=router.types, one_thread=True) \
+                if loopback else Ros2Session(router.bus, types=router.types, one_thread=True)
             sessions.insert(0, client)
             self.served = ServedRobots(self, cluster, router, domain_id=domain_id, lockstep=True)
         except BaseException:

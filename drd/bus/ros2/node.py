@@ -139,9 +139,9 @@ class Ros2Node:
 
     def subscribe(self, topic: str, type_name: str, callback: MessageCallback,
                   qos: QoS | None = None) -> Subscription:
-        """Declare a subscription; ``callback(message, info)`` runs on the session's callback thread, one message of
-        the session's subscriptions at a time, in arrival order: keep it short, and never wait in it for another
-        message of the same session (a TRANSIENT_LOCAL subscription's run on a zenoh thread of their own)."""
+        """Declare a subscription; ``callback(message, info)`` runs on a zenoh thread of the subscription (keep it
+        short), or, on a session opened with ``one_thread``, on the session's one callback thread, in arrival order
+        (then never wait in it for another message of that session)."""
         return self._add(Subscription(self, self.topic(topic, type_name, qos), callback))
 
     def _add(self, entity: E) -> E:
@@ -273,7 +273,7 @@ class Subscription(_Entity):
         self.callback = callback
         self.received = 0
         self.dropped = 0
-        session, qos = node.session.session, topic.qos
+        session, qos, dispatcher = node.session.session, topic.qos, node.session.dispatcher
         if qos.durability is Durability.TRANSIENT_LOCAL:  # ask every publisher's cache, late joiners' too
             recovery = zenoh.ext.RecoveryConfig(periodic_queries=None, heartbeat=True) \
                 if qos.reliability is not Reliability.BEST_EFFORT else None
@@ -283,7 +283,7 @@ class Subscription(_Entity):
                                       subscriber_detection=True)
         else:
             self._entity = zenoh_call(f"subscription to {topic.name}", session.declare_subscriber, self.key,
-                                      node.session.dispatcher.handler(self._on_sample))
+                                      self._on_sample if dispatcher is None else dispatcher.handler(self._on_sample))
         self._declare_token()
 
     def _on_sample(self, sample: zenoh.Sample) -> None:

@@ -94,29 +94,34 @@ class Dispatcher:
 class Ros2Session:
     """A zenoh session speaking rmw_zenoh (the counterpart of an rmw context); holds or borrows a ZenohBus."""
 
-    def __init__(self, bus: ZenohBus, *, owned: bool = False, types: MessageTypes | None = None) -> None:
+    def __init__(self, bus: ZenohBus, *, owned: bool = False, types: MessageTypes | None = None,
+                 one_thread: bool = False) -> None:
         self.bus = bus
         self.owned = owned
         self.types = types if types is not None else jazzy()
         with _COUNTERS_LOCK:
             self._ids = _COUNTERS.setdefault(bus, itertools.count())
-        self.dispatcher = Dispatcher(bus.name or "session")
+        #: `one_thread`: the subscriptions' callbacks run on one thread of the session (`Dispatcher`), for a process
+        #: whose every callback is short and never waits (the dry-run's lockstep); else on zenoh's thread per
+        #: subscription, so a callback that waits (a read waiting for a first message) holds up no other topic.
+        self.dispatcher = Dispatcher(bus.name or "session") if one_thread else None
 
     @classmethod
     def connect(cls, endpoints: str | Sequence[str], *, options: Mapping[str, Any] | None = None,
-                types: MessageTypes | None = None) -> Ros2Session:
+                types: MessageTypes | None = None, one_thread: bool = False) -> Ros2Session:
         """A client session of the robot's zenoh router (e.g. ``tcp/192.168.1.20:7447``), as drd's drivers use."""
         connect = [endpoints] if isinstance(endpoints, str) else list(endpoints)
         bus = ZenohBus(connect=connect, options={"mode": "client", **(options or {})}, name="ros2 client")
-        return cls(bus, owned=True, types=types)
+        return cls(bus, owned=True, types=types, one_thread=one_thread)
 
     @classmethod
     def listen(cls, endpoints: str | Sequence[str], *, mode: str = "router",
-               options: Mapping[str, Any] | None = None, types: MessageTypes | None = None) -> Ros2Session:
+               options: Mapping[str, Any] | None = None, types: MessageTypes | None = None,
+               one_thread: bool = False) -> Ros2Session:
         """A session that ROS 2 nodes and tools connect to, as to a robot's router (the served simulator)."""
         listen = [endpoints] if isinstance(endpoints, str) else list(endpoints)
         bus = ZenohBus(listen=listen, options={"mode": mode, **(options or {})}, name=f"ros2 {mode}")
-        return cls(bus, owned=True, types=types)
+        return cls(bus, owned=True, types=types, one_thread=one_thread)
 
     @property
     def session(self) -> zenoh.Session:
@@ -141,7 +146,8 @@ class Ros2Session:
     def close(self) -> None:
         """Stop the callbacks' thread; close the zenoh session if this object opened it (bounded, as ZenohBus
         closes)."""
-        self.dispatcher.close()
+        if self.dispatcher is not None:
+            self.dispatcher.close()
         if self.owned:
             self.bus.close()
 
