@@ -10,6 +10,7 @@ from __future__ import annotations
 import functools
 import json
 import logging
+import os
 import signal
 import subprocess
 import sys
@@ -166,9 +167,7 @@ def start(
         cluster.host(host)
     except KeyError:
         fail(f"no host {host!r} in {config} (hosts: {', '.join(h.name for h in cluster.hosts)})")
-    from drd.preflight import start_problems
-
-    problems = start_problems(cluster, host, cat)  # before any process or pidfile: a typo fails here
+    problems = _preflight(cluster, host, cat)  # before any process or pidfile: a typo fails here
     if problems:
         fail_all(problems, hint="see docs/drivers.md (drivers), docs/components.md (manifests), docs/worlds.md")
     try:
@@ -189,6 +188,43 @@ def start(
                        peer_grace, log_level, extra, as_json)
     _configure_logging(host, log_file, level)
     return _serve(cluster, host, cat, tr, rd, config, log_file, load_period, peer_grace)
+
+
+def _preflight(cluster: Cluster, host: str, cat: Catalog) -> list[str]:
+    """What keeps `host` from starting (`drd.preflight.start_problems`), found in a forked child while this process
+    is still single-threaded. The check imports every manifest's entry point: in the daemon, those modules (the
+    behaviors, numpy with them) would stay for its whole life, about 9 MB it never uses (its workers import them
+    from the fork server). Checked in this process where a fork is not known to be safe (no /proc/self/task to
+    count threads), or when the child gives no answer (an exception there is then raised here, as before)."""
+    from drd.preflight import start_problems
+
+    tasks = Path("/proc/self/task")
+    if not hasattr(os, "fork") or not tasks.is_dir() or len(list(tasks.iterdir())) != 1:
+        return start_problems(cluster, host, cat)
+    read, write = os.pipe()
+    sys.stdout.flush()
+    sys.stderr.flush()
+    pid = os.fork()
+    if pid == 0:  # the child: check, answer, and end without the interpreter's shutdown (the parent's to do)
+        code = 1
+        try:
+            os.close(read)
+            with os.fdopen(write, "w", encoding="utf-8") as answer:
+                json.dump(start_problems(cluster, host, cat), answer)
+            code = 0
+        finally:
+            os._exit(code)
+    os.close(write)
+    with os.fdopen(read, encoding="utf-8") as answer:
+        text = answer.read()
+    _, status = os.waitpid(pid, 0)
+    try:
+        problems = json.loads(text) if os.waitstatus_to_exitcode(status) == 0 else None
+    except ValueError:
+        problems = None
+    if not isinstance(problems, list) or not all(isinstance(p, str) for p in problems):
+        return start_problems(cluster, host, cat)
+    return problems
 
 
 def _load_cluster(config: Path, cat: Catalog) -> Cluster:
