@@ -354,6 +354,36 @@ def test_drd_to_drd_through_a_router_with_attachments(router: tuple[Ros2Session,
         bus.close()
 
 
+def test_a_one_thread_session_runs_every_callback_on_one_thread_in_arrival_order(
+        router: tuple[Ros2Session, int]) -> None:
+    """The lockstep's sessions: one callback thread for all their subscriptions, stopped when the session closes;
+    and a publisher says when the router knows a subscription (a put before that reaches no one)."""
+    session, port = router
+    robot = Ros2Node(session, "fake_robot", namespace="ranger1")
+    client = Ros2Session.connect(f"tcp/127.0.0.1:{port}", options=FAST_OPEN, one_thread=True)
+    got: list[tuple[str, int, str]] = []
+    try:
+        odom, scan = robot.publisher("odom_x", TWIST), robot.publisher("scan_x", TWIST)
+        assert not odom.matched()
+        drd = Ros2Node(client, "drd", namespace="ranger1")
+        for name in ("odom_x", "scan_x"):
+            drd.subscribe(name, TWIST, lambda msg, info, n=name: got.append((n, int(msg.linear.x),
+                                                                            threading.current_thread().name)))
+        eventually(lambda: odom.matched() and scan.matched(), "the router to know both subscriptions")
+        for k in range(20):
+            (odom if k % 2 == 0 else scan).publish({"linear": {"x": float(k)}})
+        eventually(lambda: len(got) == 20, "20 messages")
+        assert [x for _, x, _ in got] == list(range(20))  # arrival order, across the two topics
+        threads = {t for _, _, t in got}
+        assert len(threads) == 1 and threads != {threading.current_thread().name}
+        (thread,) = (t for t in threading.enumerate() if t.name in threads)
+    finally:
+        client.close()
+        robot.close()
+    thread.join(timeout=5)
+    assert not thread.is_alive()
+
+
 def test_a_node_refuses_bad_names_and_says_when_no_router_answers() -> None:
     for name, namespace in (("drd drive", ""), ("1drive", ""), ("drive", "ranger 1")):
         with pytest.raises(ValueError):
