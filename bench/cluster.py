@@ -46,8 +46,8 @@ import psutil
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))  # the tests' helpers import each other
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # ... imported as `tests.*`
 
+from drd.cluster.workers import KEEP_WARM  # noqa: E402
 from drd.daemon.client import ClusterClient  # noqa: E402
-from drd.daemon.workers import KEEP_WARM  # noqa: E402
 from tests.cluster_support import DRD, RANGER, ROOT, free_ports  # noqa: E402
 
 GOAL = 0.5  # seconds, median of `missionctl status` (issue #15: of 50 daemons; it was 1 s of 10)

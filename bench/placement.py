@@ -3,7 +3,7 @@ forkserver spawn of a process as the peer, in the same run.
 
 Run `python bench/placement.py [--repeat 200] [--json]` (never by pytest); `--policy HOSTS` times only the pure
 policy (`drd.placement.place`) over HOSTS hosts. It builds a Component Creator
-(`drd.daemon.creator.Creator`, no bus) for host ranger1 of a generated hosts file, with its own pool of
+(`drd.cluster.creator.Creator`, no bus) for host ranger1 of a generated hosts file, with its own pool of
 pre-started worker processes (fork server warm, behavior modules preloaded), and times with
 `time.perf_counter`, `--repeat` times each (median and p90):
 
@@ -78,9 +78,9 @@ def main() -> None:
               f"place over {args.policy} hosts: median {report['median_ms']:.3f} ms, p90 {report['p90_ms']:.3f} ms")
         return
 
+    from drd.cluster.creator import Creator, behavior_modules
     from drd.cluster.remote import ComponentCall
-    from drd.daemon.creator import Creator, behavior_modules
-    from drd.daemon.workers import WorkerPool
+    from drd.cluster.workers import WorkerPool
     from drd.hosts import load_hosts
     from drd.hw.drivers import HostDrivers
     from drd.manifests import load_catalog

@@ -35,7 +35,7 @@ class SimDriver:
 
     #: Methods and attributes whose value is a function of the simulated world at one instant (its `version`):
     #: no side effect, noise seeded per instant. The cluster's Creator reads them ahead of a component's step
-    #: (`drd.daemon.creator`), which then costs no round trip to the component's process.
+    #: (`drd.cluster.creator`), which then costs no round trip to the component's process.
     READINGS: frozenset[str] = frozenset()
     #: Commands (`drd.runtime.ownership`): setpoints hold until the next one and are multiplexed per control
     #: cycle; actions run at once and return a result; `STOP` brings the device to a safe stop. Each goes through

@@ -20,8 +20,9 @@ MESSAGE_MODULES: tuple[str, ...] = (
     "drd.daemon.messages",
     "drd.daemon.missions",
     "drd.daemon.migrate",
-    "drd.daemon.workers",
+    "drd.cluster.workers",
     "drd.cluster.gates",
+    "drd.cluster.instances",
     "drd.cluster.remote",
     "drd.sim.service",
 )

@@ -1,7 +1,7 @@
 """`missionctl tune INSTANCE [--cores 0,1] [--nice 5]`: core and priority assignment of a running instance.
 
 The instance's host comes from the Component Database (the name service, `lookup`): every Creator announces
-its instances. The request (`drd.daemon.workers.Tune`) goes to that host's Creator, which sets the CPU
+its instances. The request (`drd.cluster.workers.Tune`) goes to that host's Creator, which sets the CPU
 affinity and nice level of the process running the instance (a container shares it with other instances:
 the answer names them) and answers what the process runs with now. Without `--cores` or `--nice` it only
 shows the current settings. An unknown instance exits with code 2 and a did-you-mean.
@@ -52,7 +52,7 @@ def tune(instance: str = typer.Argument(..., metavar="INSTANCE", show_default=Fa
          timeout: float = TimeoutOption) -> int:
     """Set CPU affinity and nice of the process running a component instance, at run time."""
     from drd.bus import RemoteError
-    from drd.daemon.workers import Tune, Tuned
+    from drd.cluster.workers import Tune, Tuned
     from dsl.errors import did_you_mean
 
     try:

@@ -3,7 +3,7 @@
 The executive steps a `RemoteComponent` exactly like a local one. It works out, at each `start`, which host
 owns the devices its needs are bound to (`ranger1.drive` -> `ranger1`, from its context's bindings) and sends
 each lifecycle call (`start`, `step`, `suspend`, `resume`, `terminate`) to that host's Creator
-(`drd.daemon.creator`) as a `ComponentCall`. A call carries what the component may read of the mission: its
+(`drd.cluster.creator`) as a `ComponentCall`. A call carries what the component may read of the mission: its
 parameters, the unit bound to each need with the epoch it is bound at (None once unbound: the gate on the
 device's host then refuses its commands), the inputs the mission bound (shared data such as a DoorLog,
 siblings' outputs). Every message to a host first carries the gate operations queued for it

@@ -8,7 +8,7 @@ Executive on the controller host), `client.ClusterClient` (what `missionctl` use
 
 from __future__ import annotations
 
-from drd.daemon.keys import ClusterKeys
+from drd.cluster.keys import ClusterKeys
 from drd.daemon.view import Change, ClusterView, HostState
 
 __all__ = ["Change", "ClusterKeys", "ClusterView", "HostState"]

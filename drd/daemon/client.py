@@ -16,7 +16,7 @@ from dataclasses import asdict, replace
 from typing import Any, Self, TypeVar
 
 from drd.bus import Bus, BusError, BusTimeout, Message, Ping, Pong
-from drd.daemon.keys import ClusterKeys, cluster_of
+from drd.cluster.keys import ClusterKeys, cluster_of
 from drd.daemon.messages import (
     ComponentsReply,
     DaemonStatus,

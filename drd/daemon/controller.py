@@ -18,7 +18,7 @@ from typing import Any
 from drd.bus import Bus, BusWrapper, Handler, Message, Query, Queryable, Reply
 from drd.bus.keys import is_concrete
 from drd.bus.messages import encode
-from drd.daemon.keys import ClusterKeys
+from drd.cluster.keys import ClusterKeys
 from drd.daemon.messages import ResourcesReply, ResourcesRequest, RobotInfo, UnitInfo, ViewRequest, WaiterInfo
 from drd.hosts import Cluster
 from drd.paging import by_position

@@ -1,6 +1,6 @@
 """The Distributed Robotics Daemon: one per host, a thin shell around the cluster view.
 
-Services of every daemon (keys in `drd.daemon.keys`, docs/daemon.md):
+Services of every daemon (keys in `drd.cluster.keys`, docs/daemon.md):
 
 - **presence**: a liveliness token `drd/<cluster>/host/<host>`;
 - **Load Reporter**: a `LoadReport` every `load_period` seconds;
@@ -40,8 +40,9 @@ from typing import Any
 from drd.bus import Bus, BusError, LoadReport, Message, Ping, Pong, Query, Reply, Sample
 from drd.bus.base import Declaration
 from drd.bus.messages import encode
+from drd.cluster.instances import InstanceInfo
+from drd.cluster.keys import ClusterKeys, cluster_of
 from drd.daemon.controller import Controller
-from drd.daemon.keys import ClusterKeys, cluster_of
 from drd.daemon.load import LoadSampler, live_robots
 from drd.daemon.messages import (
     Announcement,
@@ -50,7 +51,6 @@ from drd.daemon.messages import (
     DaemonStatus,
     HostInfo,
     HostsReply,
-    InstanceInfo,
     Leaving,
     LiveReport,
     Lookup,
@@ -162,7 +162,7 @@ class Daemon:
         self._suspects: dict[str, str] = {}  # host -> a "refused credentials" diagnosis seen once, not yet confirmed
         self.controller: Controller | None = None
         self.runner: Any = None  # drd.daemon.missions.MissionRunner, on the controller
-        self.creator: Any = None  # drd.daemon.creator.Creator
+        self.creator: Any = None  # drd.cluster.creator.Creator
         self.sim_service: Any = None  # drd.sim.service.SimulationService, on the simulator host
         self._bus = bus
         self._lock = threading.RLock()  # the view, the events, the announcements
@@ -223,7 +223,7 @@ class Daemon:
             from drd.sim.service import SimulationService
 
             self.sim_service = SimulationService(bus, self.cluster.name)
-        from drd.daemon.creator import Creator
+        from drd.cluster.creator import Creator
 
         self.creator = Creator(bus, self.cluster, me, self.config.catalog,
                                sim_service=self.sim_service,

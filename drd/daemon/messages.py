@@ -12,19 +12,7 @@ import dataclasses
 from typing import Any
 
 from drd.bus import Message, message
-
-
-@message("drd.daemon.instance", 2)
-class InstanceInfo(Message):
-    """A running component instance (or a daemon service) and where it answers."""
-
-    name: str
-    component: str
-    host: str
-    state: str = "running"
-    key: str = ""
-    pid: int | None = None  # the worker process running a component instance (None for a daemon service)
-    mission: str = ""  # the mission of a component instance (several may run the same paths)
+from drd.cluster.instances import InstanceInfo
 
 
 @message("drd.daemon.announce", 1)

@@ -32,8 +32,9 @@ from dataclasses import dataclass
 from enum import StrEnum
 
 from drd.bus import LoadReport
+from drd.cluster.instances import InstanceInfo
 from drd.daemon.load import TELEMETRY, live_value
-from drd.daemon.messages import Announcement, InstanceInfo, LiveReport, Location
+from drd.daemon.messages import Announcement, LiveReport, Location
 from drd.hosts import Cluster, Host, Role
 from drd.placement import HostView, required_devices, view_of
 from drd.trader import Offer

@@ -5,7 +5,7 @@ random draw of the motion comes from a generator seeded by (seed, robot, what), 
 so the same world, seed and command sequence give bit-identical poses and readings. A sensor reading is a
 function of the world at one instant: its noise is seeded by (seed, robot, sensor, `version`), so asking
 again at the same instant gives the same answer, and asking ahead of need, or not at all, changes no
-other reading (the cluster's Creator reads ahead of a component's step: `drd.daemon.creator`). Drivers
+other reading (the cluster's Creator reads ahead of a component's step: `drd.cluster.creator`). Drivers
 command robots (`set_velocity`, `launch`, `jump`) and read sensors (`ranges`, `camera`,
 `brightness`, `radio_ok`, `odometry`, `battery`); `pose`, `intruders` and `trajectory` are ground truth,
 for the report and the picture only.

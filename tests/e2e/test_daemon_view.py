@@ -12,9 +12,9 @@ import yaml
 
 from drd.bus import LoadReport, LocalNetwork, Ping
 from drd.bus.messages import encode
+from drd.cluster.keys import ClusterKeys, cluster_of
 from drd.daemon.controller import Membership, resources_reply
 from drd.daemon.daemon import Daemon, DaemonConfig, config_digest
-from drd.daemon.keys import ClusterKeys, cluster_of
 from drd.daemon.logs import RateLimit
 from drd.daemon.messages import Announcement, ComponentsReply, HostsReply, Location, Lookup, TraderRequest
 from drd.daemon.peers import REFUSED, diagnose, parse_endpoint

@@ -13,7 +13,7 @@ from typing import Any
 import pytest
 from cluster_support import DaemonCluster, corridor_hosts, corridor_run, eventually, serving_cluster
 
-from drd.daemon.keys import ClusterKeys
+from drd.cluster.keys import ClusterKeys
 from drd.daemon.messages import TraderReply, TraderRequest
 
 NAMES = ["controller", "ranger1"]

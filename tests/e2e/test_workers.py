@@ -22,10 +22,10 @@ from typing import Any
 import psutil
 import pytest
 
+from drd.cluster.creator import Creator, CreatorError
 from drd.cluster.gates import GateUpdate
 from drd.cluster.remote import ComponentBatch, ComponentCall, ComponentReply
-from drd.daemon.creator import Creator, CreatorError
-from drd.daemon.workers import Tune, WorkerPool
+from drd.cluster.workers import Tune, WorkerPool
 from drd.hosts import Cluster, load_hosts
 from drd.hw.drivers import HostDrivers
 from drd.hw.interfaces import Fence, HardwareError
@@ -137,7 +137,7 @@ def cluster_(tmp_path_factory: pytest.TempPathFactory, catalog_: Catalog) -> Clu
 
 @pytest.fixture(scope="module")
 def pool(catalog_: Catalog) -> Iterator[WorkerPool]:
-    from drd.daemon.creator import behavior_modules
+    from drd.cluster.creator import behavior_modules
 
     p = WorkerPool(2, preload=behavior_modules(catalog_), call_timeout=10.0)  # generous: a loaded test machine
     try:
@@ -471,7 +471,7 @@ def test_a_host_refuses_the_calls_of_a_controller_older_than_one_it_heard(creato
 def test_a_pool_keeps_idle_workers_only_while_the_host_has_work(catalog_: Catalog) -> None:
     """Issue #15 (lighter daemons): a cold pool starts nothing; a take or `warm()` makes it keep `size` idle
     workers, and `keep_warm` seconds after the last of them it stops them (by pid, reaped)."""
-    from drd.daemon.creator import behavior_modules
+    from drd.cluster.creator import behavior_modules
 
     p = WorkerPool(2, preload=behavior_modules(catalog_), call_timeout=10.0, keep_warm=1.0, warm=False)
     try:

@@ -23,7 +23,7 @@ INTERNAL = {
     "drd.bus.schema.Mismatch": "a schema check's inner signal, turned into MalformedMessage by its caller",
     "drd.bus.messages.MalformedMessage": "a wire payload refused; the server logs it and answers an error",
     "dsl.evaluate.EvalError": "an expression's failure at run time; the interpreter fails the state with it",
-    "drd.daemon.pipe.ProtocolError": "a worker's message refused by the Creator, which kills that worker",
+    "drd.cluster.pipe.ProtocolError": "a worker's message refused by the Creator, which kills that worker",
     "dsl.errors.OverBudget": "a compile stage's signal past its budget; the compiler reports it as a located error",
 }
 

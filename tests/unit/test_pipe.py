@@ -1,4 +1,4 @@
-"""The worker pipe protocol (`drd.daemon.pipe`): every record survives encode/decode, and what a worker could
+"""The worker pipe protocol (`drd.cluster.pipe`): every record survives encode/decode, and what a worker could
 forge (an unknown tag, a wrong number of fields, a field of a wrong type, a pickled object) is refused by the
 plain decoder the Creator reads workers with, before anything is built or run."""
 
@@ -11,7 +11,7 @@ from typing import Any
 
 import pytest
 
-from drd.daemon.pipe import (
+from drd.cluster.pipe import (
     AttrRead,
     Call,
     CallReply,

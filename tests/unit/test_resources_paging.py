@@ -11,9 +11,9 @@ import pytest
 
 from drd.bus import LocalNetwork, Message, Query
 from drd.bus.messages import MAX_SIZE, MalformedMessage, encode
+from drd.cluster.keys import ClusterKeys
 from drd.daemon.client import ClusterClient
 from drd.daemon.controller import resources_page
-from drd.daemon.keys import ClusterKeys
 from drd.daemon.messages import ResourcesReply, ResourcesRequest, RobotInfo, UnitInfo, WaiterInfo
 
 

@@ -8,10 +8,11 @@ import pytest
 
 from drd.bus import LocalNetwork, Message, Query
 from drd.bus.messages import MAX_SIZE, MalformedMessage, encode
+from drd.cluster.instances import InstanceInfo
+from drd.cluster.keys import ClusterKeys
 from drd.daemon.client import ClusterClient
 from drd.daemon.daemon import components_page
-from drd.daemon.keys import ClusterKeys
-from drd.daemon.messages import ComponentsReply, InstanceInfo, ViewRequest
+from drd.daemon.messages import ComponentsReply, ViewRequest
 
 
 def crowded(instances: int) -> ComponentsReply:

@@ -2,7 +2,7 @@
 
 Component code is not ours to trust: a component that crashes the interpreter (`os._exit`, a segfault in an
 extension, the OOM killer) must take down its process, never the daemon. So the Creator
-(`drd.daemon.creator`) runs every component instance in a worker process and keeps the trusted side to
+(`drd.cluster.creator`) runs every component instance in a worker process and keeps the trusted side to
 itself: the catalog check, the drivers, their fencing (`drd.runtime.fence.Fenced`), the per-cycle
 arbitration of actuator commands and the simulator.
 
@@ -17,7 +17,7 @@ arbitration of actuator commands and the simulator.
 - A worker taken by the Creator becomes a **container** (hosting every instance whose manifest says
   `process: container` with the same `scheduling`) or a **dedicated** process (one instance, never shared).
 - The protocol is duplex, over one `multiprocessing` pipe per worker; its messages are the typed records of
-  `drd.daemon.pipe` (one `encode`, one `decode`). A new worker says `Ready`. The Creator sends `Run` (one or
+  `drd.cluster.pipe` (one `encode`, one `decode`). A new worker says `Ready`. The Creator sends `Run` (one or
   several `Call`s, see `run_calls`); the worker may send any number of driver requests, `DeviceCall` /
   `AttrRead`, each answered `Ok` or `Raise`, and setpoints, `Command` (not answered), and ends with `Done`
   (a `CallReply` per call run). `Drop` forgets instances (no answer). What comes from a worker is decoded as plain
@@ -62,7 +62,7 @@ import psutil
 
 from drd import entrypoints
 from drd.bus import Message, message
-from drd.daemon.pipe import (
+from drd.cluster.pipe import (
     AttrRead,
     Call,
     CallReply,
@@ -80,11 +80,11 @@ from drd.daemon.pipe import (
     encode,
     reading_key,
 )
-from drd.daemon.pipe import Message as PipeMessage
+from drd.cluster.pipe import Message as PipeMessage
 from drd.errors import ComponentFailure
 from drd.hw.commands import spec_of
 
-log = logging.getLogger("drd.daemon.workers")
+log = logging.getLogger("drd.cluster.workers")
 
 #: Idle workers kept ready while the host has work (`DRD_WORKERS` overrides it for a daemon).
 DEFAULT_SIZE = 2
@@ -104,7 +104,7 @@ START_TIMEOUT = 20.0
 RUNPY_QUIET = "ignore::RuntimeWarning:runpy"
 
 #: Modules every worker needs, imported once by the fork server.
-BASE_PRELOAD = ("drd.daemon.workers", "drd.runtime.component", "drd.runtime.records", "drd.hw.interfaces")
+BASE_PRELOAD = ("drd.cluster.workers", "drd.runtime.component", "drd.runtime.records", "drd.hw.interfaces")
 
 
 @message("drd.creator.tune", 1)
@@ -458,7 +458,7 @@ def device_methods(driver: object) -> list[str]:
 
 class _Link:
     """The worker's end of the pipe, for driver requests made from inside a call, and the readings the Creator
-    read ahead of the call (`ahead`, see `drd.daemon.creator.Creator._read_ahead`)."""
+    read ahead of the call (`ahead`, see `drd.cluster.creator.Creator._read_ahead`)."""
 
     def __init__(self, conn: Connection) -> None:
         self.conn = conn
@@ -578,7 +578,7 @@ def worker_main(conn: Connection) -> None:
     link.send(Ready(os.getpid()))
     try:
         while True:
-            match decode(conn.recv_bytes(), trusted=True):  # the Creator is the trusted side (see drd.daemon.pipe)
+            match decode(conn.recv_bytes(), trusted=True):  # the Creator is the trusted side (see drd.cluster.pipe)
                 case Run(calls, latest):
                     link.send(Done(tuple(run_calls(calls, latest, link, hosted))))
                 case Drop(paths):

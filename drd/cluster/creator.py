@@ -11,7 +11,7 @@ executive (through `RemoteComponent` proxies) and answers each with a `Component
   (`drd.cluster.gates`, carried by each call or sent alone), so only the holder's subtree, at its grant's
   epoch, moves a device, and a device whose holder lost it is stopped here, next to it.
 
-Component code runs in worker processes (`drd.daemon.workers`): a pre-started container shared by the
+Component code runs in worker processes (`drd.cluster.workers`): a pre-started container shared by the
 instances whose manifest says `process: container` (and the same `scheduling`), or a process of its own for
 `process: dedicated`. What stays here, on the trusted side: the checks above, the drivers and their fencing,
 the arbitration below and the simulator. Inside the worker a component's devices are proxies: each method
@@ -50,10 +50,9 @@ from drd.bus import Bus, BusError, Message, Query, Reply
 from drd.bus.keys import is_concrete
 from drd.cluster.gates import GateUpdate, GateUpdateReply, wire_record
 from drd.cluster.guard import HostGuard
-from drd.cluster.remote import ComponentBatch, ComponentBatchReply, ComponentCall, ComponentReply
-from drd.daemon.keys import ClusterKeys
-from drd.daemon.messages import InstanceInfo
-from drd.daemon.pipe import (
+from drd.cluster.instances import InstanceInfo
+from drd.cluster.keys import ClusterKeys
+from drd.cluster.pipe import (
     AttrRead,
     Call,
     CallReply,
@@ -70,7 +69,8 @@ from drd.daemon.pipe import (
     reading_key,
     reading_request,
 )
-from drd.daemon.workers import (
+from drd.cluster.remote import ComponentBatch, ComponentBatchReply, ComponentCall, ComponentReply
+from drd.cluster.workers import (
     DEFAULT_SIZE,
     MOVED,
     Tune,
@@ -90,7 +90,7 @@ from drd.runtime import records as rec
 from drd.runtime.ownership import Arbiter, Binding, BoundDevice, LocalGates, Proposal
 from dsl.catalog import Catalog, ComponentType, Kind, Process
 
-log = logging.getLogger("drd.daemon.creator")
+log = logging.getLogger("drd.cluster.creator")
 
 OPS = ("start", "step", "suspend", "resume", "terminate", "retire")
 

@@ -1,4 +1,4 @@
-"""The pipe protocol between the Creator and its worker processes (`drd.daemon.workers`), as typed records.
+"""The pipe protocol between the Creator and its worker processes (`drd.cluster.workers`), as typed records.
 
 Every message is a frozen dataclass. On the wire it is plain data, pickled: a tuple whose first element is the
 message's tag and the others its fields in order (a nested record, `Call`, `Setup` or `CallReply`, is the tuple of
@@ -60,7 +60,7 @@ class Setup:
 
 @dataclass(frozen=True, slots=True)
 class Call:
-    """One lifecycle call of an instance in a worker (see `drd.daemon.workers.run_calls`): `shared_ids` chain
+    """One lifecycle call of an instance in a worker (see `drd.cluster.workers.run_calls`): `shared_ids` chain
     shared dicts through a run, `params` come with `start` only, `setup` with an instance's first call, `ahead`
     holds the readings the Creator read ahead of a step (`{reading_key: value}`); `restore`, on a start only:
     `[state]` to give the instance (`Component.restore(state)`, state None: "it was lost") before it starts."""
