@@ -15,6 +15,7 @@ import json
 import os
 from collections.abc import Iterator
 from pathlib import Path
+from typing import Any
 
 import psutil
 import pytest
@@ -64,20 +65,37 @@ def all_running(c: DaemonCluster) -> bool:
     return all((c.pidfile(name) or {}).get("state") == "running" for name in c.names)
 
 
+def whole_fleet_status(fleet: DaemonCluster) -> dict[str, Any]:
+    """`missionctl status --json` once it shows the whole fleet: answered by the controller, every host up, no
+    error. Polled (bounded): on two cores shared with other test runs, one answer may come while a host's load
+    report is late or a request times out; a host that never comes up, or an error that stays, still fails."""
+    last: dict[str, Any] = {}
+
+    def whole() -> bool:
+        nonlocal last
+        r = fleet.missionctl("status", "--json", "--config", str(fleet.hosts_file), "--timeout", "10", timeout=60)
+        last = json.loads(r.stdout) if r.returncode == 0 else {"stderr": r.stderr[-2000:]}
+        return (r.returncode == 0 and last["answered_by"] == "controller" and last["errors"] == {}
+                and {h["name"] for h in last["hosts"] if h["state"] == "up"} == set(NAMES))
+
+    try:
+        eventually(whole, "a status of the whole fleet", timeout=90.0, poll=1.0)
+    except pytest.fail.Exception:
+        pytest.fail(f"no status of the whole fleet within 90 s; the last: {json.dumps(last)[:3000]}")
+    return last
+
+
 def test_every_host_is_up_and_status_is_the_whole_fleet(fleet: DaemonCluster) -> None:
-    config = str(fleet.hosts_file)
-    r = fleet.missionctl("hosts", "--json", "--config", config, timeout=60)
-    assert r.returncode == 0, r.stderr[-2000:]
-    hosts = json.loads(r.stdout)
-    assert {h["name"]: h["state"] for h in hosts["hosts"]} == dict.fromkeys(NAMES, "up")
-    r = fleet.missionctl("status", "--json", "--config", config, "--timeout", "10", timeout=60)
-    assert r.returncode == 0, r.stderr[-2000:]
-    status = json.loads(r.stdout)
-    assert status["answered_by"] == "controller" and status["errors"] == {}
+    def all_up() -> bool:
+        r = fleet.missionctl("hosts", "--json", "--config", str(fleet.hosts_file), timeout=60)
+        assert r.returncode == 0, r.stderr[-2000:]
+        return {h["name"]: h["state"] for h in json.loads(r.stdout)["hosts"]} == dict.fromkeys(NAMES, "up")
+
+    eventually(all_up, f"missionctl hosts to show all {N} hosts up", timeout=90.0, poll=1.0)
+    status = whole_fleet_status(fleet)
     roles = {h["name"]: h["roles"] for h in status["hosts"]}
     assert roles == {"controller": ["controller", "router"], "ranger1": ["worker", "simulator", "router"],
                      **{name: ["worker"] for name in NAMES[2:]}}
-    assert {h["name"] for h in status["hosts"] if h["state"] == "up"} == set(NAMES)
     units = {u["id"]: u["host"] for u in status["resources"]["units"]}
     assert units["ranger1.drive"] == "ranger1" and any(u.endswith("scout1.camera") for u in units), sorted(units)
     assert set(units.values()) == {"ranger1"}  # the compute hosts have no devices
@@ -102,9 +120,9 @@ def test_a_mission_of_parallel_waits_is_placed_across_hosts(fleet: DaemonCluster
     assert r.returncode == 0, (r.stderr[-2000:], fleet.log("controller")[-3000:])
     report = json.loads(r.stdout)
     assert report["outcome"] == "success"
-    r = fleet.missionctl("status", "--json", "--config", config, "--timeout", "10", timeout=60)
-    assert r.returncode == 0, r.stderr[-2000:]
-    mission = next(m for m in json.loads(r.stdout)["missions"] if m.get("placements"))
+    missions = [m for m in whole_fleet_status(fleet)["missions"] if m.get("placements")]
+    assert missions, "no mission with placements in status"
+    mission = missions[-1]
     placed = {p["instance"]: p["host"] for p in mission["placements"]}
     assert len(placed) == WAITS, placed
     assert set(placed.values()) <= set(NAMES[1:])  # workers only: the controller has no worker role
