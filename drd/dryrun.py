@@ -10,6 +10,7 @@ CLI renders it.
 from __future__ import annotations
 
 import functools
+import gc
 import threading
 import time
 from collections.abc import Callable, Collection, Mapping, Sequence
@@ -278,8 +279,25 @@ def run_many(missions: Sequence[Mission], cluster: Cluster, world: World, catalo
         recorder.scene(world)
         recorder.watch(sim)  # what the sensors read, launches, landings and door changes, from now on
     results = [_submit(life, m, n, speed, trace, recorder) for n, m in enumerate(missions, 1)]
+    with _Heap() as heap:
+        _loop(life, sim, until, speed, stop, progress, progress_every, recorder, heap,
+              _Injections(injections, sim, life, cluster, results), start)
+    why = "stopped by operator" if stop is not None and stop.is_set() else f"sim time limit of {until:g} s reached"
+    life.end(why)
+    _conclude(results, [life.interpreters[r.mission_id or ""] for r in results], sim, time.perf_counter() - start)
+    close = getattr(sim, "close", None)
+    if callable(close):  # the served robots' sessions (ROS 2)
+        close()
+    if recorder is not None:
+        recorder.end([summary(r) for r in results], sim.time)
+    return results
+
+
+def _loop(life: ControllerLife, sim: Simulation, until: float, speed: float | None, stop: threading.Event | None,
+          progress: Callable[[Simulation, Executive], None] | None, progress_every: float,
+          recorder: Recorder | None, heap: _Heap, due: _Injections, start: float) -> None:
+    """Step the world and the controller by control cycles until the missions end, `until` or `stop`."""
     next_progress = 0.0
-    due = _Injections(injections, sim, life, cluster, results)
     while not life.finished() and sim.time < until - 1e-6:  # 0.1 s steps add up
         if stop is not None and stop.is_set():
             break
@@ -289,6 +307,7 @@ def run_many(missions: Sequence[Mission], cluster: Cluster, world: World, catalo
             life.executive.step()
         if recorder is not None:
             recorder.cycle(sim)  # where everyone is, and what changed in this cycle
+        heap.cycle()
         if speed:
             lag = sim.time / speed - (time.perf_counter() - start)
             if lag > 0:
@@ -297,16 +316,37 @@ def run_many(missions: Sequence[Mission], cluster: Cluster, world: World, catalo
             if life.executive is not None:
                 progress(sim, life.executive)
             next_progress = sim.time + progress_every
-    why = "stopped by operator" if stop is not None and stop.is_set() else f"sim time limit of {until:g} s reached"
     due.left_over()
-    life.end(why)
-    _conclude(results, [life.interpreters[r.mission_id or ""] for r in results], sim, time.perf_counter() - start)
-    close = getattr(sim, "close", None)
-    if callable(close):  # the served robots' sessions (ROS 2)
-        close()
-    if recorder is not None:
-        recorder.end([summary(r) for r in results], sim.time)
-    return results
+
+
+class _Heap:
+    """Keeps the collector's full passes off what a run keeps (the world, the team, its records): frozen at the
+    start and every `every` control cycles (`gc.freeze`), thawed at the end.
+
+    Nothing in a run depends on when cycles are collected. A 1,000-robot run holds a million objects that live to
+    its end, and each full pass of the collector walked them all: 22 passes, 6.8 s of a 63 s run (120 s of sim
+    time); frozen every 2 s of sim time, 1 pass. What dies after being frozen (little: a few hundred objects in
+    30 s) is collected after the run. A process whose heap someone else froze, or whose collector is off, is
+    left as it is."""
+
+    def __init__(self, every: int = 20) -> None:
+        self.every, self.cycles, self.on = every, 0, False
+
+    def __enter__(self) -> _Heap:
+        self.on = gc.isenabled() and gc.get_freeze_count() == 0
+        if self.on:
+            gc.freeze()
+        return self
+
+    def cycle(self) -> None:
+        self.cycles += 1
+        if self.on and self.cycles % self.every == 0:
+            gc.freeze()
+
+    def __exit__(self, *exc: object) -> None:
+        if self.on:
+            gc.unfreeze()
+            self.on = False
 
 
 def _submit(life: ControllerLife, m: Mission, n: int, speed: float | None, trace: IO[str] | None,
