@@ -22,6 +22,7 @@ from .base import (
     Sample,
     Subscription,
     Token,
+    typed_handler,
 )
 from .keys import check_key_expr, intersects, join_key
 from .local import LocalBus, LocalNetwork
@@ -51,6 +52,7 @@ __all__ = [
     "Sample",
     "Subscription",
     "Token",
+    "typed_handler",
     "check_key_expr",
     "decode",
     "encode",

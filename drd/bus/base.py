@@ -15,14 +15,16 @@ from abc import ABC, abstractmethod
 from collections.abc import Callable
 from dataclasses import dataclass, fields
 from types import TracebackType
-from typing import Self
+from typing import Self, TypeVar
 
 import msgspec
 
 from drd.errors import BusFailure
 
-from .keys import intersects, valid_key
+from .keys import intersects, is_concrete, valid_key
 from .messages import ErrorReply, MalformedMessage, Message, decode, encode
+
+M = TypeVar("M", bound=Message)
 
 log = logging.getLogger("drd.bus")
 
@@ -95,6 +97,23 @@ class Query(msgspec.Struct, frozen=True):
 
 
 Handler = Callable[[Query], "Reply | Message | None"]
+
+
+def typed_handler(want: type[M], handle: Callable[[M], Message], refused: tuple[type[Exception], ...] = (),
+                  *, exact: bool = True) -> Handler:
+    """A handler for one request type: a query by a wildcard key (`exact`) or with another payload is answered with
+    an error saying what to send, and an exception of `refused` (the request's own fault) becomes the error reply;
+    anything else propagates to the bus's containment."""
+    def serve(query: Query) -> Reply | Message:
+        if exact and not is_concrete(query.key):
+            return query.error(f"ask {query.queryable} by its exact key")
+        if not isinstance(query.payload, want):
+            return query.error(f"expected a {want.TYPE}")
+        try:
+            return handle(query.payload)
+        except refused as e:
+            return query.error(str(e))
+    return serve
 SampleCallback = Callable[[Sample], None]
 TokenCallback = Callable[[str, bool], None]
 

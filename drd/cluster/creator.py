@@ -46,7 +46,7 @@ from typing import Any
 
 import psutil
 
-from drd.bus import Bus, BusError, Message, Query, Reply
+from drd.bus import Bus, BusError, Message, Query, Reply, typed_handler
 from drd.bus.keys import is_concrete
 from drd.cluster.gates import GateUpdate, GateUpdateReply, wire_record
 from drd.cluster.guard import HostGuard
@@ -196,7 +196,8 @@ class Creator:
         self._tokens: dict[str, Any] = {}  # instance key -> its liveliness token
         self._sampler = Sampler(host, every=200)  # DRD_PROFILE: the step batches, in <DRD_PROFILE>.<host>
         self._queryable = bus.serve(self.key, self._serve) if bus else None
-        self._tune = bus.serve(self._keys.tune(host), self._serve_tune) if bus else None
+        # an operator's `Tune`, on its own key (the Creator's own is the controller's)
+        self._tune = bus.serve(self._keys.tune(host), typed_handler(Tune, self.tune, (CreatorError,))) if bus else None
 
     def close(self) -> None:
         """Stop serving and kill every worker process (the pool's too, if this Creator owns it)."""
@@ -836,17 +837,6 @@ class Creator:
             inst.readings[need] = spec_of(driver).readings
             commands[need] = sorted(spec_of(driver).setpoints)
         return methods, commands
-
-    def _serve_tune(self, query: Query) -> Message | Reply:
-        """An operator's `Tune`, on its own key (the Creator's own is the controller's)."""
-        if not is_concrete(query.key):
-            return query.error(f"ask {query.queryable} by its exact key")
-        if not isinstance(query.payload, Tune):
-            return query.error("expected a drd.creator.tune")
-        try:
-            return self.tune(query.payload)
-        except CreatorError as e:
-            return query.error(str(e))
 
     def _serve(self, query: Query) -> Message | Reply:
         if not is_concrete(query.key):  # only the controller calls, by this exact key (drd.daemon.acl)

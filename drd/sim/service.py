@@ -31,7 +31,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-from drd.bus import Bus, Message, Query, Reply, message
+from drd.bus import Bus, Message, Query, Reply, message, typed_handler
 from drd.bus.keys import is_concrete
 from drd.profiling import Sampler
 from drd.sim.observe import Observations, SensorTap
@@ -220,7 +220,9 @@ class SimulationService:
         self._sampler = Sampler("sim", every=500)  # DRD_PROFILE: requests from other hosts only
         self.observations = Observations()  # what the running simulation's sensors read (`drd/<c>/world`)
         self._queryable = bus.serve(key(cluster), self._serve) if bus is not None else None
-        self._world_queryable = bus.serve(world_key(cluster), self._serve_world) if bus is not None else None
+        self._world_queryable = (bus.serve(world_key(cluster), typed_handler(WorldObserve, self.observe, (ValueError,),
+                                                                          exact=False))
+                                 if bus is not None else None)
 
     def local(self, world: str) -> LocalSimulation | None:
         """The running simulation for drivers of this very process (the simulator host's Creator), or None when
@@ -329,14 +331,6 @@ class SimulationService:
         readings, nxt, missed = observations.after(max(0, req.after), OBSERVE_PAGE)
         return WorldObservation(now, name, poses, carried, intruders, readings, nxt,
                                 more=nxt < observations.next, missed=missed)
-
-    def _serve_world(self, query: Query) -> Message | Reply:
-        if not isinstance(query.payload, WorldObserve):
-            return query.error("expected a drd.world.observe")
-        try:
-            return self.observe(query.payload)
-        except ValueError as e:
-            return query.error(str(e))
 
     def _serve(self, query: Query) -> Message | Reply:
         if not is_concrete(query.key):  # only the controller and the drivers ask, by this exact key
