@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import functools
 import logging
+import threading
 from collections.abc import Callable, Iterable, Mapping
 from typing import Any
 
@@ -143,6 +144,7 @@ class HostGuard:
         self.pool.telemetry = self._telemetry
         self.guard = ConstraintGuard(self.pool)
         self.watched: list[str] = []
+        self._reads = BackgroundRead(self._read_watched)
         gates.describe(*describe_devices(self.pool), self.guard)
 
     def _telemetry(self, robot: str) -> Mapping[str, float] | None:
@@ -186,7 +188,57 @@ class HostGuard:
                      "name": active.name, "holds": m.holds, "margin": m.margin, "value": m.value, "limit": m.limit})
 
     def telemetry(self) -> dict[str, Any] | None:
-        """The watched robots' live values now, as a record (None when none is watched or readable)."""
-        robots = {r: dict(data) for r in self.watched if (data := self.local(r)) is not None}
-        return {"kind": "telemetry", "mission": "", "host": self.host, "robots": robots} if self.watched else None
+        """The watched robots' live values, as a record (None when none is watched). Read off the request's
+        thread (`BackgroundRead`): a driver that waits for its first message (a ROS 2 robot before the world's
+        first step) must not hold the Creator's reply, which the controller waits 1 s for at most."""
+        if not self.watched:
+            return None
+        robots = self._reads.get(TELEMETRY_WAIT) or {}
+        return {"kind": "telemetry", "mission": "", "host": self.host, "robots": robots}
+
+    def _read_watched(self) -> dict[str, dict[str, float]]:
+        return {r: dict(data) for r in list(self.watched) if (data := self.local(r)) is not None}
+
+
+#: Seconds a reply waits for the watched robots' reading of this cycle before it takes the last one.
+TELEMETRY_WAIT = 0.05
+
+
+class BackgroundRead:
+    """`read()` on a thread of its own, one at a time: `get(wait)` starts a read if none is running and returns
+    its result if it comes within `wait` seconds, else the last result (None before the first). A read that raises
+    leaves the last result standing."""
+
+    def __init__(self, read: Callable[[], Any]) -> None:
+        self._read = read
+        self._cond = threading.Condition()
+        self._asked = self._done = 0  # reads asked for, reads finished
+        self._last: Any = None
+        self._thread: threading.Thread | None = None
+
+    def get(self, wait: float) -> Any:
+        with self._cond:
+            if self._done == self._asked:
+                self._asked += 1
+                self._cond.notify_all()
+            if self._thread is None:
+                self._thread = threading.Thread(target=self._run, name="drd-telemetry", daemon=True)
+                self._thread.start()
+            self._cond.wait_for(lambda: self._done == self._asked, wait)
+            return self._last
+
+    def _run(self) -> None:
+        while True:
+            with self._cond:
+                self._cond.wait_for(lambda: self._asked > self._done)
+            try:
+                value = self._read()
+            except Exception:  # a driver that cannot tell now: the last values stand
+                log.debug("a telemetry read failed", exc_info=True)
+                value = None
+            with self._cond:
+                if value is not None:
+                    self._last = value
+                self._done = self._asked
+                self._cond.notify_all()
 
