@@ -21,6 +21,7 @@ import binascii
 import ipaddress
 import os
 import re
+import zlib
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -48,8 +49,15 @@ class Transport:
     routers: tuple[str, ...] = ()  # the hosts with the role router (none: every daemon meets every other)
 
     def others(self, me: str) -> dict[str, str]:
-        """What the daemon of `me` connects to: every other host, or with routers the other routers only."""
-        return {h: e for h, e in self.endpoints.items() if h != me and (not self.routers or h in self.routers)}
+        """What the daemon of `me` connects to, in order: every other host, or with routers the other routers only.
+        A client of the routers connects to the first it reaches, so each client's list starts at a router of its
+        own (by a hash of its name: the same on every start), and the clients spread over the routers."""
+        found = {h: e for h, e in self.endpoints.items() if h != me and (not self.routers or h in self.routers)}
+        if not self.routers or me in self.routers or not found:
+            return found
+        names = list(found)
+        first = zlib.crc32(me.encode()) % len(names)
+        return {h: found[h] for h in names[first:] + names[:first]}
 
     def zenoh_mode(self, me: str) -> str:
         """The zenoh mode of `me`'s session: a peer among peers, a router, or a client of the routers."""
