@@ -13,6 +13,7 @@ for the report and the picture only.
 
 from __future__ import annotations
 
+import functools
 import math
 import random
 from collections.abc import Callable
@@ -484,7 +485,7 @@ class Simulation:
         in between, and standing in light of at least `min_light` (a person in a dark corner is not seen)."""
         x, y, heading, _ = self._sensor_pose(robot_id)
         return sensors.detect(self._still_rays, self.world, (x, y), heading, fov, max_range, min_light,
-                              self.intruders(), self._noise(robot_id, "camera"), self.noise)
+                              self.intruders(), functools.partial(self._noise, robot_id, "camera"), self.noise)
 
     def brightness(self, robot_id: str, fov: float, n_regions: int, max_range: float = 10.0) -> list[float]:
         """Mean light of `n_regions` vertical strips of the camera image, right to left (dark corners show here)."""

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import math
 import random
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -264,11 +264,17 @@ def clear(rays: RayCaster, a: Point, b: Point) -> bool:
 
 
 def detect(rays: RayCaster, world: World, origin: Point, heading: float, fov: float, max_range: float,
-           min_light: float, targets: dict[str, Point], rng: random.Random, noise: Noise) -> list[Detection]:
-    """The targets in the field of view, in range, in line of sight and lit at least `min_light`, in label order."""
+           min_light: float, targets: dict[str, Point], rng: random.Random | Callable[[], random.Random],
+           noise: Noise) -> list[Detection]:
+    """The targets in the field of view, in range, in line of sight and lit at least `min_light`, in label order.
+
+    `rng` may be given as a function that returns the reading's generator: it is then asked for only when a
+    target is seen (seeding one costs more than the rest of a reading that sees nobody), and draws the same."""
     out = []
     for label, (x, y) in targets.items():
         dx, dy = x - origin[0], y - origin[1]
+        if dx > max_range or -dx > max_range or dy > max_range or -dy > max_range:
+            continue  # farther than max_range on one axis alone, so d > max_range below: the same answer, cheaper
         d = math.hypot(dx, dy)
         bearing = wrap(math.atan2(dy, dx) - heading)
         if d > max_range or abs(bearing) > fov / 2:
@@ -276,6 +282,8 @@ def detect(rays: RayCaster, world: World, origin: Point, heading: float, fov: fl
         lit = world.light(x, y)
         if lit < min_light or not clear(rays, origin, (x, y)):
             continue
+        if not isinstance(rng, random.Random):
+            rng = rng()
         out.append(Detection(label, bearing + rng.gauss(0.0, noise.bearing),
                              max(0.0, d * (1 + rng.gauss(0.0, noise.distance))),
                              _unit(lit + rng.gauss(0.0, noise.light))))

@@ -140,6 +140,28 @@ def test_camera_never_sees_through_walls_anywhere() -> None:
     assert seen > 10  # the check was not vacuous
 
 
+def test_a_camera_seeds_its_noise_only_when_it_sees_someone_and_then_draws_the_same() -> None:
+    """`sensors.detect` takes the reading's generator as a function and asks for it at the first target seen:
+    the detections are those of the seeded generator given outright, and a view of nobody never seeds one."""
+    people = {"far": (30.0, 0.0), "in_room": (4.0, 3.5), "behind_wall": (9.0, 3.0), "also_in_room": (3.0, 3.0)}
+    sim = Simulation(world_with((ranger_at(4.0, 0, UP),), people=people), seed=3)
+    rays, origin, fov = sensors.RayCaster(sim.space), (4.0, 0.0), math.radians(170)
+
+    def reading() -> random.Random:
+        asked.append(1)
+        return random.Random("one reading")
+
+    asked: list[int] = []
+    lazy = sensors.detect(rays, CORRIDOR, origin, UP, fov, 10.0, 0.2, people, reading, sensors.Noise())
+    given = sensors.detect(rays, CORRIDOR, origin, UP, fov, 10.0, 0.2, people, random.Random("one reading"),
+                           sensors.Noise())
+    assert [d.label for d in lazy] == ["in_room", "also_in_room"] and lazy == given and asked == [1]
+    asked.clear()
+    assert sensors.detect(rays, CORRIDOR, origin, -UP, math.radians(60), 10.0, 0.2, people, reading,
+                          sensors.Noise()) == []
+    assert asked == [], "nobody in view: no generator seeded"
+
+
 # ---------------------------------------------------------------- launches and jumps
 
 
