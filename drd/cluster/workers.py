@@ -9,8 +9,9 @@ arbitration of actuator commands and the simulator.
 - `WorkerPool` keeps `size` idle workers started ahead of time (default 2, `DRD_WORKERS`) and refills in a
   background thread, so placing an instance costs a pipe round trip, not a process start, but only while the
   host has work: the pool is **warm** from a `take` or a `warm()` (the Creator's, when a world starts) until
-  `keep_warm` seconds after the last of them, then its idle workers are stopped. An idle daemon has none, and one
-  that never runs a component (the controller, on its own host) never starts the fork server. Workers come from
+  `keep_warm` seconds after the last of them, then its idle workers are stopped, and with them the fork server
+  (started again by the next spawn). An idle daemon has no worker and no fork server, and one that never runs a
+  component (the controller, on its own host) never starts it. Workers come from
   a `multiprocessing` **forkserver**: the daemon holds zenoh threads and must never fork; the fork server is a
   fresh single-threaded interpreter that imports the behavior modules once (`preload`), so a refill is a
   fork of a warm process (a few ms) and a first placement finds its module already imported.
@@ -240,6 +241,7 @@ class WorkerPool:
         self.size = size
         self.call_timeout = call_timeout
         self.keep_warm = keep_warm
+        self.cooled = 0  # times the fork server was stopped because the pool went cold (`_cool_down`)
         self._warm_until = time.monotonic() + keep_warm if warm else 0.0  # idle workers are kept until then
         self._ctx: Any = multiprocessing.get_context(method)
         if method == "forkserver":
@@ -333,6 +335,20 @@ class WorkerPool:
     def _forget(self, worker: Worker) -> None:
         self._workers.pop(worker.pid, None)
 
+    def _cool_down(self) -> None:
+        """The pool went cold: with no worker left anywhere in this process, the fork server (and its resource
+        tracker, about 40 MB with the behaviors' modules) goes too; the next spawn starts it again
+        (multiprocessing's `ensure_running`), preloading the same modules. Under the spawn lock, so no spawn of
+        this pool races it; only when this is the process's one pool, so no other pool's spawn does."""
+        with self._spawn_lock:
+            with self._cond:
+                busy = bool(self._workers) or self._closed or self._warm_until > time.monotonic()
+            with _open_lock:
+                alone = _open_pools == 1
+            if not busy and alone and self._ctx.get_start_method() == "forkserver":
+                _stop_forkserver()
+                self.cooled += 1
+
     def _spawn(self, timeout: float = START_TIMEOUT) -> Worker:
         with self._spawn_lock:
             parent, child = self._ctx.Pipe(duplex=True)
@@ -375,6 +391,7 @@ class WorkerPool:
             if idle:
                 for w in idle:  # outside the condition: a kill reaps, which may take a moment
                     w.kill()
+                self._cool_down()
                 continue
             try:
                 w = self._spawn()
