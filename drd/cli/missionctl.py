@@ -287,7 +287,10 @@ _ADDRESS = re.compile(r"(?:\[[0-9A-Fa-f:.]+\]|[A-Za-z0-9_.-]*):[0-9]+|[0-9]+")
 
 def live_default(argv: list[str]) -> list[str]:
     """`--foxglove` with no address after it (the end, another option, a mission file) is `--foxglove
-    127.0.0.1:8765`: typer has no option whose value may be left out."""
+    127.0.0.1:8765`: typer has no option whose value may be left out. `drd.record` (50 ms of imports) is read only
+    when `--foxglove` is there: every other command, `status` first, starts without it."""
+    if "--foxglove" not in argv:
+        return argv
     from drd.record import LIVE_DEFAULT
 
     out: list[str] = []
