@@ -596,6 +596,10 @@ class _RecordWatch:
         self.behind = False  # the controller came back: the records it sent before we heard it are still to fetch
         self.seqs: set[int] = set()  # the numbers of the records followed (a record caught up twice counts once)
         self.last_seq = 0
+        #: the last record heard before the controller went away: the catch-up starts there, not at the newest
+        #: record heard since (the resumed controller's live records may come before the catch-up, and its
+        #: first ones, `restored` among them, before this client's subscription reached it)
+        self.heard_before = 0
         self.view: _ClusterView | None = None
 
         def on_record(sample: Any) -> None:
@@ -680,6 +684,7 @@ class _RecordWatch:
         except BusFailure:
             if self.away_since is None:
                 self.away_since = time.monotonic()
+                self.heard_before = self.last_seq
                 err.print(Text.assemble(("⚠ ", "bold yellow"), "the controller does not answer: waiting for it (a"
                                         " standby takes over, or the controller started again, and resumes the"
                                         " mission from its journal)"))
@@ -705,7 +710,7 @@ class _RecordWatch:
         from drd.errors import BusFailure
 
         try:
-            records = self.client.records(mission, self.last_seq)  # page by page (`drd.paging`)
+            records = self.client.records(mission, self.heard_before)  # page by page (`drd.paging`)
         except BusFailure:
             return False  # the live records go on; the next poll asks again
         for r in records:
