@@ -129,14 +129,22 @@ class ClusterView:
             rec.silent, rec.reason = False, rec.leaving
         return []
 
+    def _unknown_sender(self, host: str, key_host: str | None, what: str, now: float) -> list[Change]:
+        """The rejection of a report from a host not in the hosts file, or published under another host's key
+        (none when it may be read)."""
+        if host not in self.records:
+            return [Change(now, "rejected", host, f"{what} from a host not in the hosts file")]
+        if key_host is not None and key_host != host:
+            return [Change(now, "rejected", key_host, f"{what} for {host} published under {key_host}")]
+        return []
+
     def load(self, report: LoadReport, now: float, key_host: str | None = None) -> list[Change]:
         """A load report; `key_host` is the host named by the key it came on (must match the report)."""
         host = report.host
         rec = self.records.get(host)
-        if rec is None:
-            return [Change(now, "rejected", host, "a load report from a host not in the hosts file")]
-        if key_host is not None and key_host != host:
-            return [Change(now, "rejected", key_host, f"a load report for {host} published under {key_host}")]
+        refused = self._unknown_sender(host, key_host, "a load report", now)
+        if refused or rec is None:
+            return refused
         if not _sane(report):
             return [Change(now, "rejected", host, "a load report with out-of-range values")]
         rec.heard, rec.report = now, report
@@ -149,10 +157,9 @@ class ClusterView:
         host's (a standby never sends any), only hosts.yaml's robots and their own keys, only scalar values."""
         host = report.host
         rec = self.records.get(host)
-        if rec is None:
-            return [Change(now, "rejected", host, "live properties from a host not in the hosts file")]
-        if key_host is not None and key_host != host:
-            return [Change(now, "rejected", key_host, f"live properties for {host} published under {key_host}")]
+        refused = self._unknown_sender(host, key_host, "live properties", now)
+        if refused or rec is None:
+            return refused
         if Role.CONTROLLER not in rec.config.roles:
             return [Change(now, "rejected", host, "live properties from a host that is not a controller")]
         robots = {r.id: r for r in self.cluster.robots}

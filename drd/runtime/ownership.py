@@ -30,7 +30,7 @@ from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass, field
 from typing import Any, Protocol
 
-from drd.hw.commands import DriverSpec, spec_of
+from drd.hw.commands import DriverSpec, declared, spec_of
 from drd.hw.interfaces import HardwareError
 from drd.runtime import records as rec
 
@@ -366,7 +366,7 @@ class BoundDevice:
     def __getattr__(self, name: str) -> Any:
         binding = self._binding
         gate, driver = binding.gate, binding.driver
-        spec = gate.spec if gate is not None else spec_of(driver)
+        spec = gate.spec if gate is not None else declared(type(driver))  # cached per class: a hot path
         if name not in spec.names:  # a behavior reaches what the driver declares, nothing else (drd.hw.commands)
             raise AttributeError(f"{binding.unit}: {name} is neither a reading nor a command its driver declares"
                                  f" (readings: {', '.join(sorted(spec.readings)) or 'none'}; commands:"
