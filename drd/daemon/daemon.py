@@ -101,6 +101,18 @@ class DaemonConfig:
         return min(self.load_period, self.cluster.lease / 3)
 
 
+def aligned_wait(wall: float, period: float, at_least: float = 0.0) -> float:
+    """Seconds from `wall` to the next multiple of `period` on the wall clock, at least `at_least`.
+
+    Every daemon steps and reports its load on the same wall-clock instants, so a router receives a fleet's reports
+    together and passes them on in a few batches: each daemon then wakes a few times a period rather than once per
+    host (docs/design.md "Load reports in step")."""
+    wait = period - wall % period
+    while wait < at_least:
+        wait += period
+    return wait
+
+
 def config_digest(cluster: Cluster) -> str:
     """A digest of what the hosts file says (not of its text), to spot a host started with another file."""
     data = {"name": cluster.name, "lease": cluster.lease, "security": cluster.security.mode.value,
@@ -344,7 +356,7 @@ class Daemon:
             self.start()
             if ready is not None:
                 ready()
-            while not stop.wait(self.config.tick):
+            while not stop.wait(aligned_wait(self.wall(), self.config.tick)):
                 self.step()
         finally:
             self.close()
@@ -354,8 +366,8 @@ class Daemon:
         slow to answer, or the others would take this host for dead), silent hosts, the controller,
         announcements, peer checks."""
         now = self.clock()
-        if now >= self._next_load:
-            self._next_load = now + self.config.period
+        if now >= self._next_load - self.config.tick / 2:  # a wake-up a little early is on time
+            self._next_load = now + aligned_wait(self.wall(), self.config.period, at_least=self.config.period / 2)
             self.bus.put(self.keys.load(self.host), self._sampler.sample(len(self._instances()), self.wall()))
             self._publish_live()
         with self._lock:

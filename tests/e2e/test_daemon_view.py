@@ -442,3 +442,24 @@ def test_drd_start_refuses_a_driver_it_cannot_load_before_any_process_or_pidfile
     assert ("hosts.yaml: hosts.ranger1.devices.drive.driver: no module components.serial.drive "
             "(for components.serial.drive:SerialDrive)") in done.stderr
     assert not (tmp_path / "run").exists() and "Traceback" not in done.stderr
+
+
+def test_load_reports_go_out_on_the_wall_clocks_multiples_of_the_period(cluster: Cluster, catalog: Catalog) -> None:
+    """Every daemon reports on the same wall-clock instants, so a router receives a fleet's reports together and
+    passes them on in a few batches; a step a little early is on time, one late does not shift the next."""
+    net = LocalNetwork()
+    clocks = Clocks()
+    clocks.sim.set(100.3)  # the wall clock at 1,000,100.3: between two multiples of the period
+    heard: list[float] = []
+    tool = net.session("tool")
+    tool.subscribe(ClusterKeys("lab").loads, lambda s: heard.append(round(s.payload.at - 1_000_000.0, 3)))
+    daemon = Daemon(DaemonConfig(cluster, "controller", catalog, load_period=0.25), net.session("controller"),
+                    clock=clocks.mono, wall=clocks.wall, controller_clock=clocks.sim)
+    daemon.start()  # reports at once
+    try:
+        for at in (100.4, 100.49, 100.55, 100.74, 100.9, 101.1, 101.26, 101.4, 101.5):
+            clocks.sim.set(at)
+            daemon.step()
+        assert heard == [100.3, 100.49, 100.74, 101.1, 101.26, 101.5]
+    finally:
+        daemon.close()
