@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import ast
+import fnmatch
 import functools
 from pathlib import Path
 
@@ -14,21 +16,43 @@ ROOT = Path(__file__).resolve().parents[1]
 SHARED_EXAMPLES = ROOT.parent / "shared" / "examples"
 
 
-#: What makes a test module end-to-end: it starts real processes (the CLI, daemons, workers).
-_E2E = ("subprocess", "cluster_support", "MISSIONCTL", "Popen", "WorkerPool")
+#: What makes a test module end-to-end: it starts real processes (the CLI, daemons, workers, etcd).
+_E2E = ("subprocess", "cluster_support", "MISSIONCTL", "Popen", "WorkerPool", "etcd_support")
+
+#: What makes an in-process test module an integration test, by what it imports (patterns of `module` or
+#: `module.name`): it runs a whole mission or robot through time (a dry-run, the executive), opens a real transport
+#: (ROS 2 over loopback zenoh), or measures the compiler's cost with an instrument that slows every line it watches.
+_INTEGRATION = ("drd.dryrun", "drd.dryrun.run", "drd.dryrun.run_many", "drd.executive", "drd.executive.Executive",
+                "tests.ros2_support*", "tracemalloc")
+
+
+def _imported(tree: ast.Module) -> set[str]:
+    """Every module imported whole (`import a.b`, `from a import b`: `a.b`), every `module.name` taken from one."""
+    found: set[str] = set()
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Import):
+            found.update(alias.name for alias in node.names)
+        elif isinstance(node, ast.ImportFrom) and node.module:
+            found.update(f"{node.module}.{alias.name}" for alias in node.names)
+    return found
 
 
 @functools.cache
 def kind_of(path: Path) -> str:
-    """`e2e`, `properties` or `unit`, from what the test module uses (its source, read once)."""
+    """`e2e`, `properties`, `integration` or `unit`, from what the test module uses (its source, read once)."""
     source = path.read_text(encoding="utf-8")
     if any(word in source for word in _E2E):
         return "e2e"
-    return "properties" if "hypothesis" in source else "unit"
+    if "hypothesis" in source:
+        return "properties"
+    imported = _imported(ast.parse(source, str(path)))
+    runs_a_lot = any(fnmatch.fnmatchcase(name, pattern) for name in imported for pattern in _INTEGRATION)
+    return "integration" if runs_a_lot else "unit"
 
 
-#: The folders of tests/, one per kind: `pytest tests/unit` (or `-m unit`) runs the fast set.
-KINDS = ("unit", "properties", "e2e")
+#: The folders of tests/, one per kind: `pytest tests/unit` (or `-m unit`) runs the fast set (pure, in process, a
+#: few seconds); `tests/integration` the in-process runs of whole missions, robots over ROS 2, cost measurements.
+KINDS = ("unit", "integration", "properties", "e2e")
 
 
 def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:

@@ -113,13 +113,38 @@ def test_no_function_is_over_60_lines() -> None:
 
 
 def test_every_test_module_is_in_the_folder_of_its_kind() -> None:
-    """tests/unit holds what runs in process, tests/properties the property tests, tests/e2e what starts
-    processes (`tests/conftest.kind_of` reads it from the module's source): a module in the wrong folder would run
-    in the wrong set."""
+    """tests/unit holds what is pure and runs in seconds, tests/integration what runs in process but a lot (a whole
+    dry-run, the executive, ROS 2 over loopback zenoh, the compiler's cost counted), tests/properties the property
+    tests, tests/e2e what starts processes (`tests/conftest.kind_of` reads it from the module's source): a module in
+    the wrong folder would run in the wrong set."""
     from tests.conftest import KINDS, kind_of
 
     tests = ROOT / "tests"
     misplaced = [f"{p.relative_to(tests)} is {kind_of(p)}" for kind in KINDS
                  for p in sorted((tests / kind).glob("test_*.py")) if kind_of(p) != kind]
     assert misplaced == []
-    assert not list(tests.glob("test_*.py")), "a test module outside tests/unit, tests/properties and tests/e2e"
+    assert not list(tests.glob("test_*.py")), "a test module outside the folders of tests/conftest.KINDS"
+    assert [p.name for p in tests.glob("*/test_*.py") if p.parent.name not in KINDS] == []
+
+
+@pytest.mark.parametrize(("source", "kind"), [
+    ("from drd.dryrun import DryRun, run\n", "integration"),
+    ("from drd.dryrun import Mission, run_many\n", "integration"),
+    ("from drd import dryrun\n", "integration"),
+    ("from drd.executive import EntryPoints, Executive\n", "integration"),
+    ("from tests.ros2_support import eventually\n", "integration"),
+    ("import tracemalloc\n", "integration"),
+    ("from drd.dryrun import SimulationClock\nfrom drd.executive import EntryPoints\n", "unit"),
+    ("# a dry-run is described here, drd.dryrun.run is not imported\nimport sys\n", "unit"),
+    # the words split, so that this module's own source does not read as e2e or properties
+    ("from etcd" "_support import etcd_cluster\nfrom drd.dryrun import run\n", "e2e"),
+    ("from hypo" "thesis import given\nfrom drd.executive import Executive\n", "properties"),
+])
+def test_a_module_s_kind_follows_what_it_imports(source: str, kind: str, tmp_path: Path) -> None:
+    """The rule, on modules written for it: a unit module that starts running whole missions moves out of the fast
+    set by itself (the test above then names it)."""
+    from tests.conftest import kind_of
+
+    module = tmp_path / "test_x.py"
+    module.write_text(source)
+    assert kind_of(module) == kind

@@ -3,8 +3,8 @@
 Each standard behavior whose state matters goes on from a snapshot as if it had never stopped (a Wait keeps its
 deadline and its step count, a Watch its count and whom it reported, an Observe its frames), and is told when
 its state is lost (`restore(None)`). The snapshot survives JSON in the mission's image (what the journal
-stores), and a mission entered again by a new executive restores its running leaf from it: the Wait ends at
-its original deadline, not a whole duration after the new controller took over.
+stores); that a mission entered again by a new executive restores its running leaf from it (the Wait ends at
+its original deadline) runs the executive, so it is in tests/integration/test_resume.py.
 """
 
 from __future__ import annotations
@@ -16,17 +16,13 @@ from pathlib import Path
 from types import SimpleNamespace
 from typing import Any
 
-import pytest
-
 from components.behaviors.observe import Observe
 from components.behaviors.wait import Wait
 from components.behaviors.watch import Watch
-from drd.journal import SqliteJournal, WorldState
 from drd.manifests import parse_manifest
 from drd.runtime.component import Component, Context, Status
 from drd.runtime.snapshot import NodeImage
 from dsl.catalog import Catalog
-from tests.unit.test_resume import Team, chart_of
 
 
 class Clock:
@@ -147,36 +143,6 @@ def test_every_standard_behavior_says_whether_it_can_move_and_only_the_wait_can(
     for t in behaviors:
         assert "movable:" in Path(t.source).read_text(), t.source
     assert [t.name for t in behaviors if t.movable] == ["Wait"]
-
-
-PAUSE = "mission Pause {\n    Wait(duration: 10s)\n}\n"
-
-
-def test_a_resumed_mission_restores_its_running_wait_from_the_journaled_snapshot(catalog: Catalog,
-                                                                                 tmp_path: Path) -> None:
-    team = Team(catalog)
-    chart = chart_of(catalog, PAUSE)
-    team.submit(chart)
-    team.run(4.0)
-    image = team.lose_controller()
-    journal = SqliteJournal(tmp_path / "journal.db")
-    journal.begin("M-1", {"source": PAUSE}, 0, 0.0, 60.0)
-    journal.save({"M-1": (4.0, image.to_dict())}, WorldState("corridor", 1, 0.0, 4.0, 10))
-    saved = journal.running()[0].snapshot
-    journal.close()
-    assert saved is not None
-    image = NodeImage.from_dict(saved)
-    leaf = [n for n in image.walk() if n.component is not None]
-    assert len(leaf) == 1 and leaf[0].component is not None
-    began = leaf[0].component[0]["began"]
-    assert began == pytest.approx(0.0, abs=0.15) and leaf[0].component[0]["steps"] >= 30
-    team.run(3.0)  # the controller is away for 3 s of the world's time
-    team.submit(chart, resume=image)
-    team.run(30.0)
-    interp = team.executive.missions["M-1"]
-    assert interp.outcome == "success", interp.reason
-    exits = [r for r in team.records() if r["kind"] == "exited" and r["path"] == "Pause/Wait"]
-    assert exits and exits[-1]["at"] == pytest.approx(began + 10.0, abs=0.15), exits  # not 7 + 10 s
 
 
 def test_an_image_without_component_snapshots_still_reads() -> None:

@@ -3,17 +3,21 @@ a new executive over the same world (the robots stay where they are) resumes it 
 
 What is checked is what an outsider sees: the mission ends as an undisturbed run does, its trace (the lost
 controller's records, then the new one's) passes the ownership check with no double hold, the timers keep
-their deadlines, and the snapshot survives JSON (what the journal stores)."""
+their deadlines, and the snapshot survives JSON (what the journal stores) and a SQLite journal."""
 
 from __future__ import annotations
 
 import io
 import json
+from pathlib import Path
 from typing import Any
+
+import pytest
 
 from drd.dryrun import SimulationClock, merged_drivers
 from drd.executive import EntryPoints, Executive
 from drd.hosts import load_hosts
+from drd.journal import SqliteJournal, WorldState
 from drd.runtime.snapshot import NodeImage, capture
 from drd.runtime.trace import TraceWriter
 from drd.sim import Simulation
@@ -165,3 +169,33 @@ def test_the_executive_gives_a_client_the_records_it_missed(catalog: Catalog) ->
     assert seqs == sorted(seqs) and seqs[0] == 1 and everything.records[0].kind == "entered"
     later = client.call("drd/corridor/executive", MissionCommand("records", "M-1", after=seqs[2]), timeout=2)
     assert isinstance(later, MissionRecords) and [r.seq for r in later.records] == seqs[3:]
+
+
+PAUSE = "mission Pause {\n    Wait(duration: 10s)\n}\n"
+
+
+def test_a_resumed_mission_restores_its_running_wait_from_the_journaled_snapshot(catalog: Catalog,
+                                                                                 tmp_path: Path) -> None:
+    team = Team(catalog)
+    chart = chart_of(catalog, PAUSE)
+    team.submit(chart)
+    team.run(4.0)
+    image = team.lose_controller()
+    journal = SqliteJournal(tmp_path / "journal.db")
+    journal.begin("M-1", {"source": PAUSE}, 0, 0.0, 60.0)
+    journal.save({"M-1": (4.0, image.to_dict())}, WorldState("corridor", 1, 0.0, 4.0, 10))
+    saved = journal.running()[0].snapshot
+    journal.close()
+    assert saved is not None
+    image = NodeImage.from_dict(saved)
+    leaf = [n for n in image.walk() if n.component is not None]
+    assert len(leaf) == 1 and leaf[0].component is not None
+    began = leaf[0].component[0]["began"]
+    assert began == pytest.approx(0.0, abs=0.15) and leaf[0].component[0]["steps"] >= 30
+    team.run(3.0)  # the controller is away for 3 s of the world's time
+    team.submit(chart, resume=image)
+    team.run(30.0)
+    interp = team.executive.missions["M-1"]
+    assert interp.outcome == "success", interp.reason
+    exits = [r for r in team.records() if r["kind"] == "exited" and r["path"] == "Pause/Wait"]
+    assert exits and exits[-1]["at"] == pytest.approx(began + 10.0, abs=0.15), exits  # not 7 + 10 s
