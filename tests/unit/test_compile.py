@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import functools
+
 import pytest
 
 from dsl import compile_text
@@ -100,8 +102,15 @@ def test_imports_bring_behaviors(tmp_path: object, catalog: Catalog) -> None:
     assert [d.message.split(":")[0] for d in bad.diagnostics] == [f"cannot read imported file {missing}"]
 
 
+@functools.cache
+def parser() -> Parser:
+    """One parser for every expression here: building one costs about 50 ms, and `expression` resets it each time."""
+    return Parser()
+
+
 def expr(text: str) -> object:
-    tree = Parser().lark.parse(text, start="expr")
+    tree = parser().expression(text)
+    assert tree is not None, f"{text!r} does not parse"
     return tree
 
 
