@@ -4,7 +4,7 @@ libraries may appear, and that no module reads another's private names."""
 from __future__ import annotations
 
 import ast
-from collections.abc import Iterator
+from collections.abc import Iterable, Iterator
 from pathlib import Path
 from typing import NamedTuple
 
@@ -21,10 +21,10 @@ def modules() -> Iterator[tuple[str, ast.Module]]:
             yield name, ast.parse(path.read_text(encoding="utf-8"), str(path))
 
 
-def imports(tree: ast.Module, module: str) -> Iterator[tuple[str, list[str]]]:
+def imports(nodes: Iterable[ast.AST], module: str) -> Iterator[tuple[str, list[str]]]:
     """Every imported module (absolute, relative ones resolved) with the names taken from it."""
     package = module.split(".")
-    for node in ast.walk(tree):
+    for node in nodes:
         if isinstance(node, ast.Import):
             for alias in node.names:
                 yield alias.name, []
@@ -53,9 +53,10 @@ class Source(NamedTuple):
 
 
 def summary(tree: ast.Module, module: str) -> Source:
-    functions = [(node.name, (node.end_lineno or node.lineno) - node.lineno + 1) for node in ast.walk(tree)
+    nodes = list(ast.walk(tree))  # walked once for both
+    functions = [(node.name, (node.end_lineno or node.lineno) - node.lineno + 1) for node in nodes
                  if isinstance(node, ast.FunctionDef | ast.AsyncFunctionDef)]
-    return Source(list(imports(tree, module)), functions)
+    return Source(list(imports(nodes, module)), functions)
 
 
 SOURCES = {module: summary(tree, module) for module, tree in modules()}

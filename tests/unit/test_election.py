@@ -7,6 +7,7 @@ tests/e2e/test_election_etcd.py; the three-member cluster and real daemons in te
 from __future__ import annotations
 
 import copy
+import functools
 from pathlib import Path
 from typing import Any
 
@@ -88,8 +89,15 @@ def test_the_fence_lets_nothing_out_once_the_controller_no_longer_acts() -> None
 # -- hosts.yaml: cluster.store -------------------------------------------------------------------------------------
 
 
+@functools.cache
+def hosts_yaml() -> dict[str, Any]:
+    """hosts.yaml read once (each case below changes a deep copy of it)."""
+    data: dict[str, Any] = yaml.safe_load((ROOT / "hosts.yaml").read_text())
+    return data
+
+
 def hosts_data(store: object = None, second_controller: bool = True) -> dict[str, Any]:
-    data: dict[str, Any] = copy.deepcopy(yaml.safe_load((ROOT / "hosts.yaml").read_text()))
+    data: dict[str, Any] = copy.deepcopy(hosts_yaml())
     if second_controller:
         data["hosts"]["controller2"] = {"endpoint": "tcp/127.0.0.1:7460", "roles": ["controller"]}
     if store is not None:
