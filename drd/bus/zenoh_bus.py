@@ -93,6 +93,10 @@ def make_config(
         "listen/endpoints": list(listen),
         "connect/endpoints": list(connect),
         "scouting/multicast/enabled": multicast_scouting,
+        # No shared-memory transport: each session's pool (16 MB) is mapped by every process on the machine that
+        # a large message passes through, a router most of all (+34 MB PSS with 25 clients), for a copy saved on
+        # messages that are small and at most 1 MiB (docs/design.md "Load reports in step").
+        "transport/shared_memory/enabled": False,
     }
     if lease_ms is not None:  # how long a silently vanished peer (power cut) keeps its tokens
         settings["transport/link/tx/lease"] = lease_ms
