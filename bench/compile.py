@@ -3,7 +3,8 @@
 Run `python bench/compile.py [--lines 10000] [--repeat 5] [--cpu] [--json] [--profile]` (never by pytest).
 Goal: the whole pipeline (parse + check + linearize + build) takes at most 2x a raw LALR parse.
 `--slope` compiles the generated mission at 1/8, 1/4, 1/2 and all of `--lines` and prints the cost per byte at each
-size: it stays flat when the compiler is linear (issue #18; `tests/unit/test_costs.py` checks it by counting work).
+size: it stays flat when the compiler is linear (issue #18; `tests/integration/test_costs.py` checks it by counting
+work).
 """
 
 from __future__ import annotations

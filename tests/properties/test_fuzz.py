@@ -27,7 +27,7 @@ SEEDS = sorted(ROOT.glob("missions/*.mission")) + sorted((ROOT / "tests" / "miss
 #: Profiler events (calls and returns, Python and C) a compilation may cost: a fixed part and a part per byte. The
 #: seeds cost at most 30 a byte; each syntax error costs up to about 50,000 more (its recovery copies the parser
 #: state for each token it tries), and recovery stops after 50. So a bound of about 0.4 s of compiling for a small
-#: file; `tests/unit/test_costs.py` checks the slope itself on inputs of growing size.
+#: file; `tests/integration/test_costs.py` checks the slope itself on inputs of growing size.
 CALLS_FIXED, CALLS_PER_BYTE = 1_000_000, 200
 #: Memory a hosts file's load may take at its peak: a fixed part and a part per byte (it is measured at a few KB a
 #: byte; an alias that expanded would cost far more).
