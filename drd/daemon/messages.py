@@ -8,7 +8,6 @@ seconds. `None` means "not known yet" (no load report received, for example).
 
 from __future__ import annotations
 
-import dataclasses
 from typing import Any
 
 from drd.bus import Message, message
@@ -240,6 +239,6 @@ class ResourcesReply(Message):
     robots: list[RobotInfo]
     queue: list[WaiterInfo]
     removing: dict[str, float]
-    hosts: dict[str, str] = dataclasses.field(default_factory=dict)
+    hosts: dict[str, str] = {}  # an empty dict of its own for each message, as msgspec copies it
     next: int = 0
     layout: int = 0

@@ -119,13 +119,10 @@ def test_decode_builds_the_registered_class_and_nothing_else() -> None:
 
 
 def test_a_stray_attribute_never_reaches_the_wire_unseen() -> None:
-    point = Point(1.0)
-    object.__setattr__(point, "z", 3.0)
-    assert decode(encode(point)) == Point(1.0)  # msgspec writes the fields
-    tagged = Tagged({"a": "b"})
-    object.__setattr__(tagged, "z", 3.0)
-    with pytest.raises(MalformedMessage, match="body: .*unknown field `z`"):
-        encode(tagged)  # orjson writes a dataclass's public attributes: the check refuses the one too many
+    for msg in (Point(1.0), Tagged({"a": "b"})):  # written by msgspec, and by orjson
+        with pytest.raises((TypeError, AttributeError)):
+            object.__setattr__(msg, "z", 3.0)  # a message (a Struct) has its fields and no other attribute
+        assert decode(encode(msg)) == msg and b'"z"' not in encode(msg)
 
 
 def test_a_key_that_is_not_a_string_is_refused_even_inside_any() -> None:
