@@ -222,9 +222,10 @@ class Bus(ABC):
     def call(self, key: str, payload: Message | None = None, timeout: float = DEFAULT_TIMEOUT) -> Message:
         """The one answer to a request: the first successful reply.
 
-        Raises RemoteError if a queryable answered with an error, BusTimeout if none answered.
+        Raises RemoteError if a queryable answered with an error, BusTimeout if none answered. Asks through
+        ``request_raw`` as ``request`` does, one step fewer on every call (a subclass changes ``request_raw``).
         """
-        replies = self.request(key, payload, timeout)
+        replies = self.request_raw(key, None if payload is None else encode(payload), timeout)
         for reply in replies:
             if reply.error is not None:
                 raise RemoteError(reply.key or key, reply.error)

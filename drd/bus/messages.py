@@ -150,7 +150,7 @@ class _Envelope(msgspec.Struct, forbid_unknown_fields=True):
 _Encoder = tuple[
     bytes,  # the envelope's bytes up to the body, as encode writes them: head + body + b"}" is the envelope
     Callable[[Any], bytes],  # the body's bytes: msgspec's writer, or orjson's where a dict may hide a key
-    Callable[[bytes], Any],  # the whole envelope against the wire struct: what a receiver checks (nothing is built)
+    Callable[[bytes], Any],  # the body against the wire struct: what a receiver checks of it (nothing is built)
 ]
 
 _REGISTRY: dict[tuple[str, int], type[Message]] = {}
@@ -231,12 +231,13 @@ def encode(msg: Message) -> bytes:
     except KeyError:
         head, write, verify = _encoder(type(msg))
     try:
-        data = head + write(msg) + b"}"
-        verify(data)  # what the receiver checks, on the very bytes it will get
+        body = write(msg)
+        verify(body)  # what the receiver checks of the body, on the very bytes it will get (the head is ours)
     except Mismatch as exc:
         raise MalformedMessage(exc.describe("body")) from None
     except (TypeError, ValueError) as exc:  # msgspec's ValidationError is a ValueError, orjson's error a TypeError
         raise MalformedMessage(_encode_reason(msg, exc)) from None
+    data = head + body + b"}"
     if len(data) > MAX_SIZE:
         raise MalformedMessage(f"too large: {len(data)} bytes > {MAX_SIZE}")
     return data
@@ -335,11 +336,7 @@ def _encoder(cls: type) -> _Encoder:
     write = _dumps if any(holds_mapping(tp) for _, tp in schema) else _write
     if any(nullable_float(tp) for _, tp in schema):  # a non-finite float there would be written as null
         write = _walking(write)
-    wire = msgspec.defstruct(
-        f"{cls.__name__}Envelope", [("v", Literal[version]), ("type", Literal[name]), ("body", wire_struct(cls))],
-        forbid_unknown_fields=True, module=cls.__module__,
-    )
-    codec = _ENCODERS[cls] = (envelope[: -len(b"null}")], write, msgspec.json.Decoder(wire).decode)
+    codec = _ENCODERS[cls] = (envelope[: -len(b"null}")], write, msgspec.json.Decoder(wire_struct(cls)).decode)
     return codec
 
 

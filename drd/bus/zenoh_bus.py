@@ -44,6 +44,7 @@ from .base import (
     log,
 )
 from .keys import check_key_expr
+from .messages import MalformedMessage, decode
 
 #: Seconds a bus waits for its zenoh session to close (a frozen peer would hold it 10 s).
 CLOSE_WAIT = 1.0
@@ -176,7 +177,8 @@ class ZenohBus(Bus):
         return Queryable(key_expr, self._keep(queryable))
 
     def request_raw(self, key: str, data: bytes | None, timeout: float = DEFAULT_TIMEOUT) -> list[Reply]:
-        self._check_open()
+        if self._closed:  # every step of a request runs cold, between two round trips: the fewest calls
+            self._check_open()
         try:
             querier = self._queriers.get((key, timeout))
         except TypeError:  # an unhashable key: refused as a bad key by `_querier`
@@ -199,7 +201,16 @@ class ZenohBus(Bus):
                 if body != b"Timeout":  # zenoh's own marker (encoding varies) for "not all answered in time";
                     raw.append((key, body, True))  # our error replies are always JSON, so this cannot hide one
         # decode only once the query is finished: an in-process queryable needs the GIL to finalize it
-        return [self._received_reply(k, body, is_error) for k, body, is_error in raw]
+        out: list[Reply] = []
+        for reply_key, body, is_error in raw:
+            if not is_error:  # a well-formed answer, on the spot; anything else through the shared rules
+                try:
+                    out.append(Reply(decode(body), reply_key))
+                    continue
+                except MalformedMessage:
+                    pass
+            out.append(self._received_reply(reply_key, body, is_error))
+        return out
 
     def _querier(self, key: str, timeout: float) -> zenoh.Querier:
         """Declare (and keep, at most MAX_QUERIERS) the querier of requests on ``key`` with ``timeout``: zenoh
