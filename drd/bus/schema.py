@@ -1,9 +1,9 @@
 """The message schema: field annotations, their wire form for msgspec, and the located reasons of a mismatch.
 
-A registered message class is a frozen dataclass; its field annotations are the schema. msgspec does the work
-on every message (see :mod:`drd.bus.messages`): each class gets a *wire struct*, a ``msgspec.Struct`` with the
-same fields and annotations but every field required and no other field allowed (a dataclass decoded by msgspec
-would fill a missing field from its default and ignore an unknown one), which checks a body in C.
+A registered message class is a frozen ``msgspec.Struct``; its field annotations are the schema. msgspec does the
+work on every message (see :mod:`drd.bus.messages`): each class also gets a *wire struct*, a ``msgspec.Struct``
+with the same fields and annotations but every field required, no default and no ``__post_init__``, against
+which encode checks the body it wrote, in C, building nothing the caller sees.
 
 When msgspec refuses something, :func:`check` walks the value against the annotations in Python, off the hot
 path, to say where and what: ``body.reports[0].cpu: expected float, got string``. It reads the schema as its

@@ -130,3 +130,59 @@ def test_a_key_that_is_not_a_string_is_refused_even_inside_any() -> None:
         encode(Tagged({1: "one"}))  # type: ignore[dict-item]
     with pytest.raises(MalformedMessage, match=r"^body: "):
         encode(Tagged({"a": "b"}, {"deep": [{2: "two"}]}))
+
+
+@message("test.codec.versioned", 1)
+class VersionedV1(Message):
+    name: str
+
+
+@message("test.codec.versioned", 2)
+class VersionedV2(Message):
+    name: str
+    count: int = 0
+
+
+@message("test.codec.nested")
+class Nested(Message):
+    points: list[Point]
+    tags: list[str] = []
+
+
+def test_the_wire_bytes_are_the_envelope_with_every_field_in_order() -> None:
+    assert encode(Point(1.0, 0.5)) == b'{"v":1,"type":"test.codec.point","body":{"x":1.0,"y":0.5}}'  # msgspec writes
+    assert encode(Tagged({"a": "b"})) == b'{"v":1,"type":"test.codec.tagged","body":{"tags":{"a":"b"},"free":null}}'
+    assert encode(Nested([Point(2.0)])) == (
+        b'{"v":1,"type":"test.codec.nested","body":{"points":[{"x":2.0,"y":0.0}],"tags":[]}}')
+
+
+def test_a_defaulted_field_of_a_nested_message_must_be_sent_too() -> None:
+    with pytest.raises(MalformedMessage) as info:
+        decode(env({"points": [{"x": 1.0, "y": 2.0}, {"x": 1.0}], "tags": []}, "test.codec.nested"))
+    assert info.value.reason == "body.points[1]: missing field 'y' of test.codec.point"
+    with pytest.raises(MalformedMessage, match=r"^body: missing field 'tags' of test.codec.nested$"):
+        decode(env({"points": []}, "test.codec.nested"))
+
+
+def test_built_in_code_a_message_takes_its_defaults_each_a_fresh_one() -> None:
+    a, b = Nested([]), Nested([])
+    assert a.tags == [] and a.tags is not b.tags and Point(1.0).y == 0.0
+    assert decode(encode(a)) == a
+
+
+def test_each_version_of_a_type_decodes_into_its_own_class() -> None:
+    assert decode(env({"name": "a"}, "test.codec.versioned")) == VersionedV1("a")
+    v2 = json.dumps({"v": 2, "type": "test.codec.versioned", "body": {"name": "a", "count": 3}}).encode()
+    assert decode(v2) == VersionedV2("a", 3) and decode(encode(VersionedV2("b"))) == VersionedV2("b")
+    with pytest.raises(MalformedMessage, match=r"^body: missing field 'count' of test.codec.versioned$"):
+        decode(json.dumps({"v": 2, "type": "test.codec.versioned", "body": {"name": "a"}}).encode())
+
+
+def test_a_message_keeps_the_dataclasses_protocol() -> None:
+    reading = Reading(1.5, [None], Point(0.5))
+    assert [f.name for f in dataclasses.fields(reading)] == ["value", "values", "at"]
+    assert dataclasses.asdict(reading) == {"value": 1.5, "values": [None], "at": {"x": 0.5, "y": 0.0}}
+    assert dataclasses.replace(reading, value=None) == Reading(None, [None], Point(0.5))
+    assert hash(Point(1.0)) == hash(Point(1.0)) and Point(1.0) != Checked(1)
+    with pytest.raises(AttributeError):
+        reading.value = 2.0  # type: ignore[misc]
