@@ -225,14 +225,15 @@ class Bus(ABC):
         Raises RemoteError if a queryable answered with an error, BusTimeout if none answered. Asks through
         ``request_raw`` as ``request`` does, one step fewer on every call (a subclass changes ``request_raw``).
         """
-        replies = self.request_raw(key, None if payload is None else encode(payload), timeout)
-        for reply in replies:
-            if reply.error is not None:
+        answer: Message | None = None
+        for reply in self.request_raw(key, None if payload is None else encode(payload), timeout):
+            if reply.error is not None:  # any error wins, the first one in arrival order
                 raise RemoteError(reply.key or key, reply.error)
-        for reply in replies:
-            if reply.payload is not None:
-                return reply.payload
-        raise BusTimeout(f"no reply on {key!r} within {timeout:g} s")
+            if answer is None:
+                answer = reply.payload
+        if answer is None:
+            raise BusTimeout(f"no reply on {key!r} within {timeout:g} s")
+        return answer
 
     # -- liveliness
     @abstractmethod

@@ -34,8 +34,10 @@ from .base import (
     Bus,
     BusClosed,
     BusError,
+    BusTimeout,
     Handler,
     Queryable,
+    RemoteError,
     Reply,
     SampleCallback,
     Subscription,
@@ -44,7 +46,7 @@ from .base import (
     log,
 )
 from .keys import check_key_expr
-from .messages import MalformedMessage, decode
+from .messages import MalformedMessage, Message, decode, encode
 
 #: Seconds a bus waits for its zenoh session to close (a frozen peer would hold it 10 s).
 CLOSE_WAIT = 1.0
@@ -177,6 +179,46 @@ class ZenohBus(Bus):
         return Queryable(key_expr, self._keep(queryable))
 
     def request_raw(self, key: str, data: bytes | None, timeout: float = DEFAULT_TIMEOUT) -> list[Reply]:
+        out: list[Reply] = []
+        for item in self._ask(key, data, timeout):
+            if isinstance(item, bytes):
+                out.append(self._received_reply(key, item, True))
+                continue
+            reply_key, body = str(item.key_expr), item.payload.to_bytes()
+            try:  # a well-formed answer, on the spot; a malformed one through the shared rules
+                out.append(Reply(decode(body), reply_key))
+            except MalformedMessage:
+                out.append(self._received_reply(reply_key, body, False))
+        return out
+
+    def call(self, key: str, payload: Message | None = None, timeout: float = DEFAULT_TIMEOUT) -> Message:
+        """``Bus.call``, the same answer and errors, without a Reply per answer nor reading its key unless it
+        is refused (the call's own path, every step of it cold between two round trips)."""
+        answer: Message | None = None
+        refused: Reply | None = None  # the first error in arrival order; every answer is still decoded and counted
+        for item in self._ask(key, None if payload is None else encode(payload), timeout):
+            if isinstance(item, bytes):
+                reply = self._received_reply(key, item, True)
+            else:
+                body = item.payload.to_bytes()
+                try:
+                    msg = decode(body)
+                except MalformedMessage:  # counted and logged as request_raw does
+                    reply = self._received_reply(str(item.key_expr), body, False)
+                else:
+                    if answer is None:
+                        answer = msg
+                    continue
+            if refused is None:
+                refused = reply
+        if refused is not None:
+            raise RemoteError(refused.key or key, refused.error or "")
+        if answer is None:
+            raise BusTimeout(f"no reply on {key!r} within {timeout:g} s")
+        return answer
+
+    def _ask(self, key: str, data: bytes | None, timeout: float) -> list[zenoh.Sample | bytes]:
+        """The answers to a request on ``key``, in arrival order: each a sample, or an error reply's bytes."""
         if self._closed:  # every step of a request runs cold, between two round trips: the fewest calls
             self._check_open()
         try:
@@ -189,28 +231,19 @@ class ZenohBus(Bus):
             replies = querier.get(payload=data)  # `querier` stays referenced until every reply is read
         except zenoh.ZError as exc:  # the bus closed meanwhile (its queriers are undeclared)
             raise BusError(str(exc)) from exc
-        raw: list[tuple[str, bytes, bool]] = []
+        arrived: list[zenoh.Sample | bytes] = []
         for reply in replies:  # blocks (GIL released) until every queryable answered or the timeout
             sample = reply.ok
             if sample is not None:
-                raw.append((str(sample.key_expr), sample.payload.to_bytes(), False))
+                arrived.append(sample)
                 continue
             err = reply.err  # read once: each read builds a new object
             if err is not None:
                 body = err.payload.to_bytes()
                 if body != b"Timeout":  # zenoh's own marker (encoding varies) for "not all answered in time";
-                    raw.append((key, body, True))  # our error replies are always JSON, so this cannot hide one
-        # decode only once the query is finished: an in-process queryable needs the GIL to finalize it
-        out: list[Reply] = []
-        for reply_key, body, is_error in raw:
-            if not is_error:  # a well-formed answer, on the spot; anything else through the shared rules
-                try:
-                    out.append(Reply(decode(body), reply_key))
-                    continue
-                except MalformedMessage:
-                    pass
-            out.append(self._received_reply(reply_key, body, is_error))
-        return out
+                    arrived.append(body)  # our error replies are always JSON, so this cannot hide one
+        # decoded by the caller, once the query is finished: an in-process queryable needs the GIL to finalize it
+        return arrived
 
     def _querier(self, key: str, timeout: float) -> zenoh.Querier:
         """Declare (and keep, at most MAX_QUERIERS) the querier of requests on ``key`` with ``timeout``: zenoh
