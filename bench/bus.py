@@ -5,8 +5,8 @@ script with --serve) answers on two keys over tcp/127.0.0.1, as another daemon w
 
 - raw zenoh: a callback queryable echoing the request bytes, asked through a declared Querier
   (all targets, no consolidation); the bytes are a pre-encoded Ping, so the wire size is the same;
-- ZenohBus: `serve` answering Ping with Pong, asked with `ZenohBus.call` (encode, schema-checked
-  decode on both sides, error containment, Reply objects);
+- ZenohBus: `serve` answering Ping with Pong, asked with `ZenohBus.call` (encode and its check,
+  schema-checked decode on both sides, error containment, the Query the handler gets);
 - raw zenoh + codec, for information: the raw path with drd's codec on both sides (the client
   encodes a Ping and decodes the Pong, the server decodes the Ping and encodes the Pong), and
   nothing else of the bus: the floor `ZenohBus.call` cannot go under with this codec.
