@@ -74,8 +74,8 @@ class _Default:
     Built by ``Foo(...)``, a message takes its defaults as a dataclass would; decoded, it must carry every field, a
     defaulted one too (other peers and recordings may differ on the default). msgspec has no such option (it fills a
     missing field from its default), so the default refuses to be taken by a decoder of this module: msgspec asks
-    for it from C, so the calling Python frame is the decoding function's. One call on the hot path, no check
-    after it; the frame is read only when a default is used.
+    for it from C, so the calling Python frame is the decoding function's. Nothing of this runs when every field is
+    given or sent: the frame is read only when a default is used.
     """
 
     __slots__ = ("value", "factory")
@@ -280,8 +280,11 @@ def _read_all(data: bytes) -> Any:
     """``decode``'s reader until the first decode after a registration: builds the one that knows every
     registered (type, version), then reads ``data`` with it."""
     global _read
-    _read = _reader()
-    return _read(data)
+    seen = _registrations
+    reader = _reader()
+    if seen == _registrations:  # else a class registered meanwhile: the next decode builds it anew
+        _read = reader
+    return reader(data)
 
 
 _read: Callable[[bytes], Any] = _read_all
@@ -378,11 +381,15 @@ def _read_none(data: bytes) -> Any:
     raise ValueError("no message type is registered")  # the long way says why ``data`` is refused
 
 
+_registrations = 0  # how many registrations so far (decode's reader is built for one count)
+
+
 def _forget(cls: type, key: tuple[str, int]) -> None:
     """Drop what was built for a (re-)registered class and its (type, version); decode's reader is rebuilt."""
-    global _read
+    global _read, _registrations
     _ENCODERS.pop(cls, None)
     _BUILDERS.pop(key, None)
+    _registrations += 1
     _read = _read_all
 
 
