@@ -36,6 +36,7 @@ import msgspec
 import orjson
 
 from .schema import (
+    BUILDING,
     SCHEMAS,
     Mismatch,
     check,
@@ -280,8 +281,9 @@ def _read_all(data: bytes) -> Any:
     """``decode``'s reader until the first decode after a registration: builds the one that knows every
     registered (type, version), then reads ``data`` with it."""
     global _read
-    seen = _registrations
-    reader = _reader()
+    with BUILDING:
+        seen = _registrations
+        reader = _reader()
     if seen == _registrations:  # else a class registered meanwhile: the next decode builds it anew
         _read = reader
     return reader(data)
@@ -339,7 +341,9 @@ def _encoder(cls: type) -> _Encoder:
     write = _dumps if any(holds_mapping(tp) for _, tp in schema) else _write
     if any(nullable_float(tp) for _, tp in schema):  # a non-finite float there would be written as null
         write = _walking(write)
-    codec = _ENCODERS[cls] = (envelope[: -len(b"null}")], write, msgspec.json.Decoder(wire_struct(cls)).decode)
+    with BUILDING:
+        verify = msgspec.json.Decoder(wire_struct(cls)).decode
+    codec = _ENCODERS[cls] = (envelope[: -len(b"null}")], write, verify)
     return codec
 
 
@@ -356,7 +360,8 @@ def _walking(write: Callable[[Any], bytes]) -> Callable[[Any], bytes]:
 
 def _builder(cls: type[Message]) -> Callable[[bytes | msgspec.Raw], Any]:
     """The long way's decoder of a body into ``cls`` (registered), cached."""
-    build: Callable[[bytes | msgspec.Raw], Any] = msgspec.json.Decoder(cls).decode
+    with BUILDING:
+        build: Callable[[bytes | msgspec.Raw], Any] = msgspec.json.Decoder(cls).decode
     _BUILDERS[(cls.TYPE, cls.VERSION)] = build
     return build
 

@@ -13,12 +13,18 @@ docstring in ``messages.message`` states it; ``tests/properties/test_schema_prop
 from __future__ import annotations
 
 import math
+import threading
 import types
 import typing
 from typing import Any, Union
 
 import msgspec
 
+#: Held while msgspec builds a decoder of messages (or a wire struct). msgspec builds a class's type information the
+#: first time a decoder needs it and publishes it on the class before it is complete (it calls Python meanwhile, so
+#: another thread may run): a second thread building a decoder then takes the unfinished information, and decoding
+#: with it crashes the process (seen as SIGSEGV in daemons whose zenoh threads decoded their first messages at once).
+BUILDING = threading.RLock()
 SCALARS: dict[Any, str] = {str: "str", int: "int", float: "float", bool: "bool", type(None): "null"}
 SCHEMAS: dict[type, tuple[tuple[str, Any], ...]] = {}  # registered message class -> (field, annotation)
 _WIRE: dict[type, type[msgspec.Struct]] = {}  # registered message class -> its wire struct
@@ -59,14 +65,15 @@ def check_annotation(tp: Any, where: str) -> None:
 def define_wire(cls: type, schema: tuple[tuple[str, Any], ...]) -> type[msgspec.Struct]:
     """Register ``cls``'s schema and build its wire struct; a TypeError names an annotation msgspec cannot decode
     (a union of two lists, or of two objects: msgspec picks a union's arm by the JSON kind alone)."""
-    wire = msgspec.defstruct(
-        f"{cls.__name__}Wire", [(field, wire_type(tp)) for field, tp in schema], forbid_unknown_fields=True,
-        module=cls.__module__,
-    )
-    try:
-        msgspec.json.Decoder(wire)  # msgspec checks the annotations here: at definition, not on first use
-    except TypeError as exc:
-        raise TypeError(f"{cls.__name__}: unsupported annotation: {exc}") from None
+    with BUILDING:
+        wire = msgspec.defstruct(
+            f"{cls.__name__}Wire", [(field, wire_type(tp)) for field, tp in schema], forbid_unknown_fields=True,
+            module=cls.__module__,
+        )
+        try:
+            msgspec.json.Decoder(wire)  # msgspec checks the annotations here: at definition, not on first use
+        except TypeError as exc:
+            raise TypeError(f"{cls.__name__}: unsupported annotation: {exc}") from None
     SCHEMAS[cls], _WIRE[cls] = schema, wire
     return wire
 
