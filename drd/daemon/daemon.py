@@ -194,6 +194,7 @@ class Daemon:
         self._next_load = 0.0
         self._next_peer_check = 0.0
         self._checking = False
+        self._all_reachable = False  # the last peer check found every peer (and said so)
         self._closed = False
         self._controller_clock = controller_clock
         self.stop_reason = "stopped"
@@ -679,9 +680,11 @@ class Daemon:
                     and self.transport.listens(h.name)}  # a client of the routers has no endpoint to probe
             silent = {h for h in down if self.view.records[h].silent}  # frozen or cut off: not a credentials issue
         if not down:
-            if not self.unreachable:
+            if not self.unreachable and not self._all_reachable:  # said once, not at every check
+                self._all_reachable = True
                 log.info("all %d peers reachable", len(self.cluster.hosts) - 1)
             return
+        self._all_reachable = False
         down = {h: self.transport.endpoints.get(h, e) for h, e in down.items()}
         self._checking = True
 

@@ -463,3 +463,27 @@ def test_load_reports_go_out_on_the_wall_clocks_multiples_of_the_period(cluster:
         assert heard == [100.3, 100.49, 100.74, 101.1, 101.26, 101.5]
     finally:
         daemon.close()
+
+
+def test_all_peers_reachable_is_said_once_not_at_every_check(cluster: Cluster, catalog: Catalog,
+                                                             caplog: pytest.LogCaptureFixture) -> None:
+    """A fleet whose peers are all up says so once, not every 5 s in every daemon's log forever."""
+    net = LocalNetwork()
+    clocks = Clocks()
+    hosts = ("controller", "ranger1", "ranger2")
+    daemons = [Daemon(DaemonConfig(cluster, h, catalog), net.session(h), clock=clocks.mono, wall=clocks.wall,
+                      controller_clock=clocks.sim) for h in hosts]
+    caplog.set_level(logging.INFO, logger="drd.daemon")
+    try:
+        for d in daemons:
+            d.start()
+        for _ in range(80):  # 20 s: four peer checks or more in each daemon
+            clocks.sim.advance(0.25)
+            for d in daemons:
+                d.step()
+        assert all(d.view.up() == list(hosts) for d in daemons)
+        said = [r for r in caplog.records if r.getMessage() == "all 2 peers reachable"]
+        assert len(said) == len(daemons)
+    finally:
+        for d in daemons:
+            d.close()
