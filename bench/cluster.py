@@ -48,7 +48,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # ... imported as 
 
 from drd.cluster.workers import KEEP_WARM  # noqa: E402
 from drd.daemon.client import ClusterClient  # noqa: E402
-from tests.cluster_support import DRD, RANGER, ROOT, free_ports  # noqa: E402
+from tests.cluster_support import DRD, RANGER, ROOT  # noqa: E402
+from tests.net_support import free_ports  # noqa: E402
 
 GOAL = 0.5  # seconds, median of `missionctl status` (issue #15: of 50 daemons; it was 1 s of 10)
 IDLE_GOAL_MB = 60.0  # PSS of an idle daemon with its workers (issue #15)

@@ -23,6 +23,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))  # the tests' cluster fixtures
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests" / "e2e"))
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # ... which import each other as `tests.*`
 
 from cluster_support import MISSIONCTL, eventually, running, serving_cluster  # noqa: E402
 from test_cluster_run import NAMES, corridor_hosts  # noqa: E402
