@@ -13,6 +13,7 @@ The goal is 10,000 requests/s; the cost per call should not grow with N beyond ~
 
 from __future__ import annotations
 
+import argparse
 import os
 import statistics
 import sys
@@ -92,6 +93,7 @@ def bench(waiting: int) -> list[str]:
 
 
 def main() -> None:
+    argparse.ArgumentParser(description=(__doc__ or "").splitlines()[0]).parse_args()  # --help; no options
     load = ", ".join(f"{x:.1f}" for x in os.getloadavg())
     print(f"RCM core: {CAMERAS} exclusive cameras, {SAMPLES:,} samples per line")
     print(f"Python {sys.version.split()[0]}, {os.cpu_count()} CPUs, load average {load}")

@@ -35,3 +35,18 @@ def test_dsl_does_no_io_outside_the_loader() -> None:
         if path.name != "loader.py":
             for pattern in (r"(?<![\w.])open\(", r"\.read_bytes\(", r"\bPath\(", r"\bsubprocess\b", r"os\.environ"):
                 assert not re.search(pattern, text), f"{path.name} matches {pattern}"
+
+
+#: Benchmarks that need the `bench` extra (`pip install -e '.[bench]'`: the peers they compare against).
+NEEDS_BENCH_EXTRA = {"runtime.py": "sismic"}
+
+
+@pytest.mark.parametrize("bench", sorted(p.name for p in (ROOT / "bench").glob("*.py") if not p.name.startswith("_")))
+def test_every_benchmark_starts(bench: str) -> None:
+    """Each benchmark still imports what it uses and parses its options (moved helpers once broke one unseen);
+    none is run here: `--help` only."""
+    if bench in NEEDS_BENCH_EXTRA:
+        pytest.importorskip(NEEDS_BENCH_EXTRA[bench], reason=f"bench/{bench} needs pip install -e '.[bench]'")
+    r = subprocess.run([sys.executable, str(ROOT / "bench" / bench), "--help"], cwd=ROOT, capture_output=True,
+                       text=True, timeout=120, check=False)
+    assert r.returncode == 0 and r.stdout.startswith("usage:"), r.stdout + r.stderr
