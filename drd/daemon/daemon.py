@@ -127,6 +127,12 @@ def config_digest(cluster: Cluster) -> str:
     return hashlib.sha256(json.dumps(data, sort_keys=True, default=str).encode()).hexdigest()
 
 
+#: zenoh settings of a cluster's own links. No QoS: drd sets no priority, and a link with QoS keeps a queue per
+#: priority that the router's tx thread goes over for each batch (idle router at 50 daemons: 0.96-0.99 % of a core
+#: with it, 0.70 % without; docs/design.md "Load reports in step"). A ROS 2 session (`drd.bus.ros2`) keeps zenoh's.
+CLUSTER_LINKS = {"transport/unicast/qos/enabled": False}
+
+
 def open_bus(config: DaemonConfig, tr: Transport, stop: threading.Event | None = None) -> Bus:
     """This host's zenoh session: a peer listening on its endpoint and connecting to every other one, or, when the
     hosts file names routers, a router (listening, meshed with the other routers) or a client of the routers. A
@@ -138,7 +144,8 @@ def open_bus(config: DaemonConfig, tr: Transport, stop: threading.Event | None =
     me = config.host
     mode = tr.zenoh_mode(me)
     listen = [tr.endpoints[me]] if tr.listens(me) else []
-    options = {**tr.options, "mode": mode, **({"connect/timeout_ms": ROUTER_WAIT_MS} if mode == "client" else {})}
+    options = {**CLUSTER_LINKS, **tr.options, "mode": mode,
+               **({"connect/timeout_ms": ROUTER_WAIT_MS} if mode == "client" else {})}
     connect = list(tr.others(me).values())
     said = False
     while True:
