@@ -213,7 +213,9 @@ def _dataclass_fields(cls: type[Message], schema: tuple[tuple[str, Any], ...]) -
             field = dataclasses.field(default=default.value) if default.factory is None else dataclasses.field(
                 default_factory=default.factory)
             specs.append((name, annotation, field))
-    shadow = dataclasses.make_dataclass(cls.__name__, specs, frozen=True)
+    # only the fields are wanted: no methods generated (their code is compiled per class, five times the cost, at
+    # every process start that loads the messages)
+    shadow = dataclasses.make_dataclass(cls.__name__, specs, init=False, repr=False, eq=False)
     return dict(shadow.__dataclass_fields__)  # type: ignore[attr-defined]
 
 
