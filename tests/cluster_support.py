@@ -103,6 +103,11 @@ class DaemonCluster:
         path = self.folder / f"{name}.log"
         return path.read_text(errors="replace") if path.exists() else ""
 
+    def tails(self, *names: str, chars: int = 4000) -> str:
+        """The end of each named daemon's log (all by default), for a failure message."""
+        return "\n".join(f"--- {name}.log (last {chars} characters) ---\n{self.log(name)[-chars:]}"
+                         for name in names or self.names)
+
     def pidfile(self, name: str) -> dict[str, object] | None:
         try:
             data: dict[str, object] = json.loads((self.run_dir / self.name / f"{name}.pid").read_text())

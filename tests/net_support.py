@@ -10,12 +10,14 @@ from collections.abc import Callable
 import pytest
 
 
-def eventually(predicate: Callable[[], object], what: str, timeout: float = 10.0, poll: float = 0.02) -> None:
-    """Wait (bounded) until `predicate()` is true; fail naming `what`."""
+def eventually(predicate: Callable[[], object], what: str, timeout: float = 10.0, poll: float = 0.02,
+               explain: Callable[[], str] | None = None) -> None:
+    """Wait (bounded) until `predicate()` is true; fail naming `what`, with `explain()` (the daemons' logs, say):
+    a failure seen once on a CI machine must say what the processes were doing."""
     deadline = time.monotonic() + timeout
     while not predicate():
         if time.monotonic() > deadline:
-            pytest.fail(f"timed out after {timeout:g} s waiting for {what}")
+            pytest.fail(f"timed out after {timeout:g} s waiting for {what}" + (f"\n{explain()}" if explain else ""))
         time.sleep(poll)
 
 

@@ -130,12 +130,19 @@ def config_digest(cluster: Cluster) -> str:
 #: zenoh settings of a cluster's own links. No QoS: drd sets no priority, and a link with QoS keeps a queue per
 #: priority that the router's tx thread goes over for each batch (idle router at 50 daemons: 0.96-0.99 % of a core
 #: with it, 0.70 % without; docs/design.md "Load reports in step"). A ROS 2 session (`drd.bus.ros2`) keeps zenoh's.
-CLUSTER_LINKS = {"transport/unicast/qos/enabled": False}
+#: One dialer per pair (`Transport.dials`): no link made on gossip (it would dial back), and a dialer tries again
+#: each second (not backing off to 4 s), so a host started before the one it dials meets it within a second.
+CLUSTER_LINKS: dict[str, object] = {
+    "transport/unicast/qos/enabled": False,
+    "scouting/gossip/autoconnect": [],
+    "connect/retry": {"period_init_ms": 1000, "period_max_ms": 1000, "period_increase_factor": 1},
+}
 
 
 def open_bus(config: DaemonConfig, tr: Transport, stop: threading.Event | None = None) -> Bus:
-    """This host's zenoh session: a peer listening on its endpoint and connecting to every other one, or, when the
-    hosts file names routers, a router (listening, meshed with the other routers) or a client of the routers. A
+    """This host's zenoh session: a peer listening on its endpoint and meshed with every other one (dialing those
+    listed before it: `Transport.dials`), or, when the hosts file names routers, a router (listening, meshed with the
+    other routers the same way) or a client of the routers. A
     client waits for a router (zenoh opens a client only once connected): started before its routers, it tries
     again each second, saying so once, until one answers or `stop` is set."""
     from drd.bus.zenoh_bus import ZenohBus  # zenoh only when a real cluster is joined
@@ -146,7 +153,7 @@ def open_bus(config: DaemonConfig, tr: Transport, stop: threading.Event | None =
     listen = [tr.endpoints[me]] if tr.listens(me) else []
     options = {**CLUSTER_LINKS, **tr.options, "mode": mode,
                **({"connect/timeout_ms": ROUTER_WAIT_MS} if mode == "client" else {})}
-    connect = list(tr.others(me).values())
+    connect = list(tr.dials(me).values())
     said = False
     while True:
         try:
@@ -161,6 +168,33 @@ def open_bus(config: DaemonConfig, tr: Transport, stop: threading.Event | None =
 
 #: Milliseconds a client of the routers waits for one at each attempt to open its session.
 ROUTER_WAIT_MS = 1000
+
+
+def token_on_bus(config: DaemonConfig, tr: Transport, key: str, timeout: float = 1.0) -> bool:
+    """Whether a host token `key` is on the cluster's bus, asked before this host's own session opens (which dials
+    only some hosts: `Transport.dials`, so another daemon running as this host may be one nobody it dials is linked
+    to yet). Asked as a zenoh client of the first host that answers: a peer or a router answers its client for
+    every host it is linked to, which in a mesh is every host. Closed at once; it listens nowhere."""
+    from drd.bus.zenoh_bus import ZenohBus
+
+    me = config.host
+    others = list(tr.others(me).values())
+    if not others:
+        return False
+    options = {**{k: v for k, v in tr.options.items() if k != "access_control"}, "mode": "client",
+               "connect/timeout_ms": ROUTER_WAIT_MS}
+    try:
+        probe = ZenohBus(connect=others, options=options, name=f"{me} (start)")
+    except BusError:  # no host answers yet: nobody runs as this one among them
+        return False
+    try:
+        return bool(probe.alive(key, timeout=timeout))
+    finally:
+        probe.close_within(PROBE_CLOSE)
+
+
+#: Seconds a daemon's start waits for its probe session to close (a frozen peer holds zenoh's close for 10 s).
+PROBE_CLOSE = 0.5
 
 
 class HostTaken(ConfigurationError):
@@ -223,10 +257,14 @@ class Daemon:
 
     def start(self) -> None:
         """Open the bus (unless given one) and declare every service; the token comes last."""
-        if self._bus is None:
+        keys, me = self.keys, self.host
+        if self._bus is None:  # before anything is declared: the first one stays in charge
+            taken = token_on_bus(self.config, self.transport, keys.host(me))
             self._bus = open_bus(self.config, self.transport, self._stop)
-        bus, keys, me = self.bus, self.keys, self.host
-        if bus.alive(keys.host(me), timeout=1.0):  # before anything is declared: the first one stays in charge
+        else:
+            taken = bool(self._bus.alive(keys.host(me), timeout=1.0))
+        bus = self.bus
+        if taken:
             raise HostTaken(f"another drd already runs as host {me} in cluster {self.cluster.name} (its token is on "
                             "the bus): host names are unique in a cluster, and one controller acts",
                             hint=f"stop that one first (drd stop --host {me} where it runs), or start this one as"

@@ -49,7 +49,7 @@ class Transport:
     routers: tuple[str, ...] = ()  # the hosts with the role router (none: every daemon meets every other)
 
     def others(self, me: str) -> dict[str, str]:
-        """What the daemon of `me` connects to, in order: every other host, or with routers the other routers only.
+        """Whom the daemon of `me` meets, in order: every other host, or with routers the other routers only.
         A client of the routers connects to the first it reaches, so each client's list starts at a router of its
         own (by a hash of its name: the same on every start), and the clients spread over the routers."""
         found = {h: e for h, e in self.endpoints.items() if h != me and (not self.routers or h in self.routers)}
@@ -58,6 +58,21 @@ class Transport:
         names = list(found)
         first = zlib.crc32(me.encode()) % len(names)
         return {h: found[h] for h in names[first:] + names[:first]}
+
+    def dials(self, me: str) -> dict[str, str]:
+        """What the daemon of `me` keeps a link to by dialing it: among peers (or among routers), only those listed
+        before `me` in the hosts file; the others dial `me`. A client of the routers dials them all (`others`).
+
+        One dialer per pair, because two peers that dial each other share a transport of two links, and when the
+        links expire one by one (a frozen or partitioned host coming back), zenoh can merge the redial into the
+        stale transport and never send one side's declarations again: the host reports its load and is never up
+        (zenoh issue #2806, seen here in 1 of 29 SIGSTOPs; docs/design.md "One dialer per pair")."""
+        found = self.others(me)
+        if self.zenoh_mode(me) == "client":
+            return found
+        names = list(self.endpoints)
+        before = set(names[:names.index(me)]) if me in names else set()
+        return {h: e for h, e in found.items() if h in before}
 
     def zenoh_mode(self, me: str) -> str:
         """The zenoh mode of `me`'s session: a peer among peers, a router, or a client of the routers."""

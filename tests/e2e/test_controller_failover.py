@@ -164,7 +164,8 @@ def test_a_frozen_controller_that_wakes_up_is_fenced_and_its_term_refused(cluste
         try:
             eventually(lambda: "elected the acting controller" in cluster.log(standby)
                        and term_of(cluster, standby) > old_term, f"{standby} to be elected", 30)
-            eventually(lambda: (mission_time(cluster, mission) or 0.0) > 0.0, "the mission running again", 30)
+            eventually(lambda: (mission_time(cluster, mission) or 0.0) > 0.0, "the mission running again", 30,
+                       explain=lambda: cluster.tails(standby, "ranger1"))
         finally:
             frozen.send_signal(signal.SIGCONT)
         eventually(lambda: "stepped down, a standby again" in cluster.log(first), f"{first} to step down", 30)

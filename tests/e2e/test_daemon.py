@@ -255,13 +255,15 @@ def test_a_frozen_host_is_seen_unresponsive_within_the_lease_and_up_again_when_i
     delay = down.at - stopped_at
     print(f"\nSIGSTOP seen after {delay:.3f} s (bound {STOP_BOUND:g} s)")
     assert 0 < delay <= STOP_BOUND
-    eventually(lambda: cluster.states(client)["ranger2"] == "up", "ranger2 to be up again", 15)
+    eventually(lambda: cluster.states(client)["ranger2"] == "up", "ranger2 to be up again", 15,
+               explain=lambda: f"states {cluster.states(client)}\n{cluster.tails()}")
     up = last_event(client, "ranger2", "up")
     assert up is not None and up.at > resumed_at
 
 
 def test_a_killed_host_is_seen_down_at_once_and_its_resources_leave_after_the_lease(cluster: DaemonCluster,
                                                                                      client: ClusterClient) -> None:
+    cluster.wait_up(client)  # whatever the test before left
     assert "ranger1.camera" in {u.id for u in client.resources().units}
     killed_at = time.time()
     os.kill(cluster.pid("ranger1"), signal.SIGKILL)

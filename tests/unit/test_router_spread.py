@@ -31,3 +31,15 @@ def test_a_router_connects_to_the_other_routers_and_a_mesh_is_unchanged() -> Non
     assert tr.others("router1") == {"router2": "tcp/127.0.0.1:7001"}
     mesh = Transport(SecurityMode.NONE, {"a": "tcp/127.0.0.1:1", "b": "tcp/127.0.0.1:2", "c": "tcp/127.0.0.1:3"})
     assert mesh.others("b") == {"a": "tcp/127.0.0.1:1", "c": "tcp/127.0.0.1:3"}
+
+
+def test_each_pair_has_one_dialer_the_one_listed_later() -> None:
+    """Two peers that dial each other can be left split by zenoh after a freeze (issue #2806): one dialer per pair."""
+    mesh = Transport(SecurityMode.NONE, {n: f"tcp/127.0.0.1:{i}" for i, n in enumerate("abcd", 1)})
+    assert mesh.dials("a") == {} and mesh.dials("c") == {"a": "tcp/127.0.0.1:1", "b": "tcp/127.0.0.1:2"}
+    pairs = [(x, y) for x in "abcd" for y in mesh.dials(x)]
+    assert len(pairs) == 6 and {frozenset(p) for p in pairs} == {frozenset((x, y)) for x in "abcd" for y in "abcd"
+                                                                 if x < y}
+    tr = fleet(3)
+    assert tr.dials("router1") == {} and tr.dials("router2") == {"router1": "tcp/127.0.0.1:7000"}
+    assert tr.dials("host01") == tr.others("host01")  # a client of the routers dials them all (it holds one link)
