@@ -677,10 +677,13 @@ class _RecordWatch:
     def _missions(self, mission: str) -> list[dict[str, Any]]:
         """The executive's missions; none while the controller does not answer (it may be restarting: a
         controller started again resumes its missions from its journal), said once when it goes and comes back."""
+        from drd.bus import RemoteError
         from drd.errors import BusFailure
 
         try:
             missions = self.client.missions(mission)  # this one only: a long history is not asked each second
+        except RemoteError:  # it answered, with a refusal: busy (a large mission's first cycle), not away
+            return []
         except BusFailure:
             if self.away_since is None:
                 self.away_since = time.monotonic()

@@ -189,8 +189,8 @@ class SerializedBus(BusWrapper):
         last = self._last.get((key, asked)) or (self._last.get((key, DEFAULT)) if asked[0] == "plain" else None)
         if last is not None and self._read_only(query):
             return last
-        return query.error(f"the controller is busy (its mission loop has waited over {self.busy_wait:g} s on a host"
-                           " that does not answer: see `missionctl hosts`); try again")
+        return query.error(f"the controller is busy (its mission loop has held it over {self.busy_wait:g} s: a large"
+                           " mission starting, or a host slow to answer: see `missionctl hosts`); try again")
 
     def keep(self, key: str, read: Callable[[], Message]) -> None:
         """Keep an answer to read-only queries on `key` ready (`refresh`), for when the lock is busy."""

@@ -296,6 +296,29 @@ def test_run_progress_shows_the_sim_time_every_interval_even_without_records(mon
     assert times == sorted(times) and times[-1] > times[0] > 0, "the time moves though no record came"
 
 
+class _BusyClient(_FakeClient):
+    """An executive that refuses its first polls as busy (its loop held the lock: a large mission starting)."""
+
+    def missions(self, mission: str = "", **options: Any) -> list[dict[str, Any]]:
+        from drd.bus import RemoteError
+
+        if self.polls < 3:
+            self.polls += 1
+            raise RemoteError("drd/test/executive/status", "the controller is busy (...); try again")
+        return super().missions(mission, **options)
+
+
+def test_run_says_nothing_of_a_controller_gone_while_it_answers_busy(monkeypatch: pytest.MonkeyPatch) -> None:
+    """`Wait(duration: 1s)[1000]` on a cluster: the first cycle's placements hold the executive's lock, its status is
+    refused as busy for a moment, and the client said the controller did not answer (as if it had died)."""
+    buf = _capture(monkeypatch, cluster)
+    monkeypatch.setattr(cluster._RecordWatch, "every", 0.05)
+    watch = cluster._RecordWatch(_BusyClient(["M-1"], polls_until_done=6), None)  # type: ignore[arg-type]
+    result = watch.follow("M-1", 60.0, base=100.0)
+    assert result.outcome == "success"
+    assert "does not answer" not in buf.getvalue() and "is back" not in buf.getvalue(), buf.getvalue()
+
+
 def _status_data() -> dict[str, Any]:
     mid = "CorridorSurveillance-6179574"
     root = "CorridorSurveillance"
