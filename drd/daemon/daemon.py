@@ -258,10 +258,14 @@ class Daemon:
     def start(self) -> None:
         """Open the bus (unless given one) and declare every service; the token comes last."""
         keys, me = self.keys, self.host
-        if self._bus is None:  # before anything is declared: the first one stays in charge
+        # before anything is declared: the first one stays in charge. A peer's or a router's own session dials only
+        # some hosts (`Transport.dials`), so it asks first; a client of the routers sees every token through them
+        if self._bus is None and self.transport.listens(me):
             taken = token_on_bus(self.config, self.transport, keys.host(me))
             self._bus = open_bus(self.config, self.transport, self._stop)
         else:
+            if self._bus is None:
+                self._bus = open_bus(self.config, self.transport, self._stop)
             taken = bool(self._bus.alive(keys.host(me), timeout=1.0))
         bus = self.bus
         if taken:
