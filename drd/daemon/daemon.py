@@ -142,9 +142,9 @@ CLUSTER_LINKS: dict[str, object] = {
 def open_bus(config: DaemonConfig, tr: Transport, stop: threading.Event | None = None) -> Bus:
     """This host's zenoh session: a peer listening on its endpoint and meshed with every other one (dialing those
     listed before it: `Transport.dials`), or, when the hosts file names routers, a router (listening, meshed with the
-    other routers the same way) or a client of the routers. A
-    client waits for a router (zenoh opens a client only once connected): started before its routers, it tries
-    again each second, saying so once, until one answers or `stop` is set."""
+    other routers the same way) or a client of the routers. A client waits for a router (zenoh opens a client only
+    once connected): started before its routers, it tries again each second, saying so once, until one answers or
+    `stop` is set."""
     from drd.bus.zenoh_bus import ZenohBus  # zenoh only when a real cluster is joined
 
     lease_ms = max(1000, int(config.cluster.lease * 2000))  # zenoh drops a silent link after twice our lease
