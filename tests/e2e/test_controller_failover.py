@@ -85,14 +85,15 @@ def term_of(cluster: DaemonCluster, name: str) -> int:
 
 
 def mission_time(cluster: DaemonCluster, mission: str) -> float | None:
-    """The mission's time as the acting executive says it; None while none answers (a frozen one holds a query up
-    until zenoh drops its link)."""
+    """The mission's time as the acting executive says it, running or already ended (at --speed 20 a resumed
+    mission may end between two asks on a slow machine); None while none answers (a frozen one holds a query up
+    until zenoh drops its link) or it is busy."""
     try:
         missions = cluster.client().missions()
     except BusFailure:
         return None
     for m in missions:
-        if m.get("id") == mission and m.get("outcome") is None and isinstance(m.get("time"), int | float):
+        if m.get("id") == mission and isinstance(m.get("time"), int | float):
             return float(m["time"])
     return None
 
