@@ -4,6 +4,7 @@ preview of the start. Pure rendering of the data the run produced, so every comm
 from __future__ import annotations
 
 import math
+import re
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -13,6 +14,8 @@ from drd.cli.common import out, shorten
 from dsl.statechart import StateKind
 
 if TYPE_CHECKING:
+    from collections.abc import Callable
+
     from rich.console import Console, RenderableType
     from rich.table import Table
 
@@ -77,22 +80,7 @@ def report_view(r: DryRun, several: bool = False, width: int = 80) -> list[Rende
     def rel(path: str, room: int = path_width) -> str:
         return shorten(_relative(path, root), room)
 
-    parts.append(_table("timeline", ("behavior", "entered", "exited", "status"),
-                        [(rel(row["path"]), f"{row['entered']:.1f}", _t(row["exited"]), row["status"])
-                         for row in r.timeline()]))
-    holds = r.holds()
-    if holds:
-        parts.append(_table("resource holds", ("holder", "resources", "from", "to", "ended"),
-                            [(rel(h["path"], max(16, width // 3)),
-                              ", ".join(f"{k}={v}" for k, v in h["resources"].items()), f"{h['from']:.1f}",
-                              _t(h["to"]), h["ended"]) for h in holds]))
-    else:
-        parts.append(Text("resource holds: none", style="bold"))
-    waits = [w for w in r.waits() if w["to"] - w["from"] >= 0.05]
-    if waits:
-        parts.append(_table("waits", ("waiter", "needs", "from", "to", "ended"),
-                            [(rel(w["path"], max(16, width // 3)), ", ".join(w["needs"]), f"{w['from']:.1f}",
-                              _t(w["to"]), w["ended"]) for w in waits]))
+    parts += _tables(r, rel, width)
     logs = r.logs()
     if logs:
         parts.append(Text(f"log: {len(logs)} line{'s' if len(logs) != 1 else ''}", style="bold"))
@@ -108,8 +96,76 @@ def report_view(r: DryRun, several: bool = False, width: int = 80) -> list[Rende
     return parts
 
 
+def _tables(r: DryRun, rel: Callable[..., str], width: int) -> list[RenderableType]:
+    """The timeline, the holds and the waits, runs of instances that say the same thing folded."""
+    parts: list[RenderableType] = []
+    parts.append(_table("timeline", ("behavior", "entered", "exited", "status"),
+                        [(rel(path), *rest) for path, *rest in collapse_instances(
+                            [(row["path"], f"{row['entered']:.1f}", _t(row["exited"]), row["status"])
+                             for row in r.timeline()])]))
+    holds = r.holds()
+    if holds:
+        parts.append(_table("resource holds", ("holder", "resources", "from", "to", "ended"),
+                            [(rel(h["path"], max(16, width // 3)),
+                              ", ".join(f"{k}={v}" for k, v in h["resources"].items()), f"{h['from']:.1f}",
+                              _t(h["to"]), h["ended"]) for h in holds]))
+    else:
+        parts.append(Text("resource holds: none", style="bold"))
+    waits = [w for w in r.waits() if w["to"] - w["from"] >= 0.05]
+    if waits:
+        parts.append(_table("waits", ("waiter", "needs", "from", "to", "ended"),
+                            [(rel(path, max(16, width // 3)), *rest) for path, *rest in collapse_instances(
+                                [(w["path"], ", ".join(w["needs"]), f"{w['from']:.1f}", _t(w["to"]), w["ended"])
+                                 for w in waits])]))
+    return parts
+
+
 #: How many log lines the text report shows (the JSON report has them all).
 LOG_LINES = 30
+
+#: The last instance index of a path (`RoomSurveillance[12]` in `M/RoomSurveillance[12]/Watch`).
+_LAST_INDEX = re.compile(r"\[(\d+)\](?!.*\[\d+\])")
+
+#: The fewest rows `collapse_instances` folds into one: below it, each instance keeps its row.
+COLLAPSE_LEAST = 3
+
+
+def collapse_instances(rows: list[tuple[str, ...]]) -> list[tuple[str, ...]]:
+    """Rows (a path, then cells) with runs of consecutive instances that say the same thing folded into one:
+    `Wait[0]` .. `Wait[999]`, all entered at 0.0, exited at 1.0, success, become one row `Wait[0..999] (1,000)`.
+    Only instances numbered one after the other, in order, whose other cells are equal; the text report only (the
+    JSON report and the trace have every instance)."""
+    out: list[tuple[str, ...]] = []
+    i = 0
+    while i < len(rows):
+        end = _same_run(rows, i)
+        if end - i < COLLAPSE_LEAST:
+            out.append(rows[i])
+            i += 1
+            continue
+        path, *cells = rows[i]
+        m = _LAST_INDEX.search(path)
+        assert m is not None  # a run of two or more rows has an index
+        first = int(m.group(1))
+        out.append((f"{path[:m.start()]}[{first}..{first + end - i - 1}]{path[m.end():]} ({end - i:,})", *cells))
+        i = end
+    return out
+
+
+def _same_run(rows: list[tuple[str, ...]], i: int) -> int:
+    """Where the run of instances starting at row `i` ends (exclusive): the rows after it that differ from it only
+    by their last index, which goes up by one each row."""
+    def shape(row: tuple[str, ...]) -> tuple[str, str, tuple[str, ...], int] | None:
+        m = _LAST_INDEX.search(row[0])
+        return None if m is None else (row[0][:m.start()], row[0][m.end():], row[1:], int(m.group(1)))
+
+    first = shape(rows[i])
+    if first is None:
+        return i + 1
+    j = i + 1
+    while j < len(rows) and (s := shape(rows[j])) is not None and s[:3] == first[:3] and s[3] == first[3] + j - i:
+        j += 1
+    return j
 
 
 def _why_view(r: DryRun, width: int) -> list[RenderableType]:
