@@ -80,20 +80,28 @@ class DryRun:
         return self.sim_time / self.wall_time if self.wall_time > 0 else float("inf")
 
     def timeline(self) -> list[dict[str, Any]]:
-        """Each behavior instance: when it was entered and exited, and how it ended."""
-        rows: dict[str, dict[str, Any]] = {}
+        """Each entry of a behavior instance, in the order entered: when it was entered and exited, and how it
+        ended. A state entered again (a self-transition, a loop) gets a row per entry: its earlier runs happened."""
+        rows: list[dict[str, Any]] = []
+        open_: dict[str, dict[str, Any]] = {}  # path -> the row of its entry in force
         for r in self.records:
             if isinstance(r, rec.Entered):
-                rows[r.path] = {"path": r.path, "entered": r.at, "exited": None, "status": "active"}
-            elif isinstance(r, rec.Exited) and r.path in rows:
-                rows[r.path].update(exited=r.at, status=r.status)
-        return list(rows.values())
+                open_[r.path] = row = {"path": r.path, "entered": report_time(r.at), "exited": None,
+                                       "status": "active"}
+                rows.append(row)
+            elif isinstance(r, rec.Exited):
+                row = open_.pop(r.path, None)
+                if row is not None:
+                    row.update(exited=report_time(r.at), status=r.status)
+        return rows
 
     def holds(self) -> list[dict[str, Any]]:
         """Who held what, when: one row per grant interval, ended by a revoke at a slice boundary, a release,
-        the holder's exit or the end of the run. Fig. 8 shows up here as alternating rows."""
+        the holder's exit or the end of the run. Fig. 8 shows up here as alternating rows. A hold that ends in
+        part (`release(carrier)`) splits: each row names only the needs whose units it held."""
         rows: list[dict[str, Any]] = []
         open_: dict[str, dict[str, Any]] = {}
+        owned: dict[str, dict[str, set[str]]] = {}  # holder -> need -> the ids it covers (itself and its parts)
 
         def close(path: str, at: float, units: tuple[str, ...] | None, how: str) -> None:
             row = open_.get(path)
@@ -103,16 +111,21 @@ class DryRun:
             if not gone:
                 return
             del open_[path]
-            rows.append({**row, "units": sorted(gone), "to": at, "ended": how})
-            rest = sorted(set(row["units"]) - gone)
+            rest = set(row["units"]) - gone
+            rows.append({**row, "resources": _needs_of(row["resources"], owned[path], gone, rest),
+                         "units": sorted(gone), "to": report_time(at), "ended": how})
             if rest:
-                open_[path] = {**row, "units": rest, "from": at}
+                open_[path] = {**row, "resources": _needs_of(row["resources"], owned[path], rest, gone),
+                               "units": sorted(rest), "from": report_time(at)}
 
         for r in self.records:
             if isinstance(r, rec.Granted):
                 close(r.path, r.at, None, "regranted")
                 needs = {k: v for k, v in r.resources.items() if "." not in k}  # not each part of an aggregate
-                open_[r.path] = {"path": r.path, "resources": needs, "units": sorted(r.epochs), "from": r.at}
+                owned[r.path] = {k: {v} | {u for part, u in r.resources.items() if part.startswith(k + ".")}
+                                 for k, v in needs.items()}
+                open_[r.path] = {"path": r.path, "resources": needs, "units": sorted(r.epochs),
+                                 "from": report_time(r.at)}
             elif isinstance(r, rec.Revoked):
                 close(r.path, r.at, tuple(r.resources), "revoked")
             elif isinstance(r, rec.Released):
@@ -132,16 +145,18 @@ class DryRun:
                 since.setdefault(r.path, r)
             elif isinstance(r, rec.Granted | rec.Exited) and r.path in since:
                 w = since.pop(r.path)
-                rows.append({"path": r.path, "from": w.at, "to": r.at, "needs": list(w.needs),
+                rows.append({"path": r.path, "from": report_time(w.at), "to": report_time(r.at), "needs": list(w.needs),
                              "ended": "granted" if isinstance(r, rec.Granted) else "exited"})
-        rows += [{"path": p, "from": w.at, "to": self.sim_time, "needs": list(w.needs), "ended": "still waiting"}
+        rows += [{"path": p, "from": report_time(w.at), "to": report_time(self.sim_time), "needs": list(w.needs),
+                  "ended": "still waiting"}
                  for p, w in since.items()]
         return sorted(rows, key=lambda w: (w["from"], w["path"]))
 
     def logs(self) -> list[dict[str, Any]]:
         """Every `log` line of the run (the mission's `log` actions, the components' and the runtime's own), in
         order: what the mission said about itself is part of what happened."""
-        return [{"at": round(r.at, 6), "path": r.path, "text": r.text} for r in self.records if isinstance(r, rec.Log)]
+        return [{"at": report_time(r.at), "path": r.path, "text": r.text}
+                for r in self.records if isinstance(r, rec.Log)]
 
     def failure_chain(self) -> list[dict[str, Any]]:
         """Why the mission failed, from the mission down to each leaf that failed, each with its own reason
@@ -179,7 +194,7 @@ class DryRun:
     def to_dict(self) -> dict[str, Any]:
         return {"mission": self.mission, "id": self.mission_id, "priority": self.priority,
                 "outcome": self.outcome, "reason": self.reason,
-                "sim_time": self.sim_time, "wall_time": self.wall_time,
+                "sim_time": report_time(self.sim_time), "wall_time": self.wall_time,
                 "real_time_factor": self.real_time_factor, "speed": self.speed,
                 "failure_chain": self.failure_chain(), "degraded": self.degraded(), "still_active": self.still_active(),
                 "waiting": self.waiting(), "logs": self.logs(),
@@ -190,6 +205,22 @@ class DryRun:
 
 #: How the report words the end of a hold (the trace's `released` reasons).
 _ENDED = {"exit": "exited", "release": "released"}
+
+#: Digits a report's (and a trace's) times keep: sim time counts in float steps (0.1 s ten times would read
+#: 0.9999999999999999), and a microsecond is far below the control period.
+TIME_DIGITS = 6
+
+
+def report_time(at: float) -> float:
+    """A time as reports give it, the dry-run's and a cluster run's alike (`missionctl run` rounds the records it
+    receives with this too): one rule, so the same run reads the same either way."""
+    return round(at, TIME_DIGITS)
+
+
+def _needs_of(needs: dict[str, str], owned: dict[str, set[str]], held: set[str], other: set[str]) -> dict[str, str]:
+    """The needs of a grant a part of it (`held`, unit ids) covers, the rest (`other`) held on or let go: a need
+    goes with the part holding any of its units; a need none of whose ids is a unit of either stays with both."""
+    return {k: v for k, v in needs.items() if owned[k] & held or not owned[k] & other}
 
 
 def merged_drivers(cluster: Cluster, sim: Simulation, catalog: Catalog,
