@@ -35,10 +35,10 @@ def entry_point_problems(catalog: Catalog, names: Iterable[str] | None = None) -
 def world_problems(cluster: Cluster) -> list[str]:
     """The world `cluster.world` names, found under worlds/ and loaded (its own problems name its file)."""
     from drd.sim import WorldError, load_world
-    from drd.sim.service import world_file
+    from drd.sim.service import world_dirs, world_file
 
     try:
-        load_world(world_file(cluster.world))
+        load_world(world_file(cluster.world, world_dirs(cluster)))
     except ValueError as e:
         return [f"{cluster.source}: cluster.world: {e}"]
     except WorldError as e:

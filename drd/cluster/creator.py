@@ -745,7 +745,7 @@ class Creator:
                 self._generation = (world, generation)
                 return self._drivers
             from drd.hw.drivers import drivers_for
-            from drd.sim.service import RemoteSimulation
+            from drd.sim.service import RemoteSimulation, world_dirs
 
             service = self._sim_service
             local = service.local(world) if service is not None else None
@@ -753,9 +753,10 @@ class Creator:
                 sim: Any = local
                 self._sim = None
             elif service is not None:
-                sim = self._sim = RemoteSimulation(service.handle, world)
+                sim = self._sim = RemoteSimulation(service.handle, world, beside=service.beside)
             elif self._bus is not None:
-                sim = self._sim = RemoteSimulation.over(self._bus, self.cluster.name, world)
+                sim = self._sim = RemoteSimulation.over(self._bus, self.cluster.name, world,
+                                                        beside=world_dirs(self.cluster))
             else:
                 sim = self._sim = None
             self._drivers = drivers_for(self.cluster, self.host, sim, catalog=self.catalog)

@@ -289,9 +289,9 @@ class Daemon:
             self.sim_service = ServedSimulationService(bus, self.cluster, listen=serving.listen,
                                                        domain_id=serving.domain_id)
         elif Role.SIMULATOR in roles:
-            from drd.sim.service import SimulationService
+            from drd.sim.service import SimulationService, world_dirs
 
-            self.sim_service = SimulationService(bus, self.cluster.name)
+            self.sim_service = SimulationService(bus, self.cluster.name, beside=world_dirs(self.cluster))
         from drd.cluster.creator import Creator
 
         self.creator = Creator(bus, self.cluster, me, self.config.catalog,

@@ -354,10 +354,10 @@ class MissionRunner:
 
     def _new_world(self, req: RunMission) -> WorldRun:
         from drd.sim import load_world
-        from drd.sim.service import world_file
+        from drd.sim.service import world_dirs, world_file
         from drd.sim.world import check_hosts
 
-        path = world_file(req.world or self.cluster.world)
+        path = world_file(req.world or self.cluster.world, world_dirs(self.cluster))
         loaded = load_world(path)
         problems = check_hosts(loaded, self.cluster)
         if problems:

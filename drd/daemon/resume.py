@@ -106,10 +106,10 @@ def resume(runner: Any, journal: Journal) -> list[str]:
 def _rejoin(runner: Any, state: WorldState, first: Journaled) -> Any:
     """The world's loop again, on the simulator's world if it still runs it, else on a fresh one."""
     from drd.sim import load_world
-    from drd.sim.service import SimRequest, world_file
+    from drd.sim.service import SimRequest, world_dirs, world_file
 
     name = state.name or str(first.request.get("world") or runner.cluster.world)
-    path = world_file(name)
+    path = world_file(name, world_dirs(runner.cluster))
     loaded = load_world(path)
     try:
         reply = runner.sim(SimRequest("attr", method="jump_height"))

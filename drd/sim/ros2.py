@@ -41,7 +41,7 @@ from drd.hw import ros2 as mapping
 from drd.hw.ros2 import Ros2Link, Ros2Options
 from drd.sim.physics import MAX_LAUNCH, Simulation
 from drd.sim.robots import SimError
-from drd.sim.service import SimReply, SimRequest, SimulationService
+from drd.sim.service import SimReply, SimRequest, SimulationService, world_dirs
 
 log = logging.getLogger("drd.sim.ros2")
 
@@ -580,7 +580,7 @@ class ServedSimulationService(SimulationService):
             raise BusError(f"the simulator's ROS 2 router cannot listen on {listen} (hosts.yaml simulator.listen):"
                            f" {e}") from None
         try:
-            super().__init__(bus, cluster.name)
+            super().__init__(bus, cluster.name, beside=world_dirs(cluster))
         except BaseException:
             self.session.close()
             raise

@@ -27,14 +27,17 @@ import math
 import re
 import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from drd.bus import Bus, Message, Query, Reply, message, typed_handler
 from drd.bus.keys import is_concrete
 from drd.profiling import Sampler
 from drd.sim.observe import Observations, SensorTap
+
+if TYPE_CHECKING:
+    from drd.hosts import Cluster
 
 #: The Simulation methods a remote driver may call (what components/sim/* use), and their arity bounds.
 ALLOWED_METHODS: dict[str, tuple[int, int]] = {
@@ -123,17 +126,29 @@ class WorldObservation(Message):
     missed: bool = False
 
 
-def world_file(name: str, root: Path = ROOT) -> Path:
-    """`corridor` or `corridor.yaml` -> `worlds/corridor.yaml` of this installation; ValueError otherwise."""
+def world_file(name: str, beside: Sequence[Path] = (), root: Path = ROOT) -> Path:
+    """`corridor` or `corridor.yaml` -> `worlds/corridor.yaml` of the first folder of `beside` that has it (the hosts
+    file's folder, as `world_dirs` gives it: where `missionctl world generate` writes, and where a dry-run looks),
+    else of this installation; ValueError otherwise. A name, never a path: it travels on the wire, and each host
+    finds it in its own folders."""
     stem = name[:-5] if name.endswith(".yaml") else name
     stem = Path(stem).name if "/" in stem and Path(stem).parent.name == "worlds" else stem
     if not WORLD_NAME.match(stem):
-        raise ValueError(f"bad world name {name!r}: give a name under worlds/ (like corridor)")
-    path = root / "worlds" / f"{stem}.yaml"
-    if not path.exists():
-        known = sorted(p.stem for p in (root / "worlds").glob("*.yaml"))
-        raise ValueError(f"no world {stem!r} (known: {', '.join(known)})")
-    return path
+        raise ValueError(f"bad world name {name!r}: give the name of a world under worlds/ (like corridor), beside "
+                         "the hosts file or of drd's own")
+    folders = [*(Path(b) / "worlds" for b in beside), root / "worlds"]
+    for folder in folders:
+        if (folder / f"{stem}.yaml").is_file():
+            return folder / f"{stem}.yaml"
+    known = sorted({p.stem for folder in folders for p in folder.glob("*.yaml")})
+    raise ValueError(f"no world {stem!r} in {' or '.join(str(f) for f in folders)} (known: {', '.join(known)})")
+
+
+def world_dirs(cluster: Cluster) -> tuple[Path, ...]:
+    """The folder of the hosts file `cluster` was read from (its worlds/ comes first), or none when it was not read
+    from a file."""
+    source = Path(cluster.source)
+    return (source.absolute().parent,) if source.is_file() else ()
 
 
 # -- values on the wire ------------------------------------------------------------------------------
@@ -210,9 +225,9 @@ class LocalSimulation:
 class SimulationService:
     """Owns the simulation of the running mission and answers `SimRequest`s (one lock: calls are serialized)."""
 
-    def __init__(self, bus: Bus | None, cluster: str, *, root: Path = ROOT) -> None:
+    def __init__(self, bus: Bus | None, cluster: str, *, root: Path = ROOT, beside: Sequence[Path] = ()) -> None:
         self.cluster = cluster
-        self.root = root
+        self.root, self.beside = root, tuple(beside)  # where worlds are found (`world_file`)
         self.sim: Any = None
         self.world_name = ""
         self.calls = 0
@@ -235,7 +250,7 @@ class SimulationService:
     def reset(self, world: str, seed: int = 0) -> SimReply:
         from drd.sim import Simulation, load_world
 
-        path = world_file(world, self.root)
+        path = world_file(world, self.beside, self.root)
         sim = Simulation(load_world(path), seed=seed)
         observations = Observations()
         SensorTap(observations).tap(sim)  # every reading, whoever reads: a recording client may ask for them
@@ -360,10 +375,11 @@ class RemoteSimulation:
     sim version, and every reading request carries the queued commands before it and fetches along the
     odometry of the robots read so far (noiseless readings): one round trip per reading (see `_method`)."""
 
-    def __init__(self, call: Callable[[SimRequest], SimReply], world: str, *, root: Path = ROOT) -> None:
+    def __init__(self, call: Callable[[SimRequest], SimReply], world: str, *, root: Path = ROOT,
+                 beside: Sequence[Path] = ()) -> None:
         self._call = call
         self._world_name = world
-        self._root = root
+        self._root, self._beside = root, tuple(beside)
         self._world: Any = None
         self._attrs: dict[str, Any] = {}
         self.time = 0.0
@@ -378,7 +394,8 @@ class RemoteSimulation:
         self._refused: list[tuple[str, str]] = []  # refused commands of other owners, for the next flush()
 
     @classmethod
-    def over(cls, bus: Bus, cluster: str, world: str, timeout: float = 1.0) -> RemoteSimulation:
+    def over(cls, bus: Bus, cluster: str, world: str, timeout: float = 1.0,
+             beside: Sequence[Path] = ()) -> RemoteSimulation:
         k = key(cluster)
 
         def call(req: SimRequest) -> SimReply:
@@ -386,7 +403,7 @@ class RemoteSimulation:
             if not isinstance(reply, SimReply):
                 raise TypeError(f"expected a drd.sim.reply, got a {type(reply).TYPE}")
             return reply
-        return cls(call, world)
+        return cls(call, world, beside=beside)
 
     def sync(self, time_: float, version: int) -> None:
         self.time, self.version = time_, version
@@ -453,7 +470,7 @@ class RemoteSimulation:
         if self._world is None:
             from drd.sim import load_world
 
-            self._world = load_world(world_file(self._world_name, self._root))
+            self._world = load_world(world_file(self._world_name, self._beside, self._root))
         return self._world
 
     def _request(self, req: SimRequest) -> Any:

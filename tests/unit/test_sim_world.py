@@ -252,3 +252,29 @@ def test_the_example_in_the_docs_loads() -> None:
     example = text.split("```yaml\n", 1)[1].split("```", 1)[0]
     world = parse_world(yaml.safe_load(example), "docs/worlds.md")
     assert world.door("d_b").state is DoorState.CLOSED and world.scout_ids == ("scout1", "scout2", "scout3")
+
+
+def test_a_world_is_found_beside_the_hosts_file_first_then_in_drds_own(tmp_path: Path) -> None:
+    from drd.sim.service import world_file
+
+    (tmp_path / "worlds").mkdir()
+    own = tmp_path / "worlds" / "corridor.yaml"
+    own.write_text("name: corridor\n")
+    (tmp_path / "worlds" / "annex.yaml").write_text("name: annex\n")
+    assert world_file("corridor", [tmp_path]) == own  # the user's copy shadows drd's own
+    assert world_file("annex.yaml", [tmp_path]) == tmp_path / "worlds" / "annex.yaml"
+    assert world_file("two_rangers", [tmp_path]) == ROOT / "worlds" / "two_rangers.yaml"  # else drd's own
+    assert world_file("corridor") == ROOT / "worlds" / "corridor.yaml"
+    with pytest.raises(ValueError, match=r"no world 'nowhere' in .*worlds or .*worlds \(known: .*annex.*corridor"):
+        world_file("nowhere", [tmp_path])
+    for path in ("../annex", "/etc/passwd", "worlds/../annex"):  # names only: a name is on the wire
+        with pytest.raises(ValueError, match="bad world name"):
+            world_file(path, [tmp_path])
+
+
+def test_the_worlds_of_a_cluster_are_beside_the_file_it_was_read_from(tmp_path: Path, catalog: Catalog) -> None:
+    from drd.sim.service import world_dirs
+
+    hosts = tmp_path / "hosts.yaml"
+    hosts.write_text((ROOT / "hosts.yaml").read_text())
+    assert world_dirs(load_hosts(hosts, catalog)) == (tmp_path,)
