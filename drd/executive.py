@@ -271,12 +271,10 @@ class Executive:
         if cmd.op == "status":  # of one mission (none: it is not, or no more, known) or a page of them all
             return self.status(cmd.after, cmd.count, [cmd.mission] if cmd.mission else None)
         if cmd.mission and cmd.mission not in self.missions:
-            known = list(self.missions)
-            return query.error(f"no mission {cmd.mission}; running: {', '.join(known[-20:]) or 'none'}"
-                               + (f" (and {len(known) - 20} more)" if len(known) > 20 else ""))
+            return query.error(self.unknown(cmd.mission))
         match cmd.op:
             case "stop":
-                return self.status(0, cmd.count, self.stop(cmd.mission))
+                return self._stop_reply(cmd.mission, cmd.count)
             case "records" if cmd.mission:
                 kept = list(self.kept.get(cmd.mission, ()))  # one copy: the loop may append meanwhile
                 page, nxt = fill(((r.seq, r) for r in kept if r.seq > cmd.after), _size, cmd.count)
@@ -287,6 +285,27 @@ class Executive:
                     self.missions[mid].emit(cmd.event, "operator", **(cmd.fields or {}))
                 return self.status(0, cmd.count, targets)
         return query.error(f"unknown command {cmd.op!r}: use status, stop, emit EVENT or records")
+
+
+    def unknown(self, mission: str) -> str:
+        """The error for a mission id it does not know: with those still running (an ended one cannot be stopped,
+        nor sent an event that changes anything), and how many ended ones it still knows."""
+        running = [mid for mid, interp in self.missions.items() if not interp.finished]
+        ended = len(self.missions) - len(running)
+        return (f"no mission {mission}; running: {', '.join(running[-20:]) or 'none'}"
+                + (f" (and {len(running) - 20} more)" if len(running) > 20 else "")
+                + (f"; {ended} ended mission{'s' if ended != 1 else ''} known (missionctl status lists them)"
+                   if ended else ""))
+
+    def _stop_reply(self, mission: str, count: int) -> MissionStatus:
+        """`stop`'s answer: the status of each mission it was asked to stop; one that had already ended is marked
+        `already_ended` (its outcome is its own, not the operator's stop), so nobody is told it was stopped now."""
+        ended = {mid for mid in ([mission] if mission else self.missions) if self.missions[mid].finished}
+        reply = self.status(0, count, self.stop(mission))
+        for m in reply.missions:
+            if m.get("id") in ended:
+                m["already_ended"] = True
+        return reply
 
 
 def _size(msg: Message) -> int:

@@ -521,16 +521,20 @@ def stop(mission: str = typer.Argument("", help="The mission id (default: the on
          config: Path = ConfigOption, connect: list[str] = ConnectOption, as_json: bool = JsonOption,
          timeout: float = TimeoutOption) -> int:
     """Stop a running mission (its behaviors are terminated, its resources released). Without an id it stops the
-    one mission that runs; with several running it names them and stops none (`--all` stops them all)."""
+    one mission that runs; with several running it names them and stops none (`--all` stops them all). A mission
+    that had already ended is not stopped: it says so, with its outcome (exit 0: it does not run)."""
     with cluster_client(config, connect, timeout, to="stop a mission") as client:
         missions = stop_missions(client, mission, every, timeout)
+    ended = [m for m in missions if m.get("already_ended")]
     if as_json:
-        print_json({"stopped": missions})
+        print_json({"stopped": [m for m in missions if m not in ended], "ended": ended})
         return OK
     if not missions:
         out.print("no mission is running: nothing to stop")
     for m in missions:
-        out.print(f"{m.get('id')}: {m.get('outcome') or 'running'} {m.get('reason') or ''}".rstrip())
+        how = f"{m.get('outcome') or 'running'} {m.get('reason') or ''}".rstrip()
+        out.print(f"{m.get('id')}: had already ended ({how}): nothing to stop" if m in ended
+                  else f"{m.get('id')}: {how}")
     return OK
 
 
