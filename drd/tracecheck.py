@@ -4,14 +4,129 @@ What a run promises, whatever happened in it: a device obeys only the behavior s
 grant, at that grant's epoch; an exclusive unit has one holder at a time; every hold ends by the end of a
 finished mission. `check` reads `granted` (units and epochs), `revoked`/`released`/`exited` (ends of holds) and
 `command` records, in order, per mission (`mission` field, when a trace holds several), and lists every breach.
-Pure: the caller reads the file (`missionctl check-trace` does).
+`read_trace` turns a trace file's lines into records, each checked against docs/trace.md's tables first: a
+record `check` would misread (a time that is not a number, a command without its device) is the file's error, at
+its line, not a pass or a crash. Pure: the caller opens the file (`missionctl check-trace` does).
 """
 
 from __future__ import annotations
 
-from collections.abc import Collection, Iterable, Mapping
+import json
+import math
+from collections.abc import Callable, Collection, Iterable, Mapping
 from dataclasses import dataclass, field
 from typing import Any
+
+from drd.errors import DrdError
+
+
+class TraceError(DrdError):
+    """A trace file that is not a trace: `where` is `FILE:LINE` of the first bad record."""
+
+    kind = "trace"
+
+
+#: A field's test and what it should be, as an error says it.
+FieldType = tuple[Callable[[Any], bool], str]
+
+
+def _number(v: Any) -> bool:
+    return isinstance(v, int | float) and not isinstance(v, bool) and math.isfinite(v)
+
+
+def _integer(v: Any) -> bool:
+    return isinstance(v, int) and not isinstance(v, bool)
+
+
+STRING: FieldType = (lambda v: isinstance(v, str), "a string")
+NUMBER: FieldType = (_number, "a number")
+INTEGER: FieldType = (_integer, "an integer")
+BOOLEAN: FieldType = (lambda v: isinstance(v, bool), "true or false")
+EPOCH: FieldType = (lambda v: v is None or _integer(v), "an integer or null")
+STRINGS: FieldType = (lambda v: isinstance(v, list) and all(isinstance(x, str) for x in v), "a list of strings")
+OBJECT: FieldType = (lambda v: isinstance(v, dict), "an object")
+NAMES: FieldType = (lambda v: isinstance(v, dict) and all(isinstance(x, str) for x in v.values()),
+                    "an object of strings")
+EPOCHS: FieldType = (lambda v: isinstance(v, dict) and all(_integer(x) for x in v.values()),
+                     "an object of integers")
+
+#: The fields every record has (docs/trace.md, "Every record"), and those some traces have.
+COMMON: dict[str, FieldType] = {"kind": STRING, "at": NUMBER, "path": STRING}
+COMMON_OPTIONAL: dict[str, FieldType] = {"mission": STRING, "seq": INTEGER}
+#: Each kind's fields (docs/trace.md, "Kinds"): drd writes all of them in every record of the kind.
+KINDS: dict[str, dict[str, FieldType]] = {
+    "entered": {"state": STRING},
+    "exited": {"state": STRING, "status": STRING},
+    "taken": {"target": STRING, "trigger": STRING, "label": STRING},
+    "waiting": {"needs": STRINGS, "blocked_by": STRINGS},
+    "reserved": {"by": STRING, "needs": STRINGS},
+    "granted": {"resources": NAMES, "epochs": EPOCHS},
+    "revoked": {"resources": STRINGS, "reason": STRING},
+    "released": {"resources": STRINGS, "reason": STRING},
+    "suspended": {},
+    "resumed": {},
+    "command": {"device": STRING, "method": STRING, "epoch": EPOCH, "accepted": BOOLEAN, "reason": STRING},
+    "halted": {"device": STRING, "method": STRING, "reason": STRING, "error": STRING},
+    "restored": {"since": NUMBER, "paused": NUMBER},
+    "event": {"name": STRING, "fields": OBJECT},
+    "log": {"text": STRING},
+    "finished": {"outcome": STRING, "reason": STRING},
+}
+#: Fields added to a kind later (a field is only ever added): checked when there, not required of older traces.
+KINDS_OPTIONAL: dict[str, dict[str, FieldType]] = {"exited": {"reason": STRING}}
+
+
+def record_problem(record: Any) -> str | None:
+    """What is wrong with one parsed trace line, or None. A kind this version does not know is checked for the
+    common fields only: readers ignore what they do not know (docs/trace.md, "Stability")."""
+    if not isinstance(record, dict):
+        return f"a record is a JSON object, not {_json_kind(record)}"
+    kind = record.get("kind")
+    own = KINDS.get(kind, {}) if isinstance(kind, str) else {}
+    what = f"`{kind}` record" if isinstance(kind, str) and kind in KINDS else "record"
+    for required, fields in ((True, COMMON), (True, own), (False, COMMON_OPTIONAL),
+                             (False, KINDS_OPTIONAL.get(kind, {}) if isinstance(kind, str) else {})):
+        for name, (test, expected) in fields.items():
+            if name not in record:
+                if required:
+                    listed = ", ".join(f"`{f}`" for f in (*COMMON, *own))
+                    return f"{what} without `{name}` (its fields: {listed}; docs/trace.md)"
+                continue
+            if not test(record[name]):
+                return f"{what}: `{name}` is {_shown(record[name])}, not {expected}"
+    return None
+
+
+def read_trace(lines: Iterable[bytes], name: str) -> list[dict[str, Any]]:
+    """The records of a trace's lines (JSON objects, blank lines skipped), each checked by `record_problem`;
+    `TraceError` at `name:LINE` for the first line that is not a record."""
+    records: list[dict[str, Any]] = []
+    for number, raw in enumerate(lines, 1):
+        where = f"{name}:{number}"
+        try:
+            text = raw.decode("utf-8").rstrip()  # the line's end: a column of an error is on this line
+        except UnicodeDecodeError as e:
+            raise TraceError(f"not UTF-8 text (byte {e.start + 1} of the line)", where=where) from None
+        if not text.strip():
+            continue
+        try:
+            record = json.loads(text)
+        except json.JSONDecodeError as e:
+            raise TraceError(f"not a JSON record: {e.msg} at column {e.colno}", where=where) from None
+        problem = record_problem(record)
+        if problem is not None:
+            raise TraceError(problem, where=where)
+        records.append(record)
+    return records
+
+
+def _json_kind(value: Any) -> str:
+    return {list: "a list", str: "a string", bool: "a boolean", type(None): "null"}.get(type(value), "a number")
+
+
+def _shown(value: Any) -> str:
+    text = json.dumps(value, ensure_ascii=False)
+    return text if len(text) <= 40 else text[:37] + "..."
 
 
 @dataclass(frozen=True, slots=True)

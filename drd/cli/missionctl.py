@@ -20,6 +20,7 @@ from drd.cli.common import (
     INVALID,
     MISSION_FAILED,
     OK,
+    as_text,
     catalog,
     err,
     fail,
@@ -156,14 +157,10 @@ def plan(
         return OK
     fmt = fmt or FORMAT_BY_SUFFIX.get(suffix, Format.tree)
     if fmt is Format.tree:
-        tree = _tree(chart)
         if output:
-            from rich.console import Console
-
-            with output.open("w", encoding="utf-8") as fh:
-                Console(file=fh, width=120, no_color=True).print(tree)
+            output.write_text(_whole_lines(_tree(chart)), encoding="utf-8")
         else:
-            out.print(tree)
+            print_tree(_tree(chart))
     else:
         text = {Format.json: lambda: json.dumps(to_dict(chart), indent=2, ensure_ascii=False) + "\n",
                 Format.dot: lambda: to_dot(chart), Format.mermaid: lambda: to_mermaid(chart)}[fmt]()
@@ -198,7 +195,7 @@ def _preview(chart: Statechart, config: Path, world: str | None, components: lis
     else:
         from drd.cli.report import print_preview
 
-        out.print(_tree(chart))
+        print_tree(_tree(chart))
         print_preview(p, hosts_file, chart.name)
     return MISSION_FAILED if p.problems else OK
 
@@ -220,6 +217,26 @@ def _draw(chart: Statechart, output: Path, kind: str) -> None:
 
 _KIND_STYLE = {StateKind.COMPOUND: "bold", StateKind.PARALLEL: "bold magenta", StateKind.MULTI: "bold yellow",
                StateKind.LEAF: "", StateKind.FINAL: "dim"}
+
+
+#: Columns a tree is drawn in off a terminal: wide enough for any line, which is then as long as its text.
+UNCUT = 1_000_000
+
+
+def print_tree(tree: Tree) -> None:
+    """A plan tree on stdout as docs/cli.md says reports are: to a file or a pipe every line whole (for grep: a
+    transition's action cut at 80 columns read as another, valid-looking action); on a terminal a line fits its
+    width and a cut one ends in `…`. rich crops a tree's lines at the console's width whatever `soft_wrap` says,
+    so off a terminal the tree is drawn as text first, in `UNCUT` columns."""
+    if out.is_terminal:
+        out.print(tree, no_wrap=True, overflow="ellipsis")
+    else:
+        out.out(_whole_lines(tree), end="")
+
+
+def _whole_lines(tree: Tree) -> str:
+    """The tree as plain text, no line cut or wrapped (`plan -o plan.txt`, and a pipe)."""
+    return as_text(tree, UNCUT)
 
 
 def _tree(chart: Statechart) -> Tree:
@@ -752,14 +769,20 @@ def check_trace(
 
 
 def _trace_records(path: Path) -> list[dict[str, Any]]:
-    """The records of a trace file (JSON lines), or a clear error."""
+    """The records of a trace file, each checked against docs/trace.md (`drd.tracecheck.read_trace`), or a clear
+    error at the bad line; a trace with no record is not a pass: there is nothing to check."""
+    from drd.tracecheck import TraceError, read_trace
+
     try:
-        lines = path.read_text(encoding="utf-8").splitlines()
-        records = [json.loads(line) for line in lines if line.strip()]
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as e:
-        fail(f"{path}: cannot read it as a trace: {e}")
-    if not all(isinstance(r, dict) for r in records):
-        fail(f"{path}: every line of a trace is a JSON object")
+        with path.open("rb") as fh:
+            records = read_trace(fh, str(path))
+    except OSError as e:
+        fail(f"{path}: cannot read the trace: {e.strerror or e}")
+    except TraceError as e:
+        fail(f"{e.where}: {e}", hint="a trace is the JSON lines `--trace` writes (docs/trace.md)")
+    if not records:
+        fail(f"{path}: no records: there is nothing to check",
+             hint="give the file `missionctl dry-run --trace` or `missionctl run --trace` wrote")
     return records
 
 
