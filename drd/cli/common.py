@@ -276,6 +276,24 @@ def version() -> str:
         return "unknown (not installed)"
 
 
+def version_option(app: typer.Typer, prog: str) -> None:
+    """`--version` in the tool's `--help` (docs/cli.md lists it for both tools). `run_app` answers a bare
+    `--version` before typer parses anything, so no command pays for it; this option is parsed only among other
+    words (`missionctl --version validate x.mission` prints the version, as `git` does)."""
+
+    def show(value: bool) -> None:
+        if value:
+            out.print(f"{prog} (drd) {version()}", highlight=False)
+            raise typer.Exit(OK)
+
+    @app.callback()
+    def tool(version_flag: bool = typer.Option(False, "--version", is_eager=True, expose_value=False,
+                                               callback=show,
+                                               help="Print the installed drd's version and exit (with --json: as "
+                                                    "JSON).")) -> None:
+        pass
+
+
 def run_app(app: Callable[..., object], prog: str,
             fast: Callable[[Sequence[str]], Callable[[], object] | None] | None = None) -> NoReturn:
     """Run a typer app with the safety net: clean errors, documented exit codes.

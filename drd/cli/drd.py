@@ -36,6 +36,7 @@ from drd.cli.common import (
     out,
     print_json,
     run_app,
+    version_option,
 )
 from drd.cli.common import version as installed_version
 from drd.cli.options import ComponentsOption
@@ -50,6 +51,7 @@ if TYPE_CHECKING:
 
 app = typer.Typer(help="The Distributed Robotics Daemon: one per host.", no_args_is_help=True,
                   add_completion=False, rich_markup_mode=None)
+version_option(app, "drd")
 
 
 @app.command()

@@ -31,6 +31,7 @@ from drd.cli.common import (
     render_diagnostics,
     run_app,
     show_diagnostics,
+    version_option,
 )
 from drd.cli.options import ComponentsOption
 from dsl import Compiled, Limits, compile_file
@@ -59,6 +60,7 @@ app = typer.Typer(
     add_completion=False,
     rich_markup_mode=None,
 )
+version_option(app, "missionctl")
 
 
 class Format(StrEnum):
