@@ -605,6 +605,7 @@ class _RecordWatch:
         #: first ones, `restored` among them, before this client's subscription reached it)
         self.heard_before = 0
         self.view: _ClusterView | None = None
+        self.priority = 1  # the started mission's, as the controller said it (`started`)
 
         def on_record(sample: Any) -> None:
             if isinstance(sample.payload, MissionRecord):
@@ -614,6 +615,7 @@ class _RecordWatch:
     def started(self, reply: Any) -> None:
         """The controller started the mission (`RunReply`): what the client sees of the cluster goes into the
         recording from now on (`_ClusterView`)."""
+        self.priority = reply.priority
         if self.recorder is not None and self.view is None:
             self.view = _ClusterView(self.client, self.recorder, reply)
 
@@ -632,7 +634,8 @@ class _RecordWatch:
         from drd.runtime import records as rec
 
         if mission not in self.seen:  # a second follow (after a Ctrl-C) goes on with what the first received
-            self.seen[mission] = (DryRun(mission, None, "", 0.0, 0.0), {})
+            self.seen[mission] = (DryRun(mission_name(mission), None, "", 0.0, 0.0, priority=self.priority,
+                                         mission_id=mission), {})
         result, active = self.seen[mission]
         start = time.monotonic()
         next_print = next_poll = start + self.every
@@ -726,11 +729,11 @@ class _RecordWatch:
 
     def _take(self, msg: Any, result: Any, base: float) -> Any:
         """One record of the followed mission: into its report (and the trace file); the record, or None."""
-        from drd.dryrun import facts
+        from drd.dryrun import facts, report_time
         from drd.runtime import records as rec
 
         if self.trace is not None:
-            line = {"kind": msg.kind, "at": round(msg.at - base, 6), "path": msg.path, **_rebased(msg.data, base),
+            line = {"kind": msg.kind, "at": report_time(msg.at - base), "path": msg.path, **_rebased(msg.data, base),
                     "mission": msg.mission, "seq": msg.seq}
             self.trace.write(json.dumps(line, separators=(",", ":"), default=str) + "\n")
         r = _record(msg, rec, base)
@@ -917,9 +920,19 @@ class _ClusterView:
         return round((status.time - self.base - sim_time) / 0.1) * 0.1
 
 
+def mission_name(mission_id: str) -> str:
+    """The mission's name in its id (`HallSentry-9539828` -> `HallSentry`: the controller names a mission
+    `<name>-<number>`): a cluster run's report means by `mission` and `id` what a dry-run's does, and its paths,
+    which begin with the name, are shown below it."""
+    name, dash, number = mission_id.rpartition("-")
+    return name if dash and name and number.isdigit() else mission_id
+
+
 def _record(msg: Any, rec: Any, base: float = 0.0) -> Any:
     """A `MissionRecord` from the wire as the runtime's record (what the dry-run's report reads)."""
-    return rec.from_dict({**_rebased(msg.data, base), "kind": msg.kind, "at": round(msg.at - base, 6),
+    from drd.dryrun import report_time
+
+    return rec.from_dict({**_rebased(msg.data, base), "kind": msg.kind, "at": report_time(msg.at - base),
                           "path": msg.path})
 
 
@@ -929,9 +942,11 @@ TIME_FIELDS = ("since",)
 
 def _rebased(data: dict[str, Any], base: float) -> dict[str, Any]:
     """A record's fields with its times relative to the mission's start, as `at`."""
+    from drd.dryrun import report_time
+
     if not base or not any(k in data for k in TIME_FIELDS):
         return data
-    return {k: round(v - base, 6) if k in TIME_FIELDS and isinstance(v, int | float) else v for k, v in data.items()}
+    return {k: report_time(v - base) if k in TIME_FIELDS and isinstance(v, int | float) else v for k, v in data.items()}
 
 
 # --- rendering -------------------------------------------------------------------------------------

@@ -111,8 +111,8 @@ def test_two_missions_share_one_ranger_by_priority(cluster: DaemonCluster, tmp_p
     assert "priority 1" in high_err and "priority 2" in low_err  # each run says the rank it got
 
     low_recs, high_recs = read_trace(low_trace), read_trace(high_trace)
-    assert {r["mission"] for r in low_recs} == {low_report["mission"]}, "each trace holds its own mission"
-    assert {r["mission"] for r in high_recs} == {high_report["mission"]}
+    assert {r["mission"] for r in low_recs} == {low_report["id"]}, "each trace holds its own mission"
+    assert {r["mission"] for r in high_recs} == {high_report["id"]}
 
     # The outside check: only the holder moved a device, no double hold, everything released.
     check = subprocess.run([*MISSIONCTL, "check-trace", "--together", str(low_trace), str(high_trace), "--config",
@@ -126,21 +126,21 @@ def test_two_missions_share_one_ranger_by_priority(cluster: DaemonCluster, tmp_p
     merged = sorted(low_recs + high_recs, key=lambda r: r["seq"])
     drive = "ranger1.drive"
     revoked = next(i for i, r in enumerate(merged) if r["kind"] == "revoked" and drive in r["resources"])
-    assert merged[revoked]["mission"] == low_report["mission"]
+    assert merged[revoked]["mission"] == low_report["id"]
     assert "High" in merged[revoked]["reason"], merged[revoked]
     high_grant = next(i for i, r in enumerate(merged)
-                      if r["kind"] == "granted" and r["mission"] == high_report["mission"] and drive in r["epochs"])
+                      if r["kind"] == "granted" and r["mission"] == high_report["id"] and drive in r["epochs"])
     assert high_grant > revoked, "the drive is granted to High only after the patrol lost it"
     high_done = next(i for i, r in enumerate(merged) if r["kind"] == "released" and drive in r["resources"]
-                     and r["mission"] == high_report["mission"])
-    resumed = next(i for i, r in enumerate(merged) if r["kind"] == "resumed" and r["mission"] == low_report["mission"])
+                     and r["mission"] == high_report["id"])
+    resumed = next(i for i, r in enumerate(merged) if r["kind"] == "resumed" and r["mission"] == low_report["id"])
     assert high_grant < high_done < resumed
     window = merged[high_grant:high_done]
     moved = [r for r in window if r["kind"] == "command" and r["device"] == drive and r["accepted"]]
-    assert moved and all(r["mission"] == high_report["mission"] for r in moved), \
+    assert moved and all(r["mission"] == high_report["id"] for r in moved), \
         "while High held the drive, only High moved it"
     assert [r for r in merged[resumed:] if r["kind"] == "command" and r["device"] == drive and r["accepted"]
-            and r["mission"] == low_report["mission"]], "the patrol drove again once resumed"
+            and r["mission"] == low_report["id"]], "the patrol drove again once resumed"
 
 
 def robot_distance(cluster: DaemonCluster, robot: str, x: float, y: float) -> float:

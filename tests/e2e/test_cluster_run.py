@@ -105,6 +105,12 @@ def test_a_cluster_run_records_and_replays_to_the_same_report(cluster: DaemonClu
     ran, replayed = json.loads(r.stdout), json.loads(replay.stdout)
     assert replayed == ran
     assert [row["path"] for row in replayed["timeline"]] == ["Short", "Short/first", "Short/second"]
+    # `mission` and `id` mean what a dry-run's report means by them: the mission's name, the mission's id
+    assert ran["mission"] == "Short" and re.fullmatch(r"Short-\d+", ran["id"]), (ran["mission"], ran["id"])
+    text = missionctl(cluster, "run", str(mission), "--speed", "10")
+    assert text.returncode == 0, text.stderr[-2000:]
+    rows = [line.split("│")[1].strip() for line in text.stdout.splitlines() if line.count("│") == 5]
+    assert rows == ["Short", "first", "second"], text.stdout  # paths below the mission, as the dry-run's
 
 
 def test_detach_then_status_shows_the_active_states_then_stop(cluster: DaemonCluster) -> None:

@@ -119,7 +119,7 @@ def check_report(cluster: DaemonCluster, run: object, out: str, err: str, missio
     assert getattr(run, "returncode", None) == 0, (out[-2000:], err[-3000:], cluster.log("controller")[-3000:],
                                                    cluster.log("controller2")[-3000:])
     report = json.loads(out)
-    assert report["outcome"] == "success" and report["mission"] == mission, report
+    assert report["outcome"] == "success" and report["id"] == mission, report
     assert not noticed or ("controller" in err and "resumed" in err), err[-2000:]  # the client said what happened
     recs = read_trace(trace)
     assert {r["mission"] for r in recs} == {mission}

@@ -55,7 +55,7 @@ def test_a_mission_goes_on_after_its_controller_is_killed_and_started_again(clus
         out, err = run.communicate(timeout=240)
     assert run.returncode == 0, (out[-2000:], err[-3000:], cluster.log("controller")[-4000:])
     report = json.loads(out)
-    assert report["outcome"] == "success" and report["mission"] == mission, report
+    assert report["outcome"] == "success" and report["id"] == mission, report
     assert "controller" in err and "resumed" in err, err[-2000:]  # the client said what happened
     recs = read_trace(trace)
     assert {r["mission"] for r in recs} == {mission}
