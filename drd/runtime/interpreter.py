@@ -127,12 +127,20 @@ class Interpreter:
         self._restoring: dict[str, NodeImage] = {}  # nodes entered again whose children are not entered yet
         self.resources = ResourceClient(self.rcm, self.pool, self.mission, gates or self._own_gates(), self.arbiter,
                                         clock.now, self._names, priority)
+        #: each component's last log line, by path: the reason of a plain failure (`Status.FAILURE` says no why)
+        self._said: dict[str, str] = {}
         rank = {sid: i for i, sid in enumerate(s.id for s in chart.walk())}  # declaration order
         self.host = ComponentHost(registry, self.resources, self.arbiter, clock.now,
-                                  {**self.services, "dependencies": self._dependency}, notify=self._notify,
+                                  {**self.services, "dependencies": self._dependency}, notify=self._heard,
                                   emit=self.emit, on_failure=lambda node, why: self._finish(node, False, why),
                                   rank=rank)
         self.rcm.attach(self._apply)
+
+    def _heard(self, record: rec.Record) -> None:
+        """A record from the component host: passed on; a log line is kept as its component's last words."""
+        if type(record) is rec.Log:
+            self._said[record.path] = record.text
+        self._notify(record)
 
     def _own_gates(self) -> Gates:
         """Gates over the drivers of `services["drivers"]` (a `drd.hw.HostDrivers`), for a mission run alone."""
@@ -208,8 +216,9 @@ class Interpreter:
             except Exception as e:  # component code is not ours to trust
                 host.failed(node, e)
                 continue
-            if status is _SUCCESS or status is _FAILURE:
-                self._finish(node, status is _SUCCESS, "" if status is _SUCCESS else "failed")
+            if status is _SUCCESS or status is _FAILURE:  # a failure's reason: its last words, if it said any
+                said = self._said.pop(node.path, "") if self._said else ""
+                self._finish(node, status is _SUCCESS, "" if status is _SUCCESS else said or "failed")
         if host.lagging:
             host.end_cycle()
         if self.arbiter.best:  # most cycles of most charts command nothing: no call then
@@ -429,6 +438,8 @@ class Interpreter:
             for sid, index in live_children(image):  # the children it had live, not its initial ones
                 self._enter_child(node, self._states[sid], index)
         elif kind is LEAF:
+            if self._said:  # an earlier entry's words are not this one's
+                self._said.pop(node.path, None)
             self.host.start(node, None if image is None else [image.component[0] if image.component else None])
         elif kind is COMPOUND:
             target = self._initial(node)
