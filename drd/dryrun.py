@@ -86,13 +86,12 @@ class DryRun:
         open_: dict[str, dict[str, Any]] = {}  # path -> the row of its entry in force
         for r in self.records:
             if isinstance(r, rec.Entered):
-                open_[r.path] = row = {"path": r.path, "entered": report_time(r.at), "exited": None,
-                                       "status": "active"}
-                rows.append(row)
+                rows.append({"path": r.path, "entered": report_time(r.at), "exited": None, "status": "active"})
+                open_[r.path] = rows[-1]
             elif isinstance(r, rec.Exited):
-                row = open_.pop(r.path, None)
-                if row is not None:
-                    row.update(exited=report_time(r.at), status=r.status)
+                entry = open_.pop(r.path, None)
+                if entry is not None:
+                    entry.update(exited=report_time(r.at), status=r.status)
         return rows
 
     def holds(self) -> list[dict[str, Any]]:
