@@ -272,10 +272,18 @@ class Builder:
 
     # ------------------------------------------------------------- resources
     def _need(self, n: ast.Need, held: tuple[_Held, ...]) -> ResourceNeed:
-        # A `where` selects a particular resource: then only a same-named or same-typed one is reused.
+        # A `where` selects a particular resource: a same-named or same-typed one is reused (the `where` must hold of
+        # it), a part of an ancestor's robot only when the `where` holds of it on entry (`reuse`), else the manager
+        # is asked: a behavior may want another robot's camera than the one its mission's Ranger carries.
         bound = self._bind(n.name, n.type.name, (), held, n.span, parts=n.where is None)
+        reuse = self._part_in_scope(n.name, n.type.name, held) if n.where is not None and bound is None else ()
         return ResourceNeed(n.name, n.type.name, n.where, n.quantity, n.slice.seconds if n.slice else None,
-                            bound, span=n.span)
+                            bound, span=n.span, reuse=reuse)
+
+    def _part_in_scope(self, name: str, typ: str, held: tuple[_Held, ...]) -> tuple[tuple[str, str, str], ...]:
+        """The parts of type `typ` of the ancestors' robots (a same-named one first), nearest first."""
+        hits = sorted(_distinct(list(held)), key=lambda h: h.name != name)
+        return tuple((h.state, h.name, part) for h in hits if (part := self.catalog.part_of(h.type, typ)))
 
     def _leaf_needs(self, child: ast.Child, held: tuple[_Held, ...]) -> tuple[ResourceNeed, ...]:
         ct = self.catalog.get(child.name)

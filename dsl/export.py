@@ -68,12 +68,14 @@ def input_label(b: InputBinding) -> str:
 
 def need_label(n: ResourceNeed) -> str:
     out = f"{n.name}: {n.type}"
+    if n.where is not None:  # of a bound need too: it must hold of the ancestor's resource, or the behavior fails
+        out += f" where {printer.expr(n.where)}"
     if n.bound_to is not None:
         holder, name, part = n.bound_to
         out += f" ← {name}" + (f".{part}" if part else "")
     else:
-        if n.where is not None:
-            out += f" where {printer.expr(n.where)}"
+        if n.reuse:
+            out += " ← " + " or ".join(f"{name}.{part}" for _, name, part in n.reuse) + " if it qualifies, else asked"
         if n.quantity is not None:
             q = n.quantity
             out += f" quantity {printer.expr(q) if isinstance(q, ast.Expr) else f'{q:g}'}"

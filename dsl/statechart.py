@@ -42,6 +42,9 @@ class ResourceNeed:
 
     `bound_to` is `(ancestor state id, ancestor need name, part or None)` when an ancestor
     already holds it; otherwise the state asks the Resource Controller Manager on entry.
+    `reuse`: for a requested need with a `where`, the parts of ancestors' robots it takes
+    instead, the first that satisfies the `where` on entry (the mission would otherwise wait
+    for a resource it holds itself); when none does, the manager is asked.
     """
 
     name: str
@@ -51,6 +54,7 @@ class ResourceNeed:
     slice: float | None = None
     bound_to: tuple[str, str, str | None] | None = None
     span: Span = field(default=NOWHERE, compare=False, repr=False)
+    reuse: tuple[tuple[str, str, str], ...] = ()
 
     @property
     def requested(self) -> bool:

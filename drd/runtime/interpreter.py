@@ -345,6 +345,10 @@ class Interpreter:
         requested = plan.requested
         if node.released:  # entered again after its controller was lost: what it had given back stays given back
             requested = tuple(n for n in requested if n.name not in node.released)
+        if requested and any(n.reuse for n in requested):  # a part of an ancestor's robot may serve its where
+            requested = self.resources.reuse(node, requested)
+            if not requested:
+                self._unreserve(node)
         if requested:  # a state whose needs are all bound above never talks to the manager
             self._request(node, requested)
         else:
@@ -394,6 +398,10 @@ class Interpreter:
             return
         try:
             future.scope.update({a.name: evaluate(a.value, self._names(parent), self.pool.count) for a in target.args})
+            if any(n.reuse for n in needs):  # what an ancestor's robot serves is not reserved (it would wait for it)
+                needs = list(self.resources.reuse(future, tuple(needs)))
+                if not needs:
+                    return
             self._reservations[holder] = future
             if self.listeners:
                 self._notify(rec.Reserved(self.clock.now(), future.path, node.path,

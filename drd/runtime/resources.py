@@ -14,6 +14,7 @@ keeps the books and talks to the manager and the gates.
 from __future__ import annotations
 
 from collections.abc import Callable, Collection, Iterable, Mapping
+from dataclasses import replace
 from typing import Any
 
 from drd.errors import MissionInputError
@@ -165,14 +166,14 @@ class ResourceClient:
             BindingError: the holder the chain leads to does not hold that resource now.
         """
         holder, name, part = node, need.name, None
-        bound = need.bound_to
+        bound = need.bound_to or node.reused.get(name)
         while bound is not None:
             state_id, name, inner = bound
             holder = next((a for a in holder.ancestors() if a.state.id == state_id), holder)
             if inner is not None:
                 part = inner if part is None else part
             spec = next((n for n in holder.state.needs if n.name == name), None)
-            bound = spec.bound_to if spec is not None else None
+            bound = (spec.bound_to if spec is not None else None) or holder.reused.get(name)
         rid = (holder.grant or {}).get(name)
         if rid is None:
             where = "its own" if holder is node else f"{name} of {holder.path}"
@@ -207,6 +208,35 @@ class ResourceClient:
                     raise BindingError(f"need {need.name} ({need.type}) is {rid}, held by {holder.path}, which does"
                                        f" not satisfy its where")
             node.scope[need.name] = view
+
+    def reuse(self, node: Node, needs: tuple[ResourceNeed, ...]) -> tuple[ResourceNeed, ...]:
+        """Of `needs` (asked of the manager), those no ancestor's robot serves: a need with a `where` takes the first
+        part of an ancestor's robot (`ResourceNeed.reuse`) that satisfies it now, as a need bound to it would
+        (`resolve` follows it), instead of asking the manager for what its own mission holds (a deadlock)."""
+        left = []
+        for need in needs:
+            via = next((v for v in need.reuse if self._serves(node, need, v)), None)
+            if via is None:
+                left.append(need)
+            else:
+                node.reused = {**node.reused, need.name: via}
+        return tuple(left)
+
+    def _serves(self, node: Node, need: ResourceNeed, via: tuple[str, str, str]) -> bool:
+        try:
+            _holder, rid, _robot, _part = self.resolve(node, replace(need, bound_to=via))
+        except BindingError:
+            return False
+        view = self.pool.view(rid)
+        scope = self.names(node)
+        scope[need.name] = view
+        try:
+            ok = truthy(need.where, scope, self.pool.count)
+        except EvalError:
+            return False
+        if ok:
+            node.scope[need.name] = view
+        return ok
 
     def bind(self, leaf: Node) -> dict[str, Binding]:
         """Bind every need of a leaf, live at the grants' epochs (raises BindingError)."""

@@ -42,6 +42,7 @@ LEAF, COMPOUND, PARALLEL, MULTI, FINAL = (StateKind.LEAF, StateKind.COMPOUND, St
 # Shared by every node until it has its own (a node is made on every entry: two allocations fewer each).
 _NO_BINDINGS: Mapping[str, Binding] = MappingProxyType({})
 _NO_EPOCHS: dict[str, int] = {}  # never written: `took` gives a node a dict of its own
+_NO_REUSE: Mapping[str, tuple[str, str, str]] = MappingProxyType({})
 
 
 class StatePlan:
@@ -94,6 +95,7 @@ class Node:
     units: tuple[str, ...]  # the units of the grant in force
     revoked: bool  # its own grant was taken at a slice boundary: suspended until granted again
     released: frozenset[str]  # needs it gave back early (`release(x)`)
+    reused: Mapping[str, tuple[str, str, str]]  # need -> the ancestor's robot part it took (`ResourceNeed.reuse`)
     lease_until: float
     reserved_by: str  # a preallocation made when this (future) node's predecessor was entered
     # -- the component host's
@@ -115,6 +117,7 @@ class Node:
         self.pending = self.closing = False
         self.requested, self.grant, self.epochs, self.units, self.revoked = False, None, _NO_EPOCHS, (), False
         self.released = frozenset()
+        self.reused = _NO_REUSE
         self.lease_until = 0.0
         self.reserved_by = reserved_by
         self.component, self.context, self.bindings = None, None, _NO_BINDINGS
