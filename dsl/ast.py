@@ -61,9 +61,15 @@ class Duration(Expr):
 
 @dataclass(frozen=True, slots=True)
 class Interp(Expr):
-    """A string with `{expr}` interpolation: literal parts and expressions, in order."""
+    """A string with `{expr}` interpolation: literal parts and expressions, in order.
+
+    `durations`: the indices of the parts typed `duration`, which print as the language writes durations (`9s`,
+    not `9`). A duration is a number of seconds at run time, so only the type checker can tell (`dsl.exprtypes`
+    notes them here, once per compile, as it infers the string).
+    """
 
     parts: tuple[str | Expr, ...]
+    durations: frozenset[int] = field(default=frozenset(), compare=False, repr=False)
 
 
 @dataclass(frozen=True, slots=True)

@@ -92,6 +92,25 @@ def format_value(v: object) -> str:
     return str(v)
 
 
+def _show(v: object, duration: bool) -> str:
+    """An interpolated value; a duration as the language writes it (`9s`, `250ms`, `5min`)."""
+    if duration and isinstance(v, int | float) and not isinstance(v, bool) and math.isfinite(v):
+        return duration_literal(float(v))
+    return format_value(v)
+
+
+def duration_literal(seconds: float) -> str:
+    """Seconds as a duration literal: in the largest unit that writes them whole (`2h`, `5min`, `90s`), else in
+    seconds (`9.25s`), under a second in milliseconds (`250ms`)."""
+    for unit, size in (("h", 3600.0), ("min", 60.0), ("s", 1.0)):
+        count = seconds / size
+        if abs(count) >= 1 and abs(count - round(count)) < 1e-9:
+            return f"{round(count)}{unit}"
+    if seconds == 0:
+        return "0s"
+    return f"{seconds:g}s" if abs(seconds) >= 1 else f"{seconds * 1000:g}ms"
+
+
 class _Evaluator:
     def __init__(self, names: Mapping[str, object], count: CountFn | None, place: PlaceFn | None = None):
         self.names = names
@@ -104,8 +123,9 @@ class _Evaluator:
                 return v
             case ast.Duration(seconds=s):
                 return s
-            case ast.Interp(parts=parts):
-                return "".join(p if isinstance(p, str) else format_value(self.eval(p)) for p in parts)
+            case ast.Interp(parts=parts, durations=durations):
+                return "".join(p if isinstance(p, str) else _show(self.eval(p), i in durations)
+                               for i, p in enumerate(parts))
             case ast.Name(id=n):
                 if n not in self.names:
                     raise EvalError(f"{n} has no value here", e.span)

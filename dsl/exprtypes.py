@@ -96,9 +96,10 @@ class Typer:
             case ast.Duration():
                 return "duration"
             case ast.Interp(parts=parts):
-                for p in parts:
-                    if isinstance(p, ast.Expr):
-                        self.infer(p, scope)
+                marks = frozenset(i for i, p in enumerate(parts)
+                                  if isinstance(p, ast.Expr) and self.infer(p, scope) == "duration")
+                if marks != expr.durations:  # an annotation of the checked tree, not a new node to put back in it
+                    object.__setattr__(expr, "durations", marks)
                 return "str"
             case ast.Name(id=name):
                 return self._name(expr, name, scope)

@@ -594,6 +594,9 @@ def syntax_diagnostic(e: UnexpectedInput, history: Sequence[Token], file: str, t
         unclosed = _unclosed(file, text, tok)
         if unclosed is not None:
             return unclosed
+    unit = _unknown_unit(file, prev, tok)
+    if unit is not None:
+        return unit
     hint = _keyword_hint(tok, e.expected)
     if prev is not None and tok.type == "LPAR" and len(earlier) >= 2 and earlier[-2].type == "ARROW":
         return Diagnostic("syntax", f"syntax: a transition's target is a state's name, not a call: "
@@ -614,6 +617,32 @@ def syntax_diagnostic(e: UnexpectedInput, history: Sequence[Token], file: str, t
         return Diagnostic("syntax", f"syntax: expected a newline or ; after {_show(prev)}", _after(file, prev),
                           hint or f"{_show(tok)} starts a new item: put it on its own line")
     return Diagnostic("syntax", f"syntax: {_describe_token_error(e)}", span, hint)
+
+
+#: Units people write that the language spells otherwise, with the seconds each is worth (`3days` -> `72h`).
+_UNIT_WORDS = {**dict.fromkeys(("sec", "secs", "second", "seconds"), 1.0),
+               **dict.fromkeys(("m", "mn", "mins", "minute", "minutes"), 60.0),
+               **dict.fromkeys(("hr", "hrs", "hour", "hours"), 3600.0),
+               **dict.fromkeys(("d", "day", "days"), 86400.0),
+               **dict.fromkeys(("msec", "msecs", "millis", "millisecond", "milliseconds"), 0.001)}
+
+
+def _unknown_unit(file: str, prev: Token | None, tok: Token) -> Diagnostic | None:
+    """A number with a name glued to it (`5parsecs`, `3days`) is a duration with a unit the language lacks: say so,
+    rather than that the name starts a new item (which only a duration can mean there)."""
+    if (prev is None or prev.type not in ("INT", "FLOAT") or tok.type != "NAME" or prev.end_line != tok.line
+            or prev.end_column != tok.column):
+        return None
+    word = str(tok.value)
+    span = Span(file, prev.line or 1, prev.column or 1, tok.end_line or 1, tok.end_column or 1)
+    hint = None
+    size = _UNIT_WORDS.get(word.lower())
+    if size is not None:
+        from dsl.catalog import duration_text
+
+        hint = f"did you mean {duration_text(float(prev.value) * size)}?"
+    return Diagnostic("syntax", f"syntax: unknown duration unit {word} in `{prev.value}{word}`: write 250ms, 30s,"
+                      " 5min or 2h", span, hint)
 
 
 def _unclosed(file: str, text: str, tok: Token) -> Diagnostic | None:
