@@ -392,7 +392,7 @@ def run(mission: Path = typer.Argument(..., help="The mission file.", show_defau
     request = RunMission(source, str(mission), world, speed, until, seed, params or None, priority,
                          give_up_at=time.time() + wait - 0.5)  # the reply must still reach us after it
     with cluster_client(config, connect, timeout, to="run a mission") as client:
-        watch = _RecordWatch(client, trace_out, recorder)
+        watch = _RecordWatch(client, trace_out, recorder, worlds=(config.absolute().parent,))
         try:
             report = _run_and_follow(client, watch, request, wait, detach)
         finally:
@@ -586,7 +586,8 @@ class _RecordWatch:
     #: Seconds between progress lines (and between asking the executive how the mission is).
     every = 1.0
 
-    def __init__(self, client: ClusterClient, trace: IO[str] | None = None, recorder: Recorder | None = None) -> None:
+    def __init__(self, client: ClusterClient, trace: IO[str] | None = None, recorder: Recorder | None = None,
+                 worlds: Sequence[Path] = ()) -> None:
         import queue
 
         from drd.executive_messages import MissionRecord
@@ -606,6 +607,7 @@ class _RecordWatch:
         self.heard_before = 0
         self.view: _ClusterView | None = None
         self.priority = 1  # the started mission's, as the controller said it (`started`)
+        self.worlds = tuple(worlds)  # where the mission's world is found, before drd's own (beside the hosts file)
 
         def on_record(sample: Any) -> None:
             if isinstance(sample.payload, MissionRecord):
@@ -617,7 +619,7 @@ class _RecordWatch:
         recording from now on (`_ClusterView`)."""
         self.priority = reply.priority
         if self.recorder is not None and self.view is None:
-            self.view = _ClusterView(self.client, self.recorder, reply)
+            self.view = _ClusterView(self.client, self.recorder, reply, self.worlds)
 
     def close(self) -> None:
         self.sub.close()
@@ -791,14 +793,14 @@ class _ClusterView:
     #: Seconds (wall) between two requests for the poses, and between two for the hosts and placements.
     every, hosts_every = 0.2, 1.0
 
-    def __init__(self, client: ClusterClient, recorder: Recorder, reply: Any) -> None:
+    def __init__(self, client: ClusterClient, recorder: Recorder, reply: Any, worlds: Sequence[Path] = ()) -> None:
         import threading
 
         from drd.bus.messages import LoadReport
 
         self.client, self.recorder, self.base = client, recorder, float(reply.base)
         self.said: dict[str, Any] = {}  # what was last written on each channel (only changes are written)
-        self.world = self._world(str(reply.world))
+        self.world = self._world(str(reply.world), worlds)
         self.offset: float | None = None  # mission time = simulator time + offset (None: not known yet)
         self.cursor = 0  # the simulator host's next reading to ask for (`drd.sim.observe.Observations`)
 
@@ -811,13 +813,14 @@ class _ClusterView:
         self.thread = threading.Thread(target=self._loop, name="drd-record-cluster", daemon=True)
         self.thread.start()
 
-    def _world(self, name: str) -> Any:
-        """The mission's world as this installation has it (for the scene, and the robots to ask about)."""
+    def _world(self, name: str, worlds: Sequence[Path]) -> Any:
+        """The mission's world as this client has it, beside its hosts file or drd's own (for the scene, and the
+        robots to ask about)."""
         from drd.sim.service import world_file
         from drd.sim.world import WorldError, load_world
 
         try:
-            world = load_world(world_file(name))
+            world = load_world(world_file(name, worlds))
         except (ValueError, WorldError, OSError):
             return None
         self.recorder.scene(world)

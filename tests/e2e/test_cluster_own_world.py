@@ -9,6 +9,7 @@ import json
 from pathlib import Path
 
 from cluster_support import ROOT, DaemonCluster, corridor_hosts, serving_cluster
+from mcap.reader import make_reader
 
 NAMES = ["controller", "ranger1"]
 
@@ -26,9 +27,13 @@ def test_daemons_start_and_run_a_mission_on_a_world_beside_their_hosts_file(tmp_
 
     with serving_cluster(tmp_path, NAMES, hosts) as cluster:  # every daemon ready and up, the simulator too
         mission = ROOT / "missions" / "corridor_surveillance.mission"
+        recording = tmp_path / "run.mcap"
         run = cluster.missionctl("run", str(mission), "--config", str(cluster.hosts_file), "--speed", "20",
-                                 "--json", timeout=120)
+                                 "--json", "--record", str(recording), timeout=120)
         assert run.returncode == 0, cluster.tails(*NAMES) + run.stderr
         assert "(world annex_hall," in run.stderr
         report = json.loads(run.stdout)
         assert report["outcome"] == "success" and len(report["scouts"]) == 6, report
+    with recording.open("rb") as f:  # the client found it too: the recording carries it, for a replay to draw
+        attached = {a.name: a.data for a in make_reader(f).iter_attachments()}
+    assert attached["world.yaml"] == (tmp_path / "worlds" / "annex_hall.yaml").read_bytes()
