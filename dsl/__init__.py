@@ -57,9 +57,13 @@ def compile_program(program: Program, catalog: Catalog, report: Reporter) -> Sta
     try:
         checked = Checker(program, catalog, report).run()
         mission = program.mission
-        if report.failed or mission is None:
+        # Bindings are checked even when the checker found errors (all of a file's errors in one run): the builder
+        # then expands only what is sound and says nothing that only echoes an error already reported.
+        builder = Builder(checked, catalog, report, diagnose=report.failed)
+        if mission is None:  # a library: each behavior no other uses, as a mission's child that holds nothing
+            builder.build_library()
             return None
-        chart = Builder(checked, catalog, report).build(mission, program.main)
+        chart = builder.build(mission, program.main)
     except OverBudget as stop:
         report.over_budget(stop)
         return None

@@ -16,11 +16,11 @@ from dataclasses import dataclass, replace
 
 from dsl import ast
 from dsl.catalog import Catalog, ComponentType, InputSpec, Kind, Limit
-from dsl.checker import Body, Checked
+from dsl.checker import MAX_BEHAVIOR_DEPTH, Body, Checked
 from dsl.dataflow import UNTYPED, Ambiguous, InputBinding, Level, Offer, Scope, bind, producer_order
 from dsl.errors import NOWHERE, Reporter, Span
 from dsl.exprtypes import constant
-from dsl.linearize import plan_graph, predecessors, total_order
+from dsl.linearize import find_cycle, plan_graph, predecessors, total_order
 from dsl.statechart import ResourceNeed, State, Statechart, StateKind, Transition
 
 #: The data in scope of a child, nearest level first (`dsl.dataflow`).
@@ -36,11 +36,22 @@ class _Held:
     type: str
 
 
+#: How deep a broken program (`diagnose`) is expanded: the checker refuses deeper nesting anyway.
+_MAX_DIAGNOSE_DEPTH = 2 * MAX_BEHAVIOR_DEPTH + 4
+
+
 class Builder:
-    def __init__(self, checked: Checked, catalog: Catalog, report: Reporter):
+    """`diagnose`: the checker found errors; the statechart is built only for the binding errors it finds (all of a
+    file's errors in one run): a behavior that is not sound (recursive) is not expanded, a cyclic plan not ordered,
+    and an input that an unknown sibling might have fed is not reported missing. `open`: a library's behaviors,
+    built with no ancestors: what an ancestor may provide (a shared datum, an input) is not reported missing."""
+
+    def __init__(self, checked: Checked, catalog: Catalog, report: Reporter, diagnose: bool = False):
         self.checked = checked
         self.catalog = catalog
         self.report = report
+        self.diagnose = diagnose
+        self.open = False
         self.states: dict[str, State] = {}
         self._reported: set[tuple[str, Span]] = set()
 
@@ -49,6 +60,18 @@ class Builder:
         self._instance(mission.name, mission.name, root, None, 0, 1, (), ())
         return Statechart(mission.name, mission.name, dict(self.states), file, mission.priority or 1,
                           self.report.limits.instances)
+
+    def build_library(self) -> None:
+        """Build each behavior no other one uses as if a mission that holds nothing ran it: its binding errors
+        that hold wherever it is used (two cameras of its own for one `camera`) are reported in the library."""
+        self.open = True
+        for name, behavior in self.checked.behaviors.items():
+            if name not in self.checked.called and name in self.checked.sound:
+                self._instance(name, name, ast.Child(name, span=behavior.name_span), None, 0, 1, (), ())
+
+    def _expands(self, behavior: ast.Behavior | None, depth: int) -> bool:
+        return behavior is not None and (not self.diagnose or (
+            behavior.name in self.checked.sound and depth <= _MAX_DIAGNOSE_DEPTH))
 
     # ------------------------------------------------------------- states
     def _child(self, parent: str, child: ast.Child, depth: int, prio: int, held: tuple[_Held, ...],
@@ -70,8 +93,8 @@ class Builder:
             self.report.check_budget(child.span)
         behavior = self.checked.behaviors.get(child.name)
         args = child.args or ()
-        if behavior is None:
-            ct = self.catalog.get(child.name)
+        if not self._expands(behavior, depth):
+            ct = self.catalog.get(child.name) if behavior is None else None
             defaults = tuple(ast.Arg(p.name, _literal(p.default, p.type)) for p in (ct.params if ct else ())
                              if not p.required)
             inputs = self._inputs(child, ct, data) if ct is not None else ()
@@ -81,6 +104,7 @@ class Builder:
                                      needs=self._leaf_needs(child, held), priority=prio, inputs=inputs,
                                      ranges=_evaluated_ranges(ct, args), span=child.span)
             return
+        assert behavior is not None
         body = self.checked.bodies[behavior.name]
         needs = tuple(self._need(n, held) for n in body.needs)
         defaults = tuple(ast.Arg(p.name, p.default, span=p.span) for p in behavior.params if p.default is not None)
@@ -96,10 +120,16 @@ class Builder:
         offers = [o for key, c in body.children.items() if c.mult is None
                   for o in self._offers(f"{sid}/{key}", key, c.name, ())]
         offers += [Offer(sid, s.name, s.type.name, True) for s in body.shared]
-        scope = Scope(offers)
+        scope = Scope(offers, self.diagnose and self._opaque(body))
         kids = {key: self._child(sid, c, depth + 1, prio, inner, (Level(scope, key), *data))
                 for key, c in body.children.items()}
         self.states[sid] = self._body(self.states[sid], body, kids)
+
+    def _opaque(self, body: Body) -> bool:
+        """Whether a child or shared datum of `body` is unknown (then what it would offer is unknown)."""
+        return any(c.name not in self.checked.sound and (c.name in self.checked.behaviors or
+                                                          self.catalog.get(c.name) is None)
+                   for c in body.children.values()) or any(self.catalog.get(s.type.name) is None for s in body.shared)
 
     def _body(self, state: State, body: Body, kids: dict[str, str]) -> State:
         """Fill in kind, initial state, policy and transitions from the body's structure."""
@@ -134,7 +164,8 @@ class Builder:
                 s = self.states[kids[step]]
                 self.states[s.id] = replace(s, after=tuple(kids[p] for p in preds))
         else:
-            order = total_order(plan_graph(body.plan)) if body.plan is not None else []
+            graph = plan_graph(body.plan) if body.plan is not None else None
+            order = total_order(graph) if graph is not None and find_cycle(graph) is None else []
             ahead = body.plan is not None and body.plan.preallocate
             for a, b in zip(order, order[1:], strict=False):
                 generated.append(_completion(sid, kids[a], kids[b], ahead))
@@ -194,7 +225,7 @@ class Builder:
                 names = " or ".join(o.describe() for o in found.offers)
                 self._error("ambiguous-input", f"{child.name}'s input {spec.name} ({spec.type}) could read {names}",
                             child.span, f"bind it: {child.name}({spec.name}: {_reference(found.offers[0])})")
-            elif not spec.optional:
+            elif not spec.optional and not self.open and not any(level.scope.opaque for level in data):
                 self._error("missing-input", f"{child.name} needs input {spec.name} ({spec.type}): nothing in scope"
                             f" is called {spec.name} or is a {spec.type}", child.span,
                             f"run a behavior that outputs a {spec.type} before it, declare `shared {spec.name}:"
@@ -221,6 +252,8 @@ class Builder:
             offer = hits[0]
         elif isinstance(value, ast.Name):
             offer = next((o for level in data for o in level.named(value.id) if o.shared), None)
+            if offer is None and (self.open or any(level.scope.opaque for level in data)):
+                return None  # an ancestor's (or an unknown sibling's) datum, perhaps
             if offer is None:
                 self._error("unknown-input-source", f"{value.id} is no shared datum in scope of {child.name}",
                             arg.span, "an input reads a sibling's output (sibling.output) or a `shared` datum")

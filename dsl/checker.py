@@ -123,6 +123,8 @@ class Checked:
     behaviors: dict[str, ast.Behavior]
     bodies: dict[str, Body]
     events: dict[str, RecordSpec]
+    sound: frozenset[str] = frozenset()  # the behaviors that can be expanded: not recursive, not nested too deep
+    called: frozenset[str] = frozenset()  # the behaviors another behavior uses as a child
 
 
 class Checker:
@@ -145,7 +147,8 @@ class Checker:
         for name in order:
             self.report.check_budget(self.behaviors[name].name_span)
             self._behavior(self.behaviors[name])
-        return Checked(self.behaviors, self.bodies, self.events)
+        called = frozenset(c.name for body in self.bodies.values() for c in body.children.values())
+        return Checked(self.behaviors, self.bodies, self.events, frozenset(order), called)
 
     # ------------------------------------------------------------- declarations
     def _declarations(self) -> None:

@@ -69,8 +69,9 @@ class Scope:
     sibling: every child of the body looks its inputs up in it, so a body of many children costs each lookup a
     dictionary hit, not a scan of all its siblings (a 20,000-child mission compiled in quadratic time)."""
 
-    def __init__(self, offers: Iterable[Offer]) -> None:
+    def __init__(self, offers: Iterable[Offer], opaque: bool = False) -> None:
         self.offers = tuple(offers)
+        self.opaque = opaque  # a child or datum here is unknown (a checker error): what it offers is unknown too
         self.by_name: dict[str, list[Offer]] = {}
         self.by_type: dict[str, list[Offer]] = {}
         self.by_key: dict[str, list[Offer]] = {}
