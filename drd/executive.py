@@ -286,7 +286,6 @@ class Executive:
                 return self.status(0, cmd.count, targets)
         return query.error(f"unknown command {cmd.op!r}: use status, stop, emit EVENT or records")
 
-
     def unknown(self, mission: str) -> str:
         """The error for a mission id it does not know: with those still running (an ended one cannot be stopped,
         nor sent an event that changes anything), and how many ended ones it still knows."""
