@@ -37,7 +37,7 @@ import json
 import math
 import struct
 import threading
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -294,8 +294,10 @@ class Recorder:
         if ends is not None:
             self.update_world(at, [_door(door, ends[0], ends[1], DoorState(state))])
 
-    def record(self, mission: str, r: rec.Record) -> None:
-        """One trace record of `mission`: on `/drd/records`, and into its active configuration (`/drd/active`)."""
+    def record(self, mission: str, r: rec.Record, seq: int | None = None) -> None:
+        """One trace record of `mission`: on `/drd/records`, and into its active configuration (`/drd/active`).
+        `seq`: the executive's sequence number, which a cluster run's trace line carries (missions that ran
+        together merge by it: `check-trace --together`), so the recorded record carries it too."""
         view = self.views.get(mission)
         if view is None:
             view = self.views[mission] = ActiveView(mission)
@@ -304,6 +306,8 @@ class Recorder:
         view.take(r)
         data = r.to_dict()
         data["mission"] = mission
+        if seq is not None:
+            data["seq"] = seq
         self._channel(RECORDS).log(_json(data), log_time=_ns(r.at))
         if isinstance(r, rec.Log):
             self._log_line(r)
@@ -356,6 +360,13 @@ class Recorder:
             self.flushed = at
             if self.writer is not None and not self.closed:
                 self.writer.flush()
+
+    def where(self, robot: str) -> tuple[float, float] | None:
+        """Where `robot` was last written on `/drd/tf` (its Ranger's place while carried), or None if never."""
+        last = self.frames.last.get(robot)
+        if isinstance(last, str):
+            last = self.frames.last.get(last)
+        return None if last is None or isinstance(last, str) else (last[0], last[1])
 
     def end(self, runs: Sequence[dict[str, Any]], at: float) -> None:
         """Each mission's run summary (`summary`), then close the file and the live view."""
@@ -627,6 +638,8 @@ class Recording:
     (sim time, x, y, heading), decoded from the Foxglove transforms with `mcap_protobuf`."""
 
     records: dict[str, list[rec.Record]] = field(default_factory=dict)
+    #: Each record's `seq` (None when it has none: a dry-run's), in the order of `records`.
+    seqs: dict[str, list[int | None]] = field(default_factory=dict)
     runs: list[dict[str, Any]] = field(default_factory=list)
     tracks: dict[str, list[tuple[float, float, float, float]]] = field(default_factory=dict)
     #: A Scout in a magazine: from when, carried by which Ranger (its frame's parent is the Ranger's).
@@ -634,6 +647,17 @@ class Recording:
     fovs: dict[str, float] = field(default_factory=dict)  # each camera's field of view (radians), by robot
     world: bytes | None = None  # the world file the run used (`world.yaml` attachment), if it was a file
     cut: bool = False  # the file ends before the run did (a crash): what its complete chunks held
+
+    def trace_lines(self) -> Iterator[str]:
+        """The recorded records as the run's `--trace` wrote them (with `seq` where the run's lines had it)."""
+        from drd.runtime.trace import trace_line
+
+        for mission, records in self.records.items():
+            seqs = self.seqs.get(mission, [])
+            for i, r in enumerate(records):
+                line = trace_line(r, mission)
+                seq = seqs[i] if i < len(seqs) else None
+                yield line if seq is None else f'{line[:-1]},"seq":{seq}}}'
 
     def load_world(self, name: str) -> World | None:
         """The recorded world (its problems name `name`), or None when the recording has none."""
@@ -722,7 +746,9 @@ def _take(out: Recording, topic: str, data: bytes) -> None:
         d = json.loads(data)
         r = rec.from_dict(d)
         if r is not None:
-            out.records.setdefault(str(d.get("mission", "")), []).append(r)
+            key, seq = str(d.get("mission", "")), d.get("seq")
+            out.records.setdefault(key, []).append(r)
+            out.seqs.setdefault(key, []).append(seq if isinstance(seq, int) else None)
     elif topic == RUNS:
         run = json.loads(data)
         if run.get("format") != FORMAT:

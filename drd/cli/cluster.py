@@ -403,6 +403,7 @@ def run(mission: Path = typer.Argument(..., help="The mission file.", show_defau
         return OK
     report.speed, report.on_cluster = speed, True
     if recorder is not None:
+        _scouts_ended(report, recorder)
         recorder.end([summary(report)], report.sim_time)
     if as_json:
         print_json(report.to_dict(), default=str)
@@ -411,6 +412,15 @@ def run(mission: Path = typer.Argument(..., help="The mission file.", show_defau
 
         print_report(report)
     return OK if report.outcome == "success" else MISSION_FAILED
+
+
+def _scouts_ended(report: DryRun, recorder: Recorder) -> None:
+    """Where each launched Scout ended, as a dry-run's report says it (`x`, `y`): its last pose the recorder
+    wrote (the simulator's host told this client every pose it recorded); a Scout never seen keeps none."""
+    for scout in report.scouts:
+        where = recorder.where(str(scout.get("scout")))
+        if where is not None:
+            scout.update(x=round(where[0], 2), y=round(where[1], 2))
 
 
 def _outputs(trace: Path | None, record: Path | None, foxglove: str | None,
@@ -741,7 +751,7 @@ class _RecordWatch:
         r = _record(msg, rec, base)
         if r is not None:
             if self.recorder is not None:
-                self.recorder.record(msg.mission, r)
+                self.recorder.record(msg.mission, r, msg.seq)  # as the trace line has it
             result.records.append(r)
             facts(result, r)
             result.sim_time = max(result.sim_time, r.at)

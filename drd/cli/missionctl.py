@@ -611,14 +611,11 @@ def _write_bag(file: Path, bag: Path | None) -> None:
 
 def _write_trace(recording: Recording, fh: IO[str] | None) -> None:
     """`replay --trace`: the recorded records as the run's `--trace` wrote them."""
-    from drd.runtime.trace import trace_line
-
     if fh is None:
         return
     with fh:
-        for mission, records in recording.records.items():
-            for r in records:
-                fh.write(trace_line(r, mission) + "\n")
+        for line in recording.trace_lines():  # with each record's `seq` when the run's trace had it
+            fh.write(line + "\n")
 
 
 def _recorded_world(recording: Recording, file: Path) -> World:

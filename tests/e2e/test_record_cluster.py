@@ -49,6 +49,7 @@ def test_a_cluster_run_records_hosts_loads_placements_and_poses(cluster: DaemonC
     port = free_port()  # and serves them live (tests/e2e/test_record_live.py has a viewer)
     run = cluster.missionctl("run", "missions/corridor_surveillance.mission", "--config", str(cluster.hosts_file),
                              "--speed", "5", "--until", "20", "--record", str(tmp_path / "run.mcap"), "--json",
+                             "--trace", str(tmp_path / "run.jsonl"),
                              "--foxglove", f"127.0.0.1:{port}", timeout=120)
     assert run.returncode == 1, run.stderr[-2000:]  # stopped at --until
     assert f"live view on ws://127.0.0.1:{port}" in run.stderr
@@ -79,6 +80,31 @@ def test_a_cluster_run_records_hosts_loads_placements_and_poses(cluster: DaemonC
     launched = {report_scout["scout"] for report_scout in report["scouts"]} if report.get("scouts") else set()
     assert {m["robot"] for m in flights if m["kind"] != "landing"} >= launched and flights, report.get("scouts")
     assert counts["/drd/light"] > 20, counts  # the Scout's dark-corner search (no camera reads in the first 20 s)
-    replay = subprocess.run([*MISSIONCTL, "replay", str(tmp_path / "run.mcap"), "--json"], cwd=tmp_path,
-                            capture_output=True, text=True, timeout=60, check=False)
+    # where each Scout ended, as a dry-run's report says it, from the last pose recorded
+    ends = {s["scout"]: (s["x"], s["y"]) for s in report["scouts"]}
+    assert ends and all(isinstance(v, float) for xy in ends.values() for v in xy), report["scouts"]
+    last = {tf.child_frame_id: (tf.translation.x, tf.translation.y) for topic, _t, m in got if topic == "/drd/tf"
+            for tf in m.transforms if tf.parent_frame_id == "world"}
+    assert all(abs(x - last[s][0]) < 0.01 and abs(y - last[s][1]) < 0.01 for s, (x, y) in ends.items()), ends
+    runs = [m for topic, _t, m in got if topic == "/drd/runs"]
+    assert [s["scout"] for s in runs[0]["scouts"] if "x" in s] == list(ends)
+    replay = subprocess.run([*MISSIONCTL, "replay", str(tmp_path / "run.mcap"), "--json", "--trace",
+                             str(tmp_path / "replay.jsonl")], cwd=tmp_path, capture_output=True, text=True,
+                            timeout=60, check=False)
     assert replay.returncode == 1 and json.loads(replay.stdout) == report, replay.stderr[-2000:]
+    seqs_of_records(tmp_path, got)
+
+
+def seqs_of_records(tmp_path: Path, got: list[tuple[str, int, Any]]) -> None:
+    """The recorded records carry `seq` as the run's trace lines do, so a replayed trace merges with another
+    (`check-trace --together`, which refuses records without it)."""
+    traced = {r["seq"]: r for r in map(json.loads, (tmp_path / "run.jsonl").read_text().splitlines())}
+    recorded = [m for topic, _t, m in got if topic == "/drd/records"]
+    assert recorded and all(m["seq"] in traced and traced[m["seq"]]["kind"] == m["kind"] for m in recorded)
+    replayed = [json.loads(line) for line in (tmp_path / "replay.jsonl").read_text().splitlines()]
+    assert [r["seq"] for r in replayed] == [m["seq"] for m in recorded]
+    (tmp_path / "other.jsonl").write_text((tmp_path / "replay.jsonl").read_text())
+    together = subprocess.run([*MISSIONCTL, "check-trace", "--together", str(tmp_path / "replay.jsonl"),
+                               str(tmp_path / "other.jsonl"), "--json"], cwd=tmp_path, capture_output=True,
+                              text=True, timeout=60, check=False)
+    assert "without seq" not in together.stderr and together.returncode in (0, 1), together.stderr[-2000:]
