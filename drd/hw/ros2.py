@@ -122,9 +122,12 @@ def yaw_of(q: Any) -> float:
 
 
 def stamp(t: float) -> dict[str, int]:
-    """builtin_interfaces/Time fields of `t` seconds."""
+    """builtin_interfaces/Time fields of `t` seconds: the nearest nanosecond, carried into the seconds (sim time
+    adds up in floats, so 5 s is 4.999999999999998: that is {sec: 5, nanosec: 0}, not {4, 999999999})."""
     sec = math.floor(t)
-    nanosec = min(999_999_999, round((t - sec) * 1e9))
+    nanosec = round((t - sec) * 1e9)  # t - sec is exact; the product is within half an ulp of the true one
+    if nanosec >= 1_000_000_000:
+        sec, nanosec = sec + 1, nanosec - 1_000_000_000
     return {"sec": int(sec), "nanosec": int(nanosec)}
 
 
