@@ -11,6 +11,7 @@ import functools
 import json
 import logging
 import os
+import re
 import signal
 import subprocess
 import sys
@@ -469,6 +470,8 @@ def sim(
         fail(f"--speed {speed:g}: expected a positive number")
     if not 0 <= domain <= 232:
         fail(f"--domain {domain}: a ROS domain id is 0 to 232")
+    if (problem := endpoint_problem(listen)) is not None:
+        fail(f"--listen {listen}: {problem}", hint="e.g. --listen tcp/127.0.0.1:7447")
     cluster, sim_world, world_name = _served_team(config, world, extra)
     return _serve_ros2(cluster, sim_world, world_name, listen, speed, domain, seed, as_json)
 
@@ -495,6 +498,26 @@ def _served_team(config: Path, world: str | None, extra: list[Path]) -> tuple[Cl
     return cluster, sim_world, found.stem
 
 
+#: A zenoh endpoint drd listens on, as a hosts file's `endpoint` and `listen` are written (`drd.hosts`).
+ENDPOINT = re.compile(r"(tcp|udp)/(\[[0-9A-Fa-f:.]+\]|[A-Za-z0-9](?:[A-Za-z0-9.-]*[A-Za-z0-9])?):([0-9]+)", re.ASCII)
+
+
+def endpoint_problem(text: str) -> str | None:
+    """What is wrong with an endpoint option (None if nothing): checked before zenoh sees it, whose own error
+    is a parser's message with Rust source paths (and was reported as drd's internal error)."""
+    m = ENDPOINT.fullmatch(text)
+    if m is None:
+        return "expected tcp/HOST:PORT or udp/HOST:PORT (a zenoh endpoint)"
+    if not 0 < int(m.group(3)) < 65536:
+        return f"port {m.group(3)} is out of range (1 to 65535)"
+    return None
+
+
+def zenoh_message(error: BaseException) -> str:
+    """zenoh's error text without the Rust source locations it appends (` at /root/.cargo/...rs:62.`)."""
+    return re.sub(r"\s+at /\S+\.rs:\d+\.?", "", str(error)).strip()
+
+
 def _serve_ros2(cluster: Cluster, sim_world: Any, world_name: str, listen: str, speed: float, domain: int,
                 seed: int, as_json: bool) -> int:
     """Serve the robots until SIGTERM or Ctrl-C (`drd sim --ros2`)."""
@@ -504,10 +527,13 @@ def _serve_ros2(cluster: Cluster, sim_world: Any, world_name: str, listen: str, 
     from drd.sim import Simulation
     from drd.sim.ros2 import ServedRobots, serve
 
+    import zenoh
+
     try:
         session = Ros2Session.listen(listen, types=message_types())
-    except (BusError, ValueError) as e:
-        fail(f"cannot listen on {listen}: {e}", code=INTERNAL, hint="is another router or drd on that port?")
+    except (BusError, ValueError, zenoh.ZError) as e:
+        fail(f"cannot listen on {listen}: {zenoh_message(e)}", code=INTERNAL,
+             hint="is another router or drd on that port?")
     stop = threading.Event()
     for signum in (signal.SIGTERM, signal.SIGINT):
         signal.signal(signum, lambda _n, _f: stop.set())

@@ -219,3 +219,8 @@ def test_drd_sim_refuses_what_it_cannot_do(tmp_path: Path) -> None:
     finally:
         blocker.close()
     assert taken.returncode == 70 and json.loads(taken.stderr.strip().splitlines()[-1])["code"] == 70
+    assert ".rs:" not in taken.stderr  # zenoh's Rust source locations are not the user's business
+    for bad in ("bogus", "tcp/127.0.0.1:99999", "tcp/127.0.0.1"):  # a bad option, said in one line (not drd's bug)
+        refused = run("--ros2", "--listen", bad, "--json")
+        error = json.loads(refused.stderr)
+        assert refused.returncode == 2 and error["code"] == 2 and bad in error["error"], refused.stderr
