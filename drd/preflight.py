@@ -3,7 +3,8 @@ exists, naming the file and the key, instead of a failure at the first mission (
 
 `drd start` checks its host: the driver classes its devices name, the entry point of every component manifest
 (any behavior may be placed on any worker), and, on the controller and the simulator's host, the world the cluster
-names. `missionctl dry-run` runs every host in its own process, so it checks them all.
+names; a cluster with no simulator host runs real robots in no world, so none of its devices may be on `sim`.
+`missionctl dry-run` runs every host in its own process, so it checks them all.
 """
 
 from __future__ import annotations
@@ -13,7 +14,7 @@ from collections.abc import Iterable
 from drd import entrypoints
 from drd.entrypoints import EntryPointError
 from drd.hosts import Cluster, Role
-from drd.hw.drivers import check_driver_classes
+from drd.hw.drivers import SIM, check_driver_classes
 from dsl.catalog import Catalog
 
 
@@ -46,11 +47,24 @@ def world_problems(cluster: Cluster) -> list[str]:
     return []
 
 
+def sim_driver_problems(cluster: Cluster) -> list[str]:
+    """With no simulator host, every device on a `sim` driver (it would have no world to read): each named by its
+    file and key. Empty when a host has the role simulator."""
+    if any(Role.SIMULATOR in h.roles for h in cluster.hosts):
+        return []
+    return [f"{cluster.source}: hosts.{h.name}.devices.{d.id.removeprefix(h.name + '.')}.driver: sim, but no host has"
+            " the role simulator: drive it with a real driver (ros2, docs/ros2.md), or give one host the role"
+            " simulator" for h in cluster.hosts for d in h.devices if d.driver == SIM]
+
+
 def start_problems(cluster: Cluster, host: str, catalog: Catalog) -> list[str]:
-    """What keeps `host` from starting (empty when nothing does)."""
+    """What keeps `host` from starting (empty when nothing does). With no simulator host the missions run on the
+    real robots, in no world: no world is loaded, but a device left on a `sim` driver anywhere is refused."""
     problems = check_driver_classes(cluster, host, catalog) + entry_point_problems(catalog)
     roles = cluster.host(host).roles
-    if Role.CONTROLLER in roles or Role.SIMULATOR in roles:  # they make the world a mission runs in
+    if not any(Role.SIMULATOR in h.roles for h in cluster.hosts):
+        problems += sim_driver_problems(cluster)
+    elif Role.CONTROLLER in roles or Role.SIMULATOR in roles:  # they make the world a mission runs in
         problems += world_problems(cluster)
     return problems
 

@@ -83,7 +83,7 @@ from drd.cluster.workers import (
     scheduling_of,
 )
 from drd.errors import ComponentFailure
-from drd.hosts import Cluster
+from drd.hosts import Cluster, Role
 from drd.hw.commands import spec_of
 from drd.profiling import Sampler
 from drd.runtime import records as rec
@@ -754,10 +754,10 @@ class Creator:
                 self._sim = None
             elif service is not None:
                 sim = self._sim = RemoteSimulation(service.handle, world, beside=service.beside)
-            elif self._bus is not None:
+            elif self._bus is not None and any(Role.SIMULATOR in h.roles for h in self.cluster.hosts):
                 sim = self._sim = RemoteSimulation.over(self._bus, self.cluster.name, world,
                                                         beside=world_dirs(self.cluster))
-            else:
+            else:  # no simulator host: real robots, their drivers need no world
                 sim = self._sim = None
             self._drivers = drivers_for(self.cluster, self.host, sim, catalog=self.catalog)
             self._guard_gates()

@@ -16,6 +16,11 @@ of real time. Records go out on `drd/<cluster>/mission/<id>/record` as for every
 The simulator holds one world: the missions of the cluster share it (a second `missionctl run` joins the world
 the first one started, and the one Resource Controller Manager arbitrates their grants by priority); it stops
 when its last mission ends, and each ended mission's processes are retired on every host it used.
+
+A cluster of real robots has no host with the role simulator: its missions then run in no simulated world
+(`NO_WORLD`). The loop runs its control cycles in real time, the executive's clock is the wall clock since the
+world began, no step goes to any host, and the devices' drivers talk to the robots as they always do. A real robot
+cannot go faster than real time, so `speed` other than 1 is refused, and so is a named world.
 """
 
 from __future__ import annotations
@@ -58,6 +63,8 @@ RECENT_PLACEMENT = 3.0
 REFRESH_EVERY = 0.5
 #: Seconds beyond two leases a restarted controller waits for the hosts before it resumes the journal's missions.
 RESUME_GRACE = 5.0
+#: The world of a cluster with no simulator host: its missions drive the real robots, in real time.
+NO_WORLD = "none (real robots)"
 
 
 @message("drd.mission.run", 3)
@@ -234,8 +241,9 @@ class MissionRunner:
     def host_lost(self, host: str) -> None:
         """A host's resources left the manager: it went down and did not come back within the lease (called
         with the executive's lock held). Its robots leave the simulation at the next control cycle, when the
-        mission loop talks to the simulator anyway; a short freeze costs nothing, as for its grants."""
-        if self.current is not None:
+        mission loop talks to the simulator anyway; a short freeze costs nothing, as for its grants. Real robots
+        have no simulation to leave: their drivers' watchdogs stop them."""
+        if self.current is not None and self.simulator is not None:
             self.lost.append(host)
 
     def _lose_robots(self) -> None:
@@ -283,6 +291,8 @@ class MissionRunner:
             raise ValueError("priority must be 1 or more (1 is the highest)")
         if len(req.source) > 1_000_000:
             raise ValueError("mission source larger than 1 MB")
+        if self.simulator is None:
+            real_run_refusal(self.cluster, req)
         limits = self.cluster.limits
         budget = limits.compile_seconds if not req.give_up_at else min(limits.compile_seconds,
                                                                        req.give_up_at - time.time())
@@ -298,8 +308,6 @@ class MissionRunner:
             chart = apply_params(compiled.statechart, dict(req.params or {}))
         except ParamError as e:
             return RunReply("", False, str(e).splitlines())
-        if self.simulator is None:
-            raise ValueError("no host has the role simulator in hosts.yaml: the sim drivers need one")
         priority = req.priority or chart.priority
         with self.starting:  # one start at a time: two first missions must not start two worlds
             return self._start(req, chart, priority)
@@ -353,6 +361,11 @@ class MissionRunner:
                          resume=resume, since=since, paused=paused)
 
     def _new_world(self, req: RunMission) -> WorldRun:
+        if self.simulator is None:  # real robots: nothing to load or reset, the clock starts now
+            with self.lock:
+                self.clock.start_mission()
+                self._reset_dependencies(self.controller.executive)
+                return self.open_world(NO_WORLD, None, None, self.generation + 1, 1.0)
         from drd.sim import load_world
         from drd.sim.service import world_dirs, world_file
         from drd.sim.world import check_hosts
@@ -371,17 +384,23 @@ class MissionRunner:
             self._reset_dependencies(self.controller.executive)
             return self.open_world(path.stem, loaded, reset, self.generation + 1, req.speed)
 
-    def open_world(self, name: str, loaded: Any, reply: SimReply, generation: int, speed: float) -> WorldRun:
+    def open_world(self, name: str, loaded: Any, reply: SimReply | None, generation: int,
+                   speed: float) -> WorldRun:
         """The loop of the world the simulator runs (`reply`: its time and version now), for the hosts'
-        drivers of `generation` (called with the lock held; the clock's base is set by the caller)."""
+        drivers of `generation` (called with the lock held; the clock's base is set by the caller). With no
+        `reply` (no simulator host), a loop in real time over the real robots, its clock at 0 now."""
         self.generation = generation
-        world = WorldRun(self, name, generation, speed)
-        world.cycle.sim_time, world.cycle.sim_version = reply.time, reply.version
-        world.cycle.step_sim = lambda dt: self.sim(SimRequest("step", dt=dt))
-        world.cycle.simulator = (self.simulator or "") if self.sim_service is None else ""  # a batch there steps it
-        self.clock.set_sim(reply.time)
+        world = WorldRun(self, name, generation, speed, real=reply is None)
+        if reply is not None:
+            world.cycle.sim_time, world.cycle.sim_version = reply.time, reply.version
+            world.cycle.step_sim = lambda dt: self.sim(SimRequest("step", dt=dt))
+            world.cycle.simulator = (self.simulator or "") if self.sim_service is None else ""  # a batch steps it
+        else:
+            world.cycle.sim_time = 0.0
+        self.clock.set_sim(world.cycle.sim_time)
         self.telemetry.reset()  # the hosts build their drivers (and guards) again for the new world
-        self.controller.executive.pool.places = {r.id: (r.x0, r.y0, r.x1, r.y1) for r in loaded.rooms}
+        rooms = loaded.rooms if loaded is not None else ()
+        self.controller.executive.pool.places = {r.id: (r.x0, r.y0, r.x1, r.y1) for r in rooms}
         self.world, self.lost = world, []
         return world
 
@@ -456,13 +475,16 @@ class MissionRunner:
 
 
 class WorldRun:
-    """One simulated world's lockstep loop (a thread) and the missions running in it."""
+    """One simulated world's lockstep loop (a thread) and the missions running in it; `real`: no simulated world,
+    the cycles run in real time over the real robots (`NO_WORLD`)."""
 
-    def __init__(self, runner: MissionRunner, name: str, generation: int, speed: float) -> None:
+    def __init__(self, runner: MissionRunner, name: str, generation: int, speed: float, real: bool = False) -> None:
         self.runner = runner
         self.name = name
         self.generation = generation
         self.speed = speed
+        self.real = real
+        self.began = time.perf_counter()  # a real world's clock: wall seconds since its loop began
         self.cycle = SimCycle()
         self.routers: dict[str, ComponentRouter] = {}
         self.deadlines: dict[str, tuple[float, float]] = {}  # mission -> (executive time to stop it, its `until`)
@@ -498,7 +520,7 @@ class WorldRun:
 
     def _run(self) -> None:
         runner = self.runner
-        start = time.perf_counter()
+        start = self.began = time.perf_counter()
         sim_time = max(0.0, self.cycle.sim_time)
         try:
             while not self.stopping.is_set():
@@ -509,7 +531,7 @@ class WorldRun:
                 if runner.lost:
                     runner._lose_robots()
                 with runner.lock:
-                    stepped = self._cycle(sim_time)
+                    stepped = self._real_cycle(sim_time) if self.real else self._cycle(sim_time)
                 if stepped is None:
                     break
                 sim_time = stepped
@@ -573,6 +595,24 @@ class WorldRun:
                 executive.missions[mid].stop(f"sim time limit of {until:g} s reached")
         return sim_time
 
+    def _real_cycle(self, cycle_time: float) -> float:
+        """One control cycle in real time (the runner's lock held): no world to step, the executive's clock at the
+        wall seconds since the world began. The time the next cycle is due: the period after this one's, or now
+        if the loop fell behind (a late cycle is not made up for by cycles in a burst)."""
+        runner, executive = self.runner, self.runner.controller.executive
+        runner.controller.flush()  # hosts that came or went meanwhile: the manager learns it before the step
+        elapsed = time.perf_counter() - self.began
+        self.cycle.sim_time = elapsed  # what the calls carry as the time of their instant
+        runner.clock.set_sim(elapsed)
+        runner.guard.share(runner.telemetry.latest.get)
+        executive.step()
+        now = runner.clock.now()
+        for mid in self._unfinished():
+            deadline, until = self.deadlines[mid]
+            if now >= deadline - 1e-9:
+                executive.missions[mid].stop(f"time limit of {until:g} s reached")
+        return max(cycle_time + CONTROL_PERIOD, time.perf_counter() - self.began)
+
     def _stop_all(self, reason: str) -> None:
         """Close this world and stop every mission still running in it, saying why."""
         with self.runner.lock:
@@ -603,6 +643,22 @@ class WorldRun:
                 log.info("mission %s: %s %s on %s", mid, path, how, host)
             log.info("mission %s ended %s (%s); component steps %s, step batches %s", mid, *outcomes[mid],
                      router.stats.as_dict(), router.batches.as_dict())
+
+
+def real_run_refusal(cluster: Cluster, req: RunMission) -> None:
+    """ValueError saying why a cluster with no simulator host cannot run `req` as asked: it names a world, asks a
+    speed other than real time, or a device of the cluster still has a `sim` driver (drd start refuses that too)."""
+    from drd.preflight import sim_driver_problems
+
+    why = "no host has the role simulator in hosts.yaml: missions run on the real robots"
+    if req.world:
+        raise ValueError(f"--world {req.world}: {why}, in no simulated world (remove --world)")
+    if req.speed != 1.0:
+        raise ValueError(f"--speed {req.speed:g}: {why}, in real time: a real robot cannot go faster or slower"
+                         " (remove --speed)")
+    problems = sim_driver_problems(cluster)
+    if problems:
+        raise ValueError("; ".join(problems))
 
 
 def _active(executive: Any, mission: str) -> Any:

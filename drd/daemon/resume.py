@@ -4,7 +4,8 @@
 journal (`drd.journal`) after a control cycle, when it changed; a mission's start and end are written by the
 runner itself. `resume` is what a controller started on a journal that holds running missions does, once the
 hosts are back (or a grace period passed): it rejoins the world the simulator still runs (the robots stand where
-they stopped; a simulator that lost its world starts it again, and says so), with the hosts' drivers built anew
+they stopped; a simulator that lost its world starts it again, and says so; real robots, with no simulator host,
+go on in real time from the last saved instant), with the hosts' drivers built anew
 (fresh fences), numbers its records on from the journal's, and enters each mission again from its last state
 under its own id. A mission that can no longer be compiled is ended in the journal with the reason, not resumed.
 Its running components are given back their journaled snapshots (`Component.restore`), or None when they kept
@@ -104,11 +105,18 @@ def resume(runner: Any, journal: Journal) -> list[str]:
 
 
 def _rejoin(runner: Any, state: WorldState, first: Journaled) -> Any:
-    """The world's loop again, on the simulator's world if it still runs it, else on a fresh one."""
+    """The world's loop again, on the simulator's world if it still runs it, else on a fresh one. With no
+    simulator host, a loop over the real robots again: their time goes on from the last save (the time the
+    controller was away is not the missions'), and no simulator is asked anything."""
+    from drd.daemon.missions import NO_WORLD
     from drd.sim import load_world
     from drd.sim.service import SimRequest, world_dirs, world_file
 
-    name = state.name or str(first.request.get("world") or runner.cluster.world)
+    if runner.simulator is None:
+        with runner.lock:
+            runner.clock.base = state.now
+            return runner.open_world(NO_WORLD, None, None, state.generation + 1, 1.0)
+    name = (state.name if state.name != NO_WORLD else "") or str(first.request.get("world") or runner.cluster.world)
     path = world_file(name, world_dirs(runner.cluster))
     loaded = load_world(path)
     try:
