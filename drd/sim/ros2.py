@@ -281,15 +281,24 @@ def _drive(s: ServedRobots, rid: str, device: Device, opts: Ros2Options) -> None
                          pose=with_cov(pose=pose, covariance=zeros), twist=twist_cov(twist=moving, covariance=zeros))
 
     def battery(st: Any) -> Any:
-        nan = math.nan
+        nan = math.nan  # what the model does not know ("if unmeasured NaN", says the message definition)
         return types.make(mapping.BATTERY, header=s.header(st, base_frame), percentage=sim.battery(rid),
-                          voltage=nan, temperature=nan, current=nan, charge=nan, capacity=nan, design_capacity=nan,
-                          power_supply_status=2, present=True)  # DISCHARGING
+                          voltage=PACK_VOLTAGE, temperature=nan, current=nan, charge=nan, capacity=nan,
+                          design_capacity=nan, power_supply_status=2,  # DISCHARGING
+                          power_supply_technology=PACK_TECHNOLOGY, present=True)
 
     s.stream(s.publisher(rid, opts, "odom"), odometry)
     s.stream(s.publisher(rid, opts, "battery"), battery, status=True)
     s.subscribe(rid, opts, "cmd_vel", lambda m: s.command(lambda: sim.set_velocity(rid, float(m.linear.x),
                                                                                     float(m.angular.z))))
+
+
+#: `BatteryState.voltage`, which the message requires ("Mandatory"; only the other fields may be NaN): the world's
+#: battery model (`drd.sim.model.Battery`) is a charge fraction with no electrical side, so this is the nominal
+#: voltage of a 4-cell Li-ion pack (4 x 3.6 V, the pack of e.g. a TurtleBot 4), constant: it does not sag with
+#: the charge, which `percentage` says.
+PACK_VOLTAGE = 14.4
+PACK_TECHNOLOGY = 2  # BatteryState.POWER_SUPPLY_TECHNOLOGY_LION, the chemistry that voltage is of
 
 
 def _range_sensor(s: ServedRobots, rid: str, device: Device, opts: Ros2Options) -> None:

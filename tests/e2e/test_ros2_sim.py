@@ -20,13 +20,13 @@ import pytest
 
 from drd.bus.ros2 import Ros2Session, topic_key
 from drd.hosts import Cluster, load_hosts
-from drd.hw.ros2 import DETECTIONS, LASER_SCAN, ODOMETRY, TWIST, message_types, yaw_of
+from drd.hw.ros2 import BATTERY, DETECTIONS, LASER_SCAN, ODOMETRY, TWIST, message_types, yaw_of
 from drd.sim.ros2 import IMAGE_WIDTH, ServedRobots
 from dsl.catalog import Catalog
 from tests.ros2_support import eventually, free_port, msg_definitions, ros2_sdk, served_team
 
 ROOT = Path(__file__).resolve().parents[2]
-SDK_TYPES = (TWIST, LASER_SCAN, ODOMETRY, DETECTIONS, "sensor_msgs/msg/Image")
+SDK_TYPES = (TWIST, LASER_SCAN, ODOMETRY, DETECTIONS, "sensor_msgs/msg/Image", BATTERY)
 
 
 @pytest.fixture
@@ -60,6 +60,22 @@ def test_the_sdk_receives_the_rangers_scan_with_its_beams(served: tuple[ServedRo
         assert scan.angle_min == pytest.approx(-math.pi / 2) and scan.angle_max == pytest.approx(math.pi / 2)
         finite = np.asarray(scan.ranges)[np.isfinite(scan.ranges)]
         assert len(finite) > 90 and (finite < 8.0).all()  # the corridor's walls; +inf where nothing is hit
+    finally:
+        sub.close()
+
+
+def test_the_battery_state_has_a_voltage(served: tuple[ServedRobots, int], sdk: Any) -> None:
+    """sensor_msgs/BatteryState says `voltage` is mandatory (only the other measurements may be NaN)."""
+    _robots, port = served
+    got: list[Any] = []
+    sub = sdk.ROS2Subscriber(topic="/ranger1/battery_state", msg_type=BATTERY, callback=got.append, domain_id=0,
+                             router_port=port)
+    try:
+        eventually(lambda: got, "a BatteryState on /ranger1/battery_state")
+        state = got[-1]
+        assert math.isfinite(state.voltage) and state.voltage == pytest.approx(14.4)  # a 4S Li-ion pack, nominal
+        assert state.percentage == pytest.approx(1.0) and state.power_supply_technology == 2  # LION
+        assert math.isnan(state.temperature) and state.header.frame_id == "ranger1/base_link"
     finally:
         sub.close()
 
