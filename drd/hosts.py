@@ -37,7 +37,7 @@ DEFAULT_HISTORY, MAX_HISTORY = 100, 1000
 _NAME = re.compile(r"[A-Za-z_][A-Za-z0-9_]{0,63}", re.ASCII)
 #: Device ids may be dotted (`scout1.wheels`): a robot's own devices are prefixed with its id.
 _DEVICE_ID = re.compile(r"[A-Za-z_]\w{0,63}(?:\.[A-Za-z_]\w{0,63}){0,3}", re.ASCII)
-_ENDPOINT = re.compile(r"(tcp|udp)/(\[[0-9A-Fa-f:.]+\]|[A-Za-z0-9](?:[A-Za-z0-9.-]*[A-Za-z0-9])?):([0-9]+)", re.ASCII)
+ENDPOINT = re.compile(r"(tcp|udp)/(\[[0-9A-Fa-f:.]+\]|[A-Za-z0-9](?:[A-Za-z0-9.-]*[A-Za-z0-9])?):([0-9]+)", re.ASCII)
 _E = TypeVar("_E", bound=Enum)
 
 
@@ -685,12 +685,10 @@ class _Parser(ConfigReader):
 
     def endpoint(self, value: object, key: str) -> str:
         text = self.text(value, key)
-        m = _ENDPOINT.fullmatch(text)
-        if text and m is None:
-            self.fail(key, f"expected tcp/HOST:PORT or udp/HOST:PORT, got {text!r}")
-        elif m and not 0 < int(m.group(3)) < 65536:
-            self.fail(key, f"port {m.group(3)} is out of range (1 to 65535)")
-        return text if m else ""
+        problem = endpoint_problem(text) if text else None
+        if problem is not None:
+            self.fail(key, problem if problem.startswith("port") else f"{problem}, got {text!r}")
+        return text if text and problem is None else ""
 
     def duration(self, value: object, key: str, limit: Limit | None = None) -> float:
         """A duration literal (`3s`, `500ms`; a bare number's unit would be a guess), positive and inside `limit`."""
@@ -735,6 +733,18 @@ def load_hosts(path: str | os.PathLike[str], catalog: Catalog) -> Cluster:
         HostsError: the file is missing or unreadable, is not valid YAML (with the line), or has problems.
     """
     return _load(Path(path), catalog)
+
+
+def endpoint_problem(text: str) -> str | None:
+    """What is wrong with a zenoh endpoint drd listens on or connects to (None if nothing), as a hosts file's
+    `endpoint` and `listen` and `drd sim --listen` are written: checked before zenoh sees it, whose own error is a
+    parser's message with Rust source paths."""
+    m = ENDPOINT.fullmatch(text)
+    if m is None:
+        return "expected tcp/HOST:PORT or udp/HOST:PORT"
+    if not 0 < int(m.group(3)) < 65536:
+        return f"port {m.group(3)} is out of range (1 to 65535)"
+    return None
 
 
 def load_endpoints(path: str | os.PathLike[str]) -> Cluster:

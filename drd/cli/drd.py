@@ -470,6 +470,8 @@ def sim(
         fail(f"--speed {speed:g}: expected a positive number")
     if not 0 <= domain <= 232:
         fail(f"--domain {domain}: a ROS domain id is 0 to 232")
+    from drd.hosts import endpoint_problem
+
     if (problem := endpoint_problem(listen)) is not None:
         fail(f"--listen {listen}: {problem}", hint="e.g. --listen tcp/127.0.0.1:7447")
     cluster, sim_world, world_name = _served_team(config, world, extra)
@@ -496,21 +498,6 @@ def _served_team(config: Path, world: str | None, extra: list[Path]) -> tuple[Cl
     if problems:
         fail_all(problems)
     return cluster, sim_world, found.stem
-
-
-#: A zenoh endpoint drd listens on, as a hosts file's `endpoint` and `listen` are written (`drd.hosts`).
-ENDPOINT = re.compile(r"(tcp|udp)/(\[[0-9A-Fa-f:.]+\]|[A-Za-z0-9](?:[A-Za-z0-9.-]*[A-Za-z0-9])?):([0-9]+)", re.ASCII)
-
-
-def endpoint_problem(text: str) -> str | None:
-    """What is wrong with an endpoint option (None if nothing): checked before zenoh sees it, whose own error
-    is a parser's message with Rust source paths (and was reported as drd's internal error)."""
-    m = ENDPOINT.fullmatch(text)
-    if m is None:
-        return "expected tcp/HOST:PORT or udp/HOST:PORT (a zenoh endpoint)"
-    if not 0 < int(m.group(3)) < 65536:
-        return f"port {m.group(3)} is out of range (1 to 65535)"
-    return None
 
 
 def zenoh_message(error: BaseException) -> str:
