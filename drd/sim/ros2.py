@@ -35,16 +35,18 @@ import numpy as np
 
 from drd.bus import Bus
 from drd.bus.base import BusError
-from drd.bus.ros2 import MessageInfo, Publisher, QoS, Ros2Node, Ros2Session
+from drd.bus.ros2 import Durability, MessageInfo, Publisher, QoS, Ros2Node, Ros2Session
 from drd.hosts import Cluster, Device, Robot
 from drd.hw import ros2 as mapping
-from drd.hw.ros2 import Ros2Link, Ros2Options
+from drd.hw.ros2 import Pose, Ros2Link, Ros2Options
 from drd.sim.physics import MAX_LAUNCH, Simulation
 from drd.sim.robots import SimError
 from drd.sim.service import SimReply, SimRequest, SimulationService, world_dirs
 
 log = logging.getLogger("drd.sim.ros2")
 
+#: The transforms' type (/tf and /tf_static).
+TF = "tf2_msgs/msg/TFMessage"
 #: Seconds of sim time between two publications of every robot's state (10 Hz: the dry-run's control period).
 PUBLISH_PERIOD = 0.1
 #: The served camera image: this many columns, one row, `32FC1` (one pixel per region the behaviors look at).
@@ -95,6 +97,12 @@ class ServedRobots:
         self._nodes[""] = root
         self._clock = root.publisher("/clock", mapping.CLOCK, QoS(depth=1))
         self._time, self._header = self.msg("builtin_interfaces/msg/Time"), self.msg("std_msgs/msg/Header")
+        # tf2's broadcasters' QoS: /tf reliable, keep last 100; /tf_static also transient local, keep last 1 (a
+        # late listener, rviz, gets the sensors' frames)
+        self._tf = root.publisher("/tf", TF, QoS(depth=100))
+        self._tf_static = root.publisher("/tf_static", TF, QoS(durability=Durability.TRANSIENT_LOCAL, depth=1))
+        self.moving: list[Callable[[], tuple[str, str, Pose]]] = []  # per robot: (odom, base_link, pose in odom)
+        self.fixed: list[tuple[str, str]] = []  # (base_link, sensor frame): the sensors sit at the robot's centre
         try:
             for robot in cluster.robots:
                 if robot.id in sim.robots:
@@ -102,6 +110,8 @@ class ServedRobots:
         except BaseException:
             self.close()
             raise
+        self._tf_static.publish_cdr(self.types.serialize(self._transforms(self.now(), [
+            (parent, child, (0.0, 0.0, 0.0)) for parent, child in self.fixed]), TF))
 
     # -- building ----------------------------------------------------------------------------------------
 
@@ -212,6 +222,18 @@ class ServedRobots:
                 if status or not is_status:
                     send(st)
             self._clock.publish_cdr(self.types.serialize(self.msg(mapping.CLOCK)(clock=st), mapping.CLOCK))
+            if self.moving:
+                self._tf.publish_cdr(self.types.serialize(self._transforms(st, _poses(self.moving)), TF))
+
+    def _transforms(self, st: Any, frames: Iterable[tuple[str, str, Pose]]) -> Any:
+        """A tf2_msgs/TFMessage of (parent, child, pose of child in parent) transforms, stamped `st` (REP 105)."""
+        stamped, transform, vector, rotation = (self.msg(t) for t in (
+            "geometry_msgs/msg/TransformStamped", "geometry_msgs/msg/Transform", "geometry_msgs/msg/Vector3",
+            "geometry_msgs/msg/Quaternion"))
+        return self.msg(TF)(transforms=[
+            stamped(header=self.header(st, parent), child_frame_id=child, transform=transform(
+                translation=vector(x=x, y=y, z=0.0), rotation=rotation(**mapping.quaternion(a))))
+            for parent, child, (x, y, a) in frames])
 
     def wait_matched(self, keys: Iterable[str], timeout: float) -> list[str]:
         """Wait (up to `timeout` s) until the session knows a subscription to each of these keys that a stream
@@ -242,6 +264,17 @@ class ServedRobots:
         self._nodes = {}
 
 
+def _poses(moving: Iterable[Callable[[], tuple[str, str, Pose]]]) -> list[tuple[str, str, Pose]]:
+    """Each robot's odom -> base_link transform now; a lost robot's is left out (silent, as its topics)."""
+    out = []
+    for pose in moving:
+        try:
+            out.append(pose())
+        except SimError:
+            continue
+    return out
+
+
 def _quietly(fn: Callable[[], None]) -> None:
     try:
         fn()
@@ -270,10 +303,13 @@ def _drive(s: ServedRobots, rid: str, device: Device, opts: Ros2Options) -> None
                                                              "geometry_msgs/msg/Vector3"))
     zeros = np.zeros(36, dtype=np.float64)
 
-    def odometry(st: Any) -> Any:
+    def where() -> tuple[str, str, Pose]:
         p = sim.odometry(rid)
+        return odom_frame, base_frame, mapping.relative(start, (p.x, p.y, p.heading))
+
+    def odometry(st: Any) -> Any:
         v, omega = sim.command(rid)
-        x, y, a = mapping.relative(start, (p.x, p.y, p.heading))
+        _, _, (x, y, a) = where()
         pose = pose_(position=point(x=x, y=y, z=0.0),
                      orientation=quaternion(x=0.0, y=0.0, z=math.sin(a / 2), w=math.cos(a / 2)))
         moving = twist(linear=vector(x=v, y=0.0, z=0.0), angular=vector(x=0.0, y=0.0, z=omega))
@@ -288,6 +324,7 @@ def _drive(s: ServedRobots, rid: str, device: Device, opts: Ros2Options) -> None
                           power_supply_technology=PACK_TECHNOLOGY, present=True)
 
     s.stream(s.publisher(rid, opts, "odom"), odometry)
+    s.moving.append(where)
     s.stream(s.publisher(rid, opts, "battery"), battery, status=True)
     s.subscribe(rid, opts, "cmd_vel", lambda m: s.command(lambda: sim.set_velocity(rid, float(m.linear.x),
                                                                                     float(m.angular.z))))
@@ -309,6 +346,7 @@ def _range_sensor(s: ServedRobots, rid: str, device: Device, opts: Ros2Options) 
     step = fov / (beams - 1) if beams > 1 else 0.0
     lo = -fov / 2 if beams > 1 else 0.0
     frame = f"{rid}/laser"
+    s.fixed.append((f"{rid}/base_link", frame))
 
     laser_scan, none = s.msg(mapping.LASER_SCAN), np.zeros(0, dtype=np.float32)
 
@@ -329,6 +367,7 @@ def _camera(s: ServedRobots, rid: str, device: Device, opts: Ros2Options) -> Non
     max_range = _option(device, "max_range", 10.0)
     min_light = _option(device, "min_light", 0.2)
     frame = f"{rid}/camera"
+    s.fixed.append((f"{rid}/base_link", frame))
     pixel = fov / resolution
 
     image_ = s.msg(mapping.IMAGE)

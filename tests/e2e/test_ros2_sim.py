@@ -21,12 +21,12 @@ import pytest
 from drd.bus.ros2 import Ros2Session, topic_key
 from drd.hosts import Cluster, load_hosts
 from drd.hw.ros2 import BATTERY, DETECTIONS, LASER_SCAN, ODOMETRY, TWIST, message_types, yaw_of
-from drd.sim.ros2 import IMAGE_WIDTH, ServedRobots
+from drd.sim.ros2 import IMAGE_WIDTH, TF, ServedRobots
 from dsl.catalog import Catalog
 from tests.ros2_support import eventually, free_port, msg_definitions, ros2_sdk, served_team
 
 ROOT = Path(__file__).resolve().parents[2]
-SDK_TYPES = (TWIST, LASER_SCAN, ODOMETRY, DETECTIONS, "sensor_msgs/msg/Image", BATTERY)
+SDK_TYPES = (TWIST, LASER_SCAN, ODOMETRY, DETECTIONS, "sensor_msgs/msg/Image", BATTERY, TF)
 
 
 @pytest.fixture
@@ -78,6 +78,38 @@ def test_the_battery_state_has_a_voltage(served: tuple[ServedRobots, int], sdk: 
         assert math.isnan(state.temperature) and state.header.frame_id == "ranger1/base_link"
     finally:
         sub.close()
+
+
+def test_tf_relates_the_frames_the_topics_are_stamped_in(served: tuple[ServedRobots, int], sdk: Any) -> None:
+    """rviz and Nav2 place a scan through tf (REP 105): /tf has odom -> base_link per robot, where its odometry
+    says; /tf_static (transient local: a late listener gets it) has base_link -> laser and camera."""
+    from zenoh_ros2_sdk.qos import QosDurability, QosProfile
+
+    _robots, port = served
+    moving: list[Any] = []
+    fixed: list[Any] = []
+    odom: list[Any] = []
+    subs = [sdk.ROS2Subscriber(topic="/tf", msg_type=TF, callback=moving.append, domain_id=0, router_port=port),
+            sdk.ROS2Subscriber(topic="/tf_static", msg_type=TF, callback=fixed.append, domain_id=0, router_port=port,
+                               qos=QosProfile(durability=QosDurability.TRANSIENT_LOCAL, history_depth=1)),
+            sdk.ROS2Subscriber(topic="/ranger1/odom", msg_type=ODOMETRY, callback=odom.append, domain_id=0,
+                               router_port=port)]
+    try:
+        eventually(lambda: moving and fixed and odom, "/tf, /tf_static (published before we joined) and odometry")
+        static = {(t.header.frame_id, t.child_frame_id) for t in fixed[-1].transforms}
+        assert {("ranger1/base_link", "ranger1/laser"), ("ranger1/base_link", "ranger1/camera"),
+                ("scout1/base_link", "scout1/camera")} <= static  # a Scout's camera on the Scout
+        assert ("scout1/base_link", "scout1/laser") not in static  # a Scout has no laser
+        frames = {t.child_frame_id: t for t in moving[-1].transforms}
+        base = frames["ranger1/base_link"]
+        assert base.header.frame_id == "ranger1/odom" and "scout1/base_link" in frames
+        assert (base.transform.translation.x, base.transform.translation.y) == pytest.approx((0.0, 0.0), abs=1e-6)
+        assert base.transform.rotation.w == pytest.approx(1.0)  # it has not moved: where its odometry says
+        stamp = base.header.stamp
+        assert 0 <= stamp.nanosec < 1_000_000_000 and stamp.sec >= 0
+    finally:
+        for sub in subs:
+            sub.close()
 
 
 def test_a_twist_from_the_sdk_moves_the_simulated_ranger(served: tuple[ServedRobots, int], sdk: Any) -> None:
