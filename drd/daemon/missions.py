@@ -520,8 +520,11 @@ class WorldRun:
 
     def _run(self) -> None:
         runner = self.runner
-        start = self.began = time.perf_counter()
-        sim_time = max(0.0, self.cycle.sim_time)
+        # a resumed world goes on from its saved instant: paced from there (not from 0: it would stand still for
+        # that instant / speed), and a real world's clock goes on from it too
+        sim_time = first = max(0.0, self.cycle.sim_time)
+        start = time.perf_counter()
+        self.began = start - first
         try:
             while not self.stopping.is_set():
                 with runner.lock:
@@ -544,7 +547,7 @@ class WorldRun:
                         runner.controller.serialized.refresh()
                 self._retire_finished()
                 self.cycles += 1
-                lag = sim_time / self.speed - (time.perf_counter() - start)
+                lag = pace(sim_time - first, self.speed, time.perf_counter() - start)
                 if lag > 0:
                     self.stopping.wait(lag)
             else:
@@ -556,7 +559,8 @@ class WorldRun:
         self._retire_finished(everyone=True)
         wall = time.perf_counter() - start
         log.info("world %s ended: %.1f s sim in %.2f s wall (%.1fx), %d cycles (%.2f ms each), sim steps not "
-                 "carried by a batch %s", self.name, sim_time, wall, sim_time / wall if wall else 0.0, self.cycles,
+                 "carried by a batch %s", self.name, sim_time - first, wall, (sim_time - first) / wall if wall else 0.0,
+                 self.cycles,
                  1000 * wall / max(1, self.cycles), self.cycle.steps_alone.as_dict())
 
     def _cycle(self, sim_time: float) -> float | None:
@@ -659,6 +663,12 @@ def real_run_refusal(cluster: Cluster, req: RunMission) -> None:
     problems = sim_driver_problems(cluster)
     if problems:
         raise ValueError("; ".join(problems))
+
+
+def pace(ran: float, speed: float, wall: float) -> float:
+    """Seconds to wait so that `ran` seconds of world time, run in `wall` seconds since the loop (re)started, go at
+    most `speed` times real time (negative: behind, go on at once)."""
+    return ran / speed - wall
 
 
 def _active(executive: Any, mission: str) -> Any:
