@@ -642,7 +642,7 @@ class Daemon:
     def _record(self, kind: str, host: str, detail: str, at: float | None = None) -> None:
         wall = self.wall() if at is None else self._to_wall(at)
         self.events.append(ClusterEvent(wall, kind, host, detail))
-        level = logging.WARNING if kind in ("down", "config-mismatch", "conflict") else logging.INFO
+        level = logging.WARNING if kind in ("down", "config-mismatch", "conflict", "frozen") else logging.INFO
         log.log(level, "host %s %s: %s", host, kind, detail)
 
     def _reject(self, where: str, reason: str) -> None:

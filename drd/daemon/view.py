@@ -16,6 +16,12 @@ adds and removes resources). The rules:
   closed its link; a killed or stopped one did, at once.
 - A down host comes back **up** when its token is present and a report arrives.
 - The view's own host is always up: it is the process answering.
+- **Silence is evidence only while this view was listening.** When the daemon's own ticks stop for longer than
+  the lease (its process was frozen, suspended or starved), it heard nothing over that gap: on waking it reports
+  once that it was frozen (`Change("frozen")`, on its own host) and gives every other host a fresh lease from the
+  wake-up before judging it, silence and a vanished token alike (zenoh may drop the link of a silent peer: ours).
+  A host still silent, or still without its token, after that grace goes down as above; one that said goodbye
+  (`leaving`) goes at once.
 
 Hosts are those of `hosts.yaml`; anything about another host is refused (`Change("rejected")`).
 
@@ -54,7 +60,8 @@ UNRESPONSIVE = "unresponsive"
 
 @dataclass(frozen=True, slots=True)
 class Change:
-    """What one input changed: `kind` is `up`, `down`, `config-mismatch` or `rejected`; `at` is monotonic."""
+    """What one input changed: `kind` is `up`, `down`, `config-mismatch`, `rejected` or `frozen` (this view's own
+    host did not tick for longer than the lease, `ClusterView.tick`); `at` is monotonic."""
 
     at: float
     kind: str
@@ -78,6 +85,7 @@ class HostRecord:
     announcement: Announcement | None = None
     leaving: str = ""
     mismatch: str = ""
+    grace: float = -math.inf  # until then it is not judged: this view was not listening before (it was frozen)
 
     @property
     def name(self) -> str:
@@ -103,6 +111,7 @@ class ClusterView:
         self.live: dict[str, dict[str, object]] = {}  # robot id -> its live properties (the controller's last report)
         self.live_from: str | None = None  # the controller that sent them
         self.live_at: float | None = None  # when they arrived (monotonic)
+        self.ticked: float | None = None  # the last tick (or wake-up): a longer gap than the lease is a freeze
         mine = self.records[self.me]
         mine.state, mine.since, mine.reason = HostState.UP, now, "this host"
 
@@ -123,11 +132,14 @@ class ClusterView:
                 return [self._set(rec, HostState.UP, now, "joined")]
             return []
         rec.token, rec.token_since = False, None
+        woke = self._wake(now)
+        if rec.state is HostState.UP and not rec.leaving and now <= rec.grace:
+            return woke  # perhaps our own link, dropped while we were frozen: judged when the grace ends (`tick`)
         if rec.state is HostState.UP:
-            return [self._set(rec, HostState.DOWN, now, rec.leaving or "lost: its liveliness token vanished")]
+            return [*woke, self._set(rec, HostState.DOWN, now, rec.leaving or "lost: its liveliness token vanished")]
         if rec.silent and rec.leaving:  # a silent host said goodbye after all: it is down, not unresponsive
             rec.silent, rec.reason = False, rec.leaving
-        return []
+        return woke
 
     def _unknown_sender(self, host: str, key_host: str | None, what: str, now: float) -> list[Change]:
         """The rejection of a report from a host not in the hosts file, or published under another host's key
@@ -204,15 +216,34 @@ class ClusterView:
         return []
 
     def tick(self, now: float) -> list[Change]:
-        """Hosts whose reports stopped for longer than the lease go down."""
-        out = []
+        """Hosts whose reports stopped for longer than the lease go down, or whose token vanished during the grace
+        after a freeze of this view's own (then the freeze is reported first: `_wake`)."""
+        out = self._wake(now)
         for rec in self.records.values():
-            if rec.name != self.me and rec.state is HostState.UP and not self._fresh(rec, now):
-                last = max(t for t in (rec.heard, rec.token_since) if t is not None)
-                out.append(self._set(rec, HostState.DOWN, now,
-                                     f"silent: no load report for {now - last:.2f} s (lease {self.lease:g} s)"))
-                rec.silent = True
+            if rec.name == self.me or rec.state is not HostState.UP or self._fresh(rec, now):
+                continue
+            if not rec.token:
+                out.append(self._set(rec, HostState.DOWN, now, rec.leaving or "lost: its liveliness token vanished"))
+                continue
+            last = max(t for t in (rec.heard, rec.token_since) if t is not None)
+            out.append(self._set(rec, HostState.DOWN, now,
+                                 f"silent: no load report for {now - last:.2f} s (lease {self.lease:g} s)"))
+            rec.silent = True
         return out
+
+    def _wake(self, now: float) -> list[Change]:
+        """The freeze of this view's own, if its last tick is more than a lease ago: the others' silence over the gap
+        is not evidence (nobody listened), so each gets a lease from now before it is judged. Reported once."""
+        last, self.ticked = self.ticked, now
+        if last is None or now - last <= self.lease:
+            return []
+        for rec in self.records.values():
+            if rec.name != self.me:
+                rec.grace = now + self.lease
+        return [Change(now, "frozen", self.me,
+                       f"this daemon did not run for {now - last:.2f} s, longer than the lease ({self.lease:g} s):"
+                       " frozen, suspended or starved; the other hosts get a lease from now before their silence"
+                       " counts")]
 
     # -- queries ---------------------------------------------------------------------------------
 
@@ -300,7 +331,10 @@ class ClusterView:
         return [r for r in self.records.values() if r.state is HostState.UP]
 
     def _fresh(self, rec: HostRecord, now: float) -> bool:
-        """Token present and a report (or the token's arrival) within the lease."""
+        """Token present and a report (or the token's arrival) within the lease; or within the grace after a freeze
+        of this view's own (`_wake`)."""
+        if now <= rec.grace:
+            return True
         if not rec.token:
             return False
         last = max((t for t in (rec.heard, rec.token_since) if t is not None), default=None)

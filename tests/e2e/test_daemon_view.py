@@ -65,7 +65,7 @@ def test_a_silent_host_goes_down_after_the_lease_and_comes_back_when_it_reports(
     assert view.tick(0.5 + LEASE) == []  # exactly the lease: still fresh
     [change] = view.tick(0.5 + LEASE + 0.05)
     assert change.kind == "down" and change.detail.startswith("silent: no load report for 1.05 s (lease 1 s)")
-    assert view.tick(5.0) == []  # reported once
+    assert view.tick(2.0) == []  # reported once
     [change] = view.load(report("ranger1"), 6.0)
     assert (change.kind, change.detail) == ("up", "reporting again")
 
@@ -343,21 +343,22 @@ def test_daemons_on_a_local_bus_see_each_other_and_the_controller_follows(cluste
         granted = broker.request(Request("m/a", 1, (NeedRequest("cam", "Camera"),)), clocks.sim.now())
         assert type(granted[0]).__name__ == "Granted"
 
-        def advance(dt: float) -> None:  # the holder renews its lease at half-lease, as the executive does
-            while dt > 0:
+        def advance(dt: float) -> None:  # the holder renews its lease at half-lease, as the executive does; the
+            while dt > 0:  # controller's daemon ticks meanwhile (a gap of a lease would be a freeze of its own)
                 clocks.sim.advance(min(dt, LEASE / 2))
                 dt -= LEASE / 2
                 broker.renew("m/a", clocks.sim.now())
+                ctl.step()
 
         advance(LEASE + 0.1)
         ctl.step()
         assert ctl.view.state("ranger1") is HostState.DOWN
         assert [e.kind for e in ctl.events][-2:] == ["down", "resources-pending"]
-        advance(LEASE)
         freed: list[object] = []
         broker.attach(freed.extend)
+        advance(LEASE)
         ctl.step()
-        assert [getattr(d, "reason", None) for d in freed] == ["host lost"]
+        assert [r for r in (getattr(d, "reason", None) for d in freed) if r] == ["host lost"]  # renewals aside
         assert "ranger1.camera" not in {u.id for u in ctl.controller.resources().units}
         assert ctl.events[-1].kind == "resources-removed"
 
