@@ -302,7 +302,8 @@ class Daemon:
         elif Role.CONTROLLER in roles:
             from drd.journal import SqliteJournal
 
-            self._become_controller(bus, SqliteJournal(self.config.journal) if self.config.journal else None, None)
+            journal = SqliteJournal(self.config.journal) if self.config.journal else None
+            self._become_controller(bus, journal, self.started)  # its term: the start time it announces
         self._declared.append(bus.watch_tokens(keys.hosts, self._on_token, history=True))
         takes = Role.WORKER in roles or not any(Role.WORKER in h.roles for h in self.cluster.hosts)
         if takes and not self.creator.pool.wait_ready():  # up once a component can be placed here in milliseconds
