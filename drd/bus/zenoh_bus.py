@@ -46,7 +46,7 @@ from .base import (
     log,
 )
 from .keys import check_key_expr
-from .messages import MalformedMessage, Message, decode, encode
+from .messages import MAX_SIZE, MalformedMessage, Message, decode, encode
 
 #: Seconds a bus waits for its zenoh session to close (a frozen peer would hold it 10 s).
 CLOSE_WAIT = 1.0
@@ -77,6 +77,13 @@ def __getattr__(name: str) -> str:
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
+#: The largest zenoh message a drd bus session takes in (`transport/link/rx/max_message_size`): a drd message is at most
+#: MAX_SIZE, plus its key expression and zenoh's framing. zenoh drops a larger one before reassembling it: a peer's
+#: 1 GiB query used to be read whole (2 GiB of RSS at the peak, 1 GiB kept) before the codec refused it.
+BUS_MAX_MESSAGE = MAX_SIZE + (64 << 10)
+#: zenoh's own default, for sessions that carry other protocols' messages (ROS 2 images may be several MB).
+ZENOH_MAX_MESSAGE = 1 << 30
+
 _ALL = zenoh.QueryTarget.ALL
 _NO_CONSOLIDATION = zenoh.ConsolidationMode.NONE
 
@@ -100,6 +107,7 @@ def make_config(
         # a large message passes through, a router most of all (+34 MB PSS with 25 clients), for a copy saved on
         # messages that are small and at most 1 MiB (docs/design.md "Load reports in step").
         "transport/shared_memory/enabled": False,
+        "transport/link/rx/max_message_size": BUS_MAX_MESSAGE,
     }
     if lease_ms is not None:  # how long a silently vanished peer (power cut) keeps its tokens
         settings["transport/link/tx/lease"] = lease_ms

@@ -21,10 +21,13 @@ from typing import Any, Self
 import zenoh
 
 from drd.bus.base import BusError
-from drd.bus.zenoh_bus import ZenohBus
+from drd.bus.zenoh_bus import ZENOH_MAX_MESSAGE, ZenohBus
 
 from .msgtypes import MessageTypes, jazzy
 from .names import ADMIN_SPACE, GraphEntity, parse_token
+
+#: A ROS 2 session takes in what ROS 2 nodes send (an image may be several MB), not drd's 1 MiB bus messages.
+ROS2_OPTIONS: dict[str, Any] = {"transport/link/rx/max_message_size": ZENOH_MAX_MESSAGE}
 
 log = logging.getLogger("drd.bus.ros2")
 
@@ -111,7 +114,8 @@ class Ros2Session:
                 types: MessageTypes | None = None, one_thread: bool = False) -> Ros2Session:
         """A client session of the robot's zenoh router (e.g. ``tcp/192.168.1.20:7447``), as drd's drivers use."""
         connect = [endpoints] if isinstance(endpoints, str) else list(endpoints)
-        bus = ZenohBus(connect=connect, options={"mode": "client", **(options or {})}, name="ros2 client")
+        bus = ZenohBus(connect=connect, options={"mode": "client", **ROS2_OPTIONS, **(options or {})},
+                       name="ros2 client")
         return cls(bus, owned=True, types=types, one_thread=one_thread)
 
     @classmethod
@@ -120,7 +124,7 @@ class Ros2Session:
                one_thread: bool = False) -> Ros2Session:
         """A session that ROS 2 nodes and tools connect to, as to a robot's router (the served simulator)."""
         listen = [endpoints] if isinstance(endpoints, str) else list(endpoints)
-        bus = ZenohBus(listen=listen, options={"mode": mode, **(options or {})}, name=f"ros2 {mode}")
+        bus = ZenohBus(listen=listen, options={"mode": mode, **ROS2_OPTIONS, **(options or {})}, name=f"ros2 {mode}")
         return cls(bus, owned=True, types=types, one_thread=one_thread)
 
     @property
