@@ -43,6 +43,7 @@ arbitration of actuator commands and the simulator.
 from __future__ import annotations
 
 import collections
+import contextlib
 import functools
 import json
 import logging
@@ -54,7 +55,8 @@ import signal
 import sys
 import threading
 import time
-from collections.abc import Iterable, Sequence
+import types
+from collections.abc import Iterable, Iterator, Sequence
 from multiprocessing.connection import Connection
 from multiprocessing.process import BaseProcess
 from typing import Any
@@ -98,11 +100,11 @@ KEEP_WARM = 60.0
 CALL_TIMEOUT = 0.8
 #: Seconds a new worker may take to say hello.
 START_TIMEOUT = 20.0
-#: A worker re-runs the daemon's `-m` main module as `__mp_main__` although the fork server preloaded it (on
-#: purpose: it is cheap then); runpy warns about exactly that, once per worker, in every daemon's log. The fork
-#: server is started with this `-W` option (multiprocessing passes `sys.warnoptions` to the interpreters it
-#: starts), so only runpy's RuntimeWarnings, and only in those processes, are silenced.
-RUNPY_QUIET = "ignore::RuntimeWarning:runpy"
+#: Consecutive failed starts after which the pool says its workers cannot start (`WorkerPool.fault`, one log line).
+FAULT_AFTER = 3
+#: Longest pause between two tries of the background refill while workers cannot start: with the fork server's
+#: traceback in the log at each try, at most one a minute (and none once the pool is cold, `keep_warm`).
+RETRY_MAX = 60.0
 
 #: Modules every worker needs, imported once by the fork server.
 BASE_PRELOAD = ("drd.cluster.workers", "drd.runtime.component", "drd.runtime.records", "drd.hw.interfaces")
@@ -245,15 +247,15 @@ class WorkerPool:
         self._warm_until = time.monotonic() + keep_warm if warm else 0.0  # idle workers are kept until then
         self._ctx: Any = multiprocessing.get_context(method)
         if method == "forkserver":
-            self._ctx.set_forkserver_preload(_preload(preload))
-            if RUNPY_QUIET not in sys.warnoptions:  # read when the fork server starts (see RUNPY_QUIET)
-                sys.warnoptions.append(RUNPY_QUIET)
+            self._ctx.set_forkserver_preload(list(dict.fromkeys([*BASE_PRELOAD, *preload])))
         self._idle: collections.deque[Worker] = collections.deque()
         self._workers: dict[int, Worker] = {}  # every live worker of ours, idle or taken
         self._cond = threading.Condition()
         self._spawn_lock = threading.Lock()  # Process.start is not thread-safe (multiprocessing's child list)
         self._closed = False
         self.started = 0
+        self.failures = 0  # starts failed in a row (any success resets it)
+        self.fault = ""  # why workers cannot start, once `FAULT_AFTER` starts in a row failed; "" while they do
         with _open_lock:
             _open_pools += 1
         self._thread = threading.Thread(target=self._refill, name="drd-workers", daemon=True)
@@ -278,7 +280,11 @@ class WorkerPool:
                     return w
                 self._forget(w)
             self._cond.notify_all()
-        w = self._spawn(timeout)
+        try:
+            w = self._spawn(timeout)
+        except Exception as e:
+            raise self._start_failed(e) from None
+        self._start_ok()
         with self._cond:
             if self._closed:
                 w.kill()
@@ -353,7 +359,8 @@ class WorkerPool:
         with self._spawn_lock:
             parent, child = self._ctx.Pipe(duplex=True)
             proc = self._ctx.Process(target=worker_main, args=(child,), name="drd-worker", daemon=True)
-            proc.start()
+            with _main_hidden():
+                proc.start()
             child.close()
             assert proc.pid is not None
             w = Worker(proc, parent, proc.pid, self._spawn_lock)
@@ -371,8 +378,33 @@ class WorkerPool:
             raise WorkerDied(f"a new worker said {hello!r} instead of hello")
         return w
 
+    def _start_failed(self, e: Exception) -> WorkerDied:
+        """Count a failed start; the error for whoever wanted the worker. The `FAULT_AFTER`-th in a row is a host
+        fault (`fault`), logged once as an error; the others are a warning until then, a debug line after."""
+        with self._cond:
+            self.failures += 1
+            faulty, newly = bool(self.fault), not self.fault and self.failures >= FAULT_AFTER
+            if newly:
+                self.fault = f"worker processes cannot start ({e})"
+        if newly:
+            log.error("%s, %d times in a row: every component placed on this host fails until one starts (the "
+                      "worker's own error, if any, is above; files changed under the daemon or a broken "
+                      "installation: restart it)", self.fault, self.failures)
+        elif faulty:
+            log.debug("a worker process still cannot start (%s)", e)
+        else:
+            log.warning("could not start a worker process (%s); retrying", e)
+        return WorkerDied(f"this host's worker processes cannot start ({e})" if self.fault
+                          else f"a worker process could not start ({e})")
+
+    def _start_ok(self) -> None:
+        """A worker started: the host fault, if any, is over (said once)."""
+        with self._cond:
+            was, self.fault, self.failures = self.fault, "", 0
+        if was:
+            log.warning("worker processes start again (they could not: %s)", was)
+
     def _refill(self) -> None:
-        failures = 0
         while True:
             idle: list[Worker] = []
             with self._cond:
@@ -395,12 +427,12 @@ class WorkerPool:
                 continue
             try:
                 w = self._spawn()
-            except Exception as e:  # keep the daemon serving; try again a little later
-                failures += 1
-                log.warning("could not start a worker process (%s); retrying", e)
-                time.sleep(min(5.0, 0.2 * failures))
+            except Exception as e:  # keep the daemon serving; try again a little later (sooner if closed)
+                self._start_failed(e)
+                with self._cond:
+                    self._cond.wait_for(lambda: self._closed, min(RETRY_MAX, 0.2 * 2 ** min(self.failures, 9)))
                 continue
-            failures = 0
+            self._start_ok()
             with self._cond:
                 if self._closed:
                     w.kill()
@@ -409,12 +441,27 @@ class WorkerPool:
                 self._cond.notify_all()
 
 
-def _preload(modules: Iterable[str]) -> list[str]:
-    """What the fork server imports: the main module (else each worker would run it again), ours, `modules`."""
-    main = sys.modules.get("__main__")
-    spec = getattr(main, "__spec__", None)
-    first = [spec.name] if spec is not None and spec.name else ["__main__"] if getattr(main, "__file__", None) else []
-    return list(dict.fromkeys([*first, *BASE_PRELOAD, *modules]))
+_main_lock = threading.Lock()  # one start at a time hides the main module, so each restores what it saw
+
+
+@contextlib.contextmanager
+def _main_hidden() -> Iterator[None]:
+    """Start workers without the daemon's main module: multiprocessing would make each worker run it again,
+    from disk (`spawn.prepare`), so files changed under a running daemon (an upgrade) would kill every new worker
+    at import. Instead, for the moment of a start, `sys.modules['__main__']` is a module with no `__spec__` and
+    no `__file__` (what `python -c` has): multiprocessing then sends neither `init_main_from_name` nor
+    `init_main_from_path`, and the worker keeps the fork server's `__main__`. A worker's target and arguments
+    (`worker_main`, a pipe) need nothing from `__main__`. One lock for every pool: each restores what it saw."""
+    with _main_lock:
+        real = sys.modules.get("__main__")
+        sys.modules["__main__"] = types.ModuleType("__main__")  # no spec, no file: the main of `python -c`
+        try:
+            yield
+        finally:
+            if real is not None:
+                sys.modules["__main__"] = real
+            else:
+                sys.modules.pop("__main__", None)
 
 
 def _stop_forkserver() -> None:
