@@ -439,6 +439,13 @@ class Daemon:
             self._next_peer_check = now + self.config.peer_recheck
             self._check_peers()
 
+    def frozen_since(self, t: float) -> float:
+        """Seconds this daemon was frozen (SIGSTOP, a suspended machine, starved: its ticks stopped for longer than
+        the lease) at some time after `t` (its monotonic clock), 0.0 if not. Read without the lock, from any thread:
+        a mission loop whose call timed out across the freeze learns that the silence was its own, not the
+        callee's (`ClusterView.frozen_since`)."""
+        return self.view.frozen_since(t, self.clock())
+
     def close(self, reason: str | None = None) -> None:
         """Say goodbye, drop the token (peers see us leave at once), undeclare everything, close the bus."""
         if self._closed or self._bus is None:

@@ -112,6 +112,7 @@ class ClusterView:
         self.live_from: str | None = None  # the controller that sent them
         self.live_at: float | None = None  # when they arrived (monotonic)
         self.ticked: float | None = None  # the last tick (or wake-up): a longer gap than the lease is a freeze
+        self.woke: tuple[float, float] | None = None  # the last freeze of its own: (wake-up, seconds frozen)
         mine = self.records[self.me]
         mine.state, mine.since, mine.reason = HostState.UP, now, "this host"
 
@@ -237,6 +238,7 @@ class ClusterView:
         last, self.ticked = self.ticked, now
         if last is None or now - last <= self.lease:
             return []
+        self.woke = (now, now - last)
         for rec in self.records.values():
             if rec.name != self.me:
                 rec.grace = now + self.lease
@@ -246,6 +248,16 @@ class ClusterView:
                        " counts")]
 
     # -- queries ---------------------------------------------------------------------------------
+
+    def frozen_since(self, t: float, now: float) -> float:
+        """Seconds this view's own host was frozen (its ticks stopped for longer than the lease) at some time after
+        `t`, 0.0 if it was not: whoever timed a call out across that gap (the mission loop) blames this host, not
+        the callee. Already true before the first tick after the wake-up (another thread may wake first)."""
+        if self.ticked is not None and now - self.ticked > self.lease:
+            return now - self.ticked
+        if self.woke is not None and self.woke[0] >= t:
+            return self.woke[1]
+        return 0.0
 
     def state(self, host: str) -> HostState:
         return self.records[host].state

@@ -92,3 +92,12 @@ def test_a_gap_within_the_lease_is_no_freeze(cluster: Cluster) -> None:
     assert view.tick(18.0 + LEASE) == []  # a late tick, but within the lease: nothing to excuse
     [down, _] = view.tick(18.0 + LEASE + 0.05)  # and the silence over it counts as before
     assert down.kind == "down" and down.detail.startswith("silent: no load report for 3.05 s")
+
+
+def test_whoever_timed_out_across_the_freeze_can_ask_whether_this_host_was_frozen(cluster: Cluster) -> None:
+    view = running(cluster, 18.0)
+    assert view.frozen_since(17.0, 18.1) == 0.0  # ticking: never frozen
+    assert view.frozen_since(17.0, 28.39) == pytest.approx(10.39)  # woken, not yet ticked (another thread first)
+    view.tick(28.39)
+    assert view.frozen_since(17.0, 28.5) == pytest.approx(10.39)  # a call begun before the wake-up
+    assert view.frozen_since(28.45, 28.5) == 0.0  # one begun after it was not frozen
