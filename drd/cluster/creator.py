@@ -70,6 +70,7 @@ from drd.cluster.pipe import (
     reading_request,
 )
 from drd.cluster.remote import ComponentBatch, ComponentBatchReply, ComponentCall, ComponentReply
+from drd.cluster.terms import TermFence, Witness
 from drd.cluster.workers import (
     DEFAULT_SIZE,
     MOVED,
@@ -164,7 +165,8 @@ class Creator:
         self.catalog = catalog
         self.instances: dict[str, Instance] = {}  # by `<mission>/<path>`
         self.calls = 0
-        self.term = 0.0  # the term of the newest controller heard: its election's, or its start time (`_stale`)
+        # the live controller's term, once a call of it was accepted: older ones are refused (drd.cluster.terms)
+        self.terms = TermFence(host, Witness(bus, cluster).live if bus is not None else None)
         self._now = 0.0  # the controller's time of the call being served (the gates' records carry it)
         self.arbiter = CycleArbiter(lambda: self._now, self._setpoint_failed)
         self._sim_service = sim_service  # this host's own SimulationService (drd.sim.service), if it has one
@@ -241,14 +243,22 @@ class Creator:
     # -- the seam: one call in, one reply out ---------------------------------------------------------
 
     def handle(self, call: ComponentCall) -> ComponentReply:
+        unvouched = self.terms.admit(call.term)  # may ask the witness: not under the lock
+        if unvouched:
+            return ComponentReply(error=unvouched)
         with self._lock:
-            stale = self._stale(call.term)
+            stale = self.terms.stale(call.term)
             if stale:
                 return ComponentReply(error=stale)
+            if call.op not in OPS:  # before anything of the call is applied (or its term adopted)
+                raise CreatorError(f"unknown op {call.op!r}: use {', '.join(OPS)}")
+            if not call.mission or "/" in call.mission:
+                raise CreatorError(f"a call names a mission (without '/'), not {call.mission!r}")
             self._now = call.now
             if call.op == "retire":
                 self._apply_gates(call.gates, call.world, call.generation)
                 self._retire(call.mission)
+                self.terms.adopt(call.term)
                 self._publish()
                 return ComponentReply(records=self._take_records())
             self._apply_gates(call.gates, call.world, call.generation)
@@ -256,6 +266,7 @@ class Creator:
                 self._sim.owner = _key(call)
             try:
                 inst = self._prepare(call)
+                self.terms.adopt(call.term)  # accepted: op, mission and component checked
                 reply = self._run(inst.worker, [(call, inst)], {})[0]
             finally:
                 refused = self._flush_sim()
@@ -266,15 +277,21 @@ class Creator:
 
     def update_gates(self, update: GateUpdate) -> GateUpdateReply:
         """Apply gate operations from the controller (grants, ends of grants, unbindings); the halts they caused."""
+        if self.terms.admit(update.term):
+            return GateUpdateReply([])
         with self._lock:
-            if self._stale(update.term):
+            if self.terms.stale(update.term):
                 return GateUpdateReply([])
             self._apply_gates(update.ops, update.world, update.generation)
+            self.terms.adopt(update.term)
             self._flush_sim()
             return GateUpdateReply(self._take_records() or [])
 
     def handle_batch(self, batch: ComponentBatch) -> ComponentBatchReply:
         """The steps of one cycle in order, up to the first the controller must see first (`ComponentBatch`)."""
+        unvouched = self.terms.admit(batch.calls[0].term)  # may ask the witness: not under the lock
+        if unvouched:
+            return ComponentBatchReply([ComponentReply(error=unvouched)])
         with self._sampler.run():
             return self._handle_batch(batch)
 
@@ -285,7 +302,7 @@ class Creator:
         latest: dict[str, Any] = {}  # shared dict id on the controller -> its value after the last step
         with self._lock:
             first = batch.calls[0]
-            stale = self._stale(first.term)
+            stale = self.terms.stale(first.term)
             if stale:
                 return ComponentBatchReply([ComponentReply(error=stale)])
             self._now = first.now
@@ -303,6 +320,7 @@ class Creator:
                             raise CreatorError(f"a batch holds steps only, not {call.op!r}")
                         try:
                             inst = self._prepare(call)
+                            self.terms.adopt(first.term)
                         except CreatorError as e:
                             refused = f"{self.host}'s Creator refused step of {call.path}: {e}"
                             break
@@ -359,17 +377,6 @@ class Creator:
         sim.owner = ""
         refused += [(key, f"component raised HardwareError: {error}") for key, error in sim.flush()]
         return refused
-
-    def _stale(self, term: float) -> str:
-        """Why a call of the controller that started at `term` is refused ("" if it is not): a controller older
-        than one already heard (a frozen one that woke after another took over) must not act here."""
-        if term < self.term:
-            log.warning("creator %s: refused a call from an older controller (term %s, the current one %s)",
-                        self.host, _term(term), _term(self.term))
-            return (f"{self.host} refuses a call from an older controller (term {_term(term)}; the controller of term"
-                    f" {_term(self.term)} acts now)")
-        self.term = term
-        return ""
 
     # -- the gates ------------------------------------------------------------------------------------
 
@@ -862,12 +869,6 @@ class Creator:
         except Exception as e:  # a driver could not be built, no worker could start: this call fails, we go on
             log.warning("creator %s: %s of %s failed: %s", self.host, query.payload.op, query.payload.path, e)
             return ComponentReply(error=f"{type(e).__name__}: {e}", records=self._take_records())
-
-
-def _term(term: float) -> str:
-    """A controller's term as it reads: etcd's revision (a whole number) with several controllers, else the one
-    controller's start time."""
-    return str(int(term)) if term == int(term) else f"{term:.3f}"
 
 
 def _key(call: ComponentCall) -> str:
