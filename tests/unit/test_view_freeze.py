@@ -10,14 +10,17 @@ from drd.bus import LoadReport
 from drd.daemon.view import ClusterView, HostState
 from drd.hosts import Cluster, parse_hosts
 from dsl.catalog import Catalog
-from tests.cluster_support import hosts_yaml
 
 LEASE = 3.0
 
 
 @pytest.fixture(scope="module")
 def cluster(catalog: Catalog) -> Cluster:
-    text = hosts_yaml("lab", ["controller", "ranger1", "spare"], [7447, 7448, 7449], lease=LEASE)
+    hosts = {name: {"endpoint": f"tcp/127.0.0.1:{port}", "roles": [role]}
+             for name, port, role in (("controller", 7447, "controller"), ("ranger1", 7448, "worker"),
+                                      ("spare", 7449, "worker"))}
+    text = yaml.safe_dump({"cluster": {"name": "lab", "security": {"mode": "none"}, "lease": f"{LEASE:g}s"},
+                           "hosts": hosts})
     return parse_hosts(yaml.safe_load(text), "hosts.yaml", catalog)
 
 
