@@ -59,12 +59,12 @@ def sim_driver_problems(cluster: Cluster) -> list[str]:
 
 def start_problems(cluster: Cluster, host: str, catalog: Catalog) -> list[str]:
     """What keeps `host` from starting (empty when nothing does). With no simulator host the missions run on the
-    real robots, in no world: no world is loaded, but a device left on a `sim` driver anywhere is refused."""
+    real robots, in no world: no world is loaded. A device left on a `sim` driver then is refused when a mission is
+    run (`sim_driver_problems`, said by `missionctl run`), not here: such daemons serve all but missions."""
     problems = check_driver_classes(cluster, host, catalog) + entry_point_problems(catalog)
     roles = cluster.host(host).roles
-    if not any(Role.SIMULATOR in h.roles for h in cluster.hosts):
-        problems += sim_driver_problems(cluster)
-    elif Role.CONTROLLER in roles or Role.SIMULATOR in roles:  # they make the world a mission runs in
+    simulated = any(Role.SIMULATOR in h.roles for h in cluster.hosts)
+    if simulated and (Role.CONTROLLER in roles or Role.SIMULATOR in roles):  # they make the world a mission runs in
         problems += world_problems(cluster)
     return problems
 

@@ -16,7 +16,7 @@ from pathlib import Path
 from typing import Any
 
 import pytest
-from cluster_support import DRD, MISSIONCTL, ROOT, DaemonCluster, eventually, free_ports, serving_cluster
+from cluster_support import MISSIONCTL, ROOT, DaemonCluster, eventually, free_ports, serving_cluster
 
 from drd.hw.ros2 import BATTERY, DETECTIONS, IMAGE, LASER_SCAN, ODOMETRY, STRING, TWIST, message_types
 from tests.ros2_support import write_msg_files
@@ -136,16 +136,13 @@ def test_what_real_robots_cannot_do_is_refused(cluster: DaemonCluster, robot: tu
     assert not [t for t in twists(robot[1])[before:] if t["v"]]  # the robot was not driven
 
 
-def test_drd_start_refuses_a_sim_device_with_no_simulator_host(tmp_path: Path) -> None:
-    """Checked before any process or session exists (drd.preflight): the file and the key are named."""
-    fake = DaemonCluster(tmp_path, NAMES)
-    try:
-        fake.hosts_file.write_text(real_hosts(fake, 7900, drive="sim"), encoding="utf-8")
-        done = subprocess.run([*DRD, "start", "--host", "ranger1", "--config", str(fake.hosts_file), "--run-dir",
-                               str(tmp_path / "run"), "--json"], cwd=ROOT, capture_output=True, text=True,
-                              timeout=60, check=False)
-    finally:
-        fake.close()
+def test_a_sim_device_with_no_simulator_host_is_refused_when_a_mission_is_run(tmp_path: Path) -> None:
+    """The daemons of such a file start (they serve status, placement, the trader), and `missionctl run` says which
+    device keeps a mission from running, by file and key."""
+    with serving_cluster(tmp_path, NAMES, lambda c: real_hosts(c, free_ports(1)[0], drive="sim")) as c:
+        mission = tmp_path / "probe.mission"
+        mission.write_text(PROBE, encoding="utf-8")
+        done = run(c, mission, "--json")
     assert done.returncode == 2, (done.stdout, done.stderr)
-    assert (f"{fake.hosts_file}: hosts.ranger1.devices.drive.driver: sim, but no host has the role simulator"
-            in done.stdout + done.stderr), done.stderr
+    assert (f"{c.hosts_file}: hosts.ranger1.devices.drive.driver: sim, but no host has the role simulator"
+            in done.stderr), done.stderr
