@@ -292,7 +292,7 @@ def test_stop_all_stops_every_daemon_cleanly(cluster: DaemonCluster, client: Clu
     assert list(cluster.run_dir.rglob("*.pid")) == []
     logs = cluster.log("controller") + cluster.log("ranger2")
     assert "Traceback" not in logs
-    assert "found in sys.modules" not in logs  # runpy's warning in each worker, silenced there (RUNPY_QUIET)
+    assert "found in sys.modules" not in logs  # runpy's warning: a worker never runs the main module again
 
 
 # --- without a running cluster ------------------------------------------------------------------------------
