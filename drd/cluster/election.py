@@ -13,9 +13,9 @@ trusted until the time the last renewal was *sent* plus its TTL, less a margin, 
 (etcd counts from when it received the renewal, later; a SIGSTOPped process's monotonic clock runs on). `FencedBus`
 is the one place the controller's messages go out through: when the election says it no longer acts, a publication
 is dropped, a request refused, a query left unanswered. Behind it two more fences hold whatever slips through (a
-message checked, then sent after a freeze): workers refuse a call whose term is older than one they have seen
-(`drd.cluster.creator.Creator._stale`), and the etcd journal writes only while the leader key is still the one this
-controller created (`drd.journal.EtcdJournal`).
+message checked, then sent after a freeze): workers refuse a call whose term is older than one they have seen,
+and take a new term only when etcd's leader key vouches for it (`drd.cluster.terms`); the etcd journal writes only
+while the leader key is still the one this controller created (`drd.journal.EtcdJournal`).
 """
 
 from __future__ import annotations
