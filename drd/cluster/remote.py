@@ -135,6 +135,12 @@ class HostDown(ComponentError):
     """The host of the call is down or did not answer: a movable component is placed again elsewhere."""
 
 
+class ControllerFrozen(ComponentError):
+    """The call timed out because this controller itself was frozen (SIGSTOP, a suspended machine) for longer than
+    the lease: the callee did nothing wrong (its host stopped its robots and retired the instances when its
+    controller went silent), so it is neither marked gone nor placed around."""
+
+
 #: How many hosts a movable component's start is tried on before its state fails.
 PLACE_TRIES = 3
 #: Seconds a Creator may take to register a started instance (its first start on a host may load its module).
@@ -191,9 +197,13 @@ class ComponentRouter:
                  place: Callable[[str, Mapping[str, Any], frozenset[str]], str] | None = None,
                  gates: RemoteGates | None = None,
                  records: Callable[[str, Record | Breach], None] = lambda mission, record: None,
-                 cycle: SimCycle | None = None, generation: int = 0, term: float = 0.0):
+                 cycle: SimCycle | None = None, generation: int = 0, term: float = 0.0,
+                 frozen: Callable[[float], float] = lambda since: 0.0):
+        """`frozen(since)`: seconds this controller's daemon was frozen after `since` (`time.monotonic()`), 0.0 if
+        not (`Daemon.frozen_since`)."""
         self.bus = bus
         self.cluster = cluster
+        self.frozen = frozen
         self.resource_hosts = dict(resource_hosts)
         self.me = me
         self.active = active
@@ -310,11 +320,16 @@ class ComponentRouter:
         t0 = time.perf_counter()
         moving = op == "start" or isinstance(msg, ComponentCall) and msg.status == "moved"  # a migration's two calls
         timeout = max(self.timeout, START_TIMEOUT) if moving else self.timeout
+        sent = time.monotonic()
         try:
             reply = self.bus.call(self.creator_key(host), msg, timeout=timeout)
         except RemoteError as e:
             raise ComponentError(f"{host}'s Creator refused {op} of {path}: {e.reason}") from None
         except BusError as e:
+            away = self.frozen(sent)
+            if away:  # our own silence, not the host's: its robots were stopped and its instances retired meanwhile
+                raise ControllerFrozen(f"this controller was frozen for {away:.1f} s, longer than the lease: its hosts"
+                                       " stopped the robots and retired the mission's instances meanwhile") from None
             if op == "start":  # a slow start excludes the host from this placement only; the instance it may
                 self._forget_late_start(host, msg)  # still register there is terminated (best effort)
             else:

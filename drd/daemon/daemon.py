@@ -330,7 +330,8 @@ class Daemon:
             self.runner = MissionRunner(bus, self.cluster, self.config.catalog, me, self._exec_lock,
                                         controller, controller.mission_clock, sim_service=self.sim_service,
                                         host_down=lambda h: self.view.state(h) is HostState.DOWN,
-                                        host_views=self.view.host_views, journal=journal, term=term)
+                                        host_views=self.view.host_views, journal=journal, term=term,
+                                        frozen=self.frozen_since)
 
     # -- several controllers: an election through etcd (drd.cluster.election) --------------------------------------
 

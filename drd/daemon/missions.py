@@ -149,9 +149,11 @@ class MissionRunner:
                  controller: Any, clock: SimTimeClock, *, sim_service: SimulationService | None = None,
                  host_down: Callable[[str], bool] = lambda h: False,
                  host_views: Callable[[], list[HostView]] | None = None, journal: Journal | None = None,
-                 term: float | None = None) -> None:
+                 term: float | None = None, frozen: Callable[[float], float] = lambda since: 0.0) -> None:
         """`journal`: where missions are saved each cycle and resumed from after a restart (`drd.journal`); `term`:
-        this controller's term as its election gave it (`drd.cluster.election`), else its start time."""
+        this controller's term as its election gave it (`drd.cluster.election`), else its start time; `frozen`: how
+        long this daemon was frozen after a time (`Daemon.frozen_since`), so a call it timed out is not the callee's
+        fault."""
         self.bus = bus
         self.cluster = cluster
         self.catalog = catalog
@@ -162,6 +164,7 @@ class MissionRunner:
         self.sim_service = sim_service
         self.host_down = host_down
         self.host_views = host_views
+        self.frozen = frozen
         self._recent: list[tuple[float, str, str]] = []  # (when, host, component) of placements not yet reported
         self.placements = PlacementLog(lambda: controller.executive.missions)  # for `missionctl status`
         self.resource_hosts = {r.id: r.host for r in cluster.resources() if r.host}
@@ -354,7 +357,7 @@ class MissionRunner:
                                  place=functools.partial(self.place, mission=mid) if self.host_views else None,
                                  gates=self.gates,
                                  records=executive.record, cycle=world.cycle, generation=world.generation,
-                                 term=self.term)
+                                 term=self.term, frozen=self.frozen)
         world.add(mid, router, base, until)
         listeners = [functools.partial(self.checkpoints.note, mid)] if self.checkpoints is not None else []
         executive.submit(chart, mid, listeners=listeners, registry=router.registry(), priority=priority,

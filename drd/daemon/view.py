@@ -251,11 +251,13 @@ class ClusterView:
 
     def frozen_since(self, t: float, now: float) -> float:
         """Seconds this view's own host was frozen (its ticks stopped for longer than the lease) at some time after
-        `t`, 0.0 if it was not: whoever timed a call out across that gap (the mission loop) blames this host, not
-        the callee. Already true before the first tick after the wake-up (another thread may wake first)."""
+        `t`, or during the lease after it woke, 0.0 if it was not: whoever timed a call out across that gap (the
+        mission loop) blames this host, not the callee. Already true before the first tick after the wake-up
+        (another thread may wake first); and for a lease after it, while the links the others dropped meanwhile
+        are made again (a call then gets no answer at once)."""
         if self.ticked is not None and now - self.ticked > self.lease:
             return now - self.ticked
-        if self.woke is not None and self.woke[0] >= t:
+        if self.woke is not None and (self.woke[0] >= t or now - self.woke[0] <= self.lease):
             return self.woke[1]
         return 0.0
 
