@@ -615,6 +615,9 @@ class _RecordWatch:
         #: record heard since (the resumed controller's live records may come before the catch-up, and its
         #: first ones, `restored` among them, before this client's subscription reached it)
         self.heard_before = 0
+        #: live records that came while the controller was away or before the catch-up: taken with it, in `seq`
+        #: order (a resumed mission's first live records would otherwise go before the old ones caught up)
+        self.held: list[Any] = []
         self.view: _ClusterView | None = None
         self.priority = 1  # the started mission's, as the controller said it (`started`)
         self.worlds = tuple(worlds)  # where the mission's world is found, before drd's own (beside the hosts file)
@@ -661,7 +664,9 @@ class _RecordWatch:
                 msg: Any = self.queue.get(timeout=0.2)
             except queue.Empty:
                 msg = None
-            if msg is not None and msg.mission == mission and msg.seq not in self.seqs:
+            if msg is not None and msg.mission == mission and (self.away_since is not None or self.behind):
+                self.held.append(msg)  # taken in order once caught up (`_catch_up`)
+            elif msg is not None and msg.mission == mission and msg.seq not in self.seqs:
                 self.seqs.add(msg.seq)
                 self.last_seq = max(self.last_seq, msg.seq)
                 r = self._take(msg, result, base)
@@ -679,6 +684,8 @@ class _RecordWatch:
                         clock = max(clock, float(m["time"]) - base)
                     if m.get("id") == mission and m.get("outcome"):
                         time.sleep(0.5)  # the records in flight come first
+                        if self.held:  # (and those held for a catch-up that did not come: in order, as they are)
+                            self._requeue(mission, [])
                         while not self.queue.empty():
                             extra: Any = self.queue.get()
                             if extra.mission == mission and extra.seq not in self.seqs:
@@ -734,10 +741,24 @@ class _RecordWatch:
         try:
             records = self.client.records(mission, self.heard_before)  # page by page (`drd.paging`)
         except BusFailure:
-            return False  # the live records go on; the next poll asks again
-        for r in records:
-            self.queue.put(r)
+            return False  # the live records go on (held); the next poll asks again
+        self._requeue(mission, records)
         return True
+
+    def _requeue(self, mission: str, records: list[Any]) -> None:
+        """`records` caught up, the live ones held and those still queued, into the queue once each, in `seq` order
+        (the same thread takes them: nothing else reads the queue)."""
+        import queue
+
+        pending, self.held = [*self.held, *records], []
+        while True:
+            try:
+                pending.append(self.queue.get_nowait())
+            except queue.Empty:
+                break
+        by_seq = {r.seq: r for r in pending if r.mission == mission}
+        for seq in sorted(by_seq):
+            self.queue.put(by_seq[seq])
 
     def _take(self, msg: Any, result: Any, base: float) -> Any:
         """One record of the followed mission: into its report (and the trace file); the record, or None."""
