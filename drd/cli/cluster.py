@@ -28,6 +28,7 @@ from typer.models import CommandInfo, OptionInfo
 from drd.cli.common import (
     INVALID,
     OK,
+    VERSION_CALLBACKS,
     duration_text,
     err,
     fail,
@@ -81,7 +82,9 @@ def fast_command(app: typer.Typer, argv: Sequence[str],
     below its minimum, an option typer would treat specially (env var, callback, parser...) all
     return None, and typer then parses, answers or refuses as always (the same help, the same errors).
     """
-    if not argv or argv[0] not in commands or app.registered_callback is not None or app.info.context_settings:
+    callback = app.registered_callback
+    if (not argv or argv[0] not in commands or app.info.context_settings
+            or callback is not None and callback.callback not in VERSION_CALLBACKS):
         return None
     fn = _registered(app, argv[0])
     spec = _option_spec(fn) if fn is not None else None

@@ -276,6 +276,11 @@ def version() -> str:
         return "unknown (not installed)"
 
 
+#: The tools' `--version` callbacks: a command's own options never reach them (typer reads a callback's options
+#: before the command's name), so the fast path (`drd.cli.cluster.fast_command`) may run the command without them.
+VERSION_CALLBACKS: set[Callable[..., object]] = set()
+
+
 def version_option(app: typer.Typer, prog: str) -> None:
     """`--version` in the tool's `--help` (docs/cli.md lists it for both tools). `run_app` answers a bare
     `--version` before typer parses anything, so no command pays for it; this option is parsed only among other
@@ -292,6 +297,8 @@ def version_option(app: typer.Typer, prog: str) -> None:
                                                help="Print the installed drd's version and exit (with --json: as "
                                                     "JSON).")) -> None:
         pass
+
+    VERSION_CALLBACKS.add(tool)
 
 
 def run_app(app: Callable[..., object], prog: str,

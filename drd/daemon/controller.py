@@ -280,6 +280,14 @@ class Controller:
                             f"its resources leave the manager in {self.membership.removal[host] - now:.2f} s"
                             " unless it comes back")
 
+    def holds(self, host: str) -> bool:
+        """Whether the manager holds `host`'s resources now (added, and no action of it still queued): a journal's
+        missions resume on them (`drd.daemon.resume.wait_for_hosts`), not merely on the host being seen up."""
+        self.flush(blocking=False)
+        with self._pending_lock:
+            queued = any(a.host == host for a in self._pending)
+        return host in self.membership.present and not queued
+
     def step(self) -> None:
         """Apply removals that fell due. Missions are stepped in lockstep with the simulator by their own
         loop (`drd.daemon.missions.WorldRun`), not here."""

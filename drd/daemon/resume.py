@@ -94,7 +94,10 @@ def resume(runner: Any, journal: Journal) -> list[str]:
             executive.continue_records(state.seq + SEQ_GAP)
             for rid, values in state.properties.items():
                 for key, value in values.items():
-                    executive.pool.set_property(rid, key, value, runner.clock.now())
+                    try:
+                        executive.pool.set_property(rid, key, value, runner.clock.now())
+                    except KeyError:  # its host is still down (resumed without it): its robot is not in the manager
+                        log.info("resuming without the saved %s of %s: its host's resources are not here", key, rid)
             paused = max(0.0, time.time() - state.saved) if state.saved else 0.0
             for job in jobs:
                 if _resume_one(runner, journal, world, job, paused):
@@ -159,10 +162,12 @@ def _resume_one(runner: Any, journal: Journal, world: Any, job: Journaled, pause
 
 
 def wait_for_hosts(runner: Any, hosts: list[str], grace: float) -> list[str]:
-    """Wait (at most `grace` seconds) until each of `hosts` is up; the ones still down."""
+    """Wait (at most `grace` seconds) until each of `hosts` is up and the manager holds its resources (a standby
+    elected sees the hosts up at once, and adds their resources a moment later: a resume in between found none);
+    the ones still missing."""
     deadline = time.monotonic() + grace
     while True:
-        down = [h for h in hosts if runner.host_down(h)]
+        down = [h for h in hosts if runner.host_down(h) or not runner.controller.holds(h)]
         if not down or time.monotonic() >= deadline:
             return down
         time.sleep(0.1)
