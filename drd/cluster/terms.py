@@ -42,6 +42,9 @@ REFUSED_FOR = 1.0
 MEMO = 64
 #: Seconds the witness waits for etcd or for the controller's status.
 WITNESS_TIMEOUT = 1.0
+#: Seconds a controller's start time may be ahead of this host's clock (unsynchronized clocks): a term further in the
+#: future is no controller's start time.
+CLOCK_SKEW = 60.0
 
 #: What `Witness.live` gives: the live controller's term, or None and why it is not known.
 Live = tuple[float | None, str]
@@ -103,8 +106,10 @@ class Witness:
     """What a worker can check of the live controller's term: etcd's leader key (its `create_revision`) when the
     cluster elects its controller, else the `started` of the hosts.yaml controller's own status."""
 
-    def __init__(self, bus: Bus, cluster: Cluster, timeout: float = WITNESS_TIMEOUT) -> None:
+    def __init__(self, bus: Bus, cluster: Cluster, timeout: float = WITNESS_TIMEOUT,
+                 clock: Callable[[], float] = time.time) -> None:
         self.bus = bus
+        self.clock = clock  # wall time: a start time is one
         self.cluster = cluster
         self.timeout = timeout
         self._etcd: Etcd | None = None
@@ -129,11 +134,25 @@ class Witness:
             replies = self.bus.request(ClusterKeys(self.cluster.name).status(controller), timeout=self.timeout)
         except BusError as e:
             return None, f"the controller {controller} did not say its term: {e}"
-        for reply in replies:  # a `drd.daemon.status` (read by its fields: drd.cluster does not import drd.daemon)
-            started = getattr(reply.payload, "started", None)
-            if getattr(reply.payload, "host", None) == controller and isinstance(started, float | int):
-                return float(started), ""
+        return started_term(controller, [r.payload for r in replies], self.clock())
+
+
+def started_term(controller: str, answers: list[object], now: float) -> Live:
+    """The live controller's term from the answers to its status (`drd.daemon.status`, read by its fields: drd.cluster
+    does not import drd.daemon). Any peer may answer on that key in an open cluster, so a term is taken only if every
+    answer naming the controller says the same start time, and it is not in the future: a forged answer beside the
+    real one makes the term uncheckable (refused, asked again later), never adopted."""
+    said = {float(started) for a in answers if getattr(a, "host", None) == controller
+            and isinstance(started := getattr(a, "started", None), float | int) and not isinstance(started, bool)}
+    if not said:
         return None, f"the controller {controller} did not answer with its status"
+    if len(said) > 1:
+        return None, (f"{len(said)} different terms answer as the controller {controller}'s status (another peer"
+                      " answers on its key): none is taken")
+    term = said.pop()
+    if term > now + CLOCK_SKEW:
+        return None, f"the controller {controller}'s start time {show(term)} is in the future"
+    return term, ""
 
 
 class TermFence:

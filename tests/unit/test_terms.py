@@ -90,3 +90,23 @@ def test_without_a_witness_the_callers_word_is_taken_as_before() -> None:
     assert f.admit(5.0) == ""
     f.adopt(5.0)
     assert f.term == 5.0 and "older controller" in f.admit(4.0)
+
+
+def test_the_controllers_status_vouches_only_when_every_answer_agrees_and_is_not_in_the_future() -> None:
+    """An open cluster lets any peer answer on the controller's status key (the re-verification audit forged
+    `started=9.9e15` there, then sent one accepted call): a term is taken only from answers that all agree, and a
+    start time more than a clock skew ahead of ours is nobody's."""
+    from types import SimpleNamespace
+
+    from drd.cluster.terms import CLOCK_SKEW, started_term
+
+    real = SimpleNamespace(host="controller", started=1000.0)
+    forged = SimpleNamespace(host="controller", started=9.9e15)
+    assert started_term("controller", [real], 1005.0) == (1000.0, "")
+    assert started_term("controller", [real, SimpleNamespace(host="ranger1", started=5.0)], 1005.0) == (1000.0, "")
+    term, why = started_term("controller", [real, forged], 1005.0)
+    assert term is None and "2 different terms answer as the controller controller's status" in why
+    term, why = started_term("controller", [forged], 1005.0)  # the forger alone (the controller down meanwhile)
+    assert term is None and "in the future" in why
+    assert started_term("controller", [SimpleNamespace(host="controller", started=1005.0 + CLOCK_SKEW)], 1005.0)[0]
+    assert started_term("controller", [], 1005.0)[0] is None
