@@ -180,7 +180,7 @@ def cluster_client(config: Path, connect: list[str] | None, timeout: float,
     """A client of the cluster, or a clean exit 2; request errors become one-line errors too. `to`: what the
     command does that only an operator may (`run a mission`...): refused here, before the cluster is asked, to a
     user whose role (`cluster.security.roles`) does not allow it; the daemons refuse it anyway."""
-    from drd.bus import BusError, RemoteError
+    from drd.bus import BusError, MalformedMessage, RemoteError
     from drd.daemon.client import ClientError, ClusterClient
 
     endpoints, options, name, prefer = _endpoints(config, connect, to)
@@ -194,6 +194,9 @@ def cluster_client(config: Path, connect: list[str] | None, timeout: float,
         yield client
     except RemoteError as e:
         fail(e.reason)
+    except MalformedMessage as e:  # our own request breaks the bus's rules (a mission file whose JSON is over 1 MiB)
+        fail(f"cannot send this request: {e.reason}", hint="a request travels as one bus message of at most 1 MiB"
+             " of JSON (docs/bus.md): a mission's source is sent whole")
     except (ClientError, BusError) as e:
         fail(str(e))
     finally:

@@ -62,6 +62,19 @@ def test_an_invalid_mission_is_refused_by_the_controller_with_a_located_error(cl
     assert "not run" in r.stderr
 
 
+def test_a_valid_mission_too_large_to_send_is_refused_as_input_not_as_a_crash(cluster: DaemonCluster,
+                                                                             tmp_path: Path) -> None:
+    """A mission under the 1 MB source limit whose JSON is over 1 MiB (its quotes escaped) validates, and `run` says it
+    cannot be sent (exit 2), not "internal error" (exit 70)."""
+    big = tmp_path / "big.mission"
+    big.write_text("".join(f'# {chr(34) * 80}\n' for _ in range(7000)) + (ROOT / MISSION).read_text(), encoding="utf-8")
+    assert big.stat().st_size < 1_000_000
+    assert missionctl(cluster, "validate", str(big)).returncode == 0
+    r = missionctl(cluster, "run", str(big))
+    assert r.returncode == 2, r.stderr
+    assert "cannot send this request: too large" in r.stderr and "internal error" not in r.stderr
+
+
 def test_a_submission_its_client_gave_up_on_never_starts(cluster: DaemonCluster) -> None:
     """All or nothing (issue #18): a request whose client stopped waiting is refused, and nothing runs later."""
     from drd.daemon.missions import RunMission, RunReply, run_key
