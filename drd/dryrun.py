@@ -536,11 +536,11 @@ def facts(result: DryRun, r: rec.Record) -> None:
     if not isinstance(r, rec.Event):
         return
     if r.name == "DoorDetected":
-        result.doors.append({"at": r.at, "by": r.path, **r.fields})
+        result.doors.append({"at": report_time(r.at), "by": r.path, **r.fields})
     elif r.name == "ScoutLaunched":
-        result.scouts.append({"at": r.at, "scout": r.fields.get("scout"), "by": r.path})
+        result.scouts.append({"at": report_time(r.at), "scout": r.fields.get("scout"), "by": r.path})
     elif r.name == "MotionDetected":
-        result.detections.append({"at": r.at, "by": r.path, **r.fields})
+        result.detections.append({"at": report_time(r.at), "by": r.path, **r.fields})
 
 
 def merged(reports: Sequence[DryRun]) -> DryRun:
