@@ -1174,8 +1174,10 @@ def _missions_view(missions: list[dict[str, Any]], width: int = 80, explain: boo
         outcome = m.get("outcome") or "running"
         colour = {"running": "cyan", "success": "green"}.get(outcome, "red")
         head = Text.assemble((str(m.get("id")), "bold"), "  ", (outcome, colour))
-        if isinstance(m.get("time"), int | float) and m.get("outcome") is None:
-            head.append(f"  {duration_text(round(float(m['time']), 1))}", style="dim")
+        if isinstance(m.get("time"), int | float) and m.get("outcome") is None:  # its own time, not the world's
+            began = m.get("started")
+            since = float(began) if isinstance(began, int | float) else 0.0
+            head.append(f"  {duration_text(round(float(m['time']) - since, 1))}", style="dim")
         if m.get("outcome") and m.get("reason"):
             head.append(f"  {m['reason']}", style="dim")
         resumed = m.get("resumed")

@@ -176,7 +176,7 @@ class MissionRunner:
         self.gates = RemoteGates({u.id: u.host for u in cluster.resources() if u.host and type(u).__name__ == "Unit"})
         executive = controller.executive
         executive.gates = self.gates
-        executive.status_extras = self.placements.extras
+        executive.status_extras = self._status_extras
         # robots' pose and battery come with the hosts' replies; constraints are guarded on the devices' hosts
         self.telemetry = RemoteTelemetry({r.id: r.host for r in cluster.robots if r.host}, self._fetch,
                                          self.gates.send, clock.now)
@@ -212,6 +212,15 @@ class MissionRunner:
             return
         if resumed:
             log.info("resumed %d mission(s) from the journal: %s", len(resumed), ", ".join(resumed))
+
+    def _status_extras(self, mission: str) -> dict[str, Any]:
+        """What the executive's status adds to a mission of this controller: `started`, the executive's time when
+        it began (its `time` is the world's clock, which every mission of the world shares: the mission has run
+        `time - started`), and its placements."""
+        world = self.world
+        deadline = world.deadlines.get(mission) if world is not None else None
+        started = {"started": deadline[0] - deadline[1]} if deadline is not None else {}
+        return {**started, **self.placements.extras(mission)}
 
     def _warm_up(self) -> None:
         """Build the parser's tables once, in the background (and cache them on disk for every later process):

@@ -145,6 +145,9 @@ def test_detach_then_status_shows_the_active_states_then_stop(cluster: DaemonClu
         return out
 
     eventually(lambda: any("FollowCorridor:active" in p for p in active()), "FollowCorridor to be active", 20)
+    # `time` is the world's clock, which the world's missions share; the mission began at `started`
+    shown = {m["id"]: m for m in json.loads(missionctl(cluster, "status", "--json").stdout)["missions"]}[mid]
+    assert 0.0 <= shown["started"] <= shown["time"], shown
     client = cluster.client()
     tokens = f"drd/{cluster.name}/instance/**"
     mine = re.compile(rf"drd/{cluster.name}/instance/ranger1/{re.escape(mid)}/CorridorSurveillance/"
