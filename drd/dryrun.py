@@ -69,11 +69,16 @@ class DryRun:
     on_cluster: bool = False  # a `missionctl run` on a cluster's daemons, not a dry-run in this process
     priority: int = 1  # the mission's rank against the others sharing the team
     mission_id: str = ""
+    #: Wall seconds the mission spent without a controller (a cluster's, lost and resumed): not the cluster's pace.
+    away: float = 0.0
 
     @property
     def kept_up(self) -> bool:
         """Did the run keep (nearly: within 10 %, which a cluster's start-up takes) the pace it was asked for?"""
-        return not self.speed or self.real_time_factor >= 0.9 * self.speed
+        if not self.speed:
+            return True
+        ran = self.wall_time - self.away
+        return ran <= 0 or self.sim_time / ran >= 0.9 * self.speed
 
     @property
     def real_time_factor(self) -> float:
@@ -194,6 +199,7 @@ class DryRun:
         return {"mission": self.mission, "id": self.mission_id, "priority": self.priority,
                 "outcome": self.outcome, "reason": self.reason,
                 "sim_time": report_time(self.sim_time), "wall_time": self.wall_time,
+                **({"controller_away": round(self.away, 3)} if self.away else {}),
                 "real_time_factor": self.real_time_factor, "speed": self.speed,
                 "failure_chain": self.failure_chain(), "degraded": self.degraded(), "still_active": self.still_active(),
                 "waiting": self.waiting(), "logs": self.logs(),

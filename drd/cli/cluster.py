@@ -624,6 +624,7 @@ class _RecordWatch:
         #: live records that came while the controller was away or before the catch-up: taken with it, in `seq`
         #: order (a resumed mission's first live records would otherwise go before the old ones caught up)
         self.held: list[Any] = []
+        self.away_total = 0.0  # seconds the controller did not answer, over the run (a restart, a failover)
         self.view: _ClusterView | None = None
         self.priority = 1  # the started mission's, as the controller said it (`started`)
         self.worlds = tuple(worlds)  # where the mission's world is found, before drd's own (beside the hosts file)
@@ -703,6 +704,7 @@ class _RecordWatch:
                 err.print(progress_line(max(result.sim_time, clock), list(active), err.width))
         result.outcome, result.reason = finished
         result.wall_time = time.monotonic() - (start if began is None else began)
+        result.away = self.away_total
         return result
 
 
@@ -731,6 +733,7 @@ class _RecordWatch:
                 fail(f"mission {mission}: the controller came back without it (it kept no journal of it): see"
                      " `missionctl status`", code=1)
             away, self.away_since = time.monotonic() - self.away_since, None
+            self.away_total += away
             err.print(Text.assemble(("▶ ", "bold green"), f"the controller is back after {away:.1f} s: mission"
                                     f" {mission} resumed"))
             self.behind = True

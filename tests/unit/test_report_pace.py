@@ -1,0 +1,28 @@
+"""A cluster run's pace leaves out the time its controller was away (a restart, a failover): the report said
+"the cluster could not keep up" for a mission that kept its pace except while it had no controller."""
+
+from __future__ import annotations
+
+import io
+
+from rich.console import Console  # noqa: TID251 - rendering the report at a chosen width
+
+from drd.cli.report import print_report
+from drd.dryrun import DryRun
+
+
+def report(away: float) -> DryRun:
+    return DryRun("Patrol", "success", "", 100.0, 30.0, speed=5.0, on_cluster=True, mission_id="Patrol-1", away=away)
+
+
+def test_the_time_without_a_controller_is_not_the_clusters_pace() -> None:
+    assert not report(0.0).kept_up  # 100 s in 30 s: 3.3x of the 5x asked
+    assert report(10.0).kept_up  # 100 s in the 20 s it had a controller: 5x
+    assert report(10.0).to_dict()["controller_away"] == 10.0 and "controller_away" not in report(0.0).to_dict()
+
+
+def test_the_report_says_how_long_it_was_without_a_controller() -> None:
+    sink = io.StringIO()
+    print_report(report(10.0), console=Console(file=sink, width=120))
+    text = sink.getvalue()
+    assert "wall time 30.00 s (10.0 s of it without a controller)" in text and "could not keep up" not in text
