@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import functools
 import json
+import re
 import threading
 from collections.abc import Mapping, Sequence
 from typing import Any
@@ -138,7 +139,7 @@ class ZenohBus(Bus):
         try:
             self.session = zenoh.open(config)
         except zenoh.ZError as exc:  # a bad endpoint, a port in use, a bad option
-            raise BusError(f"cannot open a zenoh session: {exc}") from exc
+            raise BusError(f"cannot open a zenoh session: {zenoh_text(exc)}") from exc
         super().__init__(name or str(self.session.zid()))
         self._lock = threading.Lock()
         self._declared: dict[int, Any] = {}  # keeps zenoh entities referenced (they undeclare when dropped)
@@ -238,7 +239,7 @@ class ZenohBus(Bus):
         try:
             replies = querier.get(payload=data)  # `querier` stays referenced until every reply is read
         except zenoh.ZError as exc:  # the bus closed meanwhile (its queriers are undeclared)
-            raise BusError(str(exc)) from exc
+            raise BusError(zenoh_text(exc)) from exc
         arrived: list[zenoh.Sample | bytes] = []
         for reply in replies:  # blocks (GIL released) until every queryable answered or the timeout
             sample = reply.ok
@@ -360,7 +361,13 @@ class ZenohBus(Bus):
         try:
             return fn(*args, **kwargs)
         except zenoh.ZError as exc:
-            raise BusError(str(exc)) from exc
+            raise BusError(zenoh_text(exc)) from exc
+
+
+def zenoh_text(error: BaseException) -> str:
+    """zenoh's error text without the Rust source locations it appends (` at /root/.cargo/...rs:62.`): a
+    BusError's message reaches users and logs, where those say nothing."""
+    return re.sub(r"\s+at /\S+\.rs:\d+\.?", "", str(error)).strip()
 
 
 def _undeclare_querier(querier: zenoh.Querier) -> None:

@@ -11,7 +11,6 @@ import functools
 import json
 import logging
 import os
-import re
 import signal
 import subprocess
 import sys
@@ -500,11 +499,6 @@ def _served_team(config: Path, world: str | None, extra: list[Path]) -> tuple[Cl
     return cluster, sim_world, found.stem
 
 
-def zenoh_message(error: BaseException) -> str:
-    """zenoh's error text without the Rust source locations it appends (` at /root/.cargo/...rs:62.`)."""
-    return re.sub(r"\s+at /\S+\.rs:\d+\.?", "", str(error)).strip()
-
-
 def _serve_ros2(cluster: Cluster, sim_world: Any, world_name: str, listen: str, speed: float, domain: int,
                 seed: int, as_json: bool) -> int:
     """Serve the robots until SIGTERM or Ctrl-C (`drd sim --ros2`)."""
@@ -517,7 +511,7 @@ def _serve_ros2(cluster: Cluster, sim_world: Any, world_name: str, listen: str, 
     try:  # the endpoint's form was checked (`endpoint_problem`): what fails here is the listening itself
         session = Ros2Session.listen(listen, types=message_types())
     except (BusError, ValueError) as e:
-        fail(f"cannot listen on {listen}: {zenoh_message(e)}", code=INTERNAL,
+        fail(f"cannot listen on {listen}: {e}", code=INTERNAL,
              hint="is another router or drd on that port?")
     stop = threading.Event()
     for signum in (signal.SIGTERM, signal.SIGINT):

@@ -21,7 +21,7 @@ from typing import Any, Self
 import zenoh
 
 from drd.bus.base import BusError
-from drd.bus.zenoh_bus import ZENOH_MAX_MESSAGE, ZenohBus
+from drd.bus.zenoh_bus import ZENOH_MAX_MESSAGE, ZenohBus, zenoh_text
 
 from .msgtypes import MessageTypes, jazzy
 from .names import ADMIN_SPACE, GraphEntity, parse_token
@@ -41,7 +41,7 @@ def zenoh_call(what: str, fn: Callable[..., Any], *args: Any, **kwargs: Any) -> 
     try:
         return fn(*args, **kwargs)
     except zenoh.ZError as exc:
-        raise BusError(f"{what}: {exc}") from exc
+        raise BusError(f"{what}: {zenoh_text(exc)}") from exc
 
 
 def undeclare(entity: Any) -> None:
