@@ -1,20 +1,25 @@
 """An independent ROS 2 robot for drd's `ros2` drivers (a process of its own), written from ROS 2 conventions with
 zenoh and zenoh-ros2-sdk only: no drd code. Adapted from the audit's fake robot (a Ranger in a corridor 2.5 m wide).
 
-Usage: python3 tests/fake_ros2_robot.py PORT MSG_FOLDER CMD_LOG. It runs its own zenoh router on tcp/127.0.0.1:PORT
-(as rmw_zenohd would), reads its message definitions from MSG_FOLDER (``<package>/msg/<Name>.msg``), publishes
-/ranger1/odom (integrating the cmd_vel it gets), scan, camera image and detections, battery and an empty magazine,
-and appends every /ranger1/cmd_vel Twist it receives to CMD_LOG as a JSON line {"v", "w"}. Prints "serving" once
-ready; runs until SIGTERM."""
+Usage: python3 tests/fake_ros2_robot.py PORT MSG_FOLDER CMD_LOG [POSE_FILE]. It runs its own zenoh router on
+tcp/127.0.0.1:PORT (as rmw_zenohd would), reads its message definitions from MSG_FOLDER
+(``<package>/msg/<Name>.msg``), publishes /ranger1/odom (integrating the cmd_vel it gets), scan, camera image and
+detections, battery and an empty magazine, and appends every /ranger1/cmd_vel Twist it receives to CMD_LOG as a
+JSON line {"v", "w"}; with POSE_FILE, it keeps there its odometry pose of the last tick, {"x", "y", "th"} (in its
+own odom frame: 0, 0, 0 where it was switched on). Its laser sees the corridor's two walls, 1.25 m either side of
+the line it started on (+inf where a beam hits neither within 8 m). Prints "serving" once ready; runs until
+SIGTERM."""
 
 from __future__ import annotations
 
 import json
 import math
+import os
 import signal
 import sys
 import threading
 import time
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -23,6 +28,7 @@ import zenoh
 
 def main() -> None:
     port, folder, cmd_log = int(sys.argv[1]), sys.argv[2], sys.argv[3]
+    pose_file = sys.argv[4] if len(sys.argv) > 4 else None
     config = zenoh.Config()
     config.insert_json5("mode", '"router"')
     config.insert_json5("listen/endpoints", json.dumps([f"tcp/127.0.0.1:{port}"]))
@@ -67,12 +73,21 @@ def main() -> None:
             state["y"] += state["v"] * math.sin(state["th"]) * 0.05
             pose = dict(state)
         publish(pubs, types, pose, now, k)
+        if pose_file is not None:
+            keep(pose_file, pose)
         k += 1
         time.sleep(max(0.0, 0.05 - (time.time() - now)))
     for p in pubs.values():
         p.close()
     sub.close()
     router.close()
+
+
+def keep(path: str, pose: dict[str, float]) -> None:
+    """The pose, replacing the last one at once (a reader never sees half a file)."""
+    tmp = Path(path + ".tmp")
+    tmp.write_text(json.dumps({"x": pose["x"], "y": pose["y"], "th": pose["th"]}), encoding="utf-8")
+    os.replace(tmp, path)
 
 
 def publish(pubs: dict[str, Any], t: dict[str, Any], s: dict[str, float], now: float, k: int) -> None:

@@ -11,6 +11,7 @@ from __future__ import annotations
 import functools
 import inspect
 import json
+import math
 import re
 import time
 import typing
@@ -827,8 +828,10 @@ class _ClusterView:
     host's load reports as they come (`/drd/hosts/load`); asked every `every` s in a thread of its own, the hosts
     (up or down) and where each component instance runs, when they change (`/drd/hosts`, `/drd/placements`), and
     from the simulator's host the robots' poses (`/drd/tf`; a Scout in a magazine as its Ranger's frame) and what
-    their sensors read (scans, camera frames, light, launches and landings, doors: the dry-run's channels). Times
-    are the mission's (the recorder's latest record time; the simulator's time less its offset for the world's)."""
+    their sensors read (scans, camera frames, light, launches and landings, doors: the dry-run's channels); on real
+    robots (no simulator host), the same from each host that has robots (`host/<name>/robots`: its drivers' poses
+    and scans, `drd.cluster.observe`). Times are the mission's (the recorder's latest record time; the simulator's,
+    or each host's, time less its offset)."""
 
     #: Seconds (wall) between two requests for the poses, and between two for the hosts and placements.
     every, hosts_every = 0.2, 1.0
@@ -843,6 +846,11 @@ class _ClusterView:
         self.world = self._world(str(reply.world), worlds)
         self.offset: float | None = None  # mission time = simulator time + offset (None: not known yet)
         self.cursor = 0  # the simulator host's next reading to ask for (`drd.sim.observe.Observations`)
+        from drd.daemon.missions import NO_WORLD
+
+        self.real = str(reply.world) == NO_WORLD  # real robots: each host with robots says what its drivers read
+        self.robot_hosts: list[str] = []  # the hosts up with robots (from `_hosts`)
+        self.hosts_read: dict[str, tuple[int, float]] = {}  # host -> (its next reading, mission time - its time)
 
         def on_load(sample: Any) -> None:
             if isinstance(sample.payload, LoadReport):
@@ -907,6 +915,7 @@ class _ClusterView:
         if events:  # something happened: written even if the hosts look the same again
             self.said.pop("/drd/hosts", None)
         self._changed("/drd/hosts", {"hosts": hosts}, {"answered_by": reply.answered_by, "events": events})
+        self.robot_hosts = [h["name"] for h in hosts if h["robots"] and h["state"] == "up"]
 
     def _placements(self) -> None:
         instances = sorted((asdict(i) for i in self.client.components().instances),
@@ -923,6 +932,8 @@ class _ClusterView:
         from drd.sim.service import WorldObservation, WorldObserve, world_key
 
         if self.world is None:
+            if self.real:
+                self._observe_robots()
             return
         seen: WorldObservation | None = None
         for _ in range(MAX_PAGES):
@@ -949,6 +960,52 @@ class _ClusterView:
         at = seen.time + self.offset
         self.recorder.transforms(at, poses, dict(seen.carried))
         self.recorder.land(at)
+
+    def _observe_robots(self) -> None:
+        """Real robots: each host with robots, its robots' poses now and its drivers' scans since the last time
+        (`host/<name>/robots`, read-only, every role's, as the simulator's world is); the poses into one `/drd/tf`
+        message a round (each host's clock less its own offset: hosts' clocks need not agree)."""
+        from drd.bus import RemoteError
+        from drd.errors import BusFailure
+        from drd.sim.observe import replay
+        from drd.sim.service import WorldObservation, WorldObserve
+
+        poses: dict[str, tuple[float, float, float]] = {}
+        latest: float | None = None
+        for host in self.robot_hosts:
+            cursor, offset = self.hosts_read.get(host, (0, math.nan))
+            for _ in range(MAX_PAGES):
+                try:
+                    reply = self.client.bus.call(self.client.keys.robots(host), WorldObserve(cursor),
+                                                 timeout=self.client.timeout)
+                except (RemoteError, BusFailure):  # a host that does not answer now: asked again next time
+                    break
+                if not isinstance(reply, WorldObservation):
+                    break
+                if math.isnan(offset):
+                    offset = self._real_offset(reply.time)
+                for reading in reply.readings:  # those from before this mission began are not its own
+                    if float(reading.get("at", 0.0)) + offset >= 0.0:
+                        replay(reading, self.recorder, offset)
+                cursor = reply.next
+                if not reply.more:
+                    poses.update({rid: (v[0], v[1], v[2]) for rid, v in reply.poses.items()})
+                    latest = max(latest if latest is not None else -math.inf, reply.time + offset)
+                    break
+            self.hosts_read[host] = (cursor, offset)
+        if latest is not None and latest >= 0.0 and poses:
+            self.recorder.transforms(latest, poses, {})
+
+    def _real_offset(self, host_time: float) -> float:
+        """The mission's time less a host's clock, on real robots: the executive's time asked right after the
+        host's (real time, not rounded: the hosts' clocks count in no control periods)."""
+        from drd.executive_messages import MissionCommand, MissionStatus
+
+        status = self.client.bus.call(self.client.keys.executive_status, MissionCommand("status"),
+                                      timeout=self.client.timeout)
+        if not isinstance(status, MissionStatus):
+            raise ValueError("the executive did not say its time")
+        return status.time - self.base - host_time
 
     def _calibrate(self, sim_time: float) -> float:
         """The mission's time less the simulator's (the executive's clock is the simulator's plus an offset, and a

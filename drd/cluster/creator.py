@@ -197,13 +197,22 @@ class Creator:
         self._keys = ClusterKeys(cluster.name)
         self._tokens: dict[str, Any] = {}  # instance key -> its liveliness token
         self._sampler = Sampler(host, every=200)  # DRD_PROFILE: the step batches, in <DRD_PROFILE>.<host>
+        self._observed: Any = None  # the tap's queryable (below)
         self._queryable = bus.serve(self.key, self._serve) if bus else None
         # an operator's `Tune`, on its own key (the Creator's own is the controller's)
         self._tune = bus.serve(self._keys.tune(host), typed_handler(Tune, self.tune, (CreatorError,))) if bus else None
+        # real robots (no simulator host): what this host's drivers read, for a recording client (docs/recording.md)
+        self.tap: Any = None  # drd.cluster.observe.DriverTap
+        if bus is not None and mine.robots and not any(Role.SIMULATOR in h.roles for h in cluster.hosts):
+            from drd.cluster.observe import DriverTap
+            from drd.sim.service import WorldObserve
+
+            self.tap = DriverTap()
+            self._observed = bus.serve(self._keys.robots(host), typed_handler(WorldObserve, self.tap.observe))
 
     def close(self) -> None:
         """Stop serving and kill every worker process (the pool's too, if this Creator owns it)."""
-        for served in (self._queryable, self._tune):
+        for served in (self._queryable, self._tune, self._observed):
             if served is not None:
                 served.close()
         with self._lock:
@@ -767,6 +776,8 @@ class Creator:
             else:  # no simulator host: real robots, their drivers need no world
                 sim = self._sim = None
             self._drivers = drivers_for(self.cluster, self.host, sim, catalog=self.catalog)
+            if self.tap is not None:
+                self.tap.attach(self._drivers)
             self._guard_gates()
             self._world = sim
             self._generation = (world, generation)

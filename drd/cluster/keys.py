@@ -71,6 +71,11 @@ class ClusterKeys:
             raise ValueError(f"unknown database operation {op!r} (expected one of {', '.join(DB_OPS)})")
         return f"{self.host(host)}/db/{op}"
 
+    def robots(self, host: str) -> str:
+        """What the host's real drivers read (`drd.cluster.observe`: the robots' poses, their scans): read-only, open
+        to every role, as the simulator's `world` is; served by a host with robots when no host is a simulator."""
+        return f"{self.host(host)}/robots"
+
     def tune(self, host: str) -> str:
         """The Creator of `host` tuning a running instance's process (`Tune`): an operator's, apart from the
         Creator's own key, which only the controller calls."""

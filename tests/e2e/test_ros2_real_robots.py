@@ -3,12 +3,14 @@ whose hosts file gives no host the role simulator, and ranger1's devices all on 
 independent ROS 2 robot (tests/fake_ros2_robot.py, a process of its own written with zenoh-ros2-sdk only, its own
 zenoh router on a free port). `missionctl run` drives it in real time, in no simulated world; the robot itself
 says what it received: Twists that move it, then a final zero one. A speed other than real time and a named world
-are refused, and `drd start` refuses a `sim` device when no host is a simulator. About 30 s. Every process is
-ours and killed by pid."""
+are refused, and `drd start` refuses a `sim` device when no host is a simulator. `run --record` keeps the robot's
+poses and scans as its drivers read them, read back with the `mcap` library's own reader. About 40 s. Every process
+is ours and killed by pid."""
 
 from __future__ import annotations
 
 import json
+import math
 import subprocess
 import sys
 from collections.abc import Iterator
@@ -70,9 +72,10 @@ def robot(tmp_path_factory: pytest.TempPathFactory) -> Iterator[tuple[int, Path]
     port, cmd_log = free_ports(1)[0], folder / "cmd_vel.jsonl"
     cmd_log.touch()
     out = folder / "robot.out"
-    with out.open("wb") as sink:
+    with out.open("wb") as sink:  # its odometry pose beside the Twists' log (`pose_of`)
         proc = subprocess.Popen([sys.executable, str(ROOT / "tests" / "fake_ros2_robot.py"), str(port), str(msgs),
-                                 str(cmd_log)], cwd=folder, stdout=sink, stderr=subprocess.STDOUT)
+                                 str(cmd_log), str(folder / "pose.json")], cwd=folder, stdout=sink,
+                                stderr=subprocess.STDOUT)
     try:
         eventually(lambda: b"serving" in out.read_bytes() or proc.poll() is not None, "the fake robot to serve")
         assert proc.poll() is None, out.read_text(errors="replace")
@@ -146,3 +149,71 @@ def test_a_sim_device_with_no_simulator_host_is_refused_when_a_mission_is_run(tm
     assert done.returncode == 2, (done.stdout, done.stderr)
     assert (f"{c.hosts_file}: hosts.ranger1.devices.drive.driver: sim, but no host has the role simulator"
             in done.stderr), done.stderr
+
+
+def pose_of(robot: tuple[int, Path]) -> dict[str, float]:
+    """The fake robot's own odometry pose now (its odom frame: where it was switched on)."""
+    found: dict[str, float] = json.loads((robot[1].parent / "pose.json").read_text(encoding="utf-8"))
+    return found
+
+
+Poses = list[tuple[float, float, float]]
+
+
+def read_recording(path: Path) -> tuple[Poses, list[tuple[float, Any]], list[dict[str, Any]]]:
+    """With mcap's own reader (no drd code): ranger1's poses on /drd/tf (time, x, y), its scans on
+    /drd/scan/ranger1 (time, the LaserScan) and the records, each time in s of log time."""
+    from mcap.reader import make_reader
+    from mcap_protobuf.decoder import DecoderFactory
+
+    poses, scans, records = [], [], []
+    protobuf = DecoderFactory()
+    with path.open("rb") as fh:
+        for schema, channel, message in make_reader(fh).iter_messages(
+                topics=["/drd/tf", "/drd/scan/ranger1", "/drd/records"]):
+            t = message.log_time / 1e9
+            if channel.topic == "/drd/records":  # JSON
+                records.append(json.loads(message.data))
+                continue
+            decode = protobuf.decoder_for(channel.message_encoding, schema)
+            assert decode is not None, channel
+            decoded = decode(message.data)
+            if channel.topic == "/drd/tf":
+                poses += [(t, f.translation.x, f.translation.y) for f in decoded.transforms
+                          if f.child_frame_id == "ranger1" and f.parent_frame_id == "world"]
+            else:
+                scans.append((t, decoded))
+    return poses, scans, records
+
+
+def test_a_recording_of_real_robots_has_their_poses_and_scans(cluster: DaemonCluster, robot: tuple[int, Path],
+                                                             tmp_path: Path) -> None:
+    """No simulator to ask: the robot's host says what its drivers read. The poses are the robot's odometry in the
+    mission's map (the driver's origin, 1 m ahead of the odom frame's), they move as the robot does, and the scans
+    are the fake robot's corridor, each at the mission's time."""
+    mission, out = tmp_path / "probe.mission", tmp_path / "run.mcap"
+    mission.write_text(PROBE, encoding="utf-8")
+    start = pose_of(robot)
+    done = run(cluster, mission, "--until", "30", "--json", "--record", str(out))
+    assert done.returncode == 0, (done.stdout[-1000:], done.stderr[-2000:], cluster.tails())
+    eventually(lambda: twists(robot[1])[-1] == {"v": 0.0, "w": 0.0}, "a final zero Twist")
+    end = pose_of(robot)
+    assert end["x"] - start["x"] >= 0.5, (start, end)  # the robot itself went forward (4 s at 0.3 m/s)
+    poses, scans, records = read_recording(out)
+    finished = next(r["at"] for r in records if r["kind"] == "finished")
+    assert len(poses) >= 5, poses
+    assert all(0.0 <= t <= finished + 1.0 for t, _, _ in poses), (finished, poses)  # the mission's time
+    assert poses[0][0] <= 2.0, poses[:3]  # from its start on
+    # where the robot was, in the map: origin (1, 0, 0 degrees) composed with its odometry
+    assert abs(poses[0][1] - (1.0 + start["x"])) <= 0.5, (poses[0], start)
+    assert abs(poses[-1][1] - (1.0 + end["x"])) <= 0.2 and abs(poses[-1][2] - end["y"]) <= 0.2, (poses[-1], end)
+    assert poses[-1][1] - poses[0][1] >= 0.5, poses  # it moved as the robot did
+    # its laser, as the robot published it: 181 beams over the half-plane ahead, the walls 2.5 m apart either side,
+    # nothing straight ahead (+inf, REP 117)
+    assert len(scans) >= 5, len(scans)
+    assert all(0.0 <= t <= finished + 1.0 for t, _ in scans), (finished, [t for t, _ in scans])
+    for _t, scan in scans:
+        assert len(scan.ranges) == 181 and scan.frame_id == "ranger1", scan
+        assert abs(scan.start_angle + math.pi / 2) < 1e-6 and abs(scan.end_angle - math.pi / 2) < 1e-6, scan
+        assert abs(scan.ranges[0] + scan.ranges[-1] - 2.5) <= 0.1, (scan.ranges[0], scan.ranges[-1])
+        assert math.isinf(scan.ranges[90]), scan.ranges[90]
