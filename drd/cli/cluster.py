@@ -355,8 +355,9 @@ def query(text: str = typer.Argument(..., metavar="QUERY", show_default=False,
 
 _RECORD_OPTION = typer.Option(None, "--record", show_default=False,
                               help="Record the run as an MCAP file: the mission's records and active states, the"
-                                   " hosts' load and liveliness, placements, the robots' poses (`missionctl replay`,"
-                                   " docs/recording.md).")
+                                   " hosts' load and liveliness, placements, the robots' poses and sensor readings"
+                                   " (from the simulator's host, or on real robots from each robot's host),"
+                                   " `missionctl replay`, docs/recording.md.")
 _FOXGLOVE_OPTION = typer.Option(None, "--foxglove", show_default=False, metavar="[HOST:PORT]",
                                 help="Serve the run live to Foxglove (its WebSocket protocol), the channels of"
                                      " --record, on HOST:PORT only; `--foxglove` alone: 127.0.0.1:8765.")
