@@ -115,6 +115,10 @@ class Interpreter:
         self._last_tick = -1.0
         self._settling = False
         self._taken: list[tuple[str, str, str]] = []
+        # Events a transition took before their dispatch (a tie it won), with the states that transition entered:
+        # those do not hear the same event again when it is dispatched (`_take_chosen`).
+        self._deaf: list[tuple[rec.Event, list[Node]]] = []
+        self._entering: list[Node] | None = None  # while `_take_chosen` notes what a transition enters
         # What a state's descendants may read of it: its shared data and resources.
         self._visible = {sid: frozenset(n for n, _ in st.shared) | frozenset(n.name for n in st.needs)
                          for sid, st in chart.states.items()}
@@ -304,6 +308,8 @@ class Interpreter:
         """Enter `state` at `path`; `scope` (its parameters) becomes the node's own, not a copy."""
         plan = self._plans[state.id]
         node = Node(state, path, parent, self.clock.now(), plan, scope)
+        if self._entering is not None:
+            self._entering.append(node)
         if parent is not None:
             parent.children.append(node)
         else:
@@ -502,11 +508,18 @@ class Interpreter:
         names = self._names(node.parent) if node.parent else {}
         try:
             low = int(evaluate(m.low, names, self.pool.count))  # type: ignore[call-overload]
+            star = None if m.exact or m.high is not None else self._star_capacity(node)
             high = low if m.exact else (
                 int(evaluate(m.high, names, self.pool.count)) if m.high is not None  # type: ignore[call-overload]
-                else max(low, self._capacity(node)))
+                else max(low, star or 0))
         except (EvalError, TypeError, ValueError) as e:
             self._finish(node, False, f"multiplicity: {e}")
+            return
+        if star is not None and star < low:  # spec: fewer than `a` can be created (`[n]`, `[a..b]` queue instead)
+            template = self._states[node.state.children[0]]
+            needs = ", ".join(f"{n.name}: {n.type}" for n in self._plans[template.id].requested)
+            self._finish(node, False, f"{node.state.name}[{low}..*] needs at least {low} instances, but the resources "
+                                      f"allow only {star} (one per distinct set of resources its needs accept: {needs})")
             return
         if max(low, high) > self.chart.max_instances:
             self._finish(node, False, f"{node.state.name} would create {max(low, high)} instances, above the limit "
@@ -524,14 +537,19 @@ class Interpreter:
     def _capacity(self, node: Node) -> int:
         """For `[a..*]`: as many instances as could each hold distinct resources for the template's own needs
         (their `where` honored, in the multiplicity's scope): one per Scout that may serve, not one per Ranger."""
+        return self._star_capacity(node) or 0
+
+    def _star_capacity(self, node: Node) -> int | None:
+        """`_capacity`, or None when the resources do not bound it: the template asks for nothing (or a need's
+        `where` cannot be evaluated: its instances then fail with that reason when they ask)."""
         template = self._states[node.state.children[0]]
         needs = self._plans[template.id].requested
         if not needs:
-            return 0
+            return None
         try:
             reqs = tuple(self.resources.need_request(node, n) for n in needs)
         except EvalError:
-            return 0
+            return None
         return int(self.rcm.distinct(reqs))
 
     def _grow_multi(self, node: Node) -> None:
@@ -577,6 +595,8 @@ class Interpreter:
             self._run_to_completion()
         finally:
             self._settling = False
+            if self._deaf:  # every event was dispatched (or the mission ended): nothing left to be deaf to
+                self._deaf.clear()
 
     def _run_to_completion(self) -> None:
         for _ in range(MAX_MICROSTEPS):
@@ -614,10 +634,10 @@ class Interpreter:
             parent.outputs[node.state.name] = dict(node.context.outputs)
         elif node.outputs:  # a composite's outputs are its finished children's, merged (FindNewDoor.door)
             parent.outputs[node.state.name] = {k: v for child in node.outputs.values() for k, v in child.items()}
-        kind = ast.TriggerKind.COMPLETION if ok else ast.TriggerKind.ERROR
-        for t in node.state.transitions:
-            if t.kind is kind and self._enabled_guard(parent, t, None):
-                self._take(node, t, None, why)
+        if node.state.transitions:
+            choice = self._choose(node, parent, ok)
+            if choice is not None and (ok or choice[0].kind is ast.TriggerKind.ERROR or self._caught(node, parent)):
+                self._take_chosen(node, choice, None, why)
                 return
         pk = parent.state.kind
         if pk is MULTI:
@@ -664,7 +684,9 @@ class Interpreter:
             self._finish(multi, True)
 
     def _fire_one(self) -> bool:
-        """Take the first enabled change or timeout transition, if any (none inside a frozen subtree)."""
+        """Take a transition of the first state with an enabled change or timeout transition, if any (none inside a
+        frozen subtree): its first declared enabled one, which may be an `on` declared before it whose event was
+        emitted at this instant (`_choose`)."""
         if not self._timed:
             return False
         now = self.clock.now()
@@ -683,9 +705,74 @@ class Interpreter:
                 else:
                     continue
                 if self._enabled_guard(domain, t, None):
-                    self._take(node, t, None)
+                    choice = self._choose(node, domain, None) if self.events else None  # an earlier `on` may win
+                    self._take_chosen(node, choice or (t, None), None)
                     return True
         return False
+
+    def _choose(self, node: Node, domain: Node, ok: bool | None, current: rec.Event | None = None
+                ) -> tuple[Transition, rec.Event | None] | None:
+        """The first declared transition of `node` enabled at this instant, of any kind (spec: "the first declared
+        wins"), with the event it takes: its completion (`ok`) or `on error` (`not ok`) when it has just finished,
+        an `after` due, a `when` that holds, an `on E` whose event was emitted at this instant and is not yet
+        dispatched (`current`, the one being dispatched, then the queue, in emission order). A false guard does
+        not enable."""
+        finished = None if ok is None else ast.TriggerKind.COMPLETION if ok else ast.TriggerKind.ERROR
+        now = self.clock.now()
+        for t in node.state.transitions:
+            kind = t.kind
+            if kind is ast.TriggerKind.EVENT:
+                event = self._pending(domain, t, current)
+                if event is not None:
+                    return t, event
+                continue
+            if kind is ast.TriggerKind.TIMEOUT:
+                delay = self._delay(domain, t)
+                if delay is None or now - node.entered < delay - TIME_EPS:
+                    continue
+            elif kind is ast.TriggerKind.CHANGE:
+                if t.condition is None or not self._truthy(domain, t.condition, None):
+                    continue
+            elif kind is not finished:
+                continue
+            if self._enabled_guard(domain, t, None):
+                return t, None
+        return None
+
+    def _pending(self, domain: Node, t: Transition, current: rec.Event | None) -> rec.Event | None:
+        """The first event of this instant not yet dispatched that enables `on` transition `t` (heard by `domain`,
+        from its sender if it names one, its guard true of it)."""
+        events: Iterable[rec.Event] = self.events if current is None else (current, *self.events)
+        for event in events:
+            if event.name != t.event or not hears(domain.path, event.path):
+                continue
+            if t.sender is not None and not under(event.path, f"{domain.path}/{t.sender}"):
+                continue
+            if t.guard is None or self._truthy(domain, t.guard, event):
+                return event
+        return None
+
+    def _caught(self, node: Node, domain: Node) -> bool:
+        """Whether an `on error` of `node` is enabled: only that catches a failure. A timeout (or event) declared
+        before it and enabled at the same instant is taken instead, but without one, the failure propagates."""
+        return any(t.kind is ast.TriggerKind.ERROR and self._enabled_guard(domain, t, None)
+                   for t in node.state.transitions)
+
+    def _take_chosen(self, node: Node, choice: tuple[Transition, rec.Event | None], current: rec.Event | None,
+                     why: str = "") -> None:
+        """Take `_choose`'s transition. When its event is still queued (it won a tie ahead of the event's dispatch),
+        the states it enters are noted: that dispatch passes them over, as a dispatch passes over the states its
+        own transitions enter (one event moves a state once); every other listener still hears it."""
+        t, event = choice
+        if event is None or event is current:
+            self._take(node, t, event, why)
+            return
+        outer, self._entering = self._entering, []
+        try:
+            self._take(node, t, event, why)
+        finally:
+            entered, self._entering = self._entering, outer
+        self._deaf.append((event, entered))
 
     def _delay(self, domain: Node, t: Transition) -> float | None:
         """A timeout in seconds: a constant, or its expression in the scope that declares it."""
@@ -702,18 +789,28 @@ class Interpreter:
         listening = self._listening.get(event.name)
         if not listening:
             return
+        deaf = self._deaf_to(event) if self._deaf else ()
         for node in list(listening):  # a copy: taking a transition changes who listens
             domain = node.parent
             if domain is None or node.phase is DONE or domain.phase is not ACTIVE or domain.closing:
                 continue  # a frozen subtree hears nothing
-            if not hears(domain.path, event.path):
+            if not hears(domain.path, event.path) or (deaf and node in deaf):
                 continue
             for t in node.plan.on_event[event.name]:
                 if t.sender is not None and not under(event.path, f"{domain.path}/{t.sender}"):
                     continue
-                if t.guard is None or self._truthy(domain, t.guard, event):
-                    self._take(node, t, event)
+                if t.guard is None or self._truthy(domain, t.guard, event):  # then the first declared enabled wins
+                    choice = self._choose(node, domain, None, event) if len(node.state.transitions) > 1 else None
+                    self._take_chosen(node, choice or (t, event), event)
                     break
+
+    def _deaf_to(self, event: rec.Event) -> list[Node]:
+        """The states a transition taken on `event` before its dispatch entered (`_take_chosen`)."""
+        for i, (e, nodes) in enumerate(self._deaf):
+            if e is event:
+                del self._deaf[i]
+                return nodes
+        return []
 
     def _take(self, node: Node, t: Transition, event: rec.Event | None, why: str = "") -> None:
         domain = node.parent  # the node whose body declares the transition

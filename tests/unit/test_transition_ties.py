@@ -1,0 +1,182 @@
+"""Transitions of one state enabled at the same instant: the first declared wins, whatever their kinds (spec
+audit D2); and `[a..*]` fails on entry when its resources allow fewer than `a` instances (spec audit D4)."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import pytest
+
+from drd.runtime import records as rec
+from drd.runtime.component import Status
+from dsl import compile_text
+from dsl.catalog import Catalog
+from dsl.statechart import Statechart
+from tests.runtime_support import Harness, Timed, ranger_world
+
+#: `Target`'s child `Step` ends at t=2.0, when the sibling `Zapper` emits `Zap` (and `Zip`, with `zip`), and when
+#: `Step`'s `after 2s` falls due. `{transitions}` are `Step`'s, in declaration order, then each target's: `X -> done / log "X"`.
+TIE = """
+mission M {{
+    parallel all {{
+        Zapper
+        Target
+    }}
+}}
+behavior Zapper {{ Wait(duration: 2s); Wait -> done / emit Zap(k: 1){zip} }}
+behavior Target {{
+    needs r: Ranger
+    start -> Step
+{transitions}
+}}
+behavior Step {{ Wait(duration: {step}) }}
+"""
+
+
+class FailsAt(Timed):
+    """Fails once its duration has passed (a child failing at the same instant as the rest)."""
+
+    def step(self, now: float) -> Status:
+        return Status.FAILURE if super().step(now) is Status.SUCCESS else Status.RUNNING
+
+
+class MarksAt(Timed):
+    """Succeeds after its duration, and marks scout1 as it does: a `when` on the mark holds from that instant."""
+
+    def step(self, now: float) -> Status:
+        status = super().step(now)
+        if status is Status.SUCCESS:
+            self.update_dependency("ranger1.scout1", "carrier", "")  # launched: no longer in r's magazine
+        return status
+
+
+def compiled(text: str, catalog: Catalog) -> Statechart:
+    r = compile_text(text, catalog, "t.mission")
+    assert r.ok and r.statechart is not None, "\n".join(d.render(r.sources) for d in r.diagnostics)
+    return r.statechart
+
+
+def run(catalog: Catalog, transitions: list[str], *, step: str = "2s", leaf: Any = Timed,
+        zip_too: bool = False) -> tuple[str | None, list[str], Harness]:
+    """Run `TIE` with these transitions of `Step`: the outcome, the logs, the harness."""
+    targets = sorted({t.split("-> ", 1)[1][0] for t in transitions} - {"d", "f"})
+    lines = [*transitions, *(f'{x} -> done / log "{x}"' for x in targets if f"{x} -> done" not in " ".join(transitions))]
+    text = TIE.format(transitions="\n".join(f"    {t}" for t in lines), step=step,
+                      zip="; emit Zip(k: 2)" if zip_too else "")
+    text += "".join(f"behavior {x} {{ Wait(duration: 1s) }}\n" for x in targets)
+    registry: dict[str, Any] = {"Wait": Timed}
+    if leaf is not Timed:
+        class StepLeaf(leaf):  # type: ignore[misc,valid-type]
+            def start(self) -> None:
+                super().start()
+                assert self.ctx is not None
+                if not self.ctx.path.endswith("/Step/Wait"):
+                    self.__class__ = Timed  # only Step's Wait fails or marks
+
+        registry["Wait"] = StepLeaf
+    h = Harness(compiled(text, catalog), registry, ranger_world(1, 2))
+    outcome = h.run(until=30)
+    return outcome, [r.text for r in h.of(rec.Log) if r.text in ("A", "B", "C")], h
+
+
+def taken_at_2(h: Harness) -> list[tuple[str, str]]:
+    return [(r.target.rsplit("/", 1)[-1], r.trigger) for r in h.of(rec.Taken)
+            if r.path.endswith("/Step") and abs(r.at - 2.0) < 1e-6]
+
+
+@pytest.mark.parametrize(("first", "second", "winner"), [
+    ("Step -> A after 2s", "Step -> B", "A"),  # today: the completion won
+    ("Step -> B", "Step -> A after 2s", "B"),
+])
+def test_completion_and_timeout_at_once(catalog: Catalog, first: str, second: str, winner: str) -> None:
+    outcome, logs, h = run(catalog, [first, second])
+    assert outcome == "success" and logs == [winner]
+    assert taken_at_2(h) == [(winner, "timeout" if winner == "A" else "completion")]
+
+
+@pytest.mark.parametrize(("first", "second", "winner"), [
+    ("Step -> A on Zap", "Step -> B after 2s", "A"),  # today: the timeout won
+    ("Step -> B after 2s", "Step -> A on Zap", "B"),
+])
+def test_event_and_timeout_at_once(catalog: Catalog, first: str, second: str, winner: str) -> None:
+    outcome, logs, _ = run(catalog, [first, second], step="1h")
+    assert outcome == "success" and logs == [winner]
+
+
+@pytest.mark.parametrize(("first", "second", "winner"), [
+    ("Step -> A on Zap", "Step -> B", "A"),  # today: the completion won
+    ("Step -> B", "Step -> A on Zap", "B"),
+])
+def test_event_and_completion_at_once(catalog: Catalog, first: str, second: str, winner: str) -> None:
+    outcome, logs, _ = run(catalog, [first, second])
+    assert outcome == "success" and logs == [winner]
+
+
+def test_two_events_of_one_instant_first_declared_wins(catalog: Catalog) -> None:
+    """Zap is emitted before Zip, at the same instant: the transition declared first (on Zip) wins."""
+    outcome, logs, _ = run(catalog, ["Step -> A on Zip", "Step -> B on Zap"], step="1h", zip_too=True)
+    assert outcome == "success" and logs == ["A"]  # today: Zap, dispatched first, won
+
+
+@pytest.mark.parametrize(("first", "second", "winner"), [
+    ("Step -> A when count(Scout where scout.carrier == r) < 2", "Step -> B", "A"),  # today: completion
+    ("Step -> B", "Step -> A when count(Scout where scout.carrier == r) < 2", "B"),
+])
+def test_change_and_completion_at_once(catalog: Catalog, first: str, second: str, winner: str) -> None:
+    outcome, logs, _ = run(catalog, [first, second], leaf=MarksAt)
+    assert outcome == "success" and logs == [winner]
+
+
+@pytest.mark.parametrize(("first", "second", "winner"), [
+    ("Step -> A after 2s", "Step -> B on error", "A"),  # today: on error won
+    ("Step -> B on error", "Step -> A after 2s", "B"),
+])
+def test_failure_and_timeout_at_once(catalog: Catalog, first: str, second: str, winner: str) -> None:
+    """An `on error` enabled catches the failure; the first declared enabled transition is taken."""
+    outcome, logs, _ = run(catalog, [first, second], leaf=FailsAt)
+    assert outcome == "success" and logs == [winner]
+
+
+def test_a_timer_does_not_swallow_an_uncaught_failure(catalog: Catalog) -> None:
+    """No `on error` (or a false one): the failure propagates, even with a timeout due at that instant."""
+    for transitions in (["Step -> A after 2s"], ["Step -> A after 2s", "Step -> B on error [false]"]):
+        outcome, logs, h = run(catalog, transitions, leaf=FailsAt)
+        assert outcome == "failure" and logs == [], transitions
+        assert [r.trigger for r in h.of(rec.Taken) if r.path.endswith("/Step")] == [], transitions
+
+
+def test_a_false_guard_does_not_enable(catalog: Catalog) -> None:
+    outcome, logs, _ = run(catalog, ["Step -> A after 2s [false]", "Step -> C on Zap [event.k == 2]", "Step -> B"])
+    assert outcome == "success" and logs == ["B"]
+
+
+def test_an_event_that_lost_a_tie_is_still_heard(catalog: Catalog) -> None:
+    """The timeout wins; Zap is then dispatched as usual: A, entered at that instant, hears it and goes to C."""
+    text = ["Step -> A after 2s", "Step -> B on Zap", "A -> C on Zap"]
+    outcome, logs, _ = run(catalog, text, step="1h")
+    assert outcome == "success" and logs == ["C"]
+
+
+def test_an_event_moves_a_state_once(catalog: Catalog) -> None:
+    """Zap wins the tie ahead of its dispatch: the state it enters (B) does not hear the same Zap again."""
+    text = ["Step -> B on Zap", "Step -> A after 2s", "B -> C on Zap"]
+    outcome, logs, _ = run(catalog, text, step="1h")
+    assert outcome == "success" and logs == ["B"]
+
+
+# ------------------------------------------------------------------ D4: [a..*]
+SPOTS = "mission M {{ Spot[{bounds}] }}\nbehavior Spot {{ needs s: Scout\n Wait(duration: 2s) }}"
+
+
+def test_a_star_multiplicity_fails_on_entry_when_its_resources_allow_fewer_than_a(catalog: Catalog) -> None:
+    h = Harness(compiled(SPOTS.format(bounds="7..*"), catalog), {"Wait": Timed}, ranger_world(1, 6))
+    assert h.run(until=60) == "failure"
+    assert "Spot[7..*] needs at least 7 instances, but the resources allow only 6" in h.interp.reason
+    assert not [r for r in h.of(rec.Entered) if "Spot[" in r.path]  # failed on entry: no instance at all
+
+
+@pytest.mark.parametrize(("bounds", "instances"), [("7", 7), ("7..9", 9), ("3..*", 6)])
+def test_other_multiplicities_queue_as_before(catalog: Catalog, bounds: str, instances: int) -> None:
+    h = Harness(compiled(SPOTS.format(bounds=bounds), catalog), {"Wait": Timed}, ranger_world(1, 6))
+    assert h.run(until=60) == "success"
+    assert len({r.path for r in h.of(rec.Entered) if r.path.count("/") == 1 and "Spot[" in r.path}) == instances
