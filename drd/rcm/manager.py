@@ -17,8 +17,9 @@ Policy:
   exclusive needs). From that slice boundary on it is in
   overtime: an equal- or higher-priority waiter that can then be granted takes its units at once,
   and the holder is `Revoked` (suspended) and queued again at the back of its priority; it is
-  resumed later by a `Granted(resumed=True)` (resuming is that flag, not a record of its own; it
-  may name other units of the same types). Equal priorities thus rotate round-robin and a
+  resumed later by a `Granted(resumed=True)` (resuming is that flag, not a record of its own) on
+  the very resources taken from it: its re-queued needs are `Pinned` to them. If one of them is
+  removed meanwhile, it is `Unsatisfiable`, naming that resource. Equal priorities thus rotate round-robin and a
   higher priority displaces a lower one at the holder's slice boundary, never before. Sharable
   units are never preempted, and a holder is never preempted by its own descendant or ancestor.
 - Sharable units: the quantities granted on a unit never exceed its capacity.
@@ -39,7 +40,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from collections.abc import Collection, Iterable
+from collections.abc import Collection, Iterable, Mapping
 from heapq import heappop, heappush
 from itertools import count, islice
 from typing import Any
@@ -47,6 +48,7 @@ from typing import Any
 from drd.rcm.deadlock import choose_victim, find_cycle, same_owner
 from drd.rcm.model import (
     Aggregate,
+    Candidate,
     Deadlock,
     Decision,
     Granted,
@@ -60,6 +62,7 @@ from drd.rcm.model import (
     Unit,
     Unsatisfiable,
     Waiting,
+    Where,
     units_of,
 )
 from drd.rcm.solver import EPS, Solution, diagnose, first_solution, solutions
@@ -70,6 +73,23 @@ _LEASE, _RESERVE, _SLICE = 0, 1, 2
 #: An event due within this of `now` is due now: callers step time in floating-point increments (0.1 s ten times
 #: is 0.9999999999999999 s), and a slice due at 5 s must end in the cycle at 5 s, not in the next one.
 TIME_EPS = 1e-6
+
+
+@dataclasses.dataclass(frozen=True, slots=True)
+class Pinned:
+    """The `where` of a suspended holder's re-queued need: only the resource it held (spec: "resumed when it gets
+    it back"), and only while it still satisfies the need's own `where` (a Scout moved to another Ranger does
+    not). Equal pins are equal, so the waiters' alternatives are cached as for any `where`."""
+
+    id: str
+    where: Where | None = None
+
+    def __call__(self, candidate: Candidate, chosen: Mapping[str, Candidate]) -> bool:
+        return candidate.id == self.id and (self.where is None or self.where(candidate, chosen))
+
+    def narrow(self, candidates: Iterable[Candidate], chosen: Mapping[str, Candidate]) -> Iterable[Candidate]:
+        """Only the pinned one: the solver need not look at the others."""
+        return [c for c in candidates if c.id == self.id]
 
 
 class ResourceManager:
@@ -440,12 +460,21 @@ class ResourceManager:
                     shared[id(needs)] = (needs, alts, claims)
             if not alts:
                 self._queue.remove(wait)
-                need, reason = diagnose(needs, self._reg, wait.given) or ("", "")
+                need, reason = self._gone(needs) or diagnose(needs, self._reg, wait.given) or ("", "")
                 out.append(Unsatisfiable(holder, need, reason))
                 continue
             self._queue.reclaim(wait, claims)
             touch(wait.claims)
         self._dispatch(extra, now, out, tuple(seen.values()))
+
+    def _gone(self, needs: tuple[NeedRequest, ...]) -> tuple[str, str] | None:
+        """(need, reason) when a suspended holder's need is pinned to a resource that no longer exists: it can
+        only resume on what was taken from it, so it never will."""
+        for need in needs:
+            pin = need.where
+            if isinstance(pin, Pinned) and pin.id not in self._reg.units and pin.id not in self._reg.aggregates:
+                return need.name, f"{pin.id}, which it held when it was suspended, is gone"
+        return None
 
     # -- granting ------------------------------------------------------------------------------
 
@@ -559,7 +588,8 @@ class ResourceManager:
             return units, frozenset()
         given = dict(hold.given)
         given.update({name: c for name, c in hold.chosen.items() if name not in hold.alloc})
-        needs = tuple(n for n in hold.request.needs if n.name in hold.alloc)
+        needs = tuple(dataclasses.replace(n, where=Pinned(hold.chosen[n.name].id, n.where))
+                      for n in hold.request.needs if n.name in hold.alloc)  # resumed on what was taken from it
         request = dataclasses.replace(hold.request, needs=needs)
         key = (*request.rank, 1, 0.0, next(self._order))
         wait = Wait(request, key, hold.since, resumed=True, given=given)

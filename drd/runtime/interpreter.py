@@ -588,8 +588,8 @@ class Interpreter:
         """Run to completion: finish nodes and take enabled transitions until quiet."""
         if self._settling:
             return
-        if not (self._finishing or self._timed or self.events or self._violations):
-            return  # nothing to finish, no change or timeout to check, no event: quiet already
+        if not (self._finishing or self._timed or self.events or self._violations or self.resources.deferred):
+            return  # nothing to finish, no change or timeout to check, no event, nothing to ask: quiet already
         self._settling = True
         try:
             self._run_to_completion()
@@ -614,6 +614,8 @@ class Interpreter:
                 continue
             if self.events:
                 self._dispatch(self.events.popleft())
+                continue
+            if self.resources.flush():  # this instant's requests, by priority (spec audit D1)
                 continue
             return
         if self.root is not None:
@@ -1022,6 +1024,8 @@ class Interpreter:
                     if self.listeners:
                         self._notify(rec.Waiting(self.clock.now(), node.path, (),
                                                  tuple(_path(b) for b in d.blocked_by)))
+        if not self._settling:  # a grant made outside a run to completion (another mission's release, a tick)
+            self.resources.flush()
 
     def _on_granted(self, node: Node, d: Granted) -> None:
         was_revoked = node.revoked

@@ -49,6 +49,9 @@ class ResourceClient:
         self.mission_priority = mission_priority
         self.holders: dict[str, Node] = {}  # request holder -> node
         self.pins: dict[str, dict[str, str]] = {}  # holder -> need -> the resource its next request must get
+        #: requests made in this instant's run to completion, not yet asked: `flush` asks them best rank first
+        self.deferred: dict[str, Request] = {}
+        self.flushing = False  # a grant made by `flush` must not start another one inside it
 
     # -------------------------------------------------------------- requests
     def holder(self, node: Node) -> str:
@@ -70,9 +73,28 @@ class ResourceClient:
         self.holders[holder] = node
         request = Request(holder, node.state.priority, reqs, self.mission, self.mission_priority)
         if at is None:
-            self.broker.request(request, self.now())
+            self.deferred[holder] = request
         else:
             self.broker.reserve(request, self.now(), at)
+
+    def flush(self) -> bool:
+        """Ask the manager for the requests deferred since the last flush, best rank first and, among equals, in
+        the order they were made: requests of one instant are granted by priority (spec "Resources"), not by who
+        asked first. Grants may enter states that ask again: those wait for the next flush. Whether any was asked.
+        """
+        if self.flushing or not self.deferred:
+            return False
+        self.flushing = True
+        try:
+            while self.deferred:
+                batch = sorted(self.deferred.items(), key=lambda item: item[1].rank)  # stable: equals keep their order
+                for holder, _ in batch:
+                    request = self.deferred.pop(holder, None)  # None: withdrawn by a grant made just before
+                    if request is not None:
+                        self.broker.request(request, self.now())
+        finally:
+            self.flushing = False
+        return True
 
     def need_request(self, node: Node, need: ResourceNeed, pinned: str | None = None,
                      earlier: Collection[str] | None = None) -> NeedRequest:
@@ -95,14 +117,21 @@ class ResourceClient:
 
     def release(self, node: Node, names: Iterable[str] | None = None) -> None:
         """Give back the whole grant (None) or these needs; the manager's decisions follow through the broker."""
-        self.broker.release(self.holder(node), self.now(), None if names is None else list(names))
+        holder = self.holder(node)
+        if names is None and self.deferred.pop(holder, None) is not None:
+            return  # never asked: nothing to give back
+        self.broker.release(holder, self.now(), None if names is None else list(names))
 
     def cancel(self, node: Node) -> None:
         """Withdraw a request still waiting (or a reservation); a grant in force is given back."""
-        self.broker.cancel(self.holder(node), self.now())
+        holder = self.holder(node)
+        if self.deferred.pop(holder, None) is None:
+            self.broker.cancel(holder, self.now())
 
     def forget(self, node: Node) -> None:
-        self.holders.pop(self.holder(node), None)
+        holder = self.holder(node)
+        self.holders.pop(holder, None)
+        self.deferred.pop(holder, None)
 
     def renew(self, now: float, lease: float) -> None:
         for holder, node in list(self.holders.items()):

@@ -120,6 +120,8 @@ class ResourcePool(RuleBasedStateMachine):
         self.epochs: dict[str, int] = {}
         self.down: set[str] = set()
         self.reduced: set[str] = set()  # holders that gave back a need: resumed with fewer needs
+        self.held: dict[str, dict[str, str]] = {}  # holder -> need -> the resource its grant named
+        self.suspended: dict[str, dict[str, str]] = {}  # a revoked holder -> what it held when suspended
         for host in ("base", *ROBOT_HOSTS):
             self.plug(host)
 
@@ -141,6 +143,10 @@ class ResourcePool(RuleBasedStateMachine):
             if isinstance(d, Granted):
                 assert d.holder not in self.holding
                 self.check_grant(d, snap)
+                if d.resumed:  # spec: resumed when it gets *it* back, not another resource of the type
+                    taken = self.suspended.pop(d.holder)
+                    assert {n: taken[n] for n in d.assignment} == dict(d.assignment), (taken, d.assignment)
+                self.held[d.holder] = dict(d.assignment)
                 self.waiting.discard(d.holder)
                 self.pending.discard(d.holder)
                 self.holding.add(d.holder)
@@ -153,17 +159,22 @@ class ResourcePool(RuleBasedStateMachine):
                 self.pending.add(d.holder)
             elif isinstance(d, Revoked):
                 self.holding.remove(d.holder)
+                self.suspended[d.holder] = self.held.pop(d.holder)
                 self.waiting.add(d.holder)
             elif isinstance(d, Released):
                 assert self.active(d.holder)
                 if d.holder != partial:
                     self.holding.discard(d.holder)
+                    self.held.pop(d.holder, None)
+                self.suspended.pop(d.holder, None)
                 self.waiting.discard(d.holder)
                 self.pending.discard(d.holder)
             elif isinstance(d, Deadlock):
                 assert d.victim in d.cycle
                 self.waiting.remove(d.victim)
+                self.suspended.pop(d.victim, None)
             elif isinstance(d, Unsatisfiable):
+                self.suspended.pop(d.holder, None)
                 self.waiting.discard(d.holder)
                 self.pending.discard(d.holder)
             else:
