@@ -518,8 +518,8 @@ class Interpreter:
         if star is not None and star < low:  # spec: fewer than `a` can be created (`[n]`, `[a..b]` queue instead)
             template = self._states[node.state.children[0]]
             needs = ", ".join(f"{n.name}: {n.type}" for n in self._plans[template.id].requested)
-            self._finish(node, False, f"{node.state.name}[{low}..*] needs at least {low} instances, but the resources "
-                                      f"allow only {star} (one per distinct set of resources its needs accept: {needs})")
+            self._finish(node, False, f"{node.state.name}[{low}..*] needs at least {low} instances, but the "
+                                      f"resources allow only {star} (one per distinct set its needs accept: {needs})")
             return
         if max(low, high) > self.chart.max_instances:
             self._finish(node, False, f"{node.state.name} would create {max(low, high)} instances, above the limit "

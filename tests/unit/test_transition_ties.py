@@ -15,7 +15,8 @@ from dsl.statechart import Statechart
 from tests.runtime_support import Harness, Timed, ranger_world
 
 #: `Target`'s child `Step` ends at t=2.0, when the sibling `Zapper` emits `Zap` (and `Zip`, with `zip`), and when
-#: `Step`'s `after 2s` falls due. `{transitions}` are `Step`'s, in declaration order, then each target's: `X -> done / log "X"`.
+#: `Step`'s `after 2s` falls due. `{transitions}` are `Step`'s, in declaration order, then each target's
+#: `X -> done / log "X"`.
 TIE = """
 mission M {{
     parallel all {{
@@ -60,7 +61,8 @@ def run(catalog: Catalog, transitions: list[str], *, step: str = "2s", leaf: Any
         zip_too: bool = False) -> tuple[str | None, list[str], Harness]:
     """Run `TIE` with these transitions of `Step`: the outcome, the logs, the harness."""
     targets = sorted({t.split("-> ", 1)[1][0] for t in transitions} - {"d", "f"})
-    lines = [*transitions, *(f'{x} -> done / log "{x}"' for x in targets if f"{x} -> done" not in " ".join(transitions))]
+    written = " ".join(transitions)
+    lines = [*transitions, *(f'{x} -> done / log "{x}"' for x in targets if f"{x} -> done" not in written)]
     text = TIE.format(transitions="\n".join(f"    {t}" for t in lines), step=step,
                       zip="; emit Zip(k: 2)" if zip_too else "")
     text += "".join(f"behavior {x} {{ Wait(duration: 1s) }}\n" for x in targets)
