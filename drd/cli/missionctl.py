@@ -719,8 +719,10 @@ def check_trace(
     sharable: list[str] = typer.Option([], "--sharable", show_default=False,
                                        help="A unit several holders may hold at once (repeatable; default: the "
                                             "sharable devices of --hosts)."),
-    hosts: Path = typer.Option(Path("hosts.yaml"), "--config", "-c", "--hosts",
-                               help="The hosts file the sharable devices are read from (`--hosts` is an alias)."),
+    hosts: Path | None = typer.Option(None, "--config", "-c", "--hosts", show_default=False,
+                                      help="The hosts file the sharable devices are read from (`--hosts` is an "
+                                           "alias; default: hosts.yaml if there is one). Without one, every unit "
+                                           "is taken as exclusive, and the output says so."),
     together: bool = typer.Option(False, "--together",
                                   help="The files are missions that ran together on one cluster (each from its"
                                        " own `missionctl run --trace`): check them as one trace, in the order"
@@ -732,14 +734,7 @@ def check_trace(
     device, no exclusive unit had two holders, nothing was held at the end. Exit 0 if it holds, 1 if not."""
     from drd.tracecheck import check
 
-    shared = set(sharable)
-    if not shared and hosts.is_file():
-        from drd.hosts import HostsError, load_hosts
-
-        try:
-            shared = {d.id for d in load_hosts(hosts, catalog(components)).devices if d.sharable}
-        except HostsError as e:
-            fail_all(e.problems)
+    shared, unknown = _sharable_units(sharable, hosts, components)
     loaded = [(str(path), _trace_records(path)) for path in traces]
     if together and len(loaded) > 1:
         unordered = [name for name, records in loaded if not all(isinstance(r.get("seq"), int) for r in records)]
@@ -752,9 +747,12 @@ def check_trace(
     if as_json:
         print_json([{"file": str(p), "ok": r.ok, "commands": r.commands, "accepted": r.accepted,
                      "refused": r.refused, "grants": r.grants,
-                     "breaches": [{"at": b.at, "kind": b.kind, "detail": b.detail} for b in r.breaches]}
+                     "breaches": [{"at": b.at, "kind": b.kind, "detail": b.detail} for b in r.breaches],
+                     "sharable": None if unknown else sorted(shared), **({"note": unknown} if unknown else {})}
                     for p, r in results])
     else:
+        if unknown:
+            out.print(Text.assemble(("! ", "bold yellow"), unknown))
         for p, r in results:
             mark = ("✓ ", "bold green") if r.ok else ("✗ ", "bold red")
             out.print(Text.assemble(mark, f"{p}: {r.summary()}"))
@@ -765,6 +763,28 @@ def check_trace(
             if r.commands == 0:
                 out.print("  no command records: nothing moved, or the trace was not written by a gate")
     return OK if all(r.ok for _, r in results) else MISSION_FAILED
+
+
+def _sharable_units(sharable: list[str], hosts: Path | None, components: list[Path]) -> tuple[set[str], str]:
+    """(the units several holders may hold at once, "" or why they are unknown): `--sharable`, else the sharable
+    devices of `--config` (which must exist when given), else of ./hosts.yaml if there is one. Without any, a
+    shared radio's holders would read as double holds: the caller says so rather than give a silent verdict."""
+    if hosts is not None:
+        hosts = _hosts_file(hosts)
+    elif Path("hosts.yaml").is_file():
+        hosts = Path("hosts.yaml")
+    if sharable:
+        return set(sharable), ""
+    if hosts is None:
+        return set(), (f"sharable units unknown: no hosts file (looked at {Path('hosts.yaml').absolute()}), so "
+                       "every unit is taken as exclusive (a shared radio's holders are double holds); give "
+                       "--config HOSTS_FILE or --sharable UNIT")
+    from drd.hosts import HostsError, load_hosts
+
+    try:
+        return {d.id for d in load_hosts(hosts, catalog(components)).devices if d.sharable}, ""
+    except HostsError as e:
+        fail_all(e.problems)
 
 
 def _trace_records(path: Path) -> list[dict[str, Any]]:

@@ -1,0 +1,59 @@
+"""`missionctl check-trace` and the hosts file it reads sharable units from (docs audit 2, item 1): a `--config`
+that does not exist is an error (exit 2, naming it), and without any hosts file the output says that sharable
+units are unknown, so a shared radio's holders read as double holds with a reason, not as a silent verdict. A
+real dry-run writes the trace; check-trace runs as a process from a folder with no hosts.yaml."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[2]
+MISSIONCTL = [sys.executable, "-c", "from drd.cli.missionctl import main; main()"]
+
+
+def missionctl(*args: str, cwd: Path) -> subprocess.CompletedProcess[str]:
+    return subprocess.run([*MISSIONCTL, *args], cwd=cwd, capture_output=True, text=True, timeout=180, check=False)
+
+
+@pytest.fixture(scope="module")
+def trace(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """The corridor mission's trace: every RoomSurveillance holds ranger1.radio, which hosts.yaml marks sharable."""
+    path = tmp_path_factory.mktemp("trace") / "run.jsonl"
+    r = missionctl("dry-run", str(ROOT / "missions" / "corridor_surveillance.mission"), "--config",
+                   str(ROOT / "hosts.yaml"), "--trace", str(path), cwd=ROOT)
+    assert r.returncode == 0, r.stderr
+    return path
+
+
+def test_a_config_that_does_not_exist_exits_2_naming_it(trace: Path, tmp_path: Path) -> None:
+    r = missionctl("check-trace", str(trace), "--config", "nonexist.yaml", cwd=tmp_path)
+    assert r.returncode == 2, r.stdout
+    assert f"nonexist.yaml: no such file (looked at {tmp_path / 'nonexist.yaml'})" in r.stderr
+    assert "breach" not in r.stdout
+    j = missionctl("check-trace", str(trace), "--config", "nonexist.yaml", "--json", cwd=tmp_path)
+    assert j.returncode == 2 and json.loads(j.stderr)["looked"] == [str(tmp_path / "nonexist.yaml")]
+
+
+def test_without_a_hosts_file_the_output_says_sharable_units_are_unknown(trace: Path, tmp_path: Path) -> None:
+    r = missionctl("check-trace", str(trace), cwd=tmp_path)
+    assert r.returncode == 1  # the radio's holders are double holds when nothing says it is sharable ...
+    assert "double hold: ranger1.radio" in r.stdout
+    assert "sharable units unknown: no hosts file" in r.stdout  # ... and the output says why
+    assert "--config" in r.stdout and "--sharable" in r.stdout
+    j = missionctl("check-trace", str(trace), "--json", cwd=tmp_path)
+    [result] = json.loads(j.stdout)
+    assert result["sharable"] is None and "sharable units unknown" in result["note"]
+
+
+def test_with_the_hosts_file_the_radio_is_shared_and_nothing_is_said(trace: Path, tmp_path: Path) -> None:
+    r = missionctl("check-trace", str(trace), "--config", str(ROOT / "hosts.yaml"), cwd=tmp_path)
+    assert r.returncode == 0, r.stdout
+    assert "unknown" not in r.stdout and "0 breaches" in r.stdout
+    j = missionctl("check-trace", str(trace), "--sharable", "ranger1.radio", "--json", cwd=tmp_path)
+    [result] = json.loads(j.stdout)
+    assert j.returncode == 0 and result["sharable"] == ["ranger1.radio"] and "note" not in result
