@@ -74,6 +74,9 @@ rejects = logging.getLogger("drd.daemon.rejects")
 MAX_EVENTS = 1000
 #: Seconds a view query waits for the daemon's lock before it reads without it.
 BUSY_WAIT = 0.25
+#: How long a daemon's start waits for the zero Twists it sends its `ros2` robots (`stop_robots`): a robot router
+#: that does not answer holds the start up no longer (the thread goes on, logged).
+START_STOP_WAIT = 2.0
 
 
 @dataclass(frozen=True, slots=True)
@@ -273,6 +276,9 @@ class Daemon:
                             "the bus): host names are unique in a cluster, and one controller acts",
                             hint=f"stop that one first (drd stop --host {me} where it runs), or start this one as"
                                  " another host")
+        # before it serves missions: a robot the process this one replaces left driving (kill -9) stops now
+        stop_robots(self.cluster, me, f"host {me} starting: its previous daemon may have left it driving",
+                    wait=START_STOP_WAIT)
         self._declared += [bus.subscribe(keys.loads, self._on_load), bus.subscribe(keys.announces, self._on_announce),
                            bus.subscribe(keys.lives, self._on_live)]
         self._serve(keys.ping(me), self._ping, Ping)
@@ -374,6 +380,9 @@ class Daemon:
                 for rec in self.view.records.values():
                     if rec.name != self.host and rec.state is HostState.UP:
                         controller.host_up(rec.name)
+            for rec in self.view.records.values():  # a host lost with the old controller: nobody stopped its robots
+                if rec.name != self.host and rec.state is HostState.DOWN and rec.since is not None:
+                    self._stop_robots_of(rec.name, f"down when controller {self.host} took over: {rec.reason}")
             self._announce_due = True  # the others learn that this host serves the executive now
             self._record("elected", self.host, f"the acting controller (term {term}), services up in"
                          f" {self.clock() - started:.2f} s")
@@ -630,8 +639,15 @@ class Daemon:
                     self.controller.host_up(change.host)
             elif change.kind == HostState.DOWN and self.controller is not None:
                 self.controller.host_down(change.host)
+                self._stop_robots_of(change.host, change.detail)
             elif change.kind == HostState.DOWN and self.creator is not None and self._acting_controller(change.host):
                 self.creator.controller_lost(f"controller {change.host} lost ({change.detail})")
+
+    def _stop_robots_of(self, host: str, detail: str) -> None:
+        """The controller saw `host` go down: its daemon's watchdogs may have died with it, so a zero Twist goes to
+        its `ros2` robots from here, on a thread (never the loop's time), unless it comes back meanwhile."""
+        stop_robots(self.cluster, host, f"host {host} down ({detail}), stopped by controller {self.host}",
+                    still=lambda: self.view.state(host) is HostState.DOWN)
 
     def _acting_controller(self, host: str) -> bool:
         """Whether `host` is the controller that acts: the one of hosts.yaml, or with several (a replicated store)
@@ -764,6 +780,28 @@ class Daemon:
                 self._checking = False
 
         threading.Thread(target=check, name="drd-peer-check", daemon=True).start()
+
+
+def stop_robots(cluster: Cluster, host: str, why: str, *, still: Callable[[], bool] = lambda: True,
+                wait: float = 0.0) -> None:
+    """A zero Twist to each `ros2` Drive of `host`'s robots (`drd.hw.safestop`), best effort, on a thread; waits up
+    to `wait` s for it. Nothing at all (not even an import) for a host with none."""
+    if not any(d.driver == "ros2" and d.type == "Drive" for d in cluster.host(host).devices):
+        return
+
+    def send() -> None:
+        from drd.hw.safestop import stop_host_robots
+
+        try:
+            stop_host_robots(cluster, host, why, still=still, wait=wait)
+        except Exception:  # best effort: a stop that cannot be sent must not take the daemon down
+            log.exception("zero Twists to host %s's robots", host)
+
+    thread = threading.Thread(target=send, name=f"drd stop {host}'s robots", daemon=True)
+    thread.start()
+    thread.join(wait)
+    if thread.is_alive():
+        log.warning("the zero Twists to host %s's robots are not all sent after %g s: still trying", host, wait)
 
 
 def _host_of(key: str) -> str | None:
