@@ -681,11 +681,13 @@ class Recording:
         return sorted({*self.tracks, *self.carried})
 
 
-def read(path: Path) -> Recording:
-    """Read a recording written by `Recorder`, in one streaming pass: a file cut short (a crash) gives what its
-    complete chunks hold, with `cut` set and a summary made up from the records (RecordingError naming the file
-    when it holds no drd run at all)."""
+def read(path: Path | str) -> Recording:
+    """Read a recording written by `Recorder` (`path` a Path or a str, as docs/recording.md calls it), in one
+    streaming pass: a file cut short (a crash) gives what its complete chunks hold, with `cut` set and a summary
+    made up from the records (RecordingError naming the file when it holds no drd run at all)."""
     from mcap.exceptions import McapError
+
+    path = Path(path)
     from mcap.reader import NonSeekingReader
     from mcap_protobuf.decoder import DecoderFactory
 

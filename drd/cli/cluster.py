@@ -340,7 +340,7 @@ def query(text: str = typer.Argument(..., metavar="QUERY", show_default=False,
         return OK
     from rich.table import Table
 
-    table = Table(title=f"{len(reply.offers)} offers for {text}", title_justify="left")
+    table = Table(title=offers_title(len(reply.offers), text), title_justify="left")
     for col in ("id", "type", "host", "load", "properties"):
         table.add_column(col)
     for o in reply.offers:
@@ -545,7 +545,8 @@ def stop(mission: str = typer.Argument("", help="The mission id (default: the on
         missions = stop_missions(client, mission, every, timeout)
     ended = [m for m in missions if m.get("already_ended")]
     if as_json:
-        print_json({"stopped": [m for m in missions if m not in ended], "ended": ended})
+        print_json({"stopped": [stop_status(m) for m in missions if m not in ended],
+                    "ended": [stop_status(m) for m in ended]})
         return OK
     if not missions:
         out.print("no mission is running: nothing to stop")
@@ -554,6 +555,25 @@ def stop(mission: str = typer.Argument("", help="The mission id (default: the on
         out.print(f"{m.get('id')}: had already ended ({how}): nothing to stop" if m in ended
                   else f"{m.get('id')}: {how}")
     return OK
+
+
+def offers_title(count: int, text: str) -> str:
+    """The header of `missionctl query`: `1 offer for Camera`, `7 offers for Camera`."""
+    return f"{count} offer{'' if count == 1 else 's'} for {text}"
+
+
+def stop_status(status: dict[str, Any]) -> dict[str, Any]:
+    """A mission's status as `stop --json` gives it: `mission` its name and `id` its id, times rounded as the
+    reports round them (`report_time`), as `run --json` gives them: one shape for a script to read."""
+    from drd.dryrun import report_time
+
+    shown = dict(status)
+    if isinstance(shown.get("id"), str):
+        shown["mission"] = mission_name(shown["id"])
+    for key in ("time", "started"):
+        if isinstance(shown.get(key), int | float) and not isinstance(shown.get(key), bool):
+            shown[key] = report_time(shown[key])
+    return shown
 
 
 def stop_missions(client: Any, mission: str, every: bool, timeout: float) -> list[dict[str, Any]]:
