@@ -800,7 +800,7 @@ def stop_robots(cluster: Cluster, host: str, why: str, *, still: Callable[[], bo
     thread = threading.Thread(target=send, name=f"drd stop {host}'s robots", daemon=True)
     thread.start()
     thread.join(wait)
-    if thread.is_alive():
+    if wait > 0 and thread.is_alive():
         log.warning("the zero Twists to host %s's robots are not all sent after %g s: still trying", host, wait)
 
 

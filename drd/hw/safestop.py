@@ -20,7 +20,7 @@ import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
-from drd.hosts import Cluster, Host
+from drd.hosts import Cluster
 from drd.hw.ros2 import RELIABLE, TWIST, OptionsError, Ros2Link, Ros2Options
 
 log = logging.getLogger("drd.hw.safestop")
@@ -50,40 +50,26 @@ class DriveStop:
         return f"{self.device} ({self.robot}) {where} at {self.endpoint}"
 
 
-def _users(host: Host) -> dict[str, list[str]]:
-    """Device id -> the robots of `host` that name it as a part (as `drd.hw.drivers.drivers_for` reads them)."""
-    users: dict[str, list[str]] = {}
-    for robot in host.robots:
-        for device_id in robot.parts.values():
-            users.setdefault(device_id, []).append(robot.id)
-    return users
-
-
 def ros2_drives(cluster: Cluster, host: str) -> tuple[list[DriveStop], list[str]]:
-    """Every `ros2` Drive `host`'s daemon drives, once per robot it drives it for (a device no robot names is driven
-    for the host itself, as `drivers_for` does), and the problems (a device whose options `drd start` would refuse:
-    its topic is unknown). Pure: the hosts file only."""
+    """Every `ros2` Drive `host`'s daemon drives, for the robot that names it (a Drive is exclusive: one at most; a
+    device no robot names is driven for the host itself, as `drd.hw.drivers.drivers_for` does), and the problems (a
+    device whose options `drd start` would refuse: its topic is not known). Pure: the hosts file only."""
     h = cluster.host(host)
-    users = _users(h)
-    carriers = {r.id: r.carrier for r in h.robots}
+    owners = {device_id: robot.id for robot in reversed(h.robots) for device_id in robot.parts.values()}
     stops: list[DriveStop] = []
     problems: list[str] = []
     for device in h.devices:
         if device.driver != DRIVER or device.type != DRIVE:
             continue
-        ids = users.get(device.id, [])
-        common = {carriers[r] for r in ids}
-        carrier = next(iter(common)) if len(common) == 1 else None
-        owner = ids[0] if len(ids) == 1 else carrier if carrier is not None else ids[0] if ids else h.name
-        for robot in dict.fromkeys([owner, *(ids if len(ids) > 1 else [])]):
-            try:
-                opts = Ros2Options.of(device, robot)
-            except OptionsError as e:
-                problems.append(str(e))
-                continue
-            topic = opts.topic("cmd_vel")
-            assert topic is not None  # cmd_vel cannot be turned off
-            stops.append(DriveStop(host, robot, device.id, opts.endpoint, opts.domain_id, opts.namespace, topic))
+        robot = owners.get(device.id, h.name)
+        try:
+            opts = Ros2Options.of(device, robot)
+        except OptionsError as e:
+            problems.append(str(e))
+            continue
+        topic = opts.topic("cmd_vel")
+        assert topic is not None  # cmd_vel cannot be turned off
+        stops.append(DriveStop(host, robot, device.id, opts.endpoint, opts.domain_id, opts.namespace, topic))
     return stops, problems
 
 
@@ -102,6 +88,7 @@ def send_zeros(stops: Sequence[DriveStop], why: str, *, still: Callable[[], bool
             except Exception as e:  # best effort: the robot's router may be down or unreachable
                 failures.append(f"{stop.describe()}: {e}")
                 log.warning("could not stop %s (%s): %s", stop.describe(), why, e)
+        sent = 0
         for k in range(repeat):
             if k and not still():
                 break
@@ -111,9 +98,11 @@ def send_zeros(stops: Sequence[DriveStop], why: str, *, still: Callable[[], bool
                 except Exception as e:
                     failures.append(f"{stop.describe()}: {e}")
                     log.warning("could not stop %s (%s): %s", stop.describe(), why, e)
-            if k == 0 and publishers:
-                log.warning("zero Twist to %s: %s", ", ".join(s.describe() for s, _ in publishers), why)
-            time.sleep(gap)
+            sent += 1
+            if sent < repeat:
+                time.sleep(gap)
+        if publishers:
+            log.warning("zero Twist (%d times) to %s: %s", sent, ", ".join(s.describe() for s, _ in publishers), why)
     finally:
         link.close()
     return failures
