@@ -276,9 +276,7 @@ class Daemon:
                             "the bus): host names are unique in a cluster, and one controller acts",
                             hint=f"stop that one first (drd stop --host {me} where it runs), or start this one as"
                                  " another host")
-        # before it serves missions: a robot the process this one replaces left driving (kill -9) stops now
-        stop_robots(self.cluster, me, f"host {me} starting: its previous daemon may have left it driving",
-                    wait=START_STOP_WAIT)
+        stop_robots(self.cluster, me, f"host {me} starting", wait=START_STOP_WAIT)  # before it serves missions
         self._declared += [bus.subscribe(keys.loads, self._on_load), bus.subscribe(keys.announces, self._on_announce),
                            bus.subscribe(keys.lives, self._on_live)]
         self._serve(keys.ping(me), self._ping, Ping)
@@ -287,8 +285,7 @@ class Daemon:
         self._serve(keys.db(me, "components"), self._components, ViewRequest, type(None))
         self._serve(keys.db(me, "lookup"), self._lookup, Lookup)
         self._serve(keys.db(me, "query"), self._query, TraderRequest)
-        roles = self.cluster.host(me).roles
-        serving = self.cluster.host(me).serving
+        roles, serving = self.cluster.host(me).roles, self.cluster.host(me).serving
         if Role.SIMULATOR in roles and serving.ros2:  # the world served as ROS 2 robots too (docs/ros2.md)
             from drd.sim.ros2 import ServedSimulationService
 

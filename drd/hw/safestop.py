@@ -89,7 +89,7 @@ def send_zeros(stops: Sequence[DriveStop], why: str, *, still: Callable[[], bool
                 failures.append(f"{stop.describe()}: {e}")
                 log.warning("could not stop %s (%s): %s", stop.describe(), why, e)
         sent = 0
-        for k in range(repeat):
+        for k in range(repeat if publishers else 0):
             if k and not still():
                 break
             for stop, pub in publishers:
