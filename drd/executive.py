@@ -14,6 +14,7 @@ from __future__ import annotations
 import collections
 import functools
 import itertools
+import logging
 from collections.abc import Callable, Iterable, Mapping
 from typing import Any
 
@@ -39,6 +40,8 @@ from drd.runtime.snapshot import NodeImage
 from drd.runtime.telemetry import DriverTelemetry
 from dsl.catalog import Catalog
 from dsl.statechart import Statechart
+
+log = logging.getLogger("drd.executive")
 
 #: Records kept per mission for a client that missed some (`records` command): its latest ones, while it runs and
 #: for the `KEPT_FINISHED` missions that ended last.
@@ -132,18 +135,22 @@ class Executive:
             self.guard.breached(record)
             return
         interp = self.missions.get(mission)
-        if interp is not None:
+        if interp is not None and interp.finished:  # a mission's trace ends with `finished` (docs/trace.md)
+            log.warning("a %s record of %s came after the mission finished: not recorded", record.kind, record.path)
+        elif interp is not None:
             interp.record(record)
 
     def submit(self, chart: Statechart, mission_id: str | None = None,
                listeners: Iterable[Callable[[rec.Record], None]] = (),
                registry: Mapping[str, Callable[[], Component]] | None = None, priority: int = 1,
-               resume: NodeImage | None = None, since: float = 0.0, paused: float = 0.0) -> str:
+               resume: NodeImage | None = None, since: float = 0.0, paused: float = 0.0,
+               earlier: Iterable[rec.Record] = ()) -> str:
         """Start a compiled mission; returns its id (`<name>-<n>`).
 
         `registry` replaces the executive's own for this mission (a cluster mission's `RemoteRegistry`);
         `priority` ranks the mission against the others sharing the team (1 first); `resume`: enter it again as
-        it was saved at `since` (`drd.runtime.snapshot`), after its controller was lost `paused` seconds ago."""
+        it was saved at `since` (`drd.runtime.snapshot`), after its controller was lost `paused` seconds ago;
+        `earlier`: what its hosts recorded meanwhile (the halts when they lost the controller), recorded first."""
         mid = mission_id or f"{chart.name}-{next(self._ids)}"
         self.forget_finished()
         if mid in self.missions:
@@ -159,6 +166,8 @@ class Executive:
             interp.attach(listener)
         self.missions[mid] = interp
         self.order[mid] = next(self._ordinals)
+        for record in earlier:  # they happened before the restore: they come before its records
+            interp.record(record)
         if resume is not None:
             interp.resume(resume, since, paused)
         else:

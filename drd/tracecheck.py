@@ -134,7 +134,7 @@ class Breach:
     """One violation of the invariant, at a record of the trace."""
 
     at: float
-    kind: str  # "non-holder command", "double hold", "held at the end"
+    kind: str  # "non-holder command", "double hold", "held at the end", "after finished", "time backwards"
     detail: str
 
 
@@ -166,7 +166,9 @@ def check(records: Iterable[Mapping[str, Any]], sharable: Collection[str] = ()) 
     report = OwnershipReport()
     holders: dict[tuple[str, str], dict[str, int]] = {}  # (mission, unit) -> {holder path: epoch}
     finished: set[str] = set()
+    seen: list[Mapping[str, Any]] = []
     for r in records:
+        seen.append(r)
         report.records += 1
         kind, mission, path = r.get("kind"), str(r.get("mission", "")), str(r.get("path", ""))
         at = float(r.get("at", 0.0) or 0.0)
@@ -205,4 +207,33 @@ def check(records: Iterable[Mapping[str, Any]], sharable: Collection[str] = ()) 
                 have = ", ".join(f"{h} at epoch {e}" for h, e in held.items()) or "nobody"
                 report.breaches.append(Breach(at, "non-holder command", f"{path} commanded {unit}."
                                               f"{r.get('method')} at epoch {epoch}; holders: {have}"))
+    report.breaches += order_breaches(seen)
     return report
+
+
+def opens_restore(r: Mapping[str, Any]) -> bool:
+    """Whether `r` opens a restore (`released` with reason `controller lost`, or `restored`): the restored
+    mission's clock goes on from its journal's last save, which may be before its last records."""
+    return r.get("kind") == "restored" or r.get("kind") == "released" and r.get("reason") == "controller lost"
+
+
+def order_breaches(records: Iterable[Mapping[str, Any]]) -> list[Breach]:
+    """docs/trace.md's order, per mission: nothing of a mission after its `finished`, and its `at` never goes
+    back, except where a restore opens (`opens_restore`)."""
+    breaches: list[Breach] = []
+    last: dict[str, tuple[float, str]] = {}  # mission -> (at, kind) of its latest record
+    ended: set[str] = set()
+    for r in records:
+        mission, kind = str(r.get("mission", "")), str(r.get("kind"))
+        at = float(r.get("at", 0.0) or 0.0)
+        where = f"{kind} of {r.get('path', '')}" + (f" (seq {r['seq']})" if "seq" in r else "")
+        if mission in ended:
+            breaches.append(Breach(at, "after finished", f"{where} comes after {mission or 'the mission'} finished"))
+        before = last.get(mission)
+        if before is not None and at < before[0] and not opens_restore(r):
+            breaches.append(Breach(at, "time backwards", f"{where} at {at:g} s comes after a {before[1]} at "
+                                                         f"{before[0]:g} s"))
+        last[mission] = (at, kind)
+        if kind == "finished":
+            ended.add(mission)
+    return breaches

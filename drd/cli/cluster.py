@@ -756,8 +756,9 @@ class _RecordWatch:
                      " `missionctl status`", code=1)
             away, self.away_since = time.monotonic() - self.away_since, None
             self.away_total += away
-            err.print(Text.assemble(("▶ ", "bold green"), f"the controller is back after {away:.1f} s: mission"
-                                    f" {mission} resumed"))
+            # "resumed" only once its `restored` record says so (`_take`): a controller that was frozen past the
+            # lease carries on with a mission whose hosts stopped it, which then ends, saying why
+            err.print(Text.assemble(("▶ ", "bold green"), f"the controller is back after {away:.1f} s"))
             self.behind = True
         if self.behind:  # until the executive answered: it may be busy with the resumed mission's first cycles
             self.behind = not self._catch_up(mission)
@@ -801,6 +802,9 @@ class _RecordWatch:
                     "mission": msg.mission, "seq": msg.seq}
             self.trace.write(json.dumps(line, separators=(",", ":"), default=str) + "\n")
         r = _record(msg, rec, base)
+        if isinstance(r, rec.Restored):
+            err.print(Text.assemble(("▶ ", "bold green"), f"mission {msg.mission} resumed from its state at"
+                                    f" {r.since:.1f} s"))
         if r is not None:
             if self.recorder is not None:
                 self.recorder.record(msg.mission, r, msg.seq)  # as the trace line has it

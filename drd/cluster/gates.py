@@ -11,7 +11,9 @@ dicts, and goes to the mission it concerns (`records`).
 
 from __future__ import annotations
 
+import logging
 import threading
+import time
 from collections.abc import Callable, Iterable, Mapping
 from typing import Any
 
@@ -19,6 +21,8 @@ from drd.bus import Message, message
 from drd.rcm.constraints import Measure
 from drd.runtime import records as rec
 from drd.runtime.constraints import Breach
+
+log = logging.getLogger("drd.cluster.gates")
 
 #: (host, robot -> live values) of a `telemetry` record.
 Seen = Callable[[str, Mapping[str, Any]], None]
@@ -132,3 +136,28 @@ def deliver(records: Iterable[Mapping[str, Any]] | None, sink: Callable[[str, re
         found = from_wire(data)
         if found is not None:
             sink(*found)
+
+
+def take_pending(bus: Any, cluster: str, hosts: Iterable[str], update: GateUpdate, patience: float,
+                 down: Callable[[str], bool] = lambda h: False) -> list[dict[str, Any]]:
+    """What each of `hosts` recorded and has not sent yet (the halts it made when it lost its controller), asked
+    now with an empty `update` rather than left for its next reply to a controller: those records must reach the
+    trace before anything a resuming or waking controller does with the mission (docs/trace.md, causal order).
+    A host that does not answer at once (links a freeze dropped are being made again) is asked again for up to
+    `patience` seconds; a host still silent then, or refusing the term, keeps its records for its next reply."""
+    got: list[dict[str, Any]] = []
+    for host in hosts:
+        deadline = time.monotonic() + patience
+        while not down(host):
+            try:
+                reply = bus.call(f"drd/{cluster}/host/{host}/creator", update, timeout=max(0.1, min(1.0, patience)))
+            except Exception as e:  # no answer yet: ask again until the patience runs out
+                if time.monotonic() >= deadline:
+                    log.warning("%s's pending records were not taken (%s): they come with its next reply", host, e)
+                    break
+                time.sleep(0.1)
+                continue
+            if isinstance(reply, GateUpdateReply):
+                got += [r for r in reply.records or () if isinstance(r, dict)]
+            break
+    return got

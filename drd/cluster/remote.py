@@ -38,7 +38,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from drd.bus import Bus, BusError, Message, RemoteError, message
-from drd.cluster.gates import RemoteGates, deliver
+from drd.cluster.gates import GateUpdate, RemoteGates, deliver, take_pending
 from drd.errors import ComponentFailure
 from drd.runtime.component import Component, Context, Status
 from drd.runtime.constraints import Breach
@@ -328,6 +328,7 @@ class ComponentRouter:
         except BusError as e:
             away = self.frozen(sent)
             if away:  # our own silence, not the host's: its robots were stopped and its instances retired meanwhile
+                self.take_halts()  # the halts they made then come before the failure this ends the mission with
                 raise ControllerFrozen(f"this controller was frozen for {away:.1f} s, longer than the lease: its hosts"
                                        " stopped the robots and retired the mission's instances meanwhile") from None
             if op == "start":  # a slow start excludes the host from this placement only; the instance it may
@@ -337,6 +338,14 @@ class ComponentRouter:
             raise HostDown(f"host {host} did not answer {op} within {timeout:g} s ({e})") from None
         deliver(getattr(reply, "records", None), self.records, self.gates.seen if self.gates is not None else None)
         return reply, time.perf_counter() - t0
+
+    def take_halts(self) -> None:
+        """Take now what the devices' hosts recorded while this controller was away (they stopped the robots when
+        they lost it) and hand it to the missions, before this controller does anything more with them."""
+        update = GateUpdate([], self.world, self.generation, self.term)
+        hosts = sorted(set(self.resource_hosts.values()))
+        deliver(take_pending(self.bus, self.cluster, hosts, update, self.timeout, self.is_down), self.records,
+                self.gates.seen if self.gates is not None else None)
 
     def _forget_late_start(self, host: str, msg: ComponentCall | ComponentBatch) -> None:
         """Terminate, in the background, an instance whose start timed out: if the host was only slow, it would

@@ -35,7 +35,7 @@ from typing import Any
 
 from drd.bus import Bus, Message, Query, Reply, message
 from drd.bus.keys import is_concrete
-from drd.cluster.gates import GateUpdate, GateUpdateReply, RemoteGates, deliver
+from drd.cluster.gates import GateUpdate, GateUpdateReply, RemoteGates, deliver, take_pending
 from drd.cluster.guard import SharedGuard
 from drd.cluster.remote import ComponentCall, ComponentError, ComponentRouter, SimCycle
 from drd.cluster.telemetry import RemoteTelemetry
@@ -355,9 +355,10 @@ class MissionRunner:
         return RunReply(mid, True, [], world.name, world.speed, time.time(), base, priority)
 
     def submit(self, world: WorldRun, chart: Any, mid: str, priority: int, base: float, until: float,
-               resume: Any = None, since: float = 0.0, paused: float = 0.0) -> None:
+               resume: Any = None, since: float = 0.0, paused: float = 0.0, earlier: Any = ()) -> None:
         """Start mission `mid` in `world` (or enter it again as `resume`, a `drd.runtime.snapshot.NodeImage`),
-        its components reached through a router of its own (called with the lock held)."""
+        its components reached through a router of its own (called with the lock held); `earlier`: records of it
+        its hosts made while it had no controller (their halts), recorded before it is entered again."""
         executive = self.controller.executive
         router = ComponentRouter(self.bus, self.cluster.name, self.resource_hosts, self.me,
                                  local=executive.registry, mission=mid, world=world.name,
@@ -370,7 +371,7 @@ class MissionRunner:
         world.add(mid, router, base, until)
         listeners = [functools.partial(self.checkpoints.note, mid)] if self.checkpoints is not None else []
         executive.submit(chart, mid, listeners=listeners, registry=router.registry(), priority=priority,
-                         resume=resume, since=since, paused=paused)
+                         resume=resume, since=since, paused=paused, earlier=earlier)
 
     def _new_world(self, req: RunMission) -> WorldRun:
         if self.simulator is None:  # real robots: nothing to load or reset, the clock starts now
@@ -451,6 +452,13 @@ class MissionRunner:
         for host in sorted(set(self.gates.hosts()) | set(self.telemetry.due())):
             self._update_gates(host, world)
 
+    def take_pending(self, world: WorldRun) -> list[dict[str, Any]]:
+        """What the devices' hosts recorded and did not send yet (the halts of a host that lost its controller), as
+        wire records (`drd.cluster.gates.take_pending`): asked before a restore or after a freeze."""
+        hosts = sorted(set(self.gates.device_hosts.values()))
+        return take_pending(self.bus, self.cluster.name, hosts, GateUpdate([], world.name, world.generation, self.term),
+                            self.patience, self.host_down)
+
     def _fetch(self, host: str) -> None:
         """`host`'s pending operations now, and its reply delivered (a robot's first read)."""
         world = self.world
@@ -505,6 +513,7 @@ class WorldRun:
         self.closed = False  # its loop takes no new mission (set under the runner's lock)
         self.cycles = 0
         self.refresh_at = 0.0  # when the answers kept for busy status queries are computed again
+        self.freeze_taken = 0.0  # the freeze whose halts were taken (`_after_freeze`)
         self.thread = threading.Thread(target=self._loop, name=f"drd-world-{name}-{generation}", daemon=True)
 
     def go(self) -> None:
@@ -537,6 +546,7 @@ class WorldRun:
         sim_time = first = max(0.0, self.cycle.sim_time)
         start = time.perf_counter()
         self.began = start - first
+        watched = time.monotonic()
         try:
             while not self.stopping.is_set():
                 with runner.lock:
@@ -545,6 +555,7 @@ class WorldRun:
                         break
                 if runner.lost:
                     runner._lose_robots()
+                watched = self._after_freeze(watched)
                 with runner.lock:
                     stepped = self._real_cycle(sim_time) if self.real else self._cycle(sim_time)
                 if stepped is None:
@@ -574,6 +585,19 @@ class WorldRun:
                  "carried by a batch %s", self.name, sim_time - first, wall, (sim_time - first) / wall if wall else 0.0,
                  self.cycles,
                  1000 * wall / max(1, self.cycles), self.cycle.steps_alone.as_dict())
+
+    def _after_freeze(self, since: float) -> float:
+        """Before a cycle: if this controller was frozen since `since` (past the lease, so its hosts stopped the
+        robots), take the halts they made then, so they come before whatever this cycle does with the missions
+        (a lease that expired meanwhile ends them). The time to watch from next."""
+        runner = self.runner
+        away = runner.frozen(since)
+        if away and away != self.freeze_taken:
+            self.freeze_taken = away
+            records = runner.take_pending(self)
+            with runner.lock:
+                deliver(records, runner.controller.executive.record, runner.telemetry.seen)
+        return time.monotonic()
 
     def _cycle(self, sim_time: float) -> float | None:
         """One control cycle (the runner's lock held): the world's step, the executive's, the time limits. The

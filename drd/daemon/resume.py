@@ -88,6 +88,7 @@ def resume(runner: Any, journal: Journal) -> list[str]:
         state = WorldState("", 0, 0.0, max(j.base for j in jobs), 0)
     with runner.starting:
         world = _rejoin(runner, state, jobs[0])
+        halts = _halts(runner.take_pending(world))  # before anything is recorded of the restore (docs/trace.md)
         resumed: list[str] = []
         with runner.lock:
             executive = runner.controller.executive
@@ -100,7 +101,7 @@ def resume(runner: Any, journal: Journal) -> list[str]:
                         log.info("resuming without the saved %s of %s: its host's resources are not here", key, rid)
             paused = max(0.0, time.time() - state.saved) if state.saved else 0.0
             for job in jobs:
-                if _resume_one(runner, journal, world, job, paused):
+                if _resume_one(runner, journal, world, job, paused, halts.get(job.id, [])):
                     resumed.append(job.id)
         if resumed:
             world.go()
@@ -137,8 +138,24 @@ def _rejoin(runner: Any, state: WorldState, first: Journaled) -> Any:
                                  float(first.request.get("speed") or 1.0))
 
 
-def _resume_one(runner: Any, journal: Journal, world: Any, job: Journaled, paused: float) -> bool:
-    """Compile the journaled mission again and enter it from its last state (with the runner's lock held)."""
+def _halts(records: list[dict[str, Any]]) -> dict[str, list[Any]]:
+    """The hosts' pending records (`MissionRunner.take_pending`: their halts when they lost the controller), by
+    mission; telemetry and breaches are left out (nothing is guarded before the missions are entered again)."""
+    from drd.cluster.gates import from_wire
+    from drd.runtime.records import Record
+
+    by: dict[str, list[Any]] = {}
+    for data in records:
+        found = from_wire(data)
+        if found is not None and isinstance(found[1], Record):
+            by.setdefault(found[0], []).append(found[1])
+    return by
+
+
+def _resume_one(runner: Any, journal: Journal, world: Any, job: Journaled, paused: float,
+                halts: list[Any]) -> bool:
+    """Compile the journaled mission again and enter it from its last state (with the runner's lock held), after
+    recording the halts its hosts made when they lost the controller (`halts`)."""
     from dsl import compile_text
     from dsl.params import ParamError, apply_params
 
@@ -155,7 +172,7 @@ def _resume_one(runner: Any, journal: Journal, world: Any, job: Journaled, pause
         log.error("mission %s cannot be resumed: %s", job.id, e)
         return False
     runner.submit(world, chart, job.id, job.priority, job.base, job.until, resume=image, since=job.at,
-                  paused=paused)
+                  paused=paused, earlier=halts)
     log.info("mission %s resumed from its state at %.1f s (%s)", job.id, job.at - job.base,
              "its saved state" if image is not None else "its start")
     return True
