@@ -227,6 +227,8 @@ def order_breaches(records: Iterable[Mapping[str, Any]]) -> list[Breach]:
         mission, kind = str(r.get("mission", "")), str(r.get("kind"))
         at = float(r.get("at", 0.0) or 0.0)
         where = f"{kind} of {r.get('path', '')}" + (f" (seq {r['seq']})" if "seq" in r else "")
+        if opens_restore(r):  # a restore enters the mission again (a dry-run's stopped executive ended it first)
+            ended.discard(mission)
         if mission in ended:
             breaches.append(Breach(at, "after finished", f"{where} comes after {mission or 'the mission'} finished"))
         before = last.get(mission)

@@ -46,3 +46,11 @@ def test_a_restore_may_start_before_the_last_records_and_goes_on_from_there() ->
 def test_only_a_restore_opens_a_new_clock() -> None:
     trace = [r("entered", 5.0, state="M"), r("released", 4.0, resources=["ranger1"], reason="exit")]
     assert kinds(trace) == ["time backwards"]
+
+
+def test_a_restore_enters_a_finished_mission_again_but_nothing_else_does() -> None:
+    ended = [r("entered", 0.0, state="M"), r("finished", 1.0, outcome="stopped", reason="the executive closed")]
+    again = [r("released", 1.0, resources=["ranger1"], reason="controller lost"), r("restored", 1.0, since=0.5,
+                                                                                     paused=1.0)]
+    assert kinds([*ended, *again, r("entered", 1.0, state="M")]) == []
+    assert kinds([*ended, r("released", 1.0, resources=["ranger1"], reason="exit")]) == ["after finished"]
