@@ -71,3 +71,33 @@ def test_a_killed_host_robot_is_stopped_by_the_controller_then_by_its_restart(
     assert got and all(t == ZERO for t in got), got
     eventually(lambda: "host ranger1 starting" in cluster.log("ranger1")[logged:], "the restarted ranger1's log")
     assert "drd ranger1 started" not in cluster.log("ranger1")[logged:].split("host ranger1 starting")[0]  # before
+
+
+def test_a_frozen_host_robot_is_stopped_by_the_controller_during_the_freeze(
+        cluster: DaemonCluster, robot: tuple[int, Path], tmp_path: Path) -> None:
+    """SIGSTOP of the robot's host: its watchdog is frozen with it. The zero comes from the controller once the lease
+    lapses, while the host is still stopped; after SIGCONT the host commands nothing (its fence)."""
+    cmd_log = robot[1]
+    mission = tmp_path / "long.mission"
+    mission.write_text(LONG, encoding="utf-8")
+    before = len(twists(cmd_log))
+    ranger1 = cluster.procs["ranger1"]
+    with running([*MISSIONCTL, "run", str(mission), "--config", str(cluster.hosts_file), "--json"]) as run:
+        eventually(lambda: len([t for t in twists(cmd_log)[before:] if t["v"] > 0.3]) >= 5, "the robot driven",
+                   timeout=30)
+        ranger1.send_signal(signal.SIGSTOP)
+        try:
+            frozen = len(twists(cmd_log))
+            eventually(lambda: twists(cmd_log)[-1] == ZERO and len(twists(cmd_log)) > frozen, "a zero Twist during"
+                       f" the freeze\n{cluster.tails('controller', chars=2000)}", timeout=20)
+            assert ranger1.poll() is None  # still frozen: the zero is not its own
+        finally:
+            ranger1.send_signal(signal.SIGCONT)
+        out, err = run.communicate(timeout=60)
+    assert run.returncode != 0, (out[-1000:], err[-2000:])
+    # fewer than 3 when the host reports again before the last (it stops its robot itself then)
+    eventually(lambda: "host ranger1 down" in cluster.log("controller") and "times) to ranger1.drive"
+               in cluster.log("controller"), "the controller's zero Twists sent")
+    got = twists(cmd_log)[before:]
+    moving = max(i for i, t in enumerate(got) if t["v"] > 0.3)
+    assert got.index(ZERO, moving) < len(got) and all(t == ZERO for t in got[got.index(ZERO, moving):]), got[moving:]
