@@ -325,6 +325,8 @@ class Daemon:
         from drd.daemon.missions import MissionRunner
 
         me = self.host
+        if any(d.driver == "ros2" and d.type == "Drive" for d in self.cluster.devices):
+            import drd.hw.safestop  # noqa: F401 - now, not when a host is lost (0.17 s: the robot moves meanwhile)
         with self._exec_lock:
             controller = Controller(bus, self.cluster, self.config.catalog, me, self._exec_lock,
                                     on_reject=self._reject, on_change=self._controller_change,
