@@ -125,8 +125,9 @@ class DryRun:
         for r in self.records:
             if isinstance(r, rec.Granted):
                 close(r.path, r.at, None, "regranted")
-                needs = {k: v for k, v in r.resources.items() if "." not in k}  # not each part of an aggregate
-                owned[r.path] = {k: {v} | {u for part, u in r.resources.items() if part.startswith(k + ".")}
+                named = r.named  # held and shared alike: a report lists both
+                needs = {k: v for k, v in named.items() if "." not in k}  # not each part of an aggregate
+                owned[r.path] = {k: {v} | {u for part, u in named.items() if part.startswith(k + ".")}
                                  for k, v in needs.items()}
                 open_[r.path] = {"path": r.path, "resources": needs, "units": sorted(r.epochs),
                                  "from": report_time(r.at)}

@@ -182,7 +182,7 @@ class Explainer:
         holds: dict[str, dict[str, str]] = {}
         for r in self.records:
             if isinstance(r, rec.Granted):
-                holds[r.path] = dict(r.resources)
+                holds[r.path] = r.named
             elif isinstance(r, rec.Released):
                 gone = set(r.resources)
                 holds[r.path] = {k: v for k, v in holds.get(r.path, {}).items() if v not in gone}
@@ -236,7 +236,7 @@ def _waiting(records: Iterator[rec.Record]) -> list[dict[str, Any]]:
                 w["blocked_by"] = list(r.blocked_by)
         elif isinstance(r, rec.Granted):
             waits.pop(r.path, None)
-            holds[r.path] = {k: v for k, v in r.resources.items() if "." not in k}
+            holds[r.path] = {k: v for k, v in r.named.items() if "." not in k}
         elif isinstance(r, rec.Released):
             gone = set(r.resources)
             holds[r.path] = {k: v for k, v in holds.get(r.path, {}).items() if v not in gone}

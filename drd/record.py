@@ -549,8 +549,9 @@ class ActiveView:
             w["blocked_by"] = list(r.blocked_by) or w["blocked_by"]
         elif isinstance(r, rec.Granted):
             self.waits.pop(r.path, None)
-            self.holds[r.path] = dict(r.resources)
-            self.needs[r.path] = {k: v for k, v in r.resources.items() if "." not in k}
+            named = r.named
+            self.holds[r.path] = named
+            self.needs[r.path] = {k: v for k, v in named.items() if "." not in k}
         elif isinstance(r, rec.Released):
             gone = set(r.resources)
             self.holds[r.path] = {k: v for k, v in self.holds.get(r.path, {}).items() if v not in gone}

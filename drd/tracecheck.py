@@ -73,7 +73,7 @@ KINDS: dict[str, dict[str, FieldType]] = {
     "finished": {"outcome": STRING, "reason": STRING},
 }
 #: Fields added to a kind later (a field is only ever added): checked when there, not required of older traces.
-KINDS_OPTIONAL: dict[str, dict[str, FieldType]] = {"exited": {"reason": STRING}}
+KINDS_OPTIONAL: dict[str, dict[str, FieldType]] = {"exited": {"reason": STRING}, "granted": {"shares": NAMES}}
 
 
 def record_problem(record: Any) -> str | None:
@@ -174,11 +174,12 @@ def check(records: Iterable[Mapping[str, Any]], sharable: Collection[str] = ()) 
         at = float(r.get("at", 0.0) or 0.0)
         if kind == "granted":
             report.grants += 1
+            shares = set(dict(r.get("shares") or {}).values())  # a share of a sharable unit, not a hold
             for unit, epoch in dict(r.get("epochs") or {}).items():
                 held = holders.setdefault((mission, unit), {})
                 others = [h for h in held if h != path]
                 shared_by_missions = [(m, u) for (m, u), hs in holders.items() if u == unit and m != mission and hs]
-                if unit not in sharable and (others or shared_by_missions):
+                if unit not in sharable and unit not in shares and (others or shared_by_missions):
                     who = others or [f"{m}: {', '.join(holders[(m, u)])}" for m, u in shared_by_missions]
                     report.breaches.append(Breach(at, "double hold", f"{unit} granted to {path} while held by "
                                                   f"{', '.join(who)}"))

@@ -721,8 +721,9 @@ def check_trace(
                                             "sharable devices of --hosts)."),
     hosts: Path | None = typer.Option(None, "--config", "-c", "--hosts", show_default=False,
                                       help="The hosts file the sharable devices are read from (`--hosts` is an "
-                                           "alias; default: hosts.yaml if there is one). Without one, every unit "
-                                           "is taken as exclusive, and the output says so."),
+                                           "alias; default: hosts.yaml if there is one). Without one, each "
+                                           "grant's `shares` say which units it shares; a trace older than them "
+                                           "has every unit taken as exclusive, and the output says so."),
     together: bool = typer.Option(False, "--together",
                                   help="The files are missions that ran together on one cluster (each from its"
                                        " own `missionctl run --trace`): check them as one trace, in the order"
@@ -736,6 +737,8 @@ def check_trace(
 
     shared, unknown = _sharable_units(sharable, hosts, components)
     loaded = [(str(path), _trace_records(path)) for path in traces]
+    if all("shares" in r for _, records in loaded for r in records if r.get("kind") == "granted"):
+        unknown = ""  # each grant says what it shares (drd.tracecheck.check reads it): nothing is unknown
     if together and len(loaded) > 1:
         unordered = [name for name, records in loaded if not all(isinstance(r.get("seq"), int) for r in records)]
         if unordered:

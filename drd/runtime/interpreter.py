@@ -1031,8 +1031,8 @@ class Interpreter:
         was_revoked = node.revoked
         self.resources.took(node, d.assignment, d.epochs, d.units, d.lease_until)
         if self.listeners:
-            self._notify(rec.Granted(self.clock.now(), node.path, self.resources.resources_of(d.assignment),
-                                     dict(d.epochs)))
+            held, shared = self.resources.resources_of(d.assignment)
+            self._notify(rec.Granted(self.clock.now(), node.path, held, dict(d.epochs), shared))
         if node.reserved_by or node.closing:
             return  # held for a state not entered yet, or given back by the exit under way
         if was_revoked:

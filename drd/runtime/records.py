@@ -77,10 +77,20 @@ class Reserved(Record):
 @dataclass(frozen=True, slots=True)
 class Granted(Record):
     """`path` holds these resources from now on: need -> resource id, and for an aggregate each of its parts
-    (`ranger.drive` -> `ranger1.drive`); `epochs`: unit id -> the fencing epoch of this grant."""
+    (`ranger.drive` -> `ranger1.drive`); `epochs`: unit id -> the fencing epoch of this grant.
+
+    A sharable unit (a radio channel) is not held but shared: it is in `shares` (need -> unit id), never in
+    `resources`, so the trace says from its records alone which grants may overlap (several holders at once, up to
+    the unit's capacity) and which may not (`drd.tracecheck`, ../shared/tools/check_ownership.py)."""
 
     resources: dict[str, str] = field(default_factory=dict)
     epochs: dict[str, int] = field(default_factory=dict)
+    shares: dict[str, str] = field(default_factory=dict)
+
+    @property
+    def named(self) -> dict[str, str]:
+        """Everything the grant names, held or shared: what a report lists as the behavior's resources."""
+        return {**self.resources, **self.shares} if self.shares else dict(self.resources)
 
 
 @dataclass(frozen=True, slots=True)

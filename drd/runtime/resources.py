@@ -18,7 +18,7 @@ from dataclasses import replace
 from typing import Any
 
 from drd.errors import MissionInputError
-from drd.rcm import Aggregate, Candidate, NeedRequest, Request
+from drd.rcm import Aggregate, Candidate, NeedRequest, Request, Unit
 from drd.runtime.broker import ResourceBroker
 from drd.runtime.ownership import Arbiter, Binding, Gates, LocalGates
 from drd.runtime.pool import LIVE, ResourcePool, ResourceView
@@ -178,14 +178,20 @@ class ResourceClient:
             node.grant = None
         return tuple(dict.fromkeys([*ids, *units]))
 
-    def resources_of(self, assignment: Mapping[str, str]) -> dict[str, str]:
-        """What a `granted` record lists: each need's resource id, and each part of an aggregate as `need.part`."""
-        out = dict(assignment)
+    def resources_of(self, assignment: Mapping[str, str]) -> tuple[dict[str, str], dict[str, str]]:
+        """What a `granted` record lists: each need's resource id, and each part of an aggregate as `need.part`,
+        split into what is held (exclusive units, aggregates) and what is shared (sharable units)."""
+        named = dict(assignment)
         for need, rid in assignment.items():
             cand = self.pool.candidates.get(rid)
             if isinstance(cand, Aggregate):
-                out.update({f"{need}.{part}": unit for part, unit in cand.parts.items()})
-        return out
+                named.update({f"{need}.{part}": unit for part, unit in cand.parts.items()})
+        held: dict[str, str] = {}
+        shared: dict[str, str] = {}
+        for name, rid in named.items():
+            cand = self.pool.candidates.get(rid)
+            (shared if isinstance(cand, Unit) and cand.sharable else held)[name] = rid
+        return held, shared
 
     # -------------------------------------------------------------- bindings
     def resolve(self, node: Node, need: ResourceNeed) -> tuple[Node, str, str, str]:

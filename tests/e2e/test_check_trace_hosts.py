@@ -1,7 +1,9 @@
 """`missionctl check-trace` and the hosts file it reads sharable units from (docs audit 2, item 1): a `--config`
-that does not exist is an error (exit 2, naming it), and without any hosts file the output says that sharable
-units are unknown, so a shared radio's holders read as double holds with a reason, not as a silent verdict. A
-real dry-run writes the trace; check-trace runs as a process from a folder with no hosts.yaml."""
+that does not exist is an error (exit 2, naming it); a trace's `granted` records say which units are shares, so
+without any hosts file the check (and ../shared/tools/check_ownership.py) needs nothing more; an older trace
+without `shares` gets a note that sharable units are unknown, so a shared radio's holders read as double holds
+with a reason, not as a silent verdict. A real dry-run writes the trace; check-trace runs as a process from a
+folder with no hosts.yaml."""
 
 from __future__ import annotations
 
@@ -39,13 +41,34 @@ def test_a_config_that_does_not_exist_exits_2_naming_it(trace: Path, tmp_path: P
     assert j.returncode == 2 and json.loads(j.stderr)["looked"] == [str(tmp_path / "nonexist.yaml")]
 
 
-def test_without_a_hosts_file_the_output_says_sharable_units_are_unknown(trace: Path, tmp_path: Path) -> None:
+def test_without_a_hosts_file_the_trace_says_which_grants_are_shares(trace: Path, tmp_path: Path) -> None:
+    granted = [json.loads(line) for line in trace.read_text().splitlines() if '"granted"' in line]
+    assert all("ranger1.radio" not in g["resources"].values() for g in granted)  # a share is not a hold ...
+    assert {g["shares"].get("scout.radio") for g in granted} == {"ranger1.radio"}  # ... it is said as one
     r = missionctl("check-trace", str(trace), cwd=tmp_path)
+    assert r.returncode == 0 and "0 breaches" in r.stdout and "unknown" not in r.stdout, r.stdout
+    tool = ROOT.parent / "shared" / "tools" / "check_ownership.py"
+    if tool.is_file():  # the outside checker, with no --sharable: no double hold either
+        out = subprocess.run([sys.executable, str(tool), str(trace)], capture_output=True, text=True, timeout=60,
+                             check=False)
+        assert out.returncode == 0 and "0 from a non-holder, 0 double holds" in out.stdout, out.stdout
+
+
+def test_an_older_trace_without_a_hosts_file_says_sharable_units_are_unknown(trace: Path, tmp_path: Path) -> None:
+    older = tmp_path / "older.jsonl"  # as drd wrote it before `shares`: the radio among the held resources
+    lines = []
+    for line in trace.read_text().splitlines():
+        r = json.loads(line)
+        if r["kind"] == "granted":
+            r["resources"] = {**r["resources"], **r.pop("shares")}
+        lines.append(json.dumps(r))
+    older.write_text("\n".join(lines) + "\n")
+    r = missionctl("check-trace", str(older), cwd=tmp_path)
     assert r.returncode == 1  # the radio's holders are double holds when nothing says it is sharable ...
     assert "double hold: ranger1.radio" in r.stdout
     assert "sharable units unknown: no hosts file" in r.stdout  # ... and the output says why
     assert "--config" in r.stdout and "--sharable" in r.stdout
-    j = missionctl("check-trace", str(trace), "--json", cwd=tmp_path)
+    j = missionctl("check-trace", str(older), "--json", cwd=tmp_path)
     [result] = json.loads(j.stdout)
     assert result["sharable"] is None and "sharable units unknown" in result["note"]
 

@@ -97,6 +97,11 @@ behavior C {
     Push(v: 0.3, duration: 8s)
 }
 behavior R {
+    Wait(duration: 0.5s)
+    Back
+    plan { Wait < Back }                       # asks for the drive at 0.5 s, once C holds it
+}
+behavior Back {
     needs drv: Drive where drv.id == "ranger1.drive" for 3s
     Push(v: -0.3, duration: 8s)
 }
@@ -114,7 +119,7 @@ def test_a_resumed_parent_does_not_resume_a_child_whose_own_grant_was_revoked(ca
     assert report.outcome == "success", report.reason
     assert_owned(records)
     c_cmds = [r["at"] for r in commands(records, "P/C/Push") if r["accepted"]]
-    r_cmds = [r["at"] for r in commands(records, "R/Push") if r["accepted"]]
+    r_cmds = [r["at"] for r in commands(records, "R/Back/Push") if r["accepted"]]
     assert c_cmds and r_cmds
     assert not [t for t in c_cmds if 2.0 - 1e-6 < t < 6.0 - 1e-6], "C drove while suspended"
     # the robot's side: stopped as soon as C's subtree froze, pushed backwards only while R held the drive

@@ -265,7 +265,7 @@ def _quantity(q: object) -> float:
 def held_quantities(chart: Statechart | None, record: Mapping[str, Any], sharable: Iterable[str]) -> dict[str, float]:
     """How much of each sharable unit a `granted` record takes: the quantities of the needs (or of the aggregates
     whose part it is) that the grant maps to it, as the chart declares them."""
-    resources: Mapping[str, str] = record.get("resources") or {}
+    resources: Mapping[str, str] = {**(record.get("resources") or {}), **(record.get("shares") or {})}
     state = chart.states.get(_state_of(str(record["path"]))) if chart is not None else None
     quantities = {n.name: _quantity(n.quantity) for n in state.needs} if state is not None else {}
     out: dict[str, float] = {}
