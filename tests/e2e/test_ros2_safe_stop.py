@@ -76,7 +76,8 @@ def test_a_killed_host_robot_is_stopped_by_the_controller_then_by_its_restart(
 def test_a_frozen_host_robot_is_stopped_by_the_controller_during_the_freeze(
         cluster: DaemonCluster, robot: tuple[int, Path], tmp_path: Path) -> None:
     """SIGSTOP of the robot's host: its watchdog is frozen with it. The zero comes from the controller once the lease
-    lapses, while the host is still stopped; after SIGCONT the host commands nothing (its fence)."""
+    lapses, while the host is still stopped; kept frozen until its resources leave the manager (its grants freed),
+    then SIGCONT: the host commands nothing that moves the robot again (its fence)."""
     cmd_log = robot[1]
     mission = tmp_path / "long.mission"
     mission.write_text(LONG, encoding="utf-8")
@@ -91,6 +92,9 @@ def test_a_frozen_host_robot_is_stopped_by_the_controller_during_the_freeze(
             eventually(lambda: twists(cmd_log)[-1] == ZERO and len(twists(cmd_log)) > frozen, "a zero Twist during"
                        f" the freeze\n{cluster.tails('controller', chars=2000)}", timeout=20)
             assert ranger1.poll() is None  # still frozen: the zero is not its own
+            # frozen until its grants are gone (a freeze shorter than that is survived: the mission drives on)
+            eventually(lambda: "host ranger1 resources-removed" in cluster.log("controller"), "ranger1's resources"
+                       " to leave the manager")
         finally:
             ranger1.send_signal(signal.SIGCONT)
         out, err = run.communicate(timeout=60)
