@@ -220,7 +220,9 @@ def _active(records: Iterator[rec.Record], waiting: set[str]) -> list[dict[str, 
         frozen = bool(suspended) and (path in suspended or not suspended.isdisjoint(_owners(path)))
         return "suspended" if frozen else "running"
 
-    return [{"path": p, "since": round(active[p], 6), "state": state(p)} for p in _leaves(active)]
+    # earliest first, then by path: the order of the entries of one instant depends on when grants came back
+    return sorted(({"path": p, "since": round(active[p], 6), "state": state(p)} for p in _leaves(active)),
+                  key=lambda row: (row["since"], row["path"]))
 
 
 def _waiting(records: Iterator[rec.Record]) -> list[dict[str, Any]]:

@@ -1073,8 +1073,8 @@ class Interpreter:
             self._notify(rec.Released(self.clock.now(), node.path, ended, reason))
         if reason in ("exit", "release") or node.closing or node.reserved_by:
             return
-        if node.phase is not DONE:
-            self._finish(node, False, f"lost its resources ({d.reason})")
+        if node.phase is not DONE:  # named as `released` lists them: the robot (the need's resource) first
+            self._finish(node, False, f"lost {ended[0] if ended else 'its resources'} ({d.reason})")
 
     def _freeze(self, top: Node, reason: str) -> None:
         """Suspend `top`'s subtree: nothing in it steps or takes a transition; its components get `suspend` (their
