@@ -156,7 +156,9 @@ def start(
     extra: list[Path] = ComponentsOption,
 ) -> int:
     """Start this host's daemon: join the cluster, report load, serve the Component Database (and, on
-    the controller, the Resource Controller Manager and the Mission Executive). Stops on SIGTERM/SIGINT."""
+    the controller, the Resource Controller Manager and the Mission Executive). Stops on SIGTERM/SIGINT.
+    First, a zero Twist to each `ros2` Drive of this host's robots (one a crashed daemon left driving stops);
+    the controller sends one to a lost host's robots (docs/ros2.md "Safety")."""
     from drd.daemon import runfiles
     from drd.daemon.security import SecurityError, transport
 
