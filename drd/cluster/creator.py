@@ -743,8 +743,11 @@ class Creator:
                 now_cores, now_nice = scheduling_of(w.pid)
             except (psutil.Error, OSError) as e:
                 raise CreatorError(f"process {w.pid} running {req.instance}: {_os_reason(e)}") from None
-            return Tuned(inst.path, self.host, w.pid, w.kind, now_cores, now_nice,
-                         sorted(w.instances - {inst.path}))
+            # who else runs in that process now (the worker's own list keeps a terminated instance until its
+            # mission ends)
+            sharing = {i.path for i in self.instances.values()
+                       if i.worker is w and i is not inst and i.state not in (TERMINATED, "starting")}
+            return Tuned(inst.path, self.host, w.pid, w.kind, now_cores, now_nice, sorted(sharing))
 
     # -- helpers ----------------------------------------------------------------------------------------
 

@@ -287,6 +287,8 @@ def test_tune_sets_affinity_and_nice_of_the_instance_process(creator: Creator) -
             creator.tune(Tune("M/A", None, -5))
     # a tuned container takes no new instance: the next one goes to another process
     assert (start(creator, "M/C").outputs or {})["pid"] != pid
+    creator.handle(ComponentCall("terminate", MISSION, "M/B"))  # ended: it shares the process with nobody any more
+    assert creator.tune(Tune("M/A")).shared_with == []
 
 
 def test_missions_run_side_by_side_in_processes_of_their_own_until_retired(creator: Creator) -> None:
