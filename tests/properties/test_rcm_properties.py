@@ -321,7 +321,8 @@ class ResourcePool(RuleBasedStateMachine):
         for holder in self.rm.queue():
             if holder in self.reduced:
                 return  # resumed with fewer needs than it asked: its claims are not known here
-            request = self.requests[holder]
+            # a suspended holder waits for the very resources taken from it (`Pinned` needs): its queued request
+            request = self.rm._queue.waits[holder].request if holder in self.suspended else self.requests[holder]
 
             def preemptible(other: str, holder: str = holder, priority: int = request.priority) -> bool:
                 hold = holds[other]
