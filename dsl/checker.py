@@ -26,6 +26,8 @@ from dsl.param_values import out_of_bounds
 MAX_BEHAVIOR_DEPTH = 64
 #: The parameter types a manifest may give a range (`min`, `max`, `unit`).
 NUMERIC = ("int", "float", "duration")
+#: A var's type and its zero, as a `declare it: var x: T = ZERO` hint writes them.
+ZEROS = {"int": "0", "float": "0.0", "bool": "false", "str": '""', "duration": "0s"}
 #: The default most instances a multiplicity may create (written as a constant, or evaluated when it starts): each is
 #: a statechart and components; a mission of more is a mistake or an attack (`Wait[1000000000]`). A cluster may
 #: raise it (`dsl.limits`, hosts.yaml `cluster.limits.instances`).
@@ -540,9 +542,11 @@ class Checker:
             case ast.SetAction(name=name, value=value):
                 var = next((v for v in body.vars if v.name == name), None)
                 if var is None:
+                    kind = self.typer.infer(value, scope)  # the hint declares it with the type of what is set
+                    kind, zero = (kind, ZEROS[kind]) if isinstance(kind, str) and kind in ZEROS else ("int", "0")
                     self.report.error("unknown-name", f"set {name}: {b.name} has no var {name}", a.span,
                                       did_you_mean(name, [v.name for v in body.vars])
-                                      or f"declare it: var {name}: int = 0")
+                                      or f"declare it: var {name}: {kind} = {zero}")
                 else:
                     self.typer.expect(value, var.type.name, scope, f"var {name}")
             case ast.EmitAction(event=event, args=args):

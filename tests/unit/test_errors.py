@@ -108,6 +108,8 @@ ERRORS: list[tuple[str, str, str, str | None]] = [
      "3:28 unknown resource type Scot", "did you mean Scout?"),
     ("set-unknown-var", m("  Watch\n  Watch -> done / set laps = 1"), "3:19 set laps: M has no var laps",
      "var laps: int = 0"),
+    ("set-unknown-float-var", m("  Watch\n  Watch -> done on MotionDetected / set seen = event.area"),
+     "3:37 set seen: M has no var seen", "var seen: float = 0.0"),  # the hint declares what is set
     ("release-unknown", m("  needs r: Ranger\n  Calibrate\n  Calibrate -> done / release(ranger)"),
      "4:23 release(ranger): no resource ranger is held here", None),
     ("not-a-behavior", m("  Camera"), "2:3 Camera is a resource, not a behavior", "needs x: Camera"),
