@@ -40,7 +40,7 @@ from typing import Any
 from drd.bus import Bus, BusError, Message, RemoteError, message
 from drd.cluster.gates import GateUpdate, RemoteGates, deliver, take_pending
 from drd.errors import ComponentFailure
-from drd.runtime.component import Component, Context, Status
+from drd.runtime.component import Component, Context, Status, step_status
 from drd.runtime.constraints import Breach
 from drd.runtime.records import Record, plain
 
@@ -503,7 +503,7 @@ class RemoteComponent(Component):
         self._apply(reply)
         if reply.error:
             raise ComponentError(reply.error)
-        return Status(reply.status) if reply.status else Status.RUNNING
+        return step_status(reply.status, self.name) if reply.status else Status.RUNNING  # one rule in both modes
 
     def suspend(self) -> None:
         self._lifecycle("suspend")

@@ -30,6 +30,25 @@ class Status(StrEnum):
     """Finished badly: the state fails (`on error` transitions may fire)."""
 
 
+class StatusError(ValueError):
+    """A `step` returned something that is not a `Status`: its state fails with this reason as it is."""
+
+
+def step_status(value: object, component: str) -> Status:
+    """What a step's return value means, by one rule in a dry-run and on a cluster (where it arrives as its `str`):
+    a `Status`, or a `Status`'s own string value (`"success"`: a `StrEnum` equals it); anything else fails the
+    state (StatusError), as a forgotten `return` (None) must not read as `RUNNING` for ever."""
+    if isinstance(value, Status):
+        return value
+    if isinstance(value, str) and value in _BY_VALUE:
+        return _BY_VALUE[value]
+    raise StatusError(f"{component}.step returned {value!s}, not a Status "
+                      "(return Status.RUNNING, Status.SUCCESS or Status.FAILURE)")
+
+
+_BY_VALUE = {s.value: s for s in Status}
+
+
 @dataclass
 class Services:
     """What the runtime lends a component besides its devices, by name and type (no drivers, no simulator: a

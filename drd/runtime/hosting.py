@@ -13,7 +13,7 @@ from collections.abc import Callable, Iterator, Mapping
 from typing import Any
 
 from drd.runtime import records as rec
-from drd.runtime.component import Component, Context, Registry, Services, Status
+from drd.runtime.component import Component, Context, Registry, Services, Status, StatusError
 from drd.runtime.ownership import Arbiter, Binding, BoundDevice
 from drd.runtime.resources import ResourceClient
 from drd.runtime.tree import ACTIVE, Node
@@ -186,7 +186,7 @@ class ComponentHost:
             return False
 
     def failed(self, node: Node, e: Exception) -> None:
-        why = f"component raised {type(e).__name__}: {e}"
+        why = str(e) if isinstance(e, StatusError) else f"component raised {type(e).__name__}: {e}"
         self.notify(rec.Log(self.now(), node.path, why))
         self.on_failure(node, why)
 

@@ -29,7 +29,7 @@ from drd.rcm.constraints import Measure, measure
 from drd.runtime import records as rec
 from drd.runtime.broker import ResourceBroker
 from drd.runtime.clock import Clock
-from drd.runtime.component import Registry, Status
+from drd.runtime.component import Registry, Status, step_status
 from drd.runtime.constraints import Active, ConstraintGuard, robots_named
 from drd.runtime.hosting import ComponentHost
 from drd.runtime.ownership import Arbiter, Gates, LocalGates, NoGates
@@ -114,6 +114,7 @@ class Interpreter:
             event: {} for plan in self._plans.values() for event in plan.on_event}
         self._last_tick = -1.0
         self._settling = False
+        self._stepping = False  # components are being stepped (`step`): their events wait for their step
         self._taken: list[tuple[str, str, str]] = []
         # Events a transition took before their dispatch (a tie it won), with the states that transition entered:
         # those do not hear the same event again when it is dispatched (`_take_chosen`).
@@ -208,21 +209,29 @@ class Interpreter:
                 self._monitor()
         stepped = 0
         host = self.host
-        for node in list(host.running):
-            comp = node.component
-            if node.phase is not ACTIVE or comp is None:
-                continue
-            stepped += 1
-            if node.state.inputs:
-                host.read_inputs(node)
-            try:
-                status = comp.step(now)
-            except Exception as e:  # component code is not ours to trust
-                host.failed(node, e)
-                continue
-            if status is _SUCCESS or status is _FAILURE:  # a failure's reason: its last words, if it said any
-                said = self._said.pop(node.path, "") if self._said else ""
-                self._finish(node, status is _SUCCESS, "" if status is _SUCCESS else said or "failed")
+        self._stepping = True  # what a step emits waits until that step has returned (as on a cluster)
+        try:
+            for node in list(host.running):
+                comp = node.component
+                if node.phase is not ACTIVE or comp is None:
+                    continue
+                stepped += 1
+                if node.state.inputs:
+                    host.read_inputs(node)
+                try:
+                    status = comp.step(now)
+                    if status is not _RUNNING and status is not _SUCCESS and status is not _FAILURE:
+                        status = step_status(status, node.state.component or node.state.name)  # or StatusError
+                except Exception as e:  # component code is not ours to trust
+                    host.failed(node, e)
+                    status = _RUNNING
+                if self.events:  # what it emitted, now that its step returned: before the next one steps
+                    self._settle()
+                if status is not _RUNNING:  # a failure's reason: its last words, if it said any
+                    said = self._said.pop(node.path, "") if self._said else ""
+                    self._finish(node, status is _SUCCESS, "" if status is _SUCCESS else said or "failed")
+        finally:
+            self._stepping = False
         if host.lagging:
             host.end_cycle()
         if self.arbiter.best:  # most cycles of most charts command nothing: no call then
@@ -238,7 +247,7 @@ class Interpreter:
         if self.listeners:
             self._notify(record)
         self.events.append(record)
-        if not self._settling and self.root is not None:  # from outside a step: run to completion now
+        if not self._settling and not self._stepping and self.root is not None:  # from outside: run it now
             self._settle()
 
     def stop(self, reason: str = "stopped by operator") -> None:
@@ -631,11 +640,7 @@ class Interpreter:
         if parent.closing:
             return  # its parent is being exited: nothing reacts any more
         if node.phase is not DONE:
-            self._exit(node, "success" if ok else "failure", "" if ok else why)
-        if node.state.kind is LEAF and node.context is not None:
-            parent.outputs[node.state.name] = dict(node.context.outputs)
-        elif node.outputs:  # a composite's outputs are its finished children's, merged (FindNewDoor.door)
-            parent.outputs[node.state.name] = {k: v for child in node.outputs.values() for k, v in child.items()}
+            self._exit(node, "success" if ok else "failure", "" if ok else why)  # keeps its outputs (`_leave`)
         if node.state.transitions:
             choice = self._choose(node, parent, ok)
             if choice is not None and (ok or choice[0].kind is ast.TriggerKind.ERROR or self._caught(node, parent)):
@@ -907,6 +912,12 @@ class Interpreter:
             if n.bindings:
                 self.arbiter.flush_from(resources.holder(n), self.host.command_failed)
                 resources.unbind(n, "exited")
+        parent = n.parent
+        if parent is not None:  # its outputs, as it left them (after `terminate`), stay readable whatever ended it
+            if n.context is not None and n.state.kind is LEAF:
+                parent.outputs[n.state.name] = dict(n.context.outputs)
+            elif n.outputs:  # a composite's outputs are its children's, merged (FindNewDoor.door)
+                parent.outputs[n.state.name] = {k: v for child in n.outputs.values() for k, v in child.items()}
         n.phase = DONE
         if n in self._constraints:
             del self._constraints[n]
