@@ -404,6 +404,18 @@ def check_references(types: Iterable[ComponentType]) -> list[ManifestProblem]:
     return problems
 
 
+def _replaced(source: str, user: str) -> bool:
+    """Whether the type defined at `source` comes from another folder than drd's own and than the manifest that
+    uses it (`user`): a folder given with -C/DRD_COMPONENTS replacing a standard type, which the errors of the
+    standard manifests that use it must name, or nothing in them points at the user's file."""
+    def folder(path: str) -> Path:
+        p = Path(path)
+        return p.parent.parent.resolve() if p.name == "manifest.yaml" else p
+
+    own = Path(components.__file__).parent.resolve()
+    return folder(source) not in (own, folder(user)) and folder(user) == own
+
+
 def _supertype_problems(t: ComponentType, types: Mapping[str, ComponentType]) -> list[ManifestProblem]:
     """`extends`: known abstract types of the same kind, no cycle, and one type per inherited property."""
     out: list[ManifestProblem] = []
@@ -472,8 +484,9 @@ class _References:
             known = [n for n, t in self.types.items() if not kinds or t.kind in kinds]
             known += SCALAR_TYPES if scalars else ()
             self.fail(key, f"unknown type {type_!r}{_hint(type_, known)}")
-        elif kinds and target.kind not in kinds:
-            self.fail(key, f"{type_} is {_A[target.kind]}, expected {wanted}")
+        elif kinds and target.kind not in kinds:  # a user's folder replaced a type this manifest uses: say where
+            where = f" (defined in {target.source})" if _replaced(target.source, self.t.source) else ""
+            self.fail(key, f"{type_} is {_A[target.kind]}{where}, expected {wanted}")
             return None
         return target
 

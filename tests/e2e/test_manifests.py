@@ -338,6 +338,19 @@ def test_bad_manifests(files: dict[str, object], expected: list[str], tmp_path: 
     assert [str(p) for p in info.value.problems] == expected
 
 
+def test_a_standard_manifest_broken_by_a_users_type_names_the_users_file(tmp_path: Path,
+                                                                          monkeypatch: pytest.MonkeyPatch) -> None:
+    """A user's folder that replaces the data type Door with a behavior breaks the standard manifests that use
+    Door: their errors say where that Door comes from, or nothing in them points at the user's file."""
+    write(tmp_path / "mine", manifest("behavior", name="Door"))
+    monkeypatch.chdir(tmp_path)
+    with pytest.raises(ManifestError) as info:
+        load_catalog([STANDARD, Path("mine")])
+    broken = [str(p) for p in info.value.problems if "Door is a behavior" in str(p)]
+    assert broken and all("(defined in mine/Door/manifest.yaml), expected a data type" in p for p in broken), broken
+    assert any("AlignRanger" in p for p in broken)
+
+
 # ---------------------------------------------------------------- loading
 
 
