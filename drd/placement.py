@@ -3,8 +3,8 @@
 The daemon gathers what it knows about every host into `HostView`s (its latest load report, its
 devices, roles and the instances it runs) and asks `place`. The policy is a small framework on the
 model of the Kubernetes scheduler: **filters** (`FILTERS`), each saying why a host cannot take the
-component (down, excluded after a failed start, missing devices, too few cores, no worker role,
-outside the caller's affinity, multiplicity reached), then **scores** (`SCORES`) of the hosts left,
+component (down, excluded after a failed start, not offered there, missing devices, too few cores,
+no worker role, outside the caller's affinity, multiplicity reached), then **scores** (`SCORES`) of the hosts left,
 each plugin giving a value on one scale (percentage points) and a weight; the lowest total wins, ties
 going to the smaller host name. Every answer carries a `Decision` record of it all, for the logs and
 `missionctl status`. See docs/placement.md.
@@ -35,7 +35,9 @@ class HostView:
     """What the placer knows of one host: its last load report, hardware and running instances.
 
     `cpu` and `memory` are percentages (0-100); `devices` the RC types it has (`Camera`); `running`
-    counts instances by component name; `cores` is None when unknown; `roles` as in hosts.yaml.
+    counts instances by component name; `cores` is None when unknown; `roles` as in hosts.yaml; `offers` the
+    component types its daemon announced it can run (its catalog: a type whose manifest it lacks, it refuses
+    to start), None while it has announced nothing.
     """
 
     name: str
@@ -47,14 +49,17 @@ class HostView:
     running: Mapping[str, int] = field(default_factory=dict, hash=False)
     cores: int | None = None
     roles: frozenset[str] = frozenset()
+    offers: frozenset[str] | None = None
 
 
 def view_of(host: Host, *, cpu: float = 0.0, memory: float = 0.0, up: bool = True,
-            running: Mapping[str, int] | None = None) -> HostView:
-    """A `HostView` of a configured host: devices, cores and roles from `hosts.yaml`, load from a report."""
+            running: Mapping[str, int] | None = None, offers: Collection[str] | None = None) -> HostView:
+    """A `HostView` of a configured host: devices, cores and roles from `hosts.yaml`, load from a report, the
+    types it offers from its announcement."""
     running = dict(running or {})
     return HostView(host.name, cpu, memory, sum(running.values()), up, frozenset(d.type for d in host.devices),
-                    running, host.cores, frozenset(str(r) for r in host.roles))
+                    running, host.cores, frozenset(str(r) for r in host.roles),
+                    None if offers is None else frozenset(offers))
 
 
 # ---------------------------------------------------------------- the decision record
@@ -156,6 +161,7 @@ class Context:
     role: str | None = None  # only hosts with it (None: the caller asks for none, or no candidate has it)
     prefer: frozenset[str] = frozenset()
     near: Mapping[str, float] = field(default_factory=dict, hash=False)  # host -> share of the devices, 0-1
+    why: Mapping[str, str] = field(default_factory=dict, hash=False)  # excluded host -> why its start failed
 
 
 @dataclass(frozen=True, slots=True)
@@ -183,6 +189,22 @@ def _missing_devices(host: HostView, ctx: Context) -> str | None:
     return f"no {', '.join(missing)} device{'s' if len(missing) > 1 else ''}" if missing else None
 
 
+def _excluded(host: HostView, ctx: Context) -> str | None:
+    if host.name not in ctx.exclude:
+        return None
+    why = ctx.why.get(host.name, "")
+    return f"excluded (its start there failed: {why})" if why else "excluded (a start there failed or timed out)"
+
+
+def _not_offered(host: HostView, ctx: Context) -> str | None:
+    """A host whose daemon does not announce the type would refuse its start (no manifest of it there); a host
+    that lacks its devices is refused for those (`_missing_devices`), once."""
+    name = ctx.component.name
+    if host.offers is None or name in host.offers or required_devices(ctx.component) - host.devices:
+        return None
+    return f"does not offer {name} (its daemon has no manifest of it)"
+
+
 def _cores(host: HostView, ctx: Context) -> str | None:
     wanted = ctx.component.scheduling.cores
     if wanted and host.cores is not None and max(wanted) >= host.cores:
@@ -204,7 +226,8 @@ def _multiplicity(host: HostView, ctx: Context) -> str | None:
 #: The filters, in the order their reasons are given.
 FILTERS: tuple[Filter, ...] = (
     Filter("up", lambda h, c: None if h.up else "down", final=True),
-    Filter("excluded", lambda h, c: "excluded (a start there failed or timed out)" if h.name in c.exclude else None),
+    Filter("excluded", _excluded),
+    Filter("offers", _not_offered),
     Filter("devices", _missing_devices),
     Filter("cores", _cores),
     Filter("role", lambda h, c: f"no {c.role} role" if c.role is not None and c.role not in h.roles else None),
@@ -230,6 +253,33 @@ def with_more(view: HostView, component: str, n: int = 1) -> HostView:
     several placed in one cycle spread instead of all going to the host that looked emptiest."""
     return replace(view, instances=view.instances + n,
                    running={**view.running, component: view.running.get(component, 0) + n})
+
+
+@dataclass(frozen=True, slots=True)
+class Recent:
+    """A placement made lately, which the host's announcements may not show yet: `seen` is how many instances of
+    `component` the host announced when it was made."""
+
+    host: str
+    component: str
+    seen: int
+
+
+def with_recent(views: Iterable[HostView], recent: Sequence[Recent]) -> list[HostView]:
+    """The views with the recent placements (oldest first) their hosts do not announce yet: each instance counts
+    once. Of k placements of a type on a host that announced `seen` of it before the first, those beyond what it
+    announces now (`seen + k - now`, 0 to k) are added (an instance that ended meanwhile hides one for a while)."""
+    groups: dict[tuple[str, str], list[Recent]] = {}
+    for r in recent:
+        groups.setdefault((r.host, r.component), []).append(r)
+    out = []
+    for view in views:
+        for (host, component), made in groups.items():
+            if host == view.name:
+                pending = min(len(made), max(0, made[0].seen + len(made) - view.running.get(component, 0)))
+                view = with_more(view, component, pending) if pending else view
+        out.append(view)
+    return out
 
 
 def required_devices(component: ComponentType) -> frozenset[str]:
@@ -299,13 +349,14 @@ def filtered(host: HostView, ctx: Context) -> tuple[str, ...]:
 
 def place(component: ComponentType, candidates: Sequence[HostView], weights: Placement, *,
           params: Mapping[str, object] | None = None, prefer_hosts: Collection[str] = (),
-          exclude: Collection[str] = (), affinity: Collection[str] | None = None, role: str | None = None,
-          near: Mapping[str, float] | None = None) -> Outcome:
+          exclude: Collection[str] | Mapping[str, str] = (), affinity: Collection[str] | None = None,
+          role: str | None = None, near: Mapping[str, float] | None = None) -> Outcome:
     """Choose the host for one more instance of `component`, or say why none can take it; either answer carries
     the `Decision` record.
 
     `params` are checked against the manifest's (unknown names, missing required ones, scalar types)
-    before any host is considered; `exclude` are hosts where a start already failed (the retry path);
+    before any host is considered; `exclude` are hosts where a start already failed (the retry path), a mapping
+    giving why (the host's refusal, kept in the decision);
     `affinity`, when given, restricts the choice to those hosts; `role`, when some candidate has it, to
     the hosts with that role (`worker`); `near` gives each host's share (0-1) of the devices the
     instance's mission state uses (`shares`), scored by the `affinity` weight. Candidates are taken by
@@ -325,7 +376,8 @@ def place(component: ComponentType, candidates: Sequence[HostView], weights: Pla
     ctx = Context(component, weights, running_count(component.name, hosts), frozenset(exclude),
                   None if affinity is None else frozenset(affinity),
                   role if role is not None and any(role in h.roles for h in hosts) else None,
-                  frozenset(prefer_hosts), dict(near or {}))
+                  frozenset(prefer_hosts), dict(near or {}),
+                  {h: str(w) for h, w in exclude.items() if w} if isinstance(exclude, Mapping) else {})
     return decide(hosts, ctx)
 
 
@@ -405,6 +457,6 @@ def _versus(best: Scored, runner: Scored) -> str:
 
 
 __all__ = ["AFFINITY_SCALE", "FILTERS", "INSTANCE_SCALE", "PREFER_BONUS", "SCORES", "Context", "Decision", "Filter",
-           "HostView", "Outcome", "Part", "Placed", "Score", "Scored", "Unplaceable", "check_params", "decide",
-           "filtered", "parts", "place", "refusals", "required_devices", "running_count", "score", "shares",
-           "total", "view_of", "with_more"]
+           "HostView", "Outcome", "Part", "Placed", "Recent", "Score", "Scored", "Unplaceable", "check_params",
+           "decide", "filtered", "parts", "place", "refusals", "required_devices", "running_count", "score", "shares",
+           "total", "view_of", "with_more", "with_recent"]

@@ -15,11 +15,12 @@ component would have done.
 A component with no device needs is *movable*. With a placer (`ComponentRouter.place`, the Load Balancer's
 policy over the hosts that are up, `drd.placement`), its `start` goes to the host the policy picks; a host that
 does not register it within `START_TIMEOUT` (every `start` may take that long: a first start on a host may
-load the component's module), or whose start fails, is excluded and the next best is tried (`PLACE_TRIES`
-hosts in all). When its host is lost later, the instance is started again on another host before its next
-call, restored from the last snapshot its host sent (`Component.snapshot`, which comes back with the replies
-when it changed): the mission sees the same component go on (it gets its parameters and inputs again with
-every call). `migrate` moves a running one on purpose (`missionctl migrate`, `drd.daemon.migrate`). Without a
+load the component's module), or whose start fails, is excluded with its reason and the next best is tried,
+until one starts it or the policy says why none can (a host that does not offer the type is never picked).
+When its host is lost later, the instance is started again on another host before its next call, restored
+from the last snapshot its host sent (`Component.snapshot`, which comes back with the replies when it
+changed): the mission sees the same component go on (it gets its parameters and inputs again with every
+call). `migrate` moves a running one on purpose (`missionctl migrate`, `drd.daemon.migrate`). Without a
 placer (the router of a test), a movable component runs right here, in the controller (`local`).
 
 A component bound to devices runs on the host that owns them, and only there: when that host does not answer
@@ -141,8 +142,6 @@ class ControllerFrozen(ComponentError):
     controller went silent), so it is neither marked gone nor placed around."""
 
 
-#: How many hosts a movable component's start is tried on before its state fails.
-PLACE_TRIES = 3
 #: Seconds a Creator may take to register a started instance (its first start on a host may load its module).
 START_TIMEOUT = 5.0
 
@@ -194,7 +193,7 @@ class ComponentRouter:
                  local: Mapping[str, Callable[[], Component]], mission: str, world: str,
                  active: Callable[[], Iterable[tuple[Any, Component]]] = lambda: (),
                  timeout: float = 1.0, dead: Callable[[str], bool] = lambda h: False, catalog: Any = None,
-                 place: Callable[[str, Mapping[str, Any], frozenset[str]], str] | None = None,
+                 place: Callable[[str, Mapping[str, Any], Mapping[str, str]], str] | None = None,
                  gates: RemoteGates | None = None,
                  records: Callable[[str, Record | Breach], None] = lambda mission, record: None,
                  cycle: SimCycle | None = None, generation: int = 0, term: float = 0.0,
@@ -215,7 +214,7 @@ class ComponentRouter:
         self.timeout = timeout
         self.dead = dead
         self.catalog = catalog
-        self.place = place  # (component, params, hosts to avoid) -> host, or ComponentError saying why none
+        self.place = place  # (component, params, hosts to avoid -> why) -> host, or ComponentError saying why none
         self.placed: deque[tuple[str, str, str]] = deque(maxlen=200)  # (path, host, "placed" or "re-placed")
         self.gone: set[str] = set()
         self.cycle = cycle if cycle is not None else SimCycle()
@@ -547,26 +546,32 @@ class RemoteComponent(Component):
                     self._call(op)
 
     def _place(self, how: str, avoid: set[str], restore: list[Any] | None = None) -> None:
-        """Start on the host the policy picks, excluding each host that does not answer (`PLACE_TRIES`), with
-        `restore` (`[state]`) if given."""
+        """Start on the host the policy picks, with `restore` (`[state]`) if given. A host whose start fails or
+        times out is excluded, with why, and the policy asked again, until a host starts it or the policy says why
+        none can: each try excludes one more host, so there are at most as many tries as hosts."""
         place = self.router.place
         assert place is not None
-        path, tried = self._ctx.path, set(avoid)
-        last: ComponentError | None = None
-        for _ in range(PLACE_TRIES):
+        path, refused = self._ctx.path, dict.fromkeys(avoid, "")
+        while True:
             self.host = None
             # hosts that timed out in this mission are left out (down ones the policy refuses itself)
-            self.host = place(self.name, self._params, frozenset(tried | self.router.gone))  # or ComponentError
+            excluded = {**dict.fromkeys(self.router.gone, "it did not answer in this mission"), **refused}
+            try:
+                host = place(self.name, self._params, excluded)
+            except ComponentError as e:
+                if len(refused) > len(avoid):
+                    raise ComponentError(f"{path}: {self.name} could not be started: {e}") from None
+                raise
+            if host in excluded:  # a policy that ignores its exclusions must not loop
+                raise ComponentError(f"{path}: {self.name}: the placer chose {host} again, where its start failed")
+            self.host = host
             try:
                 self._call("start", params=self._params, bindings={}, rank=self._rank, restore=restore)
             except ComponentError as e:  # it did not answer, or the start failed there: the next host by policy
-                tried.add(self.host)
-                last = e
+                refused[host] = str(e)
                 continue
-            self.router.placed.append((path, self.host, how))
+            self.router.placed.append((path, host, how))
             return
-        self.host = None
-        raise ComponentError(f"{path}: {self.name} could not be started on {', '.join(sorted(tried))}: {last}")
 
     def _replace(self) -> None:
         """Its host is lost: start the instance again on another host, from its last snapshot (None if it sent

@@ -44,7 +44,7 @@ from drd.daemon.placements import PlacementLog
 from drd.daemon.resume import Checkpoints, resume, wait_for_hosts
 from drd.hosts import Cluster, Role
 from drd.journal import Journal
-from drd.placement import HostView
+from drd.placement import HostView, Recent
 from drd.profiling import Sampler
 from drd.sim.service import SimReply, SimRequest, SimulationService
 from drd.sim.service import key as sim_key
@@ -57,7 +57,7 @@ CONTROL_PERIOD = 0.1
 #: Seconds a Creator or the simulator may take to answer one call, at least: a host counts as lost only once it
 #: has not answered for its lease (`MissionRunner.patience`), so a short freeze delays the mission, never fails it.
 CALL_TIMEOUT = 1.0
-#: Seconds a placement counts on its host before the host's own announcements (its instances) show it.
+#: Seconds at most a placement counts on its host while the host's own announcements (its instances) lack it.
 RECENT_PLACEMENT = 3.0
 #: Wall seconds between two refreshes of the answers status queries get while the mission loop is held up.
 REFRESH_EVERY = 0.5
@@ -165,7 +165,7 @@ class MissionRunner:
         self.host_down = host_down
         self.host_views = host_views
         self.frozen = frozen
-        self._recent: list[tuple[float, str, str]] = []  # (when, host, component) of placements not yet reported
+        self._recent: list[tuple[float, Recent]] = []  # (when, placement) of placements maybe not yet announced
         self.placements = PlacementLog(lambda: controller.executive.missions)  # for `missionctl status`
         self.resource_hosts = {r.id: r.host for r in cluster.resources() if r.host}
         self.patience = max(CALL_TIMEOUT, cluster.lease)  # how long a call waits for a host that does not answer
@@ -417,23 +417,26 @@ class MissionRunner:
         self.world, self.lost = world, []
         return world
 
-    def place(self, component: str, params: Mapping[str, Any], exclude: frozenset[str], mission: str = "") -> str:
+    def place(self, component: str, params: Mapping[str, Any], exclude: Mapping[str, str] | frozenset[str],
+              mission: str = "") -> str:
         """The host for one more instance of a movable component (`drd.placement.place` over the Component
         Database's view of the hosts), or ComponentError naming every refused host and why. The hosts with the
         `worker` role take them (every host when none has it): the controller keeps its cycles for the mission.
-        With `mission`, the hosts of the devices its instance's state uses count (device affinity) and the
-        decision is kept for `missionctl status` (`self.placements`)."""
+        `exclude` maps the hosts where this instance's start failed to why (kept in the decision). With `mission`,
+        the hosts of the devices its instance's state uses count (device affinity) and the decision is kept for
+        `missionctl status` (`self.placements`)."""
         from drd.daemon.placements import near_devices
-        from drd.placement import Placed, place, shares, with_more
+        from drd.placement import Placed, place, shares, with_recent
 
         ct = self.catalog.get(component)
         if ct is None or self.host_views is None:
             raise ComponentError(f"{component} is not in the controller's catalog")
+        self._forget_refused(component, exclude)
         now = time.monotonic()
         self._recent = [p for p in self._recent if now - p[0] < RECENT_PLACEMENT]
-        views = self.host_views()
-        for _at, host, name in self._recent:  # not yet in the hosts' reports: counted, so a cycle's starts spread
-            views = [with_more(v, name) if v.name == host else v for v in views]
+        announced = self.host_views()
+        # placements the hosts do not announce yet count, each once, so that a cycle's starts spread
+        views = with_recent(announced, [r for _at, r in self._recent])
         interp = self.controller.executive.missions.get(mission) if mission else None
         path, devices = near_devices(getattr(interp, "root", None), component, self.resource_hosts)
         decision = place(ct, views, self.cluster.placement, params=params, exclude=exclude, role=str(Role.WORKER),
@@ -442,9 +445,21 @@ class MissionRunner:
             self.placements.note(mission, path or component, decision.decision)
         if not isinstance(decision, Placed):
             raise ComponentError(decision.reason)
-        self._recent.append((now, decision.host, component))
+        seen = next((v.running.get(component, 0) for v in announced if v.name == decision.host), 0)
+        self._recent.append((now, Recent(decision.host, component, seen)))
         log.info("placement: %s on %s (%s)", component, decision.host, "; ".join(decision.reasons))
         return decision.host
+
+    def _forget_refused(self, component: str, exclude: Mapping[str, str] | frozenset[str]) -> None:
+        """A retry after the last placement's start failed (its host now excluded): that placement runs nowhere, so
+        it no longer counts on its host; its reason is logged. The retry follows the failure at once (the mission's
+        starts are made one at a time)."""
+        last = self._recent[-1][1] if self._recent else None
+        if last is None or last.component != component or last.host not in exclude:
+            return
+        self._recent.pop()
+        why = exclude.get(last.host, "") if isinstance(exclude, Mapping) else ""
+        log.warning("placement: %s refused %s: %s", last.host, component, why or "its start failed or timed out")
 
     def flush_gates(self, world: WorldRun) -> None:
         """Send the gate operations nobody carried this cycle (a device whose holder lost it stops now), and ask

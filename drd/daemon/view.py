@@ -329,14 +329,16 @@ class ClusterView:
         return out
 
     def host_views(self) -> list[HostView]:
-        """What the Load Balancer needs of every configured host (down ones included, refused as `down`)."""
+        """What the Load Balancer needs of every configured host (down ones included, refused as `down`); the types
+        each offers are those its daemon announced (it refuses to start any other)."""
         out = []
         for r in self.records.values():
             running: dict[str, int] = {}
             for inst in r.instances:
                 running[inst.component] = running.get(inst.component, 0) + 1
             cpu, memory = (r.report.cpu, r.report.memory) if r.report else (0.0, 0.0)
-            out.append(view_of(r.config, cpu=cpu, memory=memory, up=r.state is HostState.UP, running=running))
+            out.append(view_of(r.config, cpu=cpu, memory=memory, up=r.state is HostState.UP, running=running,
+                               offers=r.announcement.components if r.announcement else None))
         return out
 
     # -- internals -------------------------------------------------------------------------------

@@ -12,7 +12,6 @@ import pytest
 from drd.bus import Message, Query, Reply
 from drd.bus.local import LocalBus
 from drd.cluster.remote import (
-    PLACE_TRIES,
     ComponentBatch,
     ComponentBatchReply,
     ComponentCall,
@@ -33,6 +32,7 @@ class Hosts:
         self.calls: list[tuple[str, str]] = []
         self.dead: set[str] = set()
         self.asked: list[frozenset[str]] = []
+        self.why: list[dict[str, str]] = []  # each call's exclusions with their reasons
         self.failing: set[str] = set()  # hosts whose Creator answers a start with an error
         self.queryables = {host: bus.serve(f"drd/t/host/{host}/creator", self._creator(host)) for host in serving}
 
@@ -48,8 +48,9 @@ class Hosts:
             return ComponentBatchReply(replies) if isinstance(msg, ComponentBatch) else replies[0]
         return serve
 
-    def place(self, component: str, params: Mapping[str, Any], exclude: frozenset[str]) -> str:
-        self.asked.append(exclude)
+    def place(self, component: str, params: Mapping[str, Any], exclude: Mapping[str, str]) -> str:
+        self.asked.append(frozenset(exclude))
+        self.why.append(dict(exclude))
         for host in self.order:
             if host not in exclude and host not in self.dead:
                 return host
@@ -104,15 +105,29 @@ def test_hosts_that_timed_out_in_this_mission_are_not_offered_again() -> None:
     assert comp.host == "b" and hosts.asked == [frozenset({"a"})], "no try is spent on a"
 
 
-def test_the_start_fails_the_state_after_as_many_hosts_as_it_may_try() -> None:
-    names = [f"h{i}" for i in range(PLACE_TRIES + 1)]
+def test_tries_go_on_while_an_untried_host_remains_and_each_refusal_is_passed_on_with_its_reason() -> None:
+    """Fleet audit defect 2: three refusing hosts used up the 3 tries and failed the state while a fourth could
+    run it. Each refusal excludes its host, with the Creator's words, and the placer is asked again."""
+    names = [f"h{i}" for i in range(5)]
+    hosts = Hosts(LocalBus(), names, names)
+    hosts.failing |= set(names[:4])
+    comp, _ = movable(hosts)
+    comp.start()
+    assert comp.host == "h4" and list(comp.router.placed) == [("M/Wait", "h4", "placed")]
+    assert hosts.calls == [(h, "start") for h in names]
+    assert hosts.why[-1] == dict.fromkeys(names[:4], "Wait failed to start here: no worker")
+
+
+def test_the_start_fails_the_state_once_every_host_refused_it_with_the_placers_reasons() -> None:
+    names = [f"h{i}" for i in range(5)]
     hosts = Hosts(LocalBus(), [], names)  # nobody answers
     comp, _ = movable(hosts)
     with pytest.raises(ComponentError) as err:
         comp.start()
     assert not isinstance(err.value, HostDown), "the state fails: no further placement"
-    assert all(name in str(err.value) for name in names[:PLACE_TRIES])
-    assert len(hosts.asked) == PLACE_TRIES
+    assert str(err.value) == "M/Wait: Wait could not be started: no host can run Wait: all excluded"
+    assert len(hosts.asked) == len(names) + 1 and hosts.asked[-1] == frozenset(names)
+    assert comp.host is None
 
 
 def test_when_no_host_can_run_it_the_placers_reason_fails_the_state() -> None:
