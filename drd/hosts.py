@@ -69,7 +69,12 @@ SECURITY_KEYS: Mapping[SecurityMode, tuple[str, ...]] = {
     SecurityMode.TLS: ("ca", "cert", "key"),
 }
 _TOP_KEYS = ("cluster", "hosts")
-_CLUSTER_KEYS = ("name", "security", "lease", "placement", "world", "history", "store", "limits")
+#: What a `driver:` may be: the name of a package under `components/`, or of one `cluster.drivers` maps to a package
+#: (so never a path, a module or a pasted blob).
+DRIVER_NAME = re.compile(r"[a-z][a-z0-9_]{0,39}")
+#: A Python package a driver lives in (`cluster.drivers`): dotted identifiers, never a path.
+_PACKAGE = re.compile(r"[A-Za-z_][A-Za-z0-9_]{0,63}(\.[A-Za-z_][A-Za-z0-9_]{0,63}){0,7}")
+_CLUSTER_KEYS = ("name", "security", "lease", "placement", "world", "history", "store", "limits", "drivers")
 _LIMITS_KEYS = ("instances", "compile")
 _STORE_KEYS = ("etcd",)
 #: An etcd member's client URL (its HTTP JSON gateway; TLS to etcd is not supported yet).
@@ -234,6 +239,9 @@ class Cluster:
     history: int = DEFAULT_HISTORY  # finished missions the controller keeps (status, stop); older ones are dropped
     store: Store = Store()  # the controllers' journal: SQLite on the one controller, or etcd for several
     limits: Limits = Limits()  # what a mission may create and cost to compile (`dsl.limits`)
+    #: Driver name -> the Python package its classes are in, for drivers outside drd (`cluster.drivers`; the
+    #: default for `driver: X` is `components.X`: docs/drivers.md).
+    drivers: Mapping[str, str] = field(default_factory=dict, hash=False)
 
     @property
     def controller(self) -> Host:
@@ -331,12 +339,29 @@ class _Parser(ConfigReader):
         history = self.history(c["history"], "cluster.history") if "history" in c else DEFAULT_HISTORY
         store = self.store(c["store"], "cluster.store") if "store" in c else Store()
         limits = self.limits(c["limits"], "cluster.limits") if "limits" in c else Limits()
+        drivers = self.driver_packages(c["drivers"], "cluster.drivers") if "drivers" in c else {}
         hosts = tuple(self.host(n, h, p) for n, h, p in self.entries(data.get("hosts", {}), "hosts"))
         if data.get("hosts") == {}:
             self.fail("hosts", "expected at least one host")
         self.check_cluster(hosts, store)
         return Cluster(name or "", security, lease, placement, hosts, self.source, world or DEFAULT_WORLD, history,
-                       store=store, limits=limits)
+                       store=store, limits=limits, drivers=drivers)
+
+    def driver_packages(self, value: object, key: str) -> dict[str, str]:
+        """`{serial: acme_drivers.serial}`: the Python package of each driver kept outside drd (importable: on the
+        daemons' PYTHONPATH); `sim` is drd's own."""
+        out: dict[str, str] = {}
+        for driver, package in self.mapping(value, key).items():
+            where = f"{key}.{driver}"
+            if not isinstance(driver, str) or not DRIVER_NAME.fullmatch(driver):
+                self.fail(where, "expected a driver's name: lowercase letters, digits and _, at most 40")
+            elif driver == "sim":
+                self.fail(where, "sim is drd's own driver (the simulator's): name another")
+            elif not isinstance(package, str) or not _PACKAGE.fullmatch(package):
+                self.fail(where, f"expected a Python package name such as acme_drivers.serial, got {got(package)}")
+            else:
+                out[str(driver)] = package
+        return out
 
     def limits(self, value: object, key: str) -> Limits:
         """`{instances: 5000, compile: 30s}`: raise (or lower) what a mission may create and cost to compile."""

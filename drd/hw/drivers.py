@@ -5,7 +5,8 @@ A device of RC type `T` with `driver: X` is implemented by the class at:
 - `sim`: the entry point of `T`'s manifest (`components/T/manifest.yaml`, e.g.
   `components.sim.range_sensor:SimRangeSensor`), which must lie under `components.sim`;
 - any other `X`: `components.X.<t>:<Xcap>T`, where `<t>` is `T` in snake_case and `<Xcap>` is `X` in
-  CamelCase: `driver: serial` for a `Drive` is `components.serial.drive:SerialDrive`.
+  CamelCase: `driver: serial` for a `Drive` is `components.serial.drive:SerialDrive`; or, when hosts.yaml's
+  `cluster.drivers` names a package for `X` (a driver kept outside drd), `<package>.<t>:<Xcap>T`.
 
 The class is constructed as `cls(device, robot_id, backend)`, where `backend` is `services[X]`: the
 `Simulation` for `sim`, whatever the host provides under that name otherwise (None if nothing). A
@@ -24,7 +25,7 @@ from typing import TYPE_CHECKING, Any
 from drd import entrypoints
 from drd.entrypoints import EntryPointError
 from drd.errors import HardwareFailure
-from drd.hosts import Cluster, Device
+from drd.hosts import DRIVER_NAME, Cluster, Device
 from drd.hw.commands import DriverDeclarationError, conforms, declared, spec_of
 from drd.hw.interfaces import INTERFACES
 from drd.manifests import show
@@ -53,17 +54,18 @@ def _camel(name: str) -> str:
     return "".join(part[:1].upper() + part[1:] for part in re.split(r"[_\-]", name) if part)
 
 
-#: What a `driver:` may be: the name of a package under `components/` (so never a path, a module or a pasted blob).
-DRIVER_NAME = re.compile(r"[a-z][a-z0-9_]{0,39}")
 
 
-def driver_entry_point(device: Device, catalog: Catalog | None = None) -> str:
-    """`module:Class` implementing `device` (see the module docstring); reads the catalog for `sim` only."""
+def driver_entry_point(device: Device, catalog: Catalog | None = None, packages: Mapping[str, str] | None = None
+                       ) -> str:
+    """`module:Class` implementing `device` (see the module docstring); reads the catalog for `sim` only.
+    `packages` (hosts.yaml `cluster.drivers`) names the package of a driver kept outside drd."""
     if not DRIVER_NAME.fullmatch(device.driver):
         raise DriverError(f"{show(device.driver)} is not a driver's name: lowercase letters, digits and _, at most 40"
                           " (the package under components/, e.g. sim or ros2)")
     if device.driver != SIM:
-        return f"components.{device.driver}.{_snake(device.type)}:{_camel(device.driver)}{device.type}"
+        package = (packages or {}).get(device.driver) or f"components.{device.driver}"
+        return f"{package}.{_snake(device.type)}:{_camel(device.driver)}{device.type}"
     if catalog is None:
         from drd.manifests import load_catalog
         catalog = load_catalog()
@@ -78,12 +80,13 @@ def driver_entry_point(device: Device, catalog: Catalog | None = None) -> str:
 def load_driver(device: Device, robot_id: str, services: Mapping[str, Any]) -> object:
     """Import (first use only) and build the driver of `device` for robot `robot_id`.
 
-    `services` holds the backends by driver name (`"sim"`: the Simulation) and optionally `"catalog"`.
+    `services` holds the backends by driver name (`"sim"`: the Simulation) and optionally `"catalog"` and
+    `"packages"` (the cluster's `drivers:`, for drivers kept outside drd).
 
     Raises:
         DriverError: the module or class is missing, the backend is missing, or construction failed.
     """
-    entry = driver_entry_point(device, services.get("catalog"))
+    entry = driver_entry_point(device, services.get("catalog"), services.get("packages"))
     where = f"device {device.id} (type {device.type}, driver {show(device.driver)})"
     try:
         cls = entrypoints.load(entry)
@@ -144,6 +147,8 @@ def drivers_for(cluster: Cluster, host_name: str, sim: Simulation | None = None,
     backends: dict[str, Any] = dict(services or {})
     if sim is not None:
         backends[SIM] = sim
+    if cluster.drivers:
+        backends["packages"] = cluster.drivers
     if catalog is not None:
         backends["catalog"] = catalog
     elif "catalog" not in backends and any(d.driver == SIM for d in host.devices):
@@ -181,7 +186,7 @@ def check_driver_classes(cluster: Cluster, host: str, catalog: Catalog | None = 
     for device in cluster.host(host).devices:
         key = f"{cluster.source}: hosts.{host}.devices.{device.id.removeprefix(host + '.')}.driver"
         try:
-            cls = entrypoints.load(driver_entry_point(device, catalog))
+            cls = entrypoints.load(driver_entry_point(device, catalog, cluster.drivers))
             if not isinstance(cls, type):
                 raise DriverError(f"{device.driver}: not a class")
             declared(cls)
