@@ -216,7 +216,7 @@ class Creator:
             if served is not None:
                 served.close()
         with self._lock:
-            self._retire_all()
+            self._retire_all(wait=True)  # nothing of it outlives its close
             self._close_drivers()
             self.instances.clear()
             self._dirty = False
@@ -650,9 +650,9 @@ class Creator:
         w.instances.discard(inst.path)
         if w.died:
             return
-        if w.kind == "dedicated" or not w.alive:
+        if w.kind == "dedicated" or not w.alive:  # its process goes with it, after its `shutdown` (bounded)
             self._workers.pop(w.pid, None)
-            self.pool.release(w)
+            self.pool.retire(w, [inst.path])
             return
         try:
             w.send(Drop((inst.path,)))
@@ -660,17 +660,23 @@ class Creator:
             self._worker_died(w, w.died)
 
     def _retire(self, mission: str) -> None:
-        """A mission ended: its instances are dropped and its processes retired (killed; the pool has fresh ones)."""
+        """A mission ended: its instances are dropped (each gets its `shutdown`, bounded: `WorkerPool.retire`) and
+        its processes retired (they exit, or are killed; the pool has fresh ones)."""
         for key in [k for k, inst in self.instances.items() if inst.mission == mission]:
             del self.instances[key]
         for pid in [pid for pid, w in self._workers.items() if w.mission == mission]:
-            self.pool.release(self._workers.pop(pid))
+            w = self._workers.pop(pid)
+            self.pool.retire(w, sorted(w.instances))
         self._dirty = True
 
-    def _retire_all(self) -> None:
-        for w in self._workers.values():
-            self.pool.release(w)
+    def _retire_all(self, wait: bool = False) -> None:
+        """Every process retired, its instances' `shutdown` first (bounded, `WorkerPool.retire`); `wait`: return
+        once every one is gone (at most `SHUTDOWN_GRACE` and a little, all in parallel)."""
+        reapers = [self.pool.retire(w, sorted(w.instances)) for w in self._workers.values()]
         self._workers.clear()
+        for reaper in reapers:
+            if wait and reaper is not None:
+                reaper.join()
 
     def _publish(self) -> None:
         """Refresh what `instance_infos` says, and tell the daemon (to announce it) when it changed."""

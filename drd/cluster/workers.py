@@ -58,6 +58,7 @@ import time
 import types
 from collections.abc import Iterable, Iterator, Sequence
 from multiprocessing.connection import Connection
+from multiprocessing.connection import wait as wait_for
 from multiprocessing.process import BaseProcess
 from typing import Any
 
@@ -105,6 +106,15 @@ FAULT_AFTER = 3
 #: Longest pause between two tries of the background refill while workers cannot start: with the fork server's
 #: traceback in the log at each try, at most one a minute (and none once the pool is cold, `keep_warm`).
 RETRY_MAX = 60.0
+
+#: Seconds a dropped instance's `shutdown` may take, all of a process's dropped instances together: the worker
+#: gives up waiting for the rest after it (each runs in a thread of its own), and a retired process still running
+#: then is killed (`WorkerPool.retire`, a little later). A component that hangs in `shutdown` never holds up a
+#: mission's end, a move or a retire, and its process never outlives this bound by much.
+SHUTDOWN_GRACE = 1.0
+#: Seconds after `SHUTDOWN_GRACE` a retired worker is given to exit (its interpreter's own ending) before it is
+#: killed.
+REAP_MARGIN = 0.5
 
 #: Modules every worker needs, imported once by the fork server.
 BASE_PRELOAD = ("drd.cluster.workers", "drd.runtime.component", "drd.runtime.records", "drd.hw.interfaces")
@@ -296,6 +306,31 @@ class WorkerPool:
         worker.kill()
         with self._cond:
             self._forget(worker)
+
+    def retire(self, worker: Worker, paths: Iterable[str], grace: float = SHUTDOWN_GRACE) -> threading.Thread | None:
+        """Stop a worker whose instances (`paths`) are dropped: they get their `shutdown` first (`Drop`), then the
+        worker exits by itself (its pipe is closed); one still running `grace` seconds (and a little) later is
+        killed. Returns at once: the reaper thread that waits (None: the worker was killed now), so a retire
+        never waits for component code; join it to know the process is gone."""
+        paths = tuple(paths)
+        if not paths or not worker.alive:
+            self.release(worker)
+            return None
+        try:
+            worker.send(Drop(paths))
+        except WorkerDied:
+            self.release(worker)
+            return None
+        with contextlib.suppress(OSError):
+            worker.conn.close()  # the worker reads the Drop, then the end of its pipe: it exits
+        reaper = threading.Thread(target=self._reap, args=(worker, grace + REAP_MARGIN), name="drd-reap", daemon=True)
+        reaper.start()
+        return reaper
+
+    def _reap(self, worker: Worker, wait: float) -> None:
+        """A retired worker exits by itself within `wait` seconds, or is killed then; either way reaped."""
+        wait_for([worker.proc.sentinel], wait)
+        self.release(worker)
 
     def idle(self) -> int:
         with self._cond:
@@ -646,13 +681,26 @@ def worker_main(conn: Connection) -> None:
                 case Run(calls, latest):
                     link.send(Done(tuple(run_calls(calls, latest, link, hosted))))
                 case Drop(paths):
-                    for path in paths:
-                        _shutdown(hosted.pop(path, None))
+                    _shutdown_all([hosted.pop(path, None) for path in paths], SHUTDOWN_GRACE)
                 case _:  # nothing else comes unasked
                     pass
     except (EOFError, OSError):  # the Creator retired this worker (or died): its end of the pipe is closed
         pass
     os._exit(0)
+
+
+def _shutdown_all(dropped: Sequence[_Hosted | None], grace: float) -> None:
+    """Dropped instances' `shutdown`, in order, each in a thread of its own, all within `grace` seconds: one that
+    hangs keeps its thread (the worker goes on, or exits with its pipe), never the worker's loop; those not
+    reached by then are not called."""
+    deadline = time.monotonic() + grace
+    for h in dropped:
+        left = deadline - time.monotonic()
+        if h is None or h.comp is None or left <= 0:
+            continue
+        t = threading.Thread(target=_shutdown, args=(h,), name="drd-shutdown", daemon=True)
+        t.start()
+        t.join(left)
 
 
 def _shutdown(h: _Hosted | None) -> None:

@@ -70,6 +70,15 @@ class Probe(Component):
                 ctx.log(f"caught {type(e).__name__}: {e}")
         return Status.RUNNING
 
+    def shutdown(self) -> None:
+        """`mode: note:<file>` writes its path there (`hang:<file>`: then never returns)."""
+        how, _, file = str(self.ctx.params.get("mode", "")).partition(":")
+        if how in ("note", "hang"):
+            with open(file, "a") as f:
+                f.write(f"{self.ctx.path} {os.getpid()}\n")
+        while how == "hang":
+            time.sleep(1.0)
+
 
 class Reader(Component):
     """Reads the Ranger's sensors each step (the readings the Creator reads ahead); `mode: launch` launches a
@@ -168,6 +177,14 @@ def _alive(pid: int) -> bool:
         return psutil.Process(pid).status() != psutil.STATUS_ZOMBIE
     except psutil.NoSuchProcess:
         return False
+
+
+def _all_gone(pids: list[int], within: float = 15.0) -> bool:
+    """Whether every pid is gone (exited or killed, reaped) within a bounded wait."""
+    deadline = time.monotonic() + within
+    while any(_alive(pid) for pid in pids) and time.monotonic() < deadline:
+        time.sleep(0.05)
+    return not any(_alive(pid) for pid in pids)
 
 
 def start(c: Creator, path: str, component: str = "Probe", mode: str = "", **kw: Any) -> ComponentReply:
@@ -301,8 +318,38 @@ def test_missions_run_side_by_side_in_processes_of_their_own_until_retired(creat
         ("m1", "M/A"), ("m1", "M/X"), ("m2", "M/A")]
     assert step(creator, "M/A").status == "running"  # m1's M/A is still m1's
     creator.handle(ComponentCall("retire", MISSION, ""))
-    assert not [pid for pid in pids if _alive(pid)] and _alive(other)
+    assert _all_gone(pids) and _alive(other)
     assert [(i.mission, i.name) for i in creator.instance_infos()] == [("m2", "M/A")]
+
+
+def test_every_instance_dropped_gets_its_shutdown_once_before_its_process_goes(creator: Creator,
+                                                                                tmp_path: Path) -> None:
+    """docs/components.md: `shutdown` once, when the instance is dropped: at its mission's end (retire), in a
+    container or a dedicated process, and when it moves away (it goes on elsewhere: this object is done)."""
+    note = tmp_path / "shutdown.log"
+    replies = [start(creator, p, c, mode=f"note:{note}") for p, c in (("M/A", "Probe"), ("M/B", "Probe"),
+                                                                       ("M/X", "Alone"), ("M/V", "Probe"))]
+    pids = sorted({(r.outputs or {})["pid"] for r in replies})
+    assert len(pids) == 2  # A, B and V share a container; X has a process of its own
+    creator.handle(ComponentCall("terminate", MISSION, "M/V", status="moved"))  # it goes on on another host
+    creator.handle(ComponentCall("terminate", MISSION, "M/A", status="success"))  # ended, not dropped: kept
+    step(creator, "M/B")
+    creator.handle(ComponentCall("retire", MISSION, ""))
+    assert _all_gone(pids)
+    lines = sorted(note.read_text().splitlines())
+    assert [line.split()[0] for line in lines] == ["M/A", "M/B", "M/V", "M/X"]  # each once
+    assert {int(line.split()[1]) for line in lines} == set(pids)  # in its own process, before that went
+
+
+def test_a_shutdown_that_hangs_does_not_keep_its_process(creator: Creator, tmp_path: Path) -> None:
+    """`shutdown` is bounded (`SHUTDOWN_GRACE`): one that never returns is given up on and its process killed;
+    the retire itself returns at once, and the Creator's other missions go on."""
+    note = tmp_path / "shutdown.log"
+    pid = (start(creator, "M/H", "Alone", mode=f"hang:{note}").outputs or {})["pid"]
+    creator.handle(ComponentCall("retire", MISSION, ""))
+    assert (start(creator, "M/N").outputs or {}).get("pid") not in (None, pid)  # the Creator still serves
+    assert _all_gone([pid])
+    assert note.read_text().split() == ["M/H", str(pid)]  # it was called, once
 
 
 @pytest.fixture
