@@ -97,6 +97,8 @@ class Executive:
         self.registry = registry
         self.cluster = cluster
         self.services = dict(services or {})
+        if isinstance(registry, EntryPoints):  # its components' emits are checked against their manifests
+            self.services.setdefault("catalog", registry.catalog)
         self.preallocate = preallocate
         self.broker = ResourceBroker(ResourceManager(lease=lease, default_slice=default_slice))
         self.pool = ResourcePool(self.broker)

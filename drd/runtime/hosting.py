@@ -14,6 +14,7 @@ from typing import Any
 
 from drd.runtime import records as rec
 from drd.runtime.component import Component, Context, Registry, Services, Status, StatusError
+from drd.runtime.emits import check_emit
 from drd.runtime.ownership import Arbiter, Binding, BoundDevice
 from drd.runtime.resources import ResourceClient
 from drd.runtime.tree import ACTIVE, Node
@@ -70,8 +71,7 @@ class ComponentHost:
                 self.on_failure(node, f"no implementation of component {name} is available")
                 return
             path = node.path
-            ctx = Context(path, dict(node.scope), resources,
-                          lambda ev, **f: self.emit(ev, path, **f),
+            ctx = Context(path, dict(node.scope), resources, self._emitter(path, name),
                           lambda text: self.notify(rec.Log(self.now(), path, text)),
                           self.now, devices=devices,
                           services=Services(dependencies=self.services.get("dependencies")),
@@ -94,6 +94,21 @@ class ComponentHost:
             self.failed(node, e)
             return
         self.running[node] = None
+
+    def _emitter(self, path: str, component: str) -> Callable[..., None]:
+        """The `emit` of a component instance: checked against its manifest's `events` (`drd.runtime.emits`) when
+        the catalog is known (`services["catalog"]`), so a refused emit raises in the component's call and fails
+        its state, naming the component, the event and the field."""
+        catalog = self.services.get("catalog")
+        ct = catalog.get(component) if catalog is not None else None
+        if ct is None:
+            return lambda ev, **f: self.emit(ev, path, **f)
+        declared = ct.events
+
+        def emit(ev: str, **fields: Any) -> None:
+            check_emit(component, declared, ev, fields)
+            self.emit(ev, path, **fields)
+        return emit
 
     def read_inputs(self, node: Node, entry: bool = False) -> None:
         """Set a leaf's inputs as the mission bound them (`dsl.dataflow`): on entry every one (a shared datum is
