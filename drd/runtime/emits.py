@@ -13,10 +13,11 @@ import math
 from collections.abc import Iterable, Mapping
 from typing import Any
 
+from drd.errors import ComponentFailure
 from dsl.catalog import RecordSpec
 
 
-class EmitError(ValueError):
+class EmitError(ComponentFailure, ValueError):
     """An emit its component's manifest does not allow: the emitting state fails with this reason."""
 
 
