@@ -257,12 +257,20 @@ def with_more(view: HostView, component: str, n: int = 1) -> HostView:
 
 @dataclass(frozen=True, slots=True)
 class Recent:
-    """A placement made lately, which the host's announcements may not show yet: `seen` is how many instances of
-    `component` the host announced when it was made."""
+    """A placement made lately (`at`, a monotonic time), which the host's announcements may not show yet: `seen` is
+    how many instances of `component` the host announced when it was made."""
 
     host: str
     component: str
     seen: int
+    at: float = 0.0
+
+
+def refused_last(recent: Sequence[Recent], component: str, exclude: Collection[str]) -> bool:
+    """Whether the latest placement's start failed: it is of `component` and this placement of it excludes its
+    host (the retry; a mission's starts are made one at a time, so it follows the failure at once). Such a
+    placement runs nowhere, so it must not count on its host."""
+    return bool(recent) and recent[-1].component == component and recent[-1].host in exclude
 
 
 def with_recent(views: Iterable[HostView], recent: Sequence[Recent]) -> list[HostView]:
@@ -458,5 +466,5 @@ def _versus(best: Scored, runner: Scored) -> str:
 
 __all__ = ["AFFINITY_SCALE", "FILTERS", "INSTANCE_SCALE", "PREFER_BONUS", "SCORES", "Context", "Decision", "Filter",
            "HostView", "Outcome", "Part", "Placed", "Recent", "Score", "Scored", "Unplaceable", "check_params",
-           "decide", "filtered", "parts", "place", "refusals", "required_devices", "running_count", "score", "shares",
-           "total", "view_of", "with_more", "with_recent"]
+           "decide", "filtered", "parts", "place", "refusals", "refused_last", "required_devices", "running_count",
+           "score", "shares", "total", "view_of", "with_more", "with_recent"]

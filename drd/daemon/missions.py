@@ -165,7 +165,7 @@ class MissionRunner:
         self.host_down = host_down
         self.host_views = host_views
         self.frozen = frozen
-        self._recent: list[tuple[float, Recent]] = []  # (when, placement) of placements maybe not yet announced
+        self._recent: list[Recent] = []  # placements their hosts may not announce yet, oldest first
         self.placements = PlacementLog(lambda: controller.executive.missions)  # for `missionctl status`
         self.resource_hosts = {r.id: r.host for r in cluster.resources() if r.host}
         self.patience = max(CALL_TIMEOUT, cluster.lease)  # how long a call waits for a host that does not answer
@@ -426,17 +426,20 @@ class MissionRunner:
         the hosts of the devices its instance's state uses count (device affinity) and the decision is kept for
         `missionctl status` (`self.placements`)."""
         from drd.daemon.placements import near_devices
-        from drd.placement import Placed, place, shares, with_recent
+        from drd.placement import Placed, place, refused_last, shares, with_recent
 
         ct = self.catalog.get(component)
         if ct is None or self.host_views is None:
             raise ComponentError(f"{component} is not in the controller's catalog")
-        self._forget_refused(component, exclude)
+        if refused_last(self._recent, component, exclude):  # the retry after a start failed there
+            last = self._recent.pop()
+            why = exclude.get(last.host, "") if isinstance(exclude, Mapping) else ""
+            log.warning("placement: %s refused %s: %s", last.host, component, why or "its start failed or timed out")
         now = time.monotonic()
-        self._recent = [p for p in self._recent if now - p[0] < RECENT_PLACEMENT]
+        self._recent = [r for r in self._recent if now - r.at < RECENT_PLACEMENT]
         announced = self.host_views()
         # placements the hosts do not announce yet count, each once, so that a cycle's starts spread
-        views = with_recent(announced, [r for _at, r in self._recent])
+        views = with_recent(announced, self._recent)
         interp = self.controller.executive.missions.get(mission) if mission else None
         path, devices = near_devices(getattr(interp, "root", None), component, self.resource_hosts)
         decision = place(ct, views, self.cluster.placement, params=params, exclude=exclude, role=str(Role.WORKER),
@@ -446,20 +449,9 @@ class MissionRunner:
         if not isinstance(decision, Placed):
             raise ComponentError(decision.reason)
         seen = next((v.running.get(component, 0) for v in announced if v.name == decision.host), 0)
-        self._recent.append((now, Recent(decision.host, component, seen)))
+        self._recent.append(Recent(decision.host, component, seen, now))
         log.info("placement: %s on %s (%s)", component, decision.host, "; ".join(decision.reasons))
         return decision.host
-
-    def _forget_refused(self, component: str, exclude: Mapping[str, str] | frozenset[str]) -> None:
-        """A retry after the last placement's start failed (its host now excluded): that placement runs nowhere, so
-        it no longer counts on its host; its reason is logged. The retry follows the failure at once (the mission's
-        starts are made one at a time)."""
-        last = self._recent[-1][1] if self._recent else None
-        if last is None or last.component != component or last.host not in exclude:
-            return
-        self._recent.pop()
-        why = exclude.get(last.host, "") if isinstance(exclude, Mapping) else ""
-        log.warning("placement: %s refused %s: %s", last.host, component, why or "its start failed or timed out")
 
     def flush_gates(self, world: WorldRun) -> None:
         """Send the gate operations nobody carried this cycle (a device whose holder lost it stops now), and ask

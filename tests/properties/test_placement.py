@@ -17,12 +17,14 @@ from drd.placement import (
     PREFER_BONUS,
     HostView,
     Placed,
+    Recent,
     Unplaceable,
     check_params,
     place,
     running_count,
     score,
     view_of,
+    with_recent,
 )
 from dsl.catalog import Catalog, ComponentType, Kind, ParamSpec, Scheduling
 
@@ -124,7 +126,9 @@ percent = st.one_of(st.floats(0, 100, allow_nan=False), st.sampled_from([0.0, 50
 views = st.builds(
     HostView, st.sampled_from(NAMES), percent, percent, st.integers(0, 40), st.booleans(),
     st.frozensets(st.sampled_from(DEVICES)), st.dictionaries(st.sampled_from(["Camera", "Watch", "Ranger"]),
-                                                             st.integers(0, 3)), st.none() | st.integers(1, 8))
+                                                             st.integers(0, 3)), st.none() | st.integers(1, 8),
+    st.frozensets(st.sampled_from(["worker"])),
+    st.none() | st.frozensets(st.sampled_from(["Camera", "Watch", "Ranger"])))
 clusters = st.lists(views, max_size=6, unique_by=lambda h: h.name)
 components = st.one_of(
     st.builds(lambda m: replace(CAMERA, multiplicity=m), st.none() | st.integers(1, 4)),
@@ -142,7 +146,8 @@ def eligible(c: ComponentType, h: HostView, hosts: list[HostView], exclude: froz
     needs = {Kind.RC: {c.name}, Kind.ARC: set(c.parts.values())}.get(c.kind, set())
     total = sum(x.running.get(c.name, 0) for x in hosts if x.up)
     cores_ok = not c.scheduling.cores or h.cores is None or max(c.scheduling.cores) < h.cores
-    return (h.up and h.name not in exclude and needs <= h.devices and cores_ok
+    offered = h.offers is None or c.name in h.offers  # else its daemon would refuse the start
+    return (h.up and h.name not in exclude and needs <= h.devices and cores_ok and offered
             and (affinity is None or h.name in affinity) and (c.multiplicity is None or total < c.multiplicity))
 
 
@@ -201,3 +206,37 @@ def test_placing_repeatedly_never_exceeds_the_multiplicity(c: ComponentType, hos
         assert c.multiplicity is None or running_count(c.name, hosts) <= c.multiplicity
     if c.multiplicity is not None and placed:
         assert placed <= c.multiplicity - before
+
+
+@settings(max_examples=200, deadline=None)
+@given(components, clusters, weights, st.frozensets(st.sampled_from(NAMES)))
+def test_retrying_past_refusals_reaches_every_eligible_host_within_as_many_tries_as_hosts(
+        c: ComponentType, hosts: list[HostView], w: Placement, refusing: frozenset[str]) -> None:
+    """Fleet audit defect 2, as `RemoteComponent._place` drives the policy: each host that refuses the start is
+    excluded, with why, and the policy asked again. It never picks an excluded host or one that does not offer
+    the type, so the tries end within as many as there are hosts: on a host that does not refuse when an
+    eligible one exists, else with every refusal named."""
+    refused: dict[str, str] = {}
+    decision = place(c, hosts, w, exclude=refused)
+    while isinstance(decision, Placed) and decision.host in refusing:
+        assert decision.host not in refused and len(refused) < len(hosts)
+        chosen = next(h for h in hosts if h.name == decision.host)
+        assert chosen.offers is None or c.name in chosen.offers
+        refused[decision.host] = f"{decision.host} refused"
+        decision = place(c, hosts, w, exclude=refused)
+    ok = [h for h in hosts if eligible(c, h, hosts, frozenset(), None) and h.name not in refusing]
+    assert isinstance(decision, Placed) == bool(ok)
+    if isinstance(decision, Unplaceable):
+        assert all(f"{h}: excluded (its start there failed: {h} refused)" in decision.reason for h in refused)
+
+
+@settings(max_examples=200, deadline=None)
+@given(st.integers(0, 5), st.integers(1, 5), st.data())
+def test_a_recent_placement_counts_once_whether_or_not_its_host_announces_it(seen: int, placed: int,
+                                                                              data: st.DataObject) -> None:
+    """Fleet audit defect 3: k placements on a host that ran `seen` then: whatever share of them it announces
+    now, the view counts seen + k instances of the type, never more."""
+    announced = data.draw(st.integers(0, placed))
+    view = HostView("b", instances=seen + announced + 1, running={"Watch": seen + announced, "Camera": 1})
+    [counted] = with_recent([view], [Recent("b", "Watch", seen, float(i)) for i in range(placed)])
+    assert counted.running["Watch"] == seen + placed and counted.instances == seen + placed + 1

@@ -12,7 +12,19 @@ import pytest
 from drd.cli.report import PLACEMENTS_SHOWN, placement_lines
 from drd.daemon.placements import KEPT_PER_MISSION, PlacementLog, near_devices, status_entry
 from drd.hosts import HostsError, Placement, parse_hosts
-from drd.placement import AFFINITY_SCALE, Decision, HostView, Placed, Unplaceable, place, score, shares
+from drd.placement import (
+    AFFINITY_SCALE,
+    Decision,
+    HostView,
+    Placed,
+    Recent,
+    Unplaceable,
+    place,
+    refused_last,
+    score,
+    shares,
+    with_recent,
+)
 from dsl.catalog import Catalog, ComponentType, Kind
 
 WAIT = ComponentType("Wait", Kind.BEHAVIOR)
@@ -197,3 +209,56 @@ def test_the_affinity_weight_is_configured_in_hosts_yaml_with_a_range(catalog: C
         with pytest.raises(HostsError) as e:
             parse_hosts(cluster(bad), "hosts.yaml", catalog)
         assert [str(p) for p in e.value.problems] == [f"hosts.yaml: {message}"]
+
+
+def test_a_host_that_does_not_offer_the_type_is_filtered_with_that_reason() -> None:
+    """Fleet audit defect 2: a host whose daemon has no manifest of the type refuses its start; the policy knows it
+    from the host's announcement, so it never picks it, even when it scores best. A host that announced nothing yet
+    (offers None) is not refused for it, and one lacking the devices is refused for those only."""
+    hosts = [hv("a"), HostView("b", 50.0, roles=frozenset({"worker"}), offers=frozenset({"Wait"})),
+             HostView("c", roles=frozenset({"worker"}), offers=frozenset({"Watch"}))]
+    decision = place(WAIT, hosts, W, role="worker")
+    assert isinstance(decision, Placed) and decision.host == "a"
+    decision = place(WAIT, hosts[1:], W, role="worker")
+    assert isinstance(decision, Placed) and decision.host == "b", "c scores better but does not offer Wait"
+    assert decision.decision is not None
+    assert dict(decision.decision.filtered) == {"c": ("does not offer Wait (its daemon has no manifest of it)",)}
+    camera = ComponentType("Camera", Kind.RC)
+    refused = place(camera, hosts[2:], W)
+    assert isinstance(refused, Unplaceable) and dict(refused.refused) == {"c": ("no Camera device",)}
+
+
+def test_an_excluded_host_is_shown_with_why_its_start_failed() -> None:
+    hosts = [hv("a"), hv("b", cpu=30), hv("c", cpu=60)]
+    why = "a's Creator refused start of M/Wait: Wait has no parameter 'duration'"
+    decision = place(WAIT, hosts, W, exclude={"a": why, "b": ""})
+    assert isinstance(decision, Placed) and decision.host == "c" and decision.decision is not None
+    assert dict(decision.decision.filtered) == {"a": (f"excluded (its start there failed: {why})",),
+                                                "b": ("excluded (a start there failed or timed out)",)}
+    assert f"a: excluded (its start there failed: {why})" in decision.decision.summary()
+
+
+def test_a_recent_placement_counts_once_until_its_host_announces_it() -> None:
+    """Fleet audit defect 3: the controller added the placements of the last 3 s on top of the hosts' announced
+    instances, so an instance its host already announced counted twice (`instances` 20 for one)."""
+    placed = [Recent("b", "Wait", 0)]  # b ran no Wait when it was placed there
+    [before] = with_recent([HostView("b", running={}, instances=0)], placed)
+    [after] = with_recent([HostView("b", running={"Wait": 1}, instances=1)], placed)
+    assert (before.instances, after.instances) == (1, 1) and after.running == {"Wait": 1}
+    two = [Recent("b", "Wait", 2), Recent("b", "Wait", 2), Recent("c", "Wait", 0)]
+    views = [HostView("b", running={"Wait": 3, "Nap": 1}, instances=4), HostView("c"), HostView("d")]
+    assert [v.instances for v in with_recent(views, two)] == [5, 1, 0], "one of b's two is announced, c's is not"
+    decision = place(WAIT, with_recent([hv("b", instances=1), hv("c", instances=1)], [Recent("b", "Wait", 0)]), W)
+    assert isinstance(decision, Placed) and decision.decision is not None
+    parts = {s.host: s.part("instances") for s in decision.decision.scored}
+    assert parts["b"] is not None and parts["b"].value == 10.0 * 2, "b's announced one plus the pending one"
+
+
+def test_a_refused_start_is_recognised_by_its_retry_so_it_counts_nowhere() -> None:
+    """Fleet audit defect 3: a refused start was counted on its host for 3 s (a phantom instance). The retry that
+    follows it excludes that host: then, and only then, the latest placement is the refused one."""
+    recent = [Recent("w3", "Nap", 0, 1.0), Recent("bravo", "Nap", 0, 2.0)]
+    assert refused_last(recent, "Nap", {"bravo": "bravo's Creator refused start"})
+    assert not refused_last(recent, "Nap", {}), "a new instance's first placement"
+    assert not refused_last(recent, "Wait", {"bravo": ""}), "another type's placement"
+    assert not refused_last(recent[:1], "Nap", {"bravo": ""}) and not refused_last([], "Nap", {"bravo": ""})
