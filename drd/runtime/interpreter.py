@@ -103,6 +103,7 @@ class Interpreter:
         self.root: Node | None = None
         self.outcome: str | None = None
         self.reason = ""
+        self.ended_at: float | None = None  # the clock when it ended: its `time` from then on (the clock is shared)
         self.events: collections.deque[rec.Event] = collections.deque()
         self._finishing: list[tuple[Node, bool, str]] = []
         self._reservations: dict[str, Node] = {}  # holder -> provisional node of a state not yet entered
@@ -306,8 +307,9 @@ class Interpreter:
         def tree(n: Node) -> dict[str, Any]:
             return {"path": n.path, "kind": n.state.kind.value, "phase": n.phase.value,
                     "resources": dict(n.grant or {}), "children": [tree(c) for c in n.children]}
+        now = self.clock.now() if self.ended_at is None else self.ended_at  # an ended one's stays its end time
         out = {"mission": self.mission, "outcome": self.outcome, "reason": self.reason,
-               "time": self.clock.now(), "tree": tree(self.root) if self.root else None}
+               "time": now, "tree": tree(self.root) if self.root else None}
         if self.resumed is not None:
             out["resumed"] = dict(zip(("at", "since", "paused"), self.resumed, strict=True))
         return out
@@ -937,8 +939,8 @@ class Interpreter:
     def _end(self, outcome: str, reason: str) -> None:
         self.rcm.detach(self._apply)
         if self.outcome is None:
-            self.outcome, self.reason = outcome, reason
-            self._notify(rec.Finished(self.clock.now(), self.chart.root, outcome, reason))
+            self.outcome, self.reason, self.ended_at = outcome, reason, self.clock.now()
+            self._notify(rec.Finished(self.ended_at, self.chart.root, outcome, reason))
             self.host.shutdown()
 
     # ------------------------------------------------------------- constraints

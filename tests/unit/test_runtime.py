@@ -271,6 +271,10 @@ def test_two_missions_share_one_manager_by_priority(catalog: Catalog) -> None:
     assert finished["High"] < finished["Low"]  # priority 1 took the camera at the slice boundary
     revoked = [r for r in log if isinstance(r, rec.Revoked)]
     assert [(r.path, r.at) for r in revoked] == [("Low/A", 5.0)]
+    # fleet audit defect 6: an ended mission's `time` is its own end, not the clock its world's missions share
+    assert [r.snapshot()["time"] for r in runs] == [finished["Low"], finished["High"]]
+    clock.advance(30.0)
+    assert [r.snapshot()["time"] for r in runs] == [finished["Low"], finished["High"]]
 
 
 class StopsOnStart(Forever):
