@@ -20,6 +20,8 @@ from dataclasses import dataclass, field
 from enum import StrEnum
 from typing import Any
 
+from drd.errors import ComponentFailure
+
 
 class Status(StrEnum):
     RUNNING = "running"
@@ -30,7 +32,7 @@ class Status(StrEnum):
     """Finished badly: the state fails (`on error` transitions may fire)."""
 
 
-class StatusError(ValueError):
+class StatusError(ComponentFailure):
     """A `step` returned something that is not a `Status`: its state fails with this reason as it is."""
 
 
