@@ -223,7 +223,7 @@ def _endpoints(config: Path, connect: list[str] | None,
         fail_all(e.problems)
     _may(cluster.security, str(tr.options.get("transport/auth/usrpwd/user") or ""), to)
     prefer = [cluster.controller.name] + [h.name for h in cluster.hosts if h.name != cluster.controller.name]
-    return tr.entry_points(), dict(tr.options), cluster.name, prefer
+    return tr.entry_points(), {**tr.options, "mode": tr.client_mode()}, cluster.name, prefer
 
 
 def _may(security: Any, user: str, to: str) -> None:

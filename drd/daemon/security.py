@@ -88,6 +88,14 @@ class Transport:
         """Where a client (missionctl) connects: the routers, else every daemon."""
         return [e for h, e in self.endpoints.items() if not self.routers or h in self.routers]
 
+    def client_mode(self) -> str:
+        """The zenoh mode of a client's session (missionctl): with routers, a zenoh `client` of them, as the daemons
+        are, linked to one router at a time (the next one when it fails), so a request reaches each daemon once; a
+        peer linked to two routers got every query once through each, and the controller ran each mission twice
+        (docs/design.md "One router at a time for missionctl"). Without routers, a peer linked to every daemon:
+        peers do not forward to each other, so there too a query arrives once."""
+        return "client" if self.routers else "peer"
+
 
 def transport(cluster: Cluster, user: str | None = None, *, daemon: bool = False,
               host: str | None = None) -> Transport:

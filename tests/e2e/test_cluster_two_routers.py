@@ -1,0 +1,83 @@
+"""A cluster with two routers (docs/scale.md's fleet topology): each `missionctl` request reaches the controller
+once (fleet audit, defect 1: `missionctl --config` was a zenoh peer linked to both routers, the controller got each
+query once through each, and one `run` started two missions, `migrate` moved then answered the copy's "already
+runs there" with exit 2).
+
+Real daemons on loopback, every process ours and killed by pid: `hubA` a router only, `controller`, `w1` a
+worker, `w2` a worker and the second router. Checked from outside, through `missionctl --config`: one
+`run --detach` starts one mission (`status --json`, and the controller's log), `migrate` exits 0 and says where
+the Wait went, `stop` says it stopped the mission (not that it had already ended).
+"""
+
+from __future__ import annotations
+
+import json
+import re
+import subprocess
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+import pytest
+from cluster_support import DaemonCluster, eventually, running_cluster
+
+NAMES = ["hubA", "controller", "w1", "w2"]
+ROLES = {"hubA": "[router]", "controller": "[controller]", "w1": "[worker]", "w2": "[worker, router]"}
+WORKERS = {"w1", "w2"}
+PLACED = re.compile(r"placement: Wait on (\w+)")
+STARTED = re.compile(r"mission (Hold-\d+) started")
+
+
+def hosts(cluster: DaemonCluster) -> str:
+    lines = ["cluster:", f"  name: {cluster.name}", "  security: {mode: none}", "  lease: 1000ms", "hosts:"]
+    for name, port in zip(cluster.names, cluster.ports, strict=True):
+        lines += [f"  {name}:", f"    endpoint: tcp/127.0.0.1:{port}", f"    roles: {ROLES[name]}"]
+    return "\n".join(lines) + "\n"
+
+
+@pytest.fixture(scope="module")
+def cluster(tmp_path_factory: pytest.TempPathFactory) -> Iterator[DaemonCluster]:
+    """The routers first (a client of the routers waits for one), then the others."""
+    with running_cluster(tmp_path_factory.mktemp("two_routers"), NAMES) as c:
+        c.hosts_file.write_text(hosts(c))
+        for name in ("hubA", "w2", "controller", "w1"):
+            c.start(name)
+        c.wait_ready()
+        c.wait_up()
+        yield c
+
+
+def ctl(cluster: DaemonCluster, *args: str) -> subprocess.CompletedProcess[str]:
+    return cluster.missionctl(*args, "--config", str(cluster.hosts_file), "--timeout", "10", timeout=60)
+
+
+def answer(r: subprocess.CompletedProcess[str], cluster: DaemonCluster) -> Any:
+    assert r.returncode == 0, (r.stdout[-2000:], r.stderr[-2000:], cluster.log("controller")[-3000:])
+    return json.loads(r.stdout)
+
+
+def test_run_migrate_and_stop_through_two_routers_each_act_once(cluster: DaemonCluster, tmp_path: Path) -> None:
+    mission = tmp_path / "hold.mission"
+    mission.write_text("mission Hold {\n    Wait(duration: 60s) as w\n}\n")
+    before = len(cluster.log("controller"))
+    r = ctl(cluster, "run", str(mission), "--detach")
+    assert r.returncode == 0, (r.stderr[-2000:], cluster.log("controller")[-3000:])
+    mid = r.stdout.strip()
+    assert STARTED.fullmatch(f"mission {mid} started"), r.stdout
+    eventually(lambda: PLACED.search(cluster.log("controller")[before:]), "the Wait to be placed", 30, poll=0.05)
+    host = PLACED.findall(cluster.log("controller")[before:])[0]
+    assert host in WORKERS
+    other = (WORKERS - {host}).pop()
+
+    moved = answer(ctl(cluster, "migrate", f"{mid}/Hold/w", "--to", other, "--json"), cluster)
+    assert (moved["source"], moved["host"], moved["component"]) == (host, other, "Wait"), moved
+
+    stopped = answer(ctl(cluster, "stop", mid, "--json"), cluster)
+    assert [m["id"] for m in stopped["stopped"]] == [mid], stopped
+    assert stopped["ended"] == [], stopped
+
+    status = answer(ctl(cluster, "status", "--json"), cluster)
+    holds = [m["id"] for m in status["missions"] if str(m["id"]).startswith("Hold-")]
+    assert holds == [mid], f"one run, missions {holds}"
+    assert STARTED.findall(cluster.log("controller")[before:]) == [mid]
+    assert len(re.findall(r"Hold/w \(Wait\) moved from", cluster.log("controller")[before:])) == 1
