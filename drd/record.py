@@ -588,8 +588,8 @@ class ActiveView:
             frozen = any(path == s or path.startswith((s + "/", s + "[")) for s in self.suspended)
             return "suspended" if frozen else "running"
 
-        active = [{"path": p, "since": round(t, 6), "state": state(p)} for p, t in self.active.items()
-                  if not self.below.get(p)]
+        active = sorted(({"path": p, "since": round(t, 6), "state": state(p)} for p, t in self.active.items()
+                         if not self.below.get(p)), key=lambda row: (row["since"], row["path"]))  # as `explain`'s
         waiting = [{**w, "blocked_by": [{"path": b, "holds": self.needs.get(b, {})} for b in w["blocked_by"]]}
                    for w in self.waits.values()]
         return {"mission": self.name, "id": self.mission, "at": at, "outcome": self.outcome, "active": active,
