@@ -226,6 +226,13 @@ def _endpoints(config: Path, connect: list[str] | None,
     return tr.entry_points(), {**tr.options, "mode": tr.client_mode()}, cluster.name, prefer
 
 
+def query_error(reason: str) -> str:
+    """One error for an invalid query: the daemon's rendered reason (the query, then a caret under the column and
+    the message) under "invalid query:", its lines kept together so the caret stays under its column, as text and
+    as `--json`'s `error` (they were three "problems" there, the message not in `error`)."""
+    return f"invalid query:\n{reason}" if "\n" in reason else f"invalid query: {reason}"
+
+
 def _may(security: Any, user: str, to: str) -> None:
     """Refuse (exit 2) a user whose role does not allow what the command does; nothing without roles."""
     if not security.roles or not user:
@@ -334,7 +341,7 @@ def query(text: str = typer.Argument(..., metavar="QUERY", show_default=False,
         try:
             reply = client.query(text, seed)
         except RemoteError as e:
-            fail_all(["invalid query", *e.reason.splitlines()])
+            fail(query_error(e.reason))
     if as_json:
         print_json(reply.offers)
         return OK

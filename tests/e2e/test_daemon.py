@@ -95,6 +95,10 @@ def test_trader_query_name_service_and_components(cluster: DaemonCluster, client
     assert r.returncode == 2
     assert "unknown property resolutin (did you mean resolution?)" in r.stderr and "^" in r.stderr
     assert "Traceback" not in r.stderr
+    r = cluster.missionctl("query", "Camra", "--config", str(cluster.hosts_file), "--json")
+    error = json.loads(r.stderr)  # one problem, its message (with the caret under its column) the `error`
+    assert (r.returncode, error) == (2, {"error": "invalid query:\nCamra\n^ unknown type Camra (did you mean Camera?)",
+                                         "code": 2}), r.stderr
 
 
 def test_a_second_daemon_for_a_running_host_is_refused(cluster: DaemonCluster) -> None:
