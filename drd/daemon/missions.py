@@ -431,10 +431,11 @@ class MissionRunner:
         ct = self.catalog.get(component)
         if ct is None or self.host_views is None:
             raise ComponentError(f"{component} is not in the controller's catalog")
-        if refused_last(self._recent, component, exclude):  # the retry after a start failed there
+        reasons = exclude if isinstance(exclude, Mapping) else dict.fromkeys(exclude, "")
+        # the retry after a start failed there (a host left out with no reason, a lost one, refused nothing)
+        if refused_last(self._recent, component, {h for h, why in reasons.items() if why}):
             last = self._recent.pop()
-            why = exclude.get(last.host, "") if isinstance(exclude, Mapping) else ""
-            log.warning("placement: %s refused %s: %s", last.host, component, why or "its start failed or timed out")
+            log.warning("placement: %s refused %s: %s", last.host, component, reasons[last.host])
         now = time.monotonic()
         self._recent = [r for r in self._recent if now - r.at < RECENT_PLACEMENT]
         announced = self.host_views()
