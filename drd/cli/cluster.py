@@ -208,8 +208,8 @@ def _endpoints(config: Path, connect: list[str] | None,
                to: str = "") -> tuple[list[str], dict[str, Any], str | None, list[str]]:
     """(endpoints, zenoh options, cluster name, preferred daemons) from --connect or the hosts file (whose roles
     must allow this user `to` do what it asks, if anything)."""
-    if connect:
-        return list(connect), {}, None, []
+    if connect:  # a zenoh client of the first that answers (a router or a peer routes for it), the next if it fails
+        return list(connect), {"mode": "client"}, None, []
     from drd.daemon.security import SecurityError, transport
     from drd.hosts import HostsError, load_endpoints
 

@@ -4,9 +4,10 @@ query once through each, and one `run` started two missions, `migrate` moved the
 runs there" with exit 2).
 
 Real daemons on loopback, every process ours and killed by pid: `hubA` a router only, `controller`, `w1` a
-worker, `w2` a worker and the second router. Checked from outside, through `missionctl --config`: one
-`run --detach` starts one mission (`status --json`, and the controller's log), `migrate` exits 0 and says where
-the Wait went, `stop` says it stopped the mission (not that it had already ended).
+worker, `w2` a worker and the second router. Checked from outside, through `missionctl --config` and through
+`--connect` given both routers: one `run --detach` starts one mission (`status --json`, and the controller's
+log), `migrate` exits 0 and says where the Wait went, `stop` says it stopped the mission (not that it had
+already ended).
 """
 
 from __future__ import annotations
@@ -47,8 +48,8 @@ def cluster(tmp_path_factory: pytest.TempPathFactory) -> Iterator[DaemonCluster]
         yield c
 
 
-def ctl(cluster: DaemonCluster, *args: str) -> subprocess.CompletedProcess[str]:
-    return cluster.missionctl(*args, "--config", str(cluster.hosts_file), "--timeout", "10", timeout=60)
+def ctl(cluster: DaemonCluster, via: list[str], *args: str) -> subprocess.CompletedProcess[str]:
+    return cluster.missionctl(*args, *via, "--timeout", "10", timeout=60)
 
 
 def answer(r: subprocess.CompletedProcess[str], cluster: DaemonCluster) -> Any:
@@ -56,11 +57,16 @@ def answer(r: subprocess.CompletedProcess[str], cluster: DaemonCluster) -> Any:
     return json.loads(r.stdout)
 
 
-def test_run_migrate_and_stop_through_two_routers_each_act_once(cluster: DaemonCluster, tmp_path: Path) -> None:
+@pytest.mark.parametrize("how", ["config", "connect"])
+def test_run_migrate_and_stop_through_two_routers_each_act_once(cluster: DaemonCluster, tmp_path: Path,
+                                                                 how: str) -> None:
+    """`--config` (the routers from the hosts file), or `--connect` given both routers' endpoints."""
+    routers = [e for n, e in zip(cluster.names, cluster.endpoints, strict=True) if "router" in ROLES[n]]
+    via = ["--config", str(cluster.hosts_file)] if how == "config" else [w for e in routers for w in ("--connect", e)]
     mission = tmp_path / "hold.mission"
     mission.write_text("mission Hold {\n    Wait(duration: 60s) as w\n}\n")
     before = len(cluster.log("controller"))
-    r = ctl(cluster, "run", str(mission), "--detach")
+    r = ctl(cluster, via, "run", str(mission), "--detach")
     assert r.returncode == 0, (r.stderr[-2000:], cluster.log("controller")[-3000:])
     mid = r.stdout.strip()
     assert STARTED.fullmatch(f"mission {mid} started"), r.stdout
@@ -69,15 +75,14 @@ def test_run_migrate_and_stop_through_two_routers_each_act_once(cluster: DaemonC
     assert host in WORKERS
     other = (WORKERS - {host}).pop()
 
-    moved = answer(ctl(cluster, "migrate", f"{mid}/Hold/w", "--to", other, "--json"), cluster)
+    moved = answer(ctl(cluster, via, "migrate", f"{mid}/Hold/w", "--to", other, "--json"), cluster)
     assert (moved["source"], moved["host"], moved["component"]) == (host, other, "Wait"), moved
 
-    stopped = answer(ctl(cluster, "stop", mid, "--json"), cluster)
-    assert [m["id"] for m in stopped["stopped"]] == [mid], stopped
-    assert stopped["ended"] == [], stopped
+    stopped = answer(ctl(cluster, via, "stop", mid, "--json"), cluster)
+    assert ([m["id"] for m in stopped["stopped"]], stopped["ended"]) == ([mid], []), stopped
 
-    status = answer(ctl(cluster, "status", "--json"), cluster)
-    holds = [m["id"] for m in status["missions"] if str(m["id"]).startswith("Hold-")]
-    assert holds == [mid], f"one run, missions {holds}"
-    assert STARTED.findall(cluster.log("controller")[before:]) == [mid]
+    status = answer(ctl(cluster, via, "status", "--json"), cluster)
+    started = STARTED.findall(cluster.log("controller")[before:])
+    assert [m["id"] for m in status["missions"] if m["id"] in started] == [mid], f"one run, missions {started}"
+    assert started == [mid]
     assert len(re.findall(r"Hold/w \(Wait\) moved from", cluster.log("controller")[before:])) == 1
