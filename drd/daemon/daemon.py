@@ -146,8 +146,8 @@ def open_bus(config: DaemonConfig, tr: Transport, stop: threading.Event | None =
     """This host's zenoh session: a peer listening on its endpoint and meshed with every other one (dialing those
     listed before it: `Transport.dials`), or, when the hosts file names routers, a router (listening, meshed with the
     other routers the same way) or a client of the routers. A client waits for a router (zenoh opens a client only
-    once connected): started before its routers, it tries again each second, saying so once, until one answers or
-    `stop` is set."""
+    once connected): started before its routers, it tries again each second, saying so once, each time with another
+    router first, until one answers or `stop` is set."""
     from drd.bus.zenoh_bus import ZenohBus  # zenoh only when a real cluster is joined
 
     lease_ms = max(1000, int(config.cluster.lease * 2000))  # zenoh drops a silent link after twice our lease
@@ -167,6 +167,9 @@ def open_bus(config: DaemonConfig, tr: Transport, stop: threading.Event | None =
             if not said:
                 log.info("waiting for a router to answer at %s", ", ".join(connect))
                 said = True
+            # zenoh spends the attempt's whole wait redialing the first endpoint: a client whose first router was
+            # down never tried the second one (measured: 0 of 3 attempts opened). Another router first next time.
+            connect = connect[1:] + connect[:1]
 
 
 #: Milliseconds a client of the routers waits for one at each attempt to open its session.

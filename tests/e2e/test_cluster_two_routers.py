@@ -22,6 +22,9 @@ from typing import Any
 import pytest
 from cluster_support import DaemonCluster, eventually, running_cluster
 
+from drd.daemon.security import transport
+from drd.hosts import load_endpoints
+
 NAMES = ["hubA", "controller", "w1", "w2"]
 ROLES = {"hubA": "[router]", "controller": "[controller]", "w1": "[worker]", "w2": "[worker, router]"}
 WORKERS = {"w1", "w2"}
@@ -86,3 +89,17 @@ def test_run_migrate_and_stop_through_two_routers_each_act_once(cluster: DaemonC
     assert [m["id"] for m in status["missions"] if m["id"] in started] == [mid], f"one run, missions {started}"
     assert started == [mid]
     assert len(re.findall(r"Hold/w \(Wait\) moved from", cluster.log("controller")[before:])) == 1
+
+
+def test_a_client_daemon_whose_first_router_is_down_joins_through_the_other(tmp_path: Path) -> None:
+    """A client of the routers dials them in its own order (`Transport.others`); with the first one down when it
+    starts, it joins through the second (it used to redial the first for ever: zenoh spends each attempt on it)."""
+    with running_cluster(tmp_path, NAMES) as c:
+        c.hosts_file.write_text(hosts(c))
+        endpoint = next(iter(transport(load_endpoints(c.hosts_file)).others("w1").values()))
+        down = c.names[c.endpoints.index(endpoint)]
+        up = [n for n in ("hubA", "w2", "controller", "w1") if n != down]
+        for name in up:
+            c.start(name)
+        c.wait_ready(up)
+        c.wait_up(names=[n for n in up if n != "hubA"])
