@@ -11,9 +11,10 @@ ComponentsOption = typer.Option(
     None, "--components", "-C", help="Extra folder of component manifests (repeatable; also $DRD_COMPONENTS).",
     show_default=False)
 ConfigOption = typer.Option(Path("hosts.yaml"), "--config", "-c", "--hosts",
-                            help="The cluster's hosts file: connect to every host, with its security settings "
-                                 "(`--hosts` is an alias).")
+                            help="The cluster's hosts file: connect to its routers (one at a time), else to every"
+                                 " host, with its security settings (`--hosts` is an alias).")
 ConnectOption = typer.Option(None, "--connect", show_default=False,
-                             help="Connect to this endpoint instead (tcp/HOST:PORT; repeatable: one at a time, the next if it fails).")
+                             help="Connect to this endpoint instead (tcp/HOST:PORT; repeatable: one at a time, the"
+                                  " next if it fails).")
 JsonOption = typer.Option(False, "--json", help="Print JSON.")
 TimeoutOption = typer.Option(2.0, "--timeout", min=0.05, help="Seconds to wait for a daemon to answer.")
