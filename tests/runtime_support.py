@@ -130,3 +130,28 @@ class FailsFirst(Timed):
 
 
 COMPONENTS = {c.__name__: c for c in (Timed, Forever, Fails, Raises, Emits, FailsFirst)}
+
+
+#: An output read after an event transition exits its producer (component audit D1): the producer itself (LEAF), or
+#: its parent, a parallel that stops it (INSIDE). `face` reads the door `find`/DetectDoor left.
+LEAF = """
+mission M {
+    needs bot: Ranger
+    start -> find
+    DetectDoor as find
+    find -> face on DoorDetected
+    AlignRanger as face
+}
+"""
+
+INSIDE = """
+mission M {
+    needs bot: Ranger
+    start -> Hunt
+    Hunt -> face on DoorDetected
+    AlignRanger as face
+}
+behavior Hunt {
+    parallel until DetectDoor { FollowCorridor; DetectDoor }
+}
+"""

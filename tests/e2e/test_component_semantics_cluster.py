@@ -27,7 +27,7 @@ from drd.runtime import records as rec
 from drd.runtime.component import Component, Status
 from dsl import compile_text
 from dsl.catalog import Catalog, ComponentType, Kind, NeedSpec, ParamSpec
-from tests.runtime_support import Harness, ranger_world
+from tests.runtime_support import INSIDE, LEAF, Harness, ranger_world
 
 NOTES = "DRD_TEST_LIFECYCLE_NOTES"  # the file the components note their calls in (set before the workers fork)
 DOOR = {"width": 0.9, "x": 1.0, "y": 2.0, "side": "left"}
@@ -155,28 +155,6 @@ def run(source: str, catalog: Catalog, notes: Path, creator: Creator | None) -> 
         creator.handle(ComponentCall("retire", "m", ""))  # the next run starts afresh there
     return h, notes.read_text().splitlines()
 
-
-LEAF = """
-mission M {
-    needs bot: Ranger
-    start -> find
-    DetectDoor as find
-    find -> face on DoorDetected
-    AlignRanger as face
-}
-"""
-
-INSIDE = """
-mission M {
-    needs bot: Ranger
-    start -> Hunt
-    Hunt -> face on DoorDetected
-    AlignRanger as face
-}
-behavior Hunt {
-    parallel until DetectDoor { FollowCorridor; DetectDoor }
-}
-"""
 
 
 @pytest.mark.parametrize("source", [LEAF, INSIDE], ids=["leaf", "inside a parallel"])

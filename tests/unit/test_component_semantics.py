@@ -13,7 +13,7 @@ from drd.runtime import records as rec
 from drd.runtime.component import Component, Status, StatusError, step_status
 from dsl import compile_text
 from dsl.catalog import Catalog
-from tests.runtime_support import Harness, ranger_world
+from tests.runtime_support import INSIDE, LEAF, Harness, ranger_world
 
 DOOR = {"width": 0.9, "x": 1.0, "y": 2.0, "side": "left"}
 LOG: list[str] = []
@@ -55,28 +55,6 @@ class Idle(Component):
 
 
 REGISTRY = {"DetectDoor": Finder, "AlignRanger": Facer, "FollowCorridor": Idle}
-
-LEAF = """
-mission M {
-    needs bot: Ranger
-    start -> find
-    DetectDoor as find
-    find -> face on DoorDetected
-    AlignRanger as face
-}
-"""
-
-INSIDE = """
-mission M {
-    needs bot: Ranger
-    start -> Hunt
-    Hunt -> face on DoorDetected
-    AlignRanger as face
-}
-behavior Hunt {
-    parallel until DetectDoor { FollowCorridor; DetectDoor }
-}
-"""
 
 
 def run(source: str, catalog: Catalog, registry: dict[str, Any]) -> Harness:
