@@ -1,4 +1,5 @@
-"""``ZenohBus``: the bus of every multi-process run, over eclipse-zenoh 1.x in peer mode.
+"""``ZenohBus``: the bus of every multi-process run, over eclipse-zenoh 1.x (a peer by default; a client of the
+routers, or a router, when the cluster has routers: ``options={"mode": ...}``).
 
 A thin mapping: ``put`` → ``Session.put``, ``subscribe`` → ``declare_subscriber``, ``serve`` →
 ``declare_queryable``, ``request`` → ``Querier.get`` (all queryables, no consolidation, so
@@ -119,7 +120,7 @@ def make_config(
 
 
 class ZenohBus(Bus):
-    """A zenoh peer session behind the Bus interface."""
+    """A zenoh session (peer by default) behind the Bus interface."""
 
     def __init__(
         self,
