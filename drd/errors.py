@@ -45,6 +45,10 @@ class ComponentFailure(DrdError):
     """A component raised, is declared wrong, or its host or process went away."""
 
     kind = "component"
+    #: The message is the whole reason, already said where it happened (a worker's `component raised ValueError:
+    #: ...`, a step's bad return): a state that fails with it says it as it is, not wrapped in a second
+    #: `component raised ...`.
+    said = False
 
 
 class BusFailure(DrdError):

@@ -131,6 +131,8 @@ class ComponentBatchReply(Message):
 class ComponentError(ComponentFailure):
     """The remote component raised, or its host did not answer: the state fails with this message."""
 
+    said = True
+
 
 class HostDown(ComponentError):
     """The host of the call is down or did not answer: a movable component is placed again elsewhere."""

@@ -35,6 +35,8 @@ class Status(StrEnum):
 class StatusError(ComponentFailure):
     """A `step` returned something that is not a `Status`: its state fails with this reason as it is."""
 
+    said = True
+
 
 def step_status(value: object, component: str) -> Status:
     """What a step's return value means, by one rule in a dry-run and on a cluster (where it arrives as its `str`):

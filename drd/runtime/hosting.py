@@ -12,8 +12,9 @@ from __future__ import annotations
 from collections.abc import Callable, Iterator, Mapping
 from typing import Any
 
+from drd.errors import ComponentFailure
 from drd.runtime import records as rec
-from drd.runtime.component import Component, Context, Registry, Services, Status, StatusError
+from drd.runtime.component import Component, Context, Registry, Services, Status
 from drd.runtime.emits import check_emit
 from drd.runtime.ownership import Arbiter, Binding, BoundDevice
 from drd.runtime.resources import ResourceClient
@@ -201,7 +202,7 @@ class ComponentHost:
             return False
 
     def failed(self, node: Node, e: Exception) -> None:
-        why = str(e) if isinstance(e, StatusError) else f"component raised {type(e).__name__}: {e}"
+        why = str(e) if isinstance(e, ComponentFailure) and e.said else f"component raised {type(e).__name__}: {e}"
         self.notify(rec.Log(self.now(), node.path, why))
         self.on_failure(node, why)
 

@@ -74,11 +74,13 @@ class Idle(Component):
 
 
 class Returns(Component):
-    """Returns what its `value` says: `none` is None, anything else that string."""
+    """Returns what its `value` says: `none` is None, `raise` raises ValueError, anything else that string."""
 
     def step(self, now: float) -> Any:
         assert self.ctx is not None
         value = self.ctx.params.get("value")
+        if value == "raise":
+            raise ValueError("boom")
         return None if value == "none" else value
 
 
@@ -170,7 +172,7 @@ def test_an_output_and_the_order_around_an_emit_are_the_same_in_a_dry_run_and_on
 
 
 @pytest.mark.parametrize(("value", "outcome"), [("none", "failure"), ("ok", "failure"), ("success", "success"),
-                                                ("failure", "failure")])
+                                                ("failure", "failure"), ("raise", "failure")])
 def test_a_steps_return_value_means_the_same_in_a_dry_run_and_on_a_cluster(
         value: str, outcome: str, catalog_: Catalog, notes: Path, creator: Creator) -> None:
     """D2: None and "ok" fail the state with the same reason naming the component and the value (the dry-run
@@ -187,3 +189,5 @@ def test_a_steps_return_value_means_the_same_in_a_dry_run_and_on_a_cluster(
         shown = "None" if value == "none" else value
         assert results[0][2] == (f"Returns.step returned {shown}, not a Status "
                                  "(return Status.RUNNING, Status.SUCCESS or Status.FAILURE)")
+    if value == "raise":  # said once on the cluster too (it was `component raised ComponentError: component raised ...`)
+        assert results[0][2] == "component raised ValueError: boom"
