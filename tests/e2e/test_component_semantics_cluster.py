@@ -189,5 +189,5 @@ def test_a_steps_return_value_means_the_same_in_a_dry_run_and_on_a_cluster(
         shown = "None" if value == "none" else value
         assert results[0][2] == (f"Returns.step returned {shown}, not a Status "
                                  "(return Status.RUNNING, Status.SUCCESS or Status.FAILURE)")
-    if value == "raise":  # said once on the cluster too (it was `component raised ComponentError: component raised ...`)
+    if value == "raise":  # said once on the cluster too (it was `component raised ComponentError: component ...`)
         assert results[0][2] == "component raised ValueError: boom"
