@@ -8,7 +8,9 @@ adds and removes resources). The rules:
 - A host is **up** while its liveliness token is present and it keeps reporting its load: a
   report at most `lease` seconds old, or a token younger than `lease` (its first report is on its
   way).
-- It goes **down** at once when its token vanishes (a clean stop, a crash, a closed socket), and
+- It goes **down** at once when its token vanishes (a clean stop, a crash, a closed socket; in a cluster with
+  routers, a lease later if it did not say goodbye and its token is still gone: a router's loss takes every token
+  behind it, and they come back through the other router), and
   when its reports stop for longer than `lease` while the token stays (a frozen or SIGSTOPped
   process, a host whose link is silent but not yet expired). A host that went down that way is
   shown **unresponsive** (`shown_state`), not down, until it reports again: its token may vanish
@@ -115,6 +117,9 @@ class ClusterView:
         self.woke: tuple[float, float] | None = None  # the last freeze of its own: (wake-up, seconds frozen)
         mine = self.records[self.me]
         mine.state, mine.since, mine.reason = HostState.UP, now, "this host"
+        #: Through routers, a vanished token is not evidence at once: a router's loss takes every token behind it,
+        #: and they come back through the other router a moment later (`token`).
+        self.routed = any(Role.ROUTER in h.roles for h in cluster.hosts)
 
     # -- inputs ----------------------------------------------------------------------------------
 
@@ -136,6 +141,9 @@ class ClusterView:
         woke = self._wake(now)
         if rec.state is HostState.UP and not rec.leaving and now <= rec.grace:
             return woke  # perhaps our own link, dropped while we were frozen: judged when the grace ends (`tick`)
+        if rec.state is HostState.UP and not rec.leaving and self.routed:
+            rec.grace = now + self.lease  # perhaps a router lost, the host not: judged when the grace ends (`tick`)
+            return woke
         if rec.state is HostState.UP:
             return [*woke, self._set(rec, HostState.DOWN, now, rec.leaving or "lost: its liveliness token vanished")]
         if rec.silent and rec.leaving:  # a silent host said goodbye after all: it is down, not unresponsive

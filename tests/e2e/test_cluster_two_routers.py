@@ -13,12 +13,15 @@ already ended).
 from __future__ import annotations
 
 import json
+import os
 import re
+import signal
 import subprocess
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
+import psutil
 import pytest
 from cluster_support import DaemonCluster, eventually, running_cluster
 
@@ -103,3 +106,53 @@ def test_a_client_daemon_whose_first_router_is_down_joins_through_the_other(tmp_
             c.start(name)
         c.wait_ready(up)
         c.wait_up(names=[n for n in up if n != "hubA"])
+
+
+def linked_router(c: DaemonCluster, host: str) -> str:
+    """The router `host`'s daemon is linked to: the one of hubA, hubB whose port its established sockets reach."""
+    ports = {conn.raddr.port for conn in psutil.Process(c.pid(host)).net_connections(kind="tcp")
+             if conn.raddr and conn.status == psutil.CONN_ESTABLISHED}
+    [router] = [n for n in ("hubA", "hubB") if c.ports[c.names.index(n)] in ports]
+    return router
+
+
+def test_losing_one_of_two_routers_does_not_end_a_running_mission(tmp_path: Path) -> None:
+    """kill -9 of the router a worker goes through, mid-mission (re-verification audit: each worker behind the dead
+    router took the controller's token, gone with its link and back through the other router a moment later, for
+    the controller's loss, retired every instance, and the mission failed on a Creator's refusal). Two routers
+    only, the controller and two workers behind them; the mission's Waits spread over both workers. It runs on to
+    its success, and no worker says it lost its controller."""
+    names = ["hubA", "hubB", "controller", "w1", "w2"]
+    roles = {"hubA": "[router]", "hubB": "[router]", "controller": "[controller]", "w1": "[worker]", "w2": "[worker]"}
+    with running_cluster(tmp_path, names) as c:
+        lines = ["cluster:", f"  name: {c.name}", "  security: {mode: none}", "  lease: 3000ms", "hosts:"]
+        for name, port in zip(c.names, c.ports, strict=True):
+            lines += [f"  {name}:", f"    endpoint: tcp/127.0.0.1:{port}", f"    roles: {roles[name]}"]
+        c.hosts_file.write_text("\n".join(lines) + "\n")
+        for name in names:
+            c.start(name)
+        c.wait_ready()
+        c.wait_up()
+        mission = tmp_path / "spread.mission"
+        mission.write_text("mission Spread {\n    parallel all {\n        Wait(duration: 8s) as a\n"
+                           "        Wait(duration: 8s) as b\n        Wait(duration: 8s) as c\n    }\n}\n")
+        via = ["--config", str(c.hosts_file)]
+        r = ctl(c, via, "run", str(mission), "--detach")
+        assert r.returncode == 0, (r.stderr[-2000:], c.log("controller")[-3000:])
+        mid = r.stdout.strip()
+        eventually(lambda: {"w1", "w2"} <= set(re.findall(r"placement: Wait on (\w+)", c.log("controller"))),
+                   "the Waits on both workers", 30, poll=0.05, explain=lambda: c.tails("controller"))
+        router = linked_router(c, "w1")  # the one w1 goes through (zenoh picked it), seen from its sockets
+        os.kill(c.pid(router), signal.SIGKILL)
+        c.procs[router].wait(timeout=10)
+        seen: list[Any] = []
+
+        def ended() -> bool:
+            status = ctl(c, via, "status", "--json")
+            if status.returncode == 0:
+                seen[:] = [m for m in json.loads(status.stdout)["missions"] if m["id"] == mid]
+            return bool(seen) and seen[0].get("outcome") is not None
+
+        eventually(ended, "the mission to end", 60, poll=0.5, explain=lambda: c.tails("controller", "w1", "w2"))
+        assert seen[0]["outcome"] == "success", (seen, c.tails("controller", "w1", "w2"))
+        assert "controller controller lost" not in c.log("w1") + c.log("w2"), c.tails("w1", "w2")
