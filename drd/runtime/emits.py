@@ -14,6 +14,7 @@ from collections.abc import Iterable, Mapping
 from typing import Any
 
 from drd.errors import ComponentFailure
+from drd.runtime.records import python_scalar
 from dsl.catalog import RecordSpec
 
 
@@ -21,10 +22,12 @@ class EmitError(ComponentFailure, ValueError):
     """An emit its component's manifest does not allow: the emitting state fails with this reason."""
 
 
-def check_emit(component: str, declared: Iterable[RecordSpec], name: str, fields: Mapping[str, Any]) -> None:
-    """Refuse (EmitError) an event `component` emits that its manifest's `events` do not declare, or with a field
-    missing, unknown or of the wrong type. Fields of a non-scalar type (a data type, a resource id) are checked
-    for presence only."""
+def check_emit(component: str, declared: Iterable[RecordSpec], name: str, fields: Mapping[str, Any]
+               ) -> dict[str, Any]:
+    """The fields of an event `component` emits, numpy scalars as the Python values they hold (`python_scalar`);
+    refuse (EmitError) one that its manifest's `events` do not declare, or with a field missing, unknown or of the
+    wrong type. Fields of a non-scalar type (a data type, a resource id) are checked for presence only."""
+    fields = {k: python_scalar(v) for k, v in fields.items()}
     specs = {e.name: e for e in declared}
     spec = specs.get(name)
     if spec is None:
@@ -43,6 +46,7 @@ def check_emit(component: str, declared: Iterable[RecordSpec], name: str, fields
         if not _fits(type_, value):
             raise EmitError(f"{component} emits {name} with {field}={value!r} ({type(value).__name__})"
                             f" where its manifest declares {field}: {type_}")
+    return fields
 
 
 def _declared(spec: RecordSpec) -> str:

@@ -107,8 +107,7 @@ class ComponentHost:
         declared = ct.events
 
         def emit(ev: str, **fields: Any) -> None:
-            check_emit(component, declared, ev, fields)
-            self.emit(ev, path, **fields)
+            self.emit(ev, path, **check_emit(component, declared, ev, fields))
         return emit
 
     def read_inputs(self, node: Node, entry: bool = False) -> None:

@@ -195,7 +195,21 @@ def plain(value: Any) -> Any:
         return [plain(v) for v in value]
     if isinstance(value, bool | int | float | str):
         return value
+    native = python_scalar(value)
+    if native is not value:
+        return native
     return getattr(value, "id", None) or str(value)
+
+
+def python_scalar(value: Any) -> Any:
+    """A numpy scalar (`np.float32(2.5)`, `np.int64`, `np.bool_`: what computing on a sensor's arrays gives) as the
+    Python value it holds; anything else as it is. numpy itself is not imported: only its values are recognized."""
+    item = getattr(value, "item", None)
+    if item is not None and type(value).__module__ == "numpy" and getattr(value, "ndim", None) == 0:
+        native = item()
+        if isinstance(native, bool | int | float | str):
+            return native
+    return value
 
 
 def from_dict(data: Mapping[str, Any]) -> Record | None:
