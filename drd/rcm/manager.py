@@ -299,6 +299,12 @@ class ResourceManager:
                 seen[name].add(candidate.id)
         return max((len(ids) for ids in seen.values()), default=0)
 
+    def never(self, needs: tuple[NeedRequest, ...]) -> str | None:
+        """Why these needs can never be met on the known resources (`need: reason`, as an `Unsatisfiable` says
+        it), or None if they can."""
+        found = diagnose(needs, self._reg)
+        return None if found is None else f"resource need {found[0]} can never be satisfied: {found[1]}"
+
     def queue(self) -> tuple[str, ...]:
         """The waiting holders in the order they would be served (due reservations first)."""
         return tuple(self._queue.order())

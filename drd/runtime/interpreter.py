@@ -528,9 +528,12 @@ class Interpreter:
             return
         if star is not None and star < low:  # spec: fewer than `a` can be created (`[n]`, `[a..b]` queue instead)
             template = self._states[node.state.children[0]]
-            needs = ", ".join(f"{n.name}: {n.type}" for n in self._plans[template.id].requested)
+            requested = self._plans[template.id].requested
+            needs = ", ".join(f"{n.name}: {n.type}" for n in requested)
+            never = self.rcm.never(tuple(self.resources.need_request(node, n) for n in requested)) if not star else None
             self._finish(node, False, f"{node.state.name}[{low}..*] needs at least {low} instances, but the "
-                                      f"resources allow only {star} (one per distinct set its needs accept: {needs})")
+                                      f"resources allow only {star} (one per distinct set its needs accept: {needs})"
+                                      + (f": {never}" if never else ""))
             return
         if max(low, high) > self.chart.max_instances:
             self._finish(node, False, f"{node.state.name} would create {max(low, high)} instances, above the limit "

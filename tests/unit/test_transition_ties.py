@@ -177,6 +177,16 @@ def test_a_star_multiplicity_fails_on_entry_when_its_resources_allow_fewer_than_
     assert not [r for r in h.of(rec.Entered) if "Spot[" in r.path]  # failed on entry: no instance at all
 
 
+def test_a_star_multiplicity_nothing_can_serve_says_why(catalog: Catalog) -> None:
+    """With no resource at all, the reason says why none ever will (the manager's words, as an instance asking
+    would have had them: re-verification audit, t08)."""
+    text = "mission M { Spot[2..*] }\nbehavior Spot { needs s: Scout where s.id == \"nobody\"\n Wait(duration: 2s) }"
+    h = Harness(compiled(text, catalog), {"Wait": Timed}, ranger_world(1, 6))
+    assert h.run(until=60) == "failure"
+    assert h.interp.reason.endswith("allow only 0 (one per distinct set its needs accept: s: Scout): resource need s"
+                                    " can never be satisfied: no Scout satisfies the constraint"), h.interp.reason
+
+
 @pytest.mark.parametrize(("bounds", "instances"), [("7", 7), ("7..9", 9), ("3..*", 6)])
 def test_other_multiplicities_queue_as_before(catalog: Catalog, bounds: str, instances: int) -> None:
     h = Harness(compiled(SPOTS.format(bounds=bounds), catalog), {"Wait": Timed}, ranger_world(1, 6))
