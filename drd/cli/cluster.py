@@ -276,12 +276,19 @@ def status(config: Path = ConfigOption, connect: list[str] = ConnectOption, as_j
         if not watch:
             data = client.status(events, deadline=client.budget)
             if as_json:
-                print_json(data)
+                print_json(status_json(data))
             else:
                 out.print(_status_view(data, explain=explain))
             return OK
-        _watch(lambda: client.status(events), as_json, interval, explain)
+        _watch((lambda: status_json(client.status(events))) if as_json else lambda: client.status(events), as_json,
+               interval, explain)
     return OK
+
+
+def status_json(data: dict[str, Any]) -> dict[str, Any]:
+    """`status --json`: each mission in the shape `run --json` and `stop --json` give it (`stop_status`)."""
+    missions = data.get("missions")
+    return data if missions is None else {**data, "missions": [stop_status(m) for m in missions]}
 
 
 def components(config: Path = ConfigOption, connect: list[str] = ConnectOption, as_json: bool = JsonOption,

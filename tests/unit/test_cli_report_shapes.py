@@ -9,7 +9,7 @@ from pathlib import Path
 import pytest
 
 from drd import record
-from drd.cli.cluster import offers_title, stop_status
+from drd.cli.cluster import offers_title, status_json, stop_status
 
 
 def test_query_header_counts_offers_in_the_singular_for_one() -> None:
@@ -26,6 +26,15 @@ def test_stop_status_names_the_mission_and_rounds_its_times_as_run_does() -> Non
     assert shown["time"] == 34.5 and shown["started"] == 0.3
     assert shown["outcome"] == "stopped" and shown["already_ended"] is True
     assert status["time"] == 34.50000000000022  # the reply itself is left as it came
+
+
+def test_status_json_shapes_each_mission_as_run_and_stop_do() -> None:
+    """Re-verification audit: `status --json` times were unrounded (768.3999999999763) while `stop --json`'s were."""
+    data = {"hosts": [], "missions": [{"id": "Hold-4242", "mission": "Hold-4242", "outcome": None,
+                                       "time": 768.3999999999763, "started": 0.30000000000000004}]}
+    [shown] = status_json(data)["missions"]
+    assert (shown["mission"], shown["id"], shown["time"], shown["started"]) == ("Hold", "Hold-4242", 768.4, 0.3)
+    assert status_json({"hosts": [], "missions": None})["missions"] is None  # the controller did not answer
 
 
 def test_stop_status_keeps_an_id_that_is_not_name_dash_number() -> None:
