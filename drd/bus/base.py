@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import logging
 import threading
+import time
 from abc import ABC, abstractmethod
 from collections.abc import Callable
 from dataclasses import dataclass, fields
@@ -226,13 +227,14 @@ class Bus(ABC):
         ``request_raw`` as ``request`` does, one step fewer on every call (a subclass changes ``request_raw``).
         """
         answer: Message | None = None
+        asked = time.monotonic()
         for reply in self.request_raw(key, None if payload is None else encode(payload), timeout):
             if reply.error is not None:  # any error wins, the first one in arrival order
                 raise RemoteError(reply.key or key, reply.error)
             if answer is None:
                 answer = reply.payload
         if answer is None:
-            raise BusTimeout(f"no reply on {key!r} within {timeout:g} s")
+            raise BusTimeout(no_reply(key, timeout, time.monotonic() - asked))
         return answer
 
     # -- liveliness
@@ -345,6 +347,15 @@ class Bus(ABC):
         if is_error:
             return Reply(key=key, error=msg.reason if isinstance(msg, ErrorReply) else repr(msg))
         return Reply(msg, key)
+
+
+def no_reply(key: str, timeout: float, waited: float) -> str:
+    """Why a call got no answer: nobody answered in `timeout`, or (zenoh ended the query well before it) nothing on
+    the bus answers there now (no queryable, or no route to one: a router down)."""
+    if waited < 0.9 * timeout:
+        return (f"no reply on {key!r}: nothing answers there now (the query ended after {waited:.1f} s, before its"
+                f" {timeout:g} s timeout)")
+    return f"no reply on {key!r} within {timeout:g} s"
 
 
 class BusWrapper(Bus):

@@ -26,6 +26,7 @@ import functools
 import json
 import re
 import threading
+import time
 from collections.abc import Mapping, Sequence
 from typing import Any
 
@@ -46,6 +47,7 @@ from .base import (
     Token,
     TokenCallback,
     log,
+    no_reply,
 )
 from .keys import check_key_expr
 from .messages import MAX_SIZE, MalformedMessage, Message, decode, encode
@@ -206,6 +208,7 @@ class ZenohBus(Bus):
         is refused (the call's own path, every step of it cold between two round trips)."""
         answer: Message | None = None
         refused: Reply | None = None  # the first error in arrival order; every answer is still decoded and counted
+        asked = time.monotonic()  # for the message of a call nobody answered (40 ns)
         for item in self._ask(key, None if payload is None else encode(payload), timeout):
             if isinstance(item, bytes):
                 reply = self._received_reply(key, item, True)
@@ -224,7 +227,7 @@ class ZenohBus(Bus):
         if refused is not None:
             raise RemoteError(refused.key or key, refused.error or "")
         if answer is None:
-            raise BusTimeout(f"no reply on {key!r} within {timeout:g} s")
+            raise BusTimeout(no_reply(key, timeout, time.monotonic() - asked))
         return answer
 
     def _ask(self, key: str, data: bytes | None, timeout: float) -> list[zenoh.Sample | bytes]:
