@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 from typing import Any
 
 from drd.rcm import Aggregate, ResourceManager, Unit
@@ -155,3 +155,49 @@ behavior Hunt {
     parallel until DetectDoor { FollowCorridor; DetectDoor }
 }
 """
+
+
+#: The door a `DoorFinder` sets as its output.
+DOOR = {"width": 0.9, "x": 1.0, "y": 2.0, "side": "left"}
+
+
+class DoorFinder(Component):
+    """Stands in for DetectDoor: at its second step sets its door, emits DoorDetected and runs on. What it does is
+    said to `sink` (a subclass sets it: a list in process, a file a worker process writes)."""
+
+    sink: Callable[[str], None]
+
+    def start(self) -> None:
+        self.steps = 0
+
+    def step(self, now: float) -> Status:
+        assert self.ctx is not None
+        self.steps += 1
+        if self.steps == 2:
+            self.ctx.outputs["door"] = dict(DOOR)
+            self.ctx.emit("DoorDetected", width=0.9, x=1.0, y=2.0)
+            self.sink("after emit")
+        return Status.RUNNING
+
+    def terminate(self, status: Status) -> None:
+        self.sink(f"terminate {status}")
+
+
+class DoorFacer(Component):
+    """Stands in for AlignRanger: says the door it was given (to `sink`), then succeeds."""
+
+    sink: Callable[[str], None]
+
+    def start(self) -> None:
+        assert self.ctx is not None
+        self.sink(f"face start {self.ctx.inputs.get('door')}")
+
+    def step(self, now: float) -> Status:
+        return Status.SUCCESS
+
+
+class Idle(Component):
+    """Runs until stopped."""
+
+    def step(self, now: float) -> Status:
+        return Status.RUNNING

@@ -24,13 +24,12 @@ from drd.hosts import Cluster, load_hosts
 from drd.hw.drivers import HostDrivers
 from drd.manifests import load_catalog
 from drd.runtime import records as rec
-from drd.runtime.component import Component, Status
+from drd.runtime.component import Component
 from dsl import compile_text
 from dsl.catalog import Catalog, ComponentType, Kind, NeedSpec, ParamSpec
-from tests.runtime_support import INSIDE, LEAF, Harness, ranger_world
+from tests.runtime_support import DOOR, INSIDE, LEAF, DoorFacer, DoorFinder, Harness, Idle, ranger_world
 
 NOTES = "DRD_TEST_LIFECYCLE_NOTES"  # the file the components note their calls in (set before the workers fork)
-DOOR = {"width": 0.9, "x": 1.0, "y": 2.0, "side": "left"}
 
 
 def note(text: str) -> None:
@@ -38,39 +37,12 @@ def note(text: str) -> None:
         f.write(text + "\n")
 
 
-class Finder(Component):
-    """Stands in for DetectDoor: at its second step sets its door, emits DoorDetected and runs on."""
-
-    def start(self) -> None:
-        self.steps = 0
-
-    def step(self, now: float) -> Status:
-        assert self.ctx is not None
-        self.steps += 1
-        if self.steps == 2:
-            self.ctx.outputs["door"] = dict(DOOR)
-            self.ctx.emit("DoorDetected", width=0.9, x=1.0, y=2.0)
-            note("after emit")
-        return Status.RUNNING
-
-    def terminate(self, status: Status) -> None:
-        note(f"terminate {status}")
+class Finder(DoorFinder):
+    sink = staticmethod(note)
 
 
-class Facer(Component):
-    """Stands in for AlignRanger: notes the door it was given, then succeeds."""
-
-    def start(self) -> None:
-        assert self.ctx is not None
-        note(f"face start {self.ctx.inputs.get('door')}")
-
-    def step(self, now: float) -> Status:
-        return Status.SUCCESS
-
-
-class Idle(Component):
-    def step(self, now: float) -> Status:
-        return Status.RUNNING
+class Facer(DoorFacer):
+    sink = staticmethod(note)
 
 
 class Returns(Component):
@@ -156,7 +128,6 @@ def run(source: str, catalog: Catalog, notes: Path, creator: Creator | None) -> 
         assert ran and set(ran) <= {r.path for r in h.of(rec.Entered)}, "they ran in the Creator's worker"
         creator.handle(ComponentCall("retire", "m", ""))  # the next run starts afresh there
     return h, notes.read_text().splitlines()
-
 
 
 @pytest.mark.parametrize("source", [LEAF, INSIDE], ids=["leaf", "inside a parallel"])

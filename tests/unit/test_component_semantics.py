@@ -13,45 +13,17 @@ from drd.runtime import records as rec
 from drd.runtime.component import Component, Status, StatusError, step_status
 from dsl import compile_text
 from dsl.catalog import Catalog
-from tests.runtime_support import INSIDE, LEAF, Harness, ranger_world
+from tests.runtime_support import DOOR, INSIDE, LEAF, DoorFacer, DoorFinder, Harness, Idle, ranger_world
 
-DOOR = {"width": 0.9, "x": 1.0, "y": 2.0, "side": "left"}
 LOG: list[str] = []
 
 
-class Finder(Component):
-    """Stands in for DetectDoor: at its second step sets its door, emits DoorDetected and runs on."""
-
-    def start(self) -> None:
-        self.steps = 0
-
-    def step(self, now: float) -> Status:
-        assert self.ctx is not None
-        self.steps += 1
-        if self.steps == 2:
-            self.ctx.outputs["door"] = dict(DOOR)
-            self.ctx.emit("DoorDetected", width=0.9, x=1.0, y=2.0)
-            LOG.append("after emit")
-        return Status.RUNNING
-
-    def terminate(self, status: Status) -> None:
-        LOG.append(f"terminate {status}")
+class Finder(DoorFinder):
+    sink = LOG.append
 
 
-class Facer(Component):
-    """Stands in for AlignRanger: notes the door it was given, then succeeds."""
-
-    def start(self) -> None:
-        assert self.ctx is not None
-        LOG.append(f"face start {self.ctx.inputs.get('door')}")
-
-    def step(self, now: float) -> Status:
-        return Status.SUCCESS
-
-
-class Idle(Component):
-    def step(self, now: float) -> Status:
-        return Status.RUNNING
+class Facer(DoorFacer):
+    sink = LOG.append
 
 
 REGISTRY = {"DetectDoor": Finder, "AlignRanger": Facer, "FollowCorridor": Idle}
