@@ -286,9 +286,9 @@ def status(config: Path = ConfigOption, connect: list[str] = ConnectOption, as_j
 
 
 def status_json(data: dict[str, Any]) -> dict[str, Any]:
-    """`status --json`: each mission in the shape `run --json` and `stop --json` give it (`stop_status`)."""
+    """`status --json`: each mission in the shape `run --json` and `stop --json` give it."""
     missions = data.get("missions")
-    return data if missions is None else {**data, "missions": [stop_status(m) for m in missions]}
+    return data if missions is None else {**data, "missions": [mission_json(m) for m in missions]}
 
 
 def components(config: Path = ConfigOption, connect: list[str] = ConnectOption, as_json: bool = JsonOption,
@@ -559,8 +559,8 @@ def stop(mission: str = typer.Argument("", help="The mission id (default: the on
         missions = stop_missions(client, mission, every, timeout)
     ended = [m for m in missions if m.get("already_ended")]
     if as_json:
-        print_json({"stopped": [stop_status(m) for m in missions if m not in ended],
-                    "ended": [stop_status(m) for m in ended]})
+        print_json({"stopped": [mission_json(m) for m in missions if m not in ended],
+                    "ended": [mission_json(m) for m in ended]})
         return OK
     if not missions:
         out.print("no mission is running: nothing to stop")
@@ -576,9 +576,9 @@ def offers_title(count: int, text: str) -> str:
     return f"{count} offer{'' if count == 1 else 's'} for {text}"
 
 
-def stop_status(status: dict[str, Any]) -> dict[str, Any]:
-    """A mission's status as `stop --json` gives it: `mission` its name and `id` its id, times rounded as the
-    reports round them (`report_time`), as `run --json` gives them: one shape for a script to read."""
+def mission_json(status: dict[str, Any]) -> dict[str, Any]:
+    """A mission's status as `stop --json` and `status --json` give it: `mission` its name and `id` its id, times
+    rounded as the reports round them (`report_time`), as `run --json` gives them: one shape for a script to read."""
     from drd.dryrun import report_time
 
     shown = dict(status)

@@ -9,7 +9,7 @@ from pathlib import Path
 import pytest
 
 from drd import record
-from drd.cli.cluster import offers_title, status_json, stop_status
+from drd.cli.cluster import mission_json, offers_title, status_json
 
 
 def test_query_header_counts_offers_in_the_singular_for_one() -> None:
@@ -18,10 +18,10 @@ def test_query_header_counts_offers_in_the_singular_for_one() -> None:
     assert offers_title(0, "Camera") == "0 offers for Camera"
 
 
-def test_stop_status_names_the_mission_and_rounds_its_times_as_run_does() -> None:
+def test_mission_json_names_the_mission_and_rounds_its_times_as_run_does() -> None:
     status = {"id": "CorridorSurveillance-9900205", "mission": "CorridorSurveillance-9900205",
               "outcome": "stopped", "time": 34.50000000000022, "started": 0.30000000000000004, "already_ended": True}
-    shown = stop_status(status)
+    shown = mission_json(status)
     assert shown["mission"] == "CorridorSurveillance" and shown["id"] == "CorridorSurveillance-9900205"
     assert shown["time"] == 34.5 and shown["started"] == 0.3
     assert shown["outcome"] == "stopped" and shown["already_ended"] is True
@@ -37,8 +37,8 @@ def test_status_json_shapes_each_mission_as_run_and_stop_do() -> None:
     assert status_json({"hosts": [], "missions": None})["missions"] is None  # the controller did not answer
 
 
-def test_stop_status_keeps_an_id_that_is_not_name_dash_number() -> None:
-    assert stop_status({"id": "adhoc", "time": None})["mission"] == "adhoc"
+def test_mission_json_keeps_an_id_that_is_not_name_dash_number() -> None:
+    assert mission_json({"id": "adhoc", "time": None})["mission"] == "adhoc"
 
 
 def test_read_takes_a_str_path_and_names_the_file_it_cannot_read(tmp_path: Path) -> None:
