@@ -201,7 +201,8 @@ class DryRun:
                 "outcome": self.outcome, "reason": self.reason,
                 "sim_time": report_time(self.sim_time), "wall_time": self.wall_time,
                 **({"controller_away": round(self.away, 3)} if self.away else {}),
-                "real_time_factor": self.real_time_factor, "speed": self.speed,
+                # null when no wall time is known (a replay of a recording cut before its end): JSON has no Infinity
+                "real_time_factor": self.real_time_factor if self.wall_time > 0 else None, "speed": self.speed,
                 "failure_chain": self.failure_chain(), "degraded": self.degraded(), "still_active": self.still_active(),
                 "waiting": self.waiting(), "logs": self.logs(),
                 "timeline": self.timeline(), "holds": self.holds(), "waits": self.waits(),

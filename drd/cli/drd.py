@@ -513,8 +513,10 @@ def _serve_ros2(cluster: Cluster, sim_world: Any, world_name: str, listen: str, 
     try:  # the endpoint's form was checked (`endpoint_problem`): what fails here is the listening itself
         session = Ros2Session.listen(listen, types=message_types())
     except (BusError, ValueError) as e:
+        unknown = "name or service not known" in str(e).lower() or "failed to lookup" in str(e).lower()
         fail(f"cannot listen on {listen}: {e}", code=INTERNAL,
-             hint="is another router or drd on that port?")
+             hint="the host name does not resolve: listen on an address of this machine (tcp/127.0.0.1:PORT)"
+             if unknown else "is another router or drd on that port?")
     stop = threading.Event()
     for signum in (signal.SIGTERM, signal.SIGINT):
         signal.signal(signum, lambda _n, _f: stop.set())

@@ -26,3 +26,15 @@ def test_the_report_says_how_long_it_was_without_a_controller() -> None:
     print_report(report(10.0), console=Console(file=sink, width=120))
     text = sink.getvalue()
     assert "wall time 30.00 s (10.0 s of it without a controller)" in text and "could not keep up" not in text
+
+
+def test_a_report_with_no_wall_time_is_strict_json() -> None:
+    """A replay of a recording cut before its end has no wall time (clients audit: `Infinity` in --json)."""
+    import json
+
+    cut = DryRun("Patrol", "unfinished", "", 53.2, 0.0)
+    data = json.loads(json.dumps(cut.to_dict(), allow_nan=False))
+    assert data["real_time_factor"] is None
+    sink = io.StringIO()
+    print_report(cut, console=Console(file=sink, width=120))
+    assert "inf" not in sink.getvalue()
