@@ -25,7 +25,6 @@ from rich.table import Table
 from rich.text import Text
 
 from drd.cli.common import (
-    INTERNAL,
     OK,
     catalog,
     duration_text,
@@ -514,7 +513,7 @@ def _serve_ros2(cluster: Cluster, sim_world: Any, world_name: str, listen: str, 
         session = Ros2Session.listen(listen, types=message_types())
     except (BusError, ValueError) as e:
         unknown = "name or service not known" in str(e).lower() or "failed to lookup" in str(e).lower()
-        fail(f"cannot listen on {listen}: {e}", code=INTERNAL,
+        fail(f"cannot listen on {listen}: {e}",  # the user's endpoint or their machine, not a bug of ours: 2
              hint="the host name does not resolve: listen on an address of this machine (tcp/127.0.0.1:PORT)"
              if unknown else "is another router or drd on that port?")
     stop = threading.Event()

@@ -266,7 +266,9 @@ def test_drd_sim_refuses_what_it_cannot_do(tmp_path: Path) -> None:
         taken = run("--ros2", "--listen", f"tcp/127.0.0.1:{port}", "--json")
     finally:
         blocker.close()
-    assert taken.returncode == 70 and json.loads(taken.stderr.strip().splitlines()[-1])["code"] == 70
+    assert taken.returncode == 2 and json.loads(taken.stderr.strip().splitlines()[-1])["code"] == 2
+    nowhere = run("--ros2", "--listen", "tcp/nowhere.invalid:7447")  # a host name that does not resolve
+    assert nowhere.returncode == 2 and "does not resolve" in nowhere.stderr and "Traceback" not in nowhere.stderr
     assert ".rs:" not in taken.stderr  # zenoh's Rust source locations are not the user's business
     for bad in ("bogus", "tcp/127.0.0.1:99999", "tcp/127.0.0.1"):  # a bad option, said in one line (not drd's bug)
         refused = run("--ros2", "--listen", bad, "--json")
