@@ -416,14 +416,14 @@ def run(mission: Path = typer.Argument(..., help="The mission file.", show_defau
     with cluster_client(config, connect, timeout, to="run a mission") as client:
         watch = _RecordWatch(client, trace_out, recorder, worlds=(config.absolute().parent,))
         try:
-            report = _run_and_follow(client, watch, request, wait, detach)
+            report = _run_and_follow(client, watch, request, wait, detach, as_json)
         finally:
             watch.close()
             if trace_out is not None:
                 trace_out.close()
     if report is None:  # detached
         return OK
-    report.speed, report.on_cluster = speed, True
+    report.on_cluster = True
     if recorder is not None:
         _scouts_ended(report, recorder)
         recorder.end([summary(report)], report.sim_time)
@@ -455,9 +455,10 @@ def _outputs(trace: Path | None, record: Path | None, foxglove: str | None,
 
 
 def _run_and_follow(client: ClusterClient, watch: _RecordWatch, request: Any, wait: float,
-                    detach: bool) -> DryRun | None:
-    """Submit the mission, then follow it to its end (None when detached: its id is printed). Ctrl-C before the
-    controller took it stops nothing; after, it stops the mission and the report says how it ended."""
+                    detach: bool, as_json: bool) -> DryRun | None:
+    """Submit the mission, then follow it to its end (None when detached: its id is printed, under `--json` as an
+    object). Ctrl-C before the controller took it stops nothing; after, it stops the mission and the report says
+    how it ended. The report's pace is the world's: a mission that joins a running world runs at its speed."""
     from drd.daemon.missions import RunReply, run_key
 
     began = time.monotonic()
@@ -474,14 +475,23 @@ def _run_and_follow(client: ClusterClient, watch: _RecordWatch, request: Any, wa
                 raise typer.Exit(INVALID)
             reply = answer
             if detach:
-                out.print(reply.mission)
+                if as_json:
+                    print_json({"mission": reply.mission, "world": reply.world, "speed": reply.speed,
+                                "priority": reply.priority})
+                else:
+                    out.print(reply.mission)
                 return None
             watch.started(reply)
             err.print(Text.assemble(("▶ ", "bold green"), f"mission {reply.mission} started on the cluster (world "
                                     f"{reply.world}, {reply.speed:g}x real time, priority {reply.priority})"))
+            if reply.speed != request.speed:  # it joined a world another mission opened, which keeps its pace
+                err.print(Text(f"  --speed {request.speed:g} not applied: the running world {reply.world} goes at "
+                               f"{reply.speed:g}x, set by the mission that opened it", style="yellow"))
         if interrupted:
             raise KeyboardInterrupt
-        return watch.follow(reply.mission, request.until / request.speed + 120.0, reply.base, began)
+        report = watch.follow(reply.mission, request.until / reply.speed + 120.0, reply.base, began)
+        report.speed = reply.speed
+        return report
     except KeyboardInterrupt:  # the operator's Ctrl-C stops the mission, not just this command
         if reply is None:  # before the controller took it: nothing runs
             raise

@@ -87,7 +87,8 @@ def test_two_missions_share_one_ranger_by_priority(cluster: DaemonCluster, tmp_p
     low_trace, high_trace = tmp_path / "low.jsonl", tmp_path / "high.jsonl"
     config = ["--config", str(cluster.hosts_file), "--speed", "4", "--json"]
     low_cmd = [*MISSIONCTL, "run", str(tmp_path / "low.mission"), *config, "--priority", "2", "--trace", str(low_trace)]
-    high_cmd = [*MISSIONCTL, "run", str(tmp_path / "high.mission"), *config, "--trace", str(high_trace)]
+    high_cmd = [*MISSIONCTL, "run", str(tmp_path / "high.mission"), *config, "--speed", "8",  # the world stays at 4x
+                "--trace", str(high_trace)]
     client = cluster.client()
     with running(low_cmd) as low:
         def patrolling() -> bool:
@@ -109,6 +110,10 @@ def test_two_missions_share_one_ranger_by_priority(cluster: DaemonCluster, tmp_p
     high_report, low_report = json.loads(high_out), json.loads(low_out)
     assert high_report["outcome"] == low_report["outcome"] == "success"
     assert "priority 1" in high_err and "priority 2" in low_err  # each run says the rank it got
+    # the joining run is told its --speed is not the world's, and its report has the world's pace (not a cluster
+    # that fell behind the 8x it asked)
+    assert "--speed 8 not applied" in high_err, high_err[-2000:]
+    assert high_report["speed"] == low_report["speed"] == 4
 
     low_recs, high_recs = read_trace(low_trace), read_trace(high_trace)
     assert {r["mission"] for r in low_recs} == {low_report["id"]}, "each trace holds its own mission"

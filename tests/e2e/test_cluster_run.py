@@ -127,10 +127,11 @@ def test_a_cluster_run_records_and_replays_to_the_same_report(cluster: DaemonClu
 
 
 def test_detach_then_status_shows_the_active_states_then_stop(cluster: DaemonCluster) -> None:
-    r = missionctl(cluster, "run", MISSION, "--detach", "--speed", "5")
+    r = missionctl(cluster, "run", MISSION, "--detach", "--speed", "5", "--json")
     assert r.returncode == 0, r.stderr
-    mid = r.stdout.strip()
-    assert mid.startswith("CorridorSurveillance-")
+    started = json.loads(r.stdout)  # one strict JSON object under --json, the id in it
+    mid = started["mission"]
+    assert mid.startswith("CorridorSurveillance-") and started["speed"] == 5 and started["world"]
 
     def active() -> list[str]:
         s = missionctl(cluster, "status", "--json")
