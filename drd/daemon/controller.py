@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import threading
 import zlib
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, replace
 from typing import Any
 
@@ -19,10 +19,18 @@ from drd.bus import Bus, BusWrapper, Handler, Message, Query, Queryable, Reply
 from drd.bus.keys import is_concrete
 from drd.bus.messages import encode
 from drd.cluster.keys import ClusterKeys
-from drd.daemon.messages import ResourcesReply, ResourcesRequest, RobotInfo, UnitInfo, ViewRequest, WaiterInfo
+from drd.daemon.messages import (
+    BlockerInfo,
+    ResourcesReply,
+    ResourcesRequest,
+    RobotInfo,
+    UnitInfo,
+    ViewRequest,
+    WaiterInfo,
+)
 from drd.hosts import Cluster
 from drd.paging import by_position
-from drd.rcm import Aggregate, Unit
+from drd.rcm import Aggregate, Request, Unit
 from drd.runtime.clock import Clock, WallClock
 from dsl.catalog import Catalog
 
@@ -77,17 +85,28 @@ def host_resources(cluster: Cluster, host: str) -> list[Unit | Aggregate]:
     return [c for c in cluster.resources() if c.host == host]
 
 
+#: One waiter as the manager tells it (`ResourceManager.waiters`): its request, the units it claims, who is in its way.
+WaiterView = tuple[Request, frozenset[str], tuple[str, ...]]
+
+
 def resources_reply(snapshot: Mapping[str, Any], cluster: str, answered_by: str,
-                    removing: Mapping[str, float], hosts: Mapping[str, str] | None = None) -> ResourcesReply:
+                    removing: Mapping[str, float], hosts: Mapping[str, str] | None = None,
+                    waiters: Sequence[WaiterView] | None = None) -> ResourcesReply:
     """`ResourceManager.snapshot()` as the wire's view: each unit with holders, queue and epoch.
 
-    A unit's queue lists the waiting holders that need its type, or the type of a robot using it,
-    in service order (the manager serves in that order, though it may pick another unit of the type).
+    A unit's queue lists the waiters that claim it (`waiters`, from `ResourceManager.waiters`: a need's `where`
+    narrows what it may take), in service order; without `waiters`, those that need its type or the type of a robot
+    using it (a coarser guess: a waiter for ranger2 would stand in ranger1's queue too).
     """
     aggregates: Mapping[str, Mapping[str, Any]] = snapshot.get("aggregates", {})
     holds: Mapping[str, Mapping[str, Any]] = snapshot.get("holds", {})
+    views = {request.holder: (claims, blockers) for request, claims, blockers in waiters or ()}
+    requests = {request.holder: request for request, _, _ in waiters or ()}
     queue = [WaiterInfo(str(w["holder"]), int(w["priority"]), str(w.get("mission") or ""),
-                        {str(k): str(v) for k, v in dict(w.get("needs", {})).items()})
+                        {str(k): str(v) for k, v in dict(w.get("needs", {})).items()},
+                        int(w.get("mission_priority") or 1), _wheres(requests.get(str(w["holder"]))),
+                        _blockers(views.get(str(w["holder"])), holds, aggregates, {str(q["holder"]) for q in
+                                                                                   snapshot.get("queue", [])}))
              for w in snapshot.get("queue", [])]
     robot_of: dict[str, set[str]] = {}
     for agg in aggregates.values():
@@ -96,7 +115,8 @@ def resources_reply(snapshot: Mapping[str, Any], cluster: str, answered_by: str,
     units = []
     for uid, u in dict(snapshot.get("units", {})).items():
         types = {str(u["type"])} | robot_of.get(uid, set())
-        waiting = [w.holder for w in queue if types & set(w.needs.values())]
+        waiting = [w.holder for w in queue if (uid in views[w.holder][0] if w.holder in views
+                                               else bool(types & set(w.needs.values())))]
         units.append(UnitInfo(uid, str(u["type"]), str(u["host"] or ""), bool(u["sharable"]), float(u["capacity"]),
                               float(u["load"]), int(u["epoch"]), sorted(map(str, dict(u["holders"]))), waiting,
                               {str(k): v for k, v in dict(u.get("properties", {})).items()}))
@@ -107,6 +127,41 @@ def resources_reply(snapshot: Mapping[str, Any], cluster: str, answered_by: str,
     units.sort(key=lambda u: u.id)
     robots.sort(key=lambda r: r.id)
     return ResourcesReply(cluster, answered_by, units, robots, queue, dict(removing), dict(hosts or {}))
+
+
+def _wheres(request: Request | None) -> dict[str, str]:
+    """Need -> its `where` as written (the runtime's `Where` keeps the expression; a pinned need of a resumed
+    mission says which resource it must be)."""
+    from dsl.printer import expr
+
+    found: dict[str, str] = {}
+    for need in request.needs if request is not None else ():
+        source = getattr(need.where, "expr", None)
+        if source is not None:
+            found[need.name] = expr(source)
+        elif need.where is not None:
+            found[need.name] = "(a condition set by drd)"
+    return found
+
+
+def _blockers(view: tuple[frozenset[str], tuple[str, ...]] | None, holds: Mapping[str, Mapping[str, Any]],
+              aggregates: Mapping[str, Mapping[str, Any]], queued: set[str]) -> list[BlockerInfo]:
+    """Who is in a waiter's way, each holder with what it holds of the units the waiter claims (need -> id)."""
+    if view is None:
+        return []
+    claims, blockers = view
+    found = []
+    for holder in blockers:
+        assignment = {str(need): str(cid) for need, cid in dict(holds.get(holder, {}).get("assignment", {})).items()}
+        held = {need: cid for need, cid in assignment.items() if not claims.isdisjoint(_units(cid, aggregates))}
+        found.append(BlockerInfo(holder, held, holder in queued and holder not in holds))
+    return found
+
+
+def _units(candidate: str, aggregates: Mapping[str, Mapping[str, Any]]) -> set[str]:
+    """The unit ids a granted candidate occupies: a robot's parts, or the unit itself."""
+    parts = aggregates.get(candidate, {}).get("parts")
+    return {str(u) for u in dict(parts).values()} if parts else {candidate}
 
 
 def resources_page(whole: ResourcesReply, after: int = 0, count: int = 0) -> ResourcesReply:
@@ -312,9 +367,10 @@ class Controller:
             self._lock.release()
 
     def resources(self) -> ResourcesReply:
-        snapshot = self.executive.broker.rcm.snapshot()
+        rcm = self.executive.broker.rcm
         hosts = self._host_states() if self._host_states is not None else {}
-        return resources_reply(snapshot, self.cluster.name, self.me, self.membership.pending(self.clock.now()), hosts)
+        return resources_reply(rcm.snapshot(), self.cluster.name, self.me, self.membership.pending(self.clock.now()),
+                               hosts, rcm.waiters())
 
     def close(self) -> None:
         self._queryable.close()

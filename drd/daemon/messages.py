@@ -204,14 +204,29 @@ class RobotInfo(Message):
     holders: list[str]
 
 
-@message("drd.rcm.waiter", 1)
+@message("drd.rcm.blocker", 1)
+class BlockerInfo(Message):
+    """Who stands in a waiter's way: a holder with what it holds of the waiter's claims (need -> resource id), or a
+    better-placed waiter (`waiting`, nothing held) served first."""
+
+    holder: str
+    holds: dict[str, str]
+    waiting: bool = False
+
+
+@message("drd.rcm.waiter", 2)
 class WaiterInfo(Message):
-    """A request waiting in the manager's queue, in service order."""
+    """A request waiting in the manager's queue, in service order. Its rank is (`mission_priority`, `priority`):
+    the mission's priority decides first. `where`: need -> its `where` as written (needs without one are absent);
+    `blocked_by`: who is in its way now."""
 
     holder: str
     priority: int
     mission: str
     needs: dict[str, str]
+    mission_priority: int = 1
+    where: dict[str, str] = {}
+    blocked_by: list[BlockerInfo] = []
 
 
 @message("drd.rcm.resources-request", 1)
@@ -223,7 +238,7 @@ class ResourcesRequest(Message):
     count: int = 0
 
 
-@message("drd.rcm.resources", 3)
+@message("drd.rcm.resources", 4)
 class ResourcesReply(Message):
     """The controller's Resource Controller Manager: units, robots, the queue, hosts whose
     resources will be removed (`removing`: host -> seconds left of the lease) unless they come back, and

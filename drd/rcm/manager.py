@@ -320,6 +320,18 @@ class ResourceManager:
                                  "at": p.at} for h, p in sorted(self._pending.items())},
         }
 
+    def waiters(self) -> list[tuple[Request, frozenset[str], tuple[str, ...]]]:
+        """Each waiter in service order: its request, the units it claims (the queues it really stands in: a `where`
+        narrows them) and who is in its way now (as its `Waiting` names them). Read-only, for `missionctl status`:
+        a queue rebuilt from need types alone lists a waiter under robots it can never take."""
+        found = []
+        for holder in self._queue.order():
+            wait = self._queue.waits[holder]
+            alts, capped = self._reg.alternatives(wait.request.needs, wait.given, self.max_alternatives)
+            blockers = self._blockers_of(wait, self._claims_of(wait, alts, capped)) if alts else set()
+            found.append((wait.request, wait.claims, tuple(sorted(blockers))))
+        return found
+
     # -- time ----------------------------------------------------------------------------------
 
     def _begin(self, now: float) -> list[Decision]:
