@@ -32,7 +32,7 @@ from drd.runtime.broker import ResourceBroker
 from drd.runtime.clock import Clock
 from drd.runtime.component import Component
 from drd.runtime.constraints import Breach, ConstraintGuard
-from drd.runtime.interpreter import Interpreter, describe_devices
+from drd.runtime.interpreter import Interpreter, describe_devices, stop_together
 from drd.runtime.ownership import Gates, LocalGates, NoGates
 from drd.runtime.pool import ResourcePool
 from drd.runtime.records import plain
@@ -235,9 +235,10 @@ class Executive:
         return all(m.finished for m in self.missions.values())
 
     def stop(self, mission_id: str = "", reason: str = "stopped by operator") -> list[str]:
+        """Stop one mission, or all at once (`stop_together`: no mission being stopped is granted what another's
+        stop gives back); the ids asked of."""
         targets = [mission_id] if mission_id else list(self.missions)
-        for mid in targets:
-            self.missions[mid].stop(reason)
+        stop_together([self.missions[mid] for mid in targets], reason)
         return targets
 
     def status(self, after: int = 0, count: int = 0, only: Iterable[str] | None = None) -> MissionStatus:

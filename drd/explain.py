@@ -235,7 +235,7 @@ def _waiting(records: Iterator[rec.Record]) -> list[dict[str, Any]]:
             if r.needs:
                 w["needs"] = list(r.needs)
             if r.blocked_by:
-                w["blocked_by"] = list(r.blocked_by)
+                w["blocked_by"], w["held"] = list(r.blocked_by), r.holds
         elif isinstance(r, rec.Granted):
             waits.pop(r.path, None)
             holds[r.path] = {k: v for k, v in r.named.items() if "." not in k}
@@ -245,8 +245,17 @@ def _waiting(records: Iterator[rec.Record]) -> list[dict[str, Any]]:
         elif isinstance(r, rec.Exited):
             waits.pop(r.path, None)
             holds.pop(r.path, None)
-    return [{**w, "blocked_by": [{"path": b, "holds": holds.get(b, {})} for b in w["blocked_by"]]}
-            for w in waits.values()]
+    return [blocked(w, holds) for w in waits.values()]
+
+
+def blocked(wait: dict[str, Any], holds: dict[str, dict[str, str]]) -> dict[str, Any]:
+    """A report's waiting behavior: `{path, since, needs, blocked_by: [{path, holds}]}`, each blocker with what it
+    held (need -> resource id). This mission's blockers' holds are from its records (`holds`, by path); another
+    mission's blocker (`<mission id>/<path>`) has its `mission` too, and its holds are the `waiting` record's."""
+    held: dict[str, dict[str, str]] = wait.get("held") or {}
+    return {**{k: v for k, v in wait.items() if k != "held"},
+            "blocked_by": [{"path": b, "mission": b.partition("/")[0], "holds": held[b]} if b in held
+                           else {"path": b, "holds": holds.get(b, {})} for b in wait["blocked_by"]]}
 
 
 def _name(path: str) -> str:

@@ -45,6 +45,7 @@ from typing import Any
 import orjson
 
 from drd.errors import ConfigurationError
+from drd.explain import blocked
 from drd.runtime import records as rec
 from drd.sim.model import INTRUDER_RADIUS, RANGER_RADIUS, SCOUT_RADIUS, DoorState, World
 from drd.sim.observe import SCAN_EVERY, SensorTap
@@ -546,7 +547,8 @@ class ActiveView:
             w = self.waits.setdefault(r.path, {"path": r.path, "since": round(r.at, 6), "needs": [],
                                                "blocked_by": []})
             w["needs"] = list(r.needs) or w["needs"]
-            w["blocked_by"] = list(r.blocked_by) or w["blocked_by"]
+            if r.blocked_by:
+                w["blocked_by"], w["held"] = list(r.blocked_by), r.holds
         elif isinstance(r, rec.Granted):
             self.waits.pop(r.path, None)
             named = r.named
@@ -590,8 +592,7 @@ class ActiveView:
 
         active = sorted(({"path": p, "since": round(t, 6), "state": state(p)} for p, t in self.active.items()
                          if not self.below.get(p)), key=lambda row: (row["since"], row["path"]))  # as `explain`'s
-        waiting = [{**w, "blocked_by": [{"path": b, "holds": self.needs.get(b, {})} for b in w["blocked_by"]]}
-                   for w in self.waits.values()]
+        waiting = [blocked(w, self.needs) for w in self.waits.values()]
         return {"mission": self.name, "id": self.mission, "at": at, "outcome": self.outcome, "active": active,
                 "holds": {p: held for p, held in self.holds.items() if held}, "waiting": waiting}
 

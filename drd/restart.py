@@ -24,6 +24,7 @@ from typing import Any
 
 from drd.executive import Executive
 from drd.runtime import records as rec
+from drd.runtime.interpreter import stop_together
 from drd.runtime.snapshot import NodeImage, capture, property_changes
 from dsl.statechart import Statechart
 
@@ -141,8 +142,7 @@ class ControllerLife:
     def end(self, why: str) -> None:
         """The run ends now: the missions still running stop (those waiting for a controller that never came
         back stop silently: no controller records their end)."""
-        for interp in self.interpreters.values():
-            if not interp.finished:
-                interp.stop(why if self.executive is not None else f"{why}; the controller was down")
+        reason = why if self.executive is not None else f"{why}; the controller was down"
+        stop_together(self.interpreters.values(), reason)  # as one stop: none is granted what another gives back
         if self.executive is not None:
             self.executive.close()

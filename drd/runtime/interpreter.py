@@ -259,6 +259,18 @@ class Interpreter:
         if self.outcome is None:
             self._end("stopped", reason)
 
+    def waiting_requests(self) -> list[tuple[str, Node]]:
+        """Its requests the manager may still grant (waiting, revoked and queued again, preallocations not granted
+        yet), by holder: what `stop_together` withdraws."""
+        return [(holder, node) for holder, node in self.resources.holders.items()
+                if node.requested and node.grant is None and node.phase is not DONE and not node.closing]
+
+    def withdraw(self, node: Node) -> None:
+        """Withdraw one of `waiting_requests` ahead of a stop: nothing is granted to it any more (the stop that
+        follows exits it as it was, waiting)."""
+        node.closing = True
+        self.resources.cancel(node)
+
     def add_resources(self, resources: Iterable[Any]) -> None:
         """Hot-plug: new units and aggregates; running multiplicities may grow."""
         self.pool.add(resources, self.clock.now())
@@ -1038,10 +1050,25 @@ class Interpreter:
                         self._finish(node, False, f"cancelled to break a resource deadlock: {' -> '.join(d.cycle)}")
                 case WaitingDecision():
                     if self.listeners:
-                        self._notify(rec.Waiting(self.clock.now(), node.path, (),
-                                                 tuple(_path(b) for b in d.blocked_by)))
+                        self._notify(self._waiting(node, d.blocked_by))
         if not self._settling:  # a grant made outside a run to completion (another mission's release, a tick)
             self.resources.flush()
+
+    def _waiting(self, node: Node, blockers: tuple[str, ...]) -> rec.Waiting:
+        """Who blocks `node`: this mission's blockers by their path, another mission's by `<mission id>/<path>`
+        (two missions of one name have the same paths), with what each of those held (the manager's holds)."""
+        named = tuple(self._holder_path(b) for b in blockers)
+        foreign = [b for b in blockers if b.partition("/")[0] != self.mission]  # named by their holder
+        holds: dict[str, dict[str, str]] = {}
+        if foreign:
+            held = self.rcm.rcm.snapshot()["holds"]
+            holds = {b: dict(held[b]["assignment"]) if b in held else {} for b in foreign}
+        return rec.Waiting(self.clock.now(), node.path, (), named, holds)
+
+    def _holder_path(self, holder: str) -> str:
+        """A manager holder as the trace names it: a path of this mission, or `<mission id>/<path>` of another."""
+        mission, _, path = holder.partition("/")
+        return path if mission == self.mission and path else holder
 
     def _on_granted(self, node: Node, d: Granted) -> None:
         was_revoked = node.revoked
@@ -1061,10 +1088,10 @@ class Interpreter:
         then the grant ends (the devices stop if anything of it still moves them) and the node is suspended."""
         froze = node.phase is ACTIVE and not node.closing
         if froze:
-            self._freeze(node, f"preempted by {_path(d.by)}")
+            self._freeze(node, f"preempted by {self._holder_path(d.by)}")
         now = self.clock.now()
         if self.listeners:
-            self._notify(rec.Revoked(now, node.path, d.units, f"preempted by {_path(d.by)}"))
+            self._notify(rec.Revoked(now, node.path, d.units, f"preempted by {self._holder_path(d.by)}"))
         ended = self.resources.lost(node, d.units, "revoked")
         node.revoked = True
         if self.listeners:
@@ -1174,6 +1201,22 @@ def _violation_fields(a: Active, m: Measure) -> dict[str, Any]:
     return {"name": a.name, "resource": ", ".join(a.robots), "value": m.value, "limit": m.limit}
 
 
+def stop_together(missions: Iterable[Interpreter], reason: str) -> None:
+    """Stop several missions sharing a manager as one stop: first every request of theirs the manager may still
+    grant is withdrawn, the worst placed first (a withdrawn waiter frees only what it claimed ahead of those behind
+    it, withdrawn already), then each stops. One at a time, a stop's releases were granted to (and entered states
+    of) the next mission to stop, whose report then lost what it waited for."""
+    live = [m for m in missions if not m.finished]
+    if len(live) > 1:
+        requests = {holder: (m, node) for m in live for holder, node in m.waiting_requests()}
+        place = {holder: i for i, holder in enumerate(live[0].rcm.rcm.queue())}
+        for holder in sorted(requests, key=lambda h: place.get(h, -1), reverse=True):
+            m, node = requests[holder]
+            m.withdraw(node)
+    for m in live:
+        m.stop(reason)
+
+
 def describe_devices(pool: ResourcePool) -> tuple[dict[str, str], dict[str, str]]:
     """Each unit's RC type, and the robot it moves (the one aggregate it is a part of; none when shared)."""
     kinds = {c.id: c.type for c in pool.candidates.values() if isinstance(c, Unit)}
@@ -1183,11 +1226,6 @@ def describe_devices(pool: ResourcePool) -> tuple[dict[str, str], dict[str, str]
             for unit in pool.units(c.id):
                 owners.setdefault(unit, []).append(c.id)
     return kinds, {unit: robots[0] for unit, robots in owners.items() if len(robots) == 1}
-
-
-def _path(holder: str) -> str:
-    """A manager holder `<mission>/<path>` as a path of the trace."""
-    return holder.partition("/")[2] or holder
 
 
 def under(path: str, root: str) -> bool:

@@ -62,8 +62,20 @@ class Taken(Record):
 
 @dataclass(frozen=True, slots=True)
 class Waiting(Record):
+    """`blocked_by`: this mission's blockers by path, another mission's as `<mission id>/<path>`; `holds`: what
+    each of those other missions' blockers held then (need -> resource id; {} for a waiter). The trace has
+    `holds` only when another mission blocks: what a reader cannot find in this mission's own records."""
+
     needs: tuple[str, ...]
     blocked_by: tuple[str, ...] = ()
+    holds: dict[str, dict[str, str]] = field(default_factory=dict)
+
+    def to_dict(self) -> dict[str, Any]:
+        out: dict[str, Any] = {"kind": "waiting", "at": self.at, "path": self.path, "needs": self.needs,
+                               "blocked_by": self.blocked_by}
+        if self.holds:  # a field added later: absent when it says nothing (one mission's traces are unchanged)
+            out["holds"] = self.holds
+        return out
 
 
 @dataclass(frozen=True, slots=True)
