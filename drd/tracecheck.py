@@ -49,6 +49,8 @@ NAMES: FieldType = (lambda v: isinstance(v, dict) and all(isinstance(x, str) for
                     "an object of strings")
 EPOCHS: FieldType = (lambda v: isinstance(v, dict) and all(_integer(x) for x in v.values()),
                      "an object of integers")
+HOLDS: FieldType = (lambda v: isinstance(v, dict) and all(NAMES[0](x) for x in v.values()),
+                    "an object of objects of strings")
 
 #: The fields every record has (docs/trace.md, "Every record"), and those some traces have.
 COMMON: dict[str, FieldType] = {"kind": STRING, "at": NUMBER, "path": STRING}
@@ -73,7 +75,8 @@ KINDS: dict[str, dict[str, FieldType]] = {
     "finished": {"outcome": STRING, "reason": STRING},
 }
 #: Fields added to a kind later (a field is only ever added): checked when there, not required of older traces.
-KINDS_OPTIONAL: dict[str, dict[str, FieldType]] = {"exited": {"reason": STRING}, "granted": {"shares": NAMES}}
+KINDS_OPTIONAL: dict[str, dict[str, FieldType]] = {"exited": {"reason": STRING}, "granted": {"shares": NAMES},
+                                                   "waiting": {"holds": HOLDS}}
 
 
 def record_problem(record: Any) -> str | None:
