@@ -15,7 +15,7 @@ import math
 import re
 import time
 import typing
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from contextlib import contextmanager
 from dataclasses import asdict
 from pathlib import Path
@@ -278,7 +278,7 @@ def status(config: Path = ConfigOption, connect: list[str] = ConnectOption, as_j
             if as_json:
                 print_json(status_json(data))
             else:
-                out.print(_status_view(data, explain=explain))
+                out.print(status_view(data, explain=explain))
             return OK
         _watch((lambda: status_json(client.status(events))) if as_json else lambda: client.status(events), as_json,
                interval, explain)
@@ -286,9 +286,73 @@ def status(config: Path = ConfigOption, connect: list[str] = ConnectOption, as_j
 
 
 def status_json(data: dict[str, Any]) -> dict[str, Any]:
-    """`status --json`: each mission in the shape `run --json` and `stop --json` give it."""
+    """`status --json`: each mission in the shape `run --json` and `stop --json` give it, its waiting nodes told why
+    (`with_waits`)."""
+    data = with_waits(data)
     missions = data.get("missions")
     return data if missions is None else {**data, "missions": [mission_json(m) for m in missions]}
+
+
+def with_waits(data: dict[str, Any]) -> dict[str, Any]:
+    """The status with each node of a mission's tree that stands in the manager's queue told why (`waiting_for`:
+    its needs with their `where`, its rank, mission priority first, and who blocks it with what they hold): a
+    mission's own status says only `waiting`, the manager knows the rest. Pure; adds, never renames."""
+    resources, missions = data.get("resources"), data.get("missions")
+    if not resources or not missions:
+        return data
+    queue = {str(w["holder"]): w for w in resources.get("queue", [])}
+    if not queue:
+        return data
+
+    def mark(node: dict[str, Any], mission: str) -> dict[str, Any]:
+        found = queue.get(f"{mission}/{node.get('path')}")
+        node = {**node, "children": [mark(c, mission) for c in node.get("children") or []]}
+        if found is not None:
+            node["waiting_for"] = {"needs": found["needs"], "where": found.get("where", {}),
+                                   "mission_priority": found.get("mission_priority", 1),
+                                   "priority": found["priority"], "blocked_by": found.get("blocked_by", [])}
+        return node
+
+    return {**data, "missions": [{**m, "tree": mark(m["tree"], str(m.get("id")))} if isinstance(m.get("tree"), dict)
+                                 else m for m in missions]}
+
+
+def waits_text(why: dict[str, Any]) -> str:
+    """A node's `waiting_for` in words: `for ranger: Ranger where ranger.id == "ranger2" (mission priority 3,
+    priority 1), blocked by CamHog-91/HoldEast (ranger: ranger2)`."""
+    wheres = why.get("where") or {}
+    needs = ", ".join(f"{n}: {t}" + (f" where {wheres[n]}" if n in wheres else "") for n, t in why["needs"].items())
+    text = f"for {needs} (mission priority {why['mission_priority']}, priority {why['priority']})"
+    blockers = [holder_label(b["holder"], several=True) + (" (waiting first)" if b.get("waiting") else
+                                                           f" ({', '.join(f'{k}: {v}' for k, v in b['holds'].items())})"
+                                                           if b.get("holds") else "")
+                for b in why.get("blocked_by") or []]
+    return text + (f", blocked by {', '.join(blockers)}" if blockers else "")
+
+
+def holder_label(holder: str, room: int = 0, several: bool = True) -> str:
+    """A manager holder (`NightGuard-9515067/NightGuard/GuardPost`) in at most `room` characters (0: whole): with
+    several missions its mission id and its path below the mission's root (`NightGuard-9515067/GuardPost`), cut so
+    that what tells two holders apart stays, the id's tail and the leaf (`Nig…-9515067/GuardPost`); with one mission
+    the path below the root alone."""
+    steps = holder.split("/", 2)
+    if len(steps) < 3:
+        return shorten(holder, room) if room else holder
+    mission, rest = steps[0], steps[2]
+    if not several:
+        return shorten(rest, room) if room else rest
+    label = f"{mission}/{rest}"
+    if not room or len(label) <= room:
+        return label
+    leaf = rest.rsplit("/", 1)[-1]
+    rest = shorten(rest, max(len(leaf), room - len(mission) - 1))
+    left = room - len(rest) - 1
+    if left >= len(mission):
+        return f"{mission}/{rest}"
+    name, dash, tail = mission.rpartition("-")
+    tail = dash + tail if dash else mission[-max(1, left - 1):]
+    head = name[:max(0, left - len(tail) - 1)]
+    return f"{head}…{tail}/{rest}"
 
 
 def components(config: Path = ConfigOption, connect: list[str] = ConnectOption, as_json: bool = JsonOption,
@@ -623,18 +687,52 @@ def stop_missions(client: Any, mission: str, every: bool, timeout: float) -> lis
     return stopped
 
 
-def progress_line(sim_time: float, active: list[str], width: int = 80) -> Text:
+def progress_line(sim_time: float, active: list[str], width: int = 80, phases: Mapping[str, str] | None = None) -> Text:
     """`missionctl run`'s line each second: the sim time (the executive's, so it moves even when no record comes)
-    and the active leaves, fitted to `width`."""
+    and the leaves entered, by phase (`active`, `suspended`, `waiting`: a leaf takes the phase of its nearest node,
+    itself or above, that `phases` marks), fitted to `width`: a preempted mission must not read as running."""
     leaves = [p for p in active if not any(q.startswith((p + "/", p + "[")) for q in active)]
-    names = ", ".join(p.rsplit("/", 1)[-1] for p in leaves[:6]) or "—"
-    if len(leaves) > 6:
-        names += f" +{len(leaves) - 6}"
-    head = f"sim {sim_time:7.1f} s  active "
-    room = max(10, width - len(head) - 1)
-    if len(names) > room:
-        names = names[:room - 1] + "…"
-    return Text.assemble(("sim ", "dim"), f"{sim_time:7.1f} s  ", ("active ", "dim"), names)
+    marks = phases or {}
+    groups: dict[str, list[str]] = {}
+    for leaf in leaves:
+        groups.setdefault(_phase_of(leaf, marks), []).append(leaf.rsplit("/", 1)[-1])
+    text = Text.assemble(("sim ", "dim"), f"{sim_time:7.1f} s")
+    room = max(10, width - len(text) - 1)
+    for phase in [p for p in ("active", "suspended", "waiting") if p in groups] or ["active"]:
+        names = ", ".join(groups.get(phase, [])[:6]) or "—"
+        if len(groups.get(phase, [])) > 6:
+            names += f" +{len(groups[phase]) - 6}"
+        room -= len(phase) + 3
+        if len(names) > max(6, room):
+            names = names[:max(6, room) - 1] + "…"
+        room -= len(names)
+        text.append_text(Text.assemble(("  ", ""), (f"{phase} ", "dim" if phase == "active" else "bold yellow"),
+                                       names))
+    return text
+
+
+def _phase_of(path: str, phases: Mapping[str, str]) -> str:
+    """The phase of the nearest node, `path` or above it, that is marked (suspended or waiting), else `active`."""
+    node = path
+    while node:
+        if node in phases:
+            return str(phases[node])
+        node = node.rsplit("/", 1)[0] if "/" in node else ""
+    return "active"
+
+
+def track_phase(phases: dict[str, str], record: Any) -> None:
+    """Keep `phases` (path -> `waiting` or `suspended`) up to date with one record of the mission: a node waits from
+    its `waiting` to its `granted`, is suspended from its `suspended` to its `resumed`; an exit ends both."""
+    from drd.runtime import records as rec
+
+    if isinstance(record, rec.Waiting):
+        phases.setdefault(record.path, "waiting")
+    elif isinstance(record, rec.Suspended):
+        phases[record.path] = "suspended"
+    elif isinstance(record, rec.Granted) and phases.get(record.path) == "waiting" or isinstance(
+            record, rec.Resumed | rec.Exited):
+        phases.pop(record.path, None)
 
 
 #: Seconds a client waits, once it lost the controller, for the mission to be there again (a restarted controller
@@ -659,6 +757,7 @@ class _RecordWatch:
         self.recorder = recorder  # --record: the same records, into an MCAP file
         self.queue: queue.Queue[object] = queue.Queue()
         self.seen: dict[str, tuple[DryRun, dict[str, None]]] = {}  # mission -> (its report so far, active paths)
+        self.phases: dict[str, dict[str, str]] = {}  # mission -> its nodes waiting or suspended (`track_phase`)
         self.away_since: float | None = None  # when the controller stopped answering (None: it answers)
         self.behind = False  # the controller came back: the records it sent before we heard it are still to fetch
         self.seqs: set[int] = set()  # the numbers of the records followed (a record caught up twice counts once)
@@ -705,6 +804,7 @@ class _RecordWatch:
             self.seen[mission] = (DryRun(mission_name(mission), None, "", 0.0, 0.0, priority=self.priority,
                                          mission_id=mission), {})
         result, active = self.seen[mission]
+        phases = self.phases.setdefault(mission, {})  # path -> waiting or suspended (`track_phase`)
         start = time.monotonic()
         next_print = next_poll = start + self.every
         finished = None
@@ -723,6 +823,7 @@ class _RecordWatch:
                 self.seqs.add(msg.seq)
                 self.last_seq = max(self.last_seq, msg.seq)
                 r = self._take(msg, result, base)
+                track_phase(phases, r)
                 if isinstance(r, rec.Entered):
                     active[r.path] = None
                 elif isinstance(r, rec.Exited):
@@ -747,7 +848,7 @@ class _RecordWatch:
                         finished = (m["outcome"], m.get("reason") or "")
             if now >= next_print and finished is None:
                 next_print = now + self.every
-                err.print(progress_line(max(result.sim_time, clock), list(active), err.width))
+                err.print(progress_line(max(result.sim_time, clock), list(active), err.width, phases))
         result.outcome, result.reason = finished
         result.wall_time = time.monotonic() - (start if began is None else began)
         result.away = self.away_total
@@ -1110,15 +1211,15 @@ def _watch(fetch: Callable[[], dict[str, Any]], as_json: bool, interval: float, 
             while True:
                 out.out(json.dumps(fetch()), highlight=False)
                 time.sleep(interval)
-        with Live(_status_view(fetch(), explain=explain), console=out, auto_refresh=False) as live:
+        with Live(status_view(fetch(), explain=explain), console=out, auto_refresh=False) as live:
             while True:
                 time.sleep(interval)
-                live.update(_status_view(fetch(), explain=explain), refresh=True)
+                live.update(status_view(fetch(), explain=explain), refresh=True)
     except KeyboardInterrupt:
         return
 
 
-def _status_view(data: dict[str, Any], width: int | None = None, explain: bool = False) -> RenderableType:
+def status_view(data: dict[str, Any], width: int | None = None, explain: bool = False) -> RenderableType:
     """The cluster at a glance, what matters first (a terminal of 24 rows shows the top): the missions and their
     active trees, the hosts, the resources grouped by robot, then instances and recent events; long paths are cut
     from the middle to fit `width` (default: the console's)."""
@@ -1126,6 +1227,7 @@ def _status_view(data: dict[str, Any], width: int | None = None, explain: bool =
     from rich.table import Table
 
     width = width or out.width
+    data = with_waits(data)
     parts: list[RenderableType] = [
         Text.assemble(("cluster ", "bold"), data["cluster"], (f"  (answered by {data['answered_by']})", "dim"))]
     if data["missions"] is not None:
@@ -1214,11 +1316,11 @@ def _resources_view(data: dict[str, Any], width: int | None = None, compact: boo
 
     everyone = [h for u in data["units"] for h in (*u["holders"], *u["queue"])] + [w["holder"] for w in data["queue"]]
     one_mission = len({h.split("/", 1)[0] for h in everyone}) <= 1
+    order = {str(w["holder"]): i for i, w in enumerate(data["queue"])}
 
     def name(holder: str) -> str:
-        """`Mission-1/Mission/RoomSurveillance[4]`: below its mission's root when one mission holds everything."""
-        steps = holder.split("/", 2)
-        return shorten(steps[2] if one_mission and len(steps) == 3 else holder, room)
+        """Below its mission's root when one mission holds everything, else with its mission id (`holder_label`)."""
+        return holder_label(holder, room, several=not one_mission)
 
     def who(paths: list[str]) -> str:
         return ", ".join(name(p) for p in paths[:2]) + (f" +{len(paths) - 2}" if len(paths) > 2 else "") \
@@ -1234,7 +1336,7 @@ def _resources_view(data: dict[str, Any], width: int | None = None, compact: boo
 
     for r in data["robots"]:
         mine = [(part, units[unit]) for part, unit in r["parts"].items() if unit in units and len(owners[unit]) == 1]
-        queue = sorted({q for _, u in mine for q in u["queue"]})
+        queue = sorted({q for _, u in mine for q in u["queue"]}, key=lambda q: (order.get(q, len(order)), q))
         label = Text.assemble((r["id"], "bold"), (f" {r['type']}", "dim"))
         table.add_row(label, who(r["holders"]), who(queue), *([""] * (len(columns) - 3)))
         for part, u in mine:
@@ -1249,8 +1351,9 @@ def _resources_view(data: dict[str, Any], width: int | None = None, compact: boo
                 unit_row(f"  {u['id']}", u)
     parts: list[RenderableType] = [table]
     if data["queue"]:
-        parts.append(Text("waiting: " + ", ".join(f"{name(w['holder'])} (priority {w['priority']})"
-                                                  for w in data["queue"])))
+        parts.append(Text("waiting: " + ", ".join(
+            f"{name(w['holder'])} (mission priority {w.get('mission_priority', 1)}, priority {w['priority']})"
+            for w in data["queue"])))
     return parts + _leaving(data)
 
 
@@ -1310,10 +1413,13 @@ def _missions_view(missions: list[dict[str, Any]], width: int = 80, explain: boo
 def _grow_active(tree: Any, node: dict[str, Any], above: str, depth: int, width: int, shown: list[int]) -> None:
     """Add `node` (and its chain of single children, in one label) under `tree`; count what is left out."""
     held: list[str] = []
+    waits: list[str] = []
     path = str(node.get("path", ""))
     phase = str(node.get("phase", "active"))
     while True:
         held += [str(v) for k, v in (node.get("resources") or {}).items() if "." not in k]
+        if isinstance(node.get("waiting_for"), dict):
+            waits.append(waits_text(node["waiting_for"]))
         children = node.get("children") or []
         if len(children) != 1:
             break
@@ -1329,7 +1435,8 @@ def _grow_active(tree: Any, node: dict[str, Any], above: str, depth: int, width:
             _count(child, shown)
         return
     extra = ("  " + ", ".join(held) if held else "") + (f"  {phase}" if phase != "active" else "")
-    room = max(12, width - 4 * depth - len(extra) - 1)
+    room = max(12, width - 4 * depth - len(extra) - 1)  # why it waits wraps below: the label keeps its room
+    extra += (f"  waiting {'; '.join(waits)}" if phase != "waiting" else f" {'; '.join(waits)}") if waits else ""
     branch = tree.add(Text.assemble(shorten(label, room), (extra, "dim")))
     for child in children:
         _grow_active(branch, child, path, depth + 1, width, shown)

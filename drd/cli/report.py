@@ -56,7 +56,9 @@ def report_view(r: DryRun, several: bool = False, width: int = 80) -> list[Rende
     Paths are relative to the mission and cut from the middle to fit `width` (80 columns stay readable)."""
     root = r.mission
     colour = "green" if r.outcome == "success" else "red"
-    who = f"{r.mission_id or r.mission} (priority {r.priority})" if several else r.mission
+    # several missions, or a cluster run (another terminal may run the same mission): the id tells them apart
+    who = f"{r.mission_id or r.mission} (priority {r.priority})" if several else (
+        r.mission_id or r.mission) if r.on_cluster else r.mission
     lost = r.degraded()
     if lost:  # a success that lost instances on the way says so in its first line
         colour = "yellow"

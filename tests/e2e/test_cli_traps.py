@@ -369,7 +369,7 @@ def _status_data() -> dict[str, Any]:
 
 def test_status_at_80_columns_puts_missions_first_cuts_paths_and_groups_resources_by_robot() -> None:
     buf = io.StringIO()
-    Console(file=buf, width=80).print(cluster._status_view(_status_data(), 80))
+    Console(file=buf, width=80).print(cluster.status_view(_status_data(), 80))
     lines = buf.getvalue().splitlines()
     assert max(len(line) for line in lines) <= 80, "\n".join(lines)
     text = buf.getvalue()

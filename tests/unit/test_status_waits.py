@@ -1,0 +1,101 @@
+"""What `missionctl status` and `missionctl run` show with several missions (multi-mission audit D2, D4, D7):
+why a mission waits (its need with its `where`, its rank, who blocks it), holders of two same-name missions told
+apart, a cluster run's report named by its id, and a progress line that says suspended or waiting. Pure."""
+
+from __future__ import annotations
+
+import io
+import json
+from typing import Any
+
+from rich.console import Console  # noqa: TID251 - rendering the status and the report at a chosen width
+
+from drd.cli.cluster import holder_label, progress_line, status_json, status_view, track_phase
+from drd.cli.report import print_report
+from drd.dryrun import DryRun
+from drd.runtime import records as rec
+
+
+def text(renderable: Any, width: int = 120) -> str:
+    buf = io.StringIO()
+    Console(file=buf, width=width, color_system=None).print(renderable)
+    return buf.getvalue()
+
+
+def status() -> dict[str, Any]:
+    """Starved (p3, ranger2 only) waits behind CamHog, which holds ranger2; ranger1 is free."""
+    tree = {"path": "Starved", "kind": "compound", "phase": "active", "resources": {},
+            "children": [{"path": "Starved/WantEast", "kind": "compound", "phase": "waiting", "resources": {},
+                          "children": []}]}
+    waiter = {"holder": "Starved-92/Starved/WantEast", "priority": 1, "mission": "Starved-92",
+              "needs": {"ranger": "Ranger"}, "mission_priority": 3, "where": {"ranger": 'ranger.id == "ranger2"'},
+              "blocked_by": [{"holder": "CamHog-91/CamHog/HoldEast", "holds": {"ranger": "ranger2"},
+                              "waiting": False}]}
+    units = [{"id": f"{r}.drive", "type": "Drive", "host": r, "sharable": False, "capacity": 1.0, "load": load,
+              "epoch": 1, "holders": holders, "queue": queue, "properties": {}}
+             for r, load, holders, queue in (("ranger1", 0.0, [], []),
+                                             ("ranger2", 1.0, ["CamHog-91/CamHog/HoldEast"], [waiter["holder"]]))]
+    robots = [{"id": r, "type": "Ranger", "host": r, "parts": {"drive": f"{r}.drive"}, "holders": h}
+              for r, h in (("ranger1", []), ("ranger2", ["CamHog-91/CamHog/HoldEast"]))]
+    return {"cluster": "c", "answered_by": "hq", "at": 0.0, "hosts": [], "instances": [], "services": [],
+            "resources": {"units": units, "robots": robots, "queue": [waiter], "removing": {}, "hosts": {}},
+            "missions": [{"id": "CamHog-91", "outcome": None, "reason": "", "time": 9.0, "started": 0.0},
+                         {"id": "Starved-92", "outcome": None, "reason": "", "time": 9.0, "started": 1.0,
+                          "tree": tree}],
+            "daemon": None, "errors": {}, "events": []}
+
+
+def test_a_waiting_missions_tree_says_what_it_waits_for_its_rank_and_who_blocks_it() -> None:
+    data = status_json(status())
+    json.dumps(data, allow_nan=False)  # still strict JSON
+    [node] = data["missions"][1]["tree"]["children"]
+    assert node["phase"] == "waiting", "the old fields stay"
+    assert node["waiting_for"] == {"needs": {"ranger": "Ranger"}, "where": {"ranger": 'ranger.id == "ranger2"'},
+                                   "mission_priority": 3, "priority": 1,
+                                   "blocked_by": [{"holder": "CamHog-91/CamHog/HoldEast",
+                                                   "holds": {"ranger": "ranger2"}, "waiting": False}]}
+    shown = " ".join(text(status_view(status())).split())
+    assert 'WantEast waiting for ranger: Ranger where ranger.id == "ranger2" (mission priority 3, priority 1), ' \
+           "blocked by CamHog-91/HoldEast (ranger: ranger2)" in shown
+    assert "Starved-92/WantEast (mission priority 3, priority 1)" in shown
+    ranger1 = next(line for line in text(status_view(status())).splitlines() if "ranger1 Ranger" in line)
+    assert "Starved" not in ranger1, "it can never take ranger1"
+
+
+def test_two_holders_of_same_name_missions_stay_apart_when_cut() -> None:
+    a, b = "NightGuard-9515067/NightGuard/GuardPost", "NightGuard-9515087/NightGuard/GuardPost"
+    for room in (16, 20, 24, 28):
+        cut = holder_label(a, room), holder_label(b, room)
+        assert cut[0] != cut[1], (room, cut)
+        assert all(c.endswith("/GuardPost") and len(c) <= max(room, 19) for c in cut), cut
+    assert holder_label(a) == "NightGuard-9515067/GuardPost"
+    assert holder_label(a, several=False) == "GuardPost"
+
+
+def test_a_cluster_runs_report_opens_with_its_mission_id() -> None:
+    run = DryRun("NightGuard", "stopped", "stopped by operator", 12.0, 3.0, mission_id="NightGuard-9515087",
+                 on_cluster=True)
+    buf = io.StringIO()
+    print_report(run, console=Console(file=buf, width=100, color_system=None))
+    assert buf.getvalue().startswith("mission NightGuard-9515087  stopped")
+    run.on_cluster = False  # a dry-run of one mission keeps its name
+    buf = io.StringIO()
+    print_report(run, console=Console(file=buf, width=100, color_system=None))
+    assert buf.getvalue().startswith("mission NightGuard  stopped")
+
+
+def test_the_progress_line_says_suspended_and_waiting_from_the_records() -> None:
+    phases: dict[str, str] = {}
+    active = ["NightGuard", "NightGuard/GuardPost", "NightGuard/GuardPost/Roam"]
+    for r in (rec.Waiting(0.0, "NightGuard/GuardPost", ("ranger: Ranger",)), rec.Granted(0.0, "NightGuard/GuardPost")):
+        track_phase(phases, r)
+    assert str(progress_line(1.0, active, 80, phases)).endswith("active Roam")
+    track_phase(phases, rec.Suspended(13.7, "NightGuard/GuardPost"))
+    line = str(progress_line(14.0, active, 80, phases))
+    assert line.endswith("suspended Roam") and "active" not in line, line
+    track_phase(phases, rec.Resumed(38.3, "NightGuard/GuardPost"))
+    assert str(progress_line(39.0, active, 80, phases)).endswith("active Roam")
+    track_phase(phases, rec.Waiting(2.0, "Starved/WantEast", ("ranger: Ranger",)))
+    assert str(progress_line(3.0, ["Starved", "Starved/WantEast"], 80, phases)).endswith("waiting WantEast")
+    track_phase(phases, rec.Exited(4.0, "Starved/WantEast", "Starved/WantEast", "stopped"))
+    assert "Starved/WantEast" not in phases
