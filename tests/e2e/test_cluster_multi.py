@@ -99,6 +99,8 @@ def test_two_missions_share_one_ranger_by_priority(cluster: DaemonCluster, tmp_p
         with running(high_cmd) as high:
             eventually(lambda: sum(m.get("outcome") is None for m in client.missions()) == 2, "both to run", 30,
                        poll=0.05)
+            seen: list[tuple[Any, dict[str, list[str]]]] = []
+            eventually(lambda: blocked_waiter(client, seen), "a waiter blocked by the other mission", 30, poll=0.05)
             ambiguous = cluster.missionctl("stop", "--config", str(cluster.hosts_file), timeout=30)
             high_out, high_err = high.communicate(timeout=90)
         low_out, low_err = low.communicate(timeout=90)
@@ -115,6 +117,16 @@ def test_two_missions_share_one_ranger_by_priority(cluster: DaemonCluster, tmp_p
     assert "--speed 8 not applied" in high_err, high_err[-2000:]
     assert high_report["speed"] == low_report["speed"] == 4
 
+    # status's queues come from the manager's claims: the waiter stands in ranger1's queue, ranked by its mission's
+    # priority, blocked by the other mission's holder, which holds ranger1 (multi-mission audit D2)
+    waiter, queues = seen[0]
+    mine, other = (low_report, high_report) if waiter.mission == low_report["id"] else (high_report, low_report)
+    assert waiter.mission_priority == mine["priority"]
+    assert [b.holder.split("/", 1)[0] for b in waiter.blocked_by] == [other["id"]], waiter
+    assert "ranger1.drive" in waiter.blocked_by[0].holds.values(), waiter
+    assert all(waiter.holder in queues[unit] for unit in waiter.blocked_by[0].holds.values()), queues
+    # the patrol's progress line said it was suspended while High drove (it said `active Patrol`: audit D7)
+    assert "suspended FollowCorridor" in low_err, low_err[-2000:]
     low_recs, high_recs = read_trace(low_trace), read_trace(high_trace)
     assert {r["mission"] for r in low_recs} == {low_report["id"]}, "each trace holds its own mission"
     assert {r["mission"] for r in high_recs} == {high_report["id"]}
@@ -146,6 +158,17 @@ def test_two_missions_share_one_ranger_by_priority(cluster: DaemonCluster, tmp_p
         "while High held the drive, only High moved it"
     assert [r for r in merged[resumed:] if r["kind"] == "command" and r["device"] == drive and r["accepted"]
             and r["mission"] == low_report["id"]], "the patrol drove again once resumed"
+
+
+def blocked_waiter(client: Any, seen: list[tuple[Any, dict[str, list[str]]]]) -> bool:
+    """Whether the manager has a waiter that another mission's holder blocks: kept in `seen`, with each unit's
+    queue."""
+    reply = client.resources()
+    for w in reply.queue:
+        if any(b.holder.split("/", 1)[0] != w.mission and not b.waiting for b in w.blocked_by):
+            seen.append((w, {u.id: u.queue for u in reply.units}))
+            return True
+    return False
 
 
 def robot_distance(cluster: DaemonCluster, robot: str, x: float, y: float) -> float:
