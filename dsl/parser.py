@@ -336,7 +336,9 @@ class _Builder(Transformer):  # type: ignore[type-arg]
         return int(tok.value)
 
     def _too_large(self, tok: Token, message: str) -> None:
-        self.errors.append(Diagnostic("literal", message, self.tspan(tok)))
+        found = Diagnostic("literal", message, self.tspan(tok))
+        if found not in self.errors:  # error recovery may transform one token again: say it once
+            self.errors.append(found)
 
     def true_lit(self, c: list[Any]) -> ast.Expr:
         return ast.Literal(True, span=self.tspan(c[0]))
@@ -635,6 +637,8 @@ def _unknown_unit(file: str, prev: Token | None, tok: Token) -> Diagnostic | Non
         return None
     word = str(tok.value)
     span = Span(file, prev.line or 1, prev.column or 1, tok.end_line or 1, tok.end_column or 1)
+    if word in _OWN_UNITS and prev.type == "FLOAT" and "e" in str(prev.value).lower():
+        return _exponent_duration(str(prev.value), word, span)
     hint = None
     size = _UNIT_WORDS.get(word.lower())
     if size is not None:
@@ -643,6 +647,21 @@ def _unknown_unit(file: str, prev: Token | None, tok: Token) -> Diagnostic | Non
         hint = f"did you mean {duration_text(float(prev.value) * size)}?"
     return Diagnostic("syntax", f"syntax: unknown duration unit {word} in `{prev.value}{word}`: write 250ms, 30s,"
                       " 5min or 2h", span, hint)
+
+
+#: The language's own duration units, with the seconds each is worth.
+_OWN_UNITS = {"ms": 0.001, "s": 1.0, "min": 60.0, "h": 3600.0}
+
+
+def _exponent_duration(number: str, unit: str, span: Span) -> Diagnostic:
+    """`1e3s`: a known unit after a number with an exponent, which durations do not take (say so, and the plain
+    spelling when it is one the language accepts)."""
+    from dsl.catalog import duration_text
+
+    seconds = float(number) * _OWN_UNITS[unit]
+    hint = (f"write {duration_text(seconds)}" if math.isfinite(seconds) and 0 < seconds <= MAX_DURATION else
+            f"write the number in full: 250ms, 30s, 5min or 2h, at most {MAX_DURATION // 86400:g} days")
+    return Diagnostic("syntax", f"syntax: a duration takes no exponent: `{number}{unit}`", span, hint)
 
 
 def _unclosed(file: str, text: str, tok: Token) -> Diagnostic | None:

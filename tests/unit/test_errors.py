@@ -51,6 +51,10 @@ ERRORS: list[tuple[str, str, str, str | None]] = [
     ("after-unit", m("  Observe\n  Observe -> done after 5"), "3:25 after expects duration, got int", "write a unit"),
     ("unknown-duration-unit", m("  Observe(duration: 5parsecs)"),
      "2:21 syntax: unknown duration unit parsecs in `5parsecs`: write 250ms, 30s, 5min or 2h", None),
+    ("duration-exponent", m("  Wait(duration: 1e3s)"), "2:18 syntax: a duration takes no exponent: `1e3s`",
+     "write 1000s"),
+    ("duration-exponent-huge", m("  Wait(duration: 1e20s)"), "2:18 syntax: a duration takes no exponent: `1e20s`",
+     "at most 365 days"),
     ("duration-unit-word", m("  Observe\n  Observe -> done after 3days"),
      "3:25 syntax: unknown duration unit days in `3days`: write 250ms, 30s, 5min or 2h", "did you mean 72h?"),
     ("bad-escape", m('  Observe\n  Observe -> done / log "a\\qb"'), "3:27 unknown escape \\q in string", None),
@@ -194,6 +198,11 @@ def test_table_covers_every_diagnostic_code(catalog: Catalog) -> None:
                 "structure", "unreachable", "plan-cycle", "recursion", "multiplicity", "priority", "duplicate",
                 "ambiguous-binding"}
     assert expected <= codes, f"no table row for {sorted(expected - codes)}"
+
+
+def test_a_literal_is_refused_once_however_often_error_recovery_reads_it(catalog: Catalog) -> None:
+    got = [d.message for d in compile_text(m("  Wait(duration: 1e20s)"), catalog, "t.mission").diagnostics]
+    assert got.count("number 1e20 is too large (at most 1e+15)") == 1, got
 
 
 def test_all_errors_of_a_file_in_one_run(catalog: Catalog) -> None:
