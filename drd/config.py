@@ -6,6 +6,7 @@ raised once, so a broken configuration is fixed in one pass.
 
 from __future__ import annotations
 
+import re
 import stat
 from collections.abc import Hashable, Iterable, Mapping, Sequence
 from dataclasses import dataclass
@@ -118,6 +119,11 @@ def _construct_mapping(loader: StrictLoader, node: yaml.MappingNode) -> dict[Any
 
 StrictLoader.add_constructor(yaml.resolver.BaseResolver.DEFAULT_MAPPING_TAG, _construct_mapping)
 _FastStrictLoader.add_constructor(yaml.resolver.BaseResolver.DEFAULT_MAPPING_TAG, _construct_mapping)
+#: A number with an exponent and no dot (`1e300`, `-2E-3`) is a float, as YAML 1.2 reads it; PyYAML's YAML 1.1 reads
+#: it as the string '1e300', which a number field then refused as "expected a number, got '1e300'" (docs/design.md).
+EXPONENT_FLOAT = re.compile(r"^[-+]?[0-9][0-9_]*[eE][-+]?[0-9]+$")
+for _loader in (StrictLoader, _FastStrictLoader):
+    _loader.add_implicit_resolver("tag:yaml.org,2002:float", EXPONENT_FLOAT, list("-+0123456789"))
 
 
 def display_path(path: Path, cwd: Path | None = None) -> str:
@@ -150,7 +156,23 @@ def read_config_text(path: Path) -> str:
         data = fh.read(MAX_CONFIG_BYTES + 1)
     if len(data) > MAX_CONFIG_BYTES:
         raise ValueError(f"larger than {MAX_CONFIG_BYTES // 2**20} MiB")
-    return data.decode("utf-8")
+    try:
+        text = data.decode("utf-8")
+    except UnicodeDecodeError as e:
+        raise TextError(data, e.start, f"not UTF-8 text (byte 0x{data[e.start]:02x})") from None
+    if "\0" in text:  # valid UTF-8 that YAML refuses, with a byte offset for a place
+        raise TextError(data, data.index(b"\0"), "a NUL byte")
+    return text
+
+
+class TextError(ValueError):
+    """A configuration file whose bytes are no text YAML reads (not UTF-8, a NUL byte): its message and `line`
+    (1-based) say where, as every other problem of a file does (a byte offset says nothing to a user)."""
+
+    def __init__(self, data: bytes, offset: int, what: str) -> None:
+        self.line = data.count(b"\n", 0, offset) + 1
+        column = offset - (data.rfind(b"\n", 0, offset) + 1) + 1
+        super().__init__(f"{what} at column {column}: save the file as UTF-8 text")
 
 
 def load_yaml(text: str) -> object:
@@ -206,6 +228,8 @@ def read_yaml(path: Path, source: str, error: type[E]) -> object:
         text = read_config_text(path)
     except FileNotFoundError:
         raise error([ConfigProblem(source, "", "no such file")]) from None
+    except TextError as e:
+        raise error([ConfigProblem(source, "", str(e), e.line)]) from None
     except (OSError, ValueError) as e:  # UnicodeDecodeError is a ValueError
         raise error([ConfigProblem(source, "", f"cannot read: {e}")]) from e
     try:

@@ -21,7 +21,15 @@ from typing import Any, TypeVar
 import yaml
 
 import components
-from drd.config import ConfigError, ConfigProblem, ConfigReader, display_path, load_yaml, read_config_text
+from drd.config import (
+    ConfigError,
+    ConfigProblem,
+    ConfigReader,
+    TextError,
+    display_path,
+    load_yaml,
+    read_config_text,
+)
 from drd.entrypoints import ENTRY_POINT
 from dsl.ast import KEYWORDS, parse_duration
 from dsl.catalog import (
@@ -612,7 +620,9 @@ def _read_stamped(path: Path, source: str, mtime_ns: int, size: int,
         mark = e.problem_mark or e.context_mark
         line = mark.line + 1 if mark else None
         return None, (ManifestProblem(source, "", f"invalid YAML: {e.problem or e.context}", line),)
-    except (OSError, ValueError, yaml.YAMLError) as e:  # UnicodeDecodeError is a ValueError
+    except TextError as e:
+        return None, (ManifestProblem(source, "", str(e), e.line),)
+    except (OSError, ValueError, yaml.YAMLError) as e:
         return None, (ManifestProblem(source, "", f"cannot read: {e}"),)
     t, problems = parse_manifest(data, source)
     return t, tuple(problems)

@@ -9,6 +9,7 @@ mission file says what an operator may tune.
 from __future__ import annotations
 
 import dataclasses
+import math
 import re
 from collections.abc import Iterable, Mapping
 
@@ -16,6 +17,7 @@ from drd.errors import MissionInputError
 from dsl import ast
 from dsl.ast import parse_duration
 from dsl.errors import did_you_mean
+from dsl.parser import MAX_DURATION, MAX_INT_DIGITS, MAX_NUMBER
 from dsl.statechart import Statechart
 
 _ASSIGN = re.compile(r"^\s*(?P<name>[A-Za-z_][A-Za-z0-9_]*)\s*=(?P<value>.*)$", re.S)
@@ -62,6 +64,8 @@ def apply_params(chart: Statechart, params: Mapping[str, str]) -> Statechart:
         if literal is None:
             article = "an" if var.type.name[:1] in "aeiou" else "a"
             problems.append(f"--param {name}={text}: {name} is {article} {var.type.name}, and {text!r} is not one")
+        elif (why := beyond_limits(literal)) is not None:
+            problems.append(f"--param {name}={text}: {why}, as in a mission")
         else:
             values[name] = literal
     if problems:
@@ -70,6 +74,25 @@ def apply_params(chart: Statechart, params: Mapping[str, str]) -> Statechart:
     states = dict(chart.states)
     states[chart.root] = dataclasses.replace(root, vars=new_vars)
     return dataclasses.replace(chart, states=states)
+
+
+def beyond_limits(literal: ast.Expr) -> str | None:
+    """Why a value is refused by the bounds the mission language puts on its literals (`dsl.parser`'s MAX_INT_DIGITS,
+    MAX_NUMBER, MAX_DURATION), or None: an operator's value may not be what the mission could not say (NaN, inf)."""
+    if isinstance(literal, ast.Duration):
+        if not literal.seconds <= MAX_DURATION:
+            return f"duration {literal.text} is too long (at most {MAX_DURATION // 86400:g} days)"
+        return None
+    value = literal.value if isinstance(literal, ast.Literal) else None
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        return None
+    if isinstance(value, int):
+        digits = len(str(abs(value)))
+        return (f"integer {value} is too large ({digits} digits, at most {MAX_INT_DIGITS})"
+                if digits > MAX_INT_DIGITS else None)
+    if not math.isfinite(value) or abs(value) > MAX_NUMBER:
+        return "not a number" if math.isnan(value) else f"number {value:g} is too large (at most {MAX_NUMBER:g})"
+    return None
 
 
 def _literal(type_name: str, text: str) -> ast.Expr | None:

@@ -100,7 +100,11 @@ def make_config(
     lease_ms: int | None = None,
     options: Mapping[str, Any] | None = None,
 ) -> zenoh.Config:
-    """A peer-mode zenoh config listening and connecting exactly where told."""
+    """A peer-mode zenoh config listening and connecting exactly where told.
+
+    Raises:
+        BusError: zenoh refuses a setting (a malformed endpoint, a bad option), its text without Rust paths.
+    """
     config = zenoh.Config()
     settings: dict[str, Any] = {
         "mode": "peer",
@@ -117,7 +121,10 @@ def make_config(
         settings["transport/link/tx/lease"] = lease_ms
     settings.update(options or {})
     for path, value in settings.items():
-        config.insert_json5(path, json.dumps(value))
+        try:
+            config.insert_json5(path, json.dumps(value))
+        except zenoh.ZError as exc:  # a malformed endpoint or option: the caller's input, not a bug of ours
+            raise BusError(f"invalid zenoh setting {path}: {zenoh_text(exc)}") from exc
     return config
 
 

@@ -208,10 +208,14 @@ def _endpoints(config: Path, connect: list[str] | None,
                to: str = "") -> tuple[list[str], dict[str, Any], str | None, list[str]]:
     """(endpoints, zenoh options, cluster name, preferred daemons) from --connect or the hosts file (whose roles
     must allow this user `to` do what it asks, if anything)."""
+    from drd.hosts import HostsError, endpoint_problem, load_endpoints
+
+    for endpoint in connect or ():  # the hosts file's rule, before zenoh (whose error quotes Rust source paths)
+        if (problem := endpoint_problem(endpoint)) is not None:
+            fail(f"--connect {endpoint}: {problem}", hint="e.g. --connect tcp/127.0.0.1:7447")
     if connect:  # a zenoh client of the first that answers (a router or a peer routes for it), the next if it fails
         return list(connect), {"mode": "client"}, None, []
     from drd.daemon.security import SecurityError, transport
-    from drd.hosts import HostsError, load_endpoints
 
     if not config.is_file():
         fail(f"{config}: no such file (looked at {config.absolute()})",
@@ -500,6 +504,40 @@ def run(mission: Path = typer.Argument(..., help="The mission file.", show_defau
     return OK if report.outcome == "success" else MISSION_FAILED
 
 
+#: A diagnostic's first line and a note's, as `dsl.errors.Diagnostic.render` writes them (the controller's reply
+#: carries its diagnostics rendered).
+_HEADER = re.compile(r"(?P<file>.+):(?P<line>\d+):(?P<column>\d+): (?P<severity>error|warning): (?P<message>.*)")
+_NOTE = re.compile(r"  note: (?P<file>.+):(?P<line>\d+):(?P<column>\d+): (?P<message>.*)")
+
+
+def located(rendered: str) -> dict[str, Any]:
+    """A diagnostic the controller sent rendered, in `validate --json`'s shape (`Diagnostic.to_dict`) as far as its
+    text says: file, line, column, severity, message, hint, notes (a refusal with no location: its message only)."""
+    lines = rendered.splitlines() or [""]
+    head = _HEADER.fullmatch(lines[0])
+    hint = next((line.removeprefix("  hint: ") for line in lines[1:] if line.startswith("  hint: ")), None)
+    if head is None:
+        return {"severity": "error", "message": rendered, "hint": hint, "notes": []}
+    notes = [{"message": n["message"], "file": n["file"], "line": int(n["line"]), "column": int(n["column"])}
+             for n in map(_NOTE.fullmatch, lines[1:]) if n is not None]
+    return {"severity": head["severity"], "message": head["message"], "file": head["file"],
+            "line": int(head["line"]), "column": int(head["column"]), "hint": hint, "notes": notes}
+
+
+def _refused(file: str, diagnostics: Sequence[str], as_json: bool) -> typing.NoReturn:
+    """The controller found the mission invalid: its diagnostics as it rendered them, or under `--json` one JSON
+    error with them located, as `validate --json` and `dry-run --json` give it; exit 2."""
+    if as_json:
+        found = [located(text) for text in diagnostics]
+        first = next((d for d in found if d["severity"] == "error"), found[0] if found else None)
+        where = f"{first['file']}:{first['line']}:{first['column']}: " if first and "file" in first else ""
+        fail(f"{file}: invalid: {where}{first['message'] if first else 'refused'}", INVALID, diagnostics=found)
+    for text in diagnostics:
+        err.print(Text(text))
+    err.print(Text.assemble(("✗ ", "bold red"), f"{file}: invalid, not run"))
+    raise typer.Exit(INVALID)
+
+
 def _scouts_ended(report: DryRun, recorder: Recorder) -> None:
     """Where each launched Scout ended, as a dry-run's report says it (`x`, `y`): its last pose the recorder
     wrote (the simulator's host told this client every pose it recorded); a Scout never seen keeps none."""
@@ -533,10 +571,7 @@ def _run_and_follow(client: ClusterClient, watch: _RecordWatch, request: Any, wa
             if not isinstance(answer, RunReply):
                 fail(f"the controller answered a {type(answer).TYPE}")
             if not answer.ok:
-                for text in answer.diagnostics:
-                    err.print(Text(text))
-                err.print(Text.assemble(("✗ ", "bold red"), f"{request.file}: invalid, not run"))
-                raise typer.Exit(INVALID)
+                _refused(request.file, answer.diagnostics, as_json)
             reply = answer
             if detach:
                 if as_json:
@@ -564,9 +599,9 @@ def _run_and_follow(client: ClusterClient, watch: _RecordWatch, request: Any, wa
 
 def _mission_source(mission: Path) -> str:
     """The mission's text, once it is known to be a mission file (the controller compiles it)."""
-    if not mission.is_file():
+    if not mission.exists():
         fail(f"{mission}: no such file (looked at {mission.absolute()})")
-    _not_a_mission(mission)
+    _not_a_mission(mission)  # a folder too: "is a directory", as validate says
     try:
         return mission.read_text(encoding="utf-8")
     except (OSError, UnicodeDecodeError) as e:

@@ -369,7 +369,7 @@ def stop(
 
     if (host is None) == (not all_):
         fail("give either --host NAME or --all")
-    rd = runfiles.run_dir(run_dir_opt)
+    rd = _looked_in(run_dir_opt)
     found = _one_cluster([(p, i) for p, i in runfiles.pidfiles(rd) if i is None or host is None or i.host == host],
                          cluster, host)
     if host is not None and not found:
@@ -405,6 +405,21 @@ def stop(
     return OK
 
 
+def _looked_in(run_dir_opt: Path | None) -> Path:
+    """The run dir `stop` and `status` read: a file there, or a `--run-dir` that does not exist, is refused (exit 2),
+    since "no drd in it" would hide a typo; the default one not made yet just holds no daemon."""
+    from drd.daemon import runfiles
+
+    rd = runfiles.run_dir(run_dir_opt)
+    if rd.exists() and not rd.is_dir():
+        fail(f"{'--run-dir' if run_dir_opt is not None else 'run dir'} {rd}: not a folder",
+             hint="the folder `drd start` keeps its pidfiles in")
+    if run_dir_opt is not None and not rd.exists():
+        fail(f"--run-dir {rd}: no such folder (looked at {rd.absolute()})",
+             hint="the folder `drd start --run-dir` was given")
+    return rd
+
+
 def _one_cluster(found: list[tuple[Path, Any]], cluster: str | None, host: str | None) -> list[tuple[Path, Any]]:
     """The pidfiles of one cluster: `cluster`, else the only one among `found`; several and none named is refused,
     naming them (a bare `drd stop` must never stop another cluster's daemons)."""
@@ -428,7 +443,7 @@ def status(
 
     from drd.daemon import runfiles
 
-    rd = runfiles.run_dir(run_dir_opt)
+    rd = _looked_in(run_dir_opt)
     rows = [(i, i.running()) for _, i in runfiles.pidfiles(rd) if i is not None]
     if as_json:
         print_json([{**asdict(i), "alive": alive} for i, alive in rows])

@@ -187,7 +187,7 @@ class Creator:
         self._lock = threading.Lock()
         self._own_pool = pool is None
         # cold until a world starts or a component is placed here: an idle daemon runs no worker processes
-        self.pool = pool if pool is not None else WorkerPool(_pool_size(workers), preload=behavior_modules(catalog),
+        self.pool = pool if pool is not None else WorkerPool(pool_size(workers), preload=behavior_modules(catalog),
                                                              warm=False)
         self._workers: dict[int, Worker] = {}  # the processes taken from the pool for the missions, by pid
         self._on_change = on_change
@@ -919,15 +919,30 @@ def behavior_modules(catalog: Catalog) -> list[str]:
                    if ct.kind is Kind.BEHAVIOR and ct.entry_point})
 
 
-def _pool_size(workers: int | None) -> int:
+#: The most idle workers `$DRD_WORKERS` may ask for: each holds about 7 MB and takes a fork (about 20 ms) to
+#: start, and only idle ones are pre-started (a placement beyond them starts its own), so more buys nothing a
+#: host's missions use at once and costs memory for as long as the host has work (docs/design.md).
+MAX_WORKERS = 64
+
+
+def pool_size(workers: int | None) -> int:
+    """`workers`, else `$DRD_WORKERS` if it is a whole number from 0 to MAX_WORKERS, else (with a warning, as the
+    daemon's start should not fail on a tuning knob) the default."""
     if workers is not None:
         return workers
-    text = os.environ.get("DRD_WORKERS", "")
+    text = os.environ.get("DRD_WORKERS", "").strip()
+    if not text:
+        return DEFAULT_SIZE
     try:
-        return int(text) if text else DEFAULT_SIZE
+        size = int(text)
     except ValueError:
         log.warning("DRD_WORKERS=%r is not a number: using %d idle workers", text, DEFAULT_SIZE)
         return DEFAULT_SIZE
+    if not 0 <= size <= MAX_WORKERS:
+        log.warning("DRD_WORKERS=%s is out of range (0 to %d idle workers): using %d", text, MAX_WORKERS,
+                    DEFAULT_SIZE)
+        return DEFAULT_SIZE
+    return size
 
 
 def _os_reason(e: BaseException) -> str:
