@@ -1098,6 +1098,8 @@ class Interpreter:
             self._notify(rec.Released(now, node.path, ended, "revoked"))
             if froze:
                 self._notify(rec.Suspended(now, node.path))
+            if node.requested and not node.closing:  # queued again behind its preemptor: a wait, said as one
+                self._notify(self._waiting(node, (d.by,)))
 
     def _on_released(self, node: Node, d: Released) -> None:
         if not d.units:

@@ -89,6 +89,7 @@ def test_two_missions_of_one_name_name_each_other_by_id(tmp_path: Path) -> None:
     first, second = (r["id"] for r in reports)
     assert first != second
     blocked = [(r["mission"], r["blocked_by"]) for r in records if r["kind"] == "waiting" and r["blocked_by"]]
-    assert blocked == [(second, [f"{first}/Guard/Post"])]
+    # the second waits for the first; preempted at the slice's end, the first waits again, for the second
+    assert blocked == [(second, [f"{first}/Guard/Post"]), (first, [f"{second}/Guard/Post"])]
     revoked = [(r["mission"], r["reason"]) for r in records if r["kind"] == "revoked"]
     assert revoked == [(first, f"preempted by {second}/Guard/Post")]

@@ -125,3 +125,15 @@ def test_each_instance_resumes_on_the_scout_taken_from_it(catalog: Catalog) -> N
         assert first.setdefault(r.path, scout) == scout, (r.path, r.at, first[r.path], scout)
     assert resumed >= 2  # preemption did happen
     assert len(h.of(rec.Suspended)) == resumed
+
+
+def test_a_preempted_holder_is_said_to_wait_again_blocked_by_its_preemptor(catalog: Catalog) -> None:
+    """Suspended at a slice boundary, a holder is queued again: a `waiting` record right after its `suspended`
+    names the instance that took its Scout (before, nothing said it waited, so a report of a mission stopped
+    then listed it neither as waiting nor as having waited)."""
+    h = run(ROUND_ROBIN, catalog, ranger_world(1, 2))
+    took = {r.at: r.path for r in h.of(rec.Granted)}
+    for suspended in h.of(rec.Suspended):
+        again = [r for r in h.of(rec.Waiting) if r.path == suspended.path and r.at == suspended.at and r.blocked_by]
+        assert len(again) == 1, (suspended, h.of(rec.Waiting))
+        assert again[0].blocked_by == (took[suspended.at],)
