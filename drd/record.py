@@ -32,12 +32,16 @@ readable up to its last chunk.
 
 from __future__ import annotations
 
+import atexit
 import bisect
 import json
+import logging
 import math
+import re
 import struct
 import threading
-from collections.abc import Iterator, Sequence
+import weakref
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -73,6 +77,54 @@ LIVE_DEFAULT = ("127.0.0.1", 8765)
 
 class RecordingError(ConfigurationError):
     """A recording cannot be written or read (the message names the file)."""
+
+
+#: The recordings that stopped on a write error (disk full) and are not said yet, each as one line naming its file:
+#: the run goes on without its recording, and the command says so after its report (`write_failures`).
+_FAILURES: list[str] = []
+#: The recorders with a file open: closed at exit if a command ended without (the SDK's writer must be closed while
+#: the interpreter lives, else its drop panics in Rust).
+_OPEN: weakref.WeakSet[Recorder] = weakref.WeakSet()
+#: The SDK's own logger of a message it could not write to a sink (its first message holds the OS error).
+SINK_LOGGER = "foxglove.log_sink_set"
+
+
+def write_failures() -> list[str]:
+    """The recordings that stopped on a write error since the last call, one line each (then forgotten)."""
+    said = list(_FAILURES)
+    _FAILURES.clear()
+    return said
+
+
+class _SinkErrors(logging.Filter):
+    """Keeps the SDK's "error logging message" lines (one per message once a write failed) off stderr, and the
+    first one's OS error (`No space left on device`) for the recording's one-line error."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.first: str | None = None
+        self.count = 0
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        text = record.getMessage()
+        if "error logging message" not in text:
+            return True
+        self.count += 1
+        if self.first is None or "AttemptedWriteAfterFailure" in self.first:
+            found = re.search(r'message: "([^"]+)"', text)
+            self.first = found.group(1) if found else text.removeprefix("error logging message: ")
+        return False
+
+
+_SINK = _SinkErrors()
+
+
+def _close_all() -> None:
+    for recorder in list(_OPEN):
+        recorder.close()
+
+
+atexit.register(_close_all)
 
 
 def _ns(seconds: float) -> int:
@@ -147,6 +199,12 @@ class Recorder:
                                                      chunk_size=CHUNK_BYTES, compression=MCAPCompression.Lz4))
             except Exception as e:  # the SDK's own errors: a folder that does not exist, no permission
                 raise RecordingError(f"{path}: cannot write the recording: {e}") from e
+            sink = logging.getLogger(SINK_LOGGER)
+            if _SINK not in sink.filters:
+                sink.addFilter(_SINK)
+            _OPEN.add(self)
+        self.error: str | None = None  # why the file stopped being written (the run went on without it)
+        self.sink_errors = _SINK.count
         self.channels: dict[str, Any] = {}  # the JSON channels, each made when first used (`json`)
         self.lock = threading.Lock()
         self.tf = FrameTransformsChannel(TF, context=self.context)
@@ -205,8 +263,9 @@ class Recorder:
         run without it."""
         source = Path(world.source)
         if self.writer is not None and source.is_file():
-            self.writer.attach(log_time=0, create_time=0, name=WORLD_ATTACHMENT, media_type="application/yaml",
-                               data=source.read_bytes())
+            data = source.read_bytes()
+            self._write(lambda w: w.attach(log_time=0, create_time=0, name=WORLD_ATTACHMENT,
+                                           media_type="application/yaml", data=data))
         self.doors = {d.id: (d.a, d.b) for d in world.doors}
         self.update_world(0.0, [*_building(world), *_bodies(world)])
 
@@ -360,7 +419,33 @@ class Recorder:
         if at - self.flushed >= FLUSH_EVERY:
             self.flushed = at
             if self.writer is not None and not self.closed:
-                self.writer.flush()
+                self._write(lambda w: w.flush())
+
+    def _write(self, op: Callable[[Any], object]) -> None:
+        """`op(writer)`; on a write error (disk full) the file is closed as it is and the run goes on without it
+        (`failed`): a recording is a by-product, the mission is what runs."""
+        try:
+            op(self.writer)
+        except RuntimeError as e:  # the SDK's FoxgloveError: the file system refused a write
+            self.failed(e)
+
+    def failed(self, e: BaseException) -> None:
+        """Stop writing the file (closed as it is: its complete chunks stay readable), and keep one line saying
+        why, naming it (`error`, `write_failures`)."""
+        if self.error is None:
+            why = _SINK.first if _SINK.count > self.sink_errors and _SINK.first else str(e).removeprefix(
+                "FoxgloveError: ")
+            self.error = (f"{self.path}: cannot write the recording: {why}; it stops at {self.now:.1f} s of sim"
+                          " time (its complete chunks are readable)")
+            _FAILURES.append(self.error)
+        writer, self.writer = self.writer, None
+        _OPEN.discard(self)
+        for _ in range(2 if writer is not None else 0):  # after a failed write it refuses once, then lets go
+            try:
+                writer.close()
+                break
+            except RuntimeError:
+                continue
 
     def where(self, robot: str) -> tuple[float, float] | None:
         """Where `robot` was last written on `/drd/tf` (its Ranger's place while carried), or None if never."""
@@ -382,7 +467,8 @@ class Recorder:
         if not self.closed:
             self.closed = True
             if self.writer is not None:
-                self.writer.close()
+                self._write(lambda w: w.close())
+                _OPEN.discard(self)
             if self.server is not None:
                 self.server.stop()
 
@@ -649,6 +735,8 @@ class Recording:
     fovs: dict[str, float] = field(default_factory=dict)  # each camera's field of view (radians), by robot
     world: bytes | None = None  # the world file the run used (`world.yaml` attachment), if it was a file
     cut: bool = False  # the file ends before the run did (a crash): what its complete chunks held
+    #: Why the reading stopped early (a cut or a damaged chunk: where in the file, and the reader's error), or None.
+    damage: str | None = None
 
     def trace_lines(self) -> Iterator[str]:
         """The recorded records as the run's `--trace` wrote them (with `seq` where the run's lines had it)."""
@@ -687,9 +775,8 @@ def read(path: Path | str) -> Recording:
     """Read a recording written by `Recorder` (`path` a Path or a str, as docs/recording.md calls it), in one
     streaming pass: a file cut short (a crash) gives what its complete chunks hold, with `cut` set and a summary
     made up from the records (RecordingError naming the file when it holds no drd run at all)."""
-    from mcap.exceptions import McapError
-
     path = Path(path)
+    damaged = _damaged()
     from mcap.reader import NonSeekingReader
     from mcap_protobuf.decoder import DecoderFactory
 
@@ -710,25 +797,49 @@ def read(path: Path | str) -> Recording:
                     elif channel.topic in (CAMERA, LIGHT) and len(out.fovs) < 64:
                         frame = orjson.loads(message.data)
                         out.fovs.setdefault(str(frame.get("robot")), float(frame.get("fov") or 0.0))
-            except (McapError, struct.error, EOFError):  # a file cut short: keep what its complete chunks held
+            except damaged as e:  # a file cut short, or a damaged chunk: keep what the chunks before it held
                 if not out.records:
                     raise
                 out.cut = True
+                out.damage = f"stopped reading at byte {fh.tell():,} of {path.stat().st_size:,}: {_reason(e)}"
             fh.seek(0)
             try:
                 out.world = next((a.data for a in NonSeekingReader(fh).iter_attachments()
                                   if a.name == WORLD_ATTACHMENT), None)
-            except (McapError, struct.error, EOFError):
+            except damaged:
                 pass
-    except (OSError, McapError, ValueError, struct.error, EOFError) as e:
+    except (OSError, ValueError) + damaged as e:
         raise RecordingError(f"{path}: cannot read it as a drd recording: {e}") from e
     if not out.records and not out.runs:
         raise RecordingError(f"{path}: no drd run in it")
+    if out.damage is None and not out.runs:
+        out.damage = "it ends before the run's summary (cut short)"
     if not out.runs:  # cut before the end: each mission's summary from its records
         out.cut = True
         out.runs = [{"format": FORMAT, "mission": records[0].path.split("/", 1)[0], "id": key, "records": key,
                      "sim_time": max(r.at for r in records), "wall_time": 0.0} for key, records in out.records.items()]
     return out
+
+
+def _damaged() -> tuple[type[BaseException], ...]:
+    """What the MCAP reader raises on a cut or damaged file: its own errors, a short read, and the decompressors'
+    (lz4 raises RuntimeError on a bad checksum or a broken frame, zstandard its ZstdError)."""
+    from mcap.exceptions import McapError
+
+    kinds: list[type[BaseException]] = [McapError, struct.error, EOFError, RuntimeError]
+    try:
+        from zstandard import ZstdError
+    except ImportError:  # mcap reads zstd chunks only when it is installed
+        pass
+    else:
+        kinds.append(ZstdError)
+    return tuple(kinds)
+
+
+
+def _reason(e: BaseException) -> str:
+    """The reader's error in one line (an lz4 error's text is its code: `ERROR_contentChecksum_invalid`)."""
+    return (str(e).splitlines() or [type(e).__name__])[0][:200]
 
 
 def _take_poses(out: Recording, decoded: Any, log_time: int) -> None:

@@ -184,12 +184,70 @@ def shorten(path: str, width: int) -> str:
     return path[:width - 1 - half] + "…" + path[len(path) - half:]
 
 
+#: Output files that stopped on a write error, one line each naming the file, not yet said (`unwritten`).
+_UNWRITTEN: list[str] = []
+
+
+class OutputFile(io.TextIOWrapper):
+    """A file a run writes as it goes (`--trace`): a write error after it opened (a full disk, EIO) stops the file
+    there, not the run, and leaves one line naming the file that the command says after its report (`unwritten`)."""
+
+    def __init__(self, path: Path, what: str) -> None:
+        super().__init__(path.open("wb"), encoding="utf-8")
+        self.path, self.what, self.error = path, what, ""
+
+    def write(self, text: str) -> int:
+        if not self.error:
+            try:
+                return super().write(text)
+            except OSError as e:
+                self.failed(e)
+        return len(text)
+
+    def flush(self) -> None:
+        if not self.error and not self.closed:
+            try:
+                super().flush()
+            except OSError as e:
+                self.failed(e)
+
+    def close(self) -> None:
+        try:
+            super().close()  # the buffer's file is closed even when its last flush fails
+        except OSError as e:
+            self.failed(e)
+
+    def failed(self, e: OSError) -> None:
+        if not self.error:
+            self.error = f"{self.path}: cannot write the {self.what}: {e.strerror or e}; it stops there"
+            _UNWRITTEN.append(self.error)
+
+
+def unwritten() -> list[str]:
+    """The output files (a trace, a recording: `drd.record.write_failures`) that stopped on a write error since
+    the last call, one line each."""
+    said = list(_UNWRITTEN)
+    _UNWRITTEN.clear()
+    record = sys.modules.get("drd.record")
+    return said + (record.write_failures() if record is not None else [])
+
+
 def open_trace(trace: Path | None) -> IO[str] | None:
-    """The `--trace` file opened for writing, or a clear exit when it cannot be (None when not asked)."""
+    """The `--trace` file opened for writing (`OutputFile`), or a clear exit when it cannot be (None when not
+    asked)."""
     try:
-        return trace.open("w", encoding="utf-8") if trace is not None else None
+        return OutputFile(trace, "trace") if trace is not None else None
     except OSError as e:
         fail(f"{trace}: cannot write the trace: {e.strerror or e}")
+
+
+def write_file(path: Path, text: str, what: str) -> None:
+    """Write `text` to `path` (`plan -o`), or a clear exit naming the file (a missing folder, a full disk)."""
+    try:
+        with path.open("w", encoding="utf-8") as fh:
+            fh.write(text)
+    except OSError as e:
+        fail(f"{path}: cannot write the {what}: {e.strerror or e}")
 
 
 def open_recorder(path: Path | None) -> Recorder | None:
@@ -366,6 +424,7 @@ def _run_app(app: Callable[..., object], prog: str,
         else:
             rc = app(prog_name=prog, standalone_mode=False)
     except typer.Exit as e:
+        _said_unwritten(e.exit_code)
         sys.exit(e.exit_code)
     except (typer.Abort, KeyboardInterrupt) as e:
         _error("aborted" if isinstance(e, typer.Abort) else "interrupted", INTERRUPTED)
@@ -389,10 +448,29 @@ def _run_app(app: Callable[..., object], prog: str,
             traceback.print_exc()
             sys.exit(INTERNAL if not isinstance(e, OSError) else INVALID)
         if isinstance(e, OSError):  # a file or folder of the user's that cannot be read or written
-            _error(f"{type(e).__name__}: {e}", INVALID, "(set DRD_DEBUG=1 to see the traceback)")
+            where = f"{e.filename}: " if e.filename else ""
+            _error(f"{where}{e.strerror or type(e).__name__ + ': ' + str(e)}", INVALID,
+                   "(set DRD_DEBUG=1 to see the traceback)")
         _error(f"internal error: {type(e).__name__}: {e}", INTERNAL,
                "(set DRD_DEBUG=1 to see the traceback, and report it)")
-    sys.exit(rc if isinstance(rc, int) else OK)
+    rc = rc if isinstance(rc, int) else OK
+    _said_unwritten(rc)
+    sys.exit(rc)
+
+
+def _said_unwritten(code: int) -> None:
+    """After the command's own output (its report), the files it could not finish writing, one line each: exit 2
+    then (a file the system could not write, as for one it could not open), unless the command already failed."""
+    lines = unwritten()
+    if not lines or code not in (OK, MISSION_FAILED):
+        return
+    if _Mode.json:
+        error_json({"error": lines[0] if len(lines) == 1 else f"{len(lines)} files unwritten: {lines[0]}",
+                    "code": INVALID, **({"errors": lines} if len(lines) > 1 else {})})
+        sys.exit(INVALID)
+    for line in lines:
+        err.print(Text.assemble(("error: ", "bold red"), line))
+    sys.exit(INVALID)
 
 
 def _error(message: str, code: int, note: str = "") -> NoReturn:

@@ -23,6 +23,7 @@ from drd.cli.common import (
     as_text,
     catalog,
     err,
+    error_json,
     fail,
     fail_all,
     open_trace,
@@ -32,6 +33,7 @@ from drd.cli.common import (
     run_app,
     show_diagnostics,
     version_option,
+    write_file,
 )
 from drd.cli.options import ComponentsOption
 from dsl import Compiled, Limits, compile_file
@@ -50,6 +52,7 @@ if TYPE_CHECKING:  # rich's tables and trees, and the exporters, load only for t
     from drd.executive import Executive
     from drd.hosts import Cluster
     from drd.inject import Injection
+    from drd.preview import Preview
     from drd.record import Recording
     from drd.sim.physics import Simulation
     from drd.sim.world import World
@@ -151,23 +154,26 @@ def plan(
     if chart is None:
         fail(f"{file} declares no mission, so there is nothing to plan",
              hint="add `mission Name { ... }` or plan the file that imports this one")
-    if config is not None:
-        return _preview(chart, config, world, components, as_json or fmt is Format.json)
     suffix = output.suffix.lower() if output else ""
+    if config is not None:
+        if suffix in IMAGE_SUFFIXES:
+            fail(f"-o {output}: with --config, plan writes text (.txt) or JSON (.json), not a picture",
+                 hint="draw the statechart without --config")
+        return _preview(chart, config, world, components, as_json or fmt is Format.json or suffix == ".json", output)
     if suffix in IMAGE_SUFFIXES:
         _draw(chart, output, IMAGE_SUFFIXES[suffix])
         return OK
     fmt = fmt or FORMAT_BY_SUFFIX.get(suffix, Format.tree)
     if fmt is Format.tree:
         if output:
-            output.write_text(_whole_lines(_tree(chart)), encoding="utf-8")
+            write_file(output, _whole_lines(_tree(chart)), "plan")
         else:
             print_tree(_tree(chart))
     else:
         text = {Format.json: lambda: json.dumps(to_dict(chart), indent=2, ensure_ascii=False) + "\n",
                 Format.dot: lambda: to_dot(chart), Format.mermaid: lambda: to_mermaid(chart)}[fmt]()
         if output:
-            output.write_text(text, encoding="utf-8")
+            write_file(output, text, "plan")
         else:
             out.out(text, end="")
     if output:
@@ -175,8 +181,10 @@ def plan(
     return OK
 
 
-def _preview(chart: Statechart, config: Path, world: str | None, components: list[Path], as_json: bool) -> int:
-    """`plan --config`: the statechart, then what it gets at start on the cluster (`drd.preview`)."""
+def _preview(chart: Statechart, config: Path, world: str | None, components: list[Path], as_json: bool,
+             output: Path | None = None) -> int:
+    """`plan --config`: the statechart, then what it gets at start on the cluster (`drd.preview`), on stdout or
+    into `output` (plain text, or JSON)."""
     from drd.hosts import HostsError, load_hosts
     from drd.preview import preview
     from drd.sim.world import WorldError, load_world
@@ -192,7 +200,10 @@ def _preview(chart: Statechart, config: Path, world: str | None, components: lis
         fail_all(e.problems)
     except ValueError as e:  # the world and the hosts file disagree (check_hosts)
         fail_all(str(e).splitlines())
-    if as_json:
+    if output is not None:
+        write_file(output, _preview_text(chart, p, hosts_file, as_json), "plan")
+        err.print(Text.assemble(("✓ ", "bold green"), f"wrote {output}"))
+    elif as_json:
         print_json({**to_dict(chart), "preview": p.to_dict()})
     else:
         from drd.cli.report import print_preview
@@ -200,6 +211,22 @@ def _preview(chart: Statechart, config: Path, world: str | None, components: lis
         print_tree(_tree(chart))
         print_preview(p, hosts_file, chart.name)
     return MISSION_FAILED if p.problems else OK
+
+
+def _preview_text(chart: Statechart, p: Preview, hosts_file: Path, as_json: bool) -> str:
+    """`plan --config -o FILE`: what stdout would get off a terminal, as a file's text."""
+    import io
+
+    from rich.console import Console
+
+    from drd.cli.report import print_preview
+    from dsl.export import to_dict
+
+    if as_json:
+        return json.dumps({**to_dict(chart), "preview": p.to_dict()}, indent=2, ensure_ascii=False, default=str) + "\n"
+    text = io.StringIO()
+    print_preview(p, hosts_file, chart.name, Console(file=text, width=160, color_system=None, soft_wrap=True))
+    return _whole_lines(_tree(chart)) + text.getvalue()
 
 
 def _draw(chart: Statechart, output: Path, kind: str) -> None:
@@ -539,11 +566,24 @@ def _seconds(text: str, option: str) -> float:
 
 
 def _check_render(render: Path | None) -> None:
-    """Refuse, before anything runs, a picture in a format the renderer cannot write."""
+    """Refuse, before anything runs, a picture in a format the renderer cannot write, or where it cannot be written
+    (its folder missing or not writable, a folder in its place), as --trace and --record are refused."""
+    import os
+
     from drd.render import SUPPORTED_SUFFIXES
 
-    if render is not None and render.suffix.lower() not in SUPPORTED_SUFFIXES:
+    if render is None:
+        return
+    if render.suffix.lower() not in SUPPORTED_SUFFIXES:
         fail(f"cannot draw {render.name}: --render writes {', '.join(SUPPORTED_SUFFIXES)}")
+    folder = render.parent
+    why = ("is a folder" if render.is_dir() else
+           f"its folder {folder} does not exist" if not folder.exists() else
+           f"{folder} is not a folder" if not folder.is_dir() else
+           f"its folder {folder} is not writable" if not os.access(folder, os.W_OK | os.X_OK) else
+           "it is not writable" if render.exists() and not os.access(render, os.W_OK) else "")
+    if why:
+        fail(f"--render {render}: cannot write the picture: {why} (looked at {render.absolute()})")
 
 
 @app.command()
@@ -573,6 +613,9 @@ def replay(
         recording = read(file)
     except RecordingError as e:
         fail(str(e))
+    if recording.damage is not None:  # what the good chunks before it held is still the run so far
+        note = f"{file}: the recording is cut or damaged ({recording.damage}): the report covers what came before"
+        error_json({"warning": note}) if as_json else err.print(Text.assemble(("! ", "bold yellow"), note))
     if at is not None:
         from drd.cli.report import print_state
         from drd.record import state_at
@@ -633,19 +676,24 @@ def _recorded_world(recording: Recording, file: Path) -> World:
 
 def _show_reports(reports: list[DryRun], sim_world: World | None, render: Path | None, as_json: bool,
                   views: dict[str, tuple[float, float]] | None = None) -> None:
+    """The reports on stdout, then the picture: a picture that cannot be drawn after all (the disk filled up
+    during the run) is said in one line naming it, and the report is not lost."""
     from drd.cli.report import print_report
     from drd.dryrun import merged
 
-    if render is not None and sim_world is not None:
-        from drd.render import render as draw
-
-        draw(sim_world, reports[0] if len(reports) == 1 else merged(reports), render, views=views)
-        err.print(Text.assemble(("✓ ", "bold green"), f"drew {render}"))
     if as_json:
         print_json(reports[0].to_dict() if len(reports) == 1 else [r.to_dict() for r in reports], default=str)
     else:
         for report in reports:
             print_report(report, several=len(reports) > 1)
+    if render is not None and sim_world is not None:
+        from drd.render import render as draw
+
+        try:
+            draw(sim_world, reports[0] if len(reports) == 1 else merged(reports), render, views=views)
+        except OSError as e:
+            fail(f"--render {render}: cannot write the picture: {e.strerror or e} (the report above is complete)")
+        err.print(Text.assemble(("✓ ", "bold green"), f"drew {render}"))
 
 
 def _hosts_file(hosts: Path) -> Path:
