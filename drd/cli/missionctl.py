@@ -129,7 +129,8 @@ def plan(
                                show_default=False),
     output: Path = typer.Option(None, "--output", "-o", show_default=False,
                                 help="Write to a file: .svg/.png/.pdf are drawn with Graphviz's dot; "
-                                     ".json/.dot/.mmd/.txt pick the format."),
+                                     ".json/.dot/.mmd/.txt pick the format (with --config: the tree and the "
+                                     "preview as text, or .json)."),
     as_json: bool = typer.Option(False, "--json", help="Print the statechart as JSON (the same as --format json)."),
     config: Path = typer.Option(None, "--config", "-c", "--hosts", show_default=False,
                                 help="Preview the start on this cluster's hosts file: which robot and device each "
