@@ -270,7 +270,8 @@ def catalog(extra: Sequence[Path] | None) -> Catalog:
     dirs = default_dirs() + [Path(p) for p in extra or ()]
     for d in extra or ():
         if not Path(d).is_dir():
-            fail(f"--components {d}: no such folder")
+            fail(f"--components {d}: " + ("not a folder (a folder of component manifests is expected)"
+                                          if Path(d).exists() else "no such folder"))
     try:
         return load_catalog(dirs)
     except ManifestError as e:

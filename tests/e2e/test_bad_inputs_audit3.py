@@ -49,3 +49,10 @@ def test_drd_status_and_stop_refuse_a_run_dir_that_is_a_file_or_missing(tmp_path
     assert r.returncode == 2 and "no such folder" in r.stderr
     r = run([*DRD, "status", "--run-dir", str(tmp_path)])
     assert r.returncode == 0 and "no drd in" in r.stdout  # an empty run dir is no error
+
+
+def test_components_of_a_file_says_it_is_not_a_folder(tmp_path: Path) -> None:
+    a_file = tmp_path / "manifest.yaml"
+    a_file.write_text("name: X\n")
+    r = run([*DRD, "components", "-C", str(a_file)])
+    assert r.returncode == 2 and "not a folder" in r.stderr and "no such" not in r.stderr, r.stderr
