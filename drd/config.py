@@ -165,7 +165,7 @@ def read_config_text(path: Path) -> str:
     return text
 
 
-class TextError(ValueError):
+class TextError(ConfigurationError, ValueError):
     """A configuration file whose bytes are no text YAML reads (not UTF-8, a NUL byte): its message and `line`
     (1-based) say where, as every other problem of a file does (a byte offset says nothing to a user)."""
 
