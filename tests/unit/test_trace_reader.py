@@ -19,7 +19,8 @@ TRACE_MD = Path(__file__).resolve().parents[2] / "docs" / "trace.md"
 #: A value of each field type drd writes, by the dataclass field's annotation.
 SAMPLES: dict[str, Any] = {"str": "x", "float": 1.5, "int | None": 3, "bool": True, "tuple[str, ...]": ("a: B",),
                            "dict[str, str]": {"cam": "r1.cam"}, "dict[str, int]": {"r1.cam": 2},
-                           "dict[str, Any]": {"area": 0.5}}
+                           "dict[str, Any]": {"area": 0.5},
+                           "dict[str, dict[str, str]]": {"Other-1/M/B": {"cam": "r1.cam"}}}
 
 
 def record_classes() -> dict[str, type[rec.Record]]:
