@@ -49,7 +49,7 @@ import psutil
 from drd.bus import Bus, BusError, Message, Query, Reply, typed_handler
 from drd.bus.keys import is_concrete
 from drd.cluster.gates import GateUpdate, GateUpdateReply, wire_record
-from drd.cluster.guard import HostGuard
+from drd.cluster.guard import CLOSE_WAIT, HostGuard
 from drd.cluster.instances import InstanceInfo
 from drd.cluster.keys import ClusterKeys
 from drd.cluster.pipe import (
@@ -121,6 +121,10 @@ class CycleArbiter(Arbiter):
         except Exception as e:  # the driver refused it (fenced out is NotHolder, recorded, never raised here)
             self.on_error(p.owner, e)
 
+
+#: Seconds a new world waits for the last world's telemetry read under way (the Creator's lock is held, and the
+#: controller waits 1 s for a reply): a read that hangs longer ends its thread when it returns, keeping nothing.
+REPLACE_WAIT = 0.1
 
 #: Instance states, as announced to the Component Database.
 RUNNING, SUSPENDED, TERMINATED, FAILED = "running", "suspended", "terminated", "failed"
@@ -217,6 +221,7 @@ class Creator:
                 served.close()
         with self._lock:
             self._retire_all(wait=True)  # nothing of it outlives its close
+            self._close_guard()
             self._close_drivers()
             self.instances.clear()
             self._dirty = False
@@ -763,6 +768,7 @@ class Creator:
         pool: the mission's components are placed in the next moments."""
         if self._drivers is None or self._generation != (world, generation):
             self.pool.warm()
+            self._close_guard(REPLACE_WAIT)  # before its drivers close: no read of them is under way after
             self._close_drivers()
             if self._make_drivers is not None:
                 self._drivers = self._make_drivers(world)
@@ -792,6 +798,12 @@ class Creator:
             self._generation = (world, generation)
         return self._drivers
 
+    def _close_guard(self, wait: float = CLOSE_WAIT) -> None:
+        """End the last world's guard (its telemetry thread), waiting `wait` s at most for a read under way."""
+        if self._guard is not None:
+            self._guard.close(wait)
+            self._guard = None
+
     def _close_drivers(self) -> None:
         """Close the drivers of the last world (what they hold: a ROS 2 driver's subscriptions), if any."""
         close = getattr(self._drivers, "close", None)
@@ -799,7 +811,9 @@ class Creator:
             close()
 
     def _guard_gates(self) -> None:
-        """Gates over the drivers just built, guarded by the constraints the controller says are in force."""
+        """Gates over the drivers just built, guarded by the constraints the controller says are in force (the
+        last world's guard is closed: its telemetry thread would keep that world's drivers alive)."""
+        self._close_guard(REPLACE_WAIT)
         self._gates = LocalGates.of(self._drivers.devices, self._drivers.robots, self._sharable, self._gate_record)
         self._guard = HostGuard(self.cluster, self.host, self._drivers, self._gates, lambda: self._now,
                                 self._report)

@@ -46,6 +46,8 @@ log = logging.getLogger("drd.guard")
 Place = tuple[float, float, float, float]
 #: One queued gate operation (`drd.cluster.gates.GateUpdate`).
 Op = list[Any]
+#: Seconds `BackgroundRead.close` waits for a read under way (a driver's) before it lets the thread finish alone.
+CLOSE_WAIT = 1.0
 
 
 def read_names(condition: ast.Expr) -> list[str]:
@@ -196,6 +198,13 @@ class HostGuard:
         robots = self._reads.get(TELEMETRY_WAIT) or {}
         return {"kind": "telemetry", "mission": "", "host": self.host, "robots": robots}
 
+    def close(self, wait: float = CLOSE_WAIT) -> None:
+        """End the telemetry thread (waiting `wait` s at most): when the guard's world is replaced and when the
+        daemon stops. Nothing of the guard stays after; a read hanging in a driver keeps it until it returns."""
+        if not self._reads.close(wait):
+            log.info("guard on %s: a telemetry read still waits on its driver; its thread ends when it returns",
+                     self.host)
+
     def _read_watched(self) -> dict[str, dict[str, float]]:
         return {r: dict(data) for r in list(self.watched) if (data := self.local(r)) is not None}
 
@@ -207,17 +216,21 @@ TELEMETRY_WAIT = 0.05
 class BackgroundRead:
     """`read()` on a thread of its own, one at a time: `get(wait)` starts a read if none is running and returns
     its result if it comes within `wait` seconds, else the last result (None before the first). A read that raises
-    leaves the last result standing."""
+    leaves the last result standing. `close()` ends the thread: a guard is made per world, and a thread that
+    outlived its world would keep the world's drivers alive, one more per mission (soak audit, defect 1)."""
 
     def __init__(self, read: Callable[[], Any]) -> None:
-        self._read = read
+        self._read: Callable[[], Any] | None = read
         self._cond = threading.Condition()
         self._asked = self._done = 0  # reads asked for, reads finished
         self._last: Any = None
         self._thread: threading.Thread | None = None
+        self._closed = False
 
     def get(self, wait: float) -> Any:
         with self._cond:
+            if self._closed:
+                return self._last
             if self._done == self._asked:
                 self._asked += 1
                 self._cond.notify_all()
@@ -227,18 +240,36 @@ class BackgroundRead:
             self._cond.wait_for(lambda: self._done == self._asked, wait)
             return self._last
 
+    def close(self, wait: float = CLOSE_WAIT) -> bool:
+        """End the thread (waiting up to `wait` s for a read under way to return); True if it ended. A read that
+        hangs in its driver keeps what it reads until it returns; then the thread ends, and nothing else does."""
+        with self._cond:
+            self._closed = True
+            self._read = None
+            self._cond.notify_all()
+            thread = self._thread
+        if thread is None:
+            return True
+        if thread is not threading.current_thread():
+            thread.join(wait)
+        return not thread.is_alive()
+
     def _run(self) -> None:
         while True:
             with self._cond:
-                self._cond.wait_for(lambda: self._asked > self._done)
+                self._cond.wait_for(lambda: self._closed or self._asked > self._done)
+                read = self._read
+                if self._closed or read is None:
+                    self._read = None  # what it reads (a guard, its world's drivers) is let go with the thread
+                    return
             try:
-                value = self._read()
+                value = read()
             except Exception:  # a driver that cannot tell now: the last values stand
                 log.debug("a telemetry read failed", exc_info=True)
                 value = None
+            del read
             with self._cond:
                 if value is not None:
                     self._last = value
                 self._done = self._asked
                 self._cond.notify_all()
-

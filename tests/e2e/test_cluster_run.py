@@ -190,6 +190,19 @@ def test_ctrl_c_on_run_stops_the_mission_and_prints_how_it_ended(cluster: Daemon
     assert not left, "nothing left running on the cluster"
 
 
+def test_a_worker_daemon_keeps_no_thread_per_mission(cluster: DaemonCluster) -> None:
+    """Soak audit defect 1: every world left a `drd-telemetry` thread (and its world's drivers) in each worker
+    daemon, forever. The daemon's own threads (not its children's) after mission 2 and after mission 4 are the
+    same: what a world starts ends with it."""
+    daemon = psutil.Process(cluster.pid("ranger1"))
+    counts: list[int] = []
+    for _ in range(4):
+        r = missionctl(cluster, "run", MISSION, "--speed", "10", "--until", "5")
+        assert r.returncode in (0, 1) and "Traceback" not in r.stderr, r.stderr[-2000:]
+        counts.append(daemon.num_threads())
+    assert counts[3] <= counts[1], (counts, cluster.tails("ranger1"))
+
+
 def test_kill_9_of_the_ranger_host_mid_mission_fails_the_mission(cluster: DaemonCluster) -> None:
     cmd = [*MISSIONCTL, "run", MISSION, "--config", str(cluster.hosts_file), "--speed", "10"]
     proc = subprocess.Popen(cmd, cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
