@@ -105,6 +105,9 @@ class Executive:
         self.pool.add(resources, clock.now())
         self.missions: dict[str, Interpreter] = {}
         self.history = history  # finished missions kept (the oldest finished go first)
+        #: Missions that ended before this executive started (its controller's journal): id -> status as listed
+        #: then, in the order they ended; they count in `history` and go first.
+        self.past: dict[str, dict[str, Any]] = {}
         self.guard = ConstraintGuard(self.pool)  # the constraints in force, of every mission
         self.gates: Gates = self._gates(gates)
         self.pool.places = dict(self.services.get("places", {}))  # the world's rooms: `inside(ranger, "n1")`
@@ -157,6 +160,8 @@ class Executive:
         self.forget_finished()
         if mid in self.missions:
             raise ValueError(f"a mission {mid} is already running")
+        if self.past.pop(mid, None) is not None:  # an id an ended mission of before the restart had: this one now
+            self.order.pop(mid, None)
         if "/" in mid:
             raise ValueError(f"a mission id has no '/': {mid!r}")
         interp = Interpreter(chart, registry if registry is not None else self.registry, self.broker, self.clock,
@@ -176,6 +181,16 @@ class Executive:
             interp.start()
         return mid
 
+    def restore_history(self, ended: Iterable[tuple[str, Mapping[str, Any]]]) -> None:
+        """Missions that ended before a restart (id, status as listed then), in the order they ended: `status`
+        lists them again, before every mission of this executive, and `history` bounds them with the rest."""
+        for mid, status in ended:
+            if mid in self.missions or mid in self.past:
+                continue
+            self.past[mid] = {**status, "id": mid}
+            self.order[mid] = next(self._ordinals)
+        self.forget_finished()
+
     def continue_records(self, after: int) -> None:
         """Number the next records after `after` (a controller resuming goes on with its journal's numbering)."""
         self.sent = max(self.sent, after)
@@ -192,19 +207,26 @@ class Executive:
     def step(self) -> None:
         for interp in list(self.missions.values()):
             interp.step()
-        if len(self.missions) > self.history or len(self.kept) > 2 * KEPT_FINISHED:
+        if len(self.missions) + len(self.past) > self.history or len(self.kept) > 2 * KEPT_FINISHED:
             self.forget_finished()
 
     def forget_finished(self) -> list[str]:
-        """Drop the oldest finished missions beyond `history` (running ones are never dropped); their ids."""
+        """Drop the oldest finished missions beyond `history` (running ones are never dropped); their ids. Called
+        as missions end too (not only from `step`: a mission stopped between steps, the last one of a world, must
+        not leave `history` + 1)."""
         finished = [mid for mid, interp in self.missions.items() if interp.finished]
-        dropped = finished[:max(0, len(finished) - self.history)]
+        over = max(0, len(self.past) + len(finished) - self.history)
+        gone = list(self.past)[:over]  # those that ended before a restart go first
+        for mid in gone:
+            del self.past[mid]
+            self.order.pop(mid, None)
+        dropped = finished[:over - len(gone)]
         for mid in dropped:
             del self.missions[mid]
             self.order.pop(mid, None)
         for mid in [m for m in self.kept if m not in self.missions or m in finished[:-KEPT_FINISHED]]:
             del self.kept[mid]  # a client catching up is after a mission that ran lately
-        return dropped
+        return gone + dropped
 
     def run(self, advance: Callable[[], None], until: float, *, done: Callable[[], bool] | None = None) -> None:
         """Step until every mission finished (or `done()`), calling `advance` to move time."""
@@ -247,6 +269,10 @@ class Executive:
         wanted = None if only is None else set(only)
 
         def items() -> Iterable[tuple[int, tuple[dict[str, Any], int]]]:
+            for mid, status in list(self.past.items()):
+                n = self.order.get(mid, 0)
+                if n > after and (wanted is None or mid in wanted):
+                    yield n, _sized(dict(status))
             for mid, interp in list(self.missions.items()):
                 n = self.order.get(mid, 0)
                 if n > after and (wanted is None or mid in wanted):
@@ -260,6 +286,14 @@ class Executive:
         self.stop()
         self._queryable.close()
         self._reads.close()
+
+    def abandon_missions(self) -> None:
+        """Its controller stops for maintenance (`MissionRunner.suspend`): its missions are left as they are and
+        say nothing more (no stop, no record: what the journal holds of them is resumed by the next start); the
+        services stay until `close`, which then has nothing to stop."""
+        for interp in self.missions.values():
+            interp.listeners.clear()
+        self.missions = {mid: interp for mid, interp in self.missions.items() if interp.finished}
 
     def abandon(self) -> None:
         """Its process died (a dry-run's `kill controller`): nothing more is said or done, missions are left as
@@ -282,6 +316,8 @@ class Executive:
             return query.error("expected a drd.mission.command")
         if cmd.op == "status":  # of one mission (none: it is not, or no more, known) or a page of them all
             return self.status(cmd.after, cmd.count, [cmd.mission] if cmd.mission else None)
+        if cmd.mission and cmd.mission in self.past and cmd.op == "stop":  # it ended before the restart
+            return MissionStatus(self.clock.now(), [{**self.past[cmd.mission], "already_ended": True}])
         if cmd.mission and cmd.mission not in self.missions:
             return query.error(self.unknown(cmd.mission))
         match cmd.op:
@@ -302,7 +338,7 @@ class Executive:
         """The error for a mission id it does not know: with those still running (an ended one cannot be stopped,
         nor sent an event that changes anything), and how many ended ones it still knows."""
         running = [mid for mid, interp in self.missions.items() if not interp.finished]
-        ended = len(self.missions) - len(running)
+        ended = len(self.missions) + len(self.past) - len(running)
         return (f"no mission {mission}; running: {', '.join(running[-20:]) or 'none'}"
                 + (f" (and {len(running) - 20} more)" if len(running) > 20 else "")
                 + (f"; {ended} ended mission{'s' if ended != 1 else ''} known (missionctl status lists them)"
@@ -316,6 +352,7 @@ class Executive:
         for m in reply.missions:
             if m.get("id") in ended:
                 m["already_ended"] = True
+        self.forget_finished()  # after the reply: it lists every mission it stopped
         return reply
 
 

@@ -20,7 +20,10 @@ journal of another version is refused with a clear error, never misread.
 - `world`: the world the missions run in (name, the Creators' generation, the executive clock's base and time)
   and the number of the last record sent (a resumed executive numbers on from it).
 
-Finished missions stay in the journal (up to `keep`, the oldest go first) for `missionctl status` after a restart.
+Finished missions stay in the journal (up to `keep`, the ones that ended first go first), each with its status as
+`missionctl status` showed it when it ended (`missions.ended`, `missions.status`), so a restarted controller lists
+them again (`finished()`). A journal written before those two columns existed gains them when opened (its old
+finished rows have no status: they are listed from their outcome and reason).
 
 The etcd backend holds the same three tables as keys under `drd/<cluster>/journal/` (`version`, `mission/<id>`,
 `request/<id>`, `state/<id>`, `world`), each value JSON; every write is one transaction that holds only if the
@@ -53,7 +56,8 @@ _SCHEMA = """
 create table if not exists meta (key text primary key, value text not null);
 create table if not exists missions (
     id text primary key, request text not null, priority integer not null, base real not null,
-    until real not null, started real not null, outcome text, reason text not null default '');
+    until real not null, started real not null, outcome text, reason text not null default '',
+    ended real, status text);
 create table if not exists states (mission text primary key, at real not null, snapshot text not null);
 create table if not exists world (
     id integer primary key check (id = 1), name text not null, generation integer not null,
@@ -76,6 +80,23 @@ class Journaled:
     until: float
     at: float  # the executive's time of its last saved state
     snapshot: dict[str, Any] | None  # None: it started, and no state was saved before the loss
+
+
+@dataclass(frozen=True)
+class Finished:
+    """A mission the journal holds as ended: its status as it was listed then (`id`, `outcome`, `reason`, ...)."""
+
+    id: str
+    ended: float  # wall time (`time.time()`) it ended
+    status: dict[str, Any]
+
+
+def _status(mission: str, outcome: str, reason: str, status: str | dict[str, Any] | None) -> dict[str, Any]:
+    """A finished mission's status as journaled; one journaled without any (an older drd): from its outcome."""
+    found = json.loads(status) if isinstance(status, str) else status
+    if isinstance(found, dict):
+        return found
+    return {"id": mission, "outcome": outcome, "reason": reason}
 
 
 @dataclass(frozen=True)
@@ -112,12 +133,18 @@ class Journal(ABC):
         """The missions' states after a control cycle (mission -> (time, snapshot)) and the world's, at once."""
 
     @abstractmethod
-    def finish(self, mission: str, outcome: str, reason: str) -> None:
-        """A mission ended: it is no longer resumed; the oldest finished beyond `keep` are dropped."""
+    def finish(self, mission: str, outcome: str, reason: str, status: dict[str, Any] | None = None) -> None:
+        """A mission ended: it is no longer resumed; `status`: what `missionctl status` lists of it (kept for a
+        restarted controller); the first ended beyond `keep` are dropped."""
 
     @abstractmethod
     def running(self) -> list[Journaled]:
         """The missions that had not ended when the journal was last written, oldest first."""
+
+    def finished(self) -> list[Finished]:
+        """The missions that ended (at most `keep`), in the order they ended: a restarted controller's history
+        (a backend that keeps none has none)."""
+        return []
 
     @abstractmethod
     def world(self) -> WorldState | None:
@@ -142,6 +169,10 @@ class SqliteJournal(Journal):
             self._db.execute("pragma journal_mode=wal")
             self._db.execute("pragma synchronous=normal")
             self._db.executescript(_SCHEMA)
+            columns = {row[1] for row in self._db.execute("pragma table_info(missions)")}
+            for column in ("ended real", "status text"):  # a journal of an older drd: the history's columns
+                if column.split()[0] not in columns:
+                    self._db.execute(f"alter table missions add column {column}")
             found = self._db.execute("select value from meta where key = 'version'").fetchone()
             if found is None:
                 self._db.execute("insert into meta values ('version', ?)", (str(VERSION),))
@@ -158,7 +189,7 @@ class SqliteJournal(Journal):
     def begin(self, mission: str, request: dict[str, Any], priority: int, base: float, until: float) -> None:
         """A mission started (before its first control cycle)."""
         with self._lock, self._db:
-            self._db.execute("insert or replace into missions values (?, ?, ?, ?, ?, ?, null, '')",
+            self._db.execute("insert or replace into missions values (?, ?, ?, ?, ?, ?, null, '', null, null)",
                              (mission, json.dumps(request), priority, base, until, time.time()))
 
     def save(self, states: dict[str, tuple[float, dict[str, Any]]], world: WorldState) -> None:
@@ -170,13 +201,26 @@ class SqliteJournal(Journal):
                              (world.name, world.generation, world.base, world.now, world.seq,
                               json.dumps(world.properties, default=str), time.time()))
 
-    def finish(self, mission: str, outcome: str, reason: str) -> None:
-        """A mission ended: it is no longer resumed; the oldest finished beyond `keep` are dropped."""
+    def finish(self, mission: str, outcome: str, reason: str, status: dict[str, Any] | None = None) -> None:
+        """A mission ended: it is no longer resumed; the first ended beyond `keep` are dropped."""
+        kept = json.dumps(status, default=str) if status is not None else None
         with self._lock, self._db:
-            self._db.execute("update missions set outcome = ?, reason = ? where id = ?", (outcome, reason, mission))
+            self._db.execute("update missions set outcome = ?, reason = ?, ended = ?, status = ? where id = ?",
+                             (outcome, reason, time.time(), kept, mission))
             self._db.execute("delete from states where mission = ?", (mission,))
             self._db.execute("delete from missions where outcome is not null and id not in (select id from missions"
-                             " where outcome is not null order by started desc limit ?)", (self.keep,))
+                             " where outcome is not null order by coalesce(ended, started) desc limit ?)",
+                             (self.keep,))
+
+    def finished(self) -> list[Finished]:
+        with self._lock:
+            rows = self._db.execute(
+                "select id, outcome, reason, coalesce(ended, started), status from missions where outcome is not null"
+                " order by coalesce(ended, started) desc limit ?", (self.keep,)).fetchall()
+        try:
+            return [Finished(r[0], float(r[3]), _status(r[0], r[1], r[2], r[4])) for r in reversed(rows)]
+        except (ValueError, TypeError) as e:
+            raise JournalError(f"{self.path}: a damaged entry: {e}") from None
 
     def running(self) -> list[Journaled]:
         """The missions that had not ended when the journal was last written, oldest first."""
@@ -275,19 +319,20 @@ class EtcdJournal(Journal):
                 "seq": world.seq, "properties": world.properties, "saved": time.time()}
         self._write([*ops, put(self.prefix + "world", json.dumps(data, default=str))])
 
-    def finish(self, mission: str, outcome: str, reason: str) -> None:
+    def finish(self, mission: str, outcome: str, reason: str, status: dict[str, Any] | None = None) -> None:
         from drd.etcd import EtcdError, delete, put
 
         try:
             found = self.etcd.get(self.prefix + f"mission/{mission}")
             meta = json.loads(found.value) if found is not None else {"priority": 1, "base": 0.0, "until": 0.0,
                                                                       "started": time.time()}
-            finished = sorted(((m["started"], kv.key) for kv, m in self._metas() if m.get("outcome") is not None
+            finished = sorted(((_ended(m), kv.key) for kv, m in self._metas() if m.get("outcome") is not None
                                and kv.key != self.prefix + f"mission/{mission}"), reverse=True)
         except (EtcdError, ValueError) as e:
             log.warning("journal: mission %s not marked finished (%s): %s", mission, self.where, e)
             return
-        meta |= {"outcome": outcome, "reason": reason}
+        meta |= {"outcome": outcome, "reason": reason, "ended": time.time(),
+                 "status": json.loads(json.dumps(status, default=str)) if status is not None else None}
         dropped = [key.rsplit("/", 1)[1] for _started, key in finished[max(0, self.keep - 1):]]
         self._write([put(self.prefix + f"mission/{mission}", json.dumps(meta)),
                      delete(self.prefix + f"state/{mission}"),
@@ -317,6 +362,20 @@ class EtcdJournal(Journal):
         except (ValueError, TypeError, KeyError) as e:
             raise JournalError(f"{self.where}: a damaged entry: {e}") from None
 
+    def finished(self) -> list[Finished]:
+        from drd.etcd import EtcdError
+
+        try:
+            ended = sorted((_ended(m), kv.key.rsplit("/", 1)[1], m) for kv, m in self._metas()
+                           if m.get("outcome") is not None)
+            return [Finished(mid, float(at), _status(mid, str(m["outcome"]), str(m.get("reason", "")),
+                                                     m.get("status")))
+                    for at, mid, m in ended[-self.keep:] if self.keep > 0]
+        except EtcdError as e:
+            raise JournalError(f"{self.where}: cannot read the journal: {e}") from None
+        except (ValueError, TypeError, KeyError) as e:
+            raise JournalError(f"{self.where}: a damaged entry: {e}") from None
+
     def world(self) -> WorldState | None:
         from drd.etcd import EtcdError
 
@@ -331,6 +390,11 @@ class EtcdJournal(Journal):
             raise JournalError(f"{self.where}: cannot read the journal: {e}") from None
         except (ValueError, TypeError, KeyError) as e:
             raise JournalError(f"{self.where}: a damaged entry: {e}") from None
+
+
+def _ended(meta: dict[str, Any]) -> float:
+    """When a mission of the etcd journal ended (one an older drd journaled: when it started)."""
+    return float(meta.get("ended") or meta.get("started") or 0.0)
 
 
 class DeferredJournal(Journal):
@@ -373,12 +437,16 @@ class DeferredJournal(Journal):
     def begin(self, mission: str, request: dict[str, Any], priority: int, base: float, until: float) -> None:
         self._through(lambda: self.inner.begin(mission, request, priority, base, until))
 
-    def finish(self, mission: str, outcome: str, reason: str) -> None:
-        self._through(lambda: self.inner.finish(mission, outcome, reason))
+    def finish(self, mission: str, outcome: str, reason: str, status: dict[str, Any] | None = None) -> None:
+        self._through(lambda: self.inner.finish(mission, outcome, reason, status))
 
     def running(self) -> list[Journaled]:
         self.flush()
         return self.inner.running()
+
+    def finished(self) -> list[Finished]:
+        self.flush()
+        return self.inner.finished()
 
     def world(self) -> WorldState | None:
         self.flush()

@@ -308,7 +308,7 @@ class Daemon:
         elif Role.CONTROLLER in roles:
             from drd.journal import SqliteJournal
 
-            journal = SqliteJournal(self.config.journal) if self.config.journal else None
+            journal = SqliteJournal(self.config.journal, keep=self.cluster.history) if self.config.journal else None
             self._become_controller(bus, journal, self.started)  # its term: the start time it announces
         self._declared.append(bus.watch_tokens(keys.hosts, self._on_token, history=True))
         takes = Role.WORKER in roles or not any(Role.WORKER in h.roles for h in self.cluster.hosts)
@@ -463,6 +463,9 @@ class Daemon:
         if self._closed or self._bus is None:
             return
         self._closed = True
+        runner = self.runner
+        if self.election is None and runner is not None and runner.journal is not None:
+            runner.suspend()  # before the goodbye (no host lost meanwhile): journaled as running, for the next start
         try:
             self.bus.put(self.keys.announce(self.host), Leaving(self.host, reason or self.stop_reason))
         except Exception:  # the bus may already be gone; leaving must go on

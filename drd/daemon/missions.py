@@ -190,6 +190,9 @@ class MissionRunner:
         self.lost: list[str] = []  # hosts seen down whose robots the world's loop stops in the simulator
         self.journal = journal
         self.checkpoints = Checkpoints(journal) if journal is not None else None
+        self.suspending = False  # a maintenance stop: the missions stay journaled as running (`suspend`)
+        if journal is not None:  # the history `missionctl status` listed before a restart
+            executive.restore_history((f.id, f.status) for f in journal.finished())
         self._queryable = bus.serve(run_key(cluster.name), self._serve)
         self._migrations = Migrations(bus, self)  # `missionctl migrate` (drd.daemon.migrate)
         threading.Thread(target=self._warm_up, name="drd-compiler-warm-up", daemon=True).start()
@@ -239,6 +242,19 @@ class MissionRunner:
         """The world running now, if any (one whose last mission ended takes no new one)."""
         world = self.world
         return world if world is not None and not world.closed else None
+
+    def suspend(self) -> None:
+        """A clean stop of this controller's daemon (`drd stop`, SIGTERM): end the world's loop without stopping
+        its missions, so they stay journaled as running and the next `drd start` resumes them, as after a crash
+        (docs/design.md, "A controller's clean stop suspends its missions"). Nothing more is said of them: an
+        attached `missionctl run` waits for the controller as it would after a crash."""
+        self.suspending = True
+        world = self.world
+        if world is not None:
+            world.stopping.set()
+            world.thread.join(timeout=5)
+        with self.lock:
+            self.controller.executive.abandon_missions()
 
     def close(self) -> None:
         self._queryable.close()
@@ -582,7 +598,10 @@ class WorldRun:
                 if lag > 0:
                     self.stopping.wait(lag)
             else:
-                self._stop_all("the controller's daemon is stopping")
+                if runner.suspending:  # they stay journaled as running: the next start resumes them
+                    self.closed = True
+                else:
+                    self._stop_all("the controller's daemon is stopping")
         except Exception:  # never leave a mission hanging silently
             log.exception("world %s: the run loop failed", self.name)
             self._stop_all("internal error in the controller's run loop (see its log)")
@@ -676,9 +695,12 @@ class WorldRun:
             done = [m for m in self.routers if everyone or m not in missions or missions[m].finished]
             ended = {m: self.routers.pop(m) for m in done}
             outcomes = {m: (missions[m].outcome, missions[m].reason) if m in missions else (None, "") for m in ended}
+            listed = {m.get("id"): m for m in runner.controller.executive.status(0, 0, list(ended)).missions}
+            if ended:
+                runner.controller.executive.forget_finished()  # history, not history + 1, once the last one ended
         for mid, router in ended.items():
             if runner.journal is not None and not (everyone and self.stopping.is_set() and outcomes[mid][0] is None):
-                runner.journal.finish(mid, outcomes[mid][0] or "stopped", outcomes[mid][1])
+                runner.journal.finish(mid, outcomes[mid][0] or "stopped", outcomes[mid][1], listed.get(mid))
             for host in sorted(set(router.stats.by_host) | set(router.batches.by_host)):
                 if host == runner.me or runner.host_down(host):
                     continue

@@ -36,7 +36,7 @@ class Slow(Journal):
         if not self.refuse:
             self.writes.append(("save", (sorted((m, at) for m, (at, _s) in states.items()), world.now)))
 
-    def finish(self, mission: str, outcome: str, reason: str) -> None:
+    def finish(self, mission: str, outcome: str, reason: str, status: dict[str, Any] | None = None) -> None:
         if not self.refuse:
             self.writes.append(("finish", mission))
 
