@@ -249,7 +249,7 @@ def _serve(cluster: Cluster, host: str, cat: Catalog, tr: Transport, rd: Path, c
     daemon = Daemon(DaemonConfig(cluster, host, cat, tr, load_period=load_period, peer_grace=peer_grace,
                                  journal=journal))
     try:
-        info = runfiles.claim(rd, host, cluster.name, str(config.absolute()), str(log_file or ""))
+        info = runfiles.claim(rd, host, cluster.name, str(config.absolute()), str(log_file or ""), daemon.roles)
     except runfiles.AlreadyRunning as e:
         fail(str(e), hint=f"drd stop --host {host}")
     stop = threading.Event()
@@ -364,7 +364,9 @@ def stop(
     as_json: bool = typer.Option(False, "--json", help="Print what was stopped as JSON."),
 ) -> int:
     """Stop daemons started on this machine: SIGTERM, wait (bounded), then SIGKILL. Only one cluster's: two
-    clusters sharing a machine never stop each other's daemons."""
+    clusters sharing a machine never stop each other's daemons. With --all, the controller goes first and the
+    others once it is gone (each step bounded by --timeout): its running missions stay journaled and the next
+    `drd start` of the hosts resumes them."""
     from drd.daemon import runfiles
 
     if (host is None) == (not all_):

@@ -6,7 +6,9 @@ refuse or stop each other's daemons; `drd stop --all` stops one cluster's.
 The run dir is `--run-dir`, else `$DRD_RUN_DIR`, else `~/.drd/run`. A pidfile records the pid and
 the process's creation time, so a stale file whose pid was reused by another program is never
 taken for a running daemon (and never signalled). `drd stop` sends SIGTERM, waits (bounded), then
-SIGKILL.
+SIGKILL; the controllers first (by the roles their pidfiles record), and the others once they are gone: a
+controller that sees its workers leave first fails the missions they ran, rather than keep them journaled
+for the next start.
 """
 
 from __future__ import annotations
@@ -61,6 +63,7 @@ class PidFile:
     create_time: float
     state: str = "starting"
     log: str = ""
+    roles: tuple[str, ...] = ()  # the host's roles (an older drd's pidfile: none known)
 
     def running(self) -> bool:
         """The process is alive (not a zombie) and is the one that wrote the file."""
@@ -87,7 +90,7 @@ def read(path: Path) -> PidFile | None:
     """The pidfile at `path`, or None when it is missing or not a pidfile."""
     try:
         data = json.loads(path.read_text(encoding="utf-8"))
-        return PidFile(**data)
+        return PidFile(**{**data, "roles": tuple(data.get("roles", ()))})
     except (OSError, ValueError, TypeError):
         return None
 
@@ -100,7 +103,8 @@ def write(path: Path, info: PidFile) -> None:
     os.replace(tmp, path)
 
 
-def claim(directory: Path, host: str, cluster: str, config: str, log: str = "") -> PidFile:
+def claim(directory: Path, host: str, cluster: str, config: str, log: str = "",
+          roles: Sequence[str] = ()) -> PidFile:
     """Write this process's pidfile for `host`; a stale one is replaced.
 
     Raises:
@@ -111,7 +115,7 @@ def claim(directory: Path, host: str, cluster: str, config: str, log: str = "") 
     if old is not None and old.pid != os.getpid() and old.running():
         raise AlreadyRunning(old, path)
     me = psutil.Process(os.getpid())
-    info = PidFile(os.getpid(), host, cluster, config, time.time(), me.create_time(), "starting", log)
+    info = PidFile(os.getpid(), host, cluster, config, time.time(), me.create_time(), "starting", log, tuple(roles))
     write(path, info)
     return info
 
@@ -139,10 +143,20 @@ def pidfiles(directory: Path) -> list[tuple[Path, PidFile | None]]:
 
 
 def stop(infos: Sequence[PidFile], timeout: float = 10.0, poll: float = 0.05) -> dict[int, str]:
-    """Stop daemons: SIGTERM to all, wait up to `timeout` for each, then SIGKILL the stragglers.
+    """Stop daemons: the controllers first (SIGTERM, wait up to `timeout`, then SIGKILL the stragglers), then the
+    others the same way. A controller stopped while its workers still run keeps its running missions journaled
+    as running, and the next start resumes them; workers stopped first would be lost hosts to it, and their
+    missions' states would fail.
 
     Returns pid -> `stopped`, `killed` or `not running`.
     """
+    first = [i for i in infos if "controller" in i.roles]
+    out = _stop_group(first, timeout, poll) if first else {}
+    return out | _stop_group([i for i in infos if i not in first], timeout, poll)
+
+
+def _stop_group(infos: Sequence[PidFile], timeout: float, poll: float) -> dict[int, str]:
+    """SIGTERM to each of `infos` at once, wait up to `timeout`, then SIGKILL the stragglers."""
     out: dict[int, str] = {}
     for info in infos:
         try:
