@@ -45,10 +45,10 @@ def migrate(instance: str = typer.Argument(..., metavar="INSTANCE", show_default
         reply = client.bus.call(migrate_key(client.cluster), Migrate(instance, to), timeout=timeout)
     if not isinstance(reply, Migrated):
         fail(f"the controller answered a {type(reply).TYPE}")
+    state = reply.state[0] if reply.state else None  # the wire's `[state]`, as the docs give it: the state or null
     if as_json:
-        out.print_json(json.dumps(asdict(reply)))
+        out.print_json(json.dumps({**asdict(reply), "state": state}))
         return OK
-    state = reply.state[0] if reply.state else None
     took = f"with its state {json.dumps(state)}" if state is not None else "afresh (its component keeps no state)"
     out.print(Text.assemble((f"{reply.mission}/{reply.path}", "bold"), f" ({reply.component}) moved from"
                             f" {reply.source} to {reply.host}, {took}"))
