@@ -427,7 +427,7 @@ def query(text: str = typer.Argument(..., metavar="QUERY", show_default=False,
         table.add_column(col)
     for o in reply.offers:
         live = o.get("live") or {}
-        props = ", ".join(f"{k}={v}" + (f" (live, {live[k]:.1f} s)" if k in live else "")
+        props = ", ".join(f"{k}={shown_property(v)}" + (f" (live, {live[k]:.1f} s)" if k in live else "")
                           for k, v in o["properties"].items())
         table.add_row(o["id"], o["type"], str(o["host"]), _pct(o["load"] * 100 if o["load"] is not None else None),
                       props)
@@ -972,6 +972,15 @@ class _RecordWatch:
             facts(result, r)
             result.sim_time = max(result.sim_time, r.at)
         return r
+
+
+def shown_property(value: Any) -> str:
+    """A property as the query table shows it: a float to 3 decimals (a live pose is a float of the physics, whose
+    17 digits say nothing to a reader; --json keeps them)."""
+    if not isinstance(value, float):
+        return str(value)
+    text = f"{value:.3f}".rstrip("0").rstrip(".")
+    return "0" if text == "-0" else text
 
 
 def live_recorder(record: Path | None, foxglove: str | None) -> Recorder | None:

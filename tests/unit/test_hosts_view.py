@@ -28,3 +28,11 @@ def test_a_host_that_stopped_reporting_shows_as_silent_with_how_long() -> None:
 def test_a_down_host_is_down_however_old_its_last_report() -> None:
     text = render([host("ranger1", 30.0, state="down")])
     assert "silent" not in text and "down" in text
+
+
+def test_a_query_table_shows_a_live_float_to_three_decimals() -> None:
+    """A live pose is a physics float (`x=6.482061619805352`): the table shows 3 decimals; other values as they are."""
+    from drd.cli.cluster import shown_property
+
+    assert [shown_property(v) for v in (6.482061619805352, 0.97, 1.0, -0.0001, "ranger1", 3, True)] == [
+        "6.482", "0.97", "1", "0", "ranger1", "3", "True"]
