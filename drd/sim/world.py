@@ -139,14 +139,16 @@ class _Reader(ConfigReader):
         ambient, dark = self.light(data.get("light", {}), "light")
         raw: list[Segment] = [seg for _, v, k in self.entries(data, "walls") if (seg := self.wall(v, k))]
         rooms = [room for _, v, k in self.entries(data, "rooms") if (room := self.room(v, k, ambient, raw))]
-        self.overlaps(rooms)
-        walls = geometry.merge(raw)
-        doors = [door for _, v, k in self.entries(data, "doors") if (door := self.door(v, k, walls, rooms))]
+        near_rooms = _Rooms(rooms)
+        self.overlaps(near_rooms)
+        walls = geometry.SegmentIndex(geometry.merge(raw))
+        doors = [door for _, v, k in self.entries(data, "doors") if (door := self.door(v, k, walls, near_rooms))]
         gaps = self.gaps(doors, walls)
-        solid = [Wall(*p) for i, w in enumerate(walls) for p in geometry.cut(w, gaps.get(i, ()))]
+        solid = [Wall(*p) for i, w in enumerate(walls.segments) for p in geometry.cut(w, gaps.get(i, ()))]
         obstacles = [o for _, v, k in self.entries(data, "obstacles") if (o := self.obstacle(v, k))]
         intruders = [n for _, v, k in self.entries(data, "intruders") if (n := self.intruder(v, k))]
-        blocking = [(w.a, w.b) for w in solid] + [(d.a, d.b) for d in doors if d.state is not DoorState.OPEN]
+        blocking = geometry.SegmentIndex([(w.a, w.b) for w in solid]
+                                         + [(d.a, d.b) for d in doors if d.state is not DoorState.OPEN])
         rangers = [ranger for _, v, k in self.entries(data, "rangers") if (ranger := self.ranger(v, k, blocking))]
         scouts = [scout for _, v, k in self.entries(data, "scouts") if (scout := self.scout(v, k, blocking))]
         battery = self.battery(data["battery"], "battery") if "battery" in data else Battery()
@@ -203,36 +205,41 @@ class _Reader(ConfigReader):
             walls.extend(geometry.rect_sides(*rect))
         return Room(rid, *rect, light if light is not None else ambient) if rid and rect else None
 
-    def overlaps(self, rooms: Sequence[Room]) -> None:
+    def overlaps(self, near: _Rooms) -> None:
+        """Each room against the earlier rooms near it, in file order (the order of a scan of every pair)."""
+        rooms = near.rooms
         for i, r in enumerate(rooms):
-            for other in rooms[:i]:
+            for j in near.grid.near((r.x0, r.y0, r.x1, r.y1)):
+                if j >= i:
+                    break
+                other = rooms[j]
                 if r.x0 < other.x1 and other.x0 < r.x1 and r.y0 < other.y1 and other.y0 < r.y1:
                     self.fail(f"{self.ids[r.id]}.rect", f"overlaps room {other.id}")
 
-    def door(self, data: dict[Any, Any], key: str, walls: Sequence[Segment], rooms: Sequence[Room]) -> Door | None:
+    def door(self, data: dict[Any, Any], key: str, walls: geometry.SegmentIndex, rooms: _Rooms) -> Door | None:
         self.keys(data, key, _DOOR, required=("id", "at", "width"))
         did = self.new_id(data["id"], f"{key}.id") if "id" in data else None
         at = self.point(data["at"], f"{key}.at") if "at" in data else None
         width = self.number(data["width"], f"{key}.width", positive=True) if "width" in data else None
         state = self.state(data.get("state", "open"), f"{key}.state")
-        located = geometry.locate(at, walls) if at else None
+        located = walls.locate(at) if at else None
         if at and located is None:
             self.fail(f"{key}.at", f"[{_num(at[0])}, {_num(at[1])}] is not on a wall")
         if not (did and at and width and state and located):
             return None
-        (a, b), s = walls[located[0]], located[1]
+        (a, b), s = walls.segments[located[0]], located[1]
         if s - width / 2 < -geometry.EPS or s + width / 2 > geometry.length(a, b) + geometry.EPS:
             self.fail(f"{key}.width", f"{_num(width)} m does not fit in its wall, which ends"
                       f" {_num(round(min(s, geometry.length(a, b) - s), 3))} m from the door's centre")
             return None
-        room = next((r.id for r in rooms if _on_boundary(at, r)), None)
+        room = rooms.first_around(at)
         return Door(did, geometry.along(a, b, s - width / 2), geometry.along(a, b, s + width / 2), width, state, room)
 
-    def gaps(self, doors: Sequence[Door], walls: Sequence[Segment]) -> dict[int, list[tuple[float, float]]]:
+    def gaps(self, doors: Sequence[Door], walls: geometry.SegmentIndex) -> dict[int, list[tuple[float, float]]]:
         """Wall index -> the spans its doors take out of it (distances from its first end); overlaps are problems."""
         spans: dict[int, list[tuple[float, float, Door]]] = {}
         for door in doors:
-            located = geometry.locate(door.center, walls)
+            located = walls.locate(door.center)
             if located:
                 s, half = located[1], door.width / 2
                 spans.setdefault(located[0], []).append((s - half, s + half, door))
@@ -273,7 +280,7 @@ class _Reader(ConfigReader):
             self.fail(f"{key}.loop", "a looping path needs at least two waypoints")
         return Intruder(iid, tuple(path), bool(loop), radius) if iid and path and radius else None
 
-    def ranger(self, data: dict[Any, Any], key: str, blocking: Sequence[Segment]) -> RangerSpawn | None:
+    def ranger(self, data: dict[Any, Any], key: str, blocking: geometry.SegmentIndex) -> RangerSpawn | None:
         self.keys(data, key, _RANGER, required=("id", "at"))
         pose = self.pose(data, key, blocking, RANGER_RADIUS, "a Ranger")
         magazine: list[str] = []
@@ -287,18 +294,18 @@ class _Reader(ConfigReader):
                 magazine.append(scout)
         return RangerSpawn(*pose, tuple(magazine)) if pose else None
 
-    def scout(self, data: dict[Any, Any], key: str, blocking: Sequence[Segment]) -> ScoutSpawn | None:
+    def scout(self, data: dict[Any, Any], key: str, blocking: geometry.SegmentIndex) -> ScoutSpawn | None:
         self.keys(data, key, _SCOUT, required=("id", "at"))
         pose = self.pose(data, key, blocking, SCOUT_RADIUS, "a Scout")
         return ScoutSpawn(*pose) if pose else None
 
-    def pose(self, data: dict[Any, Any], key: str, blocking: Sequence[Segment], radius: float,
+    def pose(self, data: dict[Any, Any], key: str, blocking: geometry.SegmentIndex, radius: float,
              what: str) -> tuple[str, float, float, float] | None:
         rid = self.new_id(data["id"], f"{key}.id") if "id" in data else None
         at = self.point(data["at"], f"{key}.at") if "at" in data else None
         heading = self.number(data["heading"], f"{key}.heading") if "heading" in data else 0.0
         if at:
-            clearance = min((geometry.point_segment_distance(at, a, b) for a, b in blocking), default=math.inf)
+            clearance = blocking.clearance(at, radius)
             if clearance < radius:
                 self.fail(f"{key}.at", f"{_num(round(clearance, 3))} m from a wall or closed door;"
                           f" {what} needs {_num(radius)} m")
@@ -408,6 +415,23 @@ def _got(value: object) -> str:
 def _num(value: float) -> str:
     """`2` rather than `2.0`: numbers in messages look like the file's."""
     return str(int(value)) if isinstance(value, float) and value.is_integer() else str(value)
+
+
+class _Rooms:
+    """Rooms with a grid of their boxes, so a door finds its room among its neighbours, not among all rooms."""
+
+    def __init__(self, rooms: Sequence[Room]) -> None:
+        self.rooms = rooms
+        self.grid = geometry.GridIndex([(r.x0, r.y0, r.x1, r.y1) for r in rooms])
+
+    def first_around(self, p: Point) -> str | None:
+        """The id of the first room (in file order) with `p` on a side, as a scan of every room finds it: a room
+        `_on_boundary` accepts has its box within 2 EPS of `p`."""
+        margin = 2 * geometry.EPS
+        for i in self.grid.near((p[0] - margin, p[1] - margin, p[0] + margin, p[1] + margin)):
+            if _on_boundary(p, self.rooms[i]):
+                return self.rooms[i].id
+        return None
 
 
 def _on_boundary(p: Point, room: Room) -> bool:
