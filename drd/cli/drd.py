@@ -144,7 +144,8 @@ def start(
                                 help="The cluster's hosts file (`--hosts` is an alias)."),
     detach: bool = typer.Option(False, "--detach", "-d", help="Run in the background; log to --log-file."),
     log_file: Path = typer.Option(None, "--log-file", show_default=False,
-                                  help="Log here instead of stderr (default with --detach: RUN_DIR/HOST.log)."),
+                                  help="Log here instead of stderr (default with --detach: RUN_DIR/HOST.log);"
+                                  " it rolls over at 10 MB, keeping 3 old files."),
     run_dir_opt: Path = RunDirOption,
     load_period: float = typer.Option(1.0, "--load-period", min=0.01,
                                       help="Seconds between load reports (at most a third of the lease is used)."),
@@ -309,7 +310,7 @@ def _configure_logging(host: str, log_file: Path | None, level: int) -> None:
     handler: logging.Handler
     if log_file is not None:
         log_file.parent.mkdir(parents=True, exist_ok=True)
-        handler = logging.FileHandler(log_file, encoding="utf-8")
+        handler = logs.RotatingLog(log_file)  # bounded, and reopened after an external logrotate
     else:
         handler = logging.StreamHandler(sys.stderr)
     handler.setFormatter(logging.Formatter(f"%(asctime)s {host} %(levelname)s %(name)s: %(message)s"))

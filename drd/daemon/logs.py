@@ -3,11 +3,16 @@
 `RateLimit` is a `logging.Filter`: per message template, at most `burst` records per `window`
 seconds pass; when the window turns over, the next record that passes says how many were dropped.
 The daemon installs it on the loggers that report what peers send (`drd.bus`, `drd.daemon.rejects`).
+
+`RotatingLog` is a daemon's log file: bounded (it rolls over at `MAX_BYTES`, keeping `BACKUPS` old files), and
+reopened when an external logrotate moved or removed it (docs/daemon.md, docs/design.md).
 """
 
 from __future__ import annotations
 
 import logging
+import logging.handlers
+import os
 import threading
 import time
 from collections.abc import Callable
@@ -47,3 +52,34 @@ def install(*names: str, burst: int = 10, window: float = 10.0) -> None:
         logger = logging.getLogger(name)
         if not any(isinstance(f, RateLimit) for f in logger.filters):
             logger.addFilter(RateLimit(burst, window))
+
+
+#: A daemon's log rolls over at this size (about 13,000 missions of a controller's log, measured 0.75 KB each)...
+MAX_BYTES = 10 * 1024 * 1024
+#: ...keeping this many old files (`HOST.log.1` the newest): at most 40 MB of logs per daemon.
+BACKUPS = 3
+
+
+class RotatingLog(logging.handlers.RotatingFileHandler):
+    """A daemon's log file, bounded: it rolls over past `max_bytes`, keeping `backups` old files. It also
+    reopens its file when something else moved or removed it (an external logrotate without `copytruncate`),
+    where a plain file handler would go on writing to the moved file, or to a deleted one, forever."""
+
+    def __init__(self, path: str | os.PathLike[str], max_bytes: int = MAX_BYTES, backups: int = BACKUPS) -> None:
+        super().__init__(path, maxBytes=max_bytes, backupCount=backups, encoding="utf-8")
+
+    def emit(self, record: logging.LogRecord) -> None:
+        stream = self.stream
+        if stream is not None and self._moved(stream.fileno()):
+            stream.close()
+            self.stream = None  # reopened by the emit below, as after close()
+        super().emit(record)
+
+    def _moved(self, fd: int) -> bool:
+        """The path no longer names the open file (one stat per record: a daemon logs a few lines a minute)."""
+        try:
+            now = os.stat(self.baseFilename)
+        except FileNotFoundError:
+            return True
+        opened = os.fstat(fd)
+        return (now.st_dev, now.st_ino) != (opened.st_dev, opened.st_ino)
