@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import functools
 import re
-from collections.abc import Iterator, Sequence
+from collections.abc import Collection, Iterator, Sequence
 from typing import Any
 
 from drd.runtime import records as rec
@@ -226,10 +226,13 @@ def _active(records: Iterator[rec.Record], waiting: set[str]) -> list[dict[str, 
 
 
 def _waiting(records: Iterator[rec.Record]) -> list[dict[str, Any]]:
-    """`[{path, since, needs, blocked_by: [{path, holds}]}]`, `holds` what that holder held (need -> unit)."""
+    """`[{path, since, needs, blocked_by: [{path, holds}], blockers}]`: each waiter with who is in its way after
+    `records` (`current_blockers`), `holds` what that holder holds then (need -> unit)."""
     waits: dict[str, dict[str, Any]] = {}
     holds: dict[str, dict[str, str]] = {}
+    units = UnitTypes()
     for r in records:
+        units.take(r)
         if isinstance(r, rec.Waiting):
             w = waits.setdefault(r.path, {"path": r.path, "since": round(r.at, 6), "needs": [], "blocked_by": []})
             if r.needs:
@@ -245,17 +248,85 @@ def _waiting(records: Iterator[rec.Record]) -> list[dict[str, Any]]:
         elif isinstance(r, rec.Exited):
             waits.pop(r.path, None)
             holds.pop(r.path, None)
-    return [blocked(w, holds) for w in waits.values()]
+    by_type = units.holders_by_type(holds)
+    return [blocked(w, holds, current_blockers(w, by_type, waits)) for w in waits.values()]
 
 
-def blocked(wait: dict[str, Any], holds: dict[str, dict[str, str]]) -> dict[str, Any]:
-    """A report's waiting behavior: `{path, since, needs, blocked_by: [{path, holds}]}`, each blocker with what it
-    held (need -> resource id). This mission's blockers' holds are from its records (`holds`, by path); another
-    mission's blocker (`<mission id>/<path>`) has its `mission` too, and its holds are the `waiting` record's."""
+#: How many blockers a waiting behavior names with what each holds (`blocked_by`); `blockers` counts them all, so
+#: a thousand waiters behind fifty holders stay linear in size (report, `--json`, `/drd/active`).
+BLOCKERS_SHOWN = 3
+
+
+class UnitTypes:
+    """Which type each unit is, from this mission's records alone: a `waiting` or `reserved` record says the type
+    of each need (`ranger: Ranger`), and a grant the unit each need got. Who is in a waiter's way now is read from
+    it (`current_blockers`): the records say who blocked when a wait began, never again."""
+
+    def __init__(self) -> None:
+        self.needs: dict[str, dict[str, str]] = {}  # path -> need -> type
+        self.types: dict[str, str] = {}  # unit -> type
+
+    def take(self, r: rec.Record) -> None:
+        if isinstance(r, rec.Waiting | rec.Reserved) and r.needs:
+            self.needs[r.path] = dict(need_type(n) for n in r.needs)
+        elif isinstance(r, rec.Granted):
+            declared = self.needs.get(r.path, {})
+            for need, unit in r.named.items():
+                if need in declared:
+                    self.types[unit] = declared[need]
+
+    def holders_by_type(self, holds: dict[str, dict[str, str]]) -> dict[str, list[str]]:
+        """Type -> the behaviors holding a unit of it now, for the types none of whose known units is free (a type
+        with a free unit is not what a waiter waits for). `holds`: path -> need -> unit."""
+        held: dict[str, set[str]] = {}
+        for path, named in holds.items():
+            for unit in named.values():
+                kind = self.types.get(unit)
+                if kind is not None:
+                    held.setdefault(kind, set()).add(path)
+        busy = {unit for named in holds.values() for unit in named.values()}
+        free = {kind for unit, kind in self.types.items() if unit not in busy}
+        return {kind: sorted(paths, key=natural) for kind, paths in held.items() if kind not in free}
+
+
+def need_type(need: str) -> tuple[str, str]:
+    """`ranger: Ranger` -> (`ranger`, `Ranger`)."""
+    name, _, kind = need.partition(":")
+    return name.strip(), kind.strip().split(" ", 1)[0]
+
+
+def current_blockers(wait: dict[str, Any], by_type: dict[str, list[str]], waits: Collection[str]) -> list[str]:
+    """Who is in `wait`'s way now: the waiters its `waiting` record named that still wait (ahead of it in the
+    queue), this mission's holders now of a unit of a type it needs (`UnitTypes.holders_by_type`), and the other
+    missions' blockers its record named (their holds are not in these records). A waiter whose record named nobody
+    (nothing grants it) stays so."""
+    recorded: list[str] = wait["blocked_by"]
+    if not recorded:
+        return []
+    foreign = wait.get("held") or {}
+    found = dict.fromkeys(b for b in recorded if b in waits and b != wait["path"])
+    for need in wait["needs"]:
+        found.update(dict.fromkeys(p for p in by_type.get(need_type(need)[1], ()) if p != wait["path"]))
+    found.update(dict.fromkeys(b for b in recorded if b in foreign))
+    return list(found)
+
+
+def blocked(wait: dict[str, Any], holds: dict[str, dict[str, str]], current: list[str] | None = None) -> dict[str, Any]:
+    """A report's waiting behavior: `{path, since, needs, blocked_by: [{path, holds}], blockers}`, its first
+    `BLOCKERS_SHOWN` blockers (`current`, else its record's) each with what it holds (need -> resource id), and how
+    many there are. This mission's blockers' holds are from its records (`holds`, by path); another mission's
+    blocker (`<mission id>/<path>`) has its `mission` too, and its holds are the `waiting` record's."""
     held: dict[str, dict[str, str]] = wait.get("held") or {}
-    return {**{k: v for k, v in wait.items() if k != "held"},
+    every = wait["blocked_by"] if current is None else current
+    return {**{k: v for k, v in wait.items() if k not in ("held", "blocked_by")},
             "blocked_by": [{"path": b, "mission": b.partition("/")[0], "holds": held[b]} if b in held
-                           else {"path": b, "holds": holds.get(b, {})} for b in wait["blocked_by"]]}
+                           else {"path": b, "holds": holds.get(b, {})} for b in every[:BLOCKERS_SHOWN]],
+            "blockers": len(every)}
+
+
+def natural(path: str) -> tuple[Any, ...]:
+    """A sort key that orders `X[2]` before `X[10]`."""
+    return tuple(int(part) if part.isdigit() else part for part in re.split(r"(\d+)", path))
 
 
 def _name(path: str) -> str:

@@ -49,7 +49,7 @@ from typing import Any
 import orjson
 
 from drd.errors import ConfigurationError
-from drd.explain import blocked
+from drd.explain import UnitTypes, blocked, current_blockers
 from drd.runtime import records as rec
 from drd.sim.model import INTRUDER_RADIUS, RANGER_RADIUS, SCOUT_RADIUS, DoorState, World
 from drd.sim.observe import SCAN_EVERY, SensorTap
@@ -616,11 +616,13 @@ class ActiveView:
         self.waits: dict[str, dict[str, Any]] = {}
         self.holds: dict[str, dict[str, str]] = {}  # path -> need -> unit (aggregates' parts too)
         self.needs: dict[str, dict[str, str]] = {}  # the same without aggregates' parts (who blocks whom)
+        self.units = UnitTypes()  # each unit's type: who is in a waiter's way now
         self.outcome: str | None = None
         self.changed_at: float | None = None
 
     def take(self, r: rec.Record) -> None:
         """Apply one record; `changed_at` is its time when it changed the configuration."""
+        self.units.take(r)
         if isinstance(r, rec.Entered):
             self._enter(r)
         elif isinstance(r, rec.Exited):
@@ -678,7 +680,8 @@ class ActiveView:
 
         active = sorted(({"path": p, "since": round(t, 6), "state": state(p)} for p, t in self.active.items()
                          if not self.below.get(p)), key=lambda row: (row["since"], row["path"]))  # as `explain`'s
-        waiting = [blocked(w, self.needs) for w in self.waits.values()]
+        by_type = self.units.holders_by_type(self.needs)
+        waiting = [blocked(w, self.needs, current_blockers(w, by_type, self.waits)) for w in self.waits.values()]
         return {"mission": self.name, "id": self.mission, "at": at, "outcome": self.outcome, "active": active,
                 "holds": {p: held for p, held in self.holds.items() if held}, "waiting": waiting}
 
@@ -688,6 +691,13 @@ def _prefixes(path: str) -> list[str]:
     `q` is under `p` when it starts with `p/` or `p[`)."""
     return [path[:i] for i, c in enumerate(path) if c in "/[" and i > 0]
 
+
+#: A waiter in `/drd/active`: its first `explain.BLOCKERS_SHOWN` blockers now, with what each holds, and how many.
+_WAITER = {"type": "object", "required": ["path", "since", "needs", "blocked_by", "blockers"], "properties": {
+    "path": {"type": "string"}, "since": {"type": "number"}, "needs": {"type": "array", "items": {"type": "string"}},
+    "blocked_by": {"type": "array", "items": {"type": "object", "required": ["path", "holds"], "properties": {
+        "path": {"type": "string"}, "mission": {"type": "string"}, "holds": {"type": "object"}}}},
+    "blockers": {"type": "integer", "minimum": 0}}}
 
 #: The JSON channels: their schema's name and JSON schema (named, so a viewer lists `drd.Record`, not anonymous).
 _NUM, _STR = {"type": "number"}, {"type": "string"}
@@ -700,7 +710,7 @@ JSON_SCHEMAS: dict[str, tuple[str, dict[str, Any]]] = {
                             "properties": {"mission": _STR, "id": _STR, "at": _NUM, "outcome": {
                                 "type": ["string", "null"]}, "active": {"type": "array", "items": {
                                     "type": "object", "properties": {"path": _STR, "since": _NUM, "state": _STR}}},
-                                "holds": {"type": "object"}, "waiting": {"type": "array"}}}),
+                                "holds": {"type": "object"}, "waiting": {"type": "array", "items": _WAITER}}}),
     CAMERA: ("drd.CameraFrame", {"type": "object", "required": ["robot", "at", "fov", "detections"], "properties": {
         "robot": _STR, "at": _NUM, "fov": _NUM, "max_range": _NUM, "detections": {"type": "array", "items": {
             "type": "object", "properties": {"label": _STR, "bearing": _NUM, "distance": _NUM, "light": _NUM}}}}}),

@@ -412,7 +412,7 @@ def dry_run(
     runs = [Mission(chart, priority[i] if i < len(priority) else None) for i, chart in enumerate(charts)]
     recorder = live_recorder(record, foxglove)
     sims: list[Simulation] = []  # the simulation, for where each Scout looked at the end (the picture)
-    reports = _run_live(runs, cluster, sim_world, cat, fh, stop, not as_json, sims, seed=seed, until=until,
+    reports = _run_live(runs, cluster, sim_world, cat, fh, stop, sims, seed=seed, until=until,
                         speed=1.0 if speed is None and foxglove is not None else speed,  # watched: real time
                         injections=injections, recorder=recorder)
     if stop.is_set():  # on stderr, as `missionctl run` says it: stdout keeps the report alone
@@ -518,21 +518,22 @@ def _camera_fovs(cluster: Cluster) -> dict[str, float]:
 
 
 def _run_live(runs: list[Mission], cluster: Cluster, sim_world: World, cat: Catalog, fh: IO[str] | None,
-              stop: threading.Event, live_view: bool, sims: list[Simulation], **options: Any) -> list[DryRun]:
-    """`run_many` with a live line on a terminal, the trace flushed each second of sim time, Ctrl-C stopping;
+              stop: threading.Event, sims: list[Simulation], **options: Any) -> list[DryRun]:
+    """`run_many` with a live line when stderr is a terminal (with `--json` too: stdout has the report), the
+    trace flushed each second of sim time, Ctrl-C stopping;
     `sims` gets the simulation."""
     from rich.live import Live
 
     from drd.cli.report import progress_view
     from drd.dryrun import run_many
 
-    live = Live(Text("starting…"), console=err, transient=True) if err.is_terminal and live_view else None
+    live = Live(Text("starting…"), console=err, transient=True) if err.is_terminal else None
 
     def progress(sim: Simulation, executive: Executive) -> None:
         if not sims:
             sims.append(sim)
         if live is not None:
-            live.update(progress_view(sim, executive))
+            live.update(progress_view(sim, executive, err.width))
         if fh is not None:
             fh.flush()  # a reader of the trace (`tail -f`) sees the run as it goes, every second of sim time
 

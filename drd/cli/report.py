@@ -11,6 +11,7 @@ from typing import TYPE_CHECKING, Any
 from rich.text import Text
 
 from drd.cli.common import out, shorten
+from drd.explain import natural
 from dsl.statechart import StateKind
 
 if TYPE_CHECKING:
@@ -25,16 +26,34 @@ if TYPE_CHECKING:
     from drd.sim.physics import Simulation
 
 
-def progress_view(sim: Simulation, executive: Executive) -> Text:
-    """One live line: sim time, the active behaviors, who holds what and who waits."""
-    active = [n.path for m in executive.missions.values() for n in m.active() if n.state.kind is StateKind.LEAF]
+def progress_view(sim: Simulation, executive: Executive, width: int = 100) -> Text:
+    """One live line: sim time, who holds what and who waits (counts first: they are the figures at fleet size),
+    then the active behaviors, each leaf name once with how many run it (`LocateDarkCorner x40`), cut to `width`."""
+    active = [n.path.rsplit("/", 1)[-1] for m in executive.missions.values() for n in m.active()
+              if n.state.kind is StateKind.LEAF]
     snap = executive.broker.snapshot()
     holds = [f"{_short(h)}→{'+'.join(d['assignment'].values())}" for h, d in snap["holds"].items() if d["assignment"]]
     waiting = [_short(w["holder"]) for w in snap["queue"]]
-    return Text.assemble(("sim ", "dim"), f"{sim.time:7.1f} s  ", ("active ", "dim"),
-                         ", ".join(p.rsplit("/", 1)[-1] for p in active[:6]) or "—",
-                         ("  holds ", "dim"), "; ".join(holds[:4]) or "—",
-                         ("  waiting ", "dim"), f"{len(waiting)}" + (f" ({', '.join(waiting[:3])})" if waiting else ""))
+    return live_line(sim.time, active, holds, waiting, width)
+
+
+def live_line(at: float, active: list[str], holds: list[str], waiting: list[str], width: int = 100) -> Text:
+    """The live line from its parts: `sim T s  holds N (…)  waiting M (…)  active Name xK, …`, cut to `width`; the
+    examples in parentheses only while they fit beside the counts."""
+    def some(items: list[str], most: int, sep: str) -> str:
+        return f" ({sep.join(items[:most])}{', …' if len(items) > most else ''})" if items else ""
+
+    counted: dict[str, int] = {}
+    for name in active:
+        counted[name] = counted.get(name, 0) + 1
+    names = ", ".join(f"{n} x{k}" if k > 1 else n for n, k in counted.items()) or "—"
+    head = f"{at:7.1f} s  "
+    few = len(holds) + len(waiting) <= 6  # a small team: who holds and who waits fit the line
+    line = Text.assemble(("sim ", "dim"), head, ("holds ", "dim"),
+                         f"{len(holds)}" + (some(holds, 4, "; ") if few else ""), ("  waiting ", "dim"),
+                         f"{len(waiting)}" + (some(waiting, 3, ", ") if few else ""), ("  active ", "dim"), names)
+    line.truncate(width, overflow="ellipsis")
+    return line
 
 
 def _short(holder: str) -> str:
@@ -185,24 +204,53 @@ def _why_view(r: DryRun, width: int) -> list[RenderableType]:
                                        f": {row['reason']}"))
     active = r.still_active()
     if active:
-        waiting = {w["path"]: w for w in r.waiting()}
         parts.append(Text(f"still active when it stopped: {len(active)}", style="bold yellow"))
-        names = [shorten(_relative(row["path"], root), room) for row in active]
-        pad = max(len(n) for n in names)
-        for name, row in zip(names, active, strict=True):
-            line = Text.assemble("  ", (name.ljust(pad), "bold"), f"  {row['state']} since {row['since']:.1f} s")
-            w = waiting.get(row["path"])
-            if w is not None:
-                line.append(f" for {', '.join(w['needs']) or 'its resources'}")
-                held = [shorten(_relative(b["path"], root), room) + f" ({', '.join(b['holds'].values())})"
-                        for b in w["blocked_by"] if b["holds"]]
-                queued = [shorten(_relative(b["path"], root), room) for b in w["blocked_by"] if not b["holds"]]
-                if held:
-                    line.append(f", held by {'; '.join(held)}")
-                if queued:
-                    line.append(f", behind {', '.join(queued)} (waiting first)")
-            parts.append(line)
+        parts += still_active_lines(active, {w["path"]: w for w in r.waiting()}, root, width)
     return parts
+
+
+#: How many blockers (or runs of instances of them) a text report names in a line before "and N more".
+BLOCKERS_NAMED = 3
+
+
+def still_active_lines(active: list[dict[str, Any]], waiting: dict[str, dict[str, Any]], root: str,
+                       width: int) -> list[Text]:
+    """One line per still-active leaf, runs of instances that say the same thing folded into one
+    (`RoomSurveillance[11..189] (179)  waiting since 0.0 s …`), each line cut to `width`: a thousand waiters behind
+    fifty holders make a few lines, not a megabyte."""
+    room = max(20, width // 2)
+    texts = [(row["since"], _relative(row["path"], root), f"{row['state']} since {row['since']:.1f} s"
+              + _waiting_text(waiting.get(row["path"]), root)) for row in active]
+    # earliest first as before, then the instances of one leaf that say the same thing in index order (to fold)
+    texts.sort(key=lambda t: (t[0], natural(_LAST_INDEX.sub("[]", t[1])), t[2], natural(t[1])))
+    rows: list[tuple[str, ...]] = [(path, text) for _, path, text in texts]
+    folded = collapse_instances(rows)
+    names = [shorten(path, room) for path, _ in folded]
+    pad = max(len(n) for n in names)
+    lines = []
+    for name, (_, text) in zip(names, folded, strict=True):
+        line = Text.assemble("  ", (name.ljust(pad), "bold"), f"  {text}")
+        line.truncate(width, overflow="ellipsis")
+        lines.append(line)
+    return lines
+
+
+def _waiting_text(w: dict[str, Any] | None, root: str) -> str:
+    """` for NEEDS, held by A (units); B (units) and N more, behind C (waiting first)`: who is in a waiter's way."""
+    if w is None:
+        return ""
+    text = f" for {', '.join(w['needs']) or 'its resources'}"
+    shown = w["blocked_by"]
+    held = [f"{_relative(b['path'], root)} ({', '.join(b['holds'].values())})" for b in shown if b["holds"]]
+    queued = [_relative(b["path"], root) for b in shown if not b["holds"]]
+    more = w.get("blockers", len(shown)) - len(shown)
+    if held:
+        text += f", held by {'; '.join(held[:BLOCKERS_NAMED])}"
+    if queued:
+        text += f", behind {', '.join(queued[:BLOCKERS_NAMED])} (waiting first)"
+    if more > 0:
+        text += f" and {more:,} more"
+    return text
 
 
 def _relative(path: str, root: str) -> str:
