@@ -216,41 +216,52 @@ BLOCKERS_NAMED = 3
 def still_active_lines(active: list[dict[str, Any]], waiting: dict[str, dict[str, Any]], root: str,
                        width: int) -> list[Text]:
     """One line per still-active leaf, runs of instances that say the same thing folded into one
-    (`RoomSurveillance[11..189] (179)  waiting since 0.0 s …`), each line cut to `width`: a thousand waiters behind
-    fifty holders make a few lines, not a megabyte."""
+    (`RoomSurveillance[40..189] (150)  waiting since 0.0 s for ranger: Ranger`), a waiter's blockers on the line
+    below it; every line cut to `width`: a thousand waiters behind fifty holders make a few lines, not a megabyte."""
     room = max(20, width // 2)
-    texts = [(row["since"], _relative(row["path"], root), f"{row['state']} since {row['since']:.1f} s"
-              + _waiting_text(waiting.get(row["path"]), root)) for row in active]
+    texts = [(row["since"], _relative(row["path"], root), f"{row['state']} since {row['since']:.1f} s",
+              *_waiting_text(waiting.get(row["path"]), root)) for row in active]
     # earliest first as before, then the instances of one leaf that say the same thing in index order (to fold)
-    texts.sort(key=lambda t: (t[0], natural(_LAST_INDEX.sub("[]", t[1])), t[2], natural(t[1])))
-    rows: list[tuple[str, ...]] = [(path, text) for _, path, text in texts]
-    folded = collapse_instances(rows)
-    names = [shorten(path, room) for path, _ in folded]
+    texts.sort(key=lambda t: (t[0], natural(_LAST_INDEX.sub("[]", t[1])), t[2:], natural(t[1])))
+    folded = collapse_instances([t[1:] for t in texts])
+    names = [_fit_folded(path, room) for path, *_ in folded]
     pad = max(len(n) for n in names)
     lines = []
-    for name, (_, text) in zip(names, folded, strict=True):
-        line = Text.assemble("  ", (name.ljust(pad), "bold"), f"  {text}")
+    for name, (_, state, needs, blockers) in zip(names, folded, strict=True):
+        line = Text.assemble("  ", (name.ljust(pad), "bold"), f"  {state}")
+        why = needs + (f", {blockers}" if blockers else "")
+        if len(line) + len(why) <= width:  # on one line, as a small team's report always read
+            line.append(why)
+            lines.append(line)
+        else:  # what it waits for and who is in its way on the line below, cut to the width
+            lines += [line, Text(f"    {why.lstrip()}", style="dim")]
+    for line in lines:
         line.truncate(width, overflow="ellipsis")
-        lines.append(line)
     return lines
 
 
-def _waiting_text(w: dict[str, Any] | None, root: str) -> str:
-    """` for NEEDS, held by A (units); B (units) and N more, behind C (waiting first)`: who is in a waiter's way."""
+def _fit_folded(path: str, room: int) -> str:
+    """A path `shorten`ed to `room`, the count a fold adds (` (150)`) kept whole."""
+    head, sep, count = path.rpartition(" (")
+    if not sep or not count.endswith(")"):
+        return shorten(path, room)
+    return shorten(head, max(10, room - len(count) - 2)) + f" ({count}"
+
+
+def _waiting_text(w: dict[str, Any] | None, root: str) -> tuple[str, str]:
+    """(` for NEEDS`, `N in its way, held by A (units); B (units) and N-2 more`, or `behind C (waiting first)`): what
+    a waiter waits for and who is in its way now, the latter "" when it is not waiting."""
     if w is None:
-        return ""
-    text = f" for {', '.join(w['needs']) or 'its resources'}"
+        return "", ""
     shown = w["blocked_by"]
     held = [f"{_relative(b['path'], root)} ({', '.join(b['holds'].values())})" for b in shown if b["holds"]]
     queued = [_relative(b["path"], root) for b in shown if not b["holds"]]
     more = w.get("blockers", len(shown)) - len(shown)
-    if held:
-        text += f", held by {'; '.join(held[:BLOCKERS_NAMED])}"
-    if queued:
-        text += f", behind {', '.join(queued[:BLOCKERS_NAMED])} (waiting first)"
-    if more > 0:
-        text += f" and {more:,} more"
-    return text
+    who = [f"held by {'; '.join(held[:BLOCKERS_NAMED])}"] if held else []
+    who += [f"behind {', '.join(queued[:BLOCKERS_NAMED])} (waiting first)"] if queued else []
+    count = f"{len(shown) + more:,} in its way, " if more > 0 else ""  # first: a cut line still says how many
+    return f" for {', '.join(w['needs']) or 'its resources'}", count + ", ".join(who) + (
+        f" and {more:,} more" if more > 0 else "")
 
 
 def _relative(path: str, root: str) -> str:
