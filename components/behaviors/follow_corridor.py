@@ -8,7 +8,8 @@ from __future__ import annotations
 
 import math
 
-from components.behaviors.scan import END, ScanMemo, clearance_ahead, corridor, expected, wall_across, wrap
+from components.behaviors.scan import END, ScanMemo, clearance_ahead, corridor, expected, open_side, wall_across, wrap
+from drd.hw.interfaces import Scan
 from drd.runtime.component import Component, Status
 
 #: Gains of the P controller: rad/s per metre off the centre line, and per radian of heading error.
@@ -17,6 +18,22 @@ K_HEADING = 2.0
 MAX_OMEGA = 1.0
 #: Turning around: rate (rad/s), and how close to the reverse heading (rad) counts as turned.
 TURN_RATE, TURNED = 0.8, 0.15
+#: Blocked short of the end for WAIT seconds (longer than a person takes to cross its path), it turns on the spot
+#: toward the more open side until FREE metres ahead are clear: the way out when the walls give no heading.
+WAIT, FREE = 3.0, 1.5
+
+
+def unblock_turn(blocked_for: float, clearance: float, side: int | None, open_now: int) -> int | None:
+    """The side (+1 left, -1 right) to turn to on the spot to get out of a block, or None to keep following.
+
+    `blocked_for`: how long (s) the way ahead has been blocked short of the end; `side`: the side of the turn under
+    way, if any (kept until FREE metres are clear, so the turn never dithers between sides); `open_now`: the more
+    open side of this scan. Why: a wall follower whose fit of the walls fails (started at a steep angle to the
+    corridor, facing a door jamb) gets no heading from the walls, and would wait forever for the way to clear.
+    """
+    if side is not None:
+        return side if clearance < FREE else None
+    return open_now if blocked_for >= WAIT else None
 
 
 class FollowCorridor(Component):
@@ -33,6 +50,8 @@ class FollowCorridor(Component):
         self.origin: tuple[float, float] | None = None
         self.turn_to: float | None = None  # heading to turn to, when turning around
         self.memo = ScanMemo()  # what the scan helpers derive from this cycle's scan
+        self.blocked_since: float | None = None  # when the way ahead was last found blocked short of the end
+        self.unblocking: int | None = None  # the side of a turn out of a block, under way
 
     def step(self, now: float) -> Status:
         speed = float(self.ctx.params["speed"])
@@ -46,8 +65,10 @@ class FollowCorridor(Component):
             self.turn_to, self.origin = None, (x, y)
         if self.origin is None:
             self.origin = (x, y)
-        blocked = clearance_ahead(scan, memo=self.memo) < END
-        if blocked and wall_across(scan, memo=self.memo):
+        clearance = clearance_ahead(scan, memo=self.memo)
+        blocked = clearance < END
+        # turning out of a block, a wall across the way is the side wall it turns past, not the end
+        if blocked and self.unblocking is None and wall_across(scan, memo=self.memo):
             if math.hypot(x - self.origin[0], y - self.origin[1]) < 0.5:  # started facing the end
                 self.turn_to = wrap(a + math.pi)
                 drive.set_velocity(0.0, TURN_RATE)
@@ -55,6 +76,8 @@ class FollowCorridor(Component):
             drive.stop()
             self.ctx.log("end of the corridor")
             return Status.SUCCESS
+        if self.unblock(now, blocked, clearance, scan):
+            return Status.RUNNING
         left, right = fitted = corridor(scan, self.expect, memo=self.memo)
         self.expect = expected(fitted, self.expect)
         walls = [w for w in (left, right) if w is not None]
@@ -73,6 +96,28 @@ class FollowCorridor(Component):
         # spot as the walls say and wait for the way to clear
         drive.set_velocity(0.0 if blocked else speed, omega)
         return Status.RUNNING
+
+    def unblock(self, now: float, blocked: bool, clearance: float, scan: Scan) -> bool:
+        """Turn out of a lasting block (`unblock_turn`); True while turning. Says so in the log when it starts."""
+        if not blocked and self.unblocking is None:
+            self.blocked_since = None
+            return False
+        if self.blocked_since is None:
+            self.blocked_since = now
+        side = unblock_turn(now - self.blocked_since, clearance, self.unblocking,
+                            open_side(scan) if self.unblocking is None else self.unblocking)
+        if side is None:
+            if self.unblocking is not None:
+                self.unblocking, self.blocked_since = None, None
+                self.expect = (None, None)  # the walls are seen afresh from the new heading
+            return False
+        if self.unblocking is None:
+            self.ctx.log(f"FollowCorridor: blocked {clearance:.2f} m ahead for {now - self.blocked_since:.1f} s, "
+                         f"short of the corridor's end: turning {'left' if side > 0 else 'right'}, "
+                         "to the more open side")
+            self.unblocking = side
+        self.device("drive").set_velocity(0.0, side * TURN_RATE)
+        return True
 
     def suspend(self) -> None:
         self.device("drive").stop()

@@ -83,6 +83,23 @@ def openness(scan: Scan, lo: float, hi: float) -> float:
     return sum(scan.ranges[i0:i1])
 
 
+#: The sectors (rad, open) whose openness tells the left side from the right (mirrored), ahead of the robot.
+SIDES = (0.2, 1.4)
+
+
+def open_side(scan: Scan) -> int:
+    """The more open side ahead, +1 left or -1 right: the one whose farthest reading is farther (the way on along a
+    corridor reads farther than a room seen through a door), then the one with the larger openness, then left.
+    Where to turn to get away from a block."""
+    lo, hi = SIDES
+    b = scan.beams()
+    (l0, l1), (r0, r1) = between(b, lo, hi), between(b, -hi, -lo)
+    left, right = max(scan.ranges[l0:l1], default=0.0), max(scan.ranges[r0:r1], default=0.0)
+    if left != right:
+        return 1 if left > right else -1
+    return 1 if openness(scan, lo, hi) >= openness(scan, -hi, -lo) else -1
+
+
 def nearest_in_path(scan: Scan, half_width: float) -> float:
     """The forward distance (m) of the nearest reading in the robot's path: the least x > 0 over every beam whose
     reading lies less than `half_width` off the axis, a miss counting at its `max_range`; inf if there is none.
