@@ -145,13 +145,23 @@ def _format(path: Path) -> str:
 
 
 def _figure(world: World) -> Figure:
-    """A figure shaped like the world, so equal aspect leaves no wide empty bands; the plot fits 12 x 9 in."""
+    """A figure shaped like the world, so equal aspect leaves no wide empty bands. The plot fits 12 in wide and
+    `MAX_PLOT_HEIGHT` tall (a building of many wings stacked north to south gets a tall page, not a thin strip in a
+    landscape one), and the figure is at least `MIN_WIDTH` wide so the legend and title fit inside it."""
     from matplotlib.figure import Figure
 
     x0, y0, x1, y1 = _extent(world)
     w, h = x1 - x0, y1 - y0
-    scale = 12.0 / max(w, h * 12.0 / 9.0, 1e-9)
-    return Figure(figsize=(max(7.0, w * scale + 1.6), h * scale + 2.0), layout="constrained")
+    scale = 12.0 / max(w, h * 12.0 / MAX_PLOT_HEIGHT, 1e-9)
+    return Figure(figsize=(max(MIN_WIDTH, w * scale + 1.6), h * scale + 2.0), layout="constrained")
+
+
+#: The tallest plot (in): 9 in kept every world of a few wings as it was; taller worlds get up to this.
+MAX_PLOT_HEIGHT = 18.0
+#: The narrowest figure (in): the title's first line and a legend of two rows fit in it.
+MIN_WIDTH = 9.0
+#: Legend columns per inch of figure width: a column of the legend needs about 2.4 in.
+_LEGEND_COLUMN = 2.4
 
 
 def _extent(world: World) -> tuple[float, float, float, float]:
@@ -619,6 +629,7 @@ def _legend(fig: Figure, world: World, report: RunReport, doors: dict[str, DoorS
          bool(report.tracks)),
     ]
     shown = [(h, label) for h, label, present in entries if present]
+    fits = max(1, int(fig.get_figwidth() / _LEGEND_COLUMN))  # as many columns as the figure holds, so none is cut
     legend = fig.legend([h for h, _ in shown], [label for _, label in shown], loc="outside lower center",
-                        ncols=max(1, math.ceil(len(shown) / 2)), frameon=False, fontsize=9, handlelength=2.6)
+                        ncols=max(1, min(fits, math.ceil(len(shown) / 2))), frameon=False, fontsize=9, handlelength=2.6)
     legend.set_gid("legend")
