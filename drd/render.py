@@ -27,10 +27,10 @@ from drd.sim.model import RANGER_RADIUS, DoorState, Room, World
 if TYPE_CHECKING:
     from matplotlib.axes import Axes
     from matplotlib.figure import Figure
-    from matplotlib.text import Annotation
+    from matplotlib.text import Annotation, Text
     from matplotlib.transforms import Bbox
 
-__all__ = ["SUPPORTED_SUFFIXES", "RunReport", "render"]
+__all__ = ["SUPPORTED_SUFFIXES", "RunReport", "figure", "render"]
 
 #: The formats `render` writes, by file suffix.
 SUPPORTED_SUFFIXES = (".png", ".svg", ".pdf")
@@ -111,24 +111,38 @@ def render(world: World, report: RunReport, path: Path, *, title: str | None = N
     fmt = _format(path)
     import matplotlib
 
-    # Text stays text in SVG (searchable, selectable, small); ids are salted with a constant, not at random.
-    with matplotlib.rc_context({"svg.fonttype": "none", "svg.hashsalt": "drd-render", "font.family": "DejaVu Sans",
-                                "font.size": 9}):
+    with matplotlib.rc_context(_STYLE):
+        fig = figure(world, report, title=title, views=views)
+        fig.savefig(path, format=fmt, dpi=150, metadata=_METADATA[fmt])
+
+
+#: Text stays text in SVG (searchable, selectable, small); ids are salted with a constant, not at random.
+_STYLE: dict[Any, Any] = {"svg.fonttype": "none", "svg.hashsalt": "drd-render", "font.family": "DejaVu Sans",
+                          "font.size": 9}
+
+
+def figure(world: World, report: RunReport, *, title: str | None = None,
+           views: Mapping[str, tuple[float, float]] | None = None) -> Figure:
+    """The picture `render` writes, laid out and with its labels placed (or left out), as a matplotlib `Figure`:
+    for a caller that measures it (where the legend and title lie, which labels were kept) rather than saves it."""
+    import matplotlib
+
+    with matplotlib.rc_context(_STYLE):
         fig = _figure(world)
         ax = fig.add_subplot()
         labels = _Labels()
         doors = door_states(world, report)
-        _draw_world(ax, world, doors)
+        _draw_world(ax, world, doors, labels)
         _note_injected_doors(ax, world, report, labels)
         _draw_tracks(ax, world, report, labels)
-        _draw_time_marks(ax, world, report)
+        _draw_time_marks(ax, world, report, labels)
         _draw_views(ax, world, report, views or {})
         _draw_findings(ax, world, report, labels)
         _frame(fig, ax, world)
         _legend(fig, world, report, doors, bool(views))
-        _title(ax, world, report, title)
-        _place_labels(fig, ax, labels)
-        fig.savefig(path, format=fmt, dpi=150, metadata=_METADATA[fmt])
+        sub = _title(ax, world, report, title)
+        _place_labels(fig, ax, labels, sub)
+    return fig
 
 
 def _format(path: Path) -> str:
@@ -189,8 +203,9 @@ def _frame(fig: Figure, ax: Axes, world: World) -> None:
         bar.outline.set_visible(False)
 
 
-def _title(ax: Axes, world: World, report: RunReport, title: str | None) -> None:
-    """One line naming the mission and its outcome (green or red), one with the time and the counts."""
+def _title(ax: Axes, world: World, report: RunReport, title: str | None) -> Text:
+    """One line naming the mission and its outcome (green or red), one with the time and the counts (returned: the
+    labels left out at the figure's scale are said under it)."""
     stats = (f"sim time {report.sim_time:.1f} s  ·  {_n(len(report.doors), 'door')} found  ·  "
              f"{_n(len(report.scouts), 'Scout')} placed  ·  {_n(len(report.detections), 'detection')}")
     sub = ax.set_title(stats, loc="left", fontsize=10, color="#444444", pad=8)
@@ -203,6 +218,7 @@ def _title(ax: Axes, world: World, report: RunReport, title: str | None) -> None
     if report.reason:
         ax.annotate(f"  {report.reason}", xy=(1, 0), xycoords=mark, va="bottom", fontsize=10, color="#666666",
                     gid="reason")
+    return sub
 
 
 def _n(count: int, noun: str) -> str:
@@ -245,13 +261,17 @@ def _note_injected_doors(ax: Axes, world: World, report: RunReport, labels: _Lab
         labels.add(ax, x, y, f"{verb} at {at:.0f} s", CLOSED_DOOR, gid=f"injection-{i}")
 
 
-def _draw_world(ax: Axes, world: World, doors: dict[str, DoorState]) -> None:
+def _draw_world(ax: Axes, world: World, doors: dict[str, DoorState], labels: _Labels) -> None:
     """The building, back to front: light, rooms, obstacles, walls, then doors on top of their gaps."""
     from matplotlib.patches import Rectangle
 
     _draw_light(ax, world)
+    by_room: dict[str, list[tuple[float, float]]] = {}
+    for door in world.doors:  # once, not every door for every room (quadratic at fleet size)
+        if door.room is not None:
+            by_room.setdefault(door.room, []).append(door.center)
     for room in world.rooms:
-        _draw_room(ax, world, room)
+        _draw_room(ax, world, room, by_room.get(room.id, []), labels)
     for i, o in enumerate(world.obstacles):
         ax.add_patch(Rectangle((o.x0, o.y0), o.x1 - o.x0, o.y1 - o.y0, facecolor=OBSTACLE, edgecolor="#4e342e",
                                hatch="////", linewidth=0.8, alpha=0.85, zorder=Z_OBSTACLE, gid=f"obstacle-{i}"))
@@ -279,21 +299,22 @@ def _draw_light(ax: Axes, world: World) -> None:
               interpolation="bilinear", zorder=Z_LIGHT, gid="light")
 
 
-def _draw_room(ax: Axes, world: World, room: Room) -> None:
-    """A light tint over the room and its id in its brightest corner, away from dark corners and doors."""
+def _draw_room(ax: Axes, world: World, room: Room, doors: list[tuple[float, float]], labels: _Labels) -> None:
+    """A light tint over the room and its id in its brightest corner, away from dark corners and its `doors`."""
     from matplotlib.patches import Rectangle
 
     ax.add_patch(Rectangle((room.x0, room.y0), room.x1 - room.x0, room.y1 - room.y0, facecolor=ROOM_FILL,
                            edgecolor="none", alpha=0.35, zorder=Z_ROOM, gid=f"room-{room.id}"))
-    x, y, ha, va = _label_corner(world, room)
-    ax.text(x, y, room.id, ha=ha, va=va, fontsize=11, fontweight="bold", color="#3a4256", zorder=Z_LABEL,
-            gid=f"room-label-{room.id}")
+    x, y, ha, va = _label_corner(world, room, doors)
+    name = ax.text(x, y, room.id, ha=ha, va=va, fontsize=11, fontweight="bold", color="#3a4256", zorder=Z_LABEL,
+                   gid=f"room-label-{room.id}")
+    labels.rooms.append((name, room))
 
 
-def _label_corner(world: World, room: Room) -> tuple[float, float, str, str]:
-    """The inner corner to write a room's name in: the brightest, then the farthest from the room's doors."""
+def _label_corner(world: World, room: Room, doors: Sequence[tuple[float, float]]) -> tuple[float, float, str, str]:
+    """The inner corner to write a room's name in: the brightest, then the farthest from the room's `doors` (their
+    centres, which the caller indexes by room once)."""
     inset = min(0.3, (room.x1 - room.x0) / 4, (room.y1 - room.y0) / 4)
-    doors = [d.center for d in world.doors if d.room == room.id]
     corners = [(room.x0 + inset, room.y1 - inset, "left", "top"), (room.x1 - inset, room.y1 - inset, "right", "top"),
                (room.x0 + inset, room.y0 + inset, "left", "bottom"),
                (room.x1 - inset, room.y0 + inset, "right", "bottom")]
@@ -484,7 +505,7 @@ def time_step(sim_time: float) -> float:
     return next((s for s in (5.0, 10.0, 20.0, 30.0, 60.0, 120.0, 300.0, 600.0) if sim_time / s <= 10), 1800.0)
 
 
-def _draw_time_marks(ax: Axes, world: World, report: RunReport) -> None:
+def _draw_time_marks(ax: Axes, world: World, report: RunReport, labels: _Labels) -> None:
     """A dot every `time_step` seconds along each robot's path, with the time, where it had moved since the last
     one (a robot standing still gets no pile of marks)."""
     step = time_step(report.sim_time)
@@ -502,8 +523,9 @@ def _draw_time_marks(ax: Axes, world: World, report: RunReport) -> None:
             last = (x, y)
             ax.plot([x], [y], marker="o", markersize=3.5, markerfacecolor="white", markeredgecolor=colour,
                     markeredgewidth=1.2, linestyle="none", zorder=Z_MARK, gid=f"time-{rid}-{at:g}")
-            ax.annotate(f"{at:g} s", xy=(x, y), xytext=(0, -7), textcoords="offset points", ha="center", va="top",
-                        fontsize=6.5, color=colour, zorder=Z_LABEL, gid=f"time-label-{rid}-{at:g}")
+            labels.times.append(ax.annotate(
+                f"{at:g} s", xy=(x, y), xytext=(0, -7), textcoords="offset points", ha="center", va="top",
+                fontsize=6.5, color=colour, zorder=Z_LABEL, gid=f"time-label-{rid}-{at:g}"))
 
 
 def _where(track: _Track, at: float) -> tuple[float, float]:
@@ -531,10 +553,15 @@ _MARKER_HALF = 6.0
 
 @dataclass
 class _Labels:
-    """The labels beside markers, placed once the layout is known so they avoid each other and the markers."""
+    """The labels beside markers, placed once the layout is known so they avoid each other and the markers; and the
+    labels at fixed places (room names, time marks), kept only where they can be read."""
 
     movable: list[Annotation] = field(default_factory=list)
     markers: list[tuple[float, float]] = field(default_factory=list)
+    #: Time marks' labels, in drawing order: each is kept only where it covers no label already kept.
+    times: list[Annotation] = field(default_factory=list)
+    #: Room names and the room each names: kept only where the name fits in its room at the figure's scale.
+    rooms: list[tuple[Text, Room]] = field(default_factory=list)
 
     def add(self, ax: Axes, x: float, y: float, text: str, colour: str, *, gid: str) -> None:
         """A small label beside the marker at (x, y), on a translucent white box so it reads over any background."""
@@ -545,55 +572,154 @@ class _Labels:
         self.markers.append((x, y))
 
 
-def _place_labels(fig: Figure, ax: Axes, labels: _Labels) -> None:
-    """Move each label to the first spot where it covers no other label, room name or marker (else the least bad).
+#: A label is left out when the best spot for it still has this share of its area under other labels: at fleet size
+#: hundreds of ids on top of each other read as none, and a label half hidden tells nothing either.
+_HIDDEN = 0.15
+#: What each kind of label is called in the note saying how many were left out, by the start of its gid.
+_KINDS = (("scout-label-", "Scout ids"), ("ranger-label-", "Ranger ids"), ("intruder-label-", "intruder ids"),
+          ("detections-", "sighting notes"), ("injection-", "door notes"), ("room-label-", "room names"),
+          ("time-label-", "time marks"))
 
-    Greedy, in drawing order, on the laid-out figure: deterministic and good enough for tens of labels.
-    """
+
+def _place_labels(fig: Figure, ax: Axes, labels: _Labels, sub: Text) -> None:
+    """Place the labels on the laid-out figure, leave out those that cannot be read at its scale, and say so under
+    the title. Saying so adds a line above the plot, which shrinks it a little: the labels are then placed again on
+    the final layout (the note's height does not depend on the count), so what was judged readable still is."""
     from matplotlib.backends.backend_agg import FigureCanvasAgg
-    from matplotlib.transforms import Bbox
 
     FigureCanvasAgg(fig)  # measures text as the PNG will; the SVG and PDF writers use the same font metrics
+    stats = sub.get_text()
+    left_out = _place_once(fig, ax, labels)
+    if left_out:
+        sub.set_text(f"{stats}\n{_left_out_note(left_out)}")
+        left_out = _place_once(fig, ax, labels)
+        sub.set_text(f"{stats}\n{_left_out_note(left_out)}")
+    for text in left_out:
+        text.remove()
+
+
+def _left_out_note(left_out: list[Text]) -> str:
+    """`not drawn at this scale: 130 Scout ids, 40 time marks` (each kind once, in a fixed order)."""
+    counts = [(sum(1 for t in left_out if str(t.get_gid()).startswith(prefix)), noun) for prefix, noun in _KINDS]
+    return "not drawn at this scale: " + ", ".join(f"{n} {noun}" for n, noun in counts if n)
+
+
+def _place_once(fig: Figure, ax: Axes, labels: _Labels) -> list[Text]:
+    """Greedy, in drawing order: room names that fit their room; each movable label at the first spot where it covers
+    no other label, room name or marker (else the least bad, or left out if that is mostly hidden); then each time
+    mark's label where it covers no label kept. Returns the labels left out (hidden, for now).
+
+    The boxes kept are bucketed in a grid of display pixels, so each test looks at its neighbours only: linear in the
+    labels, where testing every box against every other was quadratic (10 s of the 14 s a 10-wing building took)."""
+    every: list[Text] = [*(t for t, _ in labels.rooms), *labels.movable, *labels.times]
+    for text in every:
+        text.set_visible(True)
     fig.draw_without_rendering()  # runs the layout, so data-to-pixel transforms are final
     half = _MARKER_HALF * fig.dpi / 72
-    taken = [t.get_window_extent() for t in ax.texts if t not in labels.movable and t.get_text()]
+    words, marks, left_out = _Grid(), _Grid(), []
+    for text, room in labels.rooms:
+        box = _box(text.get_window_extent())
+        (x0, y0), (x1, y1) = ax.transData.transform([(room.x0, room.y0), (room.x1, room.y1)])
+        if box[0] < x0 - 1 or box[1] < y0 - 1 or box[2] > x1 + 1 or box[3] > y1 + 1:
+            left_out.append(text)
+        else:
+            words.add(box)
+    times = [_box(t.get_window_extent()) for t in labels.times]
+    for box in times:
+        words.add(box)  # avoided by the labels placed next, as before time labels could be left out
     for x, y in labels.markers:
         px, py = ax.transData.transform((x, y))
-        taken.append(Bbox.from_bounds(px - half, py - half, 2 * half, 2 * half))
-    frame = ax.get_window_extent()
+        marks.add((px - half, py - half, px + half, py + half))
+    frame = _box(ax.get_window_extent())
+    placed: list[_Box] = []
     for label in labels.movable:
-        best: tuple[float, int] | None = None
-        for i, spot in enumerate(_SPOTS):
-            cost = _spot_cost(label, spot, taken, frame)
-            if best is None or cost < best[0]:
-                best = (cost, i)
-            if cost == 0:
-                break
-        assert best is not None
-        _move(label, _SPOTS[best[1]])
-        taken.append(label.get_window_extent().padded(2))
+        spot, hidden = _best_spot(label, words, marks, frame)
+        _move(label, _SPOTS[spot])
+        if hidden:
+            left_out.append(label)
+        else:
+            box = _pad(_box(label.get_window_extent()), 2)
+            words.add(box)
+            placed.append(box)
+    kept = _Grid()
+    for box in placed:
+        kept.add(box)
+    for text, _ in labels.rooms:
+        if text not in left_out:
+            kept.add(_box(text.get_window_extent()))
+    for text, box in zip(labels.times, times, strict=True):
+        if kept.covered(box) > 0:
+            left_out.append(text)
+        else:
+            kept.add(box)
+    for text in left_out:
+        text.set_visible(False)
+    return left_out
 
 
-def _spot_cost(label: Annotation, spot: _Spot, taken: list[Bbox], frame: Bbox) -> float:
-    """How much of the label, put at `spot`, covers what is already there or leaves the plot (in pixels²)."""
-    _move(label, spot)
-    box = label.get_window_extent().padded(2)
-    covered = sum(_area(box, other) for other in taken)
-    outside = box.width * box.height - _area(box, frame)
-    return covered + 4 * outside
+def _best_spot(label: Annotation, words: _Grid, marks: _Grid, frame: _Box) -> tuple[int, bool]:
+    """The spot with the least cost (the first free one), and whether the label there is mostly under other words."""
+    best: tuple[float, int, float] | None = None
+    for i, spot in enumerate(_SPOTS):
+        _move(label, spot)
+        box = _pad(_box(label.get_window_extent()), 2)
+        under = words.covered(box)
+        area = (box[2] - box[0]) * (box[3] - box[1])
+        cost = under + marks.covered(box) + 4 * (area - _overlap(box, frame))
+        if best is None or cost < best[0]:
+            best = (cost, i, under / area if area > 0 else 0.0)
+        if cost == 0:
+            break
+    assert best is not None
+    return best[1], best[2] > _HIDDEN
+
+
+_Box = tuple[float, float, float, float]  # x0, y0, x1, y1 in display pixels
+
+
+def _box(b: Bbox) -> _Box:
+    return (float(b.x0), float(b.y0), float(b.x1), float(b.y1))
+
+
+def _pad(b: _Box, p: float) -> _Box:
+    return (b[0] - p, b[1] - p, b[2] + p, b[3] + p)
+
+
+def _overlap(a: _Box, b: _Box) -> float:
+    """The area two boxes share (0 when apart)."""
+    w, h = min(a[2], b[2]) - max(a[0], b[0]), min(a[3], b[3]) - max(a[1], b[1])
+    return w * h if w > 0 and h > 0 else 0.0
+
+
+@dataclass
+class _Grid:
+    """Boxes bucketed in square cells of display pixels: `covered` looks only at boxes sharing a cell with its own."""
+
+    cell: float = 64.0
+    boxes: list[_Box] = field(default_factory=list)
+    cells: dict[tuple[int, int], list[int]] = field(default_factory=dict)
+
+    def _keys(self, b: _Box) -> Iterator[tuple[int, int]]:
+        c = self.cell
+        for i in range(math.floor(b[0] / c), math.floor(b[2] / c) + 1):
+            for j in range(math.floor(b[1] / c), math.floor(b[3] / c) + 1):
+                yield (i, j)
+
+    def add(self, b: _Box) -> None:
+        self.boxes.append(b)
+        for key in self._keys(b):
+            self.cells.setdefault(key, []).append(len(self.boxes) - 1)
+
+    def covered(self, b: _Box) -> float:
+        """How much of `b` the boxes added cover, summed over them (pixels²), as the former full scan summed it."""
+        near = {n for key in self._keys(b) for n in self.cells.get(key, ())}
+        return sum(_overlap(b, self.boxes[n]) for n in sorted(near))
 
 
 def _move(label: Annotation, spot: _Spot) -> None:
     label.xyann = spot[:2]
     label.set_horizontalalignment(spot[2])
     label.set_verticalalignment(spot[3])
-
-
-def _area(a: Bbox, b: Bbox) -> float:
-    from matplotlib.transforms import Bbox
-
-    both = Bbox.intersection(a, b)
-    return 0.0 if both is None else both.width * both.height
 
 
 def _legend(fig: Figure, world: World, report: RunReport, doors: dict[str, DoorState], views: bool) -> None:

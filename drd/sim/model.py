@@ -185,6 +185,7 @@ class World:
     battery: Battery = Battery()
     _light_cells: dict[tuple[int, int], tuple[tuple[Room, ...], tuple[LightZone, ...]]] | None = field(
         default=None, init=False, repr=False, compare=False)
+    _carriers: dict[str, str] | None = field(default=None, init=False, repr=False, compare=False)
 
     def light(self, x: float, y: float) -> float:
         """The light level (0 dark .. 1 bright) at a point: the room's ambient light, dimmed by dark corners."""
@@ -269,8 +270,19 @@ class World:
         return tuple(s for r in self.rangers for s in r.magazine) + tuple(s.id for s in self.scouts)
 
     def carrier(self, scout_id: str) -> str | None:
-        """The Ranger whose magazine holds the Scout at the start, or None."""
-        return next((r.id for r in self.rangers if scout_id in r.magazine), None)
+        """The Ranger whose magazine holds the Scout at the start, or None.
+
+        Looked up in a dict built on first use (`check_hosts` asks once per robot: scanning every magazine was
+        quadratic at fleet size). The index cannot go stale: a World is frozen and a launch empties the simulator's
+        copy of the magazine (`drd.sim.robots`), never this record, which says where each Scout starts."""
+        index = self._carriers
+        if index is None:
+            index = {}
+            for r in self.rangers:
+                for sid in r.magazine:
+                    index.setdefault(sid, r.id)  # the first Ranger listing it, as the scan found it
+            object.__setattr__(self, "_carriers", index)  # a cache: frozen for everything else
+        return index.get(scout_id)
 
     @property
     def bounds(self) -> tuple[float, float, float, float]:
