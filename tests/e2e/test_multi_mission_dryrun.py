@@ -75,7 +75,7 @@ def test_the_end_at_until_grants_nothing_to_a_mission_it_stops_and_keeps_whom_it
     assert report["still_active"] == [{"path": "Starved/WantIt", "since": 0.0, "state": "waiting"}]
     assert report["waiting"] == [{"path": "Starved/WantIt", "since": 0.0, "needs": ["ranger: Ranger"],
                                   "blocked_by": [{"path": f"{hog}/Hog/HoldIt", "mission": hog,
-                                                  "holds": {"ranger": "ranger1"}}]}]
+                                                  "holds": {"ranger": "ranger1"}}], "blockers": 1}]
     waits = [r for r in mine if r["kind"] == "waiting" and r["blocked_by"]]
     assert [(w["blocked_by"], w["holds"]) for w in waits] == [
         ([f"{hog}/Hog/HoldIt"], {f"{hog}/Hog/HoldIt": {"ranger": "ranger1"}})]

@@ -23,8 +23,20 @@ from dsl.catalog import Catalog
 ROOT = Path(__file__).resolve().parents[2]
 
 
+#: The threads alive when the running test began: other tests of this process may leave guards unclosed, and their
+#: threads are not this test's.
+BEFORE: set[threading.Thread] = set()
+
+
+@pytest.fixture(autouse=True)
+def others_threads() -> None:
+    BEFORE.clear()
+    BEFORE.update(threading.enumerate())
+
+
 def telemetry_threads() -> list[threading.Thread]:
-    return [t for t in threading.enumerate() if t.name == "drd-telemetry" and t.is_alive()]
+    """The telemetry threads this test started that still run."""
+    return [t for t in threading.enumerate() if t.name == "drd-telemetry" and t.is_alive() and t not in BEFORE]
 
 
 class Drive:

@@ -90,7 +90,7 @@ def test_missions_stopped_together_grant_nothing_to_each_other(catalog: Catalog)
     assert all(i.outcome == "stopped" for i in team.interps.values())
     waiting = Explainer(team.records["Starved-2"]).waiting()
     assert waiting == [{"path": "Starved/WantIt", "since": 0.0, "needs": ["ranger: Ranger"], "blocked_by": [
-        {"path": "Hog-1/Hog/HoldIt", "mission": "Hog-1", "holds": {"ranger": "ranger1"}}]}]
+        {"path": "Hog-1/Hog/HoldIt", "mission": "Hog-1", "holds": {"ranger": "ranger1"}}], "blockers": 1}]
     assert "Hog-1" not in team.pool.broker.rcm.snapshot()["holds"]  # the stop did give it back
 
 
