@@ -45,7 +45,7 @@ def generate(
     """Write a building of N wings (a corridor each, rooms on both sides, one Ranger with its Scouts, one
     intruder) and the matching hosts file, for `missionctl dry-run MISSION --hosts DIR/hosts.yaml`."""
     from drd.hosts import HostsError, parse_hosts
-    from drd.sim.building import Building, BuildingError, hosts, world
+    from drd.sim.building import Building, BuildingError, counted, hosts, world
     from drd.sim.world import WorldError, parse_world
 
     try:
@@ -85,8 +85,8 @@ def generate(
     if as_json:
         print_json(summary)
     else:
-        err.print(Text.assemble(("✓ ", "bold green"), f"wrote {hosts_file} and {world_file}: {b.wings} wings, "
-                                                       f"{b.robots} robots"))
+        err.print(Text.assemble(("✓ ", "bold green"), f"wrote {hosts_file} and {world_file}: "
+                                                       f"{counted(b.wings, 'wing')}, {b.robots} robots"))
         err.print(f"  run it: missionctl dry-run missions/corridor_surveillance.mission --hosts {hosts_file}")
     return OK
 

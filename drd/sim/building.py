@@ -81,13 +81,18 @@ class Building:
         return [f"scout{n}" for n in range(first, first + self.scouts)]
 
 
+def counted(n: int, noun: str) -> str:
+    """`1 wing`, `3 wings`: the count and its noun, singular or plural."""
+    return f"{n} {noun}{'' if n == 1 else 's'}"
+
+
 def world(b: Building) -> dict[str, Any]:
     """The world file's data (docs/worlds.md)."""
     data: dict[str, Any] = {
         "name": b.name,
-        "description": f"A generated building: {b.wings} wings, each a {b.length:g} m corridor with "
-                       f"{2 * b.rooms_per_side} rooms ({b.scouts} doors open), one Ranger with {b.scouts} Scouts "
-                       "and one intruder per wing.",
+        "description": f"A generated building: {counted(b.wings, 'wing')}, each a {b.length:g} m corridor with "
+                       f"{2 * b.rooms_per_side} rooms ({counted(b.scouts, 'door')} open), one Ranger with "
+                       f"{counted(b.scouts, 'Scout')} and one intruder per wing.",
         "light": {"ambient": 0.9, "dark": []},
         "walls": [], "rooms": [], "doors": [], "intruders": [], "rangers": [],
     }
