@@ -296,17 +296,18 @@ def need_type(need: str) -> tuple[str, str]:
 
 
 def current_blockers(wait: dict[str, Any], by_type: dict[str, list[str]], waits: Collection[str]) -> list[str]:
-    """Who is in `wait`'s way now: the waiters its `waiting` record named that still wait (ahead of it in the
-    queue), this mission's holders now of a unit of a type it needs (`UnitTypes.holders_by_type`), and the other
-    missions' blockers its record named (their holds are not in these records). A waiter whose record named nobody
-    (nothing grants it) stays so."""
+    """Who is in `wait`'s way now, holders first (what a reader asks first: who has it): this mission's holders now
+    of a unit of a type it needs (`UnitTypes.holders_by_type`), the waiters its `waiting` record named that still
+    wait (ahead of it in the queue), and the other missions' blockers its record named (their holds are not in
+    these records). A waiter whose record named nobody (nothing grants it) stays so."""
     recorded: list[str] = wait["blocked_by"]
     if not recorded:
         return []
     foreign = wait.get("held") or {}
-    found = dict.fromkeys(b for b in recorded if b in waits and b != wait["path"])
+    found: dict[str, None] = {}
     for need in wait["needs"]:
         found.update(dict.fromkeys(p for p in by_type.get(need_type(need)[1], ()) if p != wait["path"]))
+    found.update(dict.fromkeys(b for b in recorded if b in waits and b != wait["path"]))
     found.update(dict.fromkeys(b for b in recorded if b in foreign))
     return list(found)
 

@@ -48,12 +48,18 @@ def live_line(at: float, active: list[str], holds: list[str], waiting: list[str]
         counted[name] = counted.get(name, 0) + 1
     names = ", ".join(f"{n} x{k}" if k > 1 else n for n, k in counted.items()) or "—"
     head = f"{at:7.1f} s  "
-    few = len(holds) + len(waiting) <= 6  # a small team: who holds and who waits fit the line
-    line = Text.assemble(("sim ", "dim"), head, ("holds ", "dim"),
-                         f"{len(holds)}" + (some(holds, 4, "; ") if few else ""), ("  waiting ", "dim"),
-                         f"{len(waiting)}" + (some(waiting, 3, ", ") if few else ""), ("  active ", "dim"), names)
-    line.truncate(width, overflow="ellipsis")
-    return line
+
+    def line(examples: bool) -> Text:
+        return Text.assemble(("sim ", "dim"), head, ("holds ", "dim"),
+                             f"{len(holds)}" + (some(holds, 4, "; ") if examples else ""), ("  waiting ", "dim"),
+                             f"{len(waiting)}" + (some(waiting, 3, ", ") if examples else ""), ("  active ", "dim"),
+                             names)
+
+    shown = line(len(holds) + len(waiting) <= 6)  # a small team: who holds and who waits, while the line fits
+    if len(shown.plain) > width:  # the active behaviors before the examples
+        shown = line(False)
+    shown.truncate(width, overflow="ellipsis")
+    return shown
 
 
 def _short(holder: str) -> str:

@@ -160,14 +160,25 @@ def test_drd_components_lists_the_catalog() -> None:
                                                      "required": False}
 
 
+#: `missionctl plan` with a bug planted in the compiler it calls: an error nobody planned for.
+BUGGY = ("import sys, dsl\n"
+         "def boom(*args, **kwargs):\n    raise RuntimeError('boom')\n"
+         "dsl.compile_file = boom\n"
+         f"sys.argv = ['missionctl', 'plan', {str(CORRIDOR)!r}]\n"
+         "from drd.cli.missionctl import main\nmain()\n")
+
+
 def test_unexpected_errors_are_one_line_unless_debugging(tmp_path: Path) -> None:
     target = tmp_path / "out.json"
-    target.mkdir()  # writing the plan there fails in an unplanned way
+    target.mkdir()  # a folder where the plan goes: the user's input, said so, with the file
     r = run("missionctl", "plan", str(CORRIDOR), "-o", str(target))
     assert r.returncode == 2 and "Traceback" not in r.stderr
-    assert "IsADirectoryError" in r.stderr and "DRD_DEBUG=1" in r.stderr
-    r = run("missionctl", "plan", str(CORRIDOR), "-o", str(target), env={**os.environ, "DRD_DEBUG": "1"})
-    assert r.returncode == 2 and "Traceback (most recent call last)" in r.stderr
+    assert f"{target}: cannot write the plan" in r.stderr
+    r = run(sys.executable, "-c", BUGGY)  # a bug of ours: exit 70, one line, and how to see more
+    assert r.returncode == 70 and "Traceback" not in r.stderr, r.stderr
+    assert r.stderr.startswith("error: internal error: RuntimeError: boom") and "DRD_DEBUG=1" in r.stderr
+    r = run(sys.executable, "-c", BUGGY, env={**os.environ, "DRD_DEBUG": "1"})
+    assert r.returncode == 70 and "Traceback (most recent call last)" in r.stderr
 
 
 @pytest.mark.parametrize("args", [("plan", str(CORRIDOR)), ("validate", str(CORRIDOR), "--json")])

@@ -316,8 +316,11 @@ def test_missionctl_without_a_daemon_fails_clearly(tmp_path: Path) -> None:
         r = c.missionctl("resources", "--config", str(tmp_path / "missing.yaml"))
         assert r.returncode == 2 and "missing.yaml: no such file" in r.stderr
         assert time.monotonic() - started < 30
+        (tmp_path / "run").mkdir(exist_ok=True)
         r = c.drd("stop", "--host", "ranger9", "--run-dir", str(tmp_path / "run"))
         assert r.returncode == 2 and "no drd for host ranger9" in r.stderr
+        r = c.drd("stop", "--host", "ranger9", "--run-dir", str(tmp_path / "nowhere"))  # a --run-dir that is not
+        assert r.returncode == 2 and "nowhere: no such folder" in r.stderr
     finally:
         c.close()
 

@@ -128,8 +128,8 @@ def test_live_progress_shows_time_active_behaviors_holds_and_waiters(catalog: Ca
         until=12, progress=lambda sim, ex: lines.append(progress_view(sim, ex).plain), progress_every=10)
     first, later = lines[0], lines[1]
     assert first.startswith("sim     0.1 s") and "FollowCorridor" in first and "DetectDoor" in first
-    assert "holds RoomSurveillance[0]→ranger1+scout1" in first and "waiting 5 (RoomSurveillance[1]" in first
-    assert "RoomSurveillance[0]→scout1" in later  # the Ranger was released after the launch; the Scout is kept
+    assert "holds 1" in first and "waiting 5" in first  # the counts; examples only while the line has room
+    assert "FollowCorridor" in later
 
 
 def test_a_run_that_cannot_keep_the_pace_asked_says_so() -> None:

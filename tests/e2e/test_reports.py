@@ -202,7 +202,8 @@ def test_a_run_stopped_at_until_says_what_was_active_and_who_waited_for_whom(tmp
     assert report["still_active"] == [{"path": "Busy/First/Wait", "since": 0.0, "state": "running"},
                                       {"path": "Busy/Second", "since": 0.0, "state": "waiting"}]
     assert report["waiting"] == [{"path": "Busy/Second", "since": 0.0, "needs": ["ranger: Ranger"],
-                                  "blocked_by": [{"path": "Busy/First", "holds": {"ranger": "ranger1"}}]}]
+                                  "blocked_by": [{"path": "Busy/First", "holds": {"ranger": "ranger1"}}],
+                                  "blockers": 1}]
     assert report["failure_chain"] == []
     r, _ = dry_run_cli(tmp_path, BUSY, "--until", "5")
     lines = r.stdout.splitlines()
