@@ -144,6 +144,13 @@ def test_every_test_module_is_in_the_folder_of_its_kind() -> None:
     assert [p.name for p in tests.glob("*/test_*.py") if p.parent.name not in KINDS] == []
 
 
+def test_test_modules_have_distinct_names_across_the_folders() -> None:
+    """pytest imports test modules by their base name (the folders are no packages): two `test_x.py` in two folders
+    run alone, but `pytest` of the whole tree stops at collection (`import file mismatch`)."""
+    names = [p.name for p in (ROOT / "tests").glob("*/test_*.py")]
+    assert sorted({n for n in names if names.count(n) > 1}) == []
+
+
 @pytest.mark.parametrize(("source", "kind"), [
     ("from drd.dryrun import DryRun, run\n", "integration"),
     ("from drd.dryrun import Mission, run_many\n", "integration"),
