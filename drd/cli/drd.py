@@ -367,7 +367,8 @@ def stop(
     """Stop daemons started on this machine: SIGTERM, wait (bounded), then SIGKILL. Only one cluster's: two
     clusters sharing a machine never stop each other's daemons. With --all, the controller goes first and the
     others once it is gone (each step bounded by --timeout): its running missions stay journaled and the next
-    `drd start` of the hosts resumes them."""
+    `drd start` of the hosts resumes them (a simulated mission whose simulator stopped too ends instead, saying
+    its world started again); `missionctl stop` first ends them."""
     from drd.daemon import runfiles
 
     if (host is None) == (not all_):

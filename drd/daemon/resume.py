@@ -88,6 +88,9 @@ def resume(runner: Any, journal: Journal) -> list[str]:
         state = WorldState("", 0, 0.0, max(j.base for j in jobs), 0)
     with runner.starting:
         world = _rejoin(runner, state, jobs[0])
+        if world is None:  # the simulator's world started again: nothing of the missions' state is in it
+            _unresumable(runner, journal, jobs, state)
+            return []
         halts = _halts(runner.take_pending(world))  # before anything is recorded of the restore (docs/trace.md)
         resumed: list[str] = []
         with runner.lock:
@@ -109,7 +112,8 @@ def resume(runner: Any, journal: Journal) -> list[str]:
 
 
 def _rejoin(runner: Any, state: WorldState, first: Journaled) -> Any:
-    """The world's loop again, on the simulator's world if it still runs it, else on a fresh one. With no
+    """The world's loop again, on the simulator's world if it still runs it; None when the simulator lost it (its
+    host stopped too: it answers, without that world), after starting a fresh one for the next mission. With no
     simulator host, a loop over the real robots again: their time goes on from the last save (the time the
     controller was away is not the missions'), and no simulator is asked anything."""
     from drd.daemon.missions import NO_WORLD
@@ -129,13 +133,34 @@ def _rejoin(runner: Any, state: WorldState, first: Journaled) -> Any:
     except Exception as e:  # the simulator lost its world (it ran on the controller's host, or restarted)
         log.warning("the simulator does not run world %s any more (%s): starting it again", path.stem, e)
         continues = False
-    if not continues:
-        reply = runner.sim(SimRequest("reset", world=path.stem, seed=int(first.request.get("seed") or 0)))
-        log.warning("resumed missions run in a new world %s: its robots start from their start poses", path.stem)
+    if not continues:  # a reset that answers says the simulator is there, without the world (one that does not
+        # answer raises: the journal is kept for the next start)
+        runner.sim(SimRequest("reset", world=path.stem, seed=int(first.request.get("seed") or 0)))
+        return None
     with runner.lock:
-        runner.clock.base = state.base if continues else state.now - reply.time
+        runner.clock.base = state.base
         return runner.open_world(path.stem, loaded, reply, state.generation + 1,
                                  float(first.request.get("speed") or 1.0))
+
+
+#: Why a journaled mission is not resumed when its simulated world is gone.
+WORLD_GONE = ("cannot resume after the controller was lost: the simulator's world {world} started again (its host"
+              " stopped too), its robots back at their start poses: the mission's state is not in it")
+
+
+def _unresumable(runner: Any, journal: Journal, jobs: list[Journaled], state: WorldState) -> None:
+    """End the journaled missions as failures that say why (journal and history: `missionctl status` and an
+    attached `missionctl run` read it there), rather than enter their states in a world that knows none of them
+    (a launched Scout back in its magazine: the mission hung)."""
+    name = state.name or str(jobs[0].request.get("world") or runner.cluster.world)
+    reason = WORLD_GONE.format(world=name)
+    for job in jobs:
+        status = {"mission": job.id.rpartition("-")[0] or job.id, "outcome": "failure", "reason": reason,
+                  "time": round(state.now, 3), "started": round(job.base, 3)}
+        journal.finish(job.id, "failure", reason, status)
+        with runner.lock:
+            runner.controller.executive.restore_history([(job.id, status)])
+        log.error("mission %s: %s", job.id, reason)
 
 
 def _halts(records: list[dict[str, Any]]) -> dict[str, list[Any]]:
