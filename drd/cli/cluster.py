@@ -38,6 +38,7 @@ from drd.cli.common import (
     out,
     print_json,
     shorten,
+    wrap_cut,
 )
 
 if TYPE_CHECKING:
@@ -321,9 +322,10 @@ def with_waits(data: dict[str, Any]) -> dict[str, Any]:
                                  else m for m in missions]}
 
 
-def waits_text(why: dict[str, Any]) -> str:
-    """A node's `waiting_for` in words: `for ranger: Ranger where ranger.id == "ranger2" (mission priority 3,
-    priority 1), blocked by CamHog-91/HoldEast (ranger: ranger2)`."""
+def waits_text(why: dict[str, Any]) -> tuple[str, str]:
+    """A node's `waiting_for` in words, (what it needs, who is in its way): (`for ranger: Ranger where ranger.id ==
+    "ranger2" (mission priority 3, priority 1)`, `blocked by CamHog-91/HoldEast (ranger: ranger2)`), the count first
+    when several block it (`blocked by 3: A (ranger: ranger2), ...`): a cut line still says how many."""
     wheres = why.get("where") or {}
     needs = ", ".join(f"{n}: {t}" + (f" where {wheres[n]}" if n in wheres else "") for n, t in why["needs"].items())
     text = f"for {needs} (mission priority {why['mission_priority']}, priority {why['priority']})"
@@ -331,7 +333,19 @@ def waits_text(why: dict[str, Any]) -> str:
                                                            f" ({', '.join(f'{k}: {v}' for k, v in b['holds'].items())})"
                                                            if b.get("holds") else "")
                 for b in why.get("blocked_by") or []]
-    return text + (f", blocked by {', '.join(blockers)}" if blockers else "")
+    count = f" {len(blockers)}:" if len(blockers) > 1 else ""
+    return text, (f"blocked by{count} {', '.join(blockers)}" if blockers else "")
+
+
+#: How many lines each part of why a node waits (its need, who blocks it) may take below the node in `status`.
+WHY_LINES = 2
+
+
+def why_lines(why: tuple[str, str], width: int) -> list[str]:
+    """Why a node waits, on lines of at most `width` below it: its need, then who blocks it on a line of its own,
+    each wrapped to `WHY_LINES` lines and cut with `…` past them. The blocker starts a line, so its name shows at 80
+    columns however long the need's `where` is."""
+    return [line for part in why if part for line in wrap_cut(part, width, WHY_LINES)]
 
 
 def holder_label(holder: str, room: int = 0, several: bool = True) -> str:
@@ -1479,9 +1493,12 @@ def _grow_active(tree: Any, node: dict[str, Any], above: str, depth: int, width:
             _count(child, shown)
         return
     extra = ("  " + ", ".join(held) if held else "") + (f"  {phase}" if phase != "active" else "")
-    room = max(12, width - 4 * depth - len(extra) - 1)  # why it waits wraps below: the label keeps its room
-    extra += (f"  waiting {'; '.join(waits)}" if phase != "waiting" else f" {'; '.join(waits)}") if waits else ""
-    branch = tree.add(Text.assemble(shorten(label, room), (extra, "dim")))
+    extra += "  waiting" if waits and phase != "waiting" else ""
+    room = max(12, width - 4 * depth - len(extra) - 1)  # why it waits goes below: the label keeps its room
+    text = Text.assemble(shorten(label, room), (extra, "dim"))
+    for line in (line for why in waits for line in why_lines(why, max(20, width - 4 * depth - 1))):
+        text.append("\n" + line, style="dim")
+    branch = tree.add(text)
     for child in children:
         _grow_active(branch, child, path, depth + 1, width, shown)
 

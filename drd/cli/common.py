@@ -158,6 +158,18 @@ def duration_text(seconds: float) -> str:
     return f"{seconds * 1000:g}ms" if 0 < seconds < 1 else f"{seconds:g}s"
 
 
+def wrap_cut(text: str, width: int, lines: int) -> list[str]:
+    """`text` wrapped at spaces to lines of at most `width`, at most `lines` of them, the last cut with `…` when
+    more is left: a long reason reads whole in a few lines, and a very long one still says it was cut."""
+    import textwrap
+
+    wrapped = textwrap.wrap(text, max(2, width), break_on_hyphens=False) or [""]
+    if len(wrapped) <= lines:
+        return wrapped
+    last = " ".join(wrapped[lines - 1:])
+    return wrapped[:lines - 1] + [last[:max(1, width - 1)].rstrip() + "…"]
+
+
 def shorten(path: str, width: int) -> str:
     """A path in at most `width` characters, cut from the middle: its first step, `…`, and as many of its last
     steps as fit (`RoomSurveillance[0]/…/FollowCorridor`), else the start of the first step

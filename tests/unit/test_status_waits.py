@@ -11,6 +11,7 @@ from typing import Any
 from rich.console import Console  # noqa: TID251 - rendering the status and the report at a chosen width
 
 from drd.cli.cluster import holder_label, progress_line, status_json, status_view, track_phase
+from drd.cli.common import wrap_cut
 from drd.cli.report import print_report
 from drd.dryrun import DryRun
 from drd.runtime import records as rec
@@ -55,11 +56,49 @@ def test_a_waiting_missions_tree_says_what_it_waits_for_its_rank_and_who_blocks_
                                    "blocked_by": [{"holder": "CamHog-91/CamHog/HoldEast",
                                                    "holds": {"ranger": "ranger2"}, "waiting": False}]}
     shown = " ".join(text(status_view(status())).split())
-    assert 'WantEast waiting for ranger: Ranger where ranger.id == "ranger2" (mission priority 3, priority 1), ' \
+    assert 'WantEast waiting for ranger: Ranger where ranger.id == "ranger2" (mission priority 3, priority 1) ' \
            "blocked by CamHog-91/HoldEast (ranger: ranger2)" in shown
     assert "Starved-92/WantEast (mission priority 3, priority 1)" in shown
     ranger1 = next(line for line in text(status_view(status())).splitlines() if "ranger1 Ranger" in line)
     assert "Starved" not in ranger1, "it can never take ranger1"
+
+
+def cli_text(renderable: Any, width: int) -> str:
+    """As the CLI's console draws it: soft_wrap (no wrapping by rich), so a line too long is cropped by the tree."""
+    buf = io.StringIO()
+    Console(file=buf, width=width, color_system=None, soft_wrap=True).print(renderable)
+    return buf.getvalue()
+
+
+def test_why_a_node_waits_goes_below_it_and_the_blocker_shows_at_80_columns() -> None:
+    lines = cli_text(status_view(status(), 80), 80).splitlines()
+    assert max(len(line) for line in lines) <= 80, "\n".join(lines)
+    node = next(i for i, line in enumerate(lines) if "WantEast  waiting" in line)
+    below = lines[node + 1:node + 4]
+    assert any(line.strip() == "blocked by CamHog-91/HoldEast (ranger: ranger2)" for line in below), lines
+    assert any('where ranger.id == "ranger2"' in line for line in below), lines
+
+
+def test_a_long_reason_is_cut_with_an_ellipsis_and_several_blockers_are_counted_first() -> None:
+    data = status()
+    where = " or ".join(f'ranger.id == "ranger{i}"' for i in range(2, 30))
+    [waiter] = data["resources"]["queue"]
+    waiter["where"] = {"ranger": where}
+    waiter["blocked_by"] = [{"holder": f"NightGuard-95150{i}/NightGuard/GuardPost", "holds": {"ranger": f"ranger{i}"},
+                             "waiting": False} for i in range(10, 20)]
+    lines = cli_text(status_view(data, 80), 80).splitlines()
+    assert max(len(line) for line in lines) <= 80, "\n".join(lines)
+    node = next(i for i, line in enumerate(lines) if "WantEast  waiting" in line)
+    below = [line.strip() for line in lines[node + 1:node + 5]]
+    assert below[0].startswith("for ranger: Ranger where") and below[1].endswith("…"), below
+    assert below[2].startswith("blocked by 10: NightGuard-9515010/GuardPost (ranger: ranger10)"), below
+    assert below[3].endswith("…") and "hosts" in lines[node + 5], lines
+
+
+def test_wrap_cut_wraps_at_spaces_and_marks_a_cut() -> None:
+    assert wrap_cut("a bb ccc", 4, 3) == ["a bb", "ccc"]
+    assert wrap_cut("a bb ccc dddd", 4, 2) == ["a bb", "ccc…"]
+    assert all(len(line) <= 10 for line in wrap_cut("x" * 50, 10, 2))
 
 
 def test_two_holders_of_same_name_missions_stay_apart_when_cut() -> None:
