@@ -10,7 +10,7 @@ from typing import TYPE_CHECKING, Any
 
 from rich.text import Text
 
-from drd.cli.common import out, shorten
+from drd.cli.common import out, shorten, wrap_cut
 from drd.explain import natural
 from dsl.statechart import StateKind
 
@@ -113,15 +113,34 @@ def report_view(r: DryRun, several: bool = False, width: int = 80) -> list[Rende
     if logs:
         parts.append(Text(f"log: {len(logs)} line{'s' if len(logs) != 1 else ''}", style="bold"))
         for row in logs[:LOG_LINES]:
-            parts.append(Text.assemble((f"{row['at']:7.1f} s  ", "dim"), (rel(row["path"], max(16, width // 3)),
-                                                                          "cyan"), f": {row['text']}"))
+            parts += _log_lines(row["at"], rel(row["path"], max(16, width // 3)), str(row["text"]), width)
         if len(logs) > LOG_LINES:
             parts.append(Text(f"  … and {len(logs) - LOG_LINES} more (--json or --trace have them all)", style="dim"))
     for title, rows in (("doors found", r.doors), ("Scouts placed", r.scouts), ("intruders detected", r.detections)):
         parts.append(Text(f"{title}: {len(rows)}", style="bold"))
         for fact in rows[:20]:
-            parts.append(Text("  " + ", ".join(_fact(k, v, root) for k, v in fact.items())))
+            text = ", ".join(_fact(k, v, root) for k, v in fact.items())
+            parts += [Text(("  " if i == 0 else "    ") + line)
+                      for i, line in enumerate(wrap_cut(text, width - 4, WRAPPED_LINES))]
     return parts
+
+
+#: How many lines a log line or a fact of the text report may wrap to (indented below its first) before `…`.
+WRAPPED_LINES = 3
+
+
+def _log_lines(at: float, path: str, text: str, width: int) -> list[Text]:
+    """A log line of the report within `width`: its time, its (cut) path, its text wrapped below, indented under
+    the path (`   26.6 s  RoomSurveilla…/ServoToGoal: blocked 1.2 m short of the goal:` / `as close as it gets`)."""
+    stamp = f"{at:7.1f} s  "
+    body = wrap_cut(f"{path}: {text}", max(20, width - len(stamp)), WRAPPED_LINES)
+    first = Text(stamp, style="dim")
+    if body[0].startswith(path + ":"):
+        first.append(path, style="cyan")
+        first.append(body[0][len(path):])
+    else:
+        first.append(body[0])
+    return [first] + [Text(" " * len(stamp) + line) for line in body[1:]]
 
 
 def _tables(r: DryRun, rel: Callable[..., str], width: int) -> list[RenderableType]:
@@ -239,19 +258,45 @@ def still_active_lines(active: list[dict[str, Any]], waiting: dict[str, dict[str
         if len(line) + len(why) <= width:  # on one line, as a small team's report always read
             line.append(why)
             lines.append(line)
-        else:  # what it waits for and who is in its way on the line below, cut to the width
-            lines += [line, Text(f"    {why.lstrip()}", style="dim")]
+            continue
+        # below it: what it waits for, then who is in its way on lines of their own (wrapped, so that at least
+        # the first blocker's whole name shows), each cut with … past two lines
+        lines.append(line)
+        below = [why.lstrip()] if len(why) + 3 <= width else [needs.lstrip(), blockers]
+        lines += [Text(f"    {part}", style="dim") for text in below if text
+                  for part in wrap_cut(text, width - 4, WHY_LINES)]
     for line in lines:
         line.truncate(width, overflow="ellipsis")
     return lines
 
 
+#: How many lines what a still-active waiter waits for, and who is in its way, may each take below it.
+WHY_LINES = 2
+
+#: An instance's index or a fold's range of them in a path's first step (`RoomSurveillance[16..18]`).
+_INDEX = re.compile(r"\[[0-9.]+\]$")
+
+
 def _fit_folded(path: str, room: int) -> str:
-    """A path `shorten`ed to `room`, the count a fold adds (` (150)`) kept whole."""
+    """A path `shorten`ed to `room`, the count a fold adds (` (150)`) kept whole, and the index or range of its
+    first step (`[16..18]`) too: cut inside it, the row no longer says which instances it is
+    (`RoomSurveilla…[16..18]/…/ServoToGoal (3)`, not `RoomSurveillance[16..18…/ServoToGoal (3)`)."""
     head, sep, count = path.rpartition(" (")
     if not sep or not count.endswith(")"):
-        return shorten(path, room)
-    return shorten(head, max(10, room - len(count) - 2)) + f" ({count}"
+        head, count = path, ""
+    room = max(10, room - len(count) - 2) if count else room
+    tail = f" ({count}" if count else ""
+    cut = shorten(head, room)
+    first, slash, rest = head.partition("/")
+    index = _INDEX.search(first)
+    if cut == head or index is None or cut.startswith(first):
+        return cut + tail
+    leaf = rest.rsplit("/", 1)[-1]
+    middle = "/…/" if "/" in rest else "/"
+    name = room - len(index.group()) - len(middle) - len(leaf) - 1  # what is left of the name before the index
+    if name < 1:  # too narrow for the leaf as well: the instance and as much of its path as fits
+        return (f"…{index.group()}{slash}" + shorten(rest, max(1, room - len(index.group()) - 2)))[:room] + tail
+    return first[:min(name, index.start())] + "…" + index.group() + middle + leaf + tail
 
 
 def _waiting_text(w: dict[str, Any] | None, root: str) -> tuple[str, str]:

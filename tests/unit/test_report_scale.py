@@ -3,7 +3,12 @@ waiter, still-active rows fold, lines fit the width, and the live line counts re
 
 from __future__ import annotations
 
-from drd.cli.report import live_line, still_active_lines
+import io
+
+from rich.console import Console  # noqa: TID251 - rendering the report at a chosen width
+
+from drd.cli.report import live_line, print_report, still_active_lines
+from drd.dryrun import DryRun
 from drd.explain import BLOCKERS_SHOWN, Explainer
 from drd.record import ActiveView
 from drd.runtime import records as rec
@@ -66,10 +71,29 @@ def test_still_active_rows_fold_and_fit_the_width() -> None:
     waiting = {row["path"]: {"path": row["path"], "since": 0.0, "needs": list(NEEDS), "blocked_by": blockers,
                              "blockers": 51} for row in active}
     lines = still_active_lines(active, waiting, M, 80)
-    assert len(lines) == 2
+    assert len(lines) == 4
     assert lines[0].plain.startswith("  R[4..999] (996)")
-    assert "51 in its way" in lines[1].plain
+    assert lines[1].plain == "    for ranger: Ranger, scout: Scout"
+    assert lines[2].plain.startswith("    51 in its way, held by R[0] (ranger0, scout0); ")
     assert all(len(line.plain) <= 80 for line in lines)
+
+
+def test_a_folded_row_is_cut_outside_its_range_and_a_blocker_shows_whole() -> None:
+    """At fleet size (re-verification R3): `RoomSurveillance[16..18…/ServoToGoal (3)` lost which instances it
+    was, and the blocker line was cut inside the first blocker's name."""
+    root = "CorridorSurveillance"
+    rs = f"{root}/RoomSurveillance"
+    active = [{"path": f"{rs}[{i}]/HideInCorner/ServoToGoal", "since": 24.8, "state": "running"} for i in (16, 17, 18)]
+    active += [{"path": f"{rs}[{i}]", "since": 0.0, "state": "waiting"} for i in range(40, 190)]
+    blockers = [{"path": f"{rs}[{i}]", "holds": {"ranger": f"ranger{i}", "scout": f"scout{i}"}} for i in (30, 31)]
+    waiting = {row["path"]: {"path": row["path"], "since": 0.0, "needs": list(NEEDS), "blocked_by": blockers,
+                             "blockers": 40} for row in active if row["state"] == "waiting"}
+    lines = [line.plain for line in still_active_lines(active, waiting, root, 80)]
+    assert all(len(line) <= 80 for line in lines), lines
+    folded = next(line for line in lines if "ServoToGoal" in line)
+    assert "[16..18]/" in folded and folded.split()[0].endswith("/ServoToGoal"), folded
+    assert "(3)" in folded
+    assert any(line.startswith("    40 in its way, held by RoomSurveillance[30] (ranger30, scout30)") for line in lines)
 
 
 def test_a_small_waiter_keeps_its_one_line() -> None:
@@ -88,3 +112,22 @@ def test_live_line_counts_leaves_and_keeps_the_counts() -> None:
     assert len(line) <= 100
     small = live_line(1.0, ["Go"], ["A→ranger1"], ["B"]).plain
     assert "holds 1 (A→ranger1)" in small and "waiting 1 (B)" in small
+
+
+def test_every_line_of_the_text_report_fits_the_width_log_lines_wrapped_whole() -> None:
+    """The corridor report's `log:` lines and found doors reached 91 columns at 80 (re-verification R4.6)."""
+    root = "CorridorSurveillance"
+    path = f"{root}/RoomSurveillance[3]/HideInCorner/ServoToGoal"
+    said = "blocked 1.2 m short of the goal: as close as it gets"
+    run = DryRun(root, "success", "", 180.8, 9.0, records=[rec.Log(26.6, path, said)],
+                 doors=[{"at": 4.7, "by": f"{root}/RoomSurveillance[10]/FindNewDoor/DetectDoor", "width": 0.98,
+                         "x": 4.0, "y": -120.25}])
+    buf = io.StringIO()
+    print_report(run, console=Console(file=buf, width=80, color_system=None, soft_wrap=True))
+    lines = buf.getvalue().splitlines()
+    assert all(len(line) <= 80 for line in lines), [line for line in lines if len(line) > 80]
+    at = next(i for i, line in enumerate(lines) if line.startswith("   26.6 s  "))
+    assert " ".join(" ".join(lines[at:at + 2]).split()).endswith(f"ServoToGoal: {said}"), lines[at:at + 2]
+    assert lines[at + 1].startswith(" " * 11), "the rest of the line is indented under the path"
+    door = next(i for i, line in enumerate(lines) if "DetectDoor" in line)
+    assert lines[door + 1].strip() == "y=-120.25"
