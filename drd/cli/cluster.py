@@ -668,7 +668,17 @@ def _stop_on_interrupt(client: ClusterClient, watch: _RecordWatch, mission: str,
     except typer.Exit:
         raise
     except Exception as e:  # the controller may be the reason the operator pressed Ctrl-C
-        fail(f"mission {mission}: could not confirm the stop ({e}); see `missionctl status`", code=1)
+        fail(unconfirmed_stop(mission, str(e), watch.away_since is not None), code=1)
+
+
+def unconfirmed_stop(mission: str, why: str, away: bool) -> str:
+    """What a Ctrl-C whose stop the controller did not confirm leads to: with no controller the stop is lost, and
+    its next start resumes the mission from the journal with nobody attached; the command that ends it for good."""
+    then = ("the controller is away, so the stop is lost: when it starts again it resumes the mission, with nobody"
+            if away else "if the controller is away the stop is lost: when it starts again it resumes the mission,"
+            " with nobody")
+    return (f"mission {mission}: could not confirm the stop ({why}); {then} attached. Once it is back, end it for"
+            f" good with `missionctl stop {mission}` (`missionctl status` shows it)")
 
 
 def stop(mission: str = typer.Argument("", help="The mission id (default: the one running).", show_default=False),
@@ -789,6 +799,31 @@ def track_phase(phases: dict[str, str], record: Any) -> None:
 RESUME_PATIENCE = 60.0
 
 
+#: On a pipe or a file, seconds before an unchanged progress line is written again (it still says the run lives).
+PIPE_REPEAT = 30.0
+
+
+class ProgressGate:
+    """Which of `missionctl run`'s progress lines to write: each one on a terminal; on a pipe or a file only a line
+    that changed, or the same one after `PIPE_REPEAT` s. While the controller was away (its sim time still), a log
+    got the same line once a second."""
+
+    def __init__(self, terminal: bool, repeat: float = PIPE_REPEAT) -> None:
+        self.terminal = terminal
+        self.repeat = repeat
+        self.last = ""
+        self.at = -math.inf
+
+    def due(self, line: str, now: float) -> bool:
+        """Whether to write `line` at `now` (monotonic seconds); a line written is remembered."""
+        if self.terminal:
+            return True
+        if line == self.last and now - self.at < self.repeat:
+            return False
+        self.last, self.at = line, now
+        return True
+
+
 class _RecordWatch:
     """The records of the cluster's missions, from the moment `missionctl run` subscribed; then a report."""
 
@@ -819,6 +854,7 @@ class _RecordWatch:
         #: order (a resumed mission's first live records would otherwise go before the old ones caught up)
         self.held: list[Any] = []
         self.away_total = 0.0  # seconds the controller did not answer, over the run (a restart, a failover)
+        self.gate = ProgressGate(err.is_terminal)  # on a pipe, a progress line only when it changed
         self.view: _ClusterView | None = None
         self.priority = 1  # the started mission's, as the controller said it (`started`)
         self.worlds = tuple(worlds)  # where the mission's world is found, before drd's own (beside the hosts file)
@@ -897,12 +933,18 @@ class _RecordWatch:
                         finished = (m["outcome"], m.get("reason") or "")
             if now >= next_print and finished is None:
                 next_print = now + self.every
-                err.print(progress_line(max(result.sim_time, clock), list(active), err.width, phases))
+                self._progress(max(result.sim_time, clock), list(active), phases, now)
         result.outcome, result.reason = finished
         result.wall_time = time.monotonic() - (start if began is None else began)
         result.away = self.away_total
         return result
 
+
+    def _progress(self, sim_time: float, active: list[str], phases: dict[str, str], now: float) -> None:
+        """The progress line, when due: each second on a terminal, on a pipe only when it changed (`ProgressGate`)."""
+        line = progress_line(sim_time, active, err.width, phases)
+        if self.gate.due(line.plain, now):
+            err.print(line)
 
     def _missions(self, mission: str) -> list[dict[str, Any]]:
         """The executive's missions; none while the controller does not answer (it may be restarting: a
@@ -1471,7 +1513,7 @@ def _missions_view(missions: list[dict[str, Any]], width: int = 80, explain: boo
 def _grow_active(tree: Any, node: dict[str, Any], above: str, depth: int, width: int, shown: list[int]) -> None:
     """Add `node` (and its chain of single children, in one label) under `tree`; count what is left out."""
     held: list[str] = []
-    waits: list[str] = []
+    waits: list[tuple[str, str]] = []
     path = str(node.get("path", ""))
     phase = str(node.get("phase", "active"))
     while True:

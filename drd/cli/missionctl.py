@@ -577,7 +577,8 @@ def _check_render(render: Path | None) -> None:
     if render is None:
         return
     if render.suffix.lower() not in SUPPORTED_SUFFIXES:
-        fail(f"cannot draw {render.name}: --render writes {', '.join(SUPPORTED_SUFFIXES)}")
+        fail(f"--render {render}: cannot draw it: its suffix chooses the format, one of "
+             f"{', '.join(SUPPORTED_SUFFIXES)}")
     folder = render.parent
     why = ("is a folder" if render.is_dir() else
            f"its folder {folder} does not exist" if not folder.exists() else

@@ -699,8 +699,10 @@ class WorldRun:
             if ended:
                 runner.controller.executive.forget_finished()  # history, not history + 1, once the last one ended
         for mid, router in ended.items():
-            if runner.journal is not None and not (everyone and self.stopping.is_set() and outcomes[mid][0] is None):
-                runner.journal.finish(mid, outcomes[mid][0] or "stopped", outcomes[mid][1], listed.get(mid))
+            outcome, reason = outcomes[mid]
+            kept = everyone and self.stopping.is_set() and outcome is None  # journaled as running: the next start
+            if runner.journal is not None and not kept:
+                runner.journal.finish(mid, outcome or "stopped", reason, listed.get(mid))
             for host in sorted(set(router.stats.by_host) | set(router.batches.by_host)):
                 if host == runner.me or runner.host_down(host):
                     continue
@@ -711,8 +713,16 @@ class WorldRun:
                     log.info("mission %s: %s did not confirm the retirement: %s", mid, host, e)
             for path, host, how in router.placed:
                 log.info("mission %s: %s %s on %s", mid, path, how, host)
-            log.info("mission %s ended %s (%s); component steps %s, step batches %s", mid, *outcomes[mid],
+            log.info("mission %s %s; component steps %s, step batches %s", mid, ending_said(outcome, reason, kept),
                      router.stats.as_dict(), router.batches.as_dict())
+
+
+def ending_said(outcome: str | None, reason: str, kept: bool) -> str:
+    """How the controller's log says a mission left it: `ended failure (…)`, or, journaled as running by a clean
+    stop, `suspended for the next start` (it said `ended None ()`, which read as a bug)."""
+    if kept:
+        return "suspended for the next start"
+    return f"ended {outcome or 'stopped'}" + (f" ({reason})" if reason else "")
 
 
 def real_run_refusal(cluster: Cluster, req: RunMission) -> None:

@@ -1,0 +1,48 @@
+"""Rough edges of the clean-stop path and the CLI's messages (re-verification R4): the controller's log line for
+a mission kept for the next start, the progress line on a pipe while the controller is away, what a lost Ctrl-C
+leads to, and `--render` naming the path it cannot write. Pure."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from typer.testing import CliRunner
+
+from drd.cli.cluster import ProgressGate, unconfirmed_stop
+from drd.cli.missionctl import app
+from drd.daemon.missions import ending_said
+
+
+def test_a_mission_kept_by_a_clean_stop_is_logged_as_suspended_not_ended_none() -> None:
+    assert ending_said(None, "", kept=True) == "suspended for the next start"
+    assert ending_said("failure", "world corridor started again", kept=False) == \
+        "ended failure (world corridor started again)"
+    assert ending_said(None, "", kept=False) == "ended stopped", "journaled as stopped: said so"
+
+
+def test_on_a_pipe_an_unchanged_progress_line_is_written_once_then_every_repeat() -> None:
+    """While the controller was away, a pipe got the same `sim 28.1 s active …` line once a second (13 of them)."""
+    gate = ProgressGate(terminal=False, repeat=30.0)
+    same = "sim    28.1 s  active LocateDarkCorner"
+    written = [t for t in range(60) if gate.due(same, float(t))]
+    assert written == [0, 30], written
+    assert gate.due("sim    28.2 s  active LocateDarkCorner", 31.0), "a line that changed is written"
+    terminal = ProgressGate(terminal=True)
+    assert all(terminal.due(same, float(t)) for t in range(5)), "a terminal gets each one, as before"
+
+
+def test_a_lost_ctrl_c_says_the_mission_resumes_and_how_to_stop_it_for_good() -> None:
+    said = unconfirmed_stop("Corridor-42", "no reply on 'drd/c/executive'", away=True)
+    assert said.startswith("mission Corridor-42: could not confirm the stop (no reply on 'drd/c/executive')")
+    assert "the stop is lost" in said and "resumes the mission" in said and "nobody attached" in said
+    assert "`missionctl stop Corridor-42`" in said
+    assert "if the controller is away" in unconfirmed_stop("Corridor-42", "timeout", away=False)
+
+
+def test_render_to_a_file_of_no_picture_format_names_the_path() -> None:
+    """`--render /dev/full` said `cannot draw full`: the stem, not the file."""
+    mission = Path(__file__).parents[2] / "missions" / "corridor_surveillance.mission"
+    result = CliRunner().invoke(app, ["dry-run", str(mission), "--render", "/dev/full"])
+    assert result.exit_code == 2
+    assert result.stderr.startswith("error: --render /dev/full: cannot draw it"), result.stderr
+    assert ".png" in result.stderr
