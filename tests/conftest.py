@@ -5,7 +5,11 @@ from __future__ import annotations
 import ast
 import fnmatch
 import functools
+import sys
+from collections.abc import Callable
 from pathlib import Path
+from types import FrameType
+from typing import Any
 
 import pytest
 
@@ -74,3 +78,21 @@ def shared_examples() -> Path:
     if not SHARED_EXAMPLES.is_dir():
         pytest.skip(f"normative examples not found at {SHARED_EXAMPLES} (the shared/ folder beside the checkout)")
     return SHARED_EXAMPLES
+
+
+def lines_executed(call: Callable[[], object]) -> int:
+    """The Python lines (and calls) `call` executes: a measure of work that a busy machine does not change (the cost
+    tests compare two input sizes by it; no timing in tests)."""
+    count = 0
+
+    def tracer(frame: FrameType, event: str, arg: Any) -> Any:
+        nonlocal count
+        count += 1
+        return tracer
+
+    sys.settrace(tracer)
+    try:
+        call()
+    finally:
+        sys.settrace(None)
+    return count

@@ -9,16 +9,14 @@ measured slope in seconds per byte is in `docs/design.md`; `bench/compile.py --s
 
 from __future__ import annotations
 
-import sys
 import tracemalloc
 from collections.abc import Callable
-from types import FrameType
-from typing import Any
 
 import pytest
 
 from dsl import compile_text
 from dsl.catalog import Catalog
+from tests.conftest import lines_executed
 
 #: Four times the input may cost at most this many times the work.
 LINEAR = 4.6
@@ -85,19 +83,7 @@ SHAPES: dict[str, tuple[Callable[[int], str], int]] = {
 
 def work(text: str, catalog: Catalog) -> int:
     """The Python lines executed to compile `text`."""
-    count = 0
-
-    def tracer(frame: FrameType, event: str, arg: Any) -> Any:
-        nonlocal count
-        count += 1
-        return tracer
-
-    sys.settrace(tracer)
-    try:
-        compile_text(text, catalog, "cost.mission")
-    finally:
-        sys.settrace(None)
-    return count
+    return lines_executed(lambda: compile_text(text, catalog, "cost.mission"))
 
 
 @pytest.fixture(scope="module", autouse=True)

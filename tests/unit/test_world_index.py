@@ -12,10 +12,8 @@ worlds, generated buildings, the bad-file table and seeded random worlds full of
 from __future__ import annotations
 
 import random
-import sys
 from collections.abc import Iterator
 from pathlib import Path
-from types import FrameType
 from typing import Any
 
 import pytest
@@ -23,6 +21,7 @@ import pytest
 from drd.sim import geometry
 from drd.sim.building import Building, world
 from drd.sim.world import World, WorldError, load_world, parse_world
+from tests.conftest import lines_executed
 from tests.unit.test_sim_world import BAD, base
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -133,19 +132,7 @@ def test_the_grid_finds_every_box_that_meets_the_question() -> None:
 
 def work(data: object) -> int:
     """The Python lines executed to load `data`."""
-    count = 0
-
-    def tracer(frame: FrameType, event: str, arg: Any) -> Any:
-        nonlocal count
-        count += 1
-        return tracer
-
-    sys.settrace(tracer)
-    try:
-        parse_world(data, "cost.yaml")
-    finally:
-        sys.settrace(None)
-    return count
+    return lines_executed(lambda: parse_world(data, "cost.yaml"))
 
 
 def test_loading_a_building_costs_in_proportion_to_its_size() -> None:
