@@ -345,9 +345,16 @@ def live_default(argv: list[str]) -> list[str]:
         out.append(word)
         if word == "--":
             return out + argv[i + 1:]
-        if word == "--foxglove" and (i + 1 == len(argv) or not _ADDRESS.fullmatch(argv[i + 1])):
+        if word == "--foxglove" and (i + 1 == len(argv) or not (_ADDRESS.fullmatch(argv[i + 1])
+                                                                or _meant_as_address(argv[i + 1]))):
             out.append(f"{LIVE_DEFAULT[0]}:{LIVE_DEFAULT[1]}")
     return out
+
+
+def _meant_as_address(word: str) -> bool:
+    """A word after `--foxglove` that is a bad address rather than a mission file (`notahost:abc`): given to the
+    option, which says what it expects (as a mission path it was refused as `notahost:abc:1:1: cannot read`)."""
+    return ":" in word and not word.startswith("-") and not word.endswith(".mission") and not Path(word).exists()
 
 
 _RECORD_OPTION = typer.Option(None, "--record", show_default=False,

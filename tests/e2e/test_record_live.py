@@ -126,6 +126,8 @@ def test_a_live_view_that_cannot_be_served_says_where_and_why(tmp_path: Path) ->
     (["run", "--foxglove", "9000", "m"], ["run", "--foxglove", "9000", "m"]),
     (["run", "--foxglove", "[::1]:9000", "m"], ["run", "--foxglove", "[::1]:9000", "m"]),
     (["run", "--", "--foxglove"], ["run", "--", "--foxglove"]),
+    # a bad address is the option's, which refuses it (it was taken as the mission file: fuzz audit D11)
+    (["dry-run", "--foxglove", "notahost:abc", "m"], ["dry-run", "--foxglove", "notahost:abc", "m"]),
 ])
 def test_foxglove_alone_is_loopbacks_default_port(argv: list[str], expected: list[str]) -> None:
     assert live_default(argv) == expected
