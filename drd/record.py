@@ -48,6 +48,7 @@ from typing import Any
 
 import orjson
 
+from drd import outputs
 from drd.errors import ConfigurationError
 from drd.explain import UnitTypes, blocked, current_blockers
 from drd.runtime import records as rec
@@ -79,21 +80,11 @@ class RecordingError(ConfigurationError):
     """A recording cannot be written or read (the message names the file)."""
 
 
-#: The recordings that stopped on a write error (disk full) and are not said yet, each as one line naming its file:
-#: the run goes on without its recording, and the command says so after its report (`write_failures`).
-_FAILURES: list[str] = []
 #: The recorders with a file open: closed at exit if a command ended without (the SDK's writer must be closed while
 #: the interpreter lives, else its drop panics in Rust).
 _OPEN: weakref.WeakSet[Recorder] = weakref.WeakSet()
 #: The SDK's own logger of a message it could not write to a sink (its first message holds the OS error).
 SINK_LOGGER = "foxglove.log_sink_set"
-
-
-def write_failures() -> list[str]:
-    """The recordings that stopped on a write error since the last call, one line each (then forgotten)."""
-    said = list(_FAILURES)
-    _FAILURES.clear()
-    return said
 
 
 class _SinkErrors(logging.Filter):
@@ -431,13 +422,13 @@ class Recorder:
 
     def failed(self, e: BaseException) -> None:
         """Stop writing the file (closed as it is: its complete chunks stay readable), and keep one line saying
-        why, naming it (`error`, `write_failures`)."""
+        why, naming it (`error`, `drd.outputs.failures`)."""
         if self.error is None:
             why = _SINK.first if _SINK.count > self.sink_errors and _SINK.first else str(e).removeprefix(
                 "FoxgloveError: ")
             self.error = (f"{self.path}: cannot write the recording: {why}; it stops at {self.now:.1f} s of sim"
                           " time (its complete chunks are readable)")
-            _FAILURES.append(self.error)
+            outputs.failed(self.error)
         writer, self.writer = self.writer, None
         _OPEN.discard(self)
         for _ in range(2 if writer is not None else 0):  # after a failed write it refuses once, then lets go

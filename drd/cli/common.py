@@ -23,6 +23,7 @@ import typer
 from rich.console import Console
 from rich.text import Text
 
+from drd import outputs
 from drd.errors import DrdError
 
 if TYPE_CHECKING:  # the mission language loads only for the commands that use it
@@ -196,10 +197,6 @@ def shorten(path: str, width: int) -> str:
     return path[:width - 1 - half] + "…" + path[len(path) - half:]
 
 
-#: Output files that stopped on a write error, one line each naming the file, not yet said (`unwritten`).
-_UNWRITTEN: list[str] = []
-
-
 class OutputFile(io.TextIOWrapper):
     """A file a run writes as it goes (`--trace`): a write error after it opened (a full disk, EIO) stops the file
     there, not the run, and leaves one line naming the file that the command says after its report (`unwritten`)."""
@@ -232,16 +229,7 @@ class OutputFile(io.TextIOWrapper):
     def failed(self, e: OSError) -> None:
         if not self.error:
             self.error = f"{self.path}: cannot write the {self.what}: {e.strerror or e}; it stops there"
-            _UNWRITTEN.append(self.error)
-
-
-def unwritten() -> list[str]:
-    """The output files (a trace, a recording: `drd.record.write_failures`) that stopped on a write error since
-    the last call, one line each."""
-    said = list(_UNWRITTEN)
-    _UNWRITTEN.clear()
-    record = sys.modules.get("drd.record")
-    return said + (record.write_failures() if record is not None else [])
+            outputs.failed(self.error)
 
 
 def open_trace(trace: Path | None) -> IO[str] | None:
@@ -474,7 +462,7 @@ def _run_app(app: Callable[..., object], prog: str,
 def _said_unwritten(code: int) -> None:
     """After the command's own output (its report), the files it could not finish writing, one line each: exit 2
     then (a file the system could not write, as for one it could not open), unless the command already failed."""
-    lines = unwritten()
+    lines = outputs.failures()
     if not lines or code not in (OK, MISSION_FAILED):
         return
     if _Mode.json:

@@ -52,16 +52,17 @@ def test_a_recording_on_a_full_disk_under_json_is_one_json_error(tmp_path: Path)
 def test_a_recorder_whose_writes_fail_mid_run_stops_its_file_and_says_why(capfd: pytest.CaptureFixture[str]) -> None:
     """No world attachment: the first failure is a chunk written while logging (the SDK only logs it), then the
     flush each second refuses; the run goes on, the error keeps the OS's reason, nothing spams stderr."""
-    from drd.record import Recorder, write_failures
+    from drd.outputs import failures
+    from drd.record import Recorder
 
-    write_failures()
+    failures()
     recorder = Recorder(FULL)
     for i in range(2000):
         recorder.json("/drd/light", i * 0.01, {"robot": "scout1", "at": i * 0.01, "fov": 1.0, "regions": [0.5] * 30})
         recorder.poses(i * 0.01, {"ranger1": (i * 0.01, 0.0, 0.0)})
     recorder.end([], 20.0)
     assert recorder.error is not None and "No space left on device" in recorder.error
-    assert recorder.writer is None and write_failures() == [recorder.error]
+    assert recorder.writer is None and failures() == [recorder.error]
     assert "error logging message" not in capfd.readouterr().err
 
 
