@@ -41,7 +41,21 @@ class BusClosed(BusError):
 
 
 class BusTimeout(BusError):
-    """No reply arrived before the timeout (nobody serves the key, or it was too slow)."""
+    """No reply arrived before the timeout (nobody serves the key, or it was too slow). `unreached`: the query ended
+    well before its timeout, so it reached nothing that answers now (no queryable, or no route to one: a router
+    down); a caller may ask again (`after`)."""
+
+    def __init__(self, message: str, unreached: bool = False) -> None:
+        super().__init__(message)
+        self.unreached = unreached
+
+    @classmethod
+    def after(cls, key: str, timeout: float, waited: float) -> BusTimeout:
+        """The error of a call to `key` that got no answer after `waited` of its `timeout` seconds."""
+        if waited < 0.9 * timeout:
+            return cls(f"no reply on {key!r}: nothing answers there now (the query ended after {waited:.1f} s, before"
+                       f" its {timeout:g} s timeout)", unreached=True)
+        return cls(f"no reply on {key!r} within {timeout:g} s")
 
 
 class RemoteError(BusError):
@@ -234,7 +248,7 @@ class Bus(ABC):
             if answer is None:
                 answer = reply.payload
         if answer is None:
-            raise BusTimeout(no_reply(key, timeout, time.monotonic() - asked))
+            raise BusTimeout.after(key, timeout, time.monotonic() - asked)
         return answer
 
     # -- liveliness
@@ -347,15 +361,6 @@ class Bus(ABC):
         if is_error:
             return Reply(key=key, error=msg.reason if isinstance(msg, ErrorReply) else repr(msg))
         return Reply(msg, key)
-
-
-def no_reply(key: str, timeout: float, waited: float) -> str:
-    """Why a call got no answer: nobody answered in `timeout`, or (zenoh ended the query well before it) nothing on
-    the bus answers there now (no queryable, or no route to one: a router down)."""
-    if waited < 0.9 * timeout:
-        return (f"no reply on {key!r}: nothing answers there now (the query ended after {waited:.1f} s, before its"
-                f" {timeout:g} s timeout)")
-    return f"no reply on {key!r} within {timeout:g} s"
 
 
 class BusWrapper(Bus):

@@ -47,8 +47,7 @@ from .base import (
     Token,
     TokenCallback,
     log,
-    no_reply,
-)
+    )
 from .keys import check_key_expr
 from .messages import MAX_SIZE, MalformedMessage, Message, decode, encode
 
@@ -234,7 +233,7 @@ class ZenohBus(Bus):
         if refused is not None:
             raise RemoteError(refused.key or key, refused.error or "")
         if answer is None:
-            raise BusTimeout(no_reply(key, timeout, time.monotonic() - asked))
+            raise BusTimeout.after(key, timeout, time.monotonic() - asked)
         return answer
 
     def _ask(self, key: str, data: bytes | None, timeout: float) -> list[zenoh.Sample | bytes]:

@@ -4,13 +4,16 @@ that answer as a Creator does (the Creator itself is tested across real processe
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+import threading
+import time
+from collections.abc import Iterator, Mapping
 from typing import Any
 
 import pytest
 
 from drd.bus import Message, Query, Reply
 from drd.bus.local import LocalBus
+from drd.cluster import remote
 from drd.cluster.remote import (
     ComponentBatch,
     ComponentBatchReply,
@@ -34,14 +37,26 @@ class Hosts:
         self.asked: list[frozenset[str]] = []
         self.why: list[dict[str, str]] = []  # each call's exclusions with their reasons
         self.failing: set[str] = set()  # hosts whose Creator answers a start with an error
-        self.queryables = {host: bus.serve(f"drd/t/host/{host}/creator", self._creator(host)) for host in serving}
+        self.silent: set[str] = set()  # hosts whose Creator takes calls and answers none (gone as they came)
+        self.slow: set[str] = set()  # hosts whose Creator takes 0.2 s over a start (longer than it is given)
+        self.terms: list[tuple[str, float, int]] = []  # (op, term, generation) of every call
+        self.queryables = {host: self.serve(host) for host in serving}
+
+    def serve(self, host: str) -> Any:
+        """`host`'s Creator, on the bus from now on."""
+        return self.bus.serve(f"drd/t/host/{host}/creator", self._creator(host))
 
     def _creator(self, host: str) -> Any:
-        def serve(query: Query) -> Message | Reply:
+        def serve(query: Query) -> Message | Reply | None:
             msg = query.payload
             calls = msg.calls if isinstance(msg, ComponentBatch) else [msg]
             assert all(isinstance(c, ComponentCall) for c in calls)
             self.calls += [(host, c.op) for c in calls if isinstance(c, ComponentCall)]
+            self.terms += [(c.op, c.term, c.generation) for c in calls if isinstance(c, ComponentCall)]
+            if host in self.silent:
+                return None
+            if host in self.slow and any(isinstance(c, ComponentCall) and c.op == "start" for c in calls):
+                time.sleep(0.2)
             replies = [ComponentReply(status="running" if c.op == "step" else "",
                                       error="Wait failed to start here: no worker" if host in self.failing
                                       and c.op == "start" else "") for c in calls]
@@ -57,9 +72,16 @@ class Hosts:
         raise ComponentError(f"no host can run {component}: all excluded")
 
 
-def movable(hosts: Hosts, **kw: Any) -> tuple[RemoteComponent, list[str]]:
+@pytest.fixture(autouse=True)
+def quick_start(monkeypatch: pytest.MonkeyPatch) -> Iterator[None]:
+    """A start is given the router's 0.05 s here, not 5 s: a host that does not answer it is not asked again."""
+    monkeypatch.setattr(remote, "START_TIMEOUT", 0.05)
+    yield
+
+
+def movable(hosts: Hosts, timeout: float = 0.05, **kw: Any) -> tuple[RemoteComponent, list[str]]:
     router = ComponentRouter(hosts.bus, "t", {}, "controller", local={}, mission="m",
-                             world="corridor", timeout=0.05, dead=lambda h: h in hosts.dead, place=hosts.place, **kw)
+                             world="corridor", timeout=timeout, dead=lambda h: h in hosts.dead, place=hosts.place, **kw)
     comp = RemoteComponent("Wait", router)
     logs: list[str] = []
     comp.setup(Context("M/Wait", {"duration": 5.0}, {}, lambda ev, **f: None, logs.append, lambda: 0.0))
@@ -95,6 +117,50 @@ def test_a_host_whose_start_fails_is_excluded_and_the_next_one_tried() -> None:
     assert comp.host == "b"
     assert hosts.asked == [frozenset(), frozenset({"a"})]
     assert hosts.calls == [("a", "start"), ("b", "start")]
+
+
+def test_a_call_that_reached_nothing_is_asked_again_until_the_host_answers(monkeypatch: pytest.MonkeyPatch) -> None:
+    """A router lost on the way (two routers, e2e test_cluster_two_routers): the routes come back through the
+    other one a moment later. The start goes to the host the policy chose once its Creator is reachable again,
+    and a step does too, its host not taken for lost (both used to fail at once and exclude the host)."""
+    monkeypatch.setattr(remote, "START_TIMEOUT", 5.0)
+    hosts = Hosts(LocalBus(), ["b"], ["a", "b"])
+    threading.Timer(0.2, lambda: hosts.queryables.update(a=hosts.serve("a"))).start()
+    comp, _ = movable(hosts, timeout=5.0)
+    comp.start()
+    assert comp.host == "a" and hosts.asked == [frozenset()] and hosts.calls == [("a", "start")]
+    hosts.queryables.pop("a").close()
+    threading.Timer(0.2, lambda: hosts.queryables.update(a=hosts.serve("a"))).start()
+    assert comp.step(0.1) is Status.RUNNING
+    assert comp.host == "a" and not comp.router.gone and hosts.calls[-1] == ("a", "step")
+
+
+def test_a_host_the_view_has_down_is_not_asked_again(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Asking again is for a host the cluster view still has up: one whose token vanished where no router brings
+    it back is down at once, and the next host is tried without waiting out the start's timeout."""
+    monkeypatch.setattr(remote, "START_TIMEOUT", 5.0)
+    hosts = Hosts(LocalBus(), ["a", "b"], ["a", "b"])
+    hosts.silent.add("a")  # it takes the call, answers none, and its token vanishes meanwhile:
+    hosts.queryables["a"] = hosts.bus.serve("drd/t/host/a/creator", lambda q: hosts.dead.add("a"))
+    comp, _ = movable(hosts)
+    comp.start()
+    assert comp.host == "b" and hosts.asked == [frozenset(), frozenset({"a"})]
+    assert [c for c in hosts.calls if c[1] == "start"] == [("a", "start"), ("b", "start")], "a asked once"
+
+
+def test_the_instance_of_a_start_that_timed_out_is_terminated_with_the_starts_term() -> None:
+    """The terminate sent after a start that timed out (the host may register the instance late) carries the
+    start's term and generation: a Creator refuses a call of term 0 as an older controller's, so the late
+    instance ran on unseen (it was sent without them)."""
+    hosts = Hosts(LocalBus(), ["a", "b"], ["a", "b"])
+    hosts.slow.add("a")
+    comp, _ = movable(hosts, term=7.5, generation=3)
+    comp.start()
+    assert comp.host == "b"
+    deadline = time.monotonic() + 10
+    while ("terminate", 7.5, 3) not in hosts.terms and time.monotonic() < deadline:
+        time.sleep(0.01)
+    assert ("terminate", 7.5, 3) in hosts.terms and ("a", "terminate") in hosts.calls, hosts.terms
 
 
 def test_hosts_that_timed_out_in_this_mission_are_not_offered_again() -> None:
