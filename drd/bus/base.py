@@ -30,6 +30,8 @@ M = TypeVar("M", bound=Message)
 log = logging.getLogger("drd.bus")
 
 DEFAULT_TIMEOUT = 2.0
+#: Seconds between two asks of a call that reached nothing (`Bus.call_reaching`).
+REASK = 0.05
 
 
 class BusError(BusFailure):
@@ -250,6 +252,27 @@ class Bus(ABC):
         if answer is None:
             raise BusTimeout.after(key, timeout, time.monotonic() - asked)
         return answer
+
+    def call_reaching(self, key: str, payload: Message | None, timeout: float,
+                      gone: Callable[[], bool] = lambda: False) -> Message:
+        """`call`, asked again every `REASK` seconds while it reaches nothing (`BusTimeout.unreached`: no route
+        now; with two routers, the one on the way was lost and the routes come back through the other in a
+        moment), until `timeout` or until `gone()` (the cluster view has the callee down: its token vanished
+        where no router brings it back). Asking again does nothing twice: nothing saw the query."""
+        deadline = time.monotonic() + timeout
+        left, asks = timeout, 1
+        while True:
+            try:
+                return self.call(key, payload, timeout=left)
+            except BusTimeout as e:
+                if not e.unreached or gone():
+                    raise
+                if time.monotonic() + 2 * REASK > deadline:
+                    raise BusTimeout(f"no reply on {key!r}: nothing answered there for {timeout:g} s (asked {asks}"
+                                     " times: no route to it)", unreached=True) from None
+            time.sleep(REASK)
+            asks += 1
+            left = deadline - time.monotonic()
 
     # -- liveliness
     @abstractmethod

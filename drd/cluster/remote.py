@@ -38,7 +38,7 @@ from collections.abc import Callable, Iterable, Iterator, Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
-from drd.bus import Bus, BusError, BusTimeout, Message, RemoteError, message
+from drd.bus import Bus, BusError, Message, RemoteError, message
 from drd.cluster.gates import GateUpdate, RemoteGates, deliver, take_pending
 from drd.errors import ComponentFailure
 from drd.runtime.component import Component, Context, Status, step_status
@@ -146,8 +146,6 @@ class ControllerFrozen(ComponentError):
 
 #: Seconds a Creator may take to register a started instance (its first start on a host may load its module).
 START_TIMEOUT = 5.0
-#: Seconds between two asks of a call that reached nothing (a router lost: the routes come back through another).
-REASK = 0.05
 
 
 @dataclass
@@ -325,7 +323,7 @@ class ComponentRouter:
         timeout = max(self.timeout, START_TIMEOUT) if moving else self.timeout
         sent = time.monotonic()
         try:
-            reply = self._ask(host, msg, timeout)
+            reply = self.bus.call_reaching(self.creator_key(host), msg, timeout, lambda: self.dead(host))
         except RemoteError as e:
             raise ComponentError(f"{host}'s Creator refused {op} of {path}: {e.reason}") from None
         except BusError as e:
@@ -341,27 +339,6 @@ class ComponentRouter:
             raise HostDown(f"host {host} did not answer {op} within {timeout:g} s ({e})") from None
         deliver(getattr(reply, "records", None), self.records, self.gates.seen if self.gates is not None else None)
         return reply, time.perf_counter() - t0
-
-    def _ask(self, host: str, msg: ComponentCall | ComponentBatch, timeout: float) -> Any:
-        """`host`'s Creator's answer to `msg`. A call that reached nothing (no route now: with two routers, the one
-        on the way was lost and the routes come back through the other in a moment) is asked again until its
-        timeout, unless the cluster view has the host down meanwhile (its token vanished where there is no router
-        to come back through): the Creator never saw it, so asking again does nothing twice."""
-        key = self.creator_key(host)
-        budget, asks = timeout, 1
-        deadline = time.monotonic() + budget
-        while True:
-            try:
-                return self.bus.call(key, msg, timeout=timeout)
-            except BusTimeout as e:
-                if not e.unreached or self.dead(host):
-                    raise
-                if time.monotonic() + 2 * REASK > deadline:
-                    raise BusTimeout(f"no reply on {key!r}: nothing answered there for {budget:g} s (asked {asks}"
-                                     " times: no route to it)", unreached=True) from None
-            time.sleep(REASK)
-            asks += 1
-            timeout = deadline - time.monotonic()
 
     def take_halts(self) -> None:
         """Take now what the devices' hosts recorded while this controller was away (they stopped the robots when

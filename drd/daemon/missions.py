@@ -292,7 +292,8 @@ class MissionRunner:
     def sim(self, req: SimRequest) -> SimReply:
         if self.sim_service is not None:
             return self.sim_service.handle(req)
-        reply = self.bus.call(sim_key(self.cluster.name), req, timeout=self.patience)
+        gone = functools.partial(self.host_down, self.simulator or "")  # asked again while it is not down
+        reply = self.bus.call_reaching(sim_key(self.cluster.name), req, self.patience, gone)
         if not isinstance(reply, SimReply):
             raise ValueError(f"the simulator answered a {type(reply).TYPE}")
         return reply
