@@ -42,15 +42,15 @@ class Layout(PostLex):
         at the token reached."""
         self.history: list[Token] = []
         self.pending: list[Token] = []  # pulled from the lexer, not yet given to the parser
-        self.depth = 0
+        self.openers: list[Token] = []  # the `(` and `[` not closed yet, innermost last (where one was left open)
         self.deadline = deadline
         self.count = 0
 
-    def save(self) -> tuple[list[Token], list[Token], int]:
-        return self.history, self.pending, self.depth
+    def save(self) -> tuple[list[Token], list[Token], list[Token]]:
+        return self.history, self.pending, self.openers
 
-    def restore(self, state: tuple[list[Token], list[Token], int]) -> None:
-        self.history, self.pending, self.depth = state
+    def restore(self, state: tuple[list[Token], list[Token], list[Token]]) -> None:
+        self.history, self.pending, self.openers = state
 
     def process(self, stream: Iterator[Token]) -> Iterator[Token]:
         replay, self.pending = self.pending, []
@@ -62,7 +62,7 @@ class Layout(PostLex):
                 line, column = tok.line or 1, tok.column or 1
                 raise OverBudget(Span("", line, column, line, column + max(1, len(tok.value))))
             if kind == "_SEP":
-                if self.depth > 0:
+                if self.openers:
                     continue
                 if held is not None and held.type == "_SEP":  # fold a run into one
                     held = Token.new_borrow_pos("_SEP", held.value + tok.value, held)
@@ -73,9 +73,9 @@ class Layout(PostLex):
                 self.pending = []
                 held = None
             if kind in OPENERS:
-                self.depth += 1
-            elif kind in CLOSERS:
-                self.depth = max(0, self.depth - 1)
+                self.openers.append(tok)
+            elif kind in CLOSERS and self.openers:
+                self.openers.pop()
             if kind in ("_SEP", "SLASH"):
                 held = tok
                 continue

@@ -544,14 +544,18 @@ class _Recovery:
         return True
 
     def report(self, e: UnexpectedInput) -> None:
-        d = syntax_diagnostic(e, self.parser.layout.history, self.file, self.text)
+        layout = self.parser.layout
+        d = syntax_diagnostic(e, layout.history, self.file, self.text, layout.openers)
         if d.span.line not in self.lines:  # one error per line: the rest are usually echoes
             self.lines.add(d.span.line)
             self.diagnostics.append(d)
 
     def _repair(self, e: UnexpectedToken) -> None:
-        """Insert the one missing token that lets the parser accept the bad one, if any."""
+        """Insert the one missing token that lets the parser accept the bad one, if any (or close the bracket
+        left open before it, see `left_open`)."""
         ip = e.interactive_parser
+        if self._close(e):
+            return
         for name in sorted(ip.accepts() - {"$END"}, key=_repair_order):  # type: ignore[no-untyped-call]
             trial = ip.copy(deepcopy_values=False)  # type: ignore[no-untyped-call]  # a deep copy costs the AST so far
             try:
@@ -563,6 +567,29 @@ class _Recovery:
                     return
             except UnexpectedInput:
                 continue
+
+    def _close(self, e: UnexpectedToken) -> bool:
+        """A `(` or `[` left open before the bad token's line (`left_open`): close it, end the item there, and
+        go on with the bad token as the next item's start, if the parser takes it so. Whether it did."""
+        layout = self.parser.layout
+        opener = left_open(e.token, layout.history, layout.openers)
+        if opener is None:
+            return False
+        closer = "RPAR" if opener.type == "LPAR" else "RSQB"
+        for inserted in ([closer], [closer, "_SEP"]):
+            trial = e.interactive_parser.copy(deepcopy_values=False)  # type: ignore[no-untyped-call]
+            try:
+                for name in inserted:
+                    trial.feed_token(self._dummy(name, e.token))
+            except UnexpectedInput:
+                return False
+            if e.token.type in trial.accepts():
+                for name in inserted:
+                    e.interactive_parser.feed_token(self._dummy(name, e.token))
+                e.interactive_parser.feed_token(e.token)
+                layout.openers.pop()  # closed: the newlines after it end items again
+                return True
+        return False
 
     def _dummy(self, name: str, at: Token) -> Token:
         values = {"NAME": "_", "INT": "0", "FLOAT": "0.0", "DURATION": "0s", "STRING": '""', "_SEP": "\n",
@@ -578,9 +605,21 @@ def _repair_order(name: str) -> tuple[int, str]:
     return (preferred.index(name) if name in preferred else len(preferred), name)
 
 
-def syntax_diagnostic(e: UnexpectedInput, history: Sequence[Token], file: str, text: str = "") -> Diagnostic:
+def left_open(tok: Token, history: Sequence[Token], openers: Sequence[Token]) -> Token | None:
+    """The `(` or `[` still open when `tok`, a new item's start or a block's `}`, came on a line of its own, if
+    any: newlines inside brackets are not separators (`Layout`), so a `)` left out at a line's end reads as if
+    the next item went on the argument list; the bracket is what the user forgot, not a separator."""
+    earlier = [t for t in history if t is not tok]
+    if not openers or not earlier or tok.type not in ITEM_STARTS | {"RBRACE"} \
+            or (tok.line or 0) <= (earlier[-1].end_line or 0):
+        return None
+    return openers[-1]
+
+
+def syntax_diagnostic(e: UnexpectedInput, history: Sequence[Token], file: str, text: str = "",
+                      openers: Sequence[Token] = ()) -> Diagnostic:
     """Translate a lark error into a located message in the user's words (`text`, the whole source, lets a
-    missing `}` name the block that was never closed)."""
+    missing `}` name the block that was never closed; `openers`, the brackets still open, a missing `)`)."""
     if isinstance(e, UnexpectedCharacters):
         ch = e.char if hasattr(e, "char") else "?"
         span = Span(file, e.line, e.column, e.line, e.column + 1)
@@ -599,6 +638,12 @@ def syntax_diagnostic(e: UnexpectedInput, history: Sequence[Token], file: str, t
     unit = _unknown_unit(file, prev, tok)
     if unit is not None:
         return unit
+    opener = left_open(tok, history, openers)
+    if opener is not None and prev is not None:
+        closer = "`)`" if opener.type == "LPAR" else "`]`"
+        return Diagnostic("syntax", f"syntax: expected {closer} after {_show(prev)}: the {_show(opener)} on line"
+                                    f" {opener.line} is never closed", _after(file, prev),
+                          f"add {closer} at the end of line {prev.end_line}")
     hint = _keyword_hint(tok, e.expected)
     if prev is not None and tok.type == "LPAR" and len(earlier) >= 2 and earlier[-2].type == "ARROW":
         return Diagnostic("syntax", f"syntax: a transition's target is a state's name, not a call: "

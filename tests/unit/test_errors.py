@@ -23,6 +23,10 @@ ERRORS: list[tuple[str, str, str, str | None]] = [
     # ---- syntax
     ("arrow-without-target", m("  needs r: Ranger\n  FollowCorridor ->"), "3:20 syntax: expected a state or "
      "done/fail after ->", None),
+    ("unclosed-paren-before-next-item", m("  Wait(duration: 1s\n  Observe(duration: 2s)"),
+     "2:20 syntax: expected `)` after `1s`: the `(` on line 2 is never closed", "add `)` at the end of line 2"),
+    ("unclosed-paren-before-brace", m("  Wait(duration: 1s"),
+     "2:20 syntax: expected `)` after `1s`: the `(` on line 2 is never closed", None),
     ("missing-separator", m("  needs r: Ranger\n  FollowCorridor(speed: 0.5) AvoidObstacles"),
      "3:29 syntax: expected a newline or ; after `)`", "starts a new item"),
     ("glued-keyword", "missionpatrol M {}\n", "1:1 syntax: expected behavior, import or mission, got `missionpatrol`",
@@ -216,6 +220,19 @@ def test_several_syntax_errors_in_one_run(catalog: Catalog) -> None:
     assert [(d.span.line, d.message) for d in result.diagnostics] == [
         (2, "syntax: expected a state or done/fail after ->"),
         (3, "syntax: expected a state or done/fail after ->")]
+
+
+def test_a_paren_left_open_is_one_error_and_the_items_after_it_are_read(catalog: Catalog) -> None:
+    """Interfaces audit D1: the `)` forgotten at a line's end was reported as a missing newline, with a hint to
+    put the (already separate) next item on its own line, and error recovery then reported a second, spurious
+    error inside the next item. Now one error; recovery closes the `(` there, so a real mistake further on is
+    still found, and a wrapped argument list is not taken for one."""
+    source = m("  Wait(duration: 1s\n  Observe(duration: 2s)\n  Wait(duration 3s)")
+    got = [(d.span.line, d.message) for d in compile_text(source, catalog, "t.mission").diagnostics]
+    assert got == [(2, "syntax: expected `)` after `1s`: the `(` on line 2 is never closed"),
+                   (4, "syntax: expected `:`, got `3s`")], got
+    wrapped = m("  Wait(\n      duration: 1s\n  )")
+    assert compile_text(wrapped, catalog, "t.mission").diagnostics == []
 
 
 def test_rendered_error_shows_line_and_caret(catalog: Catalog) -> None:
