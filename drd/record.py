@@ -317,7 +317,7 @@ class Recorder:
 
         reach = min(max_range, 3.0)
         arc = [(reach * math.cos(a), reach * math.sin(a)) for a in (-fov / 2 + fov * k / 8 for k in range(9))]
-        entity = SceneEntity(frame_id=robot, id=f"fov/{robot}", frame_locked=True,
+        entity = SceneEntity(timestamp=_stamp(at), frame_id=robot, id=f"fov/{robot}", frame_locked=True,
                              lines=[_line([(0.0, 0.0), *arc, (0.0, 0.0)], _color(SCOUT_COLOUR, 0.6), 0.02, True)])
         self.update_world(at, [(f"fov/{robot}", entity)])
 
@@ -343,7 +343,7 @@ class Recorder:
     def door(self, door: str, at: float, state: str) -> None:
         ends = self.doors.get(door)
         if ends is not None:
-            self.update_world(at, [_door(door, ends[0], ends[1], DoorState(state))])
+            self.update_world(at, [_door(door, ends[0], ends[1], DoorState(state), at)])
 
     def record(self, mission: str, r: rec.Record, seq: int | None = None) -> None:
         """One trace record of `mission`: on `/drd/records`, and into its active configuration (`/drd/active`).
@@ -504,10 +504,12 @@ def _building(world: World) -> list[tuple[str, Any]]:
     return list(zip(ids, out, strict=True))
 
 
-def _door(door_id: str, a: tuple[float, float], b: tuple[float, float], state: DoorState) -> tuple[str, Any]:
+def _door(door_id: str, a: tuple[float, float], b: tuple[float, float], state: DoorState,
+          at: float = 0.0) -> tuple[str, Any]:
+    """A door's entity as it is from sim time `at` (its timestamp, as the message's log time)."""
     from foxglove.messages import SceneEntity
 
-    return f"door/{door_id}", SceneEntity(frame_id="world", id=f"door/{door_id}",
+    return f"door/{door_id}", SceneEntity(timestamp=_stamp(at), frame_id="world", id=f"door/{door_id}",
                                           lines=[_line([a, b], _color(DOOR_COLOURS[DoorState(state)]), 0.12)])
 
 
@@ -810,7 +812,7 @@ def read(path: Path | str) -> Recording:
             except damaged:
                 pass
     except (OSError, ValueError) + damaged as e:
-        raise RecordingError(f"{path}: cannot read it as a drd recording: {e}") from e
+        raise RecordingError(f"{path}: cannot read it as a drd recording: {_unreadable(path, e)}") from e
     if not out.records and not out.runs:
         raise RecordingError(f"{path}: no drd run in it")
     if out.damage is None and not out.runs:
@@ -836,6 +838,20 @@ def _damaged() -> tuple[type[BaseException], ...]:
         kinds.append(ZstdError)
     return tuple(kinds)
 
+
+
+def _unreadable(path: Path, e: BaseException) -> str:
+    """Why a file is no recording, in words: an empty or very short file's reader error says nothing a user
+    follows (an empty message, or `struct`'s "unpack requires a buffer of 4 bytes")."""
+    try:
+        size = path.stat().st_size
+    except OSError:
+        return _reason(e)
+    if size == 0:
+        return "the file is empty"
+    if isinstance(e, struct.error) or not str(e).strip():
+        return f"it ends after {size:,} bytes, before its first complete MCAP record (cut short, or not MCAP)"
+    return _reason(e)
 
 
 def _reason(e: BaseException) -> str:

@@ -115,7 +115,7 @@ def read_trace(lines: Iterable[bytes], name: str) -> list[dict[str, Any]]:
         try:
             record = json.loads(text)
         except json.JSONDecodeError as e:
-            raise TraceError(f"not a JSON record: {e.msg} at column {e.colno}", where=where) from None
+            raise TraceError(f"not a JSON record: {e.msg} (column {e.colno})", where=where) from None
         problem = record_problem(record)
         if problem is not None:
             raise TraceError(problem, where=where)

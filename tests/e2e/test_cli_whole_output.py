@@ -83,7 +83,7 @@ def read_all(fd: int) -> Iterator[bytes]:
     ([GOOD_TRACE[0], '{"kind":"command","at":"x","path":"M/a"}'], 2, '`at` is "x", not a number'),
     ([GOOD_TRACE[0], '{"kind":"command"}'], 2, "`command` record without `at`"),
     ([*GOOD_TRACE[:2], '{"kind": "released", "at": 2'], 3,
-     "not a JSON record: Expecting ',' delimiter at column 29"),
+     "not a JSON record: Expecting ',' delimiter (column 29)"),
     (['{"kind":"command","at":1,"path":"M/a","method":"stop","epoch":1,"accepted":true,"reason":""}'], 1,
      "`command` record without `device`"),
 ])

@@ -68,6 +68,18 @@ def test_a_file_that_is_not_a_recording_is_refused_clearly(tmp_path: Path) -> No
     assert "Traceback" not in done.stderr
 
 
+@pytest.mark.parametrize(("data", "why"), [
+    (b"", "the file is empty"),
+    (b"\x89MCAP0\r\n\x01\x10\x00\x00\x00\x00\x00\x00\x00\x00",
+     "it ends after 18 bytes, before its first complete MCAP record (cut short, or not MCAP)")])
+def test_an_empty_or_very_short_file_says_so(tmp_path: Path, data: bytes, why: str) -> None:
+    """Interfaces audit D5: an empty file's reason was empty, a 20-byte one's was `struct`'s "unpack requires a
+    buffer of 4 bytes"."""
+    (tmp_path / "x.mcap").write_bytes(data)
+    done = missionctl("replay", "x.mcap", cwd=tmp_path)
+    assert done.returncode == 2 and f"x.mcap: cannot read it as a drd recording: {why}" in done.stderr, done.stderr
+
+
 def test_replay_at_shows_the_mission_and_every_robot_at_that_time(tmp_path: Path) -> None:
     run = missionctl("dry-run", str(CORRIDOR), "--config", str(ROOT / "hosts.yaml"), "--until", "30", "--record",
                      "run.mcap", cwd=tmp_path)

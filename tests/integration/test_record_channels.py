@@ -130,6 +130,9 @@ def test_camera_frames_light_and_sightings_are_what_the_cameras_gave(corridor: R
     assert light == [(robot, at, result) for robot, at, _args, result in corridor.reads["brightness"]]
     fovs = [e for topic, _s, _t, m in messages if topic == "/drd/world" for e in m.entities if e.id.startswith("fov/")]
     assert sorted(e.frame_id for e in fovs) == sorted({robot for robot, *_ in corridor.reads["camera"]})
+    stamps = [(t, e.timestamp.seconds * 10**9 + e.timestamp.nanos) for topic, _s, t, m in messages
+              if topic == "/drd/world" and t > 0 for e in m.entities]  # the scene's changes after the start
+    assert stamps and all(t == stamp for t, stamp in stamps), "each entity stamped with its change's time"
 
 
 def test_each_launch_and_its_landing(corridor: Run) -> None:

@@ -69,7 +69,7 @@ def test_every_record_drd_writes_reads_back() -> None:
     ('{"kind":"entered","at":NaN,"path":"M","state":"M"}', "`at` is NaN, not a number"),
     ('{"kind":"entered","at":1,"path":"M","state":"M","seq":true}', "`seq` is true, not an integer"),
     ('[1, 2]', "a record is a JSON object, not a list"),
-    ('{"kind": "command", "at": 1', "not a JSON record: Expecting ',' delimiter at column 28"),
+    ('{"kind": "command", "at": 1', "not a JSON record: Expecting ',' delimiter (column 28)"),
 ])
 def test_a_line_that_is_not_a_record_is_an_error_at_its_line(text: str, message: str) -> None:
     good = '{"kind":"entered","at":0,"path":"M","state":"M"}'
