@@ -607,7 +607,9 @@ class Daemon:
     def _on_announce(self, sample: Sample) -> None:
         msg, host = sample.payload, _host_of(sample.key)
         if isinstance(msg, Announcement):
-            if msg.host == self.host and (msg.pid, msg.started) != (os.getpid(), self.started):
+            # another daemon as this host announces under this host's key: one that names this host under its own
+            # key is a peer faking it (security audit D1: a worker's own credentials stopped the controller)
+            if msg.host == self.host and host == self.host and (msg.pid, msg.started) != (os.getpid(), self.started):
                 newer = (self.started, os.getpid()) > (msg.started, msg.pid)  # the later one gives way
                 with self._lock:  # two daemons claim this host (they met after both started): say so
                     self._record("conflict", self.host, f"another drd (pid {msg.pid}) runs as host {self.host};"

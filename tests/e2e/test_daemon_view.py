@@ -389,12 +389,15 @@ def test_the_daemon_refuses_and_counts_what_it_cannot_use(cluster: Cluster, cata
         tool.put(keys.announce("ranger2"), announcement("ranger1"))
         [reply] = tool.request(keys.db("controller", "query"), TraderRequest("Camra"))
         assert reply.error is not None and "unknown type Camra (did you mean Camera?)" in reply.error
+        tool.put(keys.announce("ranger2"), Announcement("controller", "lab", 1, 0.0, [], [], [], {}, ""))
+        assert all(e.kind != "conflict" for e in daemon.events) and "conflict" not in daemon.stop_reason, (
+            "a peer naming this host under another host's key is refused, not obeyed (security audit D1)")
         tool.put(keys.announce("controller"), Announcement("controller", "lab", 1, 0.0, [], [], [], {}, ""))
         assert daemon.events[-1].kind == "conflict" and "another drd (pid 1) runs as host controller" in (
             daemon.events[-1].detail)
         status = daemon.status()
         assert status.bus["malformed"] == 7
-        assert sum(status.rejected.values()) == 8
+        assert sum(status.rejected.values()) == 9
     finally:
         daemon.close()
 
