@@ -241,10 +241,12 @@ def password_cluster(folder: Path, names: Sequence[str], security: str, users: d
 
 def assert_spoofing_fails(cluster: DaemonCluster, rogue: Any, victim: str,
                           view: Callable[[], dict[str, dict[str, Any]]]) -> None:
-    """`rogue` (a client session) fakes `victim`'s load twice as often as it reports, and calls its Creator: the
-    call gets no answer, and the hosts' `view()` (host -> its row) never shows the fake load."""
+    """`rogue` (a client session) fakes `victim`'s load twice as often as it reports, calls its Creator and asks
+    the executive to stop every mission: neither call gets an answer (a worker's credentials may not stop
+    missions either: security audit D3), and the hosts' `view()` (host -> its row) never shows the fake load."""
     from drd.bus import BusTimeout, LoadReport
     from drd.cluster.remote import ComponentCall
+    from drd.executive_messages import MissionCommand
 
     stop = threading.Event()
 
@@ -260,6 +262,8 @@ def assert_spoofing_fails(cluster: DaemonCluster, rogue: Any, victim: str,
         with pytest.raises(BusTimeout):  # only a controller calls a Creator: dropped where it arrives
             rogue.bus.call(f"drd/{cluster.name}/host/{victim}/creator", ComponentCall("retire", "Short-1", ""),
                            timeout=2.0)
+        with pytest.raises(BusTimeout):  # an operator's (or the administrators') to ask: dropped where it arrives
+            rogue.bus.call(f"drd/{cluster.name}/executive", MissionCommand("stop"), timeout=2.0)
         for _ in range(3):
             row = view()[victim]
             assert row["cpu"] != 99.5 and row["instances"] != 42, row

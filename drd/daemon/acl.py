@@ -73,8 +73,9 @@ def _per_host(cluster: Cluster, root: str, field: str) -> tuple[list[dict[str, A
     speaks for its own host only. It publishes, serves,
     answers and declares tokens under no other host's keys (`host/<other>`, `instance/<other>`); a host that is no
     controller serves and publishes none of the controller's keys and calls no Creator; a host that is not the
-    simulator's serves neither of its keys. So a daemon's credentials cannot fake another host's load, liveliness
-    or announcement, answer for it, or command a Creator. Where the rules apply: with tls on every link (mutual);
+    simulator's serves neither of its keys; a host that is no controller asks none of the operators' services
+    either (run, stop, move or tune a mission: security audit D3). So a daemon's credentials cannot fake another
+    host's load, liveliness or announcement, answer for it, command a Creator, or stop a mission. Where the rules apply: with tls on every link (mutual);
     with a password on every link the daemon opened (that authentication is one-way), so with routers on every
     link."""
     sending = ["put", "delete", "declare_queryable", "reply", "liveliness_token"]
@@ -89,8 +90,8 @@ def _per_host(cluster: Cluster, root: str, field: str) -> tuple[list[dict[str, A
             rules.append({"id": f"not-for-others-{host.name}", "messages": sending, "flows": ["ingress"],
                           "permission": "deny", "key_exprs": keys})
             ids.append(f"not-for-others-{host.name}")
-        if Role.CONTROLLER not in host.roles:
-            ids += ["not-a-controller", "no-creator-calls"]
+        if Role.CONTROLLER not in host.roles:  # nor does it run, stop, move or tune missions: an operator's to ask
+            ids += ["not-a-controller", "no-creator-calls", "operators-only"]
         if Role.SIMULATOR not in host.roles:
             ids.append("not-the-simulator")
         subjects.append({"id": f"host-{host.name}", field: [host.name]})

@@ -131,7 +131,7 @@ def test_per_host_identities_let_each_daemon_speak_only_for_its_own_host(tmp_pat
     subjects = {s["id"]: s["usernames"] for s in acl["subjects"]}
     assert subjects["host-ranger1"] == ["ranger1"]
     assert policies["host-ranger1"] == {"not-for-others-ranger1", "not-a-controller", "no-creator-calls",
-                                        "not-the-simulator"}
+                                        "not-the-simulator", "operators-only"}
     assert policies["host-controller"] == {"not-for-others-controller"}
     others = rules["not-for-others-ranger1"]["key_exprs"]
     assert "drd/lab/host/ranger2/**" in others and "drd/lab/host/controller" in others
