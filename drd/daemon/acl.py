@@ -29,6 +29,9 @@ from drd.hosts import Cluster, Role, SecurityMode
 #: What only daemons may ask, and what an observer may not ask either, under `drd/<cluster>/`.
 DAEMONS_ONLY = ("host/*/creator", "sim")
 OPERATORS_ONLY = ("missions/run", "missions/migrate", "executive", "host/*/tune")
+#: Every kind of message zenoh's access control knows (what a named subject is allowed under a default of deny).
+ALL_MESSAGES = ["put", "delete", "declare_subscriber", "query", "declare_queryable", "reply", "liveliness_token",
+                "declare_liveliness_subscriber", "liveliness_query"]
 #: What a client never sends: it publishes, serves and answers nothing.
 NEVER_FROM_CLIENTS = ["put", "delete", "declare_queryable", "reply", "liveliness_token"]
 #: What only the acting controller (or a standby) serves and publishes, and what only the simulator's host serves,
@@ -61,10 +64,26 @@ def access_control(cluster: Cluster) -> dict[str, Any] | None:
     if sec.per_host:
         host_rules, host_subjects, host_policies = _per_host(cluster, root, field)
         rules, subjects, policies = rules + host_rules, subjects + host_subjects, policies + host_policies
+    if sec.mode is SecurityMode.TLS and sec.roles:
+        return _known_certificates_only(sec.roles.get("daemon", ()), rules, subjects, policies)
     if not policies:  # only daemons listed: nothing to restrict
         return None
     return {"enabled": True, "default_permission": "allow", "rules": rules, "subjects": subjects,
             "policies": policies}
+
+
+def _known_certificates_only(daemons: Iterable[str], rules: list[dict[str, Any]], subjects: list[dict[str, Any]],
+                             policies: list[dict[str, Any]]) -> dict[str, Any]:
+    """With tls and roles: a certificate the CA signed for a name in no role may do nothing (security audit D2: it
+    acted as a daemon, and stopped missions). TLS authenticates both ends of every link, so a default of deny
+    leaves no daemon mute: each named subject (the daemons, each role, each host with `per_host`) is allowed
+    everything but what its deny rules take away (zenoh: a matching deny wins over an allow)."""
+    everything = {"id": "everything", "messages": ALL_MESSAGES, "flows": ["ingress", "egress"],
+                  "permission": "allow", "key_exprs": ["**"]}
+    subjects = [*subjects, {"id": "daemon", "cert_common_names": list(daemons)}] if daemons else subjects
+    policies = [*policies, {"id": "daemon-policy", "rules": [], "subjects": ["daemon"]}] if daemons else policies
+    return {"enabled": True, "default_permission": "deny", "rules": [*rules, everything], "subjects": subjects,
+            "policies": [{**p, "rules": [*p["rules"], "everything"]} for p in policies]}
 
 
 def _per_host(cluster: Cluster, root: str, field: str) -> tuple[list[dict[str, Any]], list[dict[str, Any]],
@@ -75,9 +94,9 @@ def _per_host(cluster: Cluster, root: str, field: str) -> tuple[list[dict[str, A
     controller serves and publishes none of the controller's keys and calls no Creator; a host that is not the
     simulator's serves neither of its keys; a host that is no controller asks none of the operators' services
     either (run, stop, move or tune a mission: security audit D3). So a daemon's credentials cannot fake another
-    host's load, liveliness or announcement, answer for it, command a Creator, or stop a mission. Where the rules apply: with tls on every link (mutual);
-    with a password on every link the daemon opened (that authentication is one-way), so with routers on every
-    link."""
+    host's load, liveliness or announcement, answer for it, command a Creator, or stop a mission. Where the rules
+    apply: with tls on every link (mutual); with a password on every link the daemon opened (that authentication is
+    one-way), so with routers on every link."""
     sending = ["put", "delete", "declare_queryable", "reply", "liveliness_token"]
     rules: list[dict[str, Any]] = []
     subjects: list[dict[str, Any]] = []

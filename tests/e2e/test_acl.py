@@ -150,3 +150,25 @@ def test_per_host_needs_identities(tmp_path: Path, security: str) -> None:
     with pytest.raises(HostsError) as e:
         cluster_with(tmp_path, security)
     assert any("cluster.security.per_host" in str(p) for p in e.value.problems), e.value.problems
+
+
+def test_with_tls_and_roles_a_certificate_in_no_role_may_do_nothing(tmp_path: Path) -> None:
+    """Security audit D2: under `default_permission: allow` a certificate the CA signed for a name in no role
+    matched no deny rule and acted as a daemon. With tls (both ends authenticated) and roles, the default is deny
+    and each named subject is allowed everything but its deny rules."""
+    c = cluster_with(tmp_path, "{mode: tls, ca: ca.pem, cert: c.pem, key: c.key, roles: {daemon: [drd],"
+                               " operator: [alice], observer: [bob]}}")
+    acl = access_control(c)
+    assert acl is not None and acl["default_permission"] == "deny"
+    subjects = {s["id"]: s["cert_common_names"] for s in acl["subjects"]}
+    assert subjects == {"daemon": ["drd"], "operator": ["alice"], "observer": ["bob"]}
+    policies = {p["subjects"][0]: p["rules"] for p in acl["policies"]}
+    assert policies["daemon"] == ["everything"]
+    assert "everything" in policies["observer"] and "operators-only" in policies["observer"]
+    [everything] = [r for r in acl["rules"] if r["id"] == "everything"]
+    assert everything["permission"] == "allow" and everything["key_exprs"] == ["**"]
+    assert set(everything["flows"]) == {"ingress", "egress"}
+    password = cluster_with(tmp_path, "{mode: password, user: drd, password_file: users, roles: {operator: [alice],"
+                                      " observer: [bob]}}")
+    assert access_control(password)["default_permission"] == "allow"  # type: ignore[index]  # one-way: see module
+
