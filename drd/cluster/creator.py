@@ -151,6 +151,23 @@ class Instance:
     asked: list[ReadingKey] = field(default_factory=list)  # readings it asked over the pipe in this step
 
 
+
+def token_slots(running: dict[str, str], held: dict[str, tuple[str, int]]) -> dict[str, tuple[str, int]]:
+    """(path, slot) of each running instance's token (`running`: key -> path; `held`: the tokens declared now).
+    Held ones keep theirs; each new one takes the lowest slot no running instance of the same path holds, so the
+    slot is 0 unless runs of one mission overlap on this host. Why not the mission id in the key: zenoh keeps about
+    2 kB of state for every token key it ever saw, in the declarer and in every peer, for good (worker daemons grew
+    ~40 kB per corridor mission); the keys must come from a bounded set. Why not the path alone: two overlapping
+    runs would declare one key twice, and zenoh then undeclares it once."""
+    out = {k: held[k] for k in running if k in held}
+    taken = set(out.values())
+    for key in sorted(running.keys() - out.keys()):
+        path = running[key]
+        slot = next(n for n in range(len(running) + 1) if (path, n) not in taken)
+        out[key] = (path, slot)
+        taken.add((path, slot))
+    return out
+
 class CreatorError(ComponentFailure, ValueError):
     """A call refused outright (unknown component, bad parameter, a device of another host)."""
 
@@ -199,7 +216,7 @@ class Creator:
         self._infos: list[InstanceInfo] = []
         self.key = f"drd/{cluster.name}/host/{host}/creator"
         self._keys = ClusterKeys(cluster.name)
-        self._tokens: dict[str, Any] = {}  # instance key -> its liveliness token
+        self._tokens: dict[str, tuple[str, int, Any]] = {}  # instance key -> (its path, slot, liveliness token)
         self._sampler = Sampler(host, every=200)  # DRD_PROFILE: the step batches, in <DRD_PROFILE>.<host>
         self._observed: Any = None  # the tap's queryable (below)
         self._queryable = bus.serve(self.key, self._serve) if bus else None
@@ -226,7 +243,7 @@ class Creator:
             self.instances.clear()
             self._dirty = False
             self._infos = []
-            self._sync_tokens(set())
+            self._sync_tokens({})
         if self._own_pool:
             self.pool.close()
 
@@ -692,22 +709,28 @@ class Creator:
                  for inst in self.instances.values() if inst.state not in (TERMINATED, "starting")]
         if infos != self._infos:
             self._infos = infos
-            self._sync_tokens({f"{i.mission}/{i.name}" for i in infos})
+            self._sync_tokens({f"{i.mission}/{i.name}": i.name for i in infos})
             if self._on_change is not None:
                 self._on_change()
 
-    def _sync_tokens(self, running: set[str]) -> None:
-        """A liveliness token per running instance (`drd/<c>/instance/<host>/<mission>/<path>`): it vanishes when
-        the instance ends or its daemon dies, so a peer sees either without asking."""
+    def _sync_tokens(self, running: dict[str, str]) -> None:
+        """A liveliness token per running instance (`running`: its key, mission/path -> its path), keyed
+        `drd/<c>/instance/<host>/<slot>/<path>` (`token_slots`): it vanishes when the instance ends or its daemon
+        dies, so a peer sees either without asking."""
         if self._bus is None:
             return
         for key in [k for k in self._tokens if k not in running]:
-            self._tokens.pop(key).close()
-        for key in running - self._tokens.keys():
+            self._tokens.pop(key)[2].close()
+        held = {k: (path, slot) for k, (path, slot, _) in self._tokens.items()}
+        for key, (path, slot) in token_slots(running, held).items():
+            if key in self._tokens:
+                continue
             try:
-                self._tokens[key] = self._bus.declare_token(self._keys.instance(self.host, key))
+                token = self._bus.declare_token(self._keys.instance(self.host, f"{slot}/{path}"))
             except (ValueError, BusError) as e:  # a path that is no key (never for compiled missions): say so once
                 log.warning("creator %s: no liveliness token for %s: %s", self.host, key, e)
+                continue
+            self._tokens[key] = (path, slot, token)
 
     # -- run-time scheduling ------------------------------------------------------------------------------
 

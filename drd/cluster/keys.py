@@ -83,7 +83,7 @@ class ClusterKeys:
 
     def instance(self, host: str, path: str) -> str:
         """A running component instance's liveliness token (its path's `/` are key separators)."""
-        return f"{self.root}/instance/{host}/{path}"  # path: `<mission>/<instance path>`
+        return f"{self.root}/instance/{host}/{path}"  # path: `<slot>/<instance path>` (`creator.token_slots`)
 
     @property
     def instances(self) -> str:
