@@ -11,6 +11,8 @@ Depends on nothing, so every layer (the mission language included) may raise fro
 
 from __future__ import annotations
 
+import os
+import traceback
 from typing import Any
 
 
@@ -61,3 +63,25 @@ class HardwareFailure(DrdError):
     """A driver cannot be built or a device cannot carry out a command."""
 
     kind = "hardware"
+
+
+def debugging() -> bool:
+    """`DRD_DEBUG=1`: tracebacks are shown (the one place that reads it)."""
+    return os.environ.get("DRD_DEBUG", "") not in ("", "0")
+
+
+def raised(e: BaseException, when: str = "") -> str:
+    """What a component's exception says, in both modes alike: its type and message and where it was raised, the
+    innermost frame (`(at mykit/spin.py:12, in step)`; a path under the working folder relative to it), so the
+    author finds the line without a traceback; `when`: ` in shutdown` and the like. With `DRD_DEBUG=1` the whole
+    traceback follows on the next lines."""
+    text = f"component raised {type(e).__name__}{when}: {e}"
+    frames = traceback.extract_tb(e.__traceback__)
+    if frames:
+        last = frames[-1]
+        path = os.path.relpath(last.filename) if last.filename.startswith(os.getcwd() + os.sep) else last.filename
+        text += f" (at {path}:{last.lineno}, in {last.name})"
+    if debugging():
+        text += "\n" + "".join(traceback.format_exception(e)).rstrip()
+    return text
+

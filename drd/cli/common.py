@@ -24,7 +24,7 @@ from rich.console import Console
 from rich.text import Text
 
 from drd import outputs
-from drd.errors import DrdError
+from drd.errors import DrdError, debugging
 
 if TYPE_CHECKING:  # the mission language loads only for the commands that use it
     from drd.record import Recorder
@@ -63,7 +63,7 @@ err = _Console(stderr=True, highlight=False, soft_wrap=True)
 
 
 def debug() -> bool:
-    return os.environ.get("DRD_DEBUG", "") not in ("", "0")
+    return debugging()
 
 
 class _Mode:

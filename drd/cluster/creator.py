@@ -83,7 +83,7 @@ from drd.cluster.workers import (
     device_methods,
     scheduling_of,
 )
-from drd.errors import ComponentFailure
+from drd.errors import ComponentFailure, raised
 from drd.hosts import Cluster, Role
 from drd.hw.commands import spec_of
 from drd.profiling import Sampler
@@ -451,7 +451,7 @@ class Creator:
     def _setpoint_failed(self, owner: Any, e: Exception) -> None:
         """A setpoint the driver refused (sent by a worker without waiting): fails that instance's step."""
         if isinstance(owner, str):
-            self._command_errors.append((owner, f"component raised {type(e).__name__}: {e}"))
+            self._command_errors.append((owner, raised(e)))
 
     # -- calls ----------------------------------------------------------------------------------------
 
@@ -544,8 +544,7 @@ class Creator:
                 case Command() as req:  # a setpoint: no answer awaited, a refusal fails the step after
                     error = self._device_request(worker, req, answer=False)
                     if error is not None:
-                        self._command_errors.append((f"{worker.mission}/{req.path}",
-                                                     f"component raised {type(error).__name__}: {error}"))
+                        self._command_errors.append((f"{worker.mission}/{req.path}", raised(error)))
                 case other:
                     worker.kill()
                     raise WorkerDied(f"sent an unexpected message ({type(other).__name__}): killed")

@@ -85,7 +85,7 @@ from drd.cluster.pipe import (
     reading_key,
 )
 from drd.cluster.pipe import Message as PipeMessage
-from drd.errors import ComponentFailure
+from drd.errors import ComponentFailure, raised
 from drd.hw.commands import spec_of
 
 log = logging.getLogger("drd.cluster.workers")
@@ -806,7 +806,7 @@ def _run_call(h: _Hosted, call: Call, link: _Link) -> CallReply:
         else:
             error = f"unknown op {op!r}"
     except Exception as e:  # component code is not ours to trust: the state fails, the worker goes on
-        error = f"component raised {type(e).__name__}: {e}"
+        error = raised(e)
     if not error and (call.op == "start" or call.op == "step" and _due(h)):
         snapshot = take_snapshot(h, force=call.op == "start")  # a new entry: the controller forgot the last
     reply = CallReply(result, plain(h.ctx.outputs), h.events, h.logs, plain(services.shared), h.deps, error, False,

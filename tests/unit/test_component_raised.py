@@ -1,0 +1,40 @@
+"""`drd.errors.raised`: what a component's exception says, in a dry-run and on a cluster alike (newcomer audit 2:
+the file and line were lost everywhere, and `DRD_DEBUG=1` showed no traceback)."""
+
+from __future__ import annotations
+
+import re
+from pathlib import Path
+
+import pytest
+
+from drd.errors import raised
+
+
+def boom() -> None:
+    raise ValueError("boom")
+
+
+def caught() -> ValueError:
+    try:
+        boom()
+    except ValueError as e:
+        return e
+    raise AssertionError("boom() did not raise")
+
+
+def test_it_names_the_line_that_raised(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.delenv("DRD_DEBUG", raising=False)
+    text = raised(caught())
+    assert re.fullmatch(r"component raised ValueError: boom \(at \S*test_component_raised\.py:\d+, in boom\)", text)
+    line = int(text.rsplit(":", 1)[1].split(",")[0])
+    assert Path(__file__).read_text().splitlines()[line - 1].strip() == 'raise ValueError("boom")'
+    assert raised(ValueError("never raised")) == "component raised ValueError: never raised"
+
+
+def test_with_drd_debug_the_whole_traceback_follows(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setenv("DRD_DEBUG", "1")
+    lines = raised(caught(), " in shutdown").splitlines()
+    assert lines[0].startswith("component raised ValueError in shutdown: boom (at ")
+    assert lines[1] == "Traceback (most recent call last):" and lines[-1] == "ValueError: boom"
+    assert any("in caught" in line for line in lines)
