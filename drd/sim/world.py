@@ -109,15 +109,28 @@ def check_hosts(world: World, cluster: Cluster) -> list[WorldProblem]:
         elif robot.type == "Scout" and robot.id not in scouts:
             fail("rangers", f"no Scout {robot.id!r} in a magazine or in scouts, which {cluster.source} configures")
         elif robot.type == "Scout" and world.carrier(robot.id) != robot.carrier:
-            where = f"in the magazine of {world.carrier(robot.id)}" if world.carrier(robot.id) else "on the floor"
+            carrier = world.carrier(robot.id)
+            where = f"in the magazine of {carrier}" if carrier else "on the floor"
             carried = f"carried by {robot.carrier}" if robot.carrier else "not carried"
-            fail("rangers", f"Scout {robot.id!r} starts {where}, but {cluster.source} has it {carried}")
+            fix = (f"put it in {robot.carrier}'s magazine here, or remove its carrier there" if robot.carrier else
+                   f"move it from {carrier}'s magazine to scouts here, or give it carrier: {carrier} there")
+            fail(_spawn_key(world, robot.id), f"Scout {robot.id!r} starts {where}, but {cluster.source} has it"
+                                              f" {carried}: {fix}")
     configured = {r.id for r in cluster.robots}
     for rid in [*sorted(rangers), *world.scout_ids]:
         if rid not in configured:
-            fail("rangers" if rid in rangers or world.carrier(rid) else "scouts",
-                 f"robot {rid!r} is not configured in {cluster.source}")
+            fail(_spawn_key(world, rid), f"robot {rid!r} is not configured in {cluster.source}")
     return problems
+
+
+def _spawn_key(world: World, rid: str) -> str:
+    """Where a robot starts in the world file: `rangers[i]`, `rangers[i].magazine` or `scouts[i]`."""
+    for i, ranger in enumerate(world.rangers):
+        if ranger.id == rid:
+            return f"rangers[{i}]"
+        if rid in ranger.magazine:
+            return f"rangers[{i}].magazine"
+    return next((f"scouts[{i}]" for i, s in enumerate(world.scouts) if s.id == rid), "scouts")
 
 
 class _Reader(ConfigReader):

@@ -67,9 +67,21 @@ def test_a_world_that_does_not_match_the_hosts_says_which_robot(catalog: Catalog
     world = load_world(ROOT / "worlds" / "corridor.yaml")
     problems = [f"{p.key}: {p.message}" for p in check_hosts(world, load_hosts(ROOT / "hosts.two_rangers.yaml",
                                                                                    catalog))]
-    assert "rangers: Scout 'scout4' starts in the magazine of ranger1, but hosts.two_rangers.yaml" \
-           " has it carried by ranger2" in problems
+    assert "rangers[0].magazine: Scout 'scout4' starts in the magazine of ranger1, but hosts.two_rangers.yaml" \
+           " has it carried by ranger2: put it in ranger2's magazine here, or remove its carrier there" in problems
     assert "rangers: no Ranger 'ranger2', which hosts.two_rangers.yaml configures" in problems
+
+
+def test_a_floor_scout_the_hosts_carry_is_named_at_its_own_entry(catalog: Catalog) -> None:
+    """Newcomer audit 5: the key was `rangers` for a Scout that starts on the floor (`scouts[0]`), and no message
+    said what to change."""
+    data = base()
+    data["rangers"] = [{"id": "ranger1", "at": [1, 0], "heading": 0, "magazine": [f"scout{i}" for i in range(2, 7)]}]
+    data["scouts"] = [{"id": "scout1", "at": [3, 0], "heading": 0}]
+    world = parse_world(data, "w.yaml")
+    problems = [f"{p.key}: {p.message}" for p in check_hosts(world, load_hosts(ROOT / "hosts.yaml", catalog))]
+    assert "scouts[0]: Scout 'scout1' starts on the floor, but hosts.yaml has it carried by ranger1: put it in" \
+           " ranger1's magazine here, or remove its carrier there" in problems, problems
 
 
 # ---------------------------------------------------------------- geometry and the light map
@@ -251,7 +263,17 @@ def test_the_example_in_the_docs_loads() -> None:
     text = (ROOT / "docs" / "worlds.md").read_text(encoding="utf-8")
     example = text.split("```yaml\n", 1)[1].split("```", 1)[0]
     world = parse_world(yaml.safe_load(example), "docs/worlds.md")
-    assert world.door("d_b").state is DoorState.CLOSED and world.scout_ids == ("scout1", "scout2", "scout3")
+    assert world.door("d_b").state is DoorState.CLOSED and world.scout_ids == tuple(f"scout{i}" for i in range(1, 7))
+
+
+def test_the_example_in_the_docs_is_closed_and_matches_the_repositorys_hosts(catalog: Catalog) -> None:
+    """Newcomer audit 3: the example was open at its east end (a Ranger drove 900 m out of it) and needed a hosts
+    file the docs did not give; the docs now say it runs with the repository's hosts.yaml as it is."""
+    text = (ROOT / "docs" / "worlds.md").read_text(encoding="utf-8")
+    world = parse_world(yaml.safe_load(text.split("```yaml\n", 1)[1].split("```", 1)[0]), "docs/worlds.md")
+    assert check_hosts(world, load_hosts(ROOT / "hosts.yaml", catalog)) == []
+    east = [w for w in world.walls if w.a[0] == w.b[0] == 12.0]
+    assert east and min(min(w.a[1], w.b[1]) for w in east) <= -1 and max(max(w.a[1], w.b[1]) for w in east) >= 1
 
 
 def test_a_world_is_found_beside_the_hosts_file_first_then_in_drds_own(tmp_path: Path) -> None:
