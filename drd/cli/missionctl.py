@@ -687,15 +687,24 @@ def _recorded_world(recording: Recording, file: Path) -> World:
 def _show_reports(reports: list[DryRun], sim_world: World | None, render: Path | None, as_json: bool,
                   views: dict[str, tuple[float, float]] | None = None) -> None:
     """The reports on stdout, then the picture: a picture that cannot be drawn after all (the disk filled up
-    during the run) is said in one line naming it, and the report is not lost."""
+    during the run) is said in one line naming it, and the report is not lost. The picture is drawn also when the
+    report's reader went away (`| head`: exit 141 after it), as the trace and the recording are written."""
     from drd.cli.report import print_report
+
+    try:
+        if as_json:
+            print_json(reports[0].to_dict() if len(reports) == 1 else [r.to_dict() for r in reports], default=str)
+        else:
+            for report in reports:
+                print_report(report, several=len(reports) > 1)
+    finally:
+        _picture(reports, sim_world, render, views)
+
+
+def _picture(reports: list[DryRun], sim_world: World | None, render: Path | None,
+          views: dict[str, tuple[float, float]] | None) -> None:
     from drd.dryrun import merged
 
-    if as_json:
-        print_json(reports[0].to_dict() if len(reports) == 1 else [r.to_dict() for r in reports], default=str)
-    else:
-        for report in reports:
-            print_report(report, several=len(reports) > 1)
     if render is not None and sim_world is not None:
         from drd.render import render as draw
 

@@ -181,6 +181,22 @@ def test_unexpected_errors_are_one_line_unless_debugging(tmp_path: Path) -> None
     assert r.returncode == 70 and "Traceback (most recent call last)" in r.stderr
 
 
+def test_a_dry_runs_picture_is_drawn_even_when_the_reports_reader_went_away(tmp_path: Path) -> None:
+    """Newcomer audit 4: `dry-run --render P | head -1` wrote the trace but not the picture (it was drawn after the
+    report, and the closed pipe ended the command first)."""
+    exe = shutil.which("missionctl") or "missionctl"
+    picture = tmp_path / "run.png"
+    r, w = os.pipe()
+    os.close(r)
+    try:
+        proc = subprocess.run([exe, "dry-run", str(CORRIDOR), "--until", "20", "--render", str(picture)], stdout=w,
+                              stderr=subprocess.PIPE, text=True, timeout=300, check=False, cwd=ROOT)
+    finally:
+        os.close(w)
+    assert proc.returncode == 141 and "Traceback" not in proc.stderr, proc.stderr
+    assert picture.is_file() and picture.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
 @pytest.mark.parametrize("args", [("plan", str(CORRIDOR)), ("validate", str(CORRIDOR), "--json")])
 def test_a_reader_that_went_away_ends_the_command_with_141_and_no_error(args: tuple[str, ...]) -> None:
     """`missionctl ... | head`: rich would exit 1 (a failed mission, by our codes); a shell tool killed by SIGPIPE
