@@ -167,6 +167,7 @@ class MissionRunner:
         self.frozen = frozen
         self._recent: list[Recent] = []  # placements their hosts may not announce yet, oldest first
         self.placements = PlacementLog(lambda: controller.executive.missions)  # for `missionctl status`
+        self.began: dict[str, float] = {}  # mission -> the executive's time it began, while the executive lists it
         self.resource_hosts = {r.id: r.host for r in cluster.resources() if r.host}
         self.patience = max(CALL_TIMEOUT, cluster.lease)  # how long a call waits for a host that does not answer
         # this controller's term: hosts refuse the calls of an older one (`Creator`)
@@ -220,9 +221,7 @@ class MissionRunner:
         """What the executive's status adds to a mission of this controller: `started`, the executive's time when
         it began (its `time` is the world's clock, which every mission of the world shares: the mission has run
         `time - started`), and its placements."""
-        world = self.world
-        deadline = world.deadlines.get(mission) if world is not None else None
-        started = {"started": deadline[0] - deadline[1]} if deadline is not None else {}
+        started = {"started": self.began[mission]} if mission in self.began else {}
         return {**started, **self.placements.extras(mission)}
 
     def _warm_up(self) -> None:
@@ -377,6 +376,9 @@ class MissionRunner:
         its components reached through a router of its own (called with the lock held); `earlier`: records of it
         its hosts made while it had no controller (their halts), recorded before it is entered again."""
         executive = self.controller.executive
+        known = executive.missions  # an ended mission keeps its `started` as long as its status is listed
+        self.began = {m: t for m, t in self.began.items() if m in known}
+        self.began[mid] = base
         router = ComponentRouter(self.bus, self.cluster.name, self.resource_hosts, self.me,
                                  local=executive.registry, mission=mid, world=world.name,
                                  active=functools.partial(_active, executive, mid), timeout=self.patience,

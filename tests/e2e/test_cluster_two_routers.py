@@ -88,6 +88,9 @@ def test_run_migrate_and_stop_through_two_routers_each_act_once(cluster: DaemonC
     assert ([m["id"] for m in stopped["stopped"]], stopped["ended"]) == ([mid], []), stopped
 
     status = answer(ctl(cluster, via, "status", "--json"), cluster)
+    for ended in status["missions"]:  # the previous case's mission too, its world gone since
+        assert isinstance(ended.get("started"), float) and ended["started"] <= ended["time"], (
+            "an ended mission keeps `started` (newcomer audit 7: only while its world was open)", ended)
     started = STARTED.findall(cluster.log("controller")[before:])
     assert [m["id"] for m in status["missions"] if m["id"] in started] == [mid], f"one run, missions {started}"
     assert started == [mid]
