@@ -118,11 +118,17 @@ def report_view(r: DryRun, several: bool = False, width: int = 80) -> list[Rende
             parts.append(Text(f"  … and {len(logs) - LOG_LINES} more (--json or --trace have them all)", style="dim"))
     for title, rows in (("doors found", r.doors), ("Scouts placed", r.scouts), ("intruders detected", r.detections)):
         parts.append(Text(f"{title}: {len(rows)}", style="bold"))
-        for fact in rows[:20]:
+        for fact in rows[:FACTS]:
             text = ", ".join(_fact(k, v, root) for k, v in fact.items())
             parts += [Text(("  " if i == 0 else "    ") + line)
                       for i, line in enumerate(wrap_cut(text, width - 4, WRAPPED_LINES))]
+        if len(rows) > FACTS:
+            parts.append(Text(f"  … and {len(rows) - FACTS} more (--json has them all)", style="dim"))
     return parts
+
+
+#: How many doors, Scouts or detections the text report lists (the first ones; `--json` has them all).
+FACTS = 20
 
 
 #: How many lines a log line or a fact of the text report may wrap to (indented below its first) before `…`.

@@ -38,3 +38,14 @@ def test_a_report_with_no_wall_time_is_strict_json() -> None:
     sink = io.StringIO()
     print_report(cut, console=Console(file=sink, width=120))
     assert "inf" not in sink.getvalue()
+
+
+def test_a_list_of_facts_cut_at_20_says_how_many_more() -> None:
+    """Newcomer audit 8: `intruders detected: 35` listed 20 rows and said nothing of the other 15."""
+    run = DryRun("Patrol", "success", "", 100.0, 30.0)
+    run.detections = [{"at": float(i), "by": "Patrol/Watch", "area": 0.1} for i in range(35)]
+    sink = io.StringIO()
+    print_report(run, console=Console(file=sink, width=120))
+    text = sink.getvalue()
+    assert "intruders detected: 35" in text and text.count("by=Watch") == 20
+    assert "… and 15 more (--json has them all)" in text
