@@ -400,7 +400,9 @@ class Checker:
             self.report.error("unknown-state", f"unknown state {name}: no child of {implicit_in} and no behavior "
                               "has this name", span, did_you_mean(name, [*siblings, *known]))
             return None
-        self.report.error("unknown-behavior", f"unknown behavior {name}", span, did_you_mean(name, known))
+        self.report.error("unknown-behavior", f"unknown behavior {name}", span, did_you_mean(name, known) or (
+            "a behavior is a component with a manifest: drd's own, or one in a folder given with -C DIR or"
+            " $DRD_COMPONENTS (docs/components.md)"))
         return None
 
     def _multiplicity(self, m: ast.Multiplicity, scope: Scope) -> None:

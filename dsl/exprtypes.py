@@ -147,10 +147,12 @@ class Typer:
             return ANY
         if isinstance(base, ChildRef):
             ct = self.catalog.get(base.component)
-            out = ct.output(attr) if ct else None
+            if ct is None:  # an unknown behavior, reported where it is named: its outputs are unknown too
+                return ANY
+            out = ct.output(attr)
             if out is not None:
                 return out
-            outputs = [o.name for o in ct.outputs] if ct else []
+            outputs = [o.name for o in ct.outputs]
             listed = f"its outputs: {', '.join(outputs)}" if outputs else None
             self.report.error("unknown-name", f"{base.component} has no output {attr}", expr.span,
                               did_you_mean(attr, outputs) or listed)

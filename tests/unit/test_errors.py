@@ -235,6 +235,14 @@ def test_a_paren_left_open_is_one_error_and_the_items_after_it_are_read(catalog:
     assert compile_text(wrapped, catalog, "t.mission").diagnostics == []
 
 
+def test_an_unknown_behavior_says_where_behaviors_come_from_and_nothing_about_its_outputs(catalog: Catalog) -> None:
+    """Newcomer audit 6: `unknown behavior Spin` (a manifest folder not given) had no hint, and `Spin has no output
+    spun` followed, noise once Spin is unknown."""
+    result = compile_text(m("  Spin(turns: 2) as spin\n  spin -> done when spin.spun.turns > 1"), catalog, "t.mission")
+    assert [d.message for d in result.diagnostics] == ["unknown behavior Spin"]
+    assert result.diagnostics[0].hint is not None and "-C DIR or $DRD_COMPONENTS" in result.diagnostics[0].hint
+
+
 def test_rendered_error_shows_line_and_caret(catalog: Catalog) -> None:
     result = compile_text(m("  DetectDor(min_width: 0.7)"), catalog, "t.mission")
     text = result.diagnostics[0].render(result.sources)
