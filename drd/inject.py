@@ -62,7 +62,9 @@ def parse(text: str, *, hosts: set[str], robots: set[str], doors: set[str]) -> I
     """One `--inject` value, checked against what exists (`hosts` from hosts.yaml, the world's robots and doors)."""
     m = _FORM.match(text)
     if m is None:
-        raise InjectionError(f"cannot read injection {text!r}: {USAGE}")
+        spaced = re.search(r"\bat\s+(\d+(?:\.\d+)?)\s+(ms|s|min|h)\s*$", text)
+        why = f": a time has no space before its unit (write {spaced[1]}{spaced[2]})" if spaced else ""
+        raise InjectionError(f"cannot read injection {text!r}{why}: {USAGE}")
     word = m["action"].lower()
     try:
         action = Action(word)

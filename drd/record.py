@@ -903,7 +903,10 @@ def state_at(recording: Recording, at: float) -> dict[str, Any]:
                          "holds": ex.holds_now(), "waiting": ex.waiting_now()})
     where = {rid: {"x": round(p[0], 3), "y": round(p[1], 3), "heading": round(p[2], 4)}
              for rid in recording.robots() if (p := recording.pose(rid, at)) is not None}
-    return {"at": at, "missions": missions, "robots": {k: v for k, v in where.items() if not k.startswith(INTRUDER)},
+    ends = max([r.at for rs in recording.records.values() for r in rs] +
+               [track[-1][0] for track in recording.tracks.values() if track], default=0.0)
+    return {"at": at, "ends": round(ends, 6), "missions": missions,
+            "robots": {k: v for k, v in where.items() if not k.startswith(INTRUDER)},
             "intruders": {k.removeprefix(INTRUDER): {"x": v["x"], "y": v["y"]} for k, v in where.items()
                           if k.startswith(INTRUDER)}}
 

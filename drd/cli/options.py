@@ -9,7 +9,7 @@ import typer
 
 ComponentsOption = typer.Option(
     None, "--components", "-C", help="Extra folder of component manifests (repeatable; also $DRD_COMPONENTS).",
-    show_default=False)
+    show_default=False, metavar="DIR")
 ConfigOption = typer.Option(Path("hosts.yaml"), "--config", "-c", "--hosts",
                             help="The cluster's hosts file: connect to its routers (one at a time), else to every"
                                  " host, with its security settings (`--hosts` is an alias).")

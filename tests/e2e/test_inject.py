@@ -35,6 +35,8 @@ def test_injections_are_read_with_the_languages_durations(text: str, expected: I
     ("block door_n9 at 1s", "no door 'door_n9' to block"),
     ("kill ranger1 at soon", "bad time 'soon'"),
     ("kill ranger1", "cannot read injection 'kill ranger1': write ACTION TARGET at TIME"),
+    ("lose scout3 at 2 min", "cannot read injection 'lose scout3 at 2 min': a time has no space before its unit"
+                             " (write 2min)"),  # newcomer audit L5
 ])
 def test_a_bad_injection_says_what_is_wrong(text: str, message: str) -> None:
     with pytest.raises(InjectionError, match=None) as e:

@@ -102,7 +102,12 @@ def test_replay_at_shows_the_mission_and_every_robot_at_that_time(tmp_path: Path
     assert any(row["path"].endswith("/FindNewDoor/FollowCorridor") and row["state"] == "running"
                for row in mission["active"])
     assert any(held.get("ranger") == "ranger1" for held in mission["holds"].values())  # someone drives it
-    assert at("1h")["missions"][0]["outcome"] == "stopped"  # type: ignore[index]
+    after = at("1h")
+    assert after["missions"][0]["outcome"] == "stopped"  # type: ignore[index]
+    assert after["ends"] == pytest.approx(30.0, abs=0.2) and start["ends"] == after["ends"]  # newcomer audit L6
+    text = missionctl("replay", "run.mcap", "--at", "1h", cwd=tmp_path).stdout
+    assert "after the recording's end, at 30.0 s: this is the run as it ended" in text
+    assert "recording's end" not in missionctl("replay", "run.mcap", "--at", "10s", cwd=tmp_path).stdout
     refused = missionctl("replay", "run.mcap", "--at", "soon", cwd=tmp_path)
     assert refused.returncode == 2 and "expected a time such as 90s" in refused.stderr
 
