@@ -200,7 +200,10 @@ def test_a_worker_daemon_keeps_no_thread_per_mission(cluster: DaemonCluster) -> 
         r = missionctl(cluster, "run", MISSION, "--speed", "10", "--until", "5")
         assert r.returncode in (0, 1) and "Traceback" not in r.stderr, r.stderr[-2000:]
         counts.append(daemon.num_threads())
-    assert counts[3] <= counts[1], (counts, cluster.tails("ranger1"))
+    # a thread of the last mission's end may still be finishing (a retired worker's reaper, a late start's
+    # terminate): a leak never goes, a passing thread does
+    eventually(lambda: daemon.num_threads() <= counts[1], "the daemon's threads to be as after mission 2", 15,
+               poll=0.2, explain=lambda: f"{counts} now {daemon.num_threads()}: {[t.id for t in daemon.threads()]}")
 
 
 def test_kill_9_of_the_ranger_host_mid_mission_fails_the_mission(cluster: DaemonCluster) -> None:
