@@ -73,15 +73,24 @@ def debugging() -> bool:
 def raised(e: BaseException, when: str = "") -> str:
     """What a component's exception says, in both modes alike: its type and message and where it was raised, the
     innermost frame (`(at mykit/spin.py:12, in step)`; a path under the working folder relative to it), so the
-    author finds the line without a traceback; `when`: ` in shutdown` and the like. With `DRD_DEBUG=1` the whole
-    traceback follows on the next lines."""
+    author finds the line without a traceback; `when`: ` in shutdown` and the like. One line: the traceback, with
+    `DRD_DEBUG=1`, goes to the log beside it (`debug_traceback`), not into the reason every summary repeats."""
     text = f"component raised {type(e).__name__}{when}: {e}"
     frames = traceback.extract_tb(e.__traceback__)
     if frames:
         last = frames[-1]
         path = os.path.relpath(last.filename) if last.filename.startswith(os.getcwd() + os.sep) else last.filename
         text += f" (at {path}:{last.lineno}, in {last.name})"
-    if debugging():
-        text += "\n" + "".join(traceback.format_exception(e)).rstrip()
     return text
+
+
+def debug_traceback(e: BaseException) -> str | None:
+    """The whole traceback of `e` with `DRD_DEBUG=1` (for the log line beside `raised`), else None."""
+    return "".join(traceback.format_exception(e)).rstrip() if debugging() else None
+
+
+def logged(e: BaseException, when: str = "") -> str:
+    """`raised` for a log line: with `DRD_DEBUG=1`, the traceback on the lines after it."""
+    tb = debug_traceback(e)
+    return raised(e, when) + (f"\n{tb}" if tb else "")
 

@@ -139,7 +139,8 @@ def _log_lines(at: float, path: str, text: str, width: int) -> list[Text]:
     """A log line of the report within `width`: its time, its (cut) path, its text wrapped below, indented under
     the path (`   26.6 s  RoomSurveilla…/ServoToGoal: blocked 1.2 m short of the goal:` / `as close as it gets`)."""
     stamp = f"{at:7.1f} s  "
-    body = wrap_cut(f"{path}: {text}", max(20, width - len(stamp)), WRAPPED_LINES)
+    text, _, more = text.partition("\n")  # the lines after the first (a traceback, with DRD_DEBUG=1) come whole
+    body = wrap_cut(f"{path}: {text}", max(20, width - len(stamp)), WRAPPED_LINES) + more.splitlines()
     first = Text(stamp, style="dim")
     if body[0].startswith(path + ":"):
         first.append(path, style="cyan")

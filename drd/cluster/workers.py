@@ -85,7 +85,7 @@ from drd.cluster.pipe import (
     reading_key,
 )
 from drd.cluster.pipe import Message as PipeMessage
-from drd.errors import ComponentFailure, raised
+from drd.errors import ComponentFailure, debug_traceback, raised
 from drd.hw.commands import spec_of
 
 log = logging.getLogger("drd.cluster.workers")
@@ -807,6 +807,8 @@ def _run_call(h: _Hosted, call: Call, link: _Link) -> CallReply:
             error = f"unknown op {op!r}"
     except Exception as e:  # component code is not ours to trust: the state fails, the worker goes on
         error = raised(e)
+        if (tb := debug_traceback(e)) is not None:  # DRD_DEBUG=1 on this daemon: the traceback in the mission's log
+            h.logs.append(tb)
     if not error and (call.op == "start" or call.op == "step" and _due(h)):
         snapshot = take_snapshot(h, force=call.op == "start")  # a new entry: the controller forgot the last
     reply = CallReply(result, plain(h.ctx.outputs), h.events, h.logs, plain(services.shared), h.deps, error, False,

@@ -12,7 +12,7 @@ from __future__ import annotations
 from collections.abc import Callable, Iterator, Mapping
 from typing import Any
 
-from drd.errors import ComponentFailure, raised
+from drd.errors import ComponentFailure, logged, raised
 from drd.runtime import records as rec
 from drd.runtime.component import Component, Context, Registry, Services, Status
 from drd.runtime.emits import check_emit
@@ -176,7 +176,7 @@ class ComponentHost:
         try:
             comp.terminate(_FINAL_STATUS.get(status, _RUNNING))
         except Exception as e:  # the node is leaving anyway: just say so
-            self.notify(rec.Log(self.now(), node.path, raised(e)))
+            self.notify(rec.Log(self.now(), node.path, logged(e)))
 
     def shutdown(self) -> None:
         """The mission ended: every instance made is dropped for good (`Component.shutdown`, once each); what one
@@ -186,7 +186,7 @@ class ComponentHost:
             try:
                 comp.shutdown()
             except Exception as e:  # component code is not ours to trust
-                self.notify(rec.Log(self.now(), path, raised(e, " in shutdown")))
+                self.notify(rec.Log(self.now(), path, logged(e, " in shutdown")))
 
     def call(self, node: Node, fn: Callable[[], Any], fail: bool = True) -> bool:
         """Call component code; an exception fails the node (unless `fail` is False), never the executive."""
@@ -197,12 +197,13 @@ class ComponentHost:
             if fail:
                 self.failed(node, e)
             else:
-                self.notify(rec.Log(self.now(), node.path, raised(e)))
+                self.notify(rec.Log(self.now(), node.path, logged(e)))
             return False
 
     def failed(self, node: Node, e: Exception) -> None:
-        why = str(e) if isinstance(e, ComponentFailure) and e.said else raised(e)
-        self.notify(rec.Log(self.now(), node.path, why))
+        said = isinstance(e, ComponentFailure) and e.said
+        why = str(e) if said else raised(e)
+        self.notify(rec.Log(self.now(), node.path, why if said else logged(e)))
         self.on_failure(node, why)
 
     def command_failed(self, owner: object, e: Exception) -> None:

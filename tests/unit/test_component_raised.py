@@ -8,7 +8,7 @@ from pathlib import Path
 
 import pytest
 
-from drd.errors import raised
+from drd.errors import logged, raised
 
 
 def boom() -> None:
@@ -30,11 +30,16 @@ def test_it_names_the_line_that_raised(monkeypatch: pytest.MonkeyPatch) -> None:
     line = int(text.rsplit(":", 1)[1].split(",")[0])
     assert Path(__file__).read_text().splitlines()[line - 1].strip() == 'raise ValueError("boom")'
     assert raised(ValueError("never raised")) == "component raised ValueError: never raised"
+    assert logged(caught()) == text, "no traceback without DRD_DEBUG"
 
 
-def test_with_drd_debug_the_whole_traceback_follows(monkeypatch: pytest.MonkeyPatch) -> None:
+def test_with_drd_debug_the_log_line_has_the_whole_traceback_and_the_reason_stays_one_line(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    """Re-verification: the traceback was printed three times (the headline, why it failed, the log), the
+    controller's log flattening it into one line."""
     monkeypatch.setenv("DRD_DEBUG", "1")
-    lines = raised(caught(), " in shutdown").splitlines()
+    assert "\n" not in raised(caught())
+    lines = logged(caught(), " in shutdown").splitlines()
     assert lines[0].startswith("component raised ValueError in shutdown: boom (at ")
     assert lines[1] == "Traceback (most recent call last):" and lines[-1] == "ValueError: boom"
     assert any("in caught" in line for line in lines)

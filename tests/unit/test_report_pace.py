@@ -49,3 +49,17 @@ def test_a_list_of_facts_cut_at_20_says_how_many_more() -> None:
     text = sink.getvalue()
     assert "intruders detected: 35" in text and text.count("by=Watch") == 20
     assert "… and 15 more (--json has them all)" in text
+
+
+def test_a_log_lines_further_lines_are_shown_whole() -> None:
+    """With DRD_DEBUG=1 a component's log line carries its traceback: the report's wrap-and-cut of a log line
+    flattened it into three cut lines; the lines after the first now come whole, below it."""
+    from drd.runtime import records as rec
+
+    run = DryRun("Patrol", "failure", "x", 1.0, 1.0)
+    tb = 'Traceback (most recent call last):\n  File "kit/bad.py", line 6, in step\n    raise ValueError("boom")'
+    run.records = [rec.Log(0.1, "Patrol/b", f"component raised ValueError: boom\n{tb}\nValueError: boom")]
+    sink = io.StringIO()
+    print_report(run, console=Console(file=sink, width=80))
+    lines = [line.strip() for line in sink.getvalue().splitlines()]
+    assert 'File "kit/bad.py", line 6, in step' in lines and 'raise ValueError("boom")' in lines, lines
