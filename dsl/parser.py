@@ -569,27 +569,31 @@ class _Recovery:
                 continue
 
     def _close(self, e: UnexpectedToken) -> bool:
-        """A `(` or `[` left open before the bad token's line (`left_open`): close it, end the item there, and
-        go on with the bad token as the next item's start, if the parser takes it so. Whether it did."""
+        """Brackets left open before the bad token (`left_open`): close the fewest of them, innermost first, end
+        the item there if needed, and go on with the bad token, if the parser takes it so. Whether it did."""
         layout = self.parser.layout
-        opener = left_open(e.token, layout.history, layout.openers)
-        if opener is None:
+        if left_open(e.token, layout.history, layout.openers) is None:
             return False
-        closer = "RPAR" if opener.type == "LPAR" else "RSQB"
-        for inserted in ([closer], [closer, "_SEP"]):
-            trial = e.interactive_parser.copy(deepcopy_values=False)  # type: ignore[no-untyped-call]
-            try:
-                for name in inserted:
-                    trial.feed_token(self._dummy(name, e.token))
-            except UnexpectedInput:
-                return False
-            if e.token.type in trial.accepts():
-                for name in inserted:
-                    e.interactive_parser.feed_token(self._dummy(name, e.token))
-                e.interactive_parser.feed_token(e.token)
-                layout.openers.pop()  # closed: the newlines after it end items again
-                return True
+        closers = ["RPAR" if o.type == "LPAR" else "RSQB" for o in reversed(layout.openers)]
+        for count in range(1, len(closers) + 1):
+            for inserted in (closers[:count], [*closers[:count], "_SEP"]):
+                if self._takes(e, inserted):
+                    for name in inserted:
+                        e.interactive_parser.feed_token(self._dummy(name, e.token))
+                    e.interactive_parser.feed_token(e.token)
+                    del layout.openers[-count:]  # closed: the newlines after them end items again
+                    return True
         return False
+
+    def _takes(self, e: UnexpectedToken, inserted: list[str]) -> bool:
+        """Whether the parser takes the bad token after the `inserted` terminals (tried on a copy)."""
+        trial = e.interactive_parser.copy(deepcopy_values=False)  # type: ignore[no-untyped-call]
+        try:
+            for name in inserted:
+                trial.feed_token(self._dummy(name, e.token))
+        except UnexpectedInput:
+            return False
+        return e.token.type in trial.accepts()
 
     def _dummy(self, name: str, at: Token) -> Token:
         values = {"NAME": "_", "INT": "0", "FLOAT": "0.0", "DURATION": "0s", "STRING": '""', "_SEP": "\n",
@@ -606,14 +610,24 @@ def _repair_order(name: str) -> tuple[int, str]:
 
 
 def left_open(tok: Token, history: Sequence[Token], openers: Sequence[Token]) -> Token | None:
-    """The `(` or `[` still open when `tok`, a new item's start or a block's `}`, came on a line of its own, if
-    any: newlines inside brackets are not separators (`Layout`), so a `)` left out at a line's end reads as if
-    the next item went on the argument list; the bracket is what the user forgot, not a separator."""
+    """The `(` or `[` still open when `tok`, a new item's start or a block's `}`, came on a line of its own (or
+    `tok` is `as` or `priority` after a value, which only follow a call), if any: newlines inside brackets are not
+    separators (`Layout`), so a `)` left out at a line's end reads as if the next item went on the argument list;
+    the bracket is what the user forgot, not a separator."""
     earlier = [t for t in history if t is not tok]
-    if not openers or not earlier or tok.type not in ITEM_STARTS | {"RBRACE"} \
-            or (tok.line or 0) <= (earlier[-1].end_line or 0):
+    if not openers or not earlier:
+        return None
+    if tok.type in CALL_SUFFIXES and earlier[-1].type not in OPENS_A_VALUE:  # `as`, `priority` after a value:
+        return openers[-1]  # only a call's `)` may come between (after `,` it is a reserved word as a name)
+    if tok.type not in ITEM_STARTS | {"RBRACE"} or (tok.line or 0) <= (earlier[-1].end_line or 0):
         return None
     return openers[-1]
+
+
+#: What follows a call's `)` and never comes inside its arguments (`Wait(duration: 1s as a`: the `)` is missing).
+CALL_SUFFIXES = frozenset({"AS", "PRIORITY"})
+#: Tokens after which a value or a name is due, not a call's end.
+OPENS_A_VALUE = frozenset({"COMMA", "LPAR", "LSQB", "COLON"})
 
 
 def syntax_diagnostic(e: UnexpectedInput, history: Sequence[Token], file: str, text: str = "",
@@ -641,9 +655,9 @@ def syntax_diagnostic(e: UnexpectedInput, history: Sequence[Token], file: str, t
     opener = left_open(tok, history, openers)
     if opener is not None and prev is not None:
         closer = "`)`" if opener.type == "LPAR" else "`]`"
+        where = (f"before {_show(tok)}" if tok.line == prev.end_line else f"at the end of line {prev.end_line}")
         return Diagnostic("syntax", f"syntax: expected {closer} after {_show(prev)}: the {_show(opener)} on line"
-                                    f" {opener.line} is never closed", _after(file, prev),
-                          f"add {closer} at the end of line {prev.end_line}")
+                                    f" {opener.line} is never closed", _after(file, prev), f"add {closer} {where}")
     hint = _keyword_hint(tok, e.expected)
     if prev is not None and tok.type == "LPAR" and len(earlier) >= 2 and earlier[-2].type == "ARROW":
         return Diagnostic("syntax", f"syntax: a transition's target is a state's name, not a call: "

@@ -25,6 +25,8 @@ ERRORS: list[tuple[str, str, str, str | None]] = [
      "done/fail after ->", None),
     ("unclosed-paren-before-next-item", m("  Wait(duration: 1s\n  Observe(duration: 2s)"),
      "2:20 syntax: expected `)` after `1s`: the `(` on line 2 is never closed", "add `)` at the end of line 2"),
+    ("unclosed-paren-before-alias", m("  Wait(duration: 1s as a"),
+     "2:20 syntax: expected `)` after `1s`: the `(` on line 2 is never closed", "add `)` before `as`"),
     ("unclosed-paren-before-brace", m("  Wait(duration: 1s"),
      "2:20 syntax: expected `)` after `1s`: the `(` on line 2 is never closed", None),
     ("missing-separator", m("  needs r: Ranger\n  FollowCorridor(speed: 0.5) AvoidObstacles"),
@@ -233,6 +235,22 @@ def test_a_paren_left_open_is_one_error_and_the_items_after_it_are_read(catalog:
                    (4, "syntax: expected `:`, got `3s`")], got
     wrapped = m("  Wait(\n      duration: 1s\n  )")
     assert compile_text(wrapped, catalog, "t.mission").diagnostics == []
+
+
+@pytest.mark.parametrize(("body", "expected"), [
+    ("  Wait(duration: (1s\n  Wait(duration: 2s) as b", [(2, "syntax: expected `)` after `1s`: the `(` on line 2 is"
+                                                             " never closed")]),
+    ("  Wait(duration: 1s priority 2\n  Wait(duration: 2s)", [(2, "syntax: expected `)` after `1s`: the `(` on line 2"
+                                                                 " is never closed")]),
+    ("  Wait(duration: 1s,\n       priority: 2)\n  Wait(duration: 2s)",
+     [(3, "syntax: expected a name, got `priority`")]),
+], ids=["nested", "priority-on-its-line", "reserved-word-in-a-wrapped-list"])
+def test_brackets_left_open_give_one_error_each(body: str, expected: list[tuple[int, str]], catalog: Catalog) -> None:
+    """Re-verification R3: nested brackets were closed one at a time (two spurious errors followed), `as` or
+    `priority` after an open `(` were taken for a new item, and a reserved word in a wrapped list added an error on
+    the next, correct line."""
+    got = [(d.span.line, d.message) for d in compile_text(m(body), catalog, "t.mission").diagnostics]
+    assert got == expected
 
 
 def test_an_unknown_behavior_says_where_behaviors_come_from_and_nothing_about_its_outputs(catalog: Catalog) -> None:
