@@ -168,6 +168,7 @@ class MissionRunner:
         self._recent: list[Recent] = []  # placements their hosts may not announce yet, oldest first
         self.placements = PlacementLog(lambda: controller.executive.missions)  # for `missionctl status`
         self.began: dict[str, float] = {}  # mission -> the executive's time it began, while the executive lists it
+        self.undelivered: set[str] = set()  # hosts whose last gate operations did not arrive (said once each)
         self.resource_hosts = {r.id: r.host for r in cluster.resources() if r.host}
         self.patience = max(CALL_TIMEOUT, cluster.lease)  # how long a call waits for a host that does not answer
         # this controller's term: hosts refuse the calls of an older one (`Creator`)
@@ -497,11 +498,15 @@ class MissionRunner:
         if self.host_down(host):
             return
         try:
-            reply = self.bus.call(f"drd/{self.cluster.name}/host/{host}/creator",
-                                  GateUpdate(ops, world.name, world.generation, self.term), timeout=self.patience)
+            reply = self.bus.call_reaching(f"drd/{self.cluster.name}/host/{host}/creator",
+                                           GateUpdate(ops, world.name, world.generation, self.term), self.patience,
+                                           functools.partial(self.host_down, host))
         except Exception as e:  # the host's loss is noticed by the membership and the next calls
-            log.warning("the gate operations for %s were not delivered: %s", host, e)
+            if host not in self.undelivered:  # once until it answers again (a lost worker's burst was 8 lines)
+                log.warning("the gate operations for %s were not delivered: %s", host, e)
+            self.undelivered.add(host)
             return
+        self.undelivered.discard(host)
         if isinstance(reply, GateUpdateReply):
             with self.lock:
                 deliver(reply.records, self.controller.executive.record, self.telemetry.seen)
