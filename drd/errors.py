@@ -93,4 +93,3 @@ def logged(e: BaseException, when: str = "") -> str:
     """`raised` for a log line: with `DRD_DEBUG=1`, the traceback on the lines after it."""
     tb = debug_traceback(e)
     return raised(e, when) + (f"\n{tb}" if tb else "")
-

@@ -557,16 +557,9 @@ class _Recovery:
         if self._close(e):
             return
         for name in sorted(ip.accepts() - {"$END"}, key=_repair_order):  # type: ignore[no-untyped-call]
-            trial = ip.copy(deepcopy_values=False)  # type: ignore[no-untyped-call]  # a deep copy costs the AST so far
-            try:
-                trial.feed_token(self._dummy(name, e.token))
-                if e.token.type == "$END" or e.token.type in trial.accepts():
-                    ip.feed_token(self._dummy(name, e.token))
-                    if e.token.type != "$END":
-                        ip.feed_token(e.token)
-                    return
-            except UnexpectedInput:
-                continue
+            if self._takes(e, [name]):
+                self._insert(e, [name])
+                return
 
     def _close(self, e: UnexpectedToken) -> bool:
         """Brackets left open before the bad token (`left_open`): close the fewest of them, innermost first, end
@@ -578,22 +571,28 @@ class _Recovery:
         for count in range(1, len(closers) + 1):
             for inserted in (closers[:count], [*closers[:count], "_SEP"]):
                 if self._takes(e, inserted):
-                    for name in inserted:
-                        e.interactive_parser.feed_token(self._dummy(name, e.token))
-                    e.interactive_parser.feed_token(e.token)
+                    self._insert(e, inserted)
                     del layout.openers[-count:]  # closed: the newlines after them end items again
                     return True
         return False
 
     def _takes(self, e: UnexpectedToken, inserted: list[str]) -> bool:
-        """Whether the parser takes the bad token after the `inserted` terminals (tried on a copy)."""
+        """Whether the parser takes the bad token (at the end of the file: anything) after the `inserted`
+        terminals, tried on a copy (a deep copy would cost the AST so far)."""
         trial = e.interactive_parser.copy(deepcopy_values=False)  # type: ignore[no-untyped-call]
         try:
             for name in inserted:
                 trial.feed_token(self._dummy(name, e.token))
         except UnexpectedInput:
             return False
-        return e.token.type in trial.accepts()
+        return e.token.type == "$END" or e.token.type in trial.accepts()
+
+    def _insert(self, e: UnexpectedToken, inserted: list[str]) -> None:
+        """Feed the `inserted` terminals, then the bad token (`_takes` said the parser takes it)."""
+        for name in inserted:
+            e.interactive_parser.feed_token(self._dummy(name, e.token))
+        if e.token.type != "$END":
+            e.interactive_parser.feed_token(e.token)
 
     def _dummy(self, name: str, at: Token) -> Token:
         values = {"NAME": "_", "INT": "0", "FLOAT": "0.0", "DURATION": "0s", "STRING": '""', "_SEP": "\n",

@@ -151,7 +151,6 @@ class Instance:
     asked: list[ReadingKey] = field(default_factory=list)  # readings it asked over the pipe in this step
 
 
-
 def token_slots(running: dict[str, str], held: dict[str, tuple[str, int]]) -> dict[str, tuple[str, int]]:
     """(path, slot) of each running instance's token (`running`: key -> path; `held`: the tokens declared now).
     Held ones keep theirs; each new one takes the lowest slot no running instance of the same path holds, so the
@@ -167,6 +166,7 @@ def token_slots(running: dict[str, str], held: dict[str, tuple[str, int]]) -> di
         out[key] = (path, slot)
         taken.add((path, slot))
     return out
+
 
 class CreatorError(ComponentFailure, ValueError):
     """A call refused outright (unknown component, bad parameter, a device of another host)."""
