@@ -98,7 +98,7 @@ def main() -> None:
         cluster = load_hosts(hosts, cat)
     pool = WorkerPool(2, preload=behavior_modules(cat))
     creator = Creator(None, cluster, "ranger1", cat, pool=pool)
-    creator._drivers_for = lambda world: HostDrivers()  # type: ignore[method-assign]  # no device bound
+    creator._drivers_for = lambda world, generation: HostDrivers()  # type: ignore[method-assign]  # no device bound
     out: dict[str, Any] = {}
     try:
         if not pool.wait_ready(60.0):
