@@ -311,9 +311,20 @@ def timed_run(cmd: Sequence[str], check: Callable[[str], None] | None = None) ->
 
 
 def measure(cluster: Cluster, repeat: int) -> dict[str, Any]:
-    status_cmd = [*missionctl_cmd(), "status", "--json", "--config", str(cluster.hosts_file)]
-
+    """`missionctl status` as a user runs it (subprocesses, beside their floors), then its parts in this process."""
     incomplete: list[str] = []  # runs timed whose answer was not the whole cluster (counted, and a MISS)
+    wall = subprocess_walls(cluster, repeat, incomplete)
+    phases, calls = in_process_phases(cluster, repeat)
+    return {"status_incomplete": incomplete,
+            "subprocess": {k: stats(v) for k, v in wall.items()},
+            "in_process": {k: stats(v) for k, v in phases.items()},
+            "requests": {k: stats(v) for k, v in calls.items()}}
+
+
+def subprocess_walls(cluster: Cluster, repeat: int, incomplete: list[str]) -> dict[str, list[float]]:
+    """Wall seconds of `missionctl status --json` and of its floors, `repeat` runs each; every status answer that
+    is not the whole cluster up is added to `incomplete`."""
+    status_cmd = [*missionctl_cmd(), "status", "--json", "--config", str(cluster.hosts_file)]
 
     def all_up(stdout: str) -> None:
         data = json.loads(stdout)
@@ -332,7 +343,12 @@ def measure(cluster: Cluster, repeat: int) -> dict[str, Any]:
     for _ in range(repeat):  # interleaved, so a busy moment hits every command alike
         for label, (cmd, check) in commands.items():
             wall[label].append(timed_run(cmd, check))
+    return wall
 
+
+def in_process_phases(cluster: Cluster, repeat: int) -> tuple[dict[str, list[float]], dict[str, list[float]]]:
+    """Seconds of each part of a status in this process, imports done (connect, status, close, printing, reading
+    the hosts file), and of each request status makes: `repeat` rounds after one warm-up round."""
     from rich.console import Console
 
     from drd.cli.common import print_json
@@ -345,27 +361,9 @@ def measure(cluster: Cluster, repeat: int) -> dict[str, Any]:
     calls: dict[str, list[float]] = {k: [] for k in ("daemons()", "hosts()", "components()", "daemon_status()",
                                                       "resources()", "missions()")}
     for i in range(repeat + 1):  # the first round is a warm-up
-        t0 = time.perf_counter()
-        client = ClusterClient.connect(cluster.endpoints, cluster=cluster.name, timeout=2.0, prefer=cluster.names)
-        t1 = time.perf_counter()
-        try:
-            data = client.status(20)
-            t2 = time.perf_counter()
-            one: dict[str, float] = {}
-            for label, fn in (("daemons()", client.daemons), ("hosts()", functools.partial(client.hosts, 20)),
-                              ("components()", client.components),
-                              ("daemon_status()", functools.partial(client.daemon_status, "controller")),
-                              ("resources()", client.resources), ("missions()", client.missions)):
-                s = time.perf_counter()
-                fn()
-                one[label] = time.perf_counter() - s
-        finally:
-            t3 = time.perf_counter()
-            client.close()
-            t4 = time.perf_counter()
+        data, timings, one = connected_round(cluster)
         if i:
-            for k, v in (("connect", t1 - t0), ("status()", t2 - t1), ("close", t4 - t3),
-                         ("connect+status+close", (t1 - t0) + (t2 - t1) + (t4 - t3))):
+            for k, v in timings.items():
                 phases[k].append(v)
             for k, v in one.items():
                 calls[k].append(v)
@@ -380,10 +378,33 @@ def measure(cluster: Cluster, repeat: int) -> dict[str, Any]:
             s = time.perf_counter()  # what `missionctl status --config FILE` does before it connects
             load_endpoints(cluster.hosts_file)
             phases["load_endpoints (reading the hosts file)"].append(time.perf_counter() - s)
-    return {"status_incomplete": incomplete,
-            "subprocess": {k: stats(v) for k, v in wall.items()},
-            "in_process": {k: stats(v) for k, v in phases.items()},
-            "requests": {k: stats(v) for k, v in calls.items()}}
+    return phases, calls
+
+
+def connected_round(cluster: Cluster) -> tuple[Any, dict[str, float], dict[str, float]]:
+    """One client's life: its status answer, the seconds of connect, status, close (and their sum), and of each
+    request status makes, asked again one by one on the same connection."""
+    t0 = time.perf_counter()
+    client = ClusterClient.connect(cluster.endpoints, cluster=cluster.name, timeout=2.0, prefer=cluster.names)
+    t1 = time.perf_counter()
+    try:
+        data = client.status(20)
+        t2 = time.perf_counter()
+        one: dict[str, float] = {}
+        for label, fn in (("daemons()", client.daemons), ("hosts()", functools.partial(client.hosts, 20)),
+                          ("components()", client.components),
+                          ("daemon_status()", functools.partial(client.daemon_status, "controller")),
+                          ("resources()", client.resources), ("missions()", client.missions)):
+            s = time.perf_counter()
+            fn()
+            one[label] = time.perf_counter() - s
+    finally:
+        t3 = time.perf_counter()
+        client.close()
+        t4 = time.perf_counter()
+    timings = {"connect": t1 - t0, "status()": t2 - t1, "close": t4 - t3,
+               "connect+status+close": (t1 - t0) + (t2 - t1) + (t4 - t3)}
+    return data, timings, one
 
 
 def profile(cluster: Cluster) -> str:

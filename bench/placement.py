@@ -32,9 +32,13 @@ import tempfile
 import time
 from collections.abc import Callable
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+if TYPE_CHECKING:
+    from drd.cluster.creator import Creator
+    from drd.cluster.workers import WorkerPool
 
 GOAL_MS = 10.0
 
@@ -65,21 +69,37 @@ def policy_samples(hosts: int, repeat: int) -> list[float]:
 
 
 def main() -> None:
+    args = arguments()
+    if args.policy:
+        report = {"hosts": args.policy, **figures(policy_samples(args.policy, args.repeat))}
+        print(json.dumps(report, indent=2) if args.json else
+              f"place over {args.policy} hosts: median {report['median_ms']:.3f} ms, p90 {report['p90_ms']:.3f} ms")
+        return
+    creator, pool = bench_creator()
+    try:
+        if not pool.wait_ready(60.0):
+            sys.exit("the worker pool did not start")
+        samples = placement_samples(creator, pool, args.repeat)
+    finally:
+        creator.close()
+        pool.close()
+    report_placements({name: figures(values) for name, values in samples.items()}, args.repeat, args.json)
+
+
+def arguments() -> argparse.Namespace:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--repeat", type=int, default=200, help="timed placements of each kind")
     parser.add_argument("--json", action="store_true", help="print the figures as JSON")
     parser.add_argument("--policy", type=int, metavar="HOSTS", default=0,
                         help="time only the pure policy (drd.placement.place, filters then scores, with its Decision "
                              "record) over HOSTS hosts, a third without the worker role, with devices near one")
-    args = parser.parse_args()
-    if args.policy:
-        report = {"hosts": args.policy, **figures(policy_samples(args.policy, args.repeat))}
-        print(json.dumps(report, indent=2) if args.json else
-              f"place over {args.policy} hosts: median {report['median_ms']:.3f} ms, p90 {report['p90_ms']:.3f} ms")
-        return
+    return parser.parse_args()
 
+
+def bench_creator() -> tuple[Creator, WorkerPool]:
+    """A Creator for ranger1 with its own warm worker pool, over the catalog plus one container and one dedicated
+    component (both `Calibrate`'s code): the imports are here so that `--policy` does not pay for them."""
     from drd.cluster.creator import Creator, behavior_modules
-    from drd.cluster.remote import ComponentCall
     from drd.cluster.workers import WorkerPool
     from drd.hosts import load_hosts
     from drd.hw.drivers import HostDrivers
@@ -99,47 +119,48 @@ def main() -> None:
     pool = WorkerPool(2, preload=behavior_modules(cat))
     creator = Creator(None, cluster, "ranger1", cat, pool=pool)
     creator._drivers_for = lambda world, generation: HostDrivers()  # type: ignore[method-assign]  # no device bound
-    out: dict[str, Any] = {}
-    try:
-        if not pool.wait_ready(60.0):
-            sys.exit("the worker pool did not start")
+    return creator, pool
 
-        def start(path: str, component: str) -> None:
-            reply = creator.handle(ComponentCall("start", "bench", path, component=component))
-            if reply.error:
-                sys.exit(f"start of {path} failed: {reply.error}")
 
-        start("warm/first", "BenchContainer")  # the mission's container now runs
-        container = [timed(lambda i=i: start(f"c/{i}", "BenchContainer")) for i in range(args.repeat)]
-        steps = [timed(lambda: creator.handle(ComponentCall("step", "bench", "c/0", now=1.0)))
-                 for _ in range(args.repeat)]
+def placement_samples(creator: Creator, pool: WorkerPool, repeat: int) -> dict[str, list[float]]:
+    """Seconds of each placement in a warm container, in a dedicated process, of each fork server spawn and of each
+    step round trip, `repeat` of each."""
+    from drd.cluster.remote import ComponentCall
 
-        dedicated = []
-        for i in range(args.repeat):
-            pool.wait_ready(30.0)
-            dedicated.append(timed(lambda i=i: start(f"d/{i}", "BenchDedicated")))
-            with creator._lock:
-                creator._forget(f"d/{i}")  # its process goes: the next sample takes a pre-started one again
+    def start(path: str, component: str) -> None:
+        reply = creator.handle(ComponentCall("start", "bench", path, component=component))
+        if reply.error:
+            sys.exit(f"start of {path} failed: {reply.error}")
 
-        spawns = []
-        for _ in range(args.repeat):
-            t0 = time.perf_counter()
-            w = pool._spawn()  # a fresh worker from the warm fork server, up to its hello
-            spawns.append(time.perf_counter() - t0)
-            pool.release(w)
-    finally:
-        creator.close()
-        pool.close()
+    start("warm/first", "BenchContainer")  # the mission's container now runs
+    container = [timed(lambda i=i: start(f"c/{i}", "BenchContainer")) for i in range(repeat)]
+    steps = [timed(lambda: creator.handle(ComponentCall("step", "bench", "c/0", now=1.0))) for _ in range(repeat)]
 
-    out = {"container": figures(container), "dedicated": figures(dedicated), "forkserver_spawn": figures(spawns),
-           "step_round_trip": figures(steps)}
+    dedicated = []
+    for i in range(repeat):
+        pool.wait_ready(30.0)
+        dedicated.append(timed(lambda i=i: start(f"d/{i}", "BenchDedicated")))
+        with creator._lock:
+            creator._forget(f"d/{i}")  # its process goes: the next sample takes a pre-started one again
+
+    spawns = []
+    for _ in range(repeat):
+        t0 = time.perf_counter()
+        w = pool._spawn()  # a fresh worker from the warm fork server, up to its hello
+        spawns.append(time.perf_counter() - t0)
+        pool.release(w)
+    return {"container": container, "dedicated": dedicated, "forkserver_spawn": spawns, "step_round_trip": steps}
+
+
+def report_placements(out: dict[str, dict[str, float]], repeat: int, as_json: bool) -> None:
+    """The figures as JSON or as a table, with the spawn/container ratio and the verdict on the goal."""
     ratio = out["forkserver_spawn"]["median_ms"] / out["container"]["median_ms"]
     verdict = "PASS" if out["container"]["median_ms"] <= GOAL_MS else "MISS"
-    if args.json:
+    if as_json:
         print(json.dumps({**out, "spawn_over_container": ratio, "goal_ms": GOAL_MS, "verdict": verdict}, indent=2))
         return
     load = ", ".join(f"{x:.2f}" for x in os.getloadavg())
-    print(f"Python {sys.version.split()[0]}, {os.cpu_count()} CPUs, load {load}; {args.repeat} samples each")
+    print(f"Python {sys.version.split()[0]}, {os.cpu_count()} CPUs, load {load}; {repeat} samples each")
     for name, label in (("container", "place in a warm container"), ("dedicated", "place in a dedicated process"),
                         ("forkserver_spawn", "warm forkserver spawn (peer)"), ("step_round_trip", "step round trip")):
         f = out[name]

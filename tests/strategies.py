@@ -110,6 +110,35 @@ class Grammar:
 def grammar(names: st.SearchStrategy[str], type_names: st.SearchStrategy[str],
             strings: st.SearchStrategy[str], max_leaves: int = 10, max_items: int = 5) -> Grammar:
     """Build every strategy from `names` (never keywords), `type_names` and string contents."""
+    exprs, interp_safe, string_exprs = _expressions(names, type_names, strings, max_leaves)
+    type_refs = type_names.map(ast.TypeRef)
+    arg_tuples = st.lists(st.builds(ast.Arg, names, exprs), max_size=3).map(tuple)
+    children, parallels = _children(names, exprs, arg_tuples)
+    items: st.SearchStrategy[ast.Item] = st.one_of(
+        st.builds(ast.Need, names, type_refs, st.none() | exprs, st.none() | exprs, st.none() | durations),
+        st.builds(ast.Shared, names, type_refs),
+        st.builds(ast.Var, names, type_refs, st.none() | exprs),
+        children,
+        parallels,
+        _transitions(names, exprs, string_exprs, arg_tuples),
+        _plans(names),
+        st.builds(ast.Constraint, names, exprs),
+    )
+    bodies = st.lists(items, max_size=max_items).map(tuple)
+    params = st.builds(ast.Param, names, type_refs, st.none() | exprs)
+    behaviors = st.builds(lambda name, ps, body, prio: ast.Behavior(name, tuple(ps), body, prio, False),
+                          names, st.lists(params, max_size=3), bodies, st.none() | priorities)
+    missions = st.builds(lambda name, body, prio: ast.Behavior(name, (), body, prio, True), names, bodies,
+                         st.one_of(st.none(), st.integers(1, 99)))
+    return Grammar(exprs, interp_safe, string_exprs, children, items, behaviors, missions,
+                   strings.map(ast.Import))
+
+
+def _expressions(names: st.SearchStrategy[str], type_names: st.SearchStrategy[str],
+                 strings: st.SearchStrategy[str], max_leaves: int
+                 ) -> tuple[st.SearchStrategy[ast.Expr], st.SearchStrategy[ast.Expr], st.SearchStrategy[ast.Expr]]:
+    """Expressions, those safe inside `{ }` of a string, and string expressions: built together because an
+    interpolated string holds expressions and an expression may be a string."""
     name_exprs = st.one_of(names.map(ast.Name), st.just(ast.Name("event")))
     plain_leaves = st.one_of(ints.map(ast.Literal), floats.map(ast.Literal), st.booleans().map(ast.Literal),
                              durations, name_exprs)
@@ -136,9 +165,14 @@ def grammar(names: st.SearchStrategy[str], type_names: st.SearchStrategy[str],
         lambda parts: any(isinstance(p, ast.Expr) for p in parts)).map(ast.Interp)
     string_exprs = st.one_of(strings.map(ast.Literal), interps)
     exprs = st.recursive(st.one_of(plain_leaves, string_exprs), extend, max_leaves=max_leaves)
+    return exprs, interp_safe, string_exprs
 
-    type_refs = type_names.map(ast.TypeRef)
-    arg_tuples = st.lists(st.builds(ast.Arg, names, exprs), max_size=3).map(tuple)
+
+def _children(names: st.SearchStrategy[str], exprs: st.SearchStrategy[ast.Expr],
+              arg_tuples: st.SearchStrategy[tuple[ast.Arg, ...]]
+              ) -> tuple[st.SearchStrategy[ast.Child], st.SearchStrategy[ast.Parallel]]:
+    """Child declarations and the parallel blocks that group them (a policy-less block is always ALL, as
+    parsed)."""
     multiplicities = st.one_of(
         st.builds(ast.Multiplicity, exprs),
         st.builds(ast.Multiplicity, exprs, exprs),
@@ -153,6 +187,13 @@ def grammar(names: st.SearchStrategy[str], type_names: st.SearchStrategy[str],
                   kids),
         st.builds(lambda u, k: ast.Parallel(ast.Policy.UNTIL, k, u, True), names, kids),
     )
+    return children, parallels
+
+
+def _transitions(names: st.SearchStrategy[str], exprs: st.SearchStrategy[ast.Expr],
+                 string_exprs: st.SearchStrategy[ast.Expr], arg_tuples: st.SearchStrategy[tuple[ast.Arg, ...]]
+                 ) -> st.SearchStrategy[ast.Transition]:
+    """Transitions with every trigger kind and action kind (kept apart: the largest item shape)."""
     actions = st.one_of(
         st.builds(ast.SetAction, names, exprs),
         st.builds(ast.EmitAction, names, st.none() | arg_tuples),
@@ -166,7 +207,7 @@ def grammar(names: st.SearchStrategy[str], type_names: st.SearchStrategy[str],
         st.just({"kind": ast.TriggerKind.ERROR}),
         durations.map(lambda d: {"kind": ast.TriggerKind.TIMEOUT, "delay": d}),
     )
-    transitions = st.builds(
+    return st.builds(
         lambda src, dst, trig, guard, acts, pre: ast.Transition(src, dst, guard=guard, actions=tuple(acts),
                                                                 preallocate=pre, **trig),
         st.just("start") | names,
@@ -176,30 +217,16 @@ def grammar(names: st.SearchStrategy[str], type_names: st.SearchStrategy[str],
         st.lists(actions, max_size=3),
         st.booleans(),
     )
-    plans = st.builds(
+
+
+def _plans(names: st.SearchStrategy[str]) -> st.SearchStrategy[ast.Plan]:
+    """Plans: chains of named steps, run in order or concurrently."""
+    return st.builds(
         lambda concurrent, chains, pre: ast.Plan(concurrent, tuple(tuple(c) for c in chains), preallocate=pre),
         st.booleans(),
         st.lists(st.lists(names.map(ast.PlanStep), min_size=1, max_size=4), max_size=4),
         st.booleans(),
     )
-    items: st.SearchStrategy[ast.Item] = st.one_of(
-        st.builds(ast.Need, names, type_refs, st.none() | exprs, st.none() | exprs, st.none() | durations),
-        st.builds(ast.Shared, names, type_refs),
-        st.builds(ast.Var, names, type_refs, st.none() | exprs),
-        children,
-        parallels,
-        transitions,
-        plans,
-        st.builds(ast.Constraint, names, exprs),
-    )
-    bodies = st.lists(items, max_size=max_items).map(tuple)
-    params = st.builds(ast.Param, names, type_refs, st.none() | exprs)
-    behaviors = st.builds(lambda name, ps, body, prio: ast.Behavior(name, tuple(ps), body, prio, False),
-                          names, st.lists(params, max_size=3), bodies, st.none() | priorities)
-    missions = st.builds(lambda name, body, prio: ast.Behavior(name, (), body, prio, True), names, bodies,
-                         st.one_of(st.none(), st.integers(1, 99)))
-    return Grammar(exprs, interp_safe, string_exprs, children, items, behaviors, missions,
-                   strings.map(ast.Import))
 
 
 priorities = st.integers(min_value=0, max_value=10**6)

@@ -16,7 +16,7 @@ import math
 import subprocess
 from collections.abc import Iterator
 from pathlib import Path
-from typing import Any
+from typing import Any, NamedTuple
 
 import pytest
 from cluster_support import (
@@ -81,7 +81,24 @@ def cluster(tmp_path_factory: pytest.TempPathFactory) -> Iterator[DaemonCluster]
         yield c
 
 
-def test_two_missions_share_one_ranger_by_priority(cluster: DaemonCluster, tmp_path: Path) -> None:
+class TwoRuns(NamedTuple):
+    """What the low-priority patrol and the High run that joined it left behind, for the assertions to read."""
+
+    low: subprocess.Popen[str]
+    low_out: str
+    low_err: str
+    low_trace: Path
+    high: subprocess.Popen[str]
+    high_out: str
+    high_err: str
+    high_trace: Path
+    ambiguous: subprocess.CompletedProcess[str]  # `missionctl stop` without an id while both ran
+    seen: list[tuple[Any, dict[str, list[str]]]]  # the blocked waiter status showed, with the queues
+
+
+def run_low_then_high(cluster: DaemonCluster, tmp_path: Path) -> TwoRuns:
+    """Start the patrol, let High join it once it runs, try an ambiguous stop while both run, and wait for both:
+    the processes and the live status views are here, so the test reads only what they left."""
     (tmp_path / "low.mission").write_text(LOW)
     (tmp_path / "high.mission").write_text(HIGH)
     low_trace, high_trace = tmp_path / "low.jsonl", tmp_path / "high.jsonl"
@@ -104,21 +121,38 @@ def test_two_missions_share_one_ranger_by_priority(cluster: DaemonCluster, tmp_p
             ambiguous = cluster.missionctl("stop", "--config", str(cluster.hosts_file), timeout=30)
             high_out, high_err = high.communicate(timeout=90)
         low_out, low_err = low.communicate(timeout=90)
-    assert high.returncode == 0, (high_err[-2000:], cluster.log("controller")[-3000:])
-    assert low.returncode == 0, (low_err[-2000:], cluster.log("controller")[-3000:])
+    return TwoRuns(low, low_out, low_err, low_trace, high, high_out, high_err, high_trace, ambiguous, seen)
+
+
+def test_two_missions_share_one_ranger_by_priority(cluster: DaemonCluster, tmp_path: Path) -> None:
+    runs = run_low_then_high(cluster, tmp_path)
+    low_err, high_err, ambiguous = runs.low_err, runs.high_err, runs.ambiguous
+    assert runs.high.returncode == 0, (high_err[-2000:], cluster.log("controller")[-3000:])
+    assert runs.low.returncode == 0, (low_err[-2000:], cluster.log("controller")[-3000:])
     # `missionctl stop` without an id, two missions running: it names them and stops neither
     assert ambiguous.returncode == 2 and "2 missions run" in ambiguous.stderr, ambiguous.stderr
     assert "--all" in ambiguous.stderr
-    high_report, low_report = json.loads(high_out), json.loads(low_out)
+    high_report, low_report = json.loads(runs.high_out), json.loads(runs.low_out)
     assert high_report["outcome"] == low_report["outcome"] == "success"
     assert "priority 1" in high_err and "priority 2" in low_err  # each run says the rank it got
     # the joining run is told its --speed is not the world's, and its report has the world's pace (not a cluster
     # that fell behind the 8x it asked)
     assert "--speed 8 not applied" in high_err, high_err[-2000:]
     assert high_report["speed"] == low_report["speed"] == 4
+    assert_queued_behind_the_other(runs.seen, low_report, high_report)
+    # the patrol's progress line said it was suspended while High drove (it said `active Patrol`: audit D7)
+    assert "suspended FollowCorridor" in low_err, low_err[-2000:]
+    low_recs, high_recs = read_trace(runs.low_trace), read_trace(runs.high_trace)
+    assert {r["mission"] for r in low_recs} == {low_report["id"]}, "each trace holds its own mission"
+    assert {r["mission"] for r in high_recs} == {high_report["id"]}
+    assert_checked_together(cluster, runs.low_trace, runs.high_trace)
+    assert_high_drove_between(low_recs + high_recs, low_report["id"], high_report["id"])
 
-    # status's queues come from the manager's claims: the waiter stands in ranger1's queue, ranked by its mission's
-    # priority, blocked by the other mission's holder, which holds ranger1 (multi-mission audit D2)
+
+def assert_queued_behind_the_other(seen: list[tuple[Any, dict[str, list[str]]]], low_report: dict[str, Any],
+                                   high_report: dict[str, Any]) -> None:
+    """status's queues come from the manager's claims: the waiter stands in ranger1's queue, ranked by its
+    mission's priority, blocked by the other mission's holder, which holds ranger1 (multi-mission audit D2)."""
     waiter, queues = seen[0]
     mine, other = (low_report, high_report) if waiter.mission == low_report["id"] else (high_report, low_report)
     assert waiter.mission_priority == mine["priority"]
@@ -127,13 +161,10 @@ def test_two_missions_share_one_ranger_by_priority(cluster: DaemonCluster, tmp_p
     # needs the drive, blocks the preempted patrol): whichever waits first
     assert set(waiter.blocked_by[0].holds.values()) & {"ranger1", "ranger1.drive"}, waiter
     assert waiter.holder in queues["ranger1.drive"], queues
-    # the patrol's progress line said it was suspended while High drove (it said `active Patrol`: audit D7)
-    assert "suspended FollowCorridor" in low_err, low_err[-2000:]
-    low_recs, high_recs = read_trace(low_trace), read_trace(high_trace)
-    assert {r["mission"] for r in low_recs} == {low_report["id"]}, "each trace holds its own mission"
-    assert {r["mission"] for r in high_recs} == {high_report["id"]}
 
-    # The outside check: only the holder moved a device, no double hold, everything released.
+
+def assert_checked_together(cluster: DaemonCluster, low_trace: Path, high_trace: Path) -> None:
+    """The outside check: only the holder moved a device, no double hold, everything released."""
     check = subprocess.run([*MISSIONCTL, "check-trace", "--together", str(low_trace), str(high_trace), "--config",
                             str(cluster.hosts_file), "--json"], cwd=ROOT, capture_output=True, text=True,
                            timeout=60, check=False)
@@ -141,25 +172,27 @@ def test_two_missions_share_one_ranger_by_priority(cluster: DaemonCluster, tmp_p
     [together] = json.loads(check.stdout)
     assert together["ok"] and together["accepted"] > 0 and together["grants"] >= 3
 
-    # Read in causal order: the patrol's drive is revoked for High, High drives, then the patrol resumes.
-    merged = sorted(low_recs + high_recs, key=lambda r: r["seq"])
+
+def assert_high_drove_between(records: list[dict[str, Any]], low: str, high: str) -> None:
+    """Read in causal order: the patrol's drive is revoked for High, High drives, then the patrol resumes."""
+    merged = sorted(records, key=lambda r: r["seq"])
     drive = "ranger1.drive"
     revoked = next(i for i, r in enumerate(merged) if r["kind"] == "revoked" and drive in r["resources"])
-    assert merged[revoked]["mission"] == low_report["id"]
+    assert merged[revoked]["mission"] == low
     assert "High" in merged[revoked]["reason"], merged[revoked]
     high_grant = next(i for i, r in enumerate(merged)
-                      if r["kind"] == "granted" and r["mission"] == high_report["id"] and drive in r["epochs"])
+                      if r["kind"] == "granted" and r["mission"] == high and drive in r["epochs"])
     assert high_grant > revoked, "the drive is granted to High only after the patrol lost it"
     high_done = next(i for i, r in enumerate(merged) if r["kind"] == "released" and drive in r["resources"]
-                     and r["mission"] == high_report["id"])
-    resumed = next(i for i, r in enumerate(merged) if r["kind"] == "resumed" and r["mission"] == low_report["id"])
+                     and r["mission"] == high)
+    resumed = next(i for i, r in enumerate(merged) if r["kind"] == "resumed" and r["mission"] == low)
     assert high_grant < high_done < resumed
     window = merged[high_grant:high_done]
     moved = [r for r in window if r["kind"] == "command" and r["device"] == drive and r["accepted"]]
-    assert moved and all(r["mission"] == high_report["id"] for r in moved), \
+    assert moved and all(r["mission"] == high for r in moved), \
         "while High held the drive, only High moved it"
     assert [r for r in merged[resumed:] if r["kind"] == "command" and r["device"] == drive and r["accepted"]
-            and r["mission"] == low_report["id"]], "the patrol drove again once resumed"
+            and r["mission"] == low], "the patrol drove again once resumed"
 
 
 def blocked_waiter(client: Any, seen: list[tuple[Any, dict[str, list[str]]]]) -> bool:

@@ -34,6 +34,23 @@ def random_run(chart: Statechart, seed: int, listen: bool) -> list[Any]:
     seen: list[Any] = []
     events = sorted({t.event for t in chart.transitions() if t.event}) or ["Nothing"]
     drive = random.Random(seed)
+    clock = SimClock()
+    rcm = ResourceManager(lease=120.0, default_slice=drive.choice([1.0, 5.0]))  # leases outlive 40 s steps
+    pool = ResourcePool(rcm)
+    pool.add(ranger_world(2, 2), 0.0)
+    component = dice(seed, events, seen)
+    registry = {leaf.component or "": component for leaf in chart.leaves()}
+    interp = Interpreter(chart, registry, rcm, clock, pool=pool, preallocate=drive.random() < 0.3, lease=120.0)
+    if listen:
+        interp.attach(lambda r: None)
+    interp.start()
+    shake(interp, clock, drive, events)
+    seen.append((interp.outcome, interp.reason, interp.snapshot(), rcm.snapshot()))
+    return seen
+
+
+def dice(seed: int, events: list[str], seen: list[Any]) -> type[Component]:
+    """A component class whose every call is recorded in `seen`: what the two runs compare."""
 
     class Dice(Component):
         """Succeeds, fails, raises, emits or keeps running, by a die seeded per path and entry."""
@@ -67,15 +84,11 @@ def random_run(chart: Statechart, seed: int, listen: bool) -> list[Any]:
             assert self.ctx is not None
             seen.append(("resume", self.ctx.path))
 
-    clock = SimClock()
-    rcm = ResourceManager(lease=120.0, default_slice=drive.choice([1.0, 5.0]))  # leases outlive 40 s steps
-    pool = ResourcePool(rcm)
-    pool.add(ranger_world(2, 2), 0.0)
-    registry = {leaf.component or "": Dice for leaf in chart.leaves()}
-    interp = Interpreter(chart, registry, rcm, clock, pool=pool, preallocate=drive.random() < 0.3, lease=120.0)
-    if listen:
-        interp.attach(lambda r: None)
-    interp.start()
+    return Dice
+
+
+def shake(interp: Interpreter, clock: SimClock, drive: random.Random, events: list[str]) -> None:
+    """Up to 300 random moves (time, events, steps, a host lost) from `drive`: the same moves for both runs."""
     for _ in range(300):
         if interp.finished:
             break
@@ -89,8 +102,6 @@ def random_run(chart: Statechart, seed: int, listen: bool) -> list[Any]:
             interp.step()
         else:
             interp.remove_host("ranger2")
-    seen.append((interp.outcome, interp.reason, interp.snapshot(), rcm.snapshot()))
-    return seen
 
 
 @pytest.mark.parametrize("path", MISSIONS, ids=lambda p: f"{p.parent.name}/{p.stem}")
