@@ -2,7 +2,7 @@
 
 Everything that turns a manifest's `entry_point` into a class comes here, so the format is checked one way and
 a failure says which of the three things went wrong: the module is not there, it is there but its own import
-failed, or it has no such name.
+failed (`MissingDependency` when what it imports is not installed), or it has no such name.
 """
 
 from __future__ import annotations
@@ -22,6 +22,15 @@ class EntryPointError(ComponentFailure):
     name."""
 
 
+class MissingDependency(EntryPointError):
+    """The entry point's module is there but imports one that is not installed (`dependency`): a host without a
+    library a component needs, which is not a mistake in its manifest (`drd start` then does not offer it)."""
+
+    def __init__(self, message: str, dependency: str) -> None:
+        super().__init__(message)
+        self.dependency = dependency
+
+
 def split(entry: str) -> tuple[str, str]:
     """`package.module:Name` -> (`package.module`, `Name`), or EntryPointError for anything else."""
     if not ENTRY_POINT.fullmatch(entry):
@@ -36,9 +45,13 @@ def load(entry: str) -> Any:
     try:
         module = importlib.import_module(module_name)
     except ModuleNotFoundError as e:
-        if e.name is not None and module_name.startswith(e.name):  # the module itself, not one of its imports
+        if e.name is None:
+            raise EntryPointError(f"module {module_name} failed to import: {e}") from e
+        if module_name == e.name or module_name.startswith(e.name + "."):  # the module itself, not one of its imports
             raise EntryPointError(f"no module {module_name} (for {entry})") from e
-        raise EntryPointError(f"module {module_name} failed to import: {e}") from e
+        if e.name.partition(".")[0] == module_name.partition(".")[0]:  # a module of its own package: broken
+            raise EntryPointError(f"module {module_name} failed to import: {e}") from e
+        raise MissingDependency(f"module {module_name} failed to import: {e}", e.name) from e
     except Exception as e:  # a module that raises at import is broken, not missing
         raise EntryPointError(f"module {module_name} failed to import: {type(e).__name__}: {e}") from e
     try:

@@ -197,12 +197,13 @@ def _excluded(host: HostView, ctx: Context) -> str | None:
 
 
 def _not_offered(host: HostView, ctx: Context) -> str | None:
-    """A host whose daemon does not announce the type would refuse its start (no manifest of it there); a host
-    that lacks its devices is refused for those (`_missing_devices`), once."""
+    """A host whose daemon does not announce the type would refuse its start (no manifest of it there, or its module
+    imports a library not installed there); a host that lacks its devices is refused for those
+    (`_missing_devices`), once."""
     name = ctx.component.name
     if host.offers is None or name in host.offers or required_devices(ctx.component) - host.devices:
         return None
-    return f"does not offer {name} (its daemon has no manifest of it)"
+    return f"does not offer {name} (its daemon has no manifest of it, or cannot import its module)"
 
 
 def _cores(host: HostView, ctx: Context) -> str | None:

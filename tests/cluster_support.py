@@ -83,12 +83,15 @@ class DaemonCluster:
         self.endpoints = [f"tcp/127.0.0.1:{p}" for p in self.ports]
         self._clients: list[ClusterClient] = []
 
-    def start(self, name: str, *, hosts_file: Path | None = None, extra: Sequence[str] = ()) -> subprocess.Popen[bytes]:
+    def start(self, name: str, *, hosts_file: Path | None = None, extra: Sequence[str] = (),
+              env: dict[str, str] | None = None) -> subprocess.Popen[bytes]:
+        """`drd start` for host `name`, logging to its file; `env` replaces the environment (a host with other
+        libraries installed)."""
         log = (self.folder / f"{name}.log").open("ab")
         cmd = [*DRD, "start", "--host", name, "--config", str(hosts_file or self.hosts_file),
                "--run-dir", str(self.run_dir), "--load-period", str(LOAD_PERIOD), "--peer-grace", "1", *extra]
         with log:
-            proc = subprocess.Popen(cmd, cwd=ROOT, stdin=subprocess.DEVNULL, stdout=log, stderr=log)
+            proc = subprocess.Popen(cmd, cwd=ROOT, stdin=subprocess.DEVNULL, stdout=log, stderr=log, env=env)
         self.procs[name] = proc
         return proc
 

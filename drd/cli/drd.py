@@ -7,6 +7,7 @@ See docs/daemon.md.
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 import json
 import logging
@@ -46,6 +47,7 @@ if TYPE_CHECKING:
 
     from drd.daemon.security import Transport
     from drd.hosts import Cluster
+    from drd.preflight import StartCheck
     from dsl.catalog import Catalog, ComponentType, ParamSpec, RecordSpec
 
 app = typer.Typer(help="The Distributed Robotics Daemon: one per host.", no_args_is_help=True,
@@ -171,9 +173,9 @@ def start(
         cluster.host(host)
     except KeyError:
         fail(f"no host {host!r} in {config} (hosts: {', '.join(h.name for h in cluster.hosts)})")
-    problems = _preflight(cluster, host, cat)  # before any process or pidfile: a typo fails here
-    if problems:
-        fail_all(problems, hint="see docs/drivers.md (drivers), docs/components.md (manifests), docs/worlds.md")
+    check = _preflight(cluster, host, cat)  # before any process or pidfile: a typo fails here
+    if check.problems:
+        fail_all(check.problems, hint="see docs/drivers.md (drivers), docs/components.md (manifests), docs/worlds.md")
     try:
         tr = transport(cluster, daemon=True, host=host)
     except SecurityError as e:
@@ -188,23 +190,28 @@ def start(
     if running is not None and running.running():
         fail(f"drd for host {host} is already running (pid {running.pid})", hint=f"drd stop --host {host}")
     if detach:
+        for line in check.warnings(host):  # the daemon logs them too, in its log file
+            err.print(f"warning: {line}", style="yellow", markup=False, highlight=False)
         return _detach(host, cluster.name, config, rd, log_file or rd / cluster.name / f"{host}.log", load_period,
                        peer_grace, log_level, extra, as_json)
     _configure_logging(host, log_file, level)
-    return _serve(cluster, host, cat, tr, rd, config, log_file, load_period, peer_grace)
+    for line in check.warnings(host):
+        logging.getLogger("drd.daemon").warning("%s", line)
+    return _serve(cluster, host, cat, tr, rd, config, log_file, load_period, peer_grace, check.unavailable)
 
 
-def _preflight(cluster: Cluster, host: str, cat: Catalog) -> list[str]:
-    """What keeps `host` from starting (`drd.preflight.start_problems`), found in a forked child while this process
-    is still single-threaded. The check imports every manifest's entry point: in the daemon, those modules (the
-    behaviors, numpy with them) would stay for its whole life, about 9 MB it never uses (its workers import them
-    from the fork server). Checked in this process where a fork is not known to be safe (no /proc/self/task to
-    count threads), or when the child gives no answer (an exception there is then raised here, as before)."""
-    from drd.preflight import start_problems
+def _preflight(cluster: Cluster, host: str, cat: Catalog) -> StartCheck:
+    """What keeps `host` from starting, and what it starts without (`drd.preflight.start_check`), found in a forked
+    child while this process is still single-threaded. The check imports every manifest's entry point: in the daemon,
+    those modules (the behaviors, numpy with them) would stay for its whole life, about 9 MB it never uses (its
+    workers import them from the fork server). Checked in this process where a fork is not known to be safe (no
+    /proc/self/task to count threads), or when the child gives no answer (an exception there is then raised here,
+    as before)."""
+    from drd.preflight import StartCheck, start_check
 
     tasks = Path("/proc/self/task")
     if not hasattr(os, "fork") or not tasks.is_dir() or len(list(tasks.iterdir())) != 1:
-        return start_problems(cluster, host, cat)
+        return start_check(cluster, host, cat)
     read, write = os.pipe()
     sys.stdout.flush()
     sys.stderr.flush()
@@ -214,7 +221,7 @@ def _preflight(cluster: Cluster, host: str, cat: Catalog) -> list[str]:
         try:
             os.close(read)
             with os.fdopen(write, "w", encoding="utf-8") as answer:
-                json.dump(start_problems(cluster, host, cat), answer)
+                json.dump(dataclasses.asdict(start_check(cluster, host, cat)), answer)
             code = 0
         finally:
             os._exit(code)
@@ -223,12 +230,11 @@ def _preflight(cluster: Cluster, host: str, cat: Catalog) -> list[str]:
         text = answer.read()
     _, status = os.waitpid(pid, 0)
     try:
-        problems = json.loads(text) if os.waitstatus_to_exitcode(status) == 0 else None
-    except ValueError:
-        problems = None
-    if not isinstance(problems, list) or not all(isinstance(p, str) for p in problems):
-        return start_problems(cluster, host, cat)
-    return problems
+        found: dict[str, Any] = json.loads(text) if os.waitstatus_to_exitcode(status) == 0 else {}
+        return StartCheck([str(p) for p in found["problems"]],
+                          {str(k): str(v) for k, v in found["unavailable"].items()})
+    except (ValueError, TypeError, KeyError, AttributeError):  # no answer, or not the one asked for
+        return start_check(cluster, host, cat)
 
 
 def _load_cluster(config: Path, cat: Catalog) -> Cluster:
@@ -241,14 +247,14 @@ def _load_cluster(config: Path, cat: Catalog) -> Cluster:
 
 
 def _serve(cluster: Cluster, host: str, cat: Catalog, tr: Transport, rd: Path, config: Path, log_file: Path | None,
-           load_period: float, peer_grace: float) -> int:
+           load_period: float, peer_grace: float, unavailable: dict[str, str]) -> int:
     from drd.bus import BusError
     from drd.daemon import runfiles
     from drd.daemon.daemon import Daemon, DaemonConfig
 
     journal = rd / cluster.name / "journal.sqlite"  # the controller's missions, resumed after a crash
     daemon = Daemon(DaemonConfig(cluster, host, cat, tr, load_period=load_period, peer_grace=peer_grace,
-                                 journal=journal))
+                                 journal=journal, unavailable=unavailable))
     try:
         info = runfiles.claim(rd, host, cluster.name, str(config.absolute()), str(log_file or ""), daemon.roles)
     except runfiles.AlreadyRunning as e:

@@ -302,6 +302,15 @@ class ComponentRouter:
         self.sim_time, self.sim_version = reply.time, reply.version
         return 0.0
 
+    def implements(self, component: str) -> bool:
+        """Whether an instance of `component` can be started: with a placer and a catalog, its manifest names an
+        entry point (the hosts import it; one that cannot does not offer it, `drd.preflight.StartCheck`), without
+        them its class imports here, where it would run."""
+        if self.place is not None and self.catalog is not None:
+            ct = self.catalog.get(component)
+            return ct is not None and bool(ct.entry_point)
+        return component in self.local
+
     def param_names(self, component: str) -> set[str] | None:
         """The parameters the manifest declares (what a call may carry), or None if unknown."""
         ct = self.catalog.get(component) if self.catalog is not None else None
@@ -424,7 +433,7 @@ class RemoteRegistry(Mapping[str, Callable[[], Component]]):
         self.router = router
 
     def __getitem__(self, name: str) -> Callable[[], Component]:
-        if name not in self.router.local:  # the catalog knows it (the Creator checks again on its side)
+        if not self.router.implements(name):  # the Creator checks again on its side
             raise KeyError(name)
         return lambda: RemoteComponent(name, self.router)
 

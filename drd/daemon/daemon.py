@@ -31,9 +31,9 @@ import os
 import threading
 import time
 from collections import Counter, deque
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterator, Mapping
 from contextlib import contextmanager
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -92,6 +92,8 @@ class DaemonConfig:
     peer_grace: float = 3.0
     peer_recheck: float = 5.0
     journal: Path | None = None  # the controller's missions on disk (`drd.journal`); None: not kept
+    #: component types this host does not run, with why (`drd.preflight.StartCheck`): not announced, so not placed
+    unavailable: Mapping[str, str] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         self.cluster.host(self.host)  # KeyError naming the known hosts
@@ -503,8 +505,9 @@ class Daemon:
         if self.sim_service is not None:
             services |= {"simulator": f"{keys.root}/sim"}
         services |= {f"{me}.creator": f"{keys.host(me)}/creator"}
-        return Announcement(me, self.cluster.name, os.getpid(), self.started, self.roles,
-                            runnable_components(self.cluster.host(me), self.config.catalog),
+        runnable = [name for name in runnable_components(self.cluster.host(me), self.config.catalog)
+                    if name not in self.config.unavailable]
+        return Announcement(me, self.cluster.name, os.getpid(), self.started, self.roles, runnable,
                             self._instances(), services, self.digest)
 
     def status(self) -> DaemonStatus:

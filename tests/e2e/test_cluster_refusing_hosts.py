@@ -92,7 +92,7 @@ def test_the_instance_lands_on_the_capable_host_past_refusing_ones_and_the_refus
         filtered = entry["decision"]["filtered"]
         refusal = "Nap has no parameter 'duration' (declared: length)"
         assert set(filtered) == {"controller", "a1", "a2", "b"}, filtered
-        assert filtered["b"] == ["does not offer Nap (its daemon has no manifest of it)"]
+        assert filtered["b"] == ["does not offer Nap (its daemon has no manifest of it, or cannot import its module)"]
         assert filtered["controller"] == ["no worker role"]
         for host in ("a1", "a2"):
             [why] = filtered[host]

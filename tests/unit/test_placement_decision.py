@@ -222,7 +222,8 @@ def test_a_host_that_does_not_offer_the_type_is_filtered_with_that_reason() -> N
     decision = place(WAIT, hosts[1:], W, role="worker")
     assert isinstance(decision, Placed) and decision.host == "b", "c scores better but does not offer Wait"
     assert decision.decision is not None
-    assert dict(decision.decision.filtered) == {"c": ("does not offer Wait (its daemon has no manifest of it)",)}
+    assert dict(decision.decision.filtered) == {
+        "c": ("does not offer Wait (its daemon has no manifest of it, or cannot import its module)",)}
     camera = ComponentType("Camera", Kind.RC)
     refused = place(camera, hosts[2:], W)
     assert isinstance(refused, Unplaceable) and dict(refused.refused) == {"c": ("no Camera device",)}
