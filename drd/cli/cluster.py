@@ -226,7 +226,7 @@ def _endpoints(config: Path, connect: list[str] | None,
         tr = transport(cluster)
     except (HostsError, SecurityError) as e:
         fail_all(e.problems)
-    _may(cluster.security, str(tr.options.get("transport/auth/usrpwd/user") or ""), to)
+    _may(cluster.security, tr.identity, to)
     prefer = [cluster.controller.name] + [h.name for h in cluster.hosts if h.name != cluster.controller.name]
     return tr.entry_points(), {**tr.options, "mode": tr.client_mode()}, cluster.name, prefer
 
@@ -238,17 +238,24 @@ def query_error(reason: str) -> str:
     return f"invalid query:\n{reason}" if "\n" in reason else f"invalid query: {reason}"
 
 
-def _may(security: Any, user: str, to: str) -> None:
-    """Refuse (exit 2) a user whose role does not allow what the command does; nothing without roles."""
-    if not security.roles or not user:
+def _may(security: Any, who: str, to: str) -> None:
+    """Refuse (exit 2) a user (password) or certificate (tls) whose role does not allow what the command does;
+    nothing without roles. The daemons refuse it anyway, but with tls by dropping it: it would wait for nothing."""
+    from drd.hosts import SecurityMode
+
+    if not security.roles or not who:
         return
-    role = security.role_of(user)
+    tls = security.mode is SecurityMode.TLS
+    what = f"certificate {who}" if tls else f"user {who}"
+    role = security.role_of(who)
     if role is None:
-        fail(f"user {user} has no role in the hosts file (cluster.security.roles): the daemons refuse it",
-             hint="ask for one, or set DRD_USER to a user that has one")
+        fail(f"{what} has no role in the hosts file (cluster.security.roles): the daemons refuse it",
+             hint="ask for one, or " + ("use a certificate whose common name has one (cluster.security.cert)" if tls
+                                        else "set DRD_USER to a user that has one"))
     if to and role == "observer":
-        fail(f"user {user} is an observer: it may watch the cluster (status, hosts, resources, a mission's"
-             f" records), not {to}", hint="an operator may: set DRD_USER to one")
+        fail(f"{what} is an observer: it may watch the cluster (status, hosts, resources, a mission's"
+             f" records), not {to}", hint="an operator may: " + (
+                 "use an operator's certificate (cluster.security.cert)" if tls else "set DRD_USER to one"))
 
 
 # --- commands --------------------------------------------------------------------------------------

@@ -47,6 +47,9 @@ class Transport:
     endpoints: Mapping[str, str]
     options: Mapping[str, Any] = field(default_factory=dict)
     routers: tuple[str, ...] = ()  # the hosts with the role router (none: every daemon meets every other)
+    #: the name the daemons' access control knows this session by: its user (password) or its certificate's
+    #: common name (tls); "" in mode none
+    identity: str = ""
 
     def others(self, me: str) -> dict[str, str]:
         """Whom the daemon of `me` meets, in order: every other host, or with routers the other routers only.
@@ -128,7 +131,7 @@ def transport(cluster: Cluster, user: str | None = None, *, daemon: bool = False
         unknown = check_roles(cluster, dictionary_users(sec.password_file)) if daemon else []
         if unknown:
             raise SecurityError(unknown)
-        return Transport(sec.mode, endpoints, routers=routers, options={
+        return Transport(sec.mode, endpoints, routers=routers, identity=who, options={
             "transport/auth/usrpwd/user": who,
             "transport/auth/usrpwd/password": password,
             "transport/auth/usrpwd/dictionary_file": sec.password_file,
@@ -147,7 +150,10 @@ def transport(cluster: Cluster, user: str | None = None, *, daemon: bool = False
                                                                           wanted)) is not None]
     if problems:
         raise SecurityError(problems)
-    return Transport(sec.mode, tls, routers=routers, options={
+    name = certificate_name(cluster.source, sec.cert)
+    if daemon and host is not None:
+        _check_daemon_name(cluster, host, name)
+    return Transport(sec.mode, tls, routers=routers, identity=name, options={
         **({"access_control": acl} if acl else {}),
         "transport/link/protocols": ["tls"],
         "transport/link/tls/root_ca_certificate": sec.ca,
@@ -157,6 +163,44 @@ def transport(cluster: Cluster, user: str | None = None, *, daemon: bool = False
         "transport/link/tls/connect_private_key": sec.key,
         "transport/link/tls/enable_mtls": True,
     })
+
+
+def certificate_name(source: str, path: str) -> str:
+    """The common name of the certificate in `path`: what the daemons' access control knows a tls peer by (zenoh's
+    `cert_common_names`), so `missionctl` can refuse at once what its role does not allow (the daemons drop such
+    a request without a reply) and a daemon can say at start that the others will not hear it.
+
+    Raises:
+        SecurityError: the file holds no certificate `cryptography` can read, or one with no common name.
+    """
+    from cryptography import x509
+    from cryptography.x509.oid import NameOID
+
+    where = "cluster.security.cert"
+    try:
+        cert = x509.load_pem_x509_certificate(Path(path).read_bytes())
+    except (OSError, ValueError) as e:
+        raise SecurityError([ConfigProblem(source, where, f"{path}: not a readable certificate ({e})")]) from None
+    names = cert.subject.get_attributes_for_oid(NameOID.COMMON_NAME)
+    if not names:
+        raise SecurityError([ConfigProblem(source, where, (
+            f"{path}: the certificate has no common name (CN); with tls the daemons know a peer by it"))])
+    return str(names[0].value)
+
+
+def _check_daemon_name(cluster: Cluster, host: str, name: str) -> None:
+    """With roles or `per_host`, a daemon's certificate must carry a name its peers' access control allows: one
+    listed under `roles.daemon`, or with `per_host` its host's name. Otherwise every peer would drop what it sends
+    (default deny) and it would start, alone, with no error anywhere."""
+    sec = cluster.security
+    allowed = [*sec.roles.get("daemon", ()), *([host] if sec.per_host else [])]
+    if not (sec.roles or sec.per_host) or name in allowed:
+        return
+    wanted = " or ".join(filter(None, [f"its host's name, {host} (per_host)" if sec.per_host else "",
+                                       "a name listed under cluster.security.roles.daemon"]))
+    raise SecurityError([ConfigProblem(cluster.source, "cluster.security.cert", (
+        f"{sec.cert}: the certificate's common name is {name}, but host {host}'s must be {wanted}: the other daemons"
+        " would refuse everything it sends"))])
 
 
 def _user(sec: Security, user: str | None, host: str | None, daemon: bool) -> str:

@@ -42,7 +42,8 @@ def cluster(tmp_path_factory: pytest.TempPathFactory) -> Iterator[DaemonCluster]
             lines += [f"  {name}: {{endpoint: tcp/127.0.0.1:{port}, roles: [{ROLES[name]}]}}"]
         c.hosts_file.write_text("\n".join(lines) + "\n")
         ca.issue(folder / "tls", "alice")  # missionctl's, beside the main hosts.yaml
-        for name, common_name in (("controller", "drd-daemon"), ("ranger1", "drd-daemon"), ("mallory", "mallory")):
+        for name, common_name in (("controller", "drd-daemon"), ("ranger1", "drd-daemon"), ("mallory", "mallory"),
+                                  ("bob", "bob"), ("ghost", "alice")):
             ca.issue(folder / name / "tls", common_name)
             (folder / name / "hosts.yaml").write_text(c.hosts_file.read_text())
         for name in NAMES[:2]:
@@ -78,3 +79,28 @@ def test_a_certificate_in_no_role_can_neither_stop_a_mission_nor_fake_a_host(clu
     assert mission.get("outcome") is None, mission  # still running: mallory's stop never arrived
     stopped = cluster.missionctl("stop", mid, "--json", "--config", str(cluster.hosts_file))
     assert stopped.returncode == 0 and [m["id"] for m in json.loads(stopped.stdout)["stopped"]] == [mid]
+
+
+def test_missionctl_refuses_at_once_what_its_certificates_role_may_not_do(cluster: DaemonCluster) -> None:
+    """The daemons drop a request a role may not make, without a reply (security audit D4: `stop` waited, then
+    said "nothing answers there"): missionctl reads its certificate's common name and refuses first, as it does
+    for a password user."""
+    bob = cluster.folder / "bob" / "hosts.yaml"
+    r = cluster.missionctl("stop", "--all", "--config", str(bob), "--timeout", "10")
+    assert r.returncode == 2, (r.stdout, r.stderr)
+    assert "certificate bob is an observer: it may watch the cluster" in r.stderr, r.stderr
+    assert "use an operator's certificate" in r.stderr and "nothing answers" not in r.stderr, r.stderr
+    watched = cluster.missionctl("hosts", "--json", "--config", str(bob))
+    assert watched.returncode == 0 and {h["name"] for h in json.loads(watched.stdout)["hosts"]} >= {"controller"}
+    r = cluster.missionctl("status", "--config", str(cluster.folder / "mallory" / "hosts.yaml"))
+    assert r.returncode == 2 and "certificate mallory has no role in the hosts file" in r.stderr, r.stderr
+
+
+def test_a_daemon_whose_certificate_is_no_daemons_is_refused_at_start(cluster: DaemonCluster) -> None:
+    """ghost's certificate names alice, an operator: every daemon would drop what it sends, so it would run alone
+    without an error anywhere; it is refused before it starts, naming the file and the key."""
+    r = cluster.drd("start", "--host", "ghost", "--config", str(cluster.folder / "ghost" / "hosts.yaml"), "--run-dir",
+                    str(cluster.folder / "ghost" / "run"), timeout=60)
+    assert r.returncode == 2, (r.stdout, r.stderr)
+    assert "cluster.security.cert" in r.stderr and "the certificate's common name is alice" in r.stderr, r.stderr
+    assert "a name listed under cluster.security.roles.daemon" in r.stderr and "Traceback" not in r.stderr
