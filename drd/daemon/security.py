@@ -137,9 +137,17 @@ def transport(cluster: Cluster, user: str | None = None, *, daemon: bool = False
             "transport/auth/usrpwd/dictionary_file": sec.password_file,
             **({"access_control": acl} if acl else {}),
         })
+    return _tls_transport(cluster, routers, acl, host if daemon else None)
+
+
+def _tls_transport(cluster: Cluster, routers: tuple[str, ...], acl: dict[str, Any] | None,
+                   daemon_host: str | None) -> Transport:
+    """`transport` in mode tls: `tls/` endpoints, the PEM files checked, the certificate's name known (and, for the
+    daemon of `daemon_host`, checked against the access control)."""
+    sec = cluster.security
     assert sec.ca is not None and sec.cert is not None and sec.key is not None  # parse_hosts requires all three
-    tls = {}
-    for name, endpoint in endpoints.items():
+    problems, tls = [], {}
+    for name, endpoint in ((h.name, h.endpoint) for h in cluster.hosts):
         proto, _, address = endpoint.partition("/")
         if proto != "tcp":
             problems.append(ConfigProblem(cluster.source, f"hosts.{name}.endpoint",
@@ -151,8 +159,8 @@ def transport(cluster: Cluster, user: str | None = None, *, daemon: bool = False
     if problems:
         raise SecurityError(problems)
     name = certificate_name(cluster.source, sec.cert)
-    if daemon and host is not None:
-        _check_daemon_name(cluster, host, name)
+    if daemon_host is not None:
+        _check_daemon_name(cluster, daemon_host, name)
     return Transport(sec.mode, tls, routers=routers, identity=name, options={
         **({"access_control": acl} if acl else {}),
         "transport/link/protocols": ["tls"],
