@@ -30,7 +30,7 @@ from drd.runtime import records as rec
 from drd.runtime.trace import TraceWriter
 from drd.sim.model import DoorState
 from drd.sim.physics import Simulation
-from drd.sim.world import World, check_hosts
+from drd.sim.world import World, charged, check_hosts, hosts_charges
 from dsl.catalog import Catalog
 from dsl.statechart import Statechart
 
@@ -263,6 +263,7 @@ def team(cluster: Cluster, world: World, catalog: Catalog, *, seed: int = 0, reg
 def simulation(cluster: Cluster, world: World, seed: int = 0) -> Simulation:
     """The world a dry-run simulates; when a device of `cluster` is on `driver: ros2`, served as ROS 2 robots in this
     process, in lockstep with its steps (`drd.sim.ros2.LockstepSimulation`: close it after the run)."""
+    world = charged(world, hosts_charges(cluster))  # hosts.yaml's `battery` where the world gives no start charge
     if not any(d.driver == "ros2" for h in cluster.hosts for d in h.devices):
         return Simulation(world, seed=seed)
     from drd.sim.ros2 import LockstepSimulation  # zenoh and rosbags: only for a team of ROS 2 robots
@@ -316,13 +317,16 @@ def run_many(missions: Sequence[Mission], cluster: Cluster, world: World, catalo
     if recorder is not None:
         recorder.scene(world)
         recorder.watch(sim)  # what the sensors read, launches, landings and door changes, from now on
-    results = [_submit(life, m, n, speed, trace, recorder) for n, m in enumerate(missions, 1)]
+    ends: dict[str, tuple[float, float]] = {}  # mission id -> (sim, wall) seconds at its end: its own report's times
+    results = [_submit(life, m, n, speed, trace, recorder, functools.partial(_note_end, ends, start))
+               for n, m in enumerate(missions, 1)]
     with _Heap() as heap:
         _loop(life, sim, until, speed, stop, progress, progress_every, recorder, heap,
               _Injections(injections, sim, life, cluster, results), start)
     why = "stopped by operator" if stop is not None and stop.is_set() else f"sim time limit of {until:g} s reached"
     life.end(why)
-    _conclude(results, [life.interpreters[r.mission_id or ""] for r in results], sim, time.perf_counter() - start)
+    _conclude(results, [life.interpreters[r.mission_id or ""] for r in results], sim, time.perf_counter() - start,
+              ends)
     close = getattr(sim, "close", None)
     if callable(close):  # the served robots' sessions (ROS 2)
         close()
@@ -388,8 +392,9 @@ class _Heap:
 
 
 def _submit(life: ControllerLife, m: Mission, n: int, speed: float | None, trace: IO[str] | None,
-            recorder: Recorder | None = None) -> DryRun:
-    """Start mission number `n` on the executive; its report gathers its records (and the trace gets them)."""
+            recorder: Recorder | None = None, ended: Callable[[str, rec.Record], None] | None = None) -> DryRun:
+    """Start mission number `n` on the executive; its report gathers its records (and the trace gets them);
+    `ended(mission id, record)` hears them too."""
     result = DryRun(m.chart.name, None, "", 0.0, 0.0, speed=speed, priority=m.priority or m.chart.priority)
     mid = f"{m.chart.name}-{n}"
     listeners: list[Callable[[rec.Record], None]] = [result.records.append, functools.partial(facts, result)]
@@ -397,6 +402,8 @@ def _submit(life: ControllerLife, m: Mission, n: int, speed: float | None, trace
         listeners.append(TraceWriter(trace, mid))
     if recorder is not None:
         listeners.append(functools.partial(recorder.record, mid))
+    if ended is not None:
+        listeners.append(functools.partial(ended, mid))
     result.mission_id = mid
     life.submit(m.chart, mid, listeners, result.priority)
     return result
@@ -428,12 +435,20 @@ def rebuilt(run: Mapping[str, Any], records: Sequence[rec.Record]) -> DryRun:
     return result
 
 
-def _conclude(results: list[DryRun], running: list[Any], sim: Simulation, wall: float) -> None:
-    """Each report's outcome, times, the Scouts where they ended, and every robot's track."""
+def _note_end(ends: dict[str, tuple[float, float]], start: float, mid: str, record: rec.Record) -> None:
+    """Mission `mid`'s sim and wall seconds when it finished (`run_many`'s `ends`)."""
+    if isinstance(record, rec.Finished):
+        ends[mid] = (record.at, time.perf_counter() - start)
+
+
+def _conclude(results: list[DryRun], running: list[Any], sim: Simulation, wall: float,
+              ends: Mapping[str, tuple[float, float]]) -> None:
+    """Each report's outcome, its own times (a mission that ended before the others, at its end: semantics audit
+    1), the Scouts where they ended, and every robot's track."""
     tracks = {rid: sim.trajectory(rid) for rid in (*sim.robots, *sim.intruders())}
     for interp, result in zip(running, results, strict=True):
         result.outcome, result.reason = interp.outcome, interp.reason
-        result.sim_time, result.wall_time = sim.time, wall
+        result.sim_time, result.wall_time = ends.get(result.mission_id or "", (sim.time, wall))
         for scout in result.scouts:
             pose = sim.pose(scout["scout"])
             scout.update(x=round(pose.x, 2), y=round(pose.y, 2))

@@ -1,8 +1,8 @@
 """Partial-order plans: precedence graphs, cycles, and the orders the runtime follows.
 
 `plan { A < B; A < C }` only states precedence. By default the system picks one total
-order consistent with it, breaking ties by declaration order (so the result is stable
-and the author can predict it); `plan concurrent` starts each step as soon as all its
+order consistent with it, breaking ties by the order the steps first appear in the plan
+(so the result is stable and the author can predict it); `plan concurrent` starts each step as soon as all its
 predecessors are done. networkx does the graph work.
 """
 
@@ -16,7 +16,8 @@ from dsl import ast
 
 
 def plan_graph(plan: ast.Plan) -> nx.DiGraph:
-    """Steps as nodes (with their declaration rank and first span), precedences as edges."""
+    """Steps as nodes (with their rank, the order of their first appearance in the plan, and first span),
+    precedences as edges."""
     g: nx.DiGraph = nx.DiGraph()
     for chain in plan.chains:
         for step in chain:
@@ -40,7 +41,7 @@ def find_cycle(g: nx.DiGraph) -> list[str] | None:
 
 
 def total_order(g: nx.DiGraph) -> list[str]:
-    """A topological order; among ready steps, the one declared first goes first."""
+    """A topological order; among ready steps, the one that appears first in the plan goes first."""
     return list(nx.lexicographical_topological_sort(g, key=lambda n: g.nodes[n]["rank"]))
 
 

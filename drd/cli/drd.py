@@ -533,6 +533,7 @@ def _serve_ros2(cluster: Cluster, sim_world: Any, world_name: str, listen: str, 
     from drd.hw.ros2 import message_types
     from drd.sim import Simulation
     from drd.sim.ros2 import ServedRobots, serve
+    from drd.sim.world import charged, hosts_charges
 
     try:  # the endpoint's form was checked (`endpoint_problem`): what fails here is the listening itself
         session = Ros2Session.listen(listen, types=message_types())
@@ -545,7 +546,8 @@ def _serve_ros2(cluster: Cluster, sim_world: Any, world_name: str, listen: str, 
     for signum in (signal.SIGTERM, signal.SIGINT):
         signal.signal(signum, lambda _n, _f: stop.set())
     try:
-        served = ServedRobots(Simulation(sim_world, seed=seed), cluster, session, domain_id=domain)
+        served = ServedRobots(Simulation(charged(sim_world, hosts_charges(cluster)), seed=seed), cluster, session,
+                              domain_id=domain)
         try:
             topics = {rid: r.topics for rid, r in served.robots.items()}
             if as_json:

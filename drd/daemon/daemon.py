@@ -290,16 +290,9 @@ class Daemon:
         self._serve(keys.db(me, "components"), self._components, ViewRequest, type(None))
         self._serve(keys.db(me, "lookup"), self._lookup, Lookup)
         self._serve(keys.db(me, "query"), self._query, TraderRequest)
-        roles, serving = self.cluster.host(me).roles, self.cluster.host(me).serving
-        if Role.SIMULATOR in roles and serving.ros2:  # the world served as ROS 2 robots too (docs/ros2.md)
-            from drd.sim.ros2 import ServedSimulationService
-
-            self.sim_service = ServedSimulationService(bus, self.cluster, listen=serving.listen,
-                                                       domain_id=serving.domain_id)
-        elif Role.SIMULATOR in roles:
-            from drd.sim.service import SimulationService, world_dirs
-
-            self.sim_service = SimulationService(bus, self.cluster.name, beside=world_dirs(self.cluster))
+        roles = self.cluster.host(me).roles
+        if Role.SIMULATOR in roles:
+            self.sim_service = self._simulator(bus)
         from drd.cluster.creator import Creator
 
         self.creator = Creator(bus, self.cluster, me, self.config.catalog,
@@ -495,6 +488,20 @@ class Daemon:
         log.info("drd %s stopped", self.host)
 
     # -- what the daemon says about itself --------------------------------------------------------
+
+    def _simulator(self, bus: Bus) -> Any:
+        """The simulator host's `SimulationService`: the world served as ROS 2 robots too when hosts.yaml says so
+        (docs/ros2.md); its robots start charged as hosts.yaml says."""
+        serving = self.cluster.host(self.host).serving
+        if serving.ros2:
+            from drd.sim.ros2 import ServedSimulationService
+
+            return ServedSimulationService(bus, self.cluster, listen=serving.listen, domain_id=serving.domain_id)
+        from drd.sim.service import SimulationService, world_dirs
+        from drd.sim.world import hosts_charges
+
+        return SimulationService(bus, self.cluster.name, beside=world_dirs(self.cluster),
+                                 charges=hosts_charges(self.cluster))
 
     def announcement(self) -> Announcement:
         me, keys = self.host, self.keys

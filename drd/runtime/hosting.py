@@ -17,7 +17,7 @@ from drd.runtime import records as rec
 from drd.runtime.component import Component, Context, Registry, Services, Status
 from drd.runtime.emits import check_emit
 from drd.runtime.ownership import Arbiter, Binding, BoundDevice
-from drd.runtime.resources import ResourceClient
+from drd.runtime.resources import BindingError, ResourceClient
 from drd.runtime.tree import ACTIVE, Node
 
 _FINAL_STATUS = {"success": Status.SUCCESS, "failure": Status.FAILURE}
@@ -201,7 +201,9 @@ class ComponentHost:
             return False
 
     def failed(self, node: Node, e: Exception) -> None:
-        said = isinstance(e, ComponentFailure) and e.said
+        """`node` fails with what `e` says: a component's own exception located in its code, a reason already said
+        (`ComponentFailure.said`) or the runtime's refusal to bind a need (`BindingError`) as it is."""
+        said = (isinstance(e, ComponentFailure) and e.said) or isinstance(e, BindingError)
         why = str(e) if said else raised(e)
         self.notify(rec.Log(self.now(), node.path, why if said else logged(e)))
         self.on_failure(node, why)

@@ -34,7 +34,7 @@ from drd.runtime.constraints import Active, ConstraintGuard, robots_named
 from drd.runtime.hosting import ComponentHost
 from drd.runtime.ownership import Arbiter, Gates, LocalGates, NoGates
 from drd.runtime.pool import ResourcePool
-from drd.runtime.resources import BindingError, ResourceClient
+from drd.runtime.resources import BindingError, ResourceClient, released_reason
 from drd.runtime.snapshot import NodeImage, Restore, live_children
 from drd.runtime.telemetry import DriverTelemetry
 from drd.runtime.tree import (
@@ -477,6 +477,9 @@ class Interpreter:
         elif kind is LEAF:
             if self._said:  # an earlier entry's words are not this one's
                 self._said.pop(node.path, None)
+            if state.needs and (why := self.resources.released_under(node)) is not None:
+                self._finish(node, False, why)  # at entry, whatever its component would do (docs/reference.md)
+                return
             self.host.start(node, None if image is None else [image.component[0] if image.component else None])
         elif kind is COMPOUND:
             target = self._initial(node)
@@ -649,6 +652,8 @@ class Interpreter:
         self._end("failure", f"livelock: more than {MAX_MICROSTEPS} transitions without time passing")
 
     def _complete(self, node: Node, ok: bool, why: str) -> None:
+        if not ok and not why and node.state.kind is MULTI:  # too few instances left (`_instance_done`)
+            why = self._short(node)
         parent = node.parent
         if parent is None:
             self._exit(node, "success" if ok else "failure", "" if ok else why)
@@ -700,12 +705,19 @@ class Interpreter:
         low, _ = multi.bounds
         running = [c for c in multi.children if c.phase is not DONE]
         if multi.succeeded + len(running) < low:
-            last = f"; last failure: {multi.last_failure}" if multi.last_failure else ""
-            self._finish(multi, False, f"only {multi.succeeded + len(running)} of at least {low} instances of "
-                         f"{multi.state.name} can succeed ({multi.succeeded} succeeded, {len(running)} running, "
-                         f"{multi.failed} failed{last})")
+            self._finish(multi, False)  # its reason when it completes (`_short`): others may end first, this instant
         elif not running:
             self._finish(multi, True)
+
+    def _short(self, multi: Node) -> str:
+        """Why a multiplicity fails for too few instances, counted when it completes, after the instances that
+        ended at the same instant (semantics audit 5: it said "0 succeeded, 1 running" of an instance the trace
+        showed succeeding just before)."""
+        low, _ = multi.bounds
+        running = sum(1 for c in multi.children if c.phase is not DONE)
+        last = f"; last failure: {multi.last_failure}" if multi.last_failure else ""
+        return (f"only {multi.succeeded + running} of at least {low} instances of {multi.state.name} can succeed "
+                f"({multi.succeeded} succeeded, {running} running, {multi.failed} failed{last})")
 
     def _fire_one(self) -> bool:
         """Take a transition of the first state with an enabled change or timeout transition, if any (none inside a
@@ -888,8 +900,11 @@ class Interpreter:
         resources = self.resources
         for leaf, needs in resources.bound_through(holder, name):
             resources.unbind(leaf, f"{name} released", needs)
+        users = resources.needing(holder, name)
         holder.released = holder.released | {name}
         resources.release(holder, [name])  # by need name: exact even on shared units
+        for leaf, need in users:  # nothing left to bind: each fails, naming the release (docs/reference.md)
+            self._finish(leaf, False, released_reason(need, name, holder))
 
     # ------------------------------------------------------------- exiting
     def _exit(self, node: Node, status: str, reason: str = "") -> None:

@@ -22,7 +22,7 @@ from drd.rcm import Aggregate, Candidate, NeedRequest, Request, Unit
 from drd.runtime.broker import ResourceBroker
 from drd.runtime.ownership import Arbiter, Binding, Gates, LocalGates
 from drd.runtime.pool import LIVE, ResourcePool, ResourceView
-from drd.runtime.tree import Node
+from drd.runtime.tree import DONE, LEAF, Node
 from dsl import ast
 from dsl.evaluate import EvalError, evaluate, truthy
 from dsl.statechart import ResourceNeed
@@ -200,15 +200,7 @@ class ResourceClient:
         Raises:
             BindingError: the holder the chain leads to does not hold that resource now.
         """
-        holder, name, part = node, need.name, None
-        bound = need.bound_to or node.reused.get(name)
-        while bound is not None:
-            state_id, name, inner = bound
-            holder = next((a for a in holder.ancestors() if a.state.id == state_id), holder)
-            if inner is not None:
-                part = inner if part is None else part
-            spec = next((n for n in holder.state.needs if n.name == name), None)
-            bound = (spec.bound_to if spec is not None else None) or holder.reused.get(name)
+        holder, name, part = _chain(node, need)
         rid = (holder.grant or {}).get(name)
         if rid is None:
             where = "its own" if holder is node else f"{name} of {holder.path}"
@@ -218,6 +210,26 @@ class ResourceClient:
         if part is None:
             return holder, rid, "", ""
         return holder, self.pool.part(rid, part), rid, part
+
+    def released_under(self, leaf: Node) -> str | None:
+        """Why a leaf being entered cannot bind a need, when its chain leads to a resource its holder released
+        (the reference: the behavior that needs it fails, naming the release), else None. Other leaves bind when
+        their component first reads a need, as before."""
+        for need in leaf.state.needs:
+            holder, name, _part = _chain(leaf, need)
+            if name in holder.released and (holder.grant or {}).get(name) is None:
+                return released_reason(need, name, holder)
+        return None
+
+    def needing(self, holder: Node, name: str) -> list[tuple[Node, ResourceNeed]]:
+        """The live leaves below `holder` with a need whose chain leads to its `name`, bound yet or not: what
+        `release(name)` leaves with nothing to bind (asked before the release)."""
+        out = []
+        for n in holder.subtree():
+            if n.state.kind is not LEAF or n.phase is DONE or n.closing:
+                continue
+            out += [(n, need) for need in n.state.needs if _chain(n, need)[:2] == (holder, name)]
+        return out
 
     def adopt(self, node: Node) -> None:
         """A node's needs that an ancestor holds (a re-declared need, or one bound by type or through a part):
@@ -325,6 +337,25 @@ class ResourceClient:
             if hit:
                 out.append((n, hit))
         return out
+
+
+def released_reason(need: ResourceNeed, name: str, holder: Node) -> str:
+    """Why `need` cannot be bound: its chain leads to `name` of `holder`, which `release(name)` gave back."""
+    return f"need {need.name} ({need.type}) is bound to {name} of {holder.path}, but {holder.path} released it"
+
+
+def _chain(node: Node, need: ResourceNeed) -> tuple[Node, str, str | None]:
+    """Where a need's binding chain ends: (the holder node, its need's name there, the part of it, if any)."""
+    holder, name, part = node, need.name, None
+    bound = need.bound_to or node.reused.get(name)
+    while bound is not None:
+        state_id, name, inner = bound
+        holder = next((a for a in holder.ancestors() if a.state.id == state_id), holder)
+        if inner is not None:
+            part = inner if part is None else part
+        spec = next((n for n in holder.state.needs if n.name == name), None)
+        bound = (spec.bound_to if spec is not None else None) or holder.reused.get(name)
+    return holder, name, part
 
 
 class Where:

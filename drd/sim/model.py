@@ -153,7 +153,8 @@ class ScoutSpawn:
 @dataclass(frozen=True, slots=True)
 class Battery:
     """How robots' charge (0 empty .. 1 full) runs down: `idle` per second while on the floor (computer, sensors),
-    `per_meter` per metre driven (the wheels); `start` the charge of named robots at the start (others start full).
+    `per_meter` per metre driven (the wheels); `start` the charge of named robots at the start (others start at
+    hosts.yaml's `battery`, `drd.sim.world.charged`, else full).
 
     A fraction, not a percent, because it is what a mission compares: hosts.yaml's static `battery: 1.0` and the
     manifests' "charge left (0 to 1)" use that scale, so `ranger.battery >= 0.2` means the same read from the

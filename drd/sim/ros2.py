@@ -42,6 +42,7 @@ from drd.hw.ros2 import Pose, Ros2Link, Ros2Options
 from drd.sim.physics import MAX_LAUNCH, Simulation
 from drd.sim.robots import SimError
 from drd.sim.service import SimReply, SimRequest, SimulationService, world_dirs
+from drd.sim.world import hosts_charges
 
 log = logging.getLogger("drd.sim.ros2")
 
@@ -628,7 +629,7 @@ class ServedSimulationService(SimulationService):
             raise BusError(f"the simulator's ROS 2 router cannot listen on {listen} (hosts.yaml simulator.listen):"
                            f" {e}") from None
         try:
-            super().__init__(bus, cluster.name, beside=world_dirs(cluster))
+            super().__init__(bus, cluster.name, beside=world_dirs(cluster), charges=hosts_charges(cluster))
         except BaseException:
             self.session.close()
             raise

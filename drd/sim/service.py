@@ -27,7 +27,7 @@ import math
 import re
 import threading
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -225,8 +225,12 @@ class LocalSimulation:
 class SimulationService:
     """Owns the simulation of the running mission and answers `SimRequest`s (one lock: calls are serialized)."""
 
-    def __init__(self, bus: Bus | None, cluster: str, *, root: Path = ROOT, beside: Sequence[Path] = ()) -> None:
+    def __init__(self, bus: Bus | None, cluster: str, *, root: Path = ROOT, beside: Sequence[Path] = (),
+                 charges: Mapping[str, float] | None = None) -> None:
+        """`charges`: hosts.yaml's `battery` of each robot (`drd.sim.world.hosts_charges`), its start charge in every
+        world this service loads that does not give one."""
         self.cluster = cluster
+        self.charges = dict(charges or {})
         self.root, self.beside = root, tuple(beside)  # where worlds are found (`world_file`)
         self.sim: Any = None
         self.world_name = ""
@@ -249,9 +253,10 @@ class SimulationService:
 
     def reset(self, world: str, seed: int = 0) -> SimReply:
         from drd.sim import Simulation, load_world
+        from drd.sim.world import charged
 
         path = world_file(world, self.beside, self.root)
-        sim = Simulation(load_world(path), seed=seed)
+        sim = Simulation(charged(load_world(path), self.charges), seed=seed)
         observations = Observations()
         SensorTap(observations).tap(sim)  # every reading, whoever reads: a recording client may ask for them
         with self._lock:

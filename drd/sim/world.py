@@ -9,6 +9,7 @@ the file; `check_hosts` compares robot ids with a `hosts.yaml` cluster.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import os
 import re
@@ -89,6 +90,24 @@ def load_world(path: str | os.PathLike[str]) -> World:
     source = display_path(path)
     data = read_yaml(path, source, WorldError)
     return parse_world(data, source)
+
+
+def hosts_charges(cluster: Cluster) -> dict[str, float]:
+    """Each robot's `battery` property in hosts.yaml (a number, 0..1): what its charge is before anything drains."""
+    return {r.id: float(v) for r in cluster.robots if isinstance(v := r.properties.get("battery"), (int, float))
+            and not isinstance(v, bool)}
+
+
+def charged(world: World, charges: Mapping[str, float]) -> World:
+    """`world` with `charges` (`hosts_charges`) as the start charge of its robots that its own `battery.start` does
+    not name: hosts.yaml's `battery: 0.5` is what a simulated robot starts with (semantics audit 7: every robot
+    started full, so `where r.battery > 0.7` picked the one hosts.yaml said was half empty). The world's own
+    figures win; a robot the world lacks is left out (`check_hosts` names it)."""
+    robots = {r.id for r in world.rangers} | set(world.scout_ids)
+    start = {rid: c for rid, c in charges.items() if rid in robots} | dict(world.battery.start)
+    if start == dict(world.battery.start):
+        return world
+    return dataclasses.replace(world, battery=dataclasses.replace(world.battery, start=tuple(sorted(start.items()))))
 
 
 def check_hosts(world: World, cluster: Cluster) -> list[WorldProblem]:

@@ -46,6 +46,15 @@ class Push(Component):
         self.last = self.ctx.now()
 
 
+class Idle(Component):
+    """Needs a Drive and never reads it: runs until stopped (a component binds a need when it first reads it)."""
+
+    def step(self, now: float) -> Status:
+        return Status.RUNNING
+
+
+IDLE = ComponentType("Idle", Kind.BEHAVIOR, "never reads its drive", entry_point="tests.test_ownership:Idle",
+                     needs=(NeedSpec("drive", "Drive", ("Ranger",)),), interfaces=("Drive",))
 PUSH = ComponentType("Push", Kind.BEHAVIOR, "drives forward", entry_point="tests.test_ownership:Push",
                      params=(ParamSpec("v", "float", 0.2), ParamSpec("duration", "duration", 5.0)),
                      needs=(NeedSpec("drive", "Drive", ("Ranger",)),), interfaces=("Drive",))
@@ -53,7 +62,7 @@ PUSH = ComponentType("Push", Kind.BEHAVIOR, "drives forward", entry_point="tests
 
 @pytest.fixture(scope="module")
 def cat(catalog: Catalog) -> Catalog:
-    return Catalog.of([*catalog.components.values(), PUSH])
+    return Catalog.of([*catalog.components.values(), PUSH, IDLE])
 
 
 def dry(cat: Catalog, *texts: str, until: float = 60.0, priorities: tuple[int | None, ...] = (),
@@ -69,7 +78,7 @@ def dry(cat: Catalog, *texts: str, until: float = 60.0, priorities: tuple[int | 
     seen: list[tuple[float, Any]] = []
     progress = (lambda sim, _ex: seen.append((round(sim.time, 3), sample(sim)))) if sample else None
     reports = run_many(charts, load_hosts(ROOT / "hosts.yaml", cat), load_world(ROOT / "worlds" / "corridor.yaml"),
-                       cat, until=until, trace=trace, registry=EntryPoints(cat, {"Push": Push}),
+                       cat, until=until, trace=trace, registry=EntryPoints(cat, {"Push": Push, "Idle": Idle}),
                        progress=progress, progress_every=0.1, **kw)
     return reports, [json.loads(line) for line in trace.getvalue().splitlines()], seen
 
@@ -162,6 +171,70 @@ def test_release_unbinds_the_need_at_once(cat: Catalog) -> None:
     taken = [r for r in records if r["kind"] == "taken" and r["path"] == "Rel/A/second"]
     assert taken and taken[0]["trigger"] == "error"
     assert report.outcome == "success", report.reason
+
+
+RELEASED_BEFORE = """
+mission Unused {
+    needs drv: Drive where drv.id == "ranger1.drive"
+    start -> first
+    Push(v: 0.3, duration: 1s) as first
+    first -> later / release(drv)
+    Idle as later
+}
+"""
+
+
+def test_a_leaf_entered_after_its_need_was_released_fails_at_entry_naming_the_release(cat: Catalog) -> None:
+    """Semantics audit 2, 3: `later` never reads its drive, so it ran (until --until) with a need nothing could
+    bind; one that read it failed later, with `component raised BindingError (at drd/runtime/...)`."""
+    (report,), records, _ = dry(cat, RELEASED_BEFORE, until=10.0)
+    why = "need drive (Drive) is bound to drv of Unused, but Unused released it"
+    assert (report.outcome, report.reason) == ("failure", why)
+    [exited] = [r for r in records if r["kind"] == "exited" and r["path"] == "Unused/later"]
+    assert exited["status"] == "failure" and exited["at"] == pytest.approx(1.0, abs=0.11), exited
+    assert not [r for r in records if r["kind"] == "log" and "component raised" in r.get("text", "")]
+
+
+RELEASED_BESIDE = """
+mission Beside {
+    needs drv: Drive where drv.id == "ranger1.drive"
+    parallel all {
+        Push(v: 0.3, duration: 100s) as cruise
+        Wait(duration: 1s) as tick
+    }
+    tick -> tick / release(drv)
+}
+"""
+
+
+def test_a_running_leaf_whose_need_is_released_beside_it_fails_naming_the_release(cat: Catalog) -> None:
+    """Semantics audit 4: `cruise` went on being stepped for the rest of the run, every command refused, `running`
+    in the report; it fails when the release takes its drive, and the robot stops then."""
+    (report,), records, seen = dry(cat, RELEASED_BESIDE, until=10.0, sample=lambda sim: sim.command("ranger1"))
+    assert_owned(records)
+    why = "need drive (Drive) is bound to drv of Beside, but Beside released it"
+    [exited] = [r for r in records if r["kind"] == "exited" and r["path"] == "Beside/cruise"]
+    assert (exited["status"], exited["reason"]) == ("failure", why), exited
+    assert exited["at"] == pytest.approx(1.0, abs=0.11), exited
+    assert report.outcome == "failure" and report.sim_time < 2.0, (report.outcome, report.reason, report.sim_time)
+    assert not [r for r in commands(records, "Beside/cruise") if r["at"] > exited["at"]], "stepped after failing"
+    halted = [r for r in records if r["kind"] == "halted" and r.get("device") == "ranger1.drive"]
+    assert halted and halted[0]["at"] <= exited["at"] + 1e-9, halted
+    assert seen and seen[-1][1] == (0.0, 0.0), seen[-3:]
+
+
+SHORT = "mission Short {\n    Wait(duration: 2s)\n}\n"
+LONG = "mission Long {\n    Wait(duration: 5s)\n}\n"
+
+
+def test_each_report_of_a_run_of_several_missions_gives_that_missions_own_time(cat: Catalog) -> None:
+    """Semantics audit 1: every report said the whole run's sim time (Short: 5.0 s, its real-time factor from it);
+    a cluster run reports a mission's own time."""
+    short, long = dry(cat, SHORT, LONG)[0]
+    assert (short.outcome, long.outcome) == ("success", "success")
+    assert short.sim_time == pytest.approx(2.0, abs=0.11) and long.sim_time == pytest.approx(5.0, abs=0.11)
+    assert short.sim_time < long.sim_time and short.wall_time <= long.wall_time
+    assert short.to_dict()["sim_time"] == pytest.approx(2.0, abs=0.11)
 
 
 STOPPING = """

@@ -170,3 +170,31 @@ def test_a_drained_robot_with_no_floor_just_stops_where_it_ran_out(tmp_path: Pat
     report = run(r.statechart, load_hosts(ROOT / "hosts.yaml", catalog), world, catalog, until=30.0)
     x = report.tracks["ranger1"][-1][1]
     assert 4.5 < x < 5.5, x  # 4 m from its start (1.0), and no farther: nothing failed, the wheels just stopped
+
+
+def hosts_with_scout3_at(tmp_path: Path, charge: float) -> Path:
+    text = (ROOT / "hosts.yaml").read_text()
+    scout3 = ("parts: {wheels: scout3.wheels, foot: scout3.foot, camera: scout3.camera, radio: radio}\n"
+              "        properties: {battery: 1.0}")
+    assert scout3 in text
+    path = tmp_path / "hosts.yaml"
+    path.write_text(text.replace(scout3, scout3.replace("1.0", str(charge))))
+    return path
+
+
+def test_hosts_yaml_battery_is_the_start_charge_where_the_world_gives_none(tmp_path: Path, catalog: Catalog) -> None:
+    """Semantics audit 7: every simulated robot started full whatever hosts.yaml said, so `where s.battery < 0.7`
+    found no Scout (and `> 0.7` took the one hosts.yaml said was half empty)."""
+    text = "mission Low {\n    needs s: Scout where s.battery < 0.7\n    Wait(duration: 1s)\n}\n"
+    r = compile_text(text, catalog, "low.mission")
+    assert r.ok and r.statechart is not None
+    hosts = load_hosts(hosts_with_scout3_at(tmp_path, 0.4), catalog)
+    report = run(r.statechart, hosts, load_world(ROOT / "worlds" / "corridor.yaml"), catalog, until=10.0)
+    assert report.outcome == "success", report.reason
+    assert [h for h in report.holds() if h["path"] == "Low"][0]["resources"]["s"] == "scout3"
+    (tmp_path / "worlds").mkdir()
+    world_with(tmp_path, {"start": {"ranger1": 0.3}}).rename(tmp_path / "worlds" / "half.yaml")
+    service = SimulationService(None, "c", root=tmp_path, charges={"scout3": 0.4, "ranger1": 0.9})
+    service.reset("half")
+    assert (service.sim.battery("scout3"), service.sim.battery("ranger1"), service.sim.battery("scout1")) == (
+        0.4, 0.3, 1.0)  # the world's own start charge wins; a robot neither names starts full

@@ -73,8 +73,27 @@ def test_a_failing_multiplicity_counts_what_can_still_succeed(catalog: Catalog) 
     h = Harness(compiled(text, catalog), {"Watch": FailsFast}, scouts(3))
     assert h.run(dt=0.1) == "failure"
     reason = h.interp.reason
-    # at the first failure, 2 of the 3 can still succeed: fewer than the 3 it needs, and the reason counts right
-    assert "only 2 of at least 3 instances of Lookout can succeed (0 succeeded, 2 running, 1 failed" in reason
+    # the first failure leaves fewer than the 3 it needs; the reason counts as of the multiplicity's own exit, after
+    # the second instance that failed at the same instant (semantics audit 5: the trace shows both exits first)
+    assert "only 1 of at least 3 instances of Lookout can succeed (0 succeeded, 1 running, 2 failed" in reason
+    exits = [r.path for r in h.of(rec.Exited)]
+    assert exits.index("M/Lookout[1]") < exits.index("M/Lookout"), exits
+
+
+def test_a_multiplicity_short_of_instances_counts_the_one_that_succeeded_at_the_same_instant(
+        catalog: Catalog) -> None:
+    class OneFails(Timed):
+        def step(self, now: float) -> object:
+            from drd.runtime.component import Status
+
+            assert self.ctx is not None
+            return Status.FAILURE if "[0]" in self.ctx.path else Status.SUCCESS
+
+    text = "mission M {\n Lookout[2..2]\n}\nbehavior Lookout {\n needs scout: Scout\n Watch(duration: 50s)\n}"
+    h = Harness(compiled(text, catalog), {"Watch": OneFails}, scouts(2))
+    assert h.run(dt=0.1) == "failure"
+    assert h.interp.reason.startswith(
+        "only 1 of at least 2 instances of Lookout can succeed (1 succeeded, 0 running, 1 failed"), h.interp.reason
 
 
 def test_a_timeout_fires_in_the_cycle_it_falls_due(catalog: Catalog) -> None:
