@@ -210,6 +210,16 @@ def running_cluster(folder: Path, names: Sequence[str], *, lease: float = LEASE,
         cluster.close()
 
 
+def instances_only_hosts(c: DaemonCluster) -> str:
+    """A hosts file of `c`'s names, the first the controller and the others bare workers, placed by instance count
+    alone: every idle worker scores the same and ties go to the smaller name, so which host is tried is known."""
+    lines = ["cluster:", f"  name: {c.name}", "  security: {mode: none}", "  lease: 1000ms",
+             "  placement: {cpu: 0, memory: 0, instances: 1, affinity: 0}", "hosts:"]
+    for i, (name, endpoint) in enumerate(zip(c.names, c.endpoints, strict=True)):
+        lines += [f"  {name}:", f"    endpoint: {endpoint}", f"    roles: [{'worker' if i else 'controller'}]"]
+    return "\n".join(lines) + "\n"
+
+
 def corridor_hosts(cluster: DaemonCluster, *, simulator_on_controller: bool = False, lease: str = "1000ms") -> str:
     """The repository's hosts.yaml (controller; ranger1 with its Scouts and, unless moved to the controller, the
     simulator) on the cluster's free ports and name, with the test lease."""

@@ -13,7 +13,7 @@ import os
 from pathlib import Path
 
 import pytest
-from cluster_support import DaemonCluster, running_cluster
+from cluster_support import instances_only_hosts, running_cluster
 
 from tests.conftest import ROOT
 
@@ -36,14 +36,6 @@ WARNING = ("alpha will not run Sweep: its module sweep_mod needs sweep_vendor_sd
            "({manifest})")
 
 
-def hosts_yaml(c: DaemonCluster) -> str:
-    lines = ["cluster:", f"  name: {c.name}", "  security: {mode: none}", "  lease: 1000ms",
-             "  placement: {cpu: 0, memory: 0, instances: 1, affinity: 0}", "hosts:"]
-    for i, (name, endpoint) in enumerate(zip(NAMES, c.endpoints, strict=True)):
-        lines += [f"  {name}:", f"    endpoint: {endpoint}", f"    roles: [{'worker' if i else 'controller'}]"]
-    return "\n".join(lines) + "\n"
-
-
 def test_a_host_without_a_components_library_starts_and_the_component_runs_where_the_library_is(
         tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     (tmp_path / "comp" / "Sweep").mkdir(parents=True)
@@ -59,7 +51,7 @@ def test_a_host_without_a_components_library_starts_and_the_component_runs_where
     without = os.pathsep.join([str(tmp_path / "code"), str(ROOT)])
     env = {**os.environ, "DRD_COMPONENTS": str(tmp_path / "comp")}
     with running_cluster(tmp_path, NAMES) as c:
-        c.hosts_file.write_text(hosts_yaml(c))
+        c.hosts_file.write_text(instances_only_hosts(c))
         for name in NAMES:
             library = [str(tmp_path / "vendor")] if name == "zulu" else []
             c.start(name, env={**env, "PYTHONPATH": os.pathsep.join([*library, without])})

@@ -15,7 +15,7 @@ from pathlib import Path
 from typing import Any
 
 import pytest
-from cluster_support import DaemonCluster, eventually, running_cluster
+from cluster_support import DaemonCluster, eventually, instances_only_hosts, running_cluster
 
 NAMES = ["controller", "a1", "a2", "b", "z"]
 NAP = """name: Nap
@@ -39,14 +39,6 @@ outputs:
 MISSION = "mission OneNap {\n    Nap(duration: 60s)\n}\n"
 
 
-def hosts_yaml(c: DaemonCluster) -> str:
-    lines = ["cluster:", f"  name: {c.name}", "  security: {mode: none}", "  lease: 1000ms",
-             "  placement: {cpu: 0, memory: 0, instances: 1, affinity: 0}", "hosts:"]
-    for i, (name, endpoint) in enumerate(zip(NAMES, c.endpoints, strict=True)):
-        lines += [f"  {name}:", f"    endpoint: {endpoint}", f"    roles: [{'worker' if i else 'controller'}]"]
-    return "\n".join(lines) + "\n"
-
-
 def folder(root: Path, name: str, manifest: str) -> Path:
     (root / name / "Nap").mkdir(parents=True)
     (root / name / "Nap" / "manifest.yaml").write_text(manifest)
@@ -60,7 +52,7 @@ def cluster(tmp_path_factory: pytest.TempPathFactory) -> Iterator[DaemonCluster]
     odd = folder(root, "odd", NAP.replace("  duration:\n", "  length:\n"))
     extra = {"controller": good, "z": good, "a1": odd, "a2": odd}
     with running_cluster(root, NAMES) as c:
-        c.hosts_file.write_text(hosts_yaml(c))
+        c.hosts_file.write_text(instances_only_hosts(c))
         for name in NAMES:
             c.start(name, extra=["-C", str(extra[name])] if name in extra else [])
         c.wait_ready()
