@@ -209,6 +209,9 @@ BUILTIN_PROPERTIES: Mapping[str, str] = MappingProxyType({"id": "str", "host": "
 #: as its odometry has it) and the charge left (0 to 1). Constraints and guards read them (`ranger.x`).
 ROBOT_PROPERTIES: Mapping[str, str] = MappingProxyType({"x": "float", "y": "float", "heading": "float",
                                                           "battery": "float"})
+#: What every device (an RC) tells of itself besides its manifest's properties: which driver runs it (`sim`,
+#: `ros2`, a driver of the user's), so a need can ask for a real camera (`where cam.driver != "sim"`).
+DEVICE_PROPERTIES: Mapping[str, str] = MappingProxyType({"driver": "str"})
 #: The event a behavior gets when one of its constraints is violated (`A -> B on violation`).
 VIOLATION = RecordSpec("violation", MappingProxyType({"name": "str", "resource": "str", "value": "float",
                                                       "limit": "float"}), "event",
@@ -263,6 +266,8 @@ class Catalog:
         if t is not None:
             if t.kind is Kind.ARC:
                 props.update(ROBOT_PROPERTIES)
+            elif t.kind is Kind.RC:
+                props.update(DEVICE_PROPERTIES)
             props.update(t.properties)
             props.update(t.parts)  # `ranger.camera` names the part
         return props

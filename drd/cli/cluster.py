@@ -401,8 +401,9 @@ def components(config: Path = ConfigOption, connect: list[str] = ConnectOption, 
         t = Table(title=title, title_justify="left")
         for col in ("name", "component", "host", "state", "pid", "key"):
             t.add_column(col)
-        for i in rows:
-            t.add_row(i.name, i.component, i.host, i.state, str(i.pid or "—"), i.key)
+        for i in rows:  # an instance as `missionctl migrate` takes it: <mission>/<path>
+            t.add_row(f"{i.mission}/{i.name}" if i.mission else i.name, i.component, i.host, i.state,
+                      str(i.pid or "—"), i.key)
         out.print(t if rows else Text(f"{title}: none", style="dim"))
     return OK
 

@@ -77,7 +77,8 @@ def moved(r: subprocess.CompletedProcess[str]) -> dict[str, Any]:
     return reply
 
 
-def test_a_wait_moved_twice_keeps_its_deadline_and_its_count(cluster: DaemonCluster, tmp_path: Path) -> None:
+def test_a_wait_moved_twice_keeps_its_deadline_and_its_count(cluster: DaemonCluster, tmp_path: Path,
+                                                            monkeypatch: pytest.MonkeyPatch) -> None:
     mission, trace = tmp_path / "pause.mission", tmp_path / "trace.jsonl"
     mission.write_text(f"mission Pause {{\n    Wait(duration: {DURATION:g}s) as Hold\n}}\n")
     cmd = [*MISSIONCTL, "run", str(mission), "--config", str(cluster.hosts_file), "--speed", "2", "--json",
@@ -85,6 +86,9 @@ def test_a_wait_moved_twice_keeps_its_deadline_and_its_count(cluster: DaemonClus
     with running(cmd) as proc:
         mid, first = started_wait(cluster, proc, "Pause")
         other = (WORKERS - {first}).pop()
+        monkeypatch.setenv("COLUMNS", "200")
+        listed = cluster.missionctl("components", "--config", str(cluster.hosts_file), timeout=30)
+        assert f"{mid}/Pause/Hold" in listed.stdout, listed.stdout  # what migrate takes (docs audit 9)
         time.sleep(1.0)  # a few seconds of mission time on the first host
         there = moved(migrate(cluster, f"{mid}/Pause/Hold", other))
         assert (there["source"], there["host"], there["component"]) == (first, other, "Wait")

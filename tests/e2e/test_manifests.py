@@ -106,6 +106,22 @@ def test_docs_list_every_standard_component_and_manifest_key(standard: Catalog) 
     assert [k for k in KEY_ORDER if f"`{k}`" not in text] == []
 
 
+def test_the_docs_behavior_table_names_each_behaviors_needs(standard: Catalog) -> None:
+    """The table of docs/components.md lists each standard behavior's needs as its manifest declares them (docs
+    audit 1: five rows had lost a need, so a user binding a behavior by hand missed one)."""
+    rows = {}
+    for line in DOCS.read_text(encoding="utf-8").splitlines():
+        cells = [c.strip() for c in line.strip().strip("|").split("|")]
+        if len(cells) == 4 and cells[0].startswith("`") and cells[0].strip("`") in KINDS[Kind.BEHAVIOR]:
+            rows[cells[0].strip("`")] = cells[2]
+    assert sorted(rows) == sorted(KINDS[Kind.BEHAVIOR])
+    for name, cell in rows.items():
+        ct = standard.get(name)
+        assert ct is not None
+        wanted = [f"`{n.name}: {n.type}" for n in ct.needs]  # `drive: Drive of [...]`, `scout: Scout`
+        assert [w for w in wanted if w not in cell] == [], (name, cell)
+
+
 # ---------------------------------------------------------------- parsing one manifest
 
 

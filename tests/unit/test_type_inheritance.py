@@ -144,3 +144,17 @@ def test_hosts_yaml_names_concrete_types(catalog: Catalog) -> None:
     text = str(info.value)
     assert "hosts.r1.devices.s.type: Sensor is abstract: name one of its types (Camera, RangeSensor)" in text
     assert "hosts.r1.robots.bot.type: Robot is abstract: name one of its types (Ranger, Scout)" in text
+
+
+def test_a_device_is_queried_by_its_driver_in_the_trader_and_in_a_mission(catalog: Catalog) -> None:
+    """`missionctl query` lists `driver=sim` among a device's properties; it is queryable (docs audit 8: refused as
+    an unknown property), for a device only."""
+    from dsl import compile_text
+
+    own = Catalog.of(inherit(types(ROBOT, CAM, arc("Rover", "Robot"))))
+    offers = [Offer("r1.camera", "Cam", {"driver": "sim"}), Offer("r2.camera", "Cam", {"driver": "ros2"})]
+    assert [o.id for o in query('Cam where driver != "sim"', offers, catalog=own)] == ["r2.camera"]
+    with pytest.raises(TraderError, match="unknown property driver"):
+        compile_query('Rover where driver == "sim"', own)
+    text = 'mission M {\n    needs c: Camera where c.driver == "ros2"\n    Wait(duration: 1s)\n}\n'
+    assert compile_text(text, catalog, "m.mission").ok
