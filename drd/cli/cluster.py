@@ -597,8 +597,8 @@ def _run_and_follow(client: ClusterClient, watch: _RecordWatch, request: Any, wa
             reply = answer
             if detach:
                 if as_json:
-                    print_json({"mission": reply.mission, "world": reply.world, "speed": reply.speed,
-                                "priority": reply.priority})
+                    print_json({"mission": reply.mission, "id": reply.mission, "world": reply.world,  # `id` as in
+                                "speed": reply.speed, "priority": reply.priority})  # status --json
                 else:
                     out.print(reply.mission)
                 return None

@@ -256,6 +256,7 @@ class Creator:
             self.instances.clear()
             self._retire_all()
             self._dirty = True
+            self._publish()  # announced now: they were listed `running`, with dead pids (recovery audit D2)
         log.warning("creator %s: %s: every device stopped, every instance retired", self.host, reason)
 
     @property

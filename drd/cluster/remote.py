@@ -282,6 +282,12 @@ class ComponentRouter:
     def is_down(self, host: str) -> bool:
         return host in self.gone or self.dead(host)
 
+    def back(self, host: str) -> None:
+        """`host` is up again (the daemon saw it report after it was down): it is no longer taken for gone in this
+        mission, so its instances can be retired and moved (recovery audit D1: a host frozen past its lease stayed
+        gone for the mission's life, its instances and processes left running)."""
+        self.gone.discard(host)
+
     def step_first(self, host: str | None) -> float:
         """Make the cycle's pending simulation step before a call to `host`: returns the seconds a batch to the
         simulator host carries (it steps the world first), else 0.0 once the step is made. ComponentError if
@@ -321,7 +327,8 @@ class ComponentRouter:
 
     def _request(self, host: str, msg: ComponentCall | ComponentBatch, op: str, path: str) -> tuple[Any, float]:
         """One round trip to `host`'s Creator: the reply and its duration, or ComponentError. A host that does not
-        answer is marked gone, so later calls fail at once (the daemon removes it at lease expiry)."""
+        answer is marked gone, so later calls fail at once (the daemon removes it at lease expiry), until the daemon
+        sees it up again (`back`)."""
         if self.is_down(host):
             raise HostDown(f"host {host} is down: the component cannot run there")
         ops = self.gates.take(host) if self.gates is not None else None

@@ -654,6 +654,8 @@ class Daemon:
                 self._announce_due = True  # a newcomer learns about us (and whoever came back)
                 if self.controller is not None:
                     self.controller.host_up(change.host)
+                if self.runner is not None:
+                    self.runner.host_back(change.host)
             elif change.kind == HostState.DOWN and self.controller is not None:
                 self.controller.host_down(change.host)
                 self._stop_robots_of(change.host, change.detail)
@@ -662,9 +664,12 @@ class Daemon:
 
     def _stop_robots_of(self, host: str, detail: str) -> None:
         """The controller saw `host` go down: its daemon's watchdogs may have died with it, so a zero Twist goes to
-        its `ros2` robots from here, on a thread (never the loop's time), unless it comes back meanwhile."""
+        its `ros2` robots from here, on a thread (never the loop's time), unless it comes back meanwhile, and its
+        simulated robots stop in the running world (`MissionRunner.halt_host`)."""
         stop_robots(self.cluster, host, f"host {host} down ({detail}), stopped by controller {self.host}",
                     still=lambda: self.view.state(host) is HostState.DOWN)
+        if self.runner is not None:  # its simulated robots: in the running world
+            self.runner.halt_host(host)
 
     def _acting_controller(self, host: str) -> bool:
         """Whether `host` is the controller that acts: the one of hosts.yaml, or with several (a replicated store)

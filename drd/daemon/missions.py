@@ -190,6 +190,9 @@ class MissionRunner:
         self.starting = threading.Lock()
         self.generation = 0  # worlds started so far: a Creator builds its drivers again for a new one
         self.lost: list[str] = []  # hosts seen down whose robots the world's loop stops in the simulator
+        self.halting: list[str] = []  # hosts seen down whose simulated robots the loop stops now (`halt_host`)
+        self.retirements: dict[str, list[ComponentCall]] = {}  # host -> retire calls it missed (`owed`)
+        self._hosts_lock = threading.Lock()  # `halting` and `retirements`: the daemon's thread never waits for `lock`
         self.journal = journal
         self.checkpoints = Checkpoints(journal) if journal is not None else None
         self.suspending = False  # a maintenance stop: the missions stay journaled as running (`suspend`)
@@ -273,6 +276,60 @@ class MissionRunner:
         have no simulation to leave: their drivers' watchdogs stop them."""
         if self.current is not None and self.simulator is not None:
             self.lost.append(host)
+
+    def host_back(self, host: str) -> None:
+        """`host` reports again after it was down: the running missions take it for a host again (`ComponentRouter
+        .back`), and the retirements it missed meanwhile are sent to it, on a thread of their own (recovery audit
+        D1: a frozen host's instances and worker processes of an ended mission ran on until the controller's
+        restart, counted in its placement load)."""
+        world = self.world
+        for router in list(world.routers.values()) if world is not None else []:
+            router.back(host)
+        with self._hosts_lock:
+            calls = self.retirements.pop(host, [])
+        if calls:
+            threading.Thread(target=self._retire_late, args=(host, calls), name=f"drd retire on {host}",
+                             daemon=True).start()
+
+    def owed(self, host: str, retire: ComponentCall) -> None:
+        """`retire` could not reach `host` (down, or silent): sent when it is seen up again (`host_back`)."""
+        with self._hosts_lock:
+            owed = self.retirements.setdefault(host, [])
+            if all(c.mission != retire.mission for c in owed):
+                owed.append(retire)
+
+    def _retire_late(self, host: str, calls: list[ComponentCall]) -> None:
+        for call in calls:
+            try:
+                self.bus.call(f"drd/{self.cluster.name}/host/{host}/creator", call, self.patience)
+            except Exception as e:  # it went again: its own controller loss retires what is left
+                log.info("mission %s: %s did not confirm the late retirement: %s", call.mission, host, e)
+            else:
+                log.info("mission %s: %s retired its instances on its return", call.mission, host)
+
+    def halt_host(self, host: str) -> None:
+        """`host` went silent past its lease: its simulated robots stop at the next control cycle, as a zero
+        Twist stops its `ros2` robots (recovery audit D0: a robots' host frozen for a lease and a half left its
+        Ranger driving on in the simulator at its last setpoint, its holder gone, the gates' stops for that host
+        dropped while it was down). Its robots stay in the world until its resources leave the manager."""
+        if self.current is not None and self.simulator is not None:
+            with self._hosts_lock:
+                self.halting.append(host)
+
+    def _halt_robots(self) -> None:
+        with self._hosts_lock:
+            hosts, self.halting = self.halting, []
+        for host in hosts:
+            robots = [r.id for r in self.cluster.host(host).robots]
+            if not robots:
+                continue
+            try:
+                done = self.sim(SimRequest("multi", args=[["stop", [rid]] for rid in robots])).value or []
+            except Exception as e:  # the simulator's own loss is reported by the next step
+                log.warning("could not stop %s's robots in the simulator: %s", host, e)
+                continue
+            stopped = [rid for rid, (_value, error) in zip(robots, done, strict=False) if not error]
+            log.warning("host %s down: its robots %s stopped in the simulation", host, ", ".join(stopped) or "(none)")
 
     def _lose_robots(self) -> None:
         with self.lock:
@@ -434,7 +491,7 @@ class MissionRunner:
         self.telemetry.reset()  # the hosts build their drivers (and guards) again for the new world
         rooms = loaded.rooms if loaded is not None else ()
         self.controller.executive.pool.places = {r.id: (r.x0, r.y0, r.x1, r.y1) for r in rooms}
-        self.world, self.lost = world, []
+        self.world, self.lost, self.halting = world, [], []
         return world
 
     def place(self, component: str, params: Mapping[str, Any], exclude: Mapping[str, str] | frozenset[str],
@@ -585,6 +642,8 @@ class WorldRun:
                     if not self._unfinished():
                         self.closed = True
                         break
+                if runner.halting:
+                    runner._halt_robots()
                 if runner.lost:
                     runner._lose_robots()
                 watched = self._after_freeze(watched)
@@ -712,13 +771,18 @@ class WorldRun:
             if runner.journal is not None and not kept:
                 runner.journal.finish(mid, outcome or "stopped", reason, listed.get(mid))
             for host in sorted(set(router.stats.by_host) | set(router.batches.by_host)):
-                if host == runner.me or runner.host_down(host):
+                retire = ComponentCall("retire", mid, "", world=self.name, generation=self.generation,
+                                       term=runner.term)
+                if host == runner.me:
+                    continue
+                if runner.host_down(host):  # retired when it is seen up again, if it ever is (`host_back`)
+                    runner.owed(host, retire)
                     continue
                 try:
-                    router.call(host, ComponentCall("retire", mid, "", world=self.name, generation=self.generation,
-                                                    term=runner.term))
-                except Exception as e:  # a host that does not answer has lost the mission's processes anyway
+                    router.call(host, retire)
+                except Exception as e:  # a host that does not answer has lost the mission's processes, or owes them
                     log.info("mission %s: %s did not confirm the retirement: %s", mid, host, e)
+                    runner.owed(host, retire)
             for path, host, how in router.placed:
                 log.info("mission %s: %s %s on %s", mid, path, how, host)
             log.info("mission %s %s; component steps %s, step batches %s", mid, ending_said(outcome, reason, kept),
