@@ -48,6 +48,7 @@ import psutil
 
 from drd.bus import Bus, BusError, Message, Query, Reply, typed_handler
 from drd.bus.keys import is_concrete
+from drd.cluster.freeze import FreezeWatch
 from drd.cluster.gates import GateUpdate, GateUpdateReply, wire_record
 from drd.cluster.guard import CLOSE_WAIT, HostGuard
 from drd.cluster.instances import InstanceInfo
@@ -206,6 +207,7 @@ class Creator:
         self._sharable = {d.id for d in mine.devices if d.sharable}
         self._command_errors: list[tuple[str, str]] = []  # (instance key, error) of setpoints that raised
         self._lock = threading.Lock()
+        self._still = FreezeWatch(cluster.lease)  # this process not running for longer than the lease
         self._own_pool = pool is None
         # cold until a world starts or a component is placed here: an idle daemon runs no worker processes
         self.pool = pool if pool is not None else WorkerPool(pool_size(workers), preload=behavior_modules(catalog),
@@ -246,6 +248,24 @@ class Creator:
             self._sync_tokens({})
         if self._own_pool:
             self.pool.close()
+
+    def watch_from_now(self) -> None:
+        """Its daemon serves from now: the time it took to start is no freeze (`check_freeze`)."""
+        self._still.restart()
+
+    def check_freeze(self) -> str:
+        """Whether this process stood still for longer than the lease since it last looked (called by the daemon's
+        every tick and before every call, whichever runs first after a SIGCONT): then the controller has taken this
+        host for lost and ended its grants, so its devices stop and its instances go, as on a controller's loss,
+        before a call sent meanwhile can move anything (recovery audit D0: a step delivered during the freeze ran
+        on waking and drove the Ranger on after its mission had failed). The reason, or "" when it ran on."""
+        gap = self._still.gap()
+        if not gap:
+            return ""
+        reason = (f"this host was frozen for {gap:.1f} s, longer than the lease ({self.cluster.lease:g} s): the"
+                  " controller took it for lost")
+        self.controller_lost(reason)
+        return reason
 
     def controller_lost(self, reason: str) -> None:
         """The controller is gone (its liveliness token vanished, or its lease ran out): nobody may grant this
@@ -906,6 +926,9 @@ class Creator:
     def _serve(self, query: Query) -> Message | Reply:
         if not is_concrete(query.key):  # only the controller calls, by this exact key (drd.daemon.acl)
             return query.error(f"ask {self.key} by its exact key")
+        frozen = self.check_freeze()
+        if frozen:  # a call sent while this host stood still: its controller has given up on it
+            return query.error(f"{frozen}: its devices are stopped until a controller grants them again")
         if isinstance(query.payload, ComponentBatch):
             if not query.payload.calls:
                 return query.error("an empty batch")

@@ -309,6 +309,7 @@ class Daemon:
         takes = Role.WORKER in roles or not any(Role.WORKER in h.roles for h in self.cluster.hosts)
         if takes and not self.creator.pool.wait_ready():  # up once a component can be placed here in milliseconds
             log.warning("the Creator's worker processes are not all ready yet: the first starts here may be slow")
+        self.creator.watch_from_now()  # a slow start is no freeze
         self._token = bus.declare_token(keys.host(me))
         now = self.clock()
         self._next_peer_check = now + self.config.peer_grace
@@ -435,6 +436,8 @@ class Daemon:
             self._next_load = now + aligned_wait(self.wall(), self.config.period, at_least=self.config.period / 2)
             self.bus.put(self.keys.load(self.host), self._sampler.sample(len(self._instances()), self.wall()))
             self._publish_live()
+        if self.creator is not None:  # before anything it serves: a freeze of its own ends its grants
+            self.creator.check_freeze()
         with self._lock:
             self._handle(self.view.tick(now))
             if self.controller is not None:

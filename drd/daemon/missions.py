@@ -192,6 +192,8 @@ class MissionRunner:
         self.lost: list[str] = []  # hosts seen down whose robots the world's loop stops in the simulator
         self.halting: list[str] = []  # hosts seen down whose simulated robots the loop stops now (`halt_host`)
         self.retirements: dict[str, list[ComponentCall]] = {}  # host -> retire calls it missed (`owed`)
+        self.lost_robots: set[str] = set()  # robots the running world lost with their host (`Controller.absent`)
+        controller.absent = lambda: self.lost_robots
         self._hosts_lock = threading.Lock()  # `halting` and `retirements`: the daemon's thread never waits for `lock`
         self.journal = journal
         self.checkpoints = Checkpoints(journal) if journal is not None else None
@@ -343,6 +345,7 @@ class MissionRunner:
             except Exception as e:  # the simulator's own loss is reported by the next step
                 log.warning("could not stop %s's robots in the simulator: %s", host, e)
                 continue
+            self.lost_robots |= set(robots)  # out of this world, the Scouts of a lost Ranger's magazine with it
             log.info("host %s lost: its robots %s left the simulation (nothing drives them)", host,
                      ", ".join(gone) or "(none were there)")
 
@@ -472,6 +475,8 @@ class MissionRunner:
         with self.lock:
             self.clock.start_mission()
             self._reset_dependencies(self.controller.executive)
+            self.lost_robots = set()
+            self.controller.add_left_out()  # a new world has every robot again
             return self.open_world(path.stem, loaded, reset, self.generation + 1, req.speed)
 
     def open_world(self, name: str, loaded: Any, reply: SimReply | None, generation: int,
@@ -491,7 +496,7 @@ class MissionRunner:
         self.telemetry.reset()  # the hosts build their drivers (and guards) again for the new world
         rooms = loaded.rooms if loaded is not None else ()
         self.controller.executive.pool.places = {r.id: (r.x0, r.y0, r.x1, r.y1) for r in rooms}
-        self.world, self.lost, self.halting = world, [], []
+        self.world, self.lost, self.halting, self.lost_robots = world, [], [], set()
         return world
 
     def place(self, component: str, params: Mapping[str, Any], exclude: Mapping[str, str] | frozenset[str],

@@ -74,10 +74,40 @@ def test_a_robot_whose_host_is_frozen_past_its_lease_stops_in_the_simulated_worl
             os.kill(pid, signal.SIGCONT)
         eventually(lambda: outcome(cluster, drive) == "failure", "the driving mission to fail", 30,
                    explain=lambda: cluster.tails("controller"))
+        eventually(lambda: "host ranger1 up: reporting again" in cluster.log("controller"), "ranger1 back", 30)
+        time.sleep(0.5)  # what it would do on waking, it has done: a step sent while it stood still was refused
         t0, p0 = pose(world, cluster)
         eventually(lambda: pose(world, cluster)[0] > t0 + 3.0, "3 s of world time", 30)
         t1, p1 = pose(world, cluster)
         assert outcome(cluster, keep) is None, "the world is still open: Keep runs"
         assert abs(p1[0] - p0[0]) < 0.05 and abs(p1[1] - p0[1]) < 0.05, (t0, p0, t1, p1, cluster.tails("controller"))
         assert "host ranger1 down: its robots ranger1" in cluster.log("controller")
+    cluster.missionctl("stop", "--all", "--config", str(cluster.hosts_file), timeout=60)
+
+
+def test_robots_that_left_the_world_with_their_host_are_not_granted_when_it_comes_back(cluster: DaemonCluster,
+                                                                                       tmp_path: Path) -> None:
+    """Recovery audit D3: frozen past two leases, the host's resources leave the manager and its robots the world;
+    back, its resources came back whole, and the next mission was granted ranger1 and failed at once, `ranger1 is
+    lost`. Its robots stay out of the manager while that world runs, and the host's events say so."""
+    (tmp_path / "keep.mission").write_text("mission Keep {\n    Wait(duration: 300s) as Hold\n}\n")
+    (tmp_path / "drive.mission").write_text("mission Drive2 {\n    needs ranger: Ranger\n"
+                                            "    FollowCorridor(speed: 0.5)\n}\n")
+    r = cluster.missionctl("run", str(tmp_path / "keep.mission"), "--config", str(cluster.hosts_file), "--detach",
+                           timeout=60)
+    assert r.returncode == 0, r.stderr[-2000:]
+    pid = cluster.pid("ranger1")
+    os.kill(pid, signal.SIGSTOP)
+    try:
+        eventually(lambda: "host ranger1 lost: its robots ranger1, " in cluster.log("controller"),
+                   "ranger1's robots to leave the world", 30, explain=lambda: cluster.tails("controller"))
+    finally:
+        os.kill(pid, signal.SIGCONT)
+    eventually(lambda: "not ranger1" in cluster.log("controller"), "ranger1's host back without its robots", 30,
+               explain=lambda: cluster.tails("controller"))
+    r = cluster.missionctl("run", str(tmp_path / "drive.mission"), "--config", str(cluster.hosts_file), "--json",
+                           timeout=60)
+    report = json.loads(r.stdout)
+    assert r.returncode == 1 and report["outcome"] == "failure", (r.stdout[-1500:], r.stderr[-1500:])
+    assert "is lost" not in report["reason"] and "Ranger" in report["reason"], report["reason"]
     cluster.missionctl("stop", "--all", "--config", str(cluster.hosts_file), timeout=60)
