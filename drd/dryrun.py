@@ -48,6 +48,11 @@ class SimulationClock:
         return self.sim.time
 
 
+#: Sim seconds below which a run's pace is not judged nor shown (recovery audit D4: a mission failing at 0.0 s
+#: was reported `0x real time (2x asked: the cluster could not keep up)`).
+PACE_MIN = 1.0
+
+
 @dataclass
 class DryRun:
     """What happened: outcome, times, and the facts the report shows."""
@@ -74,11 +79,17 @@ class DryRun:
 
     @property
     def kept_up(self) -> bool:
-        """Did the run keep (nearly: within 10 %, which a cluster's start-up takes) the pace it was asked for?"""
-        if not self.speed:
+        """Did the run keep (nearly: within 10 %, which a cluster's start-up takes) the pace it was asked for? A run
+        of less than a second of sim time has no pace to judge (its start-up is all of it)."""
+        if not self.speed or not self.paced:
             return True
         ran = self.wall_time - self.away
         return ran <= 0 or self.sim_time / ran >= 0.9 * self.speed
+
+    @property
+    def paced(self) -> bool:
+        """Long enough (`PACE_MIN`) for its pace to mean something."""
+        return self.sim_time >= PACE_MIN
 
     @property
     def real_time_factor(self) -> float:

@@ -97,7 +97,8 @@ def report_view(r: DryRun, several: bool = False, width: int = 80) -> list[Rende
     if not r.kept_up:  # say so, rather than leave the operator to compare with what they asked
         pace += f" ({r.speed:g}x asked: the {'cluster' if r.on_cluster else 'machine'} could not keep up)"
     away = f" ({r.away:.1f} s of it without a controller)" if r.away else ""
-    parts.append(Text(f"sim time {r.sim_time:.1f} s · wall time {r.wall_time:.2f} s{away} · {pace}" if r.wall_time > 0
+    parts.append(Text(f"sim time {r.sim_time:.1f} s · wall time {r.wall_time:.2f} s{away}"
+                      + (f" · {pace}" if r.paced else "") if r.wall_time > 0
                       else f"sim time {r.sim_time:.1f} s"))
     parts += _why_view(r, width)
     for row in r.injections:

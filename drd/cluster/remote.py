@@ -330,7 +330,9 @@ class ComponentRouter:
         answer is marked gone, so later calls fail at once (the daemon removes it at lease expiry), until the daemon
         sees it up again (`back`)."""
         if self.is_down(host):
-            raise HostDown(f"host {host} is down: the component cannot run there")
+            raise HostDown(f"host {host} is down: " + ("it ran the simulator, so the world is gone"
+                                                        if host and host == self.simulator else
+                                                        "the component cannot run there"))
         ops = self.gates.take(host) if self.gates is not None else None
         if ops:  # the gate operations queued for that host go first
             msg = dataclasses.replace(msg, gates=ops)

@@ -63,3 +63,14 @@ def test_a_log_lines_further_lines_are_shown_whole() -> None:
     print_report(run, console=Console(file=sink, width=80))
     lines = [line.strip() for line in sink.getvalue().splitlines()]
     assert 'File "kit/bad.py", line 6, in step' in lines and 'raise ValueError("boom")' in lines, lines
+
+
+def test_a_mission_that_ended_at_once_has_no_pace() -> None:
+    """Recovery audit D4: a mission refused at 0.0 s read `0x real time (2x asked: the cluster could not keep
+    up)`. Under a second of sim time, the report gives the times and judges no pace."""
+    at_once = DryRun("Drive2", "failure", "no Ranger is known", 0.0, 0.4, speed=2.0, on_cluster=True, mission_id="D-1")
+    assert at_once.kept_up and not at_once.paced
+    sink = io.StringIO()
+    print_report(at_once, console=Console(file=sink, width=120))
+    text = sink.getvalue()
+    assert "sim time 0.0 s · wall time 0.40 s" in text and "real time" not in text and "keep up" not in text
