@@ -94,7 +94,7 @@ class Authority:
         csr.unlink()
         ext.unlink()
 
-    # with `cryptography` (imported here only: it is not a dependency of drd)
+    # with `cryptography` (drd itself only reads a certificate's name with it: `certificate_name`)
 
     def _ca_cryptography(self) -> None:
         from cryptography import x509

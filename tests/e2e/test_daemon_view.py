@@ -256,12 +256,23 @@ def test_missing_security_files_are_named(tmp_path: Path, catalog: Catalog) -> N
 
 
 def test_tls_mode_moves_every_endpoint_to_tls(tmp_path: Path, catalog: Catalog) -> None:
-    for name, label in (("ca.pem", "CERTIFICATE"), ("host.pem", "CERTIFICATE"), ("host.key", "PRIVATE KEY")):
-        (tmp_path / name).write_text(f"-----BEGIN {label}-----\nAA==\n-----END {label}-----\n")
-    tr = transport(secured(tmp_path, catalog, "{mode: tls, ca: ca.pem, cert: host.pem, key: host.key}"))
+    from test_daemon_tls import Authority, pki_backend
+
+    Authority(tmp_path / "pki", "test-ca", pki_backend()).issue(tmp_path / "tls", "drd-daemon")
+    tr = transport(secured(tmp_path, catalog, "{mode: tls, ca: tls/ca.pem, cert: tls/host.pem, key: tls/host.key}"))
     assert tr.endpoints == {"controller": "tls/127.0.0.1:7447", "ranger1": "tls/127.0.0.1:7448"}
     assert tr.options["transport/link/protocols"] == ["tls"] and tr.options["transport/link/tls/enable_mtls"]
     assert tr.others("controller") == {"ranger1": "tls/127.0.0.1:7448"}
+    assert tr.identity == "drd-daemon"  # the certificate's common name: what the daemons' access control knows
+
+
+def test_a_pem_block_that_is_no_certificate_is_refused_naming_the_key(tmp_path: Path, catalog: Catalog) -> None:
+    for name, label in (("ca.pem", "CERTIFICATE"), ("host.pem", "CERTIFICATE"), ("host.key", "PRIVATE KEY")):
+        (tmp_path / name).write_text(f"-----BEGIN {label}-----\nAA==\n-----END {label}-----\n")
+    with pytest.raises(SecurityError) as refused:
+        transport(secured(tmp_path, catalog, "{mode: tls, ca: ca.pem, cert: host.pem, key: host.key}"))
+    [problem] = [str(p) for p in refused.value.problems]
+    assert "cluster.security.cert" in problem and "host.pem: not a readable certificate" in problem, problem
 
 
 def test_peer_diagnosis() -> None:

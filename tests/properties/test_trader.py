@@ -66,7 +66,7 @@ def test_random_is_seeded(catalog: Catalog) -> None:
     ("  Zeppelin", "unknown type Zeppelin (resource types: Camera, Drive, Jump, Launcher, RadioChannel, RangeSensor, "
                 "Ranger, Robot, Scout, Sensor)", 3),
     ("Camera where resolutin >= 640", "unknown property resolutin (did you mean resolution?)", 14),
-    ("Camera where colour", "unknown property colour (Camera has fov, host, id, resolution)", 14),
+    ("Camera where colour", "unknown property colour (Camera has driver, fov, host, id, resolution)", 14),
     ("Camera where host.lod > 1", "host has no field lod (did you mean load?)", 14),
     ("Camera where resolution", "where expects bool, got int", 14),
     ('Camera where resolution > "640"', "cannot order int and str with >", 14),
