@@ -5,7 +5,9 @@ wall hits on both sides of the run; its width is measured along the wall line. A
 segment to the laser, so it never shows up as a gap. The door's centre is given in odometry coordinates.
 Doors already in the shared DoorLog (`visited`: a dict keyed by (rounded x, rounded y, side)) are skipped. At the end of
 the corridor (a wall across the way, as FollowCorridor sees it) it fails: there is no new door left ahead, so
-`FindNewDoor -> fail on error` ends that RoomSurveillance instance and the mission degrades gracefully.
+`FindNewDoor -> fail on error` ends that RoomSurveillance instance and the mission degrades gracefully. A wall it
+was left facing when it started is not the end: FollowCorridor turns around, and the sweep back finds a door
+missed on the way out; the end is the next wall across the way once the Ranger has moved.
 """
 
 from __future__ import annotations
@@ -22,6 +24,9 @@ BEYOND = 0.5
 #: Only doors whose centre is within this angle of abeam are reported (the geometry is best there).
 ABEAM = math.radians(30)
 _FAR = math.pi - 0.15  # beams closer than 0.15 rad to the wall's direction cross it too far away to tell
+#: How far (m) the Ranger must have moved since the start before a wall across the way is the corridor's end: as
+#: FollowCorridor, which turns around when it starts facing one.
+LEAVE = 0.5
 #: A maximal run of beams through the wall with a beam at the wall on both sides.
 _GAP = re.compile(r"(?<=w)b+(?=w)")
 
@@ -97,6 +102,15 @@ class DetectDoor(Component):
     def start(self) -> None:
         self.expect: tuple[float | None, float | None] = (None, None)
         self.memo = ScanMemo()  # what the scan helpers derive from this cycle's scan
+        self.origin: tuple[float, float] | None = None  # where it started (odometry), once known
+
+    def _just_started(self, pose: tuple[float, float, float] | None) -> bool:
+        """Still within `LEAVE` of where it started: a wall ahead then is one it was left facing (the previous
+        instance launched its Scout from there, or the sweep ended there), which FollowCorridor turns away from,
+        sweeping back; it is the corridor's end once the Ranger has moved (a sweep back finds the doors missed on the
+        way out). Without odometry, any wall across the way is the end."""
+        return pose is not None and self.origin is not None and math.hypot(
+            pose[0] - self.origin[0], pose[1] - self.origin[1]) < LEAVE
 
     def _pose(self) -> tuple[float, float, float] | None:
         """Odometry, from the robot's Drive if this component was given one (the runtime may add it), else from
@@ -110,11 +124,14 @@ class DetectDoor(Component):
     def step(self, now: float) -> Status:
         min_width = float(self.ctx.params["min_width"])
         scan = self.device("ranges").scan()
-        if wall_across(scan, memo=self.memo):  # a wall across the way: no new door between here and the end
-            self.ctx.log("the corridor ends here, with no new door")
+        found = self._pose()
+        if self.origin is None and found is not None:
+            self.origin = found[:2]
+        if wall_across(scan, memo=self.memo) and not self._just_started(found):
+            self.ctx.log("the corridor ends here, with no new door")  # no new door between here and the end
             return Status.FAILURE
         self.expect = expected(corridor(scan, self.expect, memo=self.memo), self.expect)
-        pose = self._pose() or (0.0, 0.0, 0.0)
+        pose = found or (0.0, 0.0, 0.0)
         log = self.input("visited")
         for gap in find_gaps(scan, min_width, self.expect, self.memo):
             px, py, pa = pose

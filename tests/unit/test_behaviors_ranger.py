@@ -211,6 +211,25 @@ def test_detect_door_fails_at_the_end_of_the_corridor_when_every_door_is_known()
     assert any("the corridor ends here, with no new door" in line for line in rig.logs)
 
 
+def test_detect_door_started_facing_a_wall_sweeps_back_and_fails_only_at_the_far_end():
+    """Generated buildings (docs audit 4): a Ranger left facing a wall (at an end, or launched from askew) failed
+    every instance that drew it in the first step, before FollowCorridor could turn it round: 203 of 950 instances
+    at 50 wings. Now the sweep back goes on; with every door known it ends at the other end, having moved."""
+    rig = Rig()
+    rig.inputs["visited"] = {(round(x), "any"): {"x": x, "y": y, "width": 1.0} for x, y in
+                             ((4.0, 1.25), (11.0, -1.25), (17.0, 1.25), (23.0, 1.25), (29.0, -1.25), (35.0, -1.25))}
+    out = rig.start(FollowCorridor, needs=RANGER, params={"speed": 0.8})
+    assert rig.run(out, until=80.0) is Status.SUCCESS and rig.sim.pose("ranger1").x > 38.0  # at the east end
+    follow = rig.start(FollowCorridor, needs=RANGER, params={"speed": 0.8})
+    det = rig.start(DetectDoor, needs=RANGER)
+    statuses: list[Status] = []
+    run_all(rig, [follow, det], rig.sim.time + 120.0,
+            stop=lambda s: statuses.append(s[1]) or s[1] is not Status.RUNNING)
+    assert statuses[0] is Status.RUNNING and statuses[-1] is Status.FAILURE, statuses[:3]
+    assert rig.sim.pose("ranger1").x < 2.0  # the west end: it swept the whole corridor back
+    assert sum("the corridor ends here, with no new door" in line for line in rig.logs) == 1
+
+
 def test_align_ranger_drives_back_to_where_its_door_was_seen():
     rig = Rig()
     rig.inputs["visited"] = {}
