@@ -260,8 +260,8 @@ class Creator:
         before a call sent meanwhile can move anything (recovery audit D0: a step delivered during the freeze ran
         on waking and drove the Ranger on after its mission had failed). The reason, or "" when it ran on."""
         gap = self._still.gap()
-        if not gap:
-            return ""
+        if not gap or Role.CONTROLLER in self.cluster.host(self.host).roles:  # its grants are its own controller's,
+            return ""  # which froze with it: nothing was taken from it meanwhile (a laptop suspended, one host)
         reason = (f"this host was frozen for {gap:.1f} s, longer than the lease ({self.cluster.lease:g} s): the"
                   " controller took it for lost")
         self.controller_lost(reason)
