@@ -30,7 +30,7 @@ import functools
 import logging
 import threading
 import time
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Iterator, Mapping
 from typing import Any
 
 from drd.bus import Bus, Message, Query, Reply, message
@@ -321,33 +321,33 @@ class MissionRunner:
     def _halt_robots(self) -> None:
         with self._hosts_lock:
             hosts, self.halting = self.halting, []
-        for host in hosts:
-            robots = [r.id for r in self.cluster.host(host).robots]
-            if not robots:
-                continue
-            try:
-                done = self.sim(SimRequest("multi", args=[["stop", [rid]] for rid in robots])).value or []
-            except Exception as e:  # the simulator's own loss is reported by the next step
-                log.warning("could not stop %s's robots in the simulator: %s", host, e)
-                continue
+        stop = functools.partial(SimRequest, "multi")
+        for host, robots, done in self._robots_in_sim(hosts, lambda ids: stop(args=[["stop", [r]] for r in ids])):
             stopped = [rid for rid, (_value, error) in zip(robots, done, strict=False) if not error]
             log.warning("host %s down: its robots %s stopped in the simulation", host, ", ".join(stopped) or "(none)")
 
     def _lose_robots(self) -> None:
         with self.lock:
             hosts, self.lost = self.lost, []
+        for host, robots, gone in self._robots_in_sim(hosts, lambda ids: SimRequest("lose", args=ids)):
+            self.lost_robots |= set(robots)  # out of this world, the Scouts of a lost Ranger's magazine with it
+            log.info("host %s lost: its robots %s left the simulation (nothing drives them)", host,
+                     ", ".join(gone) or "(none were there)")
+
+    def _robots_in_sim(self, hosts: list[str], request: Callable[[list[str]], SimRequest]
+                       ) -> Iterator[tuple[str, list[str], Any]]:
+        """For each of `hosts` with robots: (host, its robot ids, the simulator's answer to `request(ids)`); a host
+        whose request fails is logged and passed over (the simulator's own loss is reported by the next step)."""
         for host in hosts:
             robots = [r.id for r in self.cluster.host(host).robots]
             if not robots:
                 continue
             try:
-                gone = self.sim(SimRequest("lose", args=robots)).value or []
-            except Exception as e:  # the simulator's own loss is reported by the next step
+                value = self.sim(request(robots)).value or []
+            except Exception as e:
                 log.warning("could not stop %s's robots in the simulator: %s", host, e)
                 continue
-            self.lost_robots |= set(robots)  # out of this world, the Scouts of a lost Ranger's magazine with it
-            log.info("host %s lost: its robots %s left the simulation (nothing drives them)", host,
-                     ", ".join(gone) or "(none were there)")
+            yield host, robots, value
 
     def sim(self, req: SimRequest) -> SimReply:
         if self.sim_service is not None:
