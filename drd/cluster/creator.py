@@ -177,11 +177,12 @@ class Creator:
     def __init__(self, bus: Bus | None, cluster: Cluster, host: str, catalog: Catalog, *,
                  sim_service: Any = None, pool: WorkerPool | None = None,
                  workers: int | None = None, on_change: Callable[[], None] | None = None,
-                 drivers: Callable[[str], Any] | None = None) -> None:
+                 drivers: Callable[[str], Any] | None = None, acting: Callable[[], bool] | None = None) -> None:
         """`pool`: the worker processes to use (default: a pool of `workers` idle ones, else `$DRD_WORKERS`, else
         2, owned and closed by this Creator); `on_change` is called when the announced instances change;
         `drivers(world)`: this host's drivers (`drd.hw.HostDrivers`) for a world, instead of those hosts.yaml names
-        (a test's fakes)."""
+        (a test's fakes); `acting()`: whether this process runs the controller that acts now, whose grants a freeze
+        of its own took nothing from (`check_freeze`; default: whether the host has the controller role)."""
         self.cluster = cluster
         self.host = host
         self.catalog = catalog
@@ -208,6 +209,7 @@ class Creator:
         self._command_errors: list[tuple[str, str]] = []  # (instance key, error) of setpoints that raised
         self._lock = threading.Lock()
         self._still = FreezeWatch(cluster.lease)  # this process not running for longer than the lease
+        self._acting = acting if acting is not None else lambda: Role.CONTROLLER in cluster.host(host).roles
         self._own_pool = pool is None
         # cold until a world starts or a component is placed here: an idle daemon runs no worker processes
         self.pool = pool if pool is not None else WorkerPool(pool_size(workers), preload=behavior_modules(catalog),
@@ -258,10 +260,12 @@ class Creator:
         every tick and before every call, whichever runs first after a SIGCONT): then the controller has taken this
         host for lost and ended its grants, so its devices stop and its instances go, as on a controller's loss,
         before a call sent meanwhile can move anything (recovery audit D0: a step delivered during the freeze ran
-        on waking and drove the Ranger on after its mission had failed). The reason, or "" when it ran on."""
+        on waking and drove the Ranger on after its mission had failed). Not when this process runs the controller
+        that still acts: its grants froze with it and nothing was taken meanwhile (a suspended one-host laptop); a
+        standby's, or a fenced one's, came from a controller elsewhere. The reason, or "" when it ran on."""
         gap = self._still.gap()
-        if not gap or Role.CONTROLLER in self.cluster.host(self.host).roles:  # its grants are its own controller's,
-            return ""  # which froze with it: nothing was taken from it meanwhile (a laptop suspended, one host)
+        if not gap or self._acting():
+            return ""
         reason = (f"this host was frozen for {gap:.1f} s, longer than the lease ({self.cluster.lease:g} s): the"
                   " controller took it for lost")
         self.controller_lost(reason)

@@ -297,7 +297,7 @@ class Daemon:
 
         self.creator = Creator(bus, self.cluster, me, self.config.catalog,
                                sim_service=self.sim_service,
-                               on_change=self._instances_changed)
+                               on_change=self._instances_changed, acting=self._acts_here)
         if Role.CONTROLLER in roles and self.cluster.store.replicated:
             self._campaign()  # a standby until etcd elects it (`_elected`)
         elif Role.CONTROLLER in roles:
@@ -317,6 +317,13 @@ class Daemon:
                  me, self.cluster.name, ", ".join(self.roles), os.getpid(), self.config.period, self.cluster.lease)
         log.info("bus: %s", describe(self.transport.mode, [self.transport.endpoints[me]]))
         self.step()
+
+    def _acts_here(self) -> bool:
+        """Whether this daemon runs the controller that acts now (an elected one asks its election, by its own clock:
+        after a freeze past its etcd lease it no longer acts, and a standby took its missions)."""
+        if self.controller is None:
+            return False
+        return self.election is None or self.election.acting()
 
     def _become_controller(self, bus: Bus, journal: Any, term: float | None) -> None:
         """Take the controller's services: the manager and the executive (`Controller`), the missions' runner with

@@ -203,10 +203,9 @@ class ResourceClient:
         holder, name, part = _chain(node, need)
         rid = (holder.grant or {}).get(name)
         if rid is None:
-            where = "its own" if holder is node else f"{name} of {holder.path}"
             why = (f"{holder.path} released it" if name in holder.released else
                    f"{holder.path} lost it at a slice boundary" if holder.revoked else "it is not held")
-            raise BindingError(f"need {need.name} ({need.type}) is bound to {where}, but {why}")
+            raise BindingError(unbound_reason(need, "its own" if holder is node else f"{name} of {holder.path}", why))
         if part is None:
             return holder, rid, "", ""
         return holder, self.pool.part(rid, part), rid, part
@@ -341,7 +340,12 @@ class ResourceClient:
 
 def released_reason(need: ResourceNeed, name: str, holder: Node) -> str:
     """Why `need` cannot be bound: its chain leads to `name` of `holder`, which `release(name)` gave back."""
-    return f"need {need.name} ({need.type}) is bound to {name} of {holder.path}, but {holder.path} released it"
+    return unbound_reason(need, f"{name} of {holder.path}", f"{holder.path} released it")
+
+
+def unbound_reason(need: ResourceNeed, where: str, why: str) -> str:
+    """The one wording of a need whose binding chain ends at nothing held: where it is bound, and why not held."""
+    return f"need {need.name} ({need.type}) is bound to {where}, but {why}"
 
 
 def _chain(node: Node, need: ResourceNeed) -> tuple[Node, str, str | None]:
