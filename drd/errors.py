@@ -12,8 +12,22 @@ Depends on nothing, so every layer (the mission language included) may raise fro
 from __future__ import annotations
 
 import os
+import sysconfig
 import traceback
 from typing import Any
+
+_DRD = os.path.dirname(os.path.realpath(__file__))
+_PATHS = sysconfig.get_paths()
+#: Folders whose frames are not a component's own line: drd's packages and Python's standard library, but not the
+#: installed packages (a component library may be one), wherever a virtual environment puts them.
+_DRDS = (os.path.join(_DRD, ""), os.path.join(os.path.dirname(_DRD), "dsl", ""))
+_STDLIB = os.path.join(os.path.realpath(_PATHS["stdlib"]), "")
+_INSTALLED = tuple(os.path.join(os.path.realpath(_PATHS[k]), "") for k in ("purelib", "platlib"))
+
+
+def _components_own(filename: str) -> bool:
+    path = os.path.realpath(filename)
+    return not path.startswith(_DRDS) and (not path.startswith(_STDLIB) or path.startswith(_INSTALLED))
 
 
 class DrdError(Exception):
@@ -72,13 +86,16 @@ def debugging() -> bool:
 
 def raised(e: BaseException, when: str = "") -> str:
     """What a component's exception says, in both modes alike: its type and message and where it was raised, the
-    innermost frame (`(at mykit/spin.py:12, in step)`; a path under the working folder relative to it), so the
-    author finds the line without a traceback; `when`: ` in shutdown` and the like. One line: the traceback, with
-    `DRD_DEBUG=1`, goes to the log beside it (`debug_traceback`), not into the reason every summary repeats."""
+    innermost frame of the component's own code (`(at mykit/spin.py:12, in step)`; a path under the working folder
+    relative to it), so the author finds the line without a traceback: not drd's nor the standard library's frame
+    it went on to (a mistyped device method raises in drd's device proxy), unless the traceback has no other;
+    `when`: ` in shutdown` and the like. One line: the traceback, with `DRD_DEBUG=1`, goes to the log beside it
+    (`debug_traceback`), not into the reason every summary repeats."""
     text = f"component raised {type(e).__name__}{when}: {e}"
     frames = traceback.extract_tb(e.__traceback__)
     if frames:
-        last = frames[-1]
+        own = [f for f in frames if _components_own(f.filename)]
+        last = (own or frames)[-1]
         path = os.path.relpath(last.filename) if last.filename.startswith(os.getcwd() + os.sep) else last.filename
         text += f" (at {path}:{last.lineno}, in {last.name})"
     return text

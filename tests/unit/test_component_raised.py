@@ -43,3 +43,30 @@ def test_with_drd_debug_the_log_line_has_the_whole_traceback_and_the_reason_stay
     assert lines[0].startswith("component raised ValueError in shutdown: boom (at ")
     assert lines[1] == "Traceback (most recent call last):" and lines[-1] == "ValueError: boom"
     assert any("in caught" in line for line in lines)
+
+
+def decodes_garbage() -> None:
+    from drd.bus.messages import decode
+
+    decode(b"not a message")  # drd raises, inside: this is the component's line
+
+
+def parses_garbage() -> None:
+    import json
+
+    json.loads("{")  # the standard library raises, inside: this is the component's line
+
+
+def test_it_names_the_components_own_line_not_drds_or_the_standard_librarys() -> None:
+    """Own-world audit D3: a mistyped device method was located in drd's device proxy (`ownership.py`), an
+    undeclared event in `emits.py`: the author's line was never named."""
+    for call in (decodes_garbage, parses_garbage):
+        try:
+            call()
+        except Exception as e:
+            text = raised(e)
+        else:
+            raise AssertionError(f"{call.__name__} did not raise")
+        assert re.search(rf"\(at \S*test_component_raised\.py:\d+, in {call.__name__}\)$", text), text
+        line = int(text.rsplit(":", 1)[1].split(",")[0])
+        assert Path(__file__).read_text().splitlines()[line - 1].endswith("this is the component's line")
