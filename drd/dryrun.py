@@ -174,6 +174,21 @@ class DryRun:
         return [{"at": report_time(r.at), "path": r.path, "text": r.text}
                 for r in self.records if isinstance(r, rec.Log)]
 
+    def events(self) -> list[dict[str, Any]]:
+        """Every event the run emitted, by name, in the order each name first came: `[{name, count, at, by,
+        fields}]`, the time, emitter and fields those of its first. Whatever the components are called: the doors,
+        Scouts and detections below are the standard components' own events only."""
+        seen: dict[str, dict[str, Any]] = {}
+        for r in self.records:
+            if isinstance(r, rec.Event):
+                row = seen.get(r.name)
+                if row is None:
+                    seen[r.name] = {"name": r.name, "count": 1, "at": report_time(r.at), "by": r.path,
+                                    "fields": dict(r.fields)}
+                else:
+                    row["count"] += 1
+        return list(seen.values())
+
     def failure_chain(self) -> list[dict[str, Any]]:
         """Why the mission failed, from the mission down to each leaf that failed, each with its own reason
         (`[{path, reason, leaf}]`, parents before their children; empty unless the outcome is a failure).
@@ -217,7 +232,7 @@ class DryRun:
                 "failure_chain": self.failure_chain(), "degraded": self.degraded(), "still_active": self.still_active(),
                 "waiting": self.waiting(), "logs": self.logs(),
                 "timeline": self.timeline(), "holds": self.holds(), "waits": self.waits(),
-                "injections": self.injections,
+                "injections": self.injections, "events": self.events(),
                 "doors": self.doors, "scouts": self.scouts, "detections": self.detections}
 
 
@@ -566,7 +581,8 @@ def _robot_resources(cluster: Cluster, robot: str) -> list[str]:
 
 
 def facts(result: DryRun, r: rec.Record) -> None:
-    """Doors found, Scouts placed and intruders seen, from the behaviors' events."""
+    """Doors found, Scouts placed and intruders seen, from the standard behaviors' events (a mission of other
+    components has none of them: `DryRun.events` counts every event by name)."""
     if not isinstance(r, rec.Event):
         return
     if r.name == "DoorDetected":

@@ -206,8 +206,10 @@ def _frame(fig: Figure, ax: Axes, world: World) -> None:
 def _title(ax: Axes, world: World, report: RunReport, title: str | None) -> Text:
     """One line naming the mission and its outcome (green or red), one with the time and the counts (returned: the
     labels left out at the figure's scale are said under it)."""
-    stats = (f"sim time {report.sim_time:.1f} s  ·  {_n(len(report.doors), 'door')} found  ·  "
-             f"{_n(len(report.scouts), 'Scout')} placed  ·  {_n(len(report.detections), 'detection')}")
+    counts = [f"{_n(len(rows), noun)}{what}" for rows, noun, what in (
+        (report.doors, "door", " found"), (report.scouts, "Scout", " placed"), (report.detections, "detection", ""))
+        if rows]  # the standard components' events: a mission of other components has none to count
+    stats = "  ·  ".join([f"sim time {report.sim_time:.1f} s", *counts])
     sub = ax.set_title(stats, loc="left", fontsize=10, color="#444444", pad=8)
     head = ax.annotate(f"{title or report.mission} in {world.name}", xy=(0, 1), xycoords=sub,
                        xytext=(0, 4), textcoords="offset points", va="bottom", fontsize=14, fontweight="bold",

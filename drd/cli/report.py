@@ -117,7 +117,10 @@ def report_view(r: DryRun, several: bool = False, width: int = 80) -> list[Rende
             parts += _log_lines(row["at"], rel(row["path"], max(16, width // 3)), str(row["text"]), width)
         if len(logs) > LOG_LINES:
             parts.append(Text(f"  … and {len(logs) - LOG_LINES} more (--json or --trace have them all)", style="dim"))
+    parts += _events_lines(r.events(), root, width)
     for title, rows in (("doors found", r.doors), ("Scouts placed", r.scouts), ("intruders detected", r.detections)):
+        if not rows:  # the standard components' events: a mission of other components says nothing of them
+            continue
         parts.append(Text(f"{title}: {len(rows)}", style="bold"))
         for fact in rows[:FACTS]:
             text = ", ".join(_fact(k, v, root) for k, v in fact.items())
@@ -126,6 +129,23 @@ def report_view(r: DryRun, several: bool = False, width: int = 80) -> list[Rende
         if len(rows) > FACTS:
             parts.append(Text(f"  … and {len(rows) - FACTS} more (--json has them all)", style="dim"))
     return parts
+
+
+def _events_lines(events: list[dict[str, Any]], root: str, width: int) -> list[Text]:
+    """The report's `events` section: each event name the run emitted, how many times, and its first."""
+    if not events:
+        return []
+    total = sum(e["count"] for e in events)
+    out = [Text(f"events: {total} ({len(events)} kind{'s' if len(events) != 1 else ''})", style="bold")]
+    for e in events[:FACTS]:
+        first = ", ".join(_fact(k, v, root) for k, v in e["fields"].items())
+        text = (f"{e['name']} x{e['count']}, first at {e['at']:.1f} s by {_relative(e['by'], root)}"
+                + (f": {first}" if first else ""))
+        out += [Text(("  " if i == 0 else "    ") + line) for i, line in enumerate(wrap_cut(text, width - 4,
+                                                                                           WRAPPED_LINES))]
+    if len(events) > FACTS:
+        out.append(Text(f"  … and {len(events) - FACTS} more (--json has them all)", style="dim"))
+    return out
 
 
 #: How many doors, Scouts or detections the text report lists (the first ones; `--json` has them all).
