@@ -84,6 +84,26 @@ def test_a_floor_scout_the_hosts_carry_is_named_at_its_own_entry(catalog: Catalo
            " ranger1's magazine here, or remove its carrier there" in problems, problems
 
 
+
+def test_a_robot_of_a_teams_own_type_missing_from_the_world_is_named_at_load(catalog: Catalog) -> None:
+    """Own-world audit D2: a `Crawler` the world lacked passed the check (only Rangers and Scouts were looked at),
+    and the run failed later building its driver, with no world key and no fix; one listed under `rangers` runs."""
+    import dataclasses
+
+    cluster = load_hosts(ROOT / "hosts.yaml", catalog)
+    host = cluster.hosts[1]
+    crawler = dataclasses.replace(host.robots[0], id="bb8", type="Crawler", properties={})
+    own = dataclasses.replace(cluster, hosts=(cluster.hosts[0], dataclasses.replace(
+        host, robots=(*host.robots, crawler)), *cluster.hosts[2:]))
+    world = load_world(ROOT / "worlds" / "corridor.yaml")
+    problems = [f"{p.key}: {p.message}" for p in check_hosts(world, own)]
+    assert problems == ["rangers: no robot 'bb8' (a Crawler), which hosts.yaml configures: a robot of any type takes"
+                        " a body here, a Ranger's under rangers (0.3 m, may carry Scouts) or a Scout's under scouts"
+                        " (0.08 m)"]
+    data = yaml.safe_load((ROOT / "worlds" / "corridor.yaml").read_text())
+    data.setdefault("scouts", []).append({"id": "bb8", "at": list(world.rooms[0].center), "heading": 0})
+    assert check_hosts(parse_world(data, "w.yaml"), own) == []
+
 # ---------------------------------------------------------------- geometry and the light map
 
 
