@@ -513,6 +513,8 @@ class MissionRunner:
         ct = self.catalog.get(component)
         if ct is None or self.host_views is None:
             raise ComponentError(f"{component} is not in the controller's catalog")
+        if self.simulator is not None and self.host_down(self.simulator):  # no host could start it: not theirs
+            raise ComponentError(f"host {self.simulator} is down: it ran the simulator, so the world is gone")
         reasons = exclude if isinstance(exclude, Mapping) else dict.fromkeys(exclude, "")
         # the retry after a start failed there (a host left out with no reason, a lost one, refused nothing)
         if refused_last(self._recent, component, {h for h, why in reasons.items() if why}):
@@ -700,7 +702,7 @@ class WorldRun:
 
     def _cycle(self, sim_time: float) -> float | None:
         """One control cycle (the runner's lock held): the world's step, the executive's, the time limits. The
-        world's time after it, or None when the simulator stopped answering (every mission is then stopped)."""
+        world's time after it, or None when the simulator stopped answering (every mission then fails)."""
         runner, executive = self.runner, self.runner.controller.executive
         runner.controller.flush()  # hosts that came or went meanwhile: the manager learns it before the step
         # the world steps before the cycle's first call (carried by a batch to the simulator host, see
@@ -721,9 +723,9 @@ class WorldRun:
                 pass
         if self.cycle.sim_error is not None:
             self.closed = True
-            for mid in self._unfinished():
+            for mid in self._unfinished():  # the world is gone: a failure, as when a component finds it gone first
                 executive.missions[mid].stop(
-                    f"the simulator on {runner.simulator} stopped answering: {self.cycle.sim_error}")
+                    f"the simulator on {runner.simulator} stopped answering: {self.cycle.sim_error}", "failure")
             return None
         sim_time = self.cycle.sim_time
         runner.clock.set_sim(sim_time)

@@ -21,7 +21,7 @@ from __future__ import annotations
 import collections
 import functools
 from collections.abc import Callable, Iterable, Mapping
-from typing import Any, NamedTuple
+from typing import Any, Literal, NamedTuple
 
 from drd.rcm import Deadlock, Granted, Released, ReleaseReason, ResourceManager, Revoked, Unit, Unsatisfiable
 from drd.rcm import Waiting as WaitingDecision
@@ -251,13 +251,14 @@ class Interpreter:
         if not self._settling and not self._stepping and self.root is not None:  # from outside: run it now
             self._settle()
 
-    def stop(self, reason: str = "stopped by operator") -> None:
-        """Shut everything down, children first; idempotent."""
+    def stop(self, reason: str = "stopped by operator", outcome: Literal["stopped", "failure"] = "stopped") -> None:
+        """Shut everything down, children first; idempotent. `outcome` "failure": what stops it is no one's choice
+        but the mission's end (the world it ran in is gone)."""
         if self.root is not None and self.root.phase is not DONE:
             self._exit(self.root, "stopped")
             self._flush()
         if self.outcome is None:
-            self._end("stopped", reason)
+            self._end(outcome, reason)
 
     def waiting_requests(self) -> list[tuple[str, Node]]:
         """Its requests the manager may still grant (waiting, revoked and queued again, preallocations not granted
