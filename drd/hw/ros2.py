@@ -26,6 +26,7 @@ from drd.bus.ros2 import MessageCallback, MessageInfo, MessageTypes, Publisher, 
 from drd.bus.ros2 import Subscription as Ros2Subscription
 from drd.errors import ConfigurationError
 from drd.hosts import Device
+from drd.hw.interfaces import HardwareError
 
 log = logging.getLogger("drd.hw.ros2")
 
@@ -132,11 +133,17 @@ def stamp(t: float) -> dict[str, int]:
 
 
 def scan_ranges(ranges: Any, range_min: float, range_max: float) -> tuple[float, ...]:
-    """A LaserScan's ranges as drd reads them (REP 117): +inf and NaN are `range_max` (nothing hit), -inf is 0,
-    finite values are clipped to [0, range_max]."""
+    """A LaserScan's ranges as drd reads them (REP 117): +inf is `range_max` (nothing within range), -inf is 0 (too
+    close), finite values are clipped to [0, range_max]. NaN is an invalid or missing reading, never free space: a
+    NaN beam reads 0, as something at the sensor, so no behavior drives into what the laser could not see; a scan
+    with most beams NaN is a faulted laser, refused as a stale one is (HardwareError: the reading fails, and the
+    behavior with it, so its robot stops)."""
     r = np.asarray(ranges, dtype=np.float64)
-    r = np.where(np.isnan(r), range_max, r)
-    r = np.clip(r, 0.0, range_max)  # +inf -> range_max, -inf -> 0
+    invalid = np.isnan(r)
+    if r.size and 2 * int(invalid.sum()) > r.size:
+        raise HardwareError(f"the laser gives no valid reading: {int(invalid.sum())} of {r.size} beams are NaN"
+                            " (REP 117: invalid or missing)")
+    r = np.clip(np.where(invalid, 0.0, r), 0.0, range_max)  # +inf -> range_max, -inf -> 0
     return tuple(r.tolist())
 
 
