@@ -327,8 +327,15 @@ def _drive(s: ServedRobots, rid: str, device: Device, opts: Ros2Options) -> None
     s.stream(s.publisher(rid, opts, "odom"), odometry)
     s.moving.append(where)
     s.stream(s.publisher(rid, opts, "battery"), battery, status=True)
-    s.subscribe(rid, opts, "cmd_vel", lambda m: s.command(lambda: sim.set_velocity(rid, float(m.linear.x),
-                                                                                    float(m.angular.z))))
+
+    def cmd_vel(m: Any) -> None:
+        v, omega = float(m.linear.x), float(m.angular.z)
+        if not (math.isfinite(v) and math.isfinite(omega)):  # a NaN pose would end the world (clients audit D1)
+            log.warning("served %s: cmd_vel refused: linear.x %r and angular.z %r must be finite", rid, v, omega)
+            return
+        s.command(lambda: sim.set_velocity(rid, v, omega))
+
+    s.subscribe(rid, opts, "cmd_vel", cmd_vel)
 
 
 #: `BatteryState.voltage`, which the message requires ("Mandatory"; only the other fields may be NaN): the world's

@@ -11,6 +11,7 @@ import signal
 import subprocess
 import sys
 import threading
+import time
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
@@ -147,6 +148,30 @@ def test_a_twist_from_the_sdk_moves_the_simulated_ranger(served: tuple[ServedRob
         pub.close()
         sub.close()
 
+
+
+def test_a_non_finite_twist_is_refused_and_the_world_goes_on(served: tuple[ServedRobots, int], sdk: Any) -> None:
+    """Clients audit D1: one Twist with NaN (or inf) in it made the pose NaN and `drd sim --ros2` exit 70 (a cluster
+    mission failed, "the simulator stopped answering"). It is refused and logged; the next good Twist drives."""
+    robots, port = served
+    pub = sdk.ROS2Publisher(topic="/ranger1/cmd_vel", msg_type=TWIST, domain_id=0, router_port=port)
+    vector = pub.session_mgr.store.types["geometry_msgs/msg/Vector3"]
+    start = robots.sim.pose("ranger1")
+    try:
+        for bad in (math.nan, math.inf, -math.inf):
+            pub.publish(linear=vector(x=bad, y=0.0, z=0.0), angular=vector(x=0.0, y=0.0, z=bad))
+        time.sleep(0.5)  # the world steps on meanwhile
+        pose = robots.sim.pose("ranger1")
+        assert all(math.isfinite(v) for v in (pose.x, pose.y, pose.heading)), pose
+        assert (pose.x, pose.y) == pytest.approx((start.x, start.y), abs=1e-6), "a refused Twist moves nothing"
+
+        def moved() -> bool:
+            pub.publish(linear=vector(x=0.4, y=0.0, z=0.0), angular=vector(x=0.0, y=0.0, z=0.0))
+            return bool(robots.sim.pose("ranger1").x > start.x + 0.3)
+
+        eventually(moved, "the Ranger to drive on a good Twist", timeout=10)
+    finally:
+        pub.close()
 
 def test_the_sdk_lists_the_served_topics_with_their_types(served: tuple[ServedRobots, int], sdk: Any) -> None:
     _robots, port = served

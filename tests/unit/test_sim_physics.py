@@ -73,6 +73,20 @@ def test_wheels_are_limited_to_max_speed_and_walls_stop_a_robot() -> None:
     assert sim.pose("ranger1").y == pytest.approx(1.25 - 0.3, abs=0.01)
 
 
+
+@pytest.mark.parametrize("bad", [math.nan, math.inf, -math.inf])
+def test_a_non_finite_wheel_speed_is_refused_and_changes_nothing(bad: float) -> None:
+    """Clients audit D1: NaN passed the max-speed clamp (inf became NaN there) and made the pose NaN."""
+    sim = Simulation(world_with((ranger_at(4.5, 0, UP),)), seed=1)
+    sim.set_velocity("ranger1", 0.3, 0.0)
+    with pytest.raises(ValueError, match="wheel speeds must be finite"):
+        sim.set_velocity("ranger1", bad, 0.0)
+    with pytest.raises(ValueError, match="wheel speeds must be finite"):
+        sim.set_wheels("ranger1", 0.1, bad)
+    assert sim.command("ranger1") == pytest.approx((0.3, 0.0))
+    sim.step(0.5)
+    assert all(math.isfinite(v) for v in (sim.pose("ranger1").x, sim.pose("ranger1").y))
+
 @pytest.mark.parametrize("x", [4.6, 5.0, 5.4])
 def test_a_ray_never_passes_a_closed_door_and_does_an_open_one(x: float) -> None:
     sim = Simulation(world_with((ranger_at(x, 0, DOWN),)), seed=2)  # facing door_s1 (4.5..5.5), closed
