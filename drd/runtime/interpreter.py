@@ -57,14 +57,38 @@ from dsl.evaluate import EvalError, evaluate, format_value, truthy
 from dsl.export import trigger_label
 from dsl.statechart import ResourceNeed, State, Statechart, Transition
 
-__all__ = ["MAX_MICROSTEPS", "Interpreter", "Listener", "MacroStep", "Node", "Phase"]
+__all__ = ["MAX_MICROSTEPS", "MAX_REPEATS", "Interpreter", "Listener", "MacroStep", "Node", "Phase"]
 
 #: Transitions one macro step may take before the chart is declared livelocked.
 MAX_MICROSTEPS = 10_000
+#: Times one node may take one same transition in one instant before it is a loop of zero-time transitions (`A -> A
+#: after 0s`): on a cluster each turn starts and stops a remote component, so 10,000 turns held the controller's
+#: mission loop for 20 s (wedge audit D1).
+MAX_REPEATS = 100
+#: Run-to-completion steps of one instant at most, what they did or not (an event nobody hears is one): a backstop.
+MAX_ITERATIONS = 1_000_000
 #: Times closer than this are the same instant (sim time adds 0.1 s steps in floating point).
 TIME_EPS = 1e-6
 
 Listener = Callable[[rec.Record], None]
+
+
+class LoopWatch:
+    """The turns each node took of each transition in the current instant: past MAX_REPEATS of one, the chart loops
+    without time passing (`looping` says where), however few transitions that is in all."""
+
+    def __init__(self) -> None:
+        self.at = -1.0
+        self.turns: dict[tuple[str, str], int] = {}  # (node path, target path) -> turns at `at`
+        self.looping = ""
+
+    def turn(self, now: float, path: str, target: str) -> None:
+        if now != self.at:
+            self.at, self.turns = now, {}
+        turns = self.turns[path, target] = self.turns.get((path, target), 0) + 1
+        if turns > MAX_REPEATS and not self.looping:
+            self.looping = (f"livelock: {path} -> {target} taken {MAX_REPEATS} times without time passing (a loop of"
+                            " zero-time transitions)")
 _RUNNING, _SUCCESS, _FAILURE = Status.RUNNING, Status.SUCCESS, Status.FAILURE
 
 
@@ -117,6 +141,7 @@ class Interpreter:
         self._settling = False
         self._stepping = False  # components are being stepped (`step`): their events wait for their step
         self._taken: list[tuple[str, str, str]] = []
+        self._loops = LoopWatch()  # why the chart loops without time passing, ended by `_run_to_completion`
         # Events a transition took before their dispatch (a tie it won), with the states that transition entered:
         # those do not hear the same event again when it is dispatched (`_take_chosen`).
         self._deaf: list[tuple[rec.Event, list[Node]]] = []
@@ -629,9 +654,12 @@ class Interpreter:
                 self._deaf.clear()
 
     def _run_to_completion(self) -> None:
-        for _ in range(MAX_MICROSTEPS):
+        taken = len(self._taken)
+        for _ in range(MAX_ITERATIONS):
             if self.outcome is not None:
                 return
+            if self._loops.looping or len(self._taken) - taken > MAX_MICROSTEPS:
+                break
             if self._finishing:
                 node, ok, why = self._finishing.pop(0)
                 if node.phase is not DONE or node is self.root:
@@ -650,7 +678,8 @@ class Interpreter:
             return
         if self.root is not None:
             self._exit(self.root, "failure")
-        self._end("failure", f"livelock: more than {MAX_MICROSTEPS} transitions without time passing")
+        too_many = f"livelock: more than {MAX_MICROSTEPS} transitions without time passing"
+        self._end("failure", self._loops.looping or too_many)
 
     def _complete(self, node: Node, ok: bool, why: str) -> None:
         if not ok and not why and node.state.kind is MULTI:  # too few instances left (`_instance_done`)
@@ -855,6 +884,7 @@ class Interpreter:
         target = self._states[t.target]
         target_path = f"{domain.path}/{target.name}"
         self._taken.append((node.path, target_path, t.kind))  # a StrEnum: a str, without `.value`
+        self._loops.turn(self.clock.now(), node.path, target_path)
         if self.listeners:
             self._notify(rec.Taken(self.clock.now(), node.path, target_path, t.kind.value, trigger_label(t)))
         if node.phase is not DONE:

@@ -9,6 +9,7 @@ import pytest
 
 from drd.rcm import Unit
 from drd.runtime import records as rec
+from drd.runtime.component import Status
 from dsl import compile_text
 from dsl.catalog import Catalog
 from dsl.statechart import Statechart
@@ -411,6 +412,43 @@ def test_a_livelock_fails_the_mission_instead_of_hanging(catalog: Catalog) -> No
     assert [r.outcome for r in h.of(rec.Finished)] == ["failure"]
     assert h.interp.active() == [] and h.rcm.holders("ranger1.drive") == ()
 
+
+
+def test_a_zero_time_loop_is_a_livelock_after_a_hundred_turns(catalog: Catalog) -> None:
+    """Wedge audit D1: `A -> A after 0s` took 10,000 turns before the livelock limit; on a cluster each restarts a
+    remote component, and the controller's mission loop was held for 20 s. One transition taken MAX_REPEATS times
+    by one node in one instant is a loop."""
+    from drd.runtime.interpreter import MAX_REPEATS
+
+    text = "mission M {\n needs r: Ranger\n start -> Calibrate\n Calibrate -> Calibrate after 0s\n}"
+    h = Harness(compiled(text, catalog), {"Calibrate": Forever}, ranger_world())
+    assert h.run(until=5) == "failure"
+    assert h.interp.reason == ("livelock: M/Calibrate -> M/Calibrate taken 100 times without time passing (a loop of"
+                               " zero-time transitions)")
+    assert len(h.of(rec.Taken)) == MAX_REPEATS + 1 and {r.at for r in h.of(rec.Taken)} == {0.0}
+
+
+class Storm(Forever):
+    """Emits 10,001 DoorDetected in its first step, heard by nobody, and runs on."""
+
+    stormed = False
+
+    def step(self, now: float) -> Status:
+        assert self.ctx is not None
+        if not self.stormed:
+            self.stormed = True
+            for i in range(10_001):
+                self.ctx.emit("DoorDetected", width=0.9, x=float(i), y=0.0)
+        return Status.RUNNING
+
+
+def test_events_nobody_hears_are_no_livelock(catalog: Catalog) -> None:
+    """Wedge audit D2: each event counted as a transition, so 10,001 events in one step failed the mission as a
+    livelock though no transition was taken."""
+    text = "mission M {\n needs bot: Ranger\n DetectDoor\n}"
+    h = Harness(compiled(text, catalog), {"DetectDoor": Storm}, ranger_world())
+    assert h.run(until=3) is None, h.interp.reason
+    assert len(h.of(rec.Event)) == 10_001 and not h.of(rec.Taken)
 
 class RecordingDrive:
     """A driver that records what reaches the hardware."""
