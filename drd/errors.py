@@ -25,7 +25,7 @@ _STDLIB = os.path.join(os.path.realpath(_PATHS["stdlib"]), "")
 _INSTALLED = tuple(os.path.join(os.path.realpath(_PATHS[k]), "") for k in ("purelib", "platlib"))
 
 
-def _components_own(filename: str) -> bool:
+def components_own(filename: str) -> bool:
     path = os.path.realpath(filename)
     return not path.startswith(_DRDS) and (not path.startswith(_STDLIB) or path.startswith(_INSTALLED))
 
@@ -94,7 +94,7 @@ def raised(e: BaseException, when: str = "") -> str:
     text = f"component raised {type(e).__name__}{when}: {e}"
     frames = traceback.extract_tb(e.__traceback__)
     if frames:
-        own = [f for f in frames if _components_own(f.filename)]
+        own = [f for f in frames if components_own(f.filename)]
         last = (own or frames)[-1]
         path = os.path.relpath(last.filename) if last.filename.startswith(os.getcwd() + os.sep) else last.filename
         text += f" (at {path}:{last.lineno}, in {last.name})"

@@ -533,6 +533,7 @@ def _run_live(runs: list[Mission], cluster: Cluster, sim_world: World, cat: Cata
 
     from drd.cli.report import progress_view
     from drd.dryrun import run_many
+    from drd.stuck import stuck_calls_end
 
     live = Live(Text("starting…"), console=err, transient=True) if err.is_terminal else None
 
@@ -547,7 +548,7 @@ def _run_live(runs: list[Mission], cluster: Cluster, sim_world: World, cat: Cata
     try:
         if live is not None:
             live.start()
-        with _ctrl_c_stops(stop):
+        with _ctrl_c_stops(stop), stuck_calls_end():
             try:
                 return run_many(runs, cluster, sim_world, cat, trace=fh, progress=progress, stop=stop, **options)
             except ValueError as e:

@@ -1,0 +1,119 @@
+"""A component call that never returns, in a process that runs components itself (the dry-run): found and ended.
+
+On a cluster each component runs in a worker process, killed when a call does not answer within 0.8 s. The
+dry-run runs every component in its own process, so a step in a busy loop, a `start` blocked on a lock or a
+`sleep(1e9)` held the whole run, with no report, and `--until` (sim time) never came (wedge audit D4). Here a
+thread looks at the main thread's stack every `poll` seconds: the outermost frame of a component's own code (not
+drd's, not the standard library's: `drd.errors.components_own`) is the call drd made into it. When one such frame
+is still there after `limit` seconds, the main thread is interrupted (a signal, whose handler raises
+`ComponentStuck` there, if that call is still running): the exception leaves the component like any it raises,
+and its state fails, naming the line it was stuck at. A call that catches the exception and goes on is
+interrupted again each `limit`; the run goes on as soon as it returns.
+
+Only in the main thread (signals); a component that ends the process itself (`os._exit`) cannot be helped here.
+"""
+
+from __future__ import annotations
+
+import functools
+import os
+import signal
+import sys
+import threading
+from collections.abc import Iterator
+from contextlib import contextmanager
+from types import FrameType
+
+from drd import runtime
+from drd.errors import components_own
+
+#: Wall seconds a component call may run in the dry-run before it is interrupted (a cluster's worker: 0.8 s).
+STUCK_AFTER = 5.0
+
+
+class ComponentStuck(Exception):
+    """Raised in a component call that ran longer than the limit (what its state fails with)."""
+
+
+#: Where drd calls component code from (the interpreter, the component host, the device proxies).
+_RUNTIME = os.path.join(os.path.dirname(os.path.realpath(runtime.__file__)), "")
+
+
+@functools.lru_cache(maxsize=4096)
+def _own(filename: str) -> bool:
+    return components_own(filename)
+
+
+@functools.lru_cache(maxsize=4096)
+def _in_runtime(filename: str) -> bool:
+    return os.path.realpath(filename).startswith(_RUNTIME)
+
+
+def boundary(frame: FrameType | None) -> FrameType | None:
+    """The outermost frame of component code called by drd's runtime in the stack ending at `frame`: the call drd
+    made into a component (or a driver); None when the stack is in none."""
+    found = None
+    while frame is not None:
+        caller = frame.f_back
+        if caller is not None and _own(frame.f_code.co_filename) and _in_runtime(caller.f_code.co_filename):
+            found = frame
+        frame = caller
+    return found
+
+
+def _within(frame: FrameType | None, call: FrameType) -> bool:
+    while frame is not None:
+        if frame is call:
+            return True
+        frame = frame.f_back
+    return False
+
+
+class StuckWatch:
+    """The thread that watches the main thread's component calls (see the module)."""
+
+    def __init__(self, limit: float = STUCK_AFTER, poll: float = 0.25) -> None:
+        self.limit, self.poll = limit, poll
+        self.main = threading.main_thread()
+        self.stopped = threading.Event()
+        self.stuck: FrameType | None = None  # the call being interrupted (read by the handler)
+        self.thread = threading.Thread(target=self._watch, name="drd-stuck-watch", daemon=True)
+
+    def _watch(self) -> None:
+        seen: FrameType | None = None
+        since = 0.0
+        ticks = 0
+        while not self.stopped.wait(self.poll):
+            ticks += 1
+            call = boundary(sys._current_frames().get(self.main.ident or 0))
+            if call is not seen:
+                seen, since = call, ticks * self.poll
+                continue
+            if call is not None and ticks * self.poll - since >= self.limit:
+                self.stuck, since = call, ticks * self.poll  # again after another `limit`, if it goes on
+                signal.pthread_kill(self.main.ident or 0, signal.SIGUSR1)
+            del call
+
+    def interrupt(self, signum: int, frame: FrameType | None) -> None:
+        """The signal's handler, in the main thread: raise in the stuck call if it is still running."""
+        stuck, self.stuck = self.stuck, None
+        if stuck is not None and _within(frame, stuck):
+            raise ComponentStuck(f"{stuck.f_code.co_name} did not return within {self.limit:g} s of wall time (the"
+                                 " dry-run stops a component's call after that; a cluster's worker after 0.8 s)")
+
+
+@contextmanager
+def stuck_calls_end(limit: float = STUCK_AFTER) -> Iterator[StuckWatch | None]:
+    """While the body runs in the main thread, a component call stuck for `limit` seconds is interrupted."""
+    if threading.current_thread() is not threading.main_thread():
+        yield None
+        return
+    watch = StuckWatch(limit)
+    previous = signal.signal(signal.SIGUSR1, watch.interrupt)
+    watch.thread.start()
+    try:
+        yield watch
+    finally:
+        watch.stopped.set()
+        watch.thread.join(timeout=2 * watch.poll + 1)
+        signal.signal(signal.SIGUSR1, previous)

@@ -1,0 +1,75 @@
+"""A component call that never returns in `missionctl dry-run` (wedge audit D4): a step in a busy loop, a `start`
+asleep. The dry-run runs components in its own process, so the run hung for ever, `--until` (sim time) never came,
+the first Ctrl-C did nothing and the second gave no report. Now the call is interrupted after 5 s of wall time
+(`drd.stuck`): its state fails naming the line it was stuck at, and the run ends with its report. The real
+command, in a process of its own (signals need its main thread); bounded by a timeout, nothing timed."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[2]
+MISSIONCTL = [sys.executable, "-c", "from drd.cli.missionctl import main; main()"]
+KIT = '''import time
+from drd.runtime.component import Component, Status
+
+
+class Spinner(Component):
+    def start(self):
+        self.drive, self.steps = self.device("drive"), 0
+
+    def step(self, now):
+        self.drive.set_velocity(0.3, 0.0)
+        self.steps += 1
+        while self.steps > 3:  # stuck here
+            pass  # stuck here
+        return Status.RUNNING
+
+
+class Blocker(Component):
+    def start(self):
+        time.sleep(1e9)  # stuck here
+
+    def step(self, now):
+        return Status.RUNNING
+'''
+MANIFEST = "name: {name}\nkind: behavior\ndescription: Never returns.\nentry_point: stuckkit:{name}\n"
+NEEDS = "needs:\n  drive: {type: Drive, of: [Ranger], description: base}\ninterfaces: [Drive]\n"
+
+
+@pytest.fixture
+def kit(tmp_path: Path) -> Path:
+    (tmp_path / "stuckkit.py").write_text(KIT)
+    for name, extra in (("Spinner", NEEDS), ("Blocker", "")):
+        (tmp_path / "comps" / name).mkdir(parents=True)
+        (tmp_path / "comps" / name / "manifest.yaml").write_text(MANIFEST.format(name=name) + extra)
+    return tmp_path
+
+
+@pytest.mark.parametrize(("mission", "call"), [
+    ("mission SpinOut {\n    needs ranger: Ranger\n    Spinner\n}\n", "step"),
+    ("mission BlockOut {\n    Blocker\n}\n", "start"),
+])
+def test_a_component_call_that_never_returns_fails_its_state_and_the_run_reports(kit: Path, mission: str,
+                                                                                 call: str) -> None:
+    (kit / "m.mission").write_text(mission)
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(kit), str(ROOT)])}
+    r = subprocess.run([*MISSIONCTL, "dry-run", str(kit / "m.mission"), "-C", str(kit / "comps"), "--config",
+                        str(ROOT / "hosts.yaml"), "--until", "60", "--json", "--trace", str(kit / "t.jsonl")],
+                       cwd=kit, env=env, capture_output=True, text=True, timeout=120, check=False)
+    assert r.returncode == 1, (r.stdout[-1500:], r.stderr[-1500:])
+    report = json.loads(r.stdout)
+    assert report["outcome"] == "failure", report["reason"]
+    reason = report["reason"]
+    assert f"ComponentStuck: {call} did not return within 5 s of wall time" in reason, reason
+    line = int(reason.rsplit("stuckkit.py:", 1)[1].split(",")[0])
+    assert KIT.splitlines()[line - 1].endswith("# stuck here"), reason
+    assert report["sim_time"] < 60, "the run ended with the failure, not at --until"
+    kinds = [json.loads(x)["kind"] for x in (kit / "t.jsonl").read_text().splitlines()]
+    assert kinds[-1] == "finished"
