@@ -521,9 +521,9 @@ class Creator:
             inst.setup = None
         try:
             got = self._exchange(worker, Run(tuple(calls), latest))
-        except WorkerDied as e:
+        except WorkerDied as e:  # which of the run's calls it died in is not known: each is named
             self._worker_died(worker, str(e))
-            return [ComponentReply(error=f"component process of {first.path} {e}")]
+            return [ComponentReply(error=f"component process of {', '.join(c.path for c, _ in run)} {e}")]
         replies = []
         for (call, inst), ahead, reply in zip(run, aheads, got, strict=False):
             replies.append(self._replied(call, inst, ahead, reply))

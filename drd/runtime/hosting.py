@@ -176,7 +176,7 @@ class ComponentHost:
         try:
             comp.terminate(_FINAL_STATUS.get(status, _RUNNING))
         except Exception as e:  # the node is leaving anyway: just say so
-            self.notify(rec.Log(self.now(), node.path, logged(e)))
+            self.notify(rec.Log(self.now(), node.path, _words(e)))
 
     def shutdown(self) -> None:
         """The mission ended: every instance made is dropped for good (`Component.shutdown`, once each); what one
@@ -186,7 +186,7 @@ class ComponentHost:
             try:
                 comp.shutdown()
             except Exception as e:  # component code is not ours to trust
-                self.notify(rec.Log(self.now(), path, logged(e, " in shutdown")))
+                self.notify(rec.Log(self.now(), path, _words(e, " in shutdown")))
 
     def call(self, node: Node, fn: Callable[[], Any], fail: bool = True) -> bool:
         """Call component code; an exception fails the node (unless `fail` is False), never the executive."""
@@ -197,15 +197,14 @@ class ComponentHost:
             if fail:
                 self.failed(node, e)
             else:
-                self.notify(rec.Log(self.now(), node.path, logged(e)))
+                self.notify(rec.Log(self.now(), node.path, _words(e)))
             return False
 
     def failed(self, node: Node, e: Exception) -> None:
         """`node` fails with what `e` says: a component's own exception located in its code, a reason already said
         (`ComponentFailure.said`) or the runtime's refusal to bind a need (`BindingError`) as it is."""
-        said = (isinstance(e, ComponentFailure) and e.said) or isinstance(e, BindingError)
-        why = str(e) if said else raised(e)
-        self.notify(rec.Log(self.now(), node.path, why if said else logged(e)))
+        why = str(e) if _said(e) else raised(e)
+        self.notify(rec.Log(self.now(), node.path, _words(e)))
         self.on_failure(node, why)
 
     def command_failed(self, owner: object, e: Exception) -> None:
@@ -225,6 +224,18 @@ class ComponentHost:
         devices = {need: BoundDevice(b, issuer, self.arbiter, rank, node, self.now)
                    for need, b in bindings.items() if b.driver is not None}
         return {need: b.unit for need, b in bindings.items()}, devices, bindings
+
+
+def _said(e: Exception) -> bool:
+    """A reason already said in words (a remote component's failure, its host's loss; a refused binding): not an
+    exception of the component's own code, to be located in it."""
+    return (isinstance(e, ComponentFailure) and e.said) or isinstance(e, BindingError)
+
+
+def _words(e: Exception, when: str = "") -> str:
+    """What the log says of `e`: a reason already said as it is (never "component raised ... at drd's own line"),
+    else the component's exception located in its code (`drd.errors.logged`)."""
+    return str(e) if _said(e) else logged(e, when)
 
 
 class _Bindings:

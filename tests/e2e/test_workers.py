@@ -263,6 +263,16 @@ def test_a_component_that_exits_fails_its_state_and_the_creator_keeps_serving(cr
     assert pool.wait_ready(60.0) and pool.idle() == 2  # refilled
 
 
+
+def test_a_process_that_dies_in_a_batch_is_named_with_every_instance_of_that_call(creator: Creator) -> None:
+    """Wedge audit D6: `Exit` died beside `Forward` in one container, and the reason said `Forward` died: which call
+    of the round trip it died in is not known, so each is named."""
+    start(creator, "M/A")
+    start(creator, "M/Crash", mode="exit")
+    calls = [ComponentCall("step", MISSION, p, now=2.0) for p in ("M/A", "M/Crash")]
+    replies = creator.handle_batch(ComponentBatch(calls)).replies
+    assert replies[0].error == "component process of M/A, M/Crash died (exit code 3)", replies
+
 def test_a_batch_runs_in_one_round_trip_per_process_and_stops_at_an_event(creator: Creator) -> None:
     for path, comp, mode in (("M/A", "Probe", "shared"), ("M/B", "Probe", "shared"), ("M/X", "Alone", "shared"),
                              ("M/C", "Probe", "emit"), ("M/D", "Probe", "")):

@@ -553,3 +553,22 @@ mission M {
     h = Harness(compiled(text, catalog), {"Calibrate": Counted}, ranger_world())
     assert h.run() == "success"
     assert Counted.calls == ["start", "terminate", "start", "terminate", "shutdown"], Counted.calls
+
+
+class DiesOnTerminate(Forever):
+    """Its process is gone by the time it is told to terminate: the remote stand-in says so, in words."""
+
+    def terminate(self, status: Status) -> None:
+        from drd.cluster.remote import ComponentError
+
+        raise ComponentError("component process of M/Calibrate did not answer within 0.8 s (killed)")
+
+
+def test_a_reason_already_said_is_logged_as_it_is_not_as_a_component_exception(catalog: Catalog) -> None:
+    """Wedge audit D6: a worker killed after 0.8 s was logged again as `component raised ComponentError: ... (at
+    drd/cluster/remote.py:683, in _call)`: the component raised nothing, and the line was drd's."""
+    text = "mission M {\n needs r: Ranger\n start -> Calibrate\n Calibrate -> done after 1s\n}"
+    h = Harness(compiled(text, catalog), {"Calibrate": DiesOnTerminate}, ranger_world())
+    h.run(until=5)
+    logs = [r.text for r in h.of(rec.Log) if r.path == "M/Calibrate"]
+    assert logs == ["component process of M/Calibrate did not answer within 0.8 s (killed)"], logs
