@@ -26,6 +26,7 @@ _INSTALLED = tuple(os.path.join(os.path.realpath(_PATHS[k]), "") for k in ("pure
 
 
 def components_own(filename: str) -> bool:
+    """Whether code in `filename` is a component's (or its library's): not drd's, not the standard library's."""
     path = os.path.realpath(filename)
     return not path.startswith(_DRDS) and (not path.startswith(_STDLIB) or path.startswith(_INSTALLED))
 

@@ -312,7 +312,7 @@ def _configure_logging(host: str, log_file: Path | None, level: int) -> None:
     """This process's logging: one handler, and rate limits on what peers can make us log."""
     from drd.daemon import logs
 
-    logs.install("drd.bus", "drd.daemon.rejects")
+    logs.install(*logs.PEER_LOGGERS)
     handler: logging.Handler
     if log_file is not None:
         log_file.parent.mkdir(parents=True, exist_ok=True)
@@ -527,9 +527,13 @@ def _served_team(config: Path, world: str | None, extra: list[Path]) -> tuple[Cl
 
 def _serve_ros2(cluster: Cluster, sim_world: Any, world_name: str, listen: str, speed: float, domain: int,
                 seed: int, as_json: bool) -> int:
-    """Serve the robots until SIGTERM or Ctrl-C (`drd sim --ros2`)."""
+    """Serve the robots until SIGTERM or Ctrl-C (`drd sim --ros2`); what any ROS 2 client sends is logged at most
+    ten lines of a kind every ten seconds (`drd.daemon.logs.PEER_LOGGERS`)."""
     from drd.bus import BusError
     from drd.bus.ros2 import Ros2Session
+    from drd.daemon import logs
+
+    logs.install(*logs.PEER_LOGGERS)
     from drd.hw.ros2 import message_types
     from drd.sim import Simulation
     from drd.sim.ros2 import ServedRobots, serve

@@ -19,7 +19,7 @@ loop holds through each control cycle; the view never waits for it (membership c
 executive), so a host slow to answer the loop never holds up the view, load reports or queries. Callbacks only
 update state; publishing happens in `step()`. Input from peers is never trusted: anything of the
 wrong type, from an unknown host or under the wrong key is refused, counted and logged (on
-`drd.bus` and `drd.daemon.rejects`: `drd start` rate-limits both with `drd.daemon.logs.install`).
+`drd.bus` and `drd.daemon.rejects`: `drd start` rate-limits them, with the other `drd.daemon.logs.PEER_LOGGERS`).
 """
 
 from __future__ import annotations

@@ -2,7 +2,7 @@
 
 `RateLimit` is a `logging.Filter`: per message template, at most `burst` records per `window`
 seconds pass; when the window turns over, the next record that passes says how many were dropped.
-The daemon installs it on the loggers that report what peers send (`drd.bus`, `drd.daemon.rejects`).
+`drd start` and `drd sim` install it on the loggers that report what peers send (`PEER_LOGGERS`).
 
 `RotatingLog` is a daemon's log file: bounded (it rolls over at `MAX_BYTES`, keeping `BACKUPS` old files), and
 reopened when an external logrotate moved or removed it (docs/daemon.md, docs/design.md).
@@ -44,6 +44,12 @@ class RateLimit(logging.Filter):
             record.msg = f"{record.getMessage()} [{dropped} similar messages suppressed]"
             record.args = ()
         return True
+
+
+#: The loggers that report what peers send: drd's bus, its rejections, ROS 2 messages to the drivers and to a served
+#: simulator. Each by its own name: a logger's filter sees only the records logged on that logger, not those its
+#: children pass up (a `drd.bus.ros2` flood went through the limit put on `drd.bus`).
+PEER_LOGGERS = ("drd.bus", "drd.bus.ros2", "drd.daemon.rejects", "drd.hw.ros2", "drd.ros2", "drd.sim.ros2")
 
 
 def install(*names: str, burst: int = 10, window: float = 10.0) -> None:

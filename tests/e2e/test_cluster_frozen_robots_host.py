@@ -52,37 +52,46 @@ def outcome(c: DaemonCluster, mid: str) -> str | None:
 
 def test_a_robot_whose_host_is_frozen_past_its_lease_stops_in_the_simulated_world(cluster: DaemonCluster,
                                                                                   tmp_path: Path) -> None:
+    freeze_while_driving(cluster, tmp_path, "Drive1")
+    assert "host ranger1 down: its robots ranger1" in cluster.log("controller")
+
+
+def freeze_while_driving(cluster: DaemonCluster, tmp_path: Path, name: str) -> None:
+    """Mission `name` drives ranger1 (Keep holds the world open); ranger1's host is frozen for 1.6 leases: the
+    mission fails, and once the host is back the Ranger stays where it is in the running world; all stopped after."""
     (tmp_path / "keep.mission").write_text("mission Keep {\n    Wait(duration: 300s) as Hold\n}\n")
-    (tmp_path / "drive.mission").write_text("mission Drive1 {\n    needs ranger: Ranger\n"
+    (tmp_path / "drive.mission").write_text(f"mission {name} {{\n    needs ranger: Ranger\n"
                                             "    FollowCorridor(speed: 0.5)\n}\n")
     ids = []
-    for name in ("keep", "drive"):
-        r = cluster.missionctl("run", str(tmp_path / f"{name}.mission"), "--config", str(cluster.hosts_file),
+    for mission in ("keep", "drive"):
+        r = cluster.missionctl("run", str(tmp_path / f"{mission}.mission"), "--config", str(cluster.hosts_file),
                                "--detach", "--speed", "2", timeout=60)
         assert r.returncode == 0, (r.stderr[-2000:], cluster.tails("controller"))
         ids.append(r.stdout.strip())
     keep, drive = ids
-    with ZenohBus(connect=cluster.endpoints, name="watcher") as world:
-        start = pose(world, cluster)[1]
-        eventually(lambda: pose(world, cluster)[1][0] > start[0] + 0.5, "ranger1 to drive", 30,
-                   explain=lambda: cluster.tails("controller"))
-        pid = cluster.pid("ranger1")
-        os.kill(pid, signal.SIGSTOP)
-        try:
-            time.sleep(1.6 * LEASE)
-        finally:
-            os.kill(pid, signal.SIGCONT)
-        eventually(lambda: outcome(cluster, drive) == "failure", "the driving mission to fail", 30,
-                   explain=lambda: cluster.tails("controller"))
-        eventually(lambda: "host ranger1 up: reporting again" in cluster.log("controller"), "ranger1 back", 30)
-        time.sleep(0.5)  # what it would do on waking, it has done: a step sent while it stood still was refused
-        t0, p0 = pose(world, cluster)
-        eventually(lambda: pose(world, cluster)[0] > t0 + 3.0, "3 s of world time", 30)
-        t1, p1 = pose(world, cluster)
-        assert outcome(cluster, keep) is None, "the world is still open: Keep runs"
-        assert abs(p1[0] - p0[0]) < 0.05 and abs(p1[1] - p0[1]) < 0.05, (t0, p0, t1, p1, cluster.tails("controller"))
-        assert "host ranger1 down: its robots ranger1" in cluster.log("controller")
-    cluster.missionctl("stop", "--all", "--config", str(cluster.hosts_file), timeout=60)
+    try:
+        with ZenohBus(connect=cluster.endpoints, name="watcher") as world:
+            start = pose(world, cluster)[1]
+            eventually(lambda: pose(world, cluster)[1][0] > start[0] + 0.5, "ranger1 to drive", 30,
+                       explain=lambda: cluster.tails("controller"))
+            pid = cluster.pid("ranger1")
+            os.kill(pid, signal.SIGSTOP)
+            try:
+                time.sleep(1.6 * LEASE)
+            finally:
+                os.kill(pid, signal.SIGCONT)
+            eventually(lambda: outcome(cluster, drive) == "failure", "the driving mission to fail", 30,
+                       explain=lambda: cluster.tails("controller"))
+            eventually(lambda: "host ranger1 up: reporting again" in cluster.log("controller"), "ranger1 back", 30)
+            time.sleep(0.5)  # what it would do on waking, it has done: a step sent while it stood still was refused
+            t0, p0 = pose(world, cluster)
+            eventually(lambda: pose(world, cluster)[0] > t0 + 3.0, "3 s of world time", 30)
+            t1, p1 = pose(world, cluster)
+            assert outcome(cluster, keep) is None, "the world is still open: Keep runs"
+            assert abs(p1[0] - p0[0]) < 0.05 and abs(p1[1] - p0[1]) < 0.05, (t0, p0, t1, p1,
+                                                                              cluster.tails("controller", "ranger1"))
+    finally:
+        cluster.missionctl("stop", "--all", "--config", str(cluster.hosts_file), timeout=60)
 
 
 def test_robots_that_left_the_world_with_their_host_are_not_granted_when_it_comes_back(cluster: DaemonCluster,

@@ -7,18 +7,13 @@ side: its pose in the running world stops changing once its host is back."""
 
 from __future__ import annotations
 
-import os
-import signal
-import time
 from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
-from cluster_support import LEASE, DaemonCluster, corridor_hosts, eventually, running_cluster
+from cluster_support import DaemonCluster, corridor_hosts, eventually, running_cluster
 from etcd_support import EtcdCluster, etcd_cluster, need_etcd
-from test_cluster_frozen_robots_host import outcome, pose
-
-from drd.bus.zenoh_bus import ZenohBus
+from test_cluster_frozen_robots_host import freeze_while_driving
 
 pytest.importorskip("zenoh", reason="eclipse-zenoh is not installed")
 
@@ -52,34 +47,5 @@ def cluster(tmp_path_factory: pytest.TempPathFactory) -> Iterator[DaemonCluster]
 
 def test_a_standby_controllers_robot_stops_when_its_host_wakes_from_a_freeze(cluster: DaemonCluster,
                                                                             tmp_path: Path) -> None:
-    (tmp_path / "keep.mission").write_text("mission Keep {\n    Wait(duration: 300s) as Hold\n}\n")
-    (tmp_path / "drive.mission").write_text("mission Drive3 {\n    needs ranger: Ranger\n"
-                                            "    FollowCorridor(speed: 0.5)\n}\n")
-    ids = []
-    for name in ("keep", "drive"):
-        r = cluster.missionctl("run", str(tmp_path / f"{name}.mission"), "--config", str(cluster.hosts_file),
-                               "--detach", "--speed", "2", timeout=60)
-        assert r.returncode == 0, (r.stderr[-2000:], cluster.tails("controller"))
-        ids.append(r.stdout.strip())
-    keep, drive = ids
-    with ZenohBus(connect=cluster.endpoints, name="watcher") as world:
-        start = pose(world, cluster)[1]
-        eventually(lambda: pose(world, cluster)[1][0] > start[0] + 0.5, "ranger1 to drive", 30,
-                   explain=lambda: cluster.tails("controller"))
-        pid = cluster.pid("ranger1")
-        os.kill(pid, signal.SIGSTOP)
-        try:
-            time.sleep(1.6 * LEASE)
-        finally:
-            os.kill(pid, signal.SIGCONT)
-        eventually(lambda: outcome(cluster, drive) == "failure", "the driving mission to fail", 30,
-                   explain=lambda: cluster.tails("controller"))
-        eventually(lambda: "host ranger1 up: reporting again" in cluster.log("controller"), "ranger1 back", 30)
-        time.sleep(0.5)  # what it would do on waking, it has done
-        t0, p0 = pose(world, cluster)
-        eventually(lambda: pose(world, cluster)[0] > t0 + 3.0, "3 s of world time", 30)
-        t1, p1 = pose(world, cluster)
-        assert outcome(cluster, keep) is None, "the world is still open: Keep runs"
-        assert abs(p1[0] - p0[0]) < 0.05 and abs(p1[1] - p0[1]) < 0.05, (t0, p0, t1, p1, cluster.tails("ranger1"))
-        assert "every device stopped" in cluster.log("ranger1"), cluster.tails("ranger1")
-    cluster.missionctl("stop", "--all", "--config", str(cluster.hosts_file), timeout=60)
+    freeze_while_driving(cluster, tmp_path, "Drive3")
+    assert "every device stopped" in cluster.log("ranger1"), cluster.tails("ranger1")

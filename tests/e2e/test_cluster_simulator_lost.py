@@ -14,7 +14,7 @@ from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
-from cluster_support import DaemonCluster, corridor_hosts, eventually, running_cluster
+from cluster_support import DaemonCluster, corridor_hosts, eventually, serving_cluster
 
 NAMES = ["controller", "ranger1", "zworker"]
 
@@ -28,11 +28,7 @@ def hosts(c: DaemonCluster) -> str:
 
 @pytest.fixture
 def cluster(tmp_path: Path) -> Iterator[DaemonCluster]:
-    with running_cluster(tmp_path, NAMES) as c:
-        c.hosts_file.write_text(hosts(c))
-        c.start_all()
-        c.wait_ready()
-        c.wait_up()
+    with serving_cluster(tmp_path, NAMES, hosts) as c:
         yield c
 
 
