@@ -46,8 +46,9 @@ from typing import Any
 
 import psutil
 
-from drd.bus import Bus, BusError, Message, Query, Reply, typed_handler
+from drd.bus import Bus, BusError, MalformedMessage, Message, Query, Reply, encode, typed_handler
 from drd.bus.keys import is_concrete
+from drd.bus.messages import MAX_SIZE
 from drd.cluster.freeze import FreezeWatch
 from drd.cluster.gates import GateUpdate, GateUpdateReply, wire_record
 from drd.cluster.guard import CLOSE_WAIT, HostGuard
@@ -526,7 +527,8 @@ class Creator:
             return [ComponentReply(error=f"component process of {', '.join(c.path for c, _ in run)} {e}")]
         replies = []
         for (call, inst), ahead, reply in zip(run, aheads, got, strict=False):
-            replies.append(self._replied(call, inst, ahead, reply))
+            replies.append(self._replied(call, inst, ahead, reply) if worker.received <= MEASURE_OVER else
+                           _fitting(call, self._replied(call, inst, ahead, reply)))
             if reply.setup_failed:
                 continue
             shared = reply.shared
@@ -953,6 +955,31 @@ class Creator:
         except Exception as e:  # a driver could not be built, no worker could start: this call fails, we go on
             log.warning("creator %s: %s of %s failed: %s", self.host, query.payload.op, query.payload.path, e)
             return ComponentReply(error=f"{type(e).__name__}: {e}", records=self._take_records())
+
+
+#: A worker's message past this many bytes (pickled) may hold a reply too large for a bus message once it is JSON:
+#: each of its replies is then measured (`_fitting`). Smaller ones are not encoded twice.
+MEASURE_OVER = MAX_SIZE // 8
+
+
+def _fitting(call: ComponentCall, reply: ComponentReply) -> ComponentReply:
+    """`reply`, or the error of one too large for a bus message (wedge audit D5: a 2 MB output made the whole step
+    batch unsendable, failing every instance of the host with "handler returned a malformed reply")."""
+    try:
+        size = len(encode(reply))
+    except MalformedMessage as e:
+        why = e.reason
+    else:
+        if size <= MAX_SIZE - REPLY_ROOM:
+            return reply
+        why = f"{size} bytes"
+    return ComponentReply(error=f"the reply to {call.op} of {call.path} is too large for the bus ({why}; at most"
+                                f" {MAX_SIZE - REPLY_ROOM} bytes): a call's outputs, events and logs travel in one"
+                                " message (docs/components.md)")
+
+
+#: What a batch reply adds around one instance's reply, at most, in bytes (its records, the envelope).
+REPLY_ROOM = 64 << 10
 
 
 def _key(call: ComponentCall) -> str:

@@ -166,6 +166,7 @@ class Worker:
         self.tuned = False  # changed at run time: no new instance joins it
         self.instances: set[str] = set()
         self.died = ""  # why it is gone, once it is
+        self.received = 0  # bytes of its last message (a large one's replies may not fit a bus message)
         # one poll object for the pipe and the exit sentinel: `multiprocessing.connection.wait` builds a selector
         # per call, which is most of a round trip's cost on the Creator's side
         self._poll = select.poll()
@@ -191,7 +192,9 @@ class Worker:
         fds = {fd for fd, _ in events}
         if not self.conn.closed and self.conn.fileno() in fds:
             try:
-                return decode(self.conn.recv_bytes())
+                data = self.conn.recv_bytes()
+                self.received = len(data)
+                return decode(data)
             except (EOFError, OSError):
                 pass
             except pickle.UnpicklingError as e:

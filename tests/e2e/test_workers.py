@@ -56,6 +56,8 @@ class Probe(Component):
             os._exit(3)
         if mode == "emit":
             ctx.emit("Seen", at=now)
+        if mode == "huge":
+            ctx.outputs["blob"] = "x" * 2_000_000
         if mode == "shared":
             log = ctx.services.shared.setdefault("log", [])
             log.append(ctx.path)
@@ -272,6 +274,21 @@ def test_a_process_that_dies_in_a_batch_is_named_with_every_instance_of_that_cal
     calls = [ComponentCall("step", MISSION, p, now=2.0) for p in ("M/A", "M/Crash")]
     replies = creator.handle_batch(ComponentBatch(calls)).replies
     assert replies[0].error == "component process of M/A, M/Crash died (exit code 3)", replies
+
+
+def test_a_reply_too_large_for_the_bus_fails_its_instance_alone(creator: Creator) -> None:
+    """Wedge audit D5: a 2 MB output made the whole batch's reply unsendable ("handler returned a malformed reply:
+    too large"), failing every instance stepped with it; now that instance's reply is the error, naming the size."""
+    from drd.bus import encode
+
+    for path, mode in (("M/A", ""), ("M/H", "huge"), ("M/B", "")):
+        start(creator, path, mode=mode)
+    calls = [ComponentCall("step", MISSION, p, now=2.0) for p in ("M/A", "M/H", "M/B")]
+    batch = creator.handle_batch(ComponentBatch(calls))
+    assert [r.error for r in batch.replies][0::2] == ["", ""], batch.replies
+    assert batch.replies[1].error.startswith("the reply to step of M/H is too large for the bus (too large: 20"), \
+        batch.replies[1].error
+    assert len(encode(batch)) < 1 << 20  # the batch's reply goes out
 
 def test_a_batch_runs_in_one_round_trip_per_process_and_stops_at_an_event(creator: Creator) -> None:
     for path, comp, mode in (("M/A", "Probe", "shared"), ("M/B", "Probe", "shared"), ("M/X", "Alone", "shared"),
