@@ -37,11 +37,17 @@ class ComponentStuck(Exception):
 
 #: Where drd calls component code from (the interpreter, the component host, the device proxies).
 _RUNTIME = os.path.join(os.path.dirname(os.path.realpath(runtime.__file__)), "")
+_DRD = os.path.join(os.path.dirname(os.path.dirname(_RUNTIME)), "")  # drd's own code, never cut in the middle
 
 
 @functools.lru_cache(maxsize=4096)
 def _own(filename: str) -> bool:
     return components_own(filename)
+
+
+@functools.lru_cache(maxsize=4096)
+def _in_drd(filename: str) -> bool:
+    return os.path.realpath(filename).startswith(_DRD)
 
 
 @functools.lru_cache(maxsize=4096)
@@ -77,6 +83,7 @@ class StuckWatch:
         self.main = threading.main_thread()
         self.stopped = threading.Event()
         self.stuck: FrameType | None = None  # the call being interrupted (read by the handler)
+        self.deferred = False  # the handler found drd's own code running: interrupt again at the next look
         self.thread = threading.Thread(target=self._watch, name="drd-stuck-watch", daemon=True)
 
     def _watch(self) -> None:
@@ -89,17 +96,21 @@ class StuckWatch:
             if call is not seen:
                 seen, since = call, ticks * self.poll
                 continue
-            if call is not None and ticks * self.poll - since >= self.limit:
-                self.stuck, since = call, ticks * self.poll  # again after another `limit`, if it goes on
+            if call is not None and (ticks * self.poll - since >= self.limit or self.deferred):
+                self.stuck, since, self.deferred = call, ticks * self.poll, False  # again after another `limit`
                 signal.pthread_kill(self.main.ident or 0, signal.SIGUSR1)
             del call
 
     def interrupt(self, signum: int, frame: FrameType | None) -> None:
         """The signal's handler, in the main thread: raise in the stuck call if it is still running."""
         stuck, self.stuck = self.stuck, None
-        if stuck is not None and _within(frame, stuck):
-            raise ComponentStuck(f"{stuck.f_code.co_name} did not return within {self.limit:g} s of wall time (the"
-                                 " dry-run stops a component's call after that; a cluster's worker after 0.8 s)")
+        if stuck is None or not _within(frame, stuck):
+            return  # it returned meanwhile
+        if frame is not None and _in_drd(frame.f_code.co_filename):  # drd's own code runs (a device proxy the
+            self.deferred = True  # component called): never cut it in the middle; the next look tries again
+            return
+        raise ComponentStuck(f"{stuck.f_code.co_name} did not return within {self.limit:g} s of wall time (the"
+                             " dry-run stops a component's call after that; a cluster's worker after 0.8 s)")
 
 
 @contextmanager

@@ -16,7 +16,8 @@ import pytest
 
 ROOT = Path(__file__).resolve().parents[2]
 MISSIONCTL = [sys.executable, "-c", "from drd.cli.missionctl import main; main()"]
-KIT = '''import time
+KIT = '''import threading
+import time
 from drd.runtime.component import Component, Status
 
 
@@ -38,6 +39,12 @@ class Blocker(Component):
 
     def step(self, now):
         return Status.RUNNING
+
+
+class Waiter(Component):
+    def step(self, now):
+        threading.Event().wait()  # stuck here
+        return Status.RUNNING
 '''
 MANIFEST = "name: {name}\nkind: behavior\ndescription: Never returns.\nentry_point: stuckkit:{name}\n"
 NEEDS = "needs:\n  drive: {type: Drive, of: [Ranger], description: base}\ninterfaces: [Drive]\n"
@@ -46,7 +53,7 @@ NEEDS = "needs:\n  drive: {type: Drive, of: [Ranger], description: base}\ninterf
 @pytest.fixture
 def kit(tmp_path: Path) -> Path:
     (tmp_path / "stuckkit.py").write_text(KIT)
-    for name, extra in (("Spinner", NEEDS), ("Blocker", "")):
+    for name, extra in (("Spinner", NEEDS), ("Blocker", ""), ("Waiter", "")):
         (tmp_path / "comps" / name).mkdir(parents=True)
         (tmp_path / "comps" / name / "manifest.yaml").write_text(MANIFEST.format(name=name) + extra)
     return tmp_path
@@ -55,6 +62,7 @@ def kit(tmp_path: Path) -> Path:
 @pytest.mark.parametrize(("mission", "call"), [
     ("mission SpinOut {\n    needs ranger: Ranger\n    Spinner\n}\n", "step"),
     ("mission BlockOut {\n    Blocker\n}\n", "start"),
+    ("mission WaitOut {\n    Waiter\n}\n", "step"),  # in the standard library's code, under the component's
 ])
 def test_a_component_call_that_never_returns_fails_its_state_and_the_run_reports(kit: Path, mission: str,
                                                                                  call: str) -> None:
