@@ -25,14 +25,15 @@ from contextlib import contextmanager
 from types import FrameType
 
 from drd import runtime
-from drd.errors import components_own
+from drd.errors import ComponentFailure, components_own
 
 #: Wall seconds a component call may run in the dry-run before it is interrupted (a cluster's worker: 0.8 s).
 STUCK_AFTER = 5.0
 
 
-class ComponentStuck(Exception):
-    """Raised in a component call that ran longer than the limit (what its state fails with)."""
+class ComponentStuck(ComponentFailure):
+    """Raised in a component call that ran longer than the limit (what its state fails with, located at the line it
+    was stuck at, as the component's own exception)."""
 
 
 #: Where drd calls component code from (the interpreter, the component host, the device proxies).
