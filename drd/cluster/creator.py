@@ -527,8 +527,8 @@ class Creator:
             return [ComponentReply(error=f"component process of {', '.join(c.path for c, _ in run)} {e}")]
         replies = []
         for (call, inst), ahead, reply in zip(run, aheads, got, strict=False):
-            replies.append(self._replied(call, inst, ahead, reply) if worker.received <= MEASURE_OVER else
-                           _fitting(call, self._replied(call, inst, ahead, reply)))
+            answer = self._replied(call, inst, ahead, reply)
+            replies.append(answer if worker.received <= MEASURE_OVER else _fitting(call, answer))
             if reply.setup_failed:
                 continue
             shared = reply.shared
@@ -960,6 +960,8 @@ class Creator:
 #: A worker's message past this many bytes (pickled) may hold a reply too large for a bus message once it is JSON:
 #: each of its replies is then measured (`_fitting`). Smaller ones are not encoded twice.
 MEASURE_OVER = MAX_SIZE // 8
+#: What a batch reply adds around one instance's reply, at most, in bytes (its records, the envelope).
+REPLY_ROOM = 64 << 10
 
 
 def _fitting(call: ComponentCall, reply: ComponentReply) -> ComponentReply:
@@ -976,10 +978,6 @@ def _fitting(call: ComponentCall, reply: ComponentReply) -> ComponentReply:
     return ComponentReply(error=f"the reply to {call.op} of {call.path} is too large for the bus ({why}; at most"
                                 f" {MAX_SIZE - REPLY_ROOM} bytes): a call's outputs, events and logs travel in one"
                                 " message (docs/components.md)")
-
-
-#: What a batch reply adds around one instance's reply, at most, in bytes (its records, the envelope).
-REPLY_ROOM = 64 << 10
 
 
 def _key(call: ComponentCall) -> str:

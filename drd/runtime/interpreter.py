@@ -71,6 +71,7 @@ MAX_ITERATIONS = 1_000_000
 TIME_EPS = 1e-6
 
 Listener = Callable[[rec.Record], None]
+_RUNNING, _SUCCESS, _FAILURE = Status.RUNNING, Status.SUCCESS, Status.FAILURE
 
 
 class LoopWatch:
@@ -89,7 +90,6 @@ class LoopWatch:
         if turns > MAX_REPEATS and not self.looping:
             self.looping = (f"livelock: {path} -> {target} taken {MAX_REPEATS} times without time passing (a loop of"
                             " zero-time transitions)")
-_RUNNING, _SUCCESS, _FAILURE = Status.RUNNING, Status.SUCCESS, Status.FAILURE
 
 
 class MacroStep(NamedTuple):
