@@ -30,7 +30,7 @@ import functools
 import logging
 import threading
 import time
-from collections.abc import Callable, Iterator, Mapping
+from collections.abc import Callable, Container, Iterator, Mapping
 from typing import Any
 
 from drd.bus import Bus, Message, Query, Reply, message
@@ -127,6 +127,17 @@ def run_key(cluster: str) -> str:
 def render(diagnostics: list[Any], sources: dict[str, str]) -> list[str]:
     """Diagnostics as `missionctl validate` prints them (file:line:col, message, source line, caret), plain text."""
     return [d.render(sources) for d in diagnostics]
+
+
+def mission_id(name: str, now: float, taken: Container[str]) -> str:
+    """A new mission's id, `<name>-<number>`: the milliseconds of `now` modulo 10^7, the next number while that id
+    is `taken`. Always a number after the last dash, which readers split off (`drd.cli.cluster.mission_name`): two
+    missions of one name started in the same millisecond were `N-5` and `N-5x`, and the second's name was then
+    read as `N-5x`."""
+    number = int(now * 1000) % 10_000_000
+    while f"{name}-{number}" in taken:
+        number += 1
+    return f"{name}-{number}"
 
 
 def _given_up(req: RunMission) -> RunReply:
@@ -419,9 +430,7 @@ class MissionRunner:
             if req.give_up_at and time.time() > req.give_up_at:  # all or nothing: nobody would watch it run
                 return _given_up(req)
             executive = self.controller.executive
-            mid = f"{chart.name}-{int(time.time() * 1000) % 10_000_000}"
-            while mid in executive.missions:
-                mid += "x"
+            mid = mission_id(chart.name, time.time(), executive.missions)
             base = self.clock.now()
             if self.journal is not None:  # before its first record: a loss from now on resumes it
                 self.journal.begin(mid, request_data(req), priority, base, req.until)
