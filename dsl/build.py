@@ -11,7 +11,7 @@ Controller Manager itself. Completion transitions the language implies (plan ord
 
 from __future__ import annotations
 
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, replace
 
 from dsl import ast
@@ -151,6 +151,7 @@ class Builder:
                    for t in body.transitions if t.source != "start"]
         starts = tuple(self._transition(t, sid, sid, target(t.target))
                        for t in body.transitions if t.source == "start")
+        waiting = self._waiting_start(state, body, written, target)
         kind, initial, policy, until = StateKind.COMPOUND, None, None, None
         generated: list[Transition] = []
         entry: tuple[str, ...] = ()
@@ -169,7 +170,9 @@ class Builder:
             ahead = body.plan is not None and body.plan.preallocate
             for a, b in zip(order, order[1:], strict=False):
                 generated.append(_completion(sid, kids[a], kids[b], ahead))
-            initial = kids[order[0]] if order else (starts[0].target if starts else next(iter(kids.values()), None))
+            # an empty body is done at once (spec: a behavior whose children have all finished is done)
+            initial = kids[order[0]] if order else (starts[0].target if starts else next(iter(kids.values()),
+                                                                                          final("done")))
             leads_on = {t.source for t in written + generated if t.kind is ast.TriggerKind.COMPLETION
                         and t.guard is None}
             generated.extend(_completion(sid, k, final("done")) for k in kids.values() if k not in leads_on)
@@ -183,10 +186,24 @@ class Builder:
                 self.report.warning("preallocate", f"{self.states[t.target].name} asks for no resource of its own"
                                     " (its needs are its ancestors'): there is nothing to preallocate",
                                     t.span if t.span is not NOWHERE else state.span)
-        children = tuple(kids.values()) + tuple(finals.values())
+        children = tuple(kids.values()) + waiting + tuple(finals.values())
+        plain = len(starts) == 1 and not (starts[0].guard or starts[0].actions or waiting)  # `initial` says it all
         return replace(self.states[sid], kind=kind, children=children, initial=initial, policy=policy,
-                       until=until, starts=starts if len(starts) > 1 or any(t.guard for t in starts) else (),
-                       entry=entry)
+                       until=until, starts=() if plain else starts, entry=entry)
+
+    def _waiting_start(self, state: State, body: Body, written: list[Transition],
+                       target: Callable[[str], str]) -> tuple[str, ...]:
+        """The `start` state of a behavior with a `start -> X when/after/on ...`: when no start transition is
+        enabled on entry, the behavior waits there (no child runs) until one of those fires. Its transitions are
+        those start transitions, so timeouts, changes and events work as from any state (appended to `written`)."""
+        triggered = [t for t in body.transitions if t.source == "start" and t.kind is not ast.TriggerKind.COMPLETION]
+        if not triggered or body.parallel is not None or body.plan is not None:
+            return ()
+        wid = f"{state.id}/start"
+        self.states[wid] = State(wid, "start", StateKind.COMPOUND, state.id, state.depth + 1,
+                                 priority=state.priority, span=triggered[0].source_span)
+        written.extend(self._transition(t, state.id, wid, target(t.target)) for t in triggered)
+        return (wid,)
 
     @staticmethod
     def _transition(t: ast.Transition, domain: str, source: str, target: str) -> Transition:

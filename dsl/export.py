@@ -10,7 +10,7 @@ from typing import Any
 
 from dsl import ast, printer
 from dsl.dataflow import InputBinding
-from dsl.statechart import ResourceNeed, State, Statechart, StateKind, Transition
+from dsl.statechart import ResourceNeed, State, Statechart, StateKind, Transition, waits_to_start
 
 SCHEMA_VERSION = 1
 
@@ -174,13 +174,17 @@ def to_dot(chart: Statechart) -> str:
         out.append(f'{indent}  label="{label}"; style="{style}"; color="#5c6bc0";')
         out.append(f'{indent}  {ids[s.id]}_in [shape=point, width=0.12, label=""];')
         for c in chart.children(s.id):
-            emit(c, indent + "  ")
+            if not waits_to_start(c):  # its transitions are drawn as the start's
+                emit(c, indent + "  ")
         out.append(f"{indent}}}")
-        if s.initial:
-            out.append(f"{indent}{ids[s.id]}_in -> {anchor(s.initial)};")
+        for target, label in _starts(s):
+            attrs = f' [label="{_dot_escape(label)}"]' if label else ""
+            out.append(f"{indent}{ids[s.id]}_in -> {anchor(target)}{attrs};")
 
     emit(chart[chart.root], "  ")
     for t in chart.transitions():
+        if waits_to_start(chart[t.source]):
+            continue
         style = ", style=dashed, color=gray40" if t.generated else ""
         label = _dot_escape(trigger_label(t))
         clip = "".join(f", {end}=cluster_{ids[sid]}" for end, sid in (("ltail", t.source), ("lhead", t.target))
@@ -214,10 +218,14 @@ def to_mermaid(chart: Statechart) -> str:
         for i, c in enumerate(regions if finals_outside else list(chart.children(s.id))):
             if finals_outside and i > 0:
                 out.append(f"{indent}  --")
-            emit(c, indent + "  ")
+            if not waits_to_start(c):  # its transitions are drawn as the start's
+                emit(c, indent + "  ")
         edge_indent = indent if finals_outside else indent + "  "
-        edges = [f"{indent}  [*] --> {ids[s.initial]}"] if s.initial else []
+        edges = [f"{indent}  [*] --> {ids[target]}" + (f" : {_mm_escape(label)}" if label else "")
+                 for target, label in _starts(s)]
         for c in chart.children(s.id):
+            if waits_to_start(c):
+                continue
             for t in c.transitions:
                 label = _mm_escape(trigger_label(t))
                 arrow = f"{edge_indent}{ids[t.source]} --> {ids[t.target]}"
@@ -235,6 +243,14 @@ def to_mermaid(chart: Statechart) -> str:
     emit(chart[chart.root], "  ")
     out.append(f"  [*] --> {ids[chart.root]}")
     return "\n".join(out) + "\n"
+
+
+def _starts(s: State) -> list[tuple[str, str]]:
+    """Where a composite starts, each with its start transition's label: its start transitions, or its initial
+    child."""
+    if s.starts:
+        return [(t.target, trigger_label(t)) for t in s.starts]
+    return [(s.initial, "")] if s.initial else []
 
 
 def _args(s: State) -> str:

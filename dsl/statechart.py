@@ -113,6 +113,12 @@ class State:
     span: Span = field(default=NOWHERE, compare=False, repr=False)
 
 
+def waits_to_start(state: State) -> bool:
+    """Whether `state` is the `start` state the compiler adds to a behavior with a `start -> X when/after/on`
+    (`start` is a keyword: no child of a mission has that name)."""
+    return state.name == "start" and state.kind is StateKind.COMPOUND and state.component is None
+
+
 @dataclass(frozen=True)
 class Statechart:
     """Every state by id, the root, and the source it came from."""

@@ -39,7 +39,7 @@ from drd.cli.options import ComponentsOption
 from dsl import Compiled, Limits, compile_file
 from dsl.catalog import Catalog
 from dsl.limits import DEFAULT as DEFAULT_LIMITS
-from dsl.statechart import State, Statechart, StateKind
+from dsl.statechart import State, Statechart, StateKind, waits_to_start
 
 if TYPE_CHECKING:  # rich's tables and trees, and the exporters, load only for the commands that draw them
     import threading
@@ -285,7 +285,7 @@ def _grow(chart: Statechart, state: State, node: Tree) -> None:
     for t in state.starts:
         node.add(Text.assemble(("start → ", "green"), t.target.rsplit("/", 1)[-1], f"  {trigger_label(t)}"))
     for child in chart.children(state.id):
-        if child.kind is StateKind.FINAL:
+        if child.kind is StateKind.FINAL or waits_to_start(child):  # its transitions are the `start →` above
             continue
         branch = node.add(_label(child, initial=child.id == state.initial))
         _details(child, branch)

@@ -520,11 +520,37 @@ class Interpreter:
             self._start_multi(node)
 
     def _initial(self, node: Node) -> State | None:
-        for t in node.state.starts:
-            if self._enabled_guard(node, t, None):
+        """The child a compound enters first: the first declared start transition enabled on entry (its actions run),
+        else its `start` state, where it waits for a `start -> X when/after/on` to fire; with neither, it fails
+        rather than enter a state whose guard is false (spec audit 7)."""
+        state = node.state
+        if not state.starts:
+            return self._states[state.initial] if state.initial else None
+        for t in state.starts:
+            if self._starts_now(node, t):
                 self._take_actions(node, t, None)
                 return self._states[t.target]
-        return self._states[node.state.initial] if node.state.initial else None
+        waiting = self._states.get(f"{state.id}/start")
+        if waiting is not None:
+            return waiting
+        tried = "; ".join(f"start -> {t.target.rsplit('/', 1)[-1]} {trigger_label(t)}" for t in state.starts)
+        self._finish(node, False, f"no start transition of {state.name} is enabled ({tried})")
+        return None
+
+    def _starts_now(self, node: Node, t: Transition) -> bool:
+        """Whether start transition `t` is enabled as `node` is entered: a completion or a `when` whose condition
+        holds, or an `after` of no time, its guard true; an `on` waits for its event."""
+        kind = t.kind
+        if kind is ast.TriggerKind.CHANGE:
+            if t.condition is None or not self._truthy(node, t.condition, None):
+                return False
+        elif kind is ast.TriggerKind.TIMEOUT:
+            delay = self._delay(node, t)
+            if delay is None or delay > TIME_EPS:
+                return False
+        elif kind is not ast.TriggerKind.COMPLETION:
+            return False
+        return self._enabled_guard(node, t, None)
 
     def _enter_child(self, parent: Node, state: State, index: int | None = None, why: str = "") -> Node | None:
         if self.outcome is not None or parent.phase is DONE or parent.closing:  # stopped meanwhile
