@@ -22,9 +22,10 @@ def _not_regular(mode: int) -> str:
 
 
 def decode(data: bytes, file: str, report: Reporter) -> str:
-    """UTF-8 text, or a located error at the first bad byte (and the text with replacements)."""
+    """UTF-8 text (without the byte order mark some editors write first), or a located error at the first bad
+    byte (and the text with replacements)."""
     try:
-        return data.decode("utf-8")
+        return data.decode("utf-8-sig")
     except UnicodeDecodeError as e:
         line = data.count(b"\n", 0, e.start) + 1
         line_start = data.rfind(b"\n", 0, e.start) + 1

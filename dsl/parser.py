@@ -636,6 +636,9 @@ def syntax_diagnostic(e: UnexpectedInput, history: Sequence[Token], file: str, t
     if isinstance(e, UnexpectedCharacters):
         ch = e.char if hasattr(e, "char") else "?"
         span = Span(file, e.line, e.column, e.line, e.column + 1)
+        if ch == '"':  # no STRING matched from here: no closing quote on this line (or a `\` ending it)
+            return Diagnostic("syntax", "syntax: unterminated string", span,
+                              'a string ends with " on the same line; write \\" for a quote inside it')
         hint = "strings use double quotes" if ch == "'" else None
         return Diagnostic("syntax", f"syntax: unexpected character {ch!r}", span, hint)
     assert isinstance(e, UnexpectedToken)
@@ -702,7 +705,9 @@ def _unknown_unit(file: str, prev: Token | None, tok: Token) -> Diagnostic | Non
     if size is not None:
         from dsl.catalog import duration_text
 
-        hint = f"did you mean {duration_text(float(prev.value) * size)}?"
+        seconds = float(prev.value) * size
+        hint = (f"did you mean {duration_text(seconds)}?" if seconds <= MAX_DURATION else
+                f"a duration is at most {MAX_DURATION // 86400:g} days ({duration_text(MAX_DURATION)})")
     return Diagnostic("syntax", f"syntax: unknown duration unit {word} in `{prev.value}{word}`: write 250ms, 30s,"
                       " 5min or 2h", span, hint)
 

@@ -7,9 +7,11 @@ this table.
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import pytest
 
-from dsl import compile_text
+from dsl import compile_file, compile_text
 from dsl.catalog import Catalog
 
 
@@ -37,6 +39,10 @@ ERRORS: list[tuple[str, str, str, str | None]] = [
      "event is a reserved word"),
     ("single-quotes", m("  Inspect(label: 'a')", "behavior Inspect(label: str) { Observe }"),
      "2:18 syntax: unexpected character \"'\"", "double quotes"),
+    ("day-unit-over-a-year", m("  Wait(duration: 366d)"),
+     "2:18 syntax: unknown duration unit d in `366d`: write 250ms, 30s, 5min or 2h", "at most 365 days (8760h)"),
+    ("unterminated-string", m('  Observe -> done / log "no end'),
+     "2:25 syntax: unterminated string", 'ends with " on the same line'),
     ("unclosed-brace", "mission M {\n  Observe\n", "1:11 syntax: this `{` of `mission M` is never closed (the file "
      "ends)", "add the `}` that ends this block"),
     ("unclosed-before-declaration", "mission M {\n  Observe\n\nbehavior B {\n  Observe\n}\n",
@@ -270,3 +276,11 @@ def test_rendered_error_shows_line_and_caret(catalog: Catalog) -> None:
         "      |   ^^^^^^^^^^^^^^^^^^^^^^^^^",
         "  hint: did you mean DetectDoor?",
     ]
+
+
+def test_a_file_saved_with_a_byte_order_mark_compiles(tmp_path: Path, catalog: Catalog) -> None:
+    """Some editors write UTF-8 with a BOM first: it is not a character of the mission (spec audit 7)."""
+    path = tmp_path / "bom.mission"
+    path.write_bytes("\ufeffmission M { Observe }\n".encode())
+    result = compile_file(path, catalog)
+    assert result.ok, [d.message for d in result.diagnostics]
