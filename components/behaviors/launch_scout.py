@@ -1,11 +1,11 @@
 """LaunchScout: throw the next Scout of the magazine straight ahead, through the door the Ranger faces.
 
-The Scout is the `scout` resource if the runtime bound one that is in the magazine, else the first of
-`loaded()`. The distance is `min(max_range, launcher.max_range, front - CLEARANCE)` where `front` is the
-front range beam (the room's far wall seen through the doorway): the Scout lands well inside the room,
-short of its back wall. Clearing the Scout's `carrier` in the Static Dependency Database is the runtime's job
-(on ScoutLaunched). Without a range sensor (the manifest gives this component the launcher only), the
-distance is the cap alone.
+The Scout is the `scout` resource the runtime bound (it fails when that one is not in the magazine: the
+launcher throws only a Scout its behavior holds); without a binding (a test rig), the first of `loaded()`.
+The distance is `min(max_range, launcher.max_range, front - CLEARANCE)` where `front` is the front range beam
+(the room's far wall seen through the doorway): the Scout lands well inside the room, short of its back wall.
+Clearing the Scout's `carrier` in the Static Dependency Database is the runtime's job (on ScoutLaunched).
+Without a range sensor (the manifest gives this component the launcher only), the distance is the cap alone.
 """
 
 from __future__ import annotations
@@ -29,7 +29,11 @@ class LaunchScout(Component):
             self.ctx.log("LaunchScout: the magazine is empty")
             return Status.FAILURE
         bound = self.ctx.resources.get("scout")
-        scout = bound if bound in loaded else loaded[0]
+        if bound is not None and bound not in loaded:  # the launcher throws only the Scout this behavior holds
+            self.ctx.log(f"LaunchScout: {bound}, the Scout it holds, is not in this Ranger's magazine"
+                         f" ({', '.join(loaded)})")
+            return Status.FAILURE
+        scout = bound if bound is not None else loaded[0]  # unbound: a test rig without resources
         distance = min(float(self.ctx.params["max_range"]), float(launcher.max_range))
         if "ranges" in self.ctx.devices:
             scan = self.device("ranges").scan()

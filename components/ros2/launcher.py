@@ -17,6 +17,7 @@ class Ros2Launcher(Ros2Driver):
 
     READINGS = frozenset({"loaded", "max_range"})
     ACTIONS = ("launch",)
+    MOVES = {"launch": "scout_id"}  # the Scout it throws: only a behavior holding that Scout may (drd.hw.commands)
 
     def __init__(self, device: Device, robot_id: str, backend: object = None) -> None:
         super().__init__(device, robot_id, backend)

@@ -16,6 +16,7 @@ class SimLauncher(SimDriver):
 
     READINGS = frozenset({"loaded", "max_range"})
     ACTIONS = ("launch",)
+    MOVES = {"launch": "scout_id"}  # the Scout it throws: only a behavior holding that Scout may (drd.hw.commands)
 
     def __init__(self, device: Device, robot_id: str, sim: Simulation) -> None:
         super().__init__(device, robot_id, sim)

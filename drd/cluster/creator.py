@@ -36,6 +36,7 @@ world the call names; on the simulator host itself they call the simulation dire
 from __future__ import annotations
 
 import dataclasses
+import functools
 import logging
 import os
 import pickle
@@ -923,7 +924,7 @@ class Creator:
             binding = Binding(need, unit, "", None, gate, driver, robot, part)
             inst.bound[need] = binding
             inst.devices[need] = BoundDevice(binding, issuer, self.arbiter, rank, f"{inst.mission}/{inst.path}",
-                                             lambda: self._now)
+                                             lambda: self._now, functools.partial(_holds, inst))
             methods[need] = device_methods(driver)
             inst.readings[need] = spec_of(driver).readings
             commands[need] = sorted(spec_of(driver).setpoints)
@@ -978,6 +979,12 @@ def _fitting(call: ComponentCall, reply: ComponentReply) -> ComponentReply:
     return ComponentReply(error=f"the reply to {call.op} of {call.path} is too large for the bus ({why}; at most"
                                 f" {MAX_SIZE - REPLY_ROOM} bytes): a call's outputs, events and logs travel in one"
                                 " message (docs/components.md)")
+
+
+def _holds(inst: Instance, robot: str) -> bool:
+    """Whether the instance is bound to `robot` (a launch moves only a Scout its behavior holds): its bindings as
+    the controller last sent them, at its holders' current grants."""
+    return any(robot in (unit, bot) for unit, bot, _ in inst.bindings.values())
 
 
 def _key(call: ComponentCall) -> str:

@@ -8,6 +8,10 @@ and goes straight to the driver. Whether a method commands is declared, never gu
 an `epoch` (the mark of a command) but is not declared is refused when the driver is loaded, so no command can
 slip past the gate (`drd.runtime.ownership`).
 
+An action that moves another robot (a launcher's `launch(scout_id, ...)` throws a Scout) names the argument
+that says which, in `MOVES` (`{"launch": "scout_id"}`): the gate then admits it only from a behavior that holds
+that robot too, not only the device it calls.
+
 Readings are declared too (`READINGS`: the methods and attributes a behavior may read), and a behavior reaches
 nothing else of a driver: its device handle forwards declared names only. A driver that declares nothing, a
 reading it does not have, or an interface member (`drd.hw.interfaces`: what its device type promises behaviors)
@@ -37,6 +41,8 @@ class DriverSpec:
     actions: frozenset[str] = frozenset()
     stop: str | None = None
     readings: frozenset[str] = frozenset()
+    #: action -> (position, name) of its argument naming the robot it moves (`MOVES`)
+    moves: dict[str, tuple[int, str]] = field(default_factory=dict)
     #: Everything a behavior may use of the driver (read on every access through a device handle: computed once).
     names: frozenset[str] = field(init=False)
 
@@ -112,9 +118,29 @@ def _declared(cls: type) -> DriverSpec:
         method = getattr(cls, attr, None)
         if callable(method) and _takes_epoch(method):
             problems.append(f"{attr} takes an epoch (a command) but is in neither SETPOINTS nor ACTIONS")
+    moves = _moves(cls, actions, problems)
     if problems:
         raise DriverDeclarationError(f"driver {cls.__module__}.{cls.__qualname__}: {'; '.join(problems)}")
-    return DriverSpec(setpoints, actions, stop, readings)
+    return DriverSpec(setpoints, actions, stop, readings, moves)
+
+
+def _moves(cls: type, actions: frozenset[str], problems: list[str]) -> dict[str, tuple[int, str]]:
+    """`MOVES`, checked: each an action of `cls` with a parameter of that name; its position among the arguments
+    a caller passes (after `self`)."""
+    out: dict[str, tuple[int, str]] = {}
+    for action, argument in dict(getattr(cls, "MOVES", {})).items():
+        if action not in actions:
+            problems.append(f"MOVES names {action!r}, which is not one of its ACTIONS")
+            continue
+        try:
+            names = list(inspect.signature(getattr(cls, action)).parameters)[1:]
+        except (TypeError, ValueError):
+            names = []
+        if argument not in names:
+            problems.append(f"MOVES names argument {argument!r} of {action}, which it does not take")
+            continue
+        out[action] = (names.index(argument), argument)
+    return out
 
 
 def _takes_epoch(method: Any) -> bool:

@@ -221,7 +221,10 @@ class ComponentHost:
         bindings = self.resources.bind(node)
         issuer = self.resources.holder(node)
         rank = (-node.state.priority, self.rank.get(node.state.id, 0))
-        devices = {need: BoundDevice(b, issuer, self.arbiter, rank, node, self.now)
+        def holds(robot: str) -> bool:  # a robot it is bound to (a launch moves only a Scout it holds); unbound,
+            return any(robot in (b.unit, b.robot) for b in bindings.values())  # the device's own epoch refuses
+
+        devices = {need: BoundDevice(b, issuer, self.arbiter, rank, node, self.now, holds)
                    for need, b in bindings.items() if b.driver is not None}
         return {need: b.unit for need, b in bindings.items()}, devices, bindings
 

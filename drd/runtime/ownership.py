@@ -35,6 +35,8 @@ from drd.hw.interfaces import HardwareError
 from drd.runtime import records as rec
 
 Sink = Callable[[rec.Record], None]
+#: Whether the issuer of a command holds a robot (by id): what an action that moves another robot is checked with.
+Holds = Callable[[str], bool]
 
 
 class NotHolder(HardwareError):
@@ -73,10 +75,17 @@ class DeviceGate:
         return f"not under the holder {_path(next(iter(self.holders)))}"
 
     def admit(self, issuer: str, epoch: int | None, method: str, args: tuple[Any, ...], kwargs: Mapping[str, Any],
-              at: float) -> str:
-        """Why this command may not go ("" if it may): the holder's authority, then the constraints in force. A
+              at: float, holds: Holds | None = None) -> str:
+        """Why this command may not go ("" if it may): the holder's authority, the robot it moves (an action the
+        driver declares in `MOVES`: the issuer must hold that robot, `holds`), then the constraints in force. A
         command refused by a constraint also stops the setpoint in force (it was heading where it must not)."""
         why = self.verdict(issuer, epoch)
+        moved = self.spec.moves.get(method) if not why else None
+        if moved is not None:
+            index, name = moved
+            robot = str(args[index] if index < len(args) else kwargs.get(name, ""))
+            if holds is None or not holds(robot):
+                why = f"it does not hold {robot}, which {method} moves"
         if not why and self.guard is not None:
             why = self.guard(self, issuer, method, args, kwargs)
             if why and self.commander is not None:
@@ -84,10 +93,10 @@ class DeviceGate:
         return why
 
     def execute(self, driver: object, issuer: str, epoch: int | None, method: str, args: tuple[Any, ...],
-                kwargs: Mapping[str, Any], at: float) -> Any:
+                kwargs: Mapping[str, Any], at: float, holds: Holds | None = None) -> Any:
         """Fence, record, then call `driver.method` (the driver the issuer was bound with: a robot's part driver
         of a shared device). Raises NotHolder when refused, or whatever the driver raises."""
-        why = self.admit(issuer, epoch, method, args, kwargs, at)
+        why = self.admit(issuer, epoch, method, args, kwargs, at, holds)
         self._record(at, issuer, method, epoch, why)
         if why:
             raise NotHolder(f"{self.device}.{method} from {_path(issuer)} refused: {why}")
@@ -262,7 +271,7 @@ class NoGates:
 
 @dataclass(slots=True)
 class Binding:
-    """One need of one component instance, bound to a device under a grant.
+    """One need of one component instance, bound to a device (or a robot: an aggregate) under a grant.
 
     `epoch` is the grant's epoch while the binding is live, None once unbound (the component's subtree is
     suspended, the need released, the component exiting). `gate`/`driver` may change when a resumed grant
@@ -352,16 +361,17 @@ class BoundDevice:
     """A component's handle on one device: readings go straight to the driver, commands through the gate with
     the issuer's path and the binding's epoch (setpoints by way of the arbiter, when there is one)."""
 
-    __slots__ = ("_binding", "_issuer", "_arbiter", "_rank", "_owner", "_clock")
+    __slots__ = ("_binding", "_issuer", "_arbiter", "_rank", "_owner", "_clock", "_holds")
 
     def __init__(self, binding: Binding, issuer: str, arbiter: Arbiter | None, rank: tuple[int, int], owner: Any,
-                 clock: Callable[[], float]) -> None:
+                 clock: Callable[[], float], holds: Holds | None = None) -> None:
         self._binding = binding
         self._issuer = issuer
         self._arbiter = arbiter
         self._rank = rank
         self._owner = owner
         self._clock = clock
+        self._holds = holds  # the robots the component holds, for an action that moves one (`DriverSpec.moves`)
 
     def __getattr__(self, name: str) -> Any:
         binding = self._binding
@@ -385,7 +395,7 @@ class BoundDevice:
 
         def command(*args: Any, **kwargs: Any) -> Any:
             kwargs.pop("epoch", None)
-            return gate.execute(binding.driver, issuer, binding.epoch, name, args, kwargs, self._clock())
+            return gate.execute(binding.driver, issuer, binding.epoch, name, args, kwargs, self._clock(), self._holds)
         return command
 
     def __repr__(self) -> str:

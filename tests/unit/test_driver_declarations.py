@@ -91,3 +91,38 @@ def test_a_behavior_reaches_declared_names_only() -> None:
     with pytest.raises(AttributeError):
         device.moved  # noqa: B018 - an attribute of the driver's own, not declared
     assert wheels.moved == []  # the undeclared method never ran
+
+
+class Thrower:
+    READINGS = frozenset({"loaded"})
+    ACTIONS = ("launch",)
+    MOVES = {"launch": "scout_id"}
+
+    def loaded(self) -> tuple[str, ...]:
+        return ("s1", "s2")
+
+    def launch(self, scout_id: str, heading: float, distance: float, epoch: int | None = None) -> str:
+        return scout_id
+
+
+def test_an_action_that_moves_another_robot_names_its_argument() -> None:
+    assert declared(Thrower).moves == {"launch": (0, "scout_id")}
+    for moves, problem in (({"loaded": "x"}, "MOVES names 'loaded', which is not one of its ACTIONS"),
+                           ({"launch": "scout"}, "MOVES names argument 'scout' of launch, which it does not take")):
+        bad = type("BadThrower", (Thrower,), {"MOVES": moves})
+        with pytest.raises(DriverDeclarationError, match=problem):
+            declared(bad)
+
+
+@pytest.mark.parametrize(("args", "kwargs"), [(("s2", 0.0, 1.0), {}), ((), {"scout_id": "s2", "heading": 0.0,
+                                                                              "distance": 1.0})])
+def test_the_gate_admits_such_an_action_only_from_a_holder_of_that_robot(args: tuple[Any, ...],
+                                                                         kwargs: dict[str, Any]) -> None:
+    from drd.runtime.ownership import DeviceGate
+
+    gate = DeviceGate("r.launcher", Thrower(), declared(Thrower), lambda mission, record: None)
+    gate.grant("M/Throw", 1, 0.0, exclusive=True)
+    assert gate.admit("M/Throw", 1, "launch", args, kwargs, 0.0, holds=lambda robot: robot == "s1") == (
+        "it does not hold s2, which launch moves")
+    assert gate.admit("M/Throw", 1, "launch", args, kwargs, 0.0) == "it does not hold s2, which launch moves"
+    assert gate.admit("M/Throw", 1, "launch", args, kwargs, 0.0, holds=lambda robot: robot == "s2") == ""
