@@ -344,8 +344,9 @@ def run_many(missions: Sequence[Mission], cluster: Cluster, world: World, catalo
         recorder.scene(world)
         recorder.watch(sim)  # what the sensors read, launches, landings and door changes, from now on
     ends: dict[str, tuple[float, float]] = {}  # mission id -> (sim, wall) seconds at its end: its own report's times
-    results = [_submit(life, m, n, speed, trace, recorder, functools.partial(_note_end, ends, start))
-               for n, m in enumerate(missions, 1)]
+    with life.together():  # missions of one instant: by priority, not by their order on the command line
+        results = [_submit(life, m, n, speed, trace, recorder, functools.partial(_note_end, ends, start))
+                   for n, m in enumerate(missions, 1)]
     with _Heap() as heap:
         _loop(life, sim, until, speed, stop, progress, progress_every, recorder, heap,
               _Injections(injections, sim, life, cluster, results), start)

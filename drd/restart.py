@@ -20,6 +20,7 @@ does.
 from __future__ import annotations
 
 from collections.abc import Callable, Collection, Iterable, Sequence
+from contextlib import AbstractContextManager
 from typing import Any
 
 from drd.executive import Executive
@@ -54,6 +55,12 @@ class ControllerLife:
         self._saved: dict[str, NodeImage] = {}
         self._properties: dict[str, dict[str, Any]] = {}
         self._died_at = 0.0
+
+    def together(self) -> AbstractContextManager[None]:
+        """Missions submitted in this block start as one: their requests are granted by priority, not by which was
+        submitted first (`drd.runtime.broker.ResourceBroker.together`)."""
+        assert self.executive is not None
+        return self.executive.broker.together()
 
     def submit(self, chart: Statechart, mid: str, listeners: list[Listener], priority: int) -> None:
         assert self.executive is not None
@@ -128,11 +135,12 @@ class ControllerLife:
             for key, value in values.items():
                 if executive.pool.view(rid) is not None:
                     executive.pool.set_property(rid, key, value, now)
-        for mid, image in self._saved.items():
-            chart, listeners, priority = self.submitted[mid]
-            executive.submit(chart, mid, listeners=listeners, priority=priority, resume=image, since=self._died_at,
-                             paused=now - self._died_at)
-            self.interpreters[mid] = executive.missions[mid]
+        with executive.broker.together():  # by priority, not by who is entered first (safety audit 7, D2)
+            for mid, image in self._saved.items():
+                chart, listeners, priority = self.submitted[mid]
+                executive.submit(chart, mid, listeners=listeners, priority=priority, resume=image,
+                                 since=self._died_at, paused=now - self._died_at)
+                self.interpreters[mid] = executive.missions[mid]
         resumed, self._saved = len(self._saved), {}
         return f"{resumed} mission(s) resumed from the journal after {now - self._died_at:g} s"
 

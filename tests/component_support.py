@@ -37,13 +37,17 @@ class Rig:
         self.inputs: dict[str, Any] = {}  # the component's inputs, as a mission would bind them
 
     def start(self, cls: type[Component], needs: dict[str, tuple[str, str]], params: dict[str, Any] | None = None,
-              path: str = "M/Test", inputs: dict[str, Any] | None = None) -> Component:
+              path: str = "M/Test", inputs: dict[str, Any] | None = None,
+              robots: dict[str, str] | None = None) -> Component:
         """Set up and start one component, with defaults from its manifest and `params` over them; `inputs` join
-        the rig's (what a mission would bind its declared inputs to)."""
+        the rig's (what a mission would bind its declared inputs to); `robots`: needs bound to a whole robot (the
+        Scout a LaunchScout throws: a launcher moves only a Scout its behavior holds)."""
         self.inputs.update(inputs or {})
         spec = self.catalog.get(cls.__name__)
         defaults = {p.name: p.default for p in spec.params if not p.required} if spec else {}
         resources = {need: self.cluster_part(robot, part) for need, (robot, part) in needs.items()}
+        held = {*resources.values(), *(robots or {}).values()}
+        resources.update(robots or {})
         gates = LocalGates.of(self.drivers.devices, self.drivers.robots)
         issuer = f"rig/{path}"
         devices = {}
@@ -52,7 +56,7 @@ class Rig:
             gates.grant(unit, issuer, 1, self.sim.time)
             gate, driver = gates.bound(unit, robot, part) or (None, None)
             binding = Binding(need, unit, issuer, 1, gate, driver, robot, part)
-            devices[need] = BoundDevice(binding, issuer, None, (0, 0), None, lambda: self.sim.time)
+            devices[need] = BoundDevice(binding, issuer, None, (0, 0), None, lambda: self.sim.time, held.__contains__)
         ctx = Context(path, {**defaults, **(params or {})}, resources,
                       lambda name, **fields: self.events.append((name, fields)), self.logs.append,
                       lambda: self.sim.time, devices=devices, inputs=self.inputs)

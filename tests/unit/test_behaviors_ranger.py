@@ -127,7 +127,8 @@ def test_launch_scout_lands_in_the_room_behind_the_open_door():
     rig.inputs["visited"] = {}
     _, det = detect(rig)
     rig.run(rig.start(AlignRanger, needs=RANGER, inputs={"door": det.ctx.outputs["door"]}), until=rig.sim.time + 10.0)
-    launch = rig.start(LaunchScout, needs={"launcher": ("ranger1", "launcher"), "ranges": ("ranger1", "ranges")})
+    launch = rig.start(LaunchScout, needs={"launcher": ("ranger1", "launcher"), "ranges": ("ranger1", "ranges")},
+                       robots={"scout": "scout1"})
     assert rig.run(launch, until=rig.sim.time + 1.0) is Status.SUCCESS
     scout = launch.ctx.outputs["scout"]
     assert scout == "scout1"
@@ -137,6 +138,18 @@ def test_launch_scout_lands_in_the_room_behind_the_open_door():
     p = rig.sim.pose("scout1")
     assert 2.0 < p.x < 8.0 and 1.25 < p.y < 6.25, p  # room n1
     assert rig.sim.magazine("ranger1") == ("scout2", "scout3", "scout4", "scout5", "scout6")
+
+
+def test_launch_scout_throws_only_the_scout_it_holds():
+    """Bound to scout2, it throws scout2 (not the magazine's first); bound to a Scout out of the magazine, it fails
+    saying so, throwing none (safety audit 7, D1)."""
+    rig = Rig()
+    launch = rig.start(LaunchScout, needs={"launcher": ("ranger1", "launcher")}, robots={"scout": "scout2"})
+    assert rig.run(launch, until=1.0) is Status.SUCCESS and launch.ctx.outputs["scout"] == "scout2"
+    launch = rig.start(LaunchScout, needs={"launcher": ("ranger1", "launcher")}, robots={"scout": "scout2"})
+    assert rig.run(launch, until=rig.sim.time + 1.0) is Status.FAILURE
+    assert "scout2, the Scout it holds, is not in this Ranger's magazine" in rig.logs[-1], rig.logs
+    assert rig.sim.magazine("ranger1") == ("scout1", "scout3", "scout4", "scout5", "scout6")
 
 
 def test_launch_scout_fails_on_an_empty_magazine():
