@@ -50,9 +50,12 @@ class GateUpdateReply(Message):
 class RemoteGates:
     """`drd.runtime.ownership.Gates` for devices on other hosts: operations queued per host (see the module)."""
 
-    def __init__(self, device_hosts: Mapping[str, str]) -> None:
+    def __init__(self, device_hosts: Mapping[str, str], deliver: Callable[[], None] | None = None) -> None:
+        """`deliver`: carries the queued operations now and records their replies (the controller's mission
+        runner: `settle`)."""
         self.device_hosts = dict(device_hosts)
         self.seen: Seen | None = None  # where robots' live values in the replies go (`drd.cluster.telemetry`)
+        self.deliver = deliver
         self._pending: dict[str, list[list[Any]]] = {}
         self._lock = threading.Lock()  # the mission loops of several missions share it
 
@@ -84,6 +87,13 @@ class RemoteGates:
         """The hosts with operations waiting."""
         with self._lock:
             return sorted(self._pending)
+
+    def settle(self) -> None:
+        """Carry the queued operations now, their records back before whatever the caller records next: a mission
+        ending halts the setpoints its components left in force, and those `halted` records must come before its
+        `finished`, as in a dry-run (safety audit 7, D4: the executive dropped them, after `finished`)."""
+        if self.deliver is not None and self.hosts():
+            self.deliver()
 
 
 def wire_record(mission: str, record: rec.Record) -> dict[str, Any]:

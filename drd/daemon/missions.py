@@ -185,8 +185,9 @@ class MissionRunner:
         # this controller's term: hosts refuse the calls of an older one (`Creator`)
         self.term = time.time() if term is None else term
         self.simulator = next((h.name for h in cluster.hosts if Role.SIMULATOR in h.roles), None)
-        # the devices' gates are on their hosts: every mission's grants reach them through these
-        self.gates = RemoteGates({u.id: u.host for u in cluster.resources() if u.host and type(u).__name__ == "Unit"})
+        # the devices' gates are on their hosts: every mission's grants reach them through these (`_deliver_gates`)
+        self.gates = RemoteGates({u.id: u.host for u in cluster.resources() if u.host and type(u).__name__ == "Unit"},
+                                 self._deliver_gates)
         executive = controller.executive
         executive.gates = self.gates
         executive.status_extras = self._status_extras
@@ -195,8 +196,7 @@ class MissionRunner:
                                          self.gates.send, clock.now)
         self.gates.seen = self.telemetry.seen
         executive.pool.telemetry = self.telemetry
-        executive.guard = self.guard = SharedGuard(executive.pool, self.gates.device_hosts, self.gates.send,
-                                                   clock.now)
+        executive.guard = self.guard = SharedGuard(executive.pool, self.gates.device_hosts, self.gates.send, clock.now)
         self.world: WorldRun | None = None
         self.starting = threading.Lock()
         self.generation = 0  # worlds started so far: a Creator builds its drivers again for a new one
@@ -552,6 +552,14 @@ class MissionRunner:
         the hosts whose robots are watched and who sent nothing this cycle (`drd.cluster.telemetry`)."""
         for host in sorted(set(self.gates.hosts()) | set(self.telemetry.due())):
             self._update_gates(host, world)
+
+    def _deliver_gates(self) -> None:
+        """The gate operations queued so far, to their hosts now, their records delivered: a mission ending
+        (`RemoteGates.settle`) has its halts recorded before its `finished`."""
+        world = self.world
+        if world is not None:
+            for host in self.gates.hosts():
+                self._update_gates(host, world)
 
     def take_pending(self, world: WorldRun) -> list[dict[str, Any]]:
         """What the devices' hosts recorded and did not send yet (the halts of a host that lost its controller), as

@@ -1026,6 +1026,7 @@ class Interpreter:
     def _end(self, outcome: str, reason: str) -> None:
         self.rcm.detach(self._apply)
         if self.outcome is None:
+            self.resources.gates.settle()  # the halts of its exit are recorded before its `finished` (docs/trace.md)
             self.outcome, self.reason, self.ended_at = outcome, reason, self.clock.now()
             self._notify(rec.Finished(self.ended_at, self.chart.root, outcome, reason))
             self.host.shutdown()

@@ -183,6 +183,10 @@ class Gates(Protocol):
         """`issuer` (a component or a subtree, qualified) may no longer command `device`."""
         ...
 
+    def settle(self) -> None:
+        """Whatever was told is done, and recorded, when this returns (gates on other hosts: their replies)."""
+        ...
+
 
 class LocalGates:
     """The gates of drivers in this process (the dry-run: every host's drivers; a Creator: its host's)."""
@@ -250,6 +254,9 @@ class LocalGates:
         if gate is not None:
             gate.unbind(issuer, at, reason)
 
+    def settle(self) -> None:
+        """In process, everything told is done at once."""
+
     def orphan_all(self, at: float, reason: str) -> None:
         """Every device here loses every grant and stops (`DeviceGate.orphan`)."""
         for gate in self.gates.values():
@@ -266,6 +273,9 @@ class NoGates:
         return None
 
     def unbind(self, device: str, issuer: str, at: float, reason: str) -> None:
+        return None
+
+    def settle(self) -> None:
         return None
 
 
