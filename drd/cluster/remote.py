@@ -144,6 +144,12 @@ class ControllerFrozen(ComponentError):
     controller went silent), so it is neither marked gone nor placed around."""
 
 
+def frozen_reason(away: float) -> str:
+    """Why a mission cannot go on after its controller was frozen `away` seconds, past the lease."""
+    return (f"this controller was frozen for {away:.1f} s, longer than the lease: its hosts stopped the robots and"
+            " retired the mission's instances meanwhile")
+
+
 #: Seconds a Creator may take to register a started instance (its first start on a host may load its module).
 START_TIMEOUT = 5.0
 
@@ -348,8 +354,7 @@ class ComponentRouter:
             away = self.frozen(sent)
             if away:  # our own silence, not the host's: its robots were stopped and its instances retired meanwhile
                 self.take_halts()  # the halts they made then come before the failure this ends the mission with
-                raise ControllerFrozen(f"this controller was frozen for {away:.1f} s, longer than the lease: its hosts"
-                                       " stopped the robots and retired the mission's instances meanwhile") from None
+                raise ControllerFrozen(frozen_reason(away)) from None
             if op == "start":  # a slow start excludes the host from this placement only; the instance it may
                 self._forget_late_start(host, msg)  # still register there is terminated (best effort)
             else:

@@ -37,7 +37,7 @@ from drd.bus import Bus, Message, Query, Reply, message
 from drd.bus.keys import is_concrete
 from drd.cluster.gates import GateUpdate, GateUpdateReply, RemoteGates, deliver, take_pending
 from drd.cluster.guard import SharedGuard
-from drd.cluster.remote import ComponentCall, ComponentError, ComponentRouter, SimCycle
+from drd.cluster.remote import ComponentCall, ComponentError, ComponentRouter, SimCycle, frozen_reason
 from drd.cluster.telemetry import RemoteTelemetry
 from drd.daemon.migrate import Migrations
 from drd.daemon.placements import PlacementLog
@@ -715,6 +715,9 @@ class WorldRun:
             records = runner.take_pending(self)
             with runner.lock:
                 deliver(records, runner.controller.executive.record, runner.telemetry.seen)
+                for mid in self._unfinished():  # they cannot go on: fail them saying why (not "lost r (expired)")
+                    runner.controller.executive.missions[mid].stop(f"ControllerFrozen: {frozen_reason(away)}",
+                                                                   outcome="failure")
         return time.monotonic()
 
     def _cycle(self, sim_time: float) -> float | None:

@@ -49,3 +49,36 @@ def test_a_controller_frozen_longer_than_the_lease_blames_nobody_but_itself(clus
     assert {h.name: h.state for h in reply.hosts} == {"controller": "up", "ranger1": "up"}
     # ranger1, the one that kept running, rightly took the silent controller for lost meanwhile
     assert "controller controller lost (silent: no load report" in cluster.log("ranger1")
+
+
+def test_a_mission_of_a_controller_frozen_past_the_lease_fails_saying_so(cluster: DaemonCluster,
+                                                                         tmp_path_factory: pytest.TempPathFactory
+                                                                         ) -> None:
+    """Its hosts stopped the robots and retired its instances while the controller was silent: on waking, the
+    mission fails with the controller's freeze as its reason (docs/daemon.md), not with whatever lost grant the
+    first cycle after the wake-up tripped on (`lost rover_a (expired)`: safety audit 7, D5)."""
+    import json
+
+    folder = tmp_path_factory.mktemp("frozen-mission")
+    (folder / "hold.mission").write_text("mission HoldOn {\n    needs r: Ranger\n    Wait(duration: 120s)\n}\n")
+    config = ["--config", str(cluster.hosts_file)]
+    r = cluster.missionctl("run", str(folder / "hold.mission"), *config, "--detach", timeout=60)
+    assert r.returncode == 0, r.stderr[-2000:]
+    mid = r.stdout.strip()
+
+    def mission() -> dict[str, object]:
+        got = cluster.missionctl("status", *config, "--json", timeout=30)
+        found = [m for m in json.loads(got.stdout)["missions"] if m["id"] == mid] if got.returncode == 0 else []
+        return found[0] if found else {}
+
+    eventually(lambda: mission().get("time", 0) > 1.0, "the mission to run", 30, explain=lambda: cluster.tails())
+    pid = cluster.pid("controller")
+    os.kill(pid, signal.SIGSTOP)
+    try:
+        time.sleep(FREEZE)
+    finally:
+        os.kill(pid, signal.SIGCONT)
+    eventually(lambda: mission().get("outcome") is not None, "the mission to end", 30, explain=lambda: cluster.tails())
+    ended = mission()
+    assert ended["outcome"] == "failure", ended
+    assert str(ended["reason"]).startswith("ControllerFrozen: this controller was frozen for"), ended
