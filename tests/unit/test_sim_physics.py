@@ -387,3 +387,20 @@ def test_a_step_of_dt_adds_exactly_dt_to_the_time_as_a_lockstep_clock_does() -> 
         sim.step(0.1)
         t += 0.1
         assert sim.time == t
+
+
+@pytest.mark.parametrize(("v", "omega"), [(1.7e308, 0.0), (0.0, 1.7e308), (-1.7e308, 1.7e308), (1e300, -1e290)])
+def test_a_huge_finite_command_is_clamped_not_refused(v: float, omega: float) -> None:
+    """Reverify audit 7, N1: `v ± omega * base / 2` of a finite 1.7e308 overflowed to inf, the wheels refused it, and
+    on a cluster that one ROS 2 Twist ended the world. It is the top speed, turning the way it was asked."""
+    sim = Simulation(world_with((ranger_at(4.5, 0, UP),)), seed=1)
+    sim.set_max_speed("ranger1", 0.5)
+    sim.set_velocity("ranger1", v, omega)
+    got_v, got_omega = sim.command("ranger1")
+    assert all(math.isfinite(x) for x in (got_v, got_omega))
+    assert abs(got_v) <= 0.5 + 1e-9 and (got_v, got_omega) != (0.0, 0.0)
+    if omega == 0:
+        assert got_v == pytest.approx(0.5)  # straight ahead at the top speed
+    assert (got_v > 0) == (v > 0) and (got_v < 0) == (v < 0) and (got_omega > 0) == (omega > 0)
+    sim.step(0.5)
+    assert all(math.isfinite(x) for x in (sim.pose("ranger1").x, sim.pose("ranger1").y))
