@@ -57,7 +57,8 @@ from dsl.evaluate import EvalError, evaluate, format_value, truthy
 from dsl.export import trigger_label
 from dsl.statechart import ResourceNeed, State, Statechart, Transition
 
-__all__ = ["MAX_MICROSTEPS", "MAX_REPEATS", "Interpreter", "Listener", "MacroStep", "Node", "Phase"]
+__all__ = ["MAX_BEHAVIOR_TURNS", "MAX_MICROSTEPS", "MAX_REPEATS", "Interpreter", "Listener", "MacroStep", "Node",
+           "Phase"]
 
 #: Transitions one macro step may take before the chart is declared livelocked.
 MAX_MICROSTEPS = 10_000
@@ -65,6 +66,10 @@ MAX_MICROSTEPS = 10_000
 #: after 0s`): on a cluster each turn starts and stops a remote component, so 10,000 turns held the controller's
 #: mission loop for 20 s (wedge audit D1).
 MAX_REPEATS = 100
+#: Transitions between the children of one behavior in one instant before it is a loop of zero-time transitions
+#: through several of them: a ring of 100 states took each of its transitions 99 times, 9,900 remote starts and
+#: stops, and held a cluster's controller for 16 s (reverify audit 7, D-a).
+MAX_BEHAVIOR_TURNS = 1_000
 #: Run-to-completion steps of one instant at most, what they did or not (an event nobody hears is one): a backstop.
 MAX_ITERATIONS = 1_000_000
 #: Times closer than this are the same instant (sim time adds 0.1 s steps in floating point).
@@ -75,21 +80,31 @@ _RUNNING, _SUCCESS, _FAILURE = Status.RUNNING, Status.SUCCESS, Status.FAILURE
 
 
 class LoopWatch:
-    """The turns each node took of each transition in the current instant: past MAX_REPEATS of one, the chart loops
-    without time passing (`looping` says where), however few transitions that is in all."""
+    """The turns each node took of each transition in the current instant, and the transitions within each behavior:
+    past MAX_REPEATS of one, or MAX_BEHAVIOR_TURNS in one behavior, the chart loops without time passing (`looping`
+    says where), however few transitions that is in all."""
 
     def __init__(self) -> None:
         self.at = -1.0
         self.turns: dict[tuple[str, str], int] = {}  # (node path, target path) -> turns at `at`
+        self.within: dict[str, int] = {}  # behavior path -> transitions between its children at `at`
         self.looping = ""
 
     def turn(self, now: float, path: str, target: str) -> None:
         if now != self.at:
-            self.at, self.turns = now, {}
+            self.at, self.turns, self.within = now, {}, {}
         turns = self.turns[path, target] = self.turns.get((path, target), 0) + 1
-        if turns > MAX_REPEATS and not self.looping:
+        behavior = path.rpartition("/")[0]
+        within = self.within[behavior] = self.within.get(behavior, 0) + 1
+        if self.looping:
+            return
+        if turns > MAX_REPEATS:
             self.looping = (f"livelock: {path} -> {target} taken {MAX_REPEATS} times without time passing (a loop of"
                             " zero-time transitions)")
+        elif within > MAX_BEHAVIOR_TURNS:
+            self.looping = (f"livelock: {MAX_BEHAVIOR_TURNS:,} transitions between the states of {behavior} without"
+                            f" time passing (a loop of zero-time transitions through them, the last {path} ->"
+                            f" {target})")
 
 
 class MacroStep(NamedTuple):

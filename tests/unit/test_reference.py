@@ -65,11 +65,11 @@ def test_shared_data_is_visible_to_descendants(catalog: Catalog) -> None:
 
 def test_the_limits_the_reference_states_are_the_compilers_and_the_interpreters() -> None:
     """Wedge audit D7: the limits were in docs/design.md only."""
-    from drd.runtime.interpreter import MAX_MICROSTEPS, MAX_REPEATS
+    from drd.runtime.interpreter import MAX_BEHAVIOR_TURNS, MAX_MICROSTEPS, MAX_REPEATS
     from dsl.checker import MAX_BEHAVIOR_DEPTH
     from dsl.parser import MAX_DURATION, MAX_EXPR_DEPTH, MAX_INT_DIGITS
 
     limits = TEXT[TEXT.index("A mission\nthat never lets time pass"):TEXT.index("## Errors")]
     stated = {int(n.replace(",", "")) for n in re.findall(r"\b\d[\d,]*\b", limits)}
-    assert {MAX_REPEATS, MAX_MICROSTEPS, MAX_BEHAVIOR_DEPTH, MAX_EXPR_DEPTH, int(MAX_DURATION // 86400),
-            MAX_INT_DIGITS} <= stated, stated
+    assert {MAX_REPEATS, MAX_BEHAVIOR_TURNS, MAX_MICROSTEPS, MAX_BEHAVIOR_DEPTH, MAX_EXPR_DEPTH,
+            int(MAX_DURATION // 86400), MAX_INT_DIGITS} <= stated, stated

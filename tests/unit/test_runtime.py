@@ -572,3 +572,20 @@ def test_a_reason_already_said_is_logged_as_it_is_not_as_a_component_exception(c
     h.run(until=5)
     logs = [r.text for r in h.of(rec.Log) if r.path == "M/Calibrate"]
     assert logs == ["component process of M/Calibrate did not answer within 0.8 s (killed)"], logs
+
+
+def test_a_zero_time_ring_through_many_states_is_a_livelock_after_a_thousand_transitions(catalog: Catalog) -> None:
+    """Reverify audit 7, D-a: a ring of 100 states took each transition 99 times (under MAX_REPEATS), 9,900 remote
+    starts and stops that held a cluster's controller for 16 s. MAX_BEHAVIOR_TURNS transitions between the states
+    of one behavior in one instant are a loop."""
+    from drd.runtime.interpreter import MAX_BEHAVIOR_TURNS
+
+    names = [f"S{i}" for i in range(100)]
+    body = "\n".join(f" Calibrate as {n}" for n in names)
+    ring = "\n".join(f" {a} -> {b} after 0s" for a, b in zip(names, names[1:] + names[:1], strict=True))
+    text = f"mission M {{\n needs r: Ranger\n start -> S0\n{body}\n{ring}\n}}"
+    h = Harness(compiled(text, catalog), {"Calibrate": Forever}, ranger_world())
+    assert h.run(until=5) == "failure"
+    assert h.interp.reason.startswith(f"livelock: {MAX_BEHAVIOR_TURNS:,} transitions between the states of M without"
+                                      " time passing"), h.interp.reason
+    assert len(h.of(rec.Taken)) == MAX_BEHAVIOR_TURNS + 1 and {r.at for r in h.of(rec.Taken)} == {0.0}
