@@ -312,7 +312,7 @@ def _configure_logging(host: str, log_file: Path | None, level: int) -> None:
     """This process's logging: one handler, and rate limits on what peers can make us log."""
     from drd.daemon import logs
 
-    logs.install(*logs.PEER_LOGGERS)
+    logs.install_daemon_limits()
     handler: logging.Handler
     if log_file is not None:
         log_file.parent.mkdir(parents=True, exist_ok=True)

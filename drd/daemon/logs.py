@@ -50,6 +50,16 @@ class RateLimit(logging.Filter):
 #: simulator. Each by its own name: a logger's filter sees only the records logged on that logger, not those its
 #: children pass up (a `drd.bus.ros2` flood went through the limit put on `drd.bus`).
 PEER_LOGGERS = ("drd.bus", "drd.bus.ros2", "drd.daemon.rejects", "drd.hw.ros2", "drd.ros2", "drd.sim.ros2")
+#: The controller's placement decisions: one line each, which a mission restarting a component many times an
+#: instant turned into 1,200 lines a second (reverify audit 7, D-c). Limited more loosely than what peers send: a
+#: mission placing 50 components at once logs them all. `missionctl status` explains every placement anyway.
+PLACEMENT_LOGGER, PLACEMENT_BURST = "drd.daemon.placement", 100
+
+
+def install_daemon_limits() -> None:
+    """`drd start`'s limits: what peers send, and the controller's placement lines."""
+    install(*PEER_LOGGERS)
+    install(PLACEMENT_LOGGER, burst=PLACEMENT_BURST)
 
 
 def install(*names: str, burst: int = 10, window: float = 10.0) -> None:

@@ -39,6 +39,7 @@ from drd.cluster.gates import GateUpdate, GateUpdateReply, RemoteGates, deliver,
 from drd.cluster.guard import SharedGuard
 from drd.cluster.remote import ComponentCall, ComponentError, ComponentRouter, SimCycle, frozen_reason
 from drd.cluster.telemetry import RemoteTelemetry
+from drd.daemon.logs import PLACEMENT_LOGGER
 from drd.daemon.migrate import Migrations
 from drd.daemon.placements import PlacementLog
 from drd.daemon.resume import Checkpoints, resume, wait_for_hosts
@@ -51,6 +52,7 @@ from drd.sim.service import key as sim_key
 from dsl.catalog import Catalog
 
 log = logging.getLogger("drd.daemon.missions")
+placement_log = logging.getLogger(PLACEMENT_LOGGER)  # rate-limited by `drd start` (drd.daemon.logs)
 
 #: Sim seconds per control cycle, as in the dry-run.
 CONTROL_PERIOD = 0.1
@@ -528,7 +530,7 @@ class MissionRunner:
         # the retry after a start failed there (a host left out with no reason, a lost one, refused nothing)
         if refused_last(self._recent, component, {h for h, why in reasons.items() if why}):
             last = self._recent.pop()
-            log.warning("placement: %s refused %s: %s", last.host, component, reasons[last.host])
+            placement_log.warning("placement: %s refused %s: %s", last.host, component, reasons[last.host])
         now = time.monotonic()
         self._recent = [r for r in self._recent if now - r.at < RECENT_PLACEMENT]
         announced = self.host_views()
@@ -544,7 +546,7 @@ class MissionRunner:
             raise ComponentError(decision.reason)
         seen = next((v.running.get(component, 0) for v in announced if v.name == decision.host), 0)
         self._recent.append(Recent(decision.host, component, seen, now))
-        log.info("placement: %s on %s (%s)", component, decision.host, "; ".join(decision.reasons))
+        placement_log.info("placement: %s on %s (%s)", component, decision.host, "; ".join(decision.reasons))
         return decision.host
 
     def flush_gates(self, world: WorldRun) -> None:

@@ -26,7 +26,7 @@ def kept() -> Iterator[Kept]:
     handler = Kept()
     root = logging.getLogger()
     root.addHandler(handler)
-    saved = {name: list(logging.getLogger(name).filters) for name in logs.PEER_LOGGERS}
+    saved = {name: list(logging.getLogger(name).filters) for name in (*logs.PEER_LOGGERS, logs.PLACEMENT_LOGGER)}
     try:
         yield handler
     finally:
@@ -42,3 +42,19 @@ def test_a_flood_on_a_peer_logger_is_cut_to_ten_lines(kept: Kept, name: str) -> 
     for i in range(100):
         log.warning("ros2 %s: a payload that is not a %s: %s", "/ranger1/odom", "nav_msgs/msg/Odometry", i)
     assert len([r for r in kept.records if r.name == name]) == 10
+
+
+def test_the_controllers_placement_lines_are_cut_to_a_hundred_per_window(kept: Kept) -> None:
+    """Reverify audit 7, D-c: a mission restarting a component 99 times an instant logged 1,200 placement lines a
+    second. `drd start` limits them (loosely: a mission placing 50 components at once logs them all)."""
+    logs.install_daemon_limits()
+    log = logging.getLogger(logs.PLACEMENT_LOGGER)
+    level = log.level
+    log.setLevel(logging.INFO)  # as a daemon's log is
+    try:
+        for _ in range(1_000):
+            log.info("placement: %s on %s (%s)", "Storm", "ranger1", "fewest instances")
+    finally:
+        log.setLevel(level)
+    placed = [r for r in kept.records if r.name == logs.PLACEMENT_LOGGER]
+    assert len(placed) == logs.PLACEMENT_BURST == 100
