@@ -17,6 +17,8 @@ import sys
 import threading
 from types import FrameType
 
+from drd.signals import set_soon
+
 from .base import Query, Reply
 from .messages import Message, Ping, Pong
 
@@ -36,7 +38,7 @@ def main(argv: list[str] | None = None) -> int:
     stop = threading.Event()
 
     def on_signal(_signum: int, _frame: FrameType | None) -> None:
-        stop.set()
+        set_soon(stop)
 
     signal.signal(signal.SIGTERM, on_signal)
     signal.signal(signal.SIGINT, on_signal)

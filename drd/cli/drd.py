@@ -40,6 +40,7 @@ from drd.cli.common import (
 )
 from drd.cli.common import version as installed_version
 from drd.cli.options import ComponentsOption
+from drd.signals import set_soon
 from dsl.catalog import Kind
 
 if TYPE_CHECKING:
@@ -265,7 +266,7 @@ def _serve(cluster: Cluster, host: str, cat: Catalog, tr: Transport, rd: Path, c
         name = signal.Signals(signum).name
         logging.getLogger("drd.daemon").info("received %s, stopping", name)
         daemon.stop_reason = name
-        stop.set()
+        set_soon(stop)
 
     signal.signal(signal.SIGTERM, on_signal)
     signal.signal(signal.SIGINT, on_signal)
@@ -548,7 +549,7 @@ def _serve_ros2(cluster: Cluster, sim_world: Any, world_name: str, listen: str, 
              if unknown else "is another router or drd on that port?")
     stop = threading.Event()
     for signum in (signal.SIGTERM, signal.SIGINT):
-        signal.signal(signum, lambda _n, _f: stop.set())
+        signal.signal(signum, lambda _n, _f: set_soon(stop))
     try:
         served = ServedRobots(Simulation(charged(sim_world, hosts_charges(cluster)), seed=seed), cluster, session,
                               domain_id=domain)

@@ -36,6 +36,7 @@ from drd.cli.common import (
     write_file,
 )
 from drd.cli.options import ComponentsOption
+from drd.signals import set_soon
 from dsl import Compiled, Limits, compile_file
 from dsl.catalog import Catalog
 from dsl.limits import DEFAULT as DEFAULT_LIMITS
@@ -752,7 +753,7 @@ def _ctrl_c_stops(stop: threading.Event) -> Iterator[None]:
     import signal
 
     def first(signum: int, frame: FrameType | None) -> None:
-        stop.set()
+        set_soon(stop)
         signal.signal(signal.SIGINT, signal.default_int_handler)
 
     try:
