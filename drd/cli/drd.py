@@ -333,13 +333,18 @@ def _detach(host: str, cluster: str, config: Path, rd: Path, log_file: Path, loa
 
     log_file = log_file.absolute()
     log_file.parent.mkdir(parents=True, exist_ok=True)
-    args = [sys.executable, "-m", "drd.cli.drd", "start", "--host", host, "--config", str(config.absolute()),
+    # -P: not the working directory first on the import path, as `python -m` puts it (a foreground `drd start` has
+    # it nowhere): a user's package there shadowed their PYTHONPATH (reverify audit 7, D-e); drd itself is found
+    # where this process found it
+    args = [sys.executable, "-P", "-m", "drd.cli.drd", "start", "--host", host, "--config", str(config.absolute()),
             "--run-dir", str(rd.absolute()), "--log-file", str(log_file), "--load-period", str(load_period),
             "--peer-grace", str(peer_grace), "--log-level", log_level]
     for folder in extra or ():
         args += ["--components", str(Path(folder).absolute())]
+    here = str(Path(__file__).resolve().parents[2])  # the folder holding the drd package
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join(p for p in (os.environ.get("PYTHONPATH", ""), here) if p)}
     with log_file.open("ab") as fh:
-        proc = subprocess.Popen(args, stdin=subprocess.DEVNULL, stdout=fh, stderr=fh, start_new_session=True)
+        proc = subprocess.Popen(args, stdin=subprocess.DEVNULL, stdout=fh, stderr=fh, start_new_session=True, env=env)
     deadline = time.monotonic() + READY_TIMEOUT
     while time.monotonic() < deadline:
         info = runfiles.read(runfiles.path_of(rd, cluster, host))
