@@ -85,6 +85,17 @@ def debugging() -> bool:
     return os.environ.get("DRD_DEBUG", "") not in ("", "0")
 
 
+class ComponentStuck(BaseException):
+    """Raised by the dry-run in a component call that ran past its limit (`drd.stuck`), where the call was stuck.
+    Not an `Exception`, on purpose: a component's `except Exception` retry loop caught it and went on, and the run
+    hung for ever (reverify audit 7, D-d); `finally` blocks still run. Control flow like `KeyboardInterrupt`, never
+    leaving drd: where drd calls component code it catches `COMPONENT_RAISES`, and the state fails with it."""
+
+
+#: What a call into component code may raise that drd turns into that state's failure.
+COMPONENT_RAISES: tuple[type[BaseException], ...] = (Exception, ComponentStuck)
+
+
 def raised(e: BaseException, when: str = "") -> str:
     """What a component's exception says, in both modes alike: its type and message and where it was raised, the
     innermost frame of the component's own code (`(at mykit/spin.py:12, in step)`; a path under the working folder

@@ -7,8 +7,11 @@ thread looks at the main thread's stack every `poll` seconds: the outermost fram
 drd's, not the standard library's: `drd.errors.components_own`) is the call drd made into it. When one such frame
 is still there after `limit` seconds, the main thread is interrupted (a signal, whose handler raises
 `ComponentStuck` there, if that call is still running): the exception leaves the component like any it raises,
-and its state fails, naming the line it was stuck at. A call that catches the exception and goes on is
-interrupted again each `limit`; the run goes on as soon as it returns.
+and its state fails, naming the line it was stuck at. `ComponentStuck` is not an `Exception`: a component's
+`except Exception` lets it through (its `finally` blocks run). A call that catches it anyway (`except
+BaseException`) and goes on is interrupted again each `limit`; the run goes on as soon as it returns. A call
+stuck inside one C function (a huge `sum(range(...))`, a regular expression that backtracks for ever) cannot be
+interrupted: Python runs the handler only between two bytecodes.
 
 Only in the main thread (signals); a component that ends the process itself (`os._exit`) cannot be helped here.
 """
@@ -25,15 +28,10 @@ from contextlib import contextmanager
 from types import FrameType
 
 from drd import runtime
-from drd.errors import ComponentFailure, components_own
+from drd.errors import ComponentStuck, components_own
 
 #: Wall seconds a component call may run in the dry-run before it is interrupted (a cluster's worker: 0.8 s).
 STUCK_AFTER = 5.0
-
-
-class ComponentStuck(ComponentFailure):
-    """Raised in a component call that ran longer than the limit (what its state fails with, located at the line it
-    was stuck at, as the component's own exception)."""
 
 
 #: Where drd calls component code from (the interpreter, the component host, the device proxies).

@@ -12,7 +12,7 @@ from __future__ import annotations
 from collections.abc import Callable, Iterator, Mapping
 from typing import Any
 
-from drd.errors import ComponentFailure, logged, raised
+from drd.errors import COMPONENT_RAISES, ComponentFailure, logged, raised
 from drd.runtime import records as rec
 from drd.runtime.component import Component, Context, Registry, Services, Status
 from drd.runtime.emits import check_emit
@@ -80,7 +80,7 @@ class ComponentHost:
             try:
                 comp = factory()
                 comp.setup(ctx)
-            except Exception as e:  # component code is not ours to trust
+            except COMPONENT_RAISES as e:  # component code is not ours to trust
                 self.failed(node, e)
                 return
             self._made[node.path] = (comp, ctx, lazy)
@@ -91,7 +91,7 @@ class ComponentHost:
             if restore is not None:
                 comp.restore(restore[0])
             comp.start()
-        except Exception as e:  # component code is not ours to trust
+        except COMPONENT_RAISES as e:  # component code is not ours to trust
             self.failed(node, e)
             return
         self.running[node] = None
@@ -153,7 +153,7 @@ class ComponentHost:
         """One control cycle of one component: its status, or None when it raised (its state fails)."""
         try:
             return comp.step(now)
-        except Exception as e:  # component code is not ours to trust
+        except COMPONENT_RAISES as e:  # component code is not ours to trust
             self.failed(node, e)
             return None
 
@@ -175,7 +175,7 @@ class ComponentHost:
         self.running.pop(node, None)
         try:
             comp.terminate(_FINAL_STATUS.get(status, _RUNNING))
-        except Exception as e:  # the node is leaving anyway: just say so
+        except COMPONENT_RAISES as e:  # the node is leaving anyway: just say so
             self.notify(rec.Log(self.now(), node.path, _words(e)))
 
     def shutdown(self) -> None:
@@ -185,7 +185,7 @@ class ComponentHost:
         for path, (comp, _ctx, _lazy) in made.items():
             try:
                 comp.shutdown()
-            except Exception as e:  # component code is not ours to trust
+            except COMPONENT_RAISES as e:  # component code is not ours to trust
                 self.notify(rec.Log(self.now(), path, _words(e, " in shutdown")))
 
     def call(self, node: Node, fn: Callable[[], Any], fail: bool = True) -> bool:
@@ -193,14 +193,14 @@ class ComponentHost:
         try:
             fn()
             return True
-        except Exception as e:  # component code is not ours to trust
+        except COMPONENT_RAISES as e:  # component code is not ours to trust
             if fail:
                 self.failed(node, e)
             else:
                 self.notify(rec.Log(self.now(), node.path, _words(e)))
             return False
 
-    def failed(self, node: Node, e: Exception) -> None:
+    def failed(self, node: Node, e: BaseException) -> None:
         """`node` fails with what `e` says: a component's own exception located in its code, a reason already said
         (`ComponentFailure.said`) or the runtime's refusal to bind a need (`BindingError`) as it is."""
         why = str(e) if _said(e) else raised(e)
@@ -229,13 +229,13 @@ class ComponentHost:
         return {need: b.unit for need, b in bindings.items()}, devices, bindings
 
 
-def _said(e: Exception) -> bool:
+def _said(e: BaseException) -> bool:
     """A reason already said in words (a remote component's failure, its host's loss; a refused binding): not an
     exception of the component's own code, to be located in it."""
     return (isinstance(e, ComponentFailure) and e.said) or isinstance(e, BindingError)
 
 
-def _words(e: Exception, when: str = "") -> str:
+def _words(e: BaseException, when: str = "") -> str:
     """What the log says of `e`: a reason already said as it is (never "component raised ... at drd's own line"),
     else the component's exception located in its code (`drd.errors.logged`)."""
     return str(e) if _said(e) else logged(e, when)

@@ -23,6 +23,7 @@ import functools
 from collections.abc import Callable, Iterable, Mapping
 from typing import Any, Literal, NamedTuple
 
+from drd.errors import COMPONENT_RAISES
 from drd.rcm import Deadlock, Granted, Released, ReleaseReason, ResourceManager, Revoked, Unit, Unsatisfiable
 from drd.rcm import Waiting as WaitingDecision
 from drd.rcm.constraints import Measure, measure
@@ -263,7 +264,7 @@ class Interpreter:
                     status = comp.step(now)
                     if status is not _RUNNING and status is not _SUCCESS and status is not _FAILURE:
                         status = step_status(status, node.state.component or node.state.name)  # or StatusError
-                except Exception as e:  # component code is not ours to trust
+                except COMPONENT_RAISES as e:  # component code is not ours to trust
                     host.failed(node, e)
                     status = _RUNNING
                 if self.events:  # what it emitted, now that its step returned: before the next one steps

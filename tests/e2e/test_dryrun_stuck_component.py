@@ -45,6 +45,15 @@ class Waiter(Component):
     def step(self, now):
         threading.Event().wait()  # stuck here
         return Status.RUNNING
+
+
+class Retrier(Component):
+    def step(self, now):
+        while True:
+            try:
+                time.sleep(0.05)  # stuck here
+            except Exception:  # a retry loop: it swallowed the first interruption and went on for ever
+                self.ctx.log("retrying")
 '''
 MANIFEST = "name: {name}\nkind: behavior\ndescription: Never returns.\nentry_point: stuckkit:{name}\n"
 NEEDS = "needs:\n  drive: {type: Drive, of: [Ranger], description: base}\ninterfaces: [Drive]\n"
@@ -53,7 +62,7 @@ NEEDS = "needs:\n  drive: {type: Drive, of: [Ranger], description: base}\ninterf
 @pytest.fixture
 def kit(tmp_path: Path) -> Path:
     (tmp_path / "stuckkit.py").write_text(KIT)
-    for name, extra in (("Spinner", NEEDS), ("Blocker", ""), ("Waiter", "")):
+    for name, extra in (("Spinner", NEEDS), ("Blocker", ""), ("Waiter", ""), ("Retrier", "")):
         (tmp_path / "comps" / name).mkdir(parents=True)
         (tmp_path / "comps" / name / "manifest.yaml").write_text(MANIFEST.format(name=name) + extra)
     return tmp_path
@@ -63,6 +72,7 @@ def kit(tmp_path: Path) -> Path:
     ("mission SpinOut {\n    needs ranger: Ranger\n    Spinner\n}\n", "step"),
     ("mission BlockOut {\n    Blocker\n}\n", "start"),
     ("mission WaitOut {\n    Waiter\n}\n", "step"),  # in the standard library's code, under the component's
+    ("mission RetryOut {\n    Retrier\n}\n", "step"),  # `except Exception` does not catch it (reverify 7, D-d)
 ])
 def test_a_component_call_that_never_returns_fails_its_state_and_the_run_reports(kit: Path, mission: str,
                                                                                  call: str) -> None:
