@@ -189,7 +189,7 @@ def _preview(chart: Statechart, config: Path, world: str | None, components: lis
     into `output` (plain text, or JSON)."""
     from drd.hosts import HostsError, load_hosts
     from drd.preview import preview
-    from drd.sim.world import WorldError, load_world
+    from drd.sim.world import WorldError, check_hosts, load_world
     from dsl.export import to_dict
 
     cat = catalog(components)
@@ -197,6 +197,9 @@ def _preview(chart: Statechart, config: Path, world: str | None, components: lis
     try:
         cluster = load_hosts(hosts_file, cat)
         sim_world = load_world(_world_file(world, cluster.world, hosts_file))
+        disagree = check_hosts(sim_world, cluster)  # as a dry-run says it, before any driver is built for it
+        if disagree:
+            fail_all([str(d) for d in disagree])
         [p] = preview([(chart, None)], cluster, sim_world, cat)
     except (HostsError, WorldError) as e:
         fail_all(e.problems)
