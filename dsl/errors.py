@@ -202,10 +202,21 @@ class Reporter:
         return any(d.severity is Severity.ERROR for d in self.diagnostics)
 
 
+#: How other languages spell the value types (`string` in a manifest written after a JSON schema): named for what
+#: they are here, where no close spelling is.
+OTHER_SPELLINGS = {"string": "str", "integer": "int", "boolean": "bool", "double": "float", "number": "float",
+                   "real": "float", "time": "duration"}
+
+
 def did_you_mean(name: str, candidates: Iterable[str], max_distance: int = 2) -> str | None:
-    """`did you mean X?` for the closest candidate within `max_distance` edits, else None."""
+    """`did you mean X?` for the closest candidate within `max_distance` edits (or a value type's other spelling,
+    `OTHER_SPELLINGS`), else None."""
+    candidates = set(candidates)
+    other = OTHER_SPELLINGS.get(name.lower())
+    if other is not None and other in candidates:
+        return f"did you mean {other}?"
     best: tuple[int, str] | None = None
-    for cand in sorted(set(candidates)):
+    for cand in sorted(candidates):
         if abs(len(cand) - len(name)) > max_distance:
             continue
         d = edit_distance(name.lower(), cand.lower()) if name.lower() != cand.lower() else 0

@@ -41,6 +41,8 @@ ERRORS: list[tuple[str, str, str, str | None]] = [
      "2:18 syntax: unexpected character \"'\"", "double quotes"),
     ("day-unit-over-a-year", m("  Wait(duration: 366d)"),
      "2:18 syntax: unknown duration unit d in `366d`: write 250ms, 30s, 5min or 2h", "at most 365 days (8760h)"),
+    ("other-languages-type-spelling", m("  var label: string = \"a\"\n  Observe"), "2:14 unknown type string",
+     "did you mean str?"),
     ("unterminated-string", m('  Observe -> done / log "no end'),
      "2:25 syntax: unterminated string", 'ends with " on the same line'),
     ("unclosed-brace", "mission M {\n  Observe\n", "1:11 syntax: this `{` of `mission M` is never closed (the file "
