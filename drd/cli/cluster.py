@@ -790,10 +790,14 @@ def _phase_of(path: str, phases: Mapping[str, str]) -> str:
 
 def track_phase(phases: dict[str, str], record: Any) -> None:
     """Keep `phases` (path -> `waiting` or `suspended`) up to date with one record of the mission: a node waits from
-    its `waiting` to its `granted`, is suspended from its `suspended` to its `resumed`; an exit ends both."""
+    its `waiting` to its `granted`, is suspended from its `suspended` to its `resumed`; an exit ends both, and a
+    restore (after a controller loss) all of them: every state is entered afresh, with no `resumed` (a node
+    suspended before the loss was shown suspended for ever, though it ran again)."""
     from drd.runtime import records as rec
 
-    if isinstance(record, rec.Waiting):
+    if isinstance(record, rec.Restored):
+        phases.clear()
+    elif isinstance(record, rec.Waiting):
         phases.setdefault(record.path, "waiting")
     elif isinstance(record, rec.Suspended):
         phases[record.path] = "suspended"

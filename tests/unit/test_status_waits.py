@@ -138,3 +138,14 @@ def test_the_progress_line_says_suspended_and_waiting_from_the_records() -> None
     assert str(progress_line(3.0, ["Starved", "Starved/WantEast"], 80, phases)).endswith("waiting WantEast")
     track_phase(phases, rec.Exited(4.0, "Starved/WantEast", "Starved/WantEast", "stopped"))
     assert "Starved/WantEast" not in phases
+
+
+def test_a_restore_clears_what_was_suspended_before_the_controller_was_lost() -> None:
+    """Safety audit 7 (seen on its cluster): a node suspended before a controller loss, entered again by the restore
+    and granted, was still shown `suspended` (no `resumed` follows a restore)."""
+    phases: dict[str, str] = {}
+    active = ["HogN", "HogN/Rogue"]
+    track_phase(phases, rec.Suspended(7.1, "HogN"))
+    for r in (rec.Restored(9.3, "HogN", 7.0, 2.0), rec.Waiting(9.3, "HogN", ("r: Ranger",)), rec.Granted(17.3, "HogN")):
+        track_phase(phases, r)
+    assert str(progress_line(18.0, active, 80, phases)).endswith("active Rogue"), phases
