@@ -60,10 +60,11 @@ def signed_depth(x: float, y: float, rects: list[tuple[float, float, float, floa
 class EvalError(Exception):
     """An expression could not be evaluated (unknown name, division by zero, bad operand)."""
 
-    def __init__(self, message: str, span: Span):
+    def __init__(self, message: str, span: Span, missing: bool = False):
         super().__init__(f"{span}: {message}")
         self.message = message
         self.span = span
+        self.missing = missing  # a value without the property asked of it (`scout3 has no carrier`)
 
 
 def evaluate(expr: ast.Expr, names: Mapping[str, object], count: CountFn | None = None,
@@ -203,7 +204,12 @@ class _Evaluator:
                 where, var = e.where, snake(type_name)
 
                 def pred(candidate: object) -> bool:
-                    return truthy(where, {**self.names, var: candidate}, self.count, self.place)
+                    try:
+                        return truthy(where, {**self.names, var: candidate}, self.count, self.place)
+                    except EvalError as err:  # a resource without the property does not satisfy the condition
+                        if err.missing:  # (as for `needs x: T where ...`): a Scout on the floor has no carrier
+                            return False
+                        raise
             return self.count(type_name, pred)
         values = [self.eval(a) for a in e.args]
         if e.func == "point":
@@ -249,7 +255,7 @@ def _attribute(obj: object, attr: str, span: Span) -> object:
         value = getattr(obj, attr)
         if not callable(value):
             return value
-    raise EvalError(f"{format_value(obj)} has no {attr}", span)
+    raise EvalError(f"{format_value(obj)} has no {attr}", span, missing=True)
 
 
 __all__ = ["CountFn", "EvalError", "PlaceFn", "Point", "coordinates", "evaluate", "format_value", "signed_depth",

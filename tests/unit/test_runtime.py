@@ -589,3 +589,22 @@ def test_a_zero_time_ring_through_many_states_is_a_livelock_after_a_thousand_tra
     assert h.interp.reason.startswith(f"livelock: {MAX_BEHAVIOR_TURNS:,} transitions between the states of M without"
                                       " time passing"), h.interp.reason
     assert len(h.of(rec.Taken)) == MAX_BEHAVIOR_TURNS + 1 and {r.at for r in h.of(rec.Taken)} == {0.0}
+
+
+def test_count_where_passes_over_a_resource_without_the_property(catalog: Catalog) -> None:
+    """New-user audit 8, D1: a Scout on the floor has no `carrier`, and `count(Scout where scout.carrier == r)` failed
+    the whole mission (`scout3 has no carrier`) where `needs s: Scout where s.carrier == r` passed over it."""
+    from drd.rcm import Aggregate
+
+    text = """
+mission M {
+    needs r: Ranger
+    var aboard: int = 0
+    start -> Calibrate
+    Calibrate -> done / set aboard = count(Scout where scout.carrier == r)
+}"""
+    floor = [Unit("floor.wheels", "Drive", host="ranger1"),
+             Aggregate("floor", "Scout", {"wheels": "floor.wheels"}, {"battery": 1.0}, host="ranger1")]
+    h = Harness(compiled(text, catalog), {"Calibrate": Timed}, [*ranger_world(1, 2), *floor])
+    assert h.run() == "success", h.interp.reason
+    assert h.interp.root is not None and h.interp.root.scope["aboard"] == 2
