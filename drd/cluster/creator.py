@@ -206,7 +206,9 @@ class Creator:
         self._world: Any = None  # the simulation the drivers use (local or remote), for its `version`
         self._ahead_version: int | None = None  # the world's version when the current run's readings were read
         mine = cluster.host(host)
-        self._devices = {d.id for d in mine.devices} | {r.id for r in mine.robots}  # what a need may be bound to
+        # what a need may be bound to: a device of this host, or a robot of the cluster (held as a whole: a Scout a
+        # launch or tow moves, `MOVES`; it has no device here to call, wherever its parts are)
+        self._devices = {d.id for d in mine.devices} | {r.id for r in cluster.robots}
         self._sharable = {d.id for d in mine.devices if d.sharable}
         self._command_errors: list[tuple[str, str]] = []  # (instance key, error) of setpoints that raised
         self._lock = threading.Lock()
@@ -887,7 +889,7 @@ class Creator:
         for need, binding in bindings.items():
             if len(binding) != 3 or binding[0] not in self._devices:
                 raise CreatorError(f"{path}: need {need} is bound to {binding[0] if binding else '?'},"
-                                   f" not a device of {self.host}")
+                                   f" neither a device of {self.host} nor a robot of the cluster")
 
     def _start_instance(self, call: ComponentCall, inst: Instance | None) -> Instance:
         ct = self._check(call)

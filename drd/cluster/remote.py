@@ -643,6 +643,10 @@ class RemoteComponent(Component):
         self._rank = list(ctx.rank)
         self._bindings = {need: [b.unit, b.robot or "", b.part or ""] for need, b in ctx.bindings.items()}
         hosts = {h for h in (self.router.resource_hosts.get(b.unit) for b in ctx.bindings.values()) if h}
+        gates = self.router.gates
+        if len(hosts) > 1 and gates is not None:  # a robot held as a whole (a Scout it launches) has no device to
+            devices = {gates.device_hosts.get(b.unit) for b in ctx.bindings.values()}  # call: where the devices
+            hosts = {h for h in devices if h} or hosts  # are decides (new-user audit 8, D2)
         if len(hosts) > 1:
             raise ComponentError(f"{ctx.path}: its devices are on several hosts ({', '.join(sorted(hosts))})")
         self.host = next(iter(hosts)) if hosts else None
