@@ -72,6 +72,18 @@ def test_entry_points_follow_the_manifests_and_the_naming_rule(catalog: Catalog)
         == "components.my_radio.radio_channel:MyRadioRadioChannel"
 
 
+def test_a_users_own_device_type_simulates_with_the_class_its_manifest_names(catalog: Catalog) -> None:
+    """New-user audit 8, D3: `driver: sim` took only entry points under drd's components.sim, so a user's own device
+    type (a Tug, `entry_point: mykit.tug:SimTug`) could not be simulated without editing drd's tree."""
+    from dataclasses import replace
+
+    drive = catalog.get("Drive")
+    assert drive is not None
+    tug = replace(drive, name="Tug", entry_point="mykit.tug:SimTug")
+    own = replace(catalog, components={**catalog.components, "Tug": tug})
+    assert driver_entry_point(Device("h.tug", "h", "Tug", "sim"), own) == "mykit.tug:SimTug"
+
+
 def test_drive_moves_the_ranger_clamped_to_max_speed(cluster: Cluster, catalog: Catalog) -> None:
     sim, hd = build(cluster, catalog)
     drive = hd.robots["ranger1"]["drive"]
