@@ -122,11 +122,12 @@ def check_hosts(world: World, cluster: Cluster) -> list[WorldProblem]:
     def fail(key: str, message: str) -> None:
         problems.append(WorldProblem(world.source, key, message))
 
+    types = {r.id: r.type for r in cluster.robots}
     for robot in cluster.robots:
         if robot.type not in ("Ranger", "Scout") and robot.id not in rangers | scouts:  # a kind of the team's own
             fail("rangers", f"no robot {robot.id!r} (a {robot.type}), which {cluster.source} configures: a robot of"
-                            " any type takes a body here, a Ranger's under rangers (0.3 m, may carry Scouts) or a"
-                            " Scout's under scouts (0.08 m)")
+                            " any type takes a body here, a Ranger's under rangers (0.3 m; only a Ranger carries"
+                            " Scouts) or a Scout's under scouts (0.08 m)")
         elif robot.type == "Ranger" and robot.id not in rangers:
             fail("rangers", f"no Ranger {robot.id!r}, which {cluster.source} configures")
         elif robot.type == "Scout" and robot.id not in scouts:
@@ -135,8 +136,12 @@ def check_hosts(world: World, cluster: Cluster) -> list[WorldProblem]:
             carrier = world.carrier(robot.id)
             where = f"in the magazine of {carrier}" if carrier else "on the floor"
             carried = f"carried by {robot.carrier}" if robot.carrier else "not carried"
+            kind = types.get(carrier or "", "Ranger")
             fix = (f"put it in {robot.carrier}'s magazine here, or remove its carrier there" if robot.carrier else
-                   f"move it from {carrier}'s magazine to scouts here, or give it carrier: {carrier} there")
+                   f"move it from {carrier}'s magazine to scouts here, or give it carrier: {carrier} there"
+                   if kind == "Ranger" else
+                   f"move it from {carrier}'s magazine to scouts here: {carrier} is a {kind}, and only a Ranger"
+                   " carries Scouts (a Scout's carrier is a Ranger)")
             fail(_spawn_key(world, robot.id), f"Scout {robot.id!r} starts {where}, but {cluster.source} has it"
                                               f" {carried}: {fix}")
     configured = {r.id for r in cluster.robots}

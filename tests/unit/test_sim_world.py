@@ -98,8 +98,8 @@ def test_a_robot_of_a_teams_own_type_missing_from_the_world_is_named_at_load(cat
     world = load_world(ROOT / "worlds" / "corridor.yaml")
     problems = [f"{p.key}: {p.message}" for p in check_hosts(world, own)]
     assert problems == ["rangers: no robot 'bb8' (a Crawler), which hosts.yaml configures: a robot of any type takes"
-                        " a body here, a Ranger's under rangers (0.3 m, may carry Scouts) or a Scout's under scouts"
-                        " (0.08 m)"]
+                        " a body here, a Ranger's under rangers (0.3 m; only a Ranger carries Scouts) or a Scout's"
+                        " under scouts (0.08 m)"]
     data = yaml.safe_load((ROOT / "worlds" / "corridor.yaml").read_text())
     data.setdefault("scouts", []).append({"id": "bb8", "at": list(world.rooms[0].center), "heading": 0})
     assert check_hosts(parse_world(data, "w.yaml"), own) == []
@@ -320,3 +320,24 @@ def test_the_worlds_of_a_cluster_are_beside_the_file_it_was_read_from(tmp_path: 
     hosts = tmp_path / "hosts.yaml"
     hosts.write_text((ROOT / "hosts.yaml").read_text())
     assert world_dirs(load_hosts(hosts, catalog)) == (tmp_path,)
+
+
+def test_a_scout_in_the_magazine_of_a_robot_that_is_no_ranger_is_told_to_leave_it(catalog: Catalog) -> None:
+    """New-user audit 8, D4: the hint said to give the Scout `carrier: bb8` in the hosts file, which the hosts file
+    then refused (a Scout's carrier is a Ranger): a dead end. Only a Ranger carries Scouts."""
+    import dataclasses
+
+    cluster = load_hosts(ROOT / "hosts.yaml", catalog)
+    host = cluster.hosts[1]
+    crawler = dataclasses.replace(host.robots[0], id="bb8", type="Crawler", properties={})
+    floor = [dataclasses.replace(r, properties={k: v for k, v in r.properties.items() if k != "carrier"})
+             if r.id == "scout6" else r for r in host.robots]
+    own = dataclasses.replace(cluster, hosts=(cluster.hosts[0], dataclasses.replace(
+        host, robots=(*floor, crawler)), *cluster.hosts[2:]))
+    data = yaml.safe_load((ROOT / "worlds" / "corridor.yaml").read_text())
+    data["rangers"][0]["magazine"].remove("scout6")
+    data["rangers"].append({"id": "bb8", "at": [1.0, 0.0], "heading": 0, "magazine": ["scout6"]})
+    problems = [f"{p.key}: {p.message}" for p in check_hosts(parse_world(data, "w.yaml"), own)]
+    assert problems == ["rangers[1].magazine: Scout 'scout6' starts in the magazine of bb8, but hosts.yaml has it not"
+                        " carried: move it from bb8's magazine to scouts here: bb8 is a Crawler, and only a Ranger"
+                        " carries Scouts (a Scout's carrier is a Ranger)"], problems
