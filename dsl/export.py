@@ -258,6 +258,8 @@ def _args(s: State) -> str:
 
 
 def _seconds(x: float) -> str:
+    if x == 0:
+        return "0s"  # as a mission writes it (`after 0s`), not `0ms`
     for unit, size in (("h", 3600), ("min", 60), ("s", 1)):
         if x >= size and x % size == 0:
             return f"{int(x // size)}{unit}"

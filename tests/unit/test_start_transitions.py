@@ -116,3 +116,13 @@ def test_the_drawings_start_with_the_start_transitions_and_hide_the_waiting_stat
     mermaid = to_mermaid(r.statechart)
     assert "[*] --> s1 : when true" in mermaid and "[*] --> s2 : after 1s" in mermaid
     assert '"start' not in mermaid and 'label="start' not in to_dot(r.statechart)
+
+
+def test_a_zero_timeout_is_shown_as_written(catalog: Catalog) -> None:
+    """New-user audit 8: `after 0s` was shown `after 0ms`."""
+    from dsl.export import trigger_label
+
+    r = compile_text("mission M {\n    Wait(duration: 1s) as a\n    a -> a after 0s [false]\n}\n", catalog, "t.mission")
+    assert r.statechart is not None
+    (t,) = [t for s in r.statechart.states.values() for t in s.transitions if t.delay == 0]
+    assert trigger_label(t) == "after 0s [false]"
