@@ -206,9 +206,7 @@ class Creator:
         self._world: Any = None  # the simulation the drivers use (local or remote), for its `version`
         self._ahead_version: int | None = None  # the world's version when the current run's readings were read
         mine = cluster.host(host)
-        # what a need may be bound to: a device of this host, or a robot of the cluster (held as a whole: a Scout a
-        # launch or tow moves, `MOVES`; it has no device here to call, wherever its parts are)
-        self._devices = {d.id for d in mine.devices} | {r.id for r in cluster.robots}
+        self._devices = {d.id for d in mine.devices} | {r.id for r in cluster.robots}  # what a need may be bound to
         self._sharable = {d.id for d in mine.devices if d.sharable}
         self._command_errors: list[tuple[str, str]] = []  # (instance key, error) of setpoints that raised
         self._lock = threading.Lock()
@@ -886,6 +884,8 @@ class Creator:
         return ct
 
     def _check_bindings(self, path: str, bindings: dict[str, list[str]]) -> None:
+        """A need is bound to a device of this host, or to a robot of the cluster held as a whole (a Scout a launch
+        moves, `MOVES`: no device here to call, wherever its parts are)."""
         for need, binding in bindings.items():
             if len(binding) != 3 or binding[0] not in self._devices:
                 raise CreatorError(f"{path}: need {need} is bound to {binding[0] if binding else '?'},"
