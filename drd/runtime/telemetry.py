@@ -7,6 +7,8 @@ the clock, and only when an expression asks (`ranger.x` in a guard, a constraint
 
 from __future__ import annotations
 
+import math
+
 from collections.abc import Callable, Mapping
 from typing import Any
 
@@ -46,8 +48,9 @@ class DriverTelemetry:
         if drive is None:
             return None
         out: dict[str, float] = {}
-        try:
-            out["x"], out["y"], out["heading"] = drive.odometry()
+        try:  # the live `heading` in [-pi, pi], as a ROS yaw: odometry keeps counting turns (7.37 after one)
+            out["x"], out["y"], heading = drive.odometry()
+            out["heading"] = math.remainder(float(heading), math.tau)
         except Exception:  # a lost robot cannot say where it is
             return None
         reading = getattr(drive, "battery", None)
