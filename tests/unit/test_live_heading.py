@@ -1,0 +1,35 @@
+"""A robot's live `heading` (what `where`, `missionctl query` and `status` read) is an angle in [-pi, pi], as a ROS
+yaw, however many turns the robot made; its driver's odometry keeps counting them (new-user audit 8: a Crawler
+showed 7.374 rad after a spin)."""
+
+from __future__ import annotations
+
+import math
+from types import SimpleNamespace
+
+import pytest
+
+from drd.rcm import Aggregate, ResourceManager, Unit
+from drd.runtime.pool import ResourcePool
+from drd.runtime.telemetry import DriverTelemetry
+
+
+class Spun:
+    """A Drive whose odometry counted one turn and a bit."""
+
+    def __init__(self, heading: float) -> None:
+        self.heading = heading
+
+    def odometry(self) -> tuple[float, float, float]:
+        return (1.0, 2.0, self.heading)
+
+
+@pytest.mark.parametrize(("raw", "live"), [(7.374, 7.374 - math.tau), (-7.0, -7.0 + math.tau), (0.5, 0.5),
+                                           (3 * math.pi + 0.1, -math.pi + 0.1)])
+def test_the_live_heading_is_within_a_turn(raw: float, live: float) -> None:
+    pool = ResourcePool(ResourceManager())
+    pool.add([Unit("c.drive", "Drive", host="h"), Aggregate("c", "Crawler", {"drive": "c.drive"}, {}, host="h")], 0.0)
+    drivers = SimpleNamespace(robots={"c": {"drive": Spun(raw)}}, devices={})
+    data = DriverTelemetry(drivers, pool, lambda: 0.0)("c")
+    assert data is not None and data["x"] == 1.0 and data["heading"] == pytest.approx(live)
+    assert -math.pi <= data["heading"] <= math.pi
