@@ -16,6 +16,7 @@ import functools
 import itertools
 import logging
 from collections.abc import Callable, Iterable, Mapping
+from contextlib import AbstractContextManager
 from typing import Any
 
 import orjson
@@ -180,6 +181,11 @@ class Executive:
         else:
             interp.start()
         return mid
+
+    def together(self) -> AbstractContextManager[None]:
+        """Missions submitted in this block ask for resources as one: by priority, not by which was submitted first
+        (`drd.runtime.broker.ResourceBroker.together`: a controller resuming its missions, a dry-run starting)."""
+        return self.broker.together()
 
     def restore_history(self, ended: Iterable[tuple[str, Mapping[str, Any]]]) -> None:
         """Missions that ended before a restart (id, status as listed then), in the order they ended: `status`

@@ -60,7 +60,7 @@ class ControllerLife:
         """Missions submitted in this block start as one: their requests are granted by priority, not by which was
         submitted first (`drd.runtime.broker.ResourceBroker.together`)."""
         assert self.executive is not None
-        return self.executive.broker.together()
+        return self.executive.together()
 
     def submit(self, chart: Statechart, mid: str, listeners: list[Listener], priority: int) -> None:
         assert self.executive is not None
@@ -135,7 +135,7 @@ class ControllerLife:
             for key, value in values.items():
                 if executive.pool.view(rid) is not None:
                     executive.pool.set_property(rid, key, value, now)
-        with executive.broker.together():  # by priority, not by who is entered first (safety audit 7, D2)
+        with executive.together():  # by priority, not by who is entered first (safety audit 7, D2)
             for mid, image in self._saved.items():
                 chart, listeners, priority = self.submitted[mid]
                 executive.submit(chart, mid, listeners=listeners, priority=priority, resume=image,

@@ -103,7 +103,7 @@ def resume(runner: Any, journal: Journal) -> list[str]:
                     except KeyError:  # its host is still down (resumed without it): its robot is not in the manager
                         log.info("resuming without the saved %s of %s: its host's resources are not here", key, rid)
             paused = max(0.0, time.time() - state.saved) if state.saved else 0.0
-            with executive.broker.together():  # by priority, not by who is entered first (safety audit 7, D2)
+            with executive.together():  # by priority, not by who is entered first (safety audit 7, D2)
                 for job in jobs:
                     if _resume_one(runner, journal, world, job, paused, halts.get(job.id, [])):
                         resumed.append(job.id)

@@ -380,14 +380,16 @@ def test_a_shutdown_that_hangs_does_not_keep_its_process(creator: Creator, tmp_p
 
 
 @pytest.fixture
-def simulated(cluster_: Cluster, catalog_: Catalog, pool: WorkerPool) -> Iterator[tuple[Creator, Any, list[Any]]]:
+def simulated(catalog_: Catalog, pool: WorkerPool) -> Iterator[tuple[Creator, Any, list[Any]]]:
     """A Creator whose `sim` drivers run on a simulation in this process (as on the simulator host), and the
-    driver requests that come over the pipe (a spy on the Creator's side)."""
+    driver requests that come over the pipe (a spy on the Creator's side). The repository's hosts file: ranger1
+    with its Scouts (a launch needs the Scout held, so bound, and so configured)."""
     from drd.sim.service import SimulationService
 
-    service = SimulationService(None, cluster_.name)
+    corridor = load_hosts(ROOT / "hosts.yaml", catalog_)
+    service = SimulationService(None, corridor.name)
     service.reset("corridor")
-    c = Creator(None, cluster_, "ranger1", catalog_, pool=pool, sim_service=service)
+    c = Creator(None, corridor, "ranger1", catalog_, pool=pool, sim_service=service)
     asked: list[Any] = []
     serve = c._device_request
 
@@ -428,8 +430,9 @@ def test_a_launch_during_a_step_makes_the_readings_read_ahead_stale(
         simulated: tuple[Creator, Any, list[Any]]) -> None:
     c, service, asked = simulated
     grant = [["grant", "ranger1.launcher", f"{MISSION}/M", 3, 0.0]]
+    holding = {**READER_BINDINGS, "scout": ["scout1", "", ""]}  # the launcher throws only a Scout it holds
     c.handle(ComponentCall("start", MISSION, "M/R", component="Reader", params={"mode": "launch"}, world="corridor",
-                           bindings=READER_BINDINGS, gates=grant, epochs={"launcher": 3}))
+                           bindings=holding, gates=grant, epochs={"launcher": 3}))
     before = (c.handle(ComponentCall("step", MISSION, "M/R", now=1.0)).outputs or {})["loaded"]
     service.sim.step(0.1)
     asked.clear()
