@@ -309,3 +309,16 @@ def two_rangers_hosts(cluster: DaemonCluster, security: str) -> str:
     for port, default in zip(cluster.ports, (7447, 7448, 7449), strict=False):
         text = text.replace(f"127.0.0.1:{default}", f"127.0.0.1:{port}")
     return text
+
+
+def user_kit(folder: Path, monkeypatch: pytest.MonkeyPatch, module: str, code: str,
+             manifests: dict[str, str]) -> None:
+    """A user's own components in `folder`: the module `module.py` holding `code`, a manifest per component under
+    `comps/<name>/`, and the environment that finds them (`DRD_COMPONENTS`, `PYTHONPATH`) for every process the
+    test starts after this."""
+    (folder / f"{module}.py").write_text(code)
+    for name, manifest in manifests.items():
+        (folder / "comps" / name).mkdir(parents=True)
+        (folder / "comps" / name / "manifest.yaml").write_text(manifest)
+    monkeypatch.setenv("DRD_COMPONENTS", str(folder / "comps"))
+    monkeypatch.setenv("PYTHONPATH", os.pathsep.join([str(folder), str(ROOT)]))

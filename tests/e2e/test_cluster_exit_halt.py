@@ -7,13 +7,10 @@ and the trace of `missionctl run --trace` shows the halt before `finished`, as a
 from __future__ import annotations
 
 import json
-import os
 from pathlib import Path
 
 import pytest
-from cluster_support import corridor_hosts, running_cluster
-
-from tests.conftest import ROOT
+from cluster_support import corridor_hosts, running_cluster, user_kit
 
 KIT = '''from drd.runtime.component import Component, Status
 
@@ -40,12 +37,8 @@ MISSION = "mission CoastAway {\n    needs r: Ranger\n    Coast\n}\n"
 
 def test_the_halt_at_a_missions_end_is_in_its_cluster_trace_before_finished(tmp_path: Path,
                                                                          monkeypatch: pytest.MonkeyPatch) -> None:
-    (tmp_path / "coastkit.py").write_text(KIT)
-    (tmp_path / "comps" / "Coast").mkdir(parents=True)
-    (tmp_path / "comps" / "Coast" / "manifest.yaml").write_text(MANIFEST)
+    user_kit(tmp_path, monkeypatch, "coastkit", KIT, {"Coast": MANIFEST})
     (tmp_path / "coast.mission").write_text(MISSION)
-    monkeypatch.setenv("DRD_COMPONENTS", str(tmp_path / "comps"))
-    monkeypatch.setenv("PYTHONPATH", os.pathsep.join([str(tmp_path), str(ROOT)]))
     with running_cluster(tmp_path, ["controller", "ranger1"]) as c:
         c.hosts_file.write_text(corridor_hosts(c))
         c.start_all()

@@ -8,13 +8,12 @@ mission's report, with the real `missionctl` and real daemons."""
 from __future__ import annotations
 
 import json
-import os
 import subprocess
 import sys
 from pathlib import Path
 
 import pytest
-from cluster_support import corridor_hosts, running_cluster
+from cluster_support import corridor_hosts, running_cluster, user_kit
 
 from tests.conftest import ROOT
 
@@ -56,13 +55,9 @@ REFUSED = "it does not hold scout1, which launch moves"
 
 @pytest.fixture
 def kit(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Path:
-    (tmp_path / "throwkit.py").write_text(KIT)
-    (tmp_path / "comps" / "Thrower").mkdir(parents=True)
-    (tmp_path / "comps" / "Thrower" / "manifest.yaml").write_text(MANIFEST)
+    user_kit(tmp_path, monkeypatch, "throwkit", KIT, {"Thrower": MANIFEST})
     (tmp_path / "hold.mission").write_text(HOLD)
     (tmp_path / "throw.mission").write_text(THROW)
-    monkeypatch.setenv("DRD_COMPONENTS", str(tmp_path / "comps"))
-    monkeypatch.setenv("PYTHONPATH", os.pathsep.join([str(tmp_path), str(ROOT)]))
     return tmp_path
 
 

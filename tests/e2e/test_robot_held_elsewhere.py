@@ -7,13 +7,10 @@ host ranger2) as a whole: it runs where ranger1's devices are, and ranger2 stays
 from __future__ import annotations
 
 import json
-import os
 from pathlib import Path
 
 import pytest
-from cluster_support import running_cluster, two_rangers_hosts
-
-from tests.conftest import ROOT
+from cluster_support import running_cluster, two_rangers_hosts, user_kit
 
 KIT = '''from drd.runtime.component import Component, Status
 
@@ -47,12 +44,8 @@ MISSION = """mission Herding {
 
 def test_a_behavior_holding_a_robot_of_another_host_runs_where_its_devices_are(tmp_path: Path,
                                                                               monkeypatch: pytest.MonkeyPatch) -> None:
-    (tmp_path / "shepherdkit.py").write_text(KIT)
-    (tmp_path / "comps" / "Shepherd").mkdir(parents=True)
-    (tmp_path / "comps" / "Shepherd" / "manifest.yaml").write_text(MANIFEST)
+    user_kit(tmp_path, monkeypatch, "shepherdkit", KIT, {"Shepherd": MANIFEST})
     (tmp_path / "herd.mission").write_text(MISSION)
-    monkeypatch.setenv("DRD_COMPONENTS", str(tmp_path / "comps"))
-    monkeypatch.setenv("PYTHONPATH", os.pathsep.join([str(tmp_path), str(ROOT)]))
     with running_cluster(tmp_path, ["controller", "ranger1", "ranger2"]) as c:
         c.hosts_file.write_text(two_rangers_hosts(c, "{mode: none}"))
         c.start_all()

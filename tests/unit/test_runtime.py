@@ -312,15 +312,18 @@ def test_stop_during_a_transition(catalog: Catalog) -> None:
     assert h.interp.active() == [] and h.rcm.holders("ranger1.drive") == ()
 
 
-def test_static_dependencies_change_at_run_time(catalog: Catalog) -> None:
-    text = """
+#: Counts the Scouts its Ranger carries when Calibrate is done.
+ABOARD = """
 mission M {
     needs r: Ranger
     var aboard: int = 0
     start -> Calibrate
     Calibrate -> done / set aboard = count(Scout where scout.carrier == r)
 }"""
-    h = Harness(compiled(text, catalog), {"Calibrate": Timed}, ranger_world(1, 3))
+
+
+def test_static_dependencies_change_at_run_time(catalog: Catalog) -> None:
+    h = Harness(compiled(ABOARD, catalog), {"Calibrate": Timed}, ranger_world(1, 3))
     h.interp.start()
     h.interp.set_property("ranger1.scout2", "carrier", "")  # launched: it left the magazine
     h.run()
@@ -596,15 +599,8 @@ def test_count_where_passes_over_a_resource_without_the_property(catalog: Catalo
     the whole mission (`scout3 has no carrier`) where `needs s: Scout where s.carrier == r` passed over it."""
     from drd.rcm import Aggregate
 
-    text = """
-mission M {
-    needs r: Ranger
-    var aboard: int = 0
-    start -> Calibrate
-    Calibrate -> done / set aboard = count(Scout where scout.carrier == r)
-}"""
     floor = [Unit("floor.wheels", "Drive", host="ranger1"),
              Aggregate("floor", "Scout", {"wheels": "floor.wheels"}, {"battery": 1.0}, host="ranger1")]
-    h = Harness(compiled(text, catalog), {"Calibrate": Timed}, [*ranger_world(1, 2), *floor])
+    h = Harness(compiled(ABOARD, catalog), {"Calibrate": Timed}, [*ranger_world(1, 2), *floor])
     assert h.run() == "success", h.interp.reason
     assert h.interp.root is not None and h.interp.root.scope["aboard"] == 2
