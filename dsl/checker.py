@@ -504,6 +504,9 @@ class Checker:
             if body.parallel is not None and t.source == "start":
                 self.report.error("structure", "a parallel block starts all its children: remove start ->",
                                   t.source_span)
+            elif body.plan is not None and t.source == "start":  # one or the other says what runs first (spec)
+                self.report.error("structure", "a plan starts its first step: remove start ->, or put its target"
+                                  " first in the plan", t.source_span)
             elif t.source == "start" and t.kind is ast.TriggerKind.ERROR:
                 self.report.error("structure", f"start -> {t.target} on error: starting cannot fail, so this is"
                                   " never taken", t.span, "remove `on error`, or put it on a transition from a child")

@@ -126,3 +126,13 @@ def test_a_zero_timeout_is_shown_as_written(catalog: Catalog) -> None:
     assert r.statechart is not None
     (t,) = [t for s in r.statechart.states.values() for t in s.transitions if t.delay == 0]
     assert trigger_label(t) == "after 0s [false]"
+
+
+def test_a_start_beside_a_plan_is_refused_where_it_is_written(catalog: Catalog) -> None:
+    """A plan says which step runs first, as `start ->` does (spec: one or the other); beside a plan, a start was
+    ignored, or with a guard taken over the plan's order."""
+    r = compile_text("mission M {\n    plan { A < B }\n    Wait(duration: 1s) as A\n    Wait(duration: 1s) as B\n"
+                     "    start -> B after 5s\n}\n", catalog, "t.mission")
+    assert not r.ok
+    (d,) = [d for d in r.diagnostics if "a plan starts its first step" in d.message]
+    assert (d.span.line, d.span.column) == (5, 5)
