@@ -23,10 +23,10 @@ each mission has processes of its own, retired when the controller says the miss
 (on the Creator's key) changes the CPU affinity and nice of the process running an instance at run time.
 
 Actuator commands of one control cycle are fenced by the gate first, then arbitrated per device as the
-dry-run's `Arbiter` does (highest priority, then the behavior declared last), but executed at once: a
-lower-ranked command that comes after a higher-ranked one in the same round is dropped, and one that comes
-before is overwritten, so the last setpoint is the same. What the gates record (each command, each halt) goes
-back to the controller with the reply.
+dry-run's `Arbiter` does (highest priority, then the behavior declared last): the best of one message's calls
+is executed when they are done, so only it reaches the driver; a lower-ranked command in a later message of the
+same round is dropped. What the gates record (each command, each halt) goes back to the controller with the
+reply.
 
 `sim` drivers reach the simulator through a `drd.sim.service.RemoteSimulation`, built per mission for the
 world the call names; on the simulator host itself they call the simulation directly
@@ -100,29 +100,29 @@ OPS = ("start", "step", "suspend", "resume", "terminate", "retire")
 
 
 class CycleArbiter(Arbiter):
-    """`Arbiter` with immediate execution (see the module docstring): fenced by the gate, then run at once unless
-    a higher-ranked behavior commanded the device in this round; `round` changes per cycle and phase. A driver
+    """`Arbiter` over the calls of one message (see the module docstring): fenced by the gate when proposed, the
+    best per device executed when the message's calls are done (`flush_round`), unless a higher-ranked behavior
+    commanded the device in an earlier message of the same round; `round` changes per cycle and phase. A driver
     that raises is reported through `on_error(owner, exception)`."""
 
     def __init__(self, clock: Callable[[], float], on_error: Callable[[Any, Exception], None]) -> None:
         super().__init__(clock)
         self.on_error = on_error
         self.round: tuple[float, bool] = (-1.0, False)
-        self._best: dict[str, tuple[tuple[float, bool], tuple[int, int]]] = {}
+        self._done: dict[str, tuple[tuple[float, bool], tuple[int, int]]] = {}  # device -> (round, rank) executed
 
     def propose(self, p: Proposal) -> None:
-        why = p.gate.admit(p.issuer, p.binding.epoch, p.method, p.args, p.kwargs, self.clock())
-        if why:
-            p.gate.refuse(p.issuer, p.binding.epoch, p.method, why, self.clock())
-            return
-        best = self._best.get(p.gate.device)
-        if best is not None and best[0] == self.round and p.rank < best[1]:
-            return  # a higher-ranked behavior already commanded this device in this round
-        self._best[p.gate.device] = (self.round, p.rank)
-        try:
-            p.gate.execute(p.binding.driver, p.issuer, p.binding.epoch, p.method, p.args, p.kwargs, self.clock())
-        except Exception as e:  # the driver refused it (fenced out is NotHolder, recorded, never raised here)
-            self.on_error(p.owner, e)
+        done = self._done.get(p.gate.device)
+        if done is not None and done[0] == self.round and p.rank < done[1]:
+            return  # a higher-ranked behavior already commanded this device in this round: it never reaches it
+        super().propose(p)
+
+    def flush_round(self) -> None:
+        """Execute the best setpoint proposed per device since the last flush: only the winner reaches the driver
+        (and the robot: a ROS 2 robot got the loser's Twist, then the winner's, every cycle; safety audit 8)."""
+        for p in self.best.values():
+            self._done[p.gate.device] = (self.round, p.rank)
+        self.flush(self.on_error)
 
 
 #: Seconds a new world waits for the last world's telemetry read under way (the Creator's lock is held, and the
@@ -132,6 +132,8 @@ REPLACE_WAIT = 0.1
 #: Instance states, as announced to the Component Database.
 RUNNING, SUSPENDED, TERMINATED, FAILED = "running", "suspended", "terminated", "failed"
 _STATE_AFTER = {"start": RUNNING, "resume": RUNNING, "suspend": SUSPENDED, "terminate": TERMINATED}
+#: The calls after which an instance may no longer command its devices (a `resume` binds it again, at its epochs).
+_UNBINDS = frozenset({"suspend", "terminate"})
 
 
 @dataclass
@@ -428,6 +430,7 @@ class Creator:
     def _flush_sim(self) -> list[tuple[str, str]]:
         """Send the actuator commands the drivers queued (one request): [(instance key, error)] of refusals, with
         the setpoint commands that raised here (sent by workers without waiting, see `_exchange`)."""
+        self.arbiter.flush_round()  # the winners of the calls just made, at once (their errors join the refusals)
         refused, self._command_errors = self._command_errors, []
         sim = self._sim
         if sim is None or not hasattr(sim, "flush"):
@@ -555,6 +558,9 @@ class Creator:
         if state is not None and state != inst.state:
             inst.state = state
             self._dirty = True
+        if call.op in _UNBINDS:  # its last words were said: a thread of its own that goes on commanding is refused
+            for binding in inst.bound.values():  # (not bound to a grant), as in process (audit 8, safety D1)
+                binding.epoch = None
         if call.op == "terminate" and call.status == MOVED:  # it goes on elsewhere: nothing of it stays here
             self._forget(_key(call))
         return ComponentReply(reply.status, reply.outputs, reply.events, logs, reply.shared, reply.dependencies,

@@ -8,7 +8,6 @@ the clock, and only when an expression asks (`ranger.x` in a guard, a constraint
 from __future__ import annotations
 
 import math
-
 from collections.abc import Callable, Mapping
 from typing import Any
 
