@@ -327,17 +327,38 @@ class MissionRunner:
         Twist stops its `ros2` robots (recovery audit D0: a robots' host frozen for a lease and a half left its
         Ranger driving on in the simulator at its last setpoint, its holder gone, the gates' stops for that host
         dropped while it was down). Its robots stay in the world until its resources leave the manager."""
-        if self.current is not None and self.simulator is not None:
+        if self.current is not None:
             with self._hosts_lock:
                 self.halting.append(host)
 
     def _halt_robots(self) -> None:
+        """Before the next cycle: the missions holding a drive of the hosts gone down record its stop (their gates,
+        on that host, cannot: a trace showed the robot moving to the end; safety audit 8, D6), then their simulated
+        robots stop (a `ros2` robot got its zero Twist from the daemon, `stop_robots`)."""
         with self._hosts_lock:
             hosts, self.halting = self.halting, []
+        for host in hosts:
+            self._record_halts(host)
+        if self.simulator is None:
+            return
         stop = functools.partial(SimRequest, "multi")
         for host, robots, done in self._robots_in_sim(hosts, lambda ids: stop(args=[["stop", [r]] for r in ids])):
             stopped = [rid for rid, (_value, error) in zip(robots, done, strict=False) if not error]
             log.warning("host %s down: its robots %s stopped in the simulation", host, ", ".join(stopped) or "(none)")
+
+    def _record_halts(self, host: str) -> None:
+        """A `halted` for each drive of `host` a running mission holds, in that mission, by its holder."""
+        from drd.runtime.records import Halted
+
+        drives = [d.id for d in self.cluster.host(host).devices if d.type == "Drive"]
+        with self.lock:
+            executive = self.controller.executive
+            now = self.clock.now()
+            for unit in drives:
+                for holder in executive.broker.holders(unit):
+                    mission, _, path = holder.partition("/")
+                    executive.record(mission, Halted(now, path, unit, "stop", f"host {host} down: its robots were"
+                                                                              " stopped by the controller"))
 
     def _lose_robots(self) -> None:
         with self.lock:
@@ -579,6 +600,7 @@ class MissionRunner:
     def _update_gates(self, host: str, world: WorldRun) -> None:
         ops = self.gates.take(host) or []
         if self.host_down(host):
+            self._unreached(host, ops, "is down")
             return
         try:
             reply = self.bus.call_reaching(f"drd/{self.cluster.name}/host/{host}/creator",
@@ -588,11 +610,30 @@ class MissionRunner:
             if host not in self.undelivered:  # once until it answers again (a lost worker's burst was 8 lines)
                 log.warning("the gate operations for %s were not delivered: %s", host, e)
             self.undelivered.add(host)
+            self._unreached(host, ops, "does not answer")
             return
         self.undelivered.discard(host)
         if isinstance(reply, GateUpdateReply):
             with self.lock:
                 deliver(reply.records, self.controller.executive.record, self.telemetry.seen)
+
+    def _unreached(self, host: str, ops: list[list[Any]], why: str) -> None:
+        """The stops `ops` asked of `host`'s drives, which cannot reach it: each is recorded as a `halted` with that
+        error, as a gate records a device it cannot reach, so the trace does not end with the robot moving (safety
+        audit 8, D6). Its robots are stopped by the controller when the host is found down (`halt_host`)."""
+        from drd.runtime.records import Halted
+
+        drives = {d.id for d in self.cluster.host(host).devices if d.type == "Drive"}
+        with self.lock:
+            for op in ops:
+                match op:
+                    case ["unbind" | "clear", str(device), str(whose), float() | int() as at, str(reason)] \
+                            if device in drives:  # once per drive: its first stop (a leaf's unbind, its holder's)
+                        drives.discard(device)
+                        mission, _, path = whose.partition("/")
+                        self.controller.executive.record(mission, Halted(
+                            float(at), path, device, "stop", reason,
+                            f"not sent: host {host} {why}; the controller stops its robots once it is found down"))
 
     def _reset_dependencies(self, executive: Any) -> None:
         """A new world puts every Scout back in its magazine: the Static Dependency Database starts again from
