@@ -13,12 +13,14 @@ import inspect
 import json
 import math
 import re
+import signal
 import time
 import typing
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from contextlib import contextmanager
 from dataclasses import asdict
 from pathlib import Path
+from types import FrameType
 from typing import IO, TYPE_CHECKING, Any
 
 import typer
@@ -588,7 +590,7 @@ def _run_and_follow(client: ClusterClient, watch: _RecordWatch, request: Any, wa
     began = time.monotonic()
     reply: RunReply | None = None
     try:
-        with _deferred_interrupt() as interrupted:  # a Ctrl-C before `follow` would leave the mission unseen
+        with _deferred_interrupt() as interrupted:  # a Ctrl-C or SIGTERM before `follow` would leave it unseen
             answer = client.bus.call(run_key(client.cluster), request, timeout=wait)
             if not isinstance(answer, RunReply):
                 fail(f"the controller answered a {type(answer).TYPE}")
@@ -609,14 +611,16 @@ def _run_and_follow(client: ClusterClient, watch: _RecordWatch, request: Any, wa
                 err.print(Text(f"  --speed {request.speed:g} not applied: the running world {reply.world} goes at "
                                f"{reply.speed:g}x, set by the mission that opened it", style="yellow"))
         if interrupted:
-            raise KeyboardInterrupt
-        report = watch.follow(reply.mission, request.until / reply.speed + 120.0, reply.base, began)
+            raise Terminated if signal.SIGTERM in interrupted else KeyboardInterrupt
+        with _terminate_as_interrupt():
+            report = watch.follow(reply.mission, request.until / reply.speed + 120.0, reply.base, began)
         report.speed = reply.speed
         return report
-    except KeyboardInterrupt:  # the operator's Ctrl-C stops the mission, not just this command
+    except KeyboardInterrupt as e:  # the operator's Ctrl-C stops the mission, not just this command
         if reply is None:  # before the controller took it: nothing runs
             raise
-        return _stop_on_interrupt(client, watch, reply.mission, reply.base, began)
+        return _stop_on_interrupt(client, watch, reply.mission, reply.base, began,
+                                  "SIGTERM" if isinstance(e, Terminated) else "Ctrl-C")
 
 
 def _mission_source(mission: Path) -> str:
@@ -647,27 +651,51 @@ def _not_a_mission(mission: Path) -> None:
 
 @contextmanager
 def _deferred_interrupt() -> Iterator[list[int]]:
-    """Hold a Ctrl-C (SIGINT) until the block ends; the list yielded is non-empty if one came."""
-    import signal
-
+    """Hold a Ctrl-C (SIGINT) or a SIGTERM until the block ends; the list yielded has the signals that came."""
     got: list[int] = []
     try:
-        previous = signal.signal(signal.SIGINT, lambda signum, frame: got.append(signum))
+        previous = {signum: signal.signal(signum, lambda n, frame: got.append(n))
+                    for signum in (signal.SIGINT, signal.SIGTERM)}
     except ValueError:  # not the main thread: nothing to defer
         yield got
         return
     try:
         yield got
     finally:
-        signal.signal(signal.SIGINT, previous)
+        for signum, handler in previous.items():
+            signal.signal(signum, handler)
 
 
-def _stop_on_interrupt(client: ClusterClient, watch: _RecordWatch, mission: str, base: float, began: float) -> DryRun:
+class Terminated(KeyboardInterrupt):
+    """A SIGTERM to an attached `missionctl run`: handled as its Ctrl-C (the mission stops, the report and the
+    trace are written), where the default action killed the client and left the mission driving with an empty
+    trace (safety audit 8)."""
+
+
+@contextmanager
+def _terminate_as_interrupt() -> Iterator[None]:
+    """While the block runs, a SIGTERM raises `Terminated` in the main thread, as a Ctrl-C raises its interrupt."""
+    def terminated(signum: int, frame: FrameType | None) -> None:
+        raise Terminated
+
+    try:
+        previous = signal.signal(signal.SIGTERM, terminated)
+    except ValueError:  # not the main thread
+        yield
+        return
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+
+
+def _stop_on_interrupt(client: ClusterClient, watch: _RecordWatch, mission: str, base: float, began: float,
+                       why: str = "Ctrl-C") -> DryRun:
     """Ask the executive to stop `mission`, then wait (bounded) for its last records, so the report says how it
     ended; a second Ctrl-C gives up waiting (the mission is stopped either way)."""
     from drd.executive_messages import MissionCommand
 
-    err.print(Text.assemble(("■ ", "bold yellow"), f"Ctrl-C: stopping mission {mission}"))
+    err.print(Text.assemble(("■ ", "bold yellow"), f"{why}: stopping mission {mission}"))
     try:
         client.bus.call(client.keys.executive, MissionCommand("stop", mission), timeout=5.0)
         return watch.follow(mission, 15.0, base, began)
@@ -946,6 +974,8 @@ class _RecordWatch:
             if now >= next_print and finished is None:
                 next_print = now + self.every
                 self._progress(max(result.sim_time, clock), list(active), phases, now)
+                if self.trace is not None:  # what came so far is on disk, whatever ends this process
+                    self.trace.flush()
         result.outcome, result.reason = finished
         result.wall_time = time.monotonic() - (start if began is None else began)
         result.away = self.away_total

@@ -166,13 +166,19 @@ def test_detach_then_status_shows_the_active_states_then_stop(cluster: DaemonClu
     assert {m["id"]: m["outcome"] for m in s["missions"]}[mid] == "stopped"
 
 
-def test_ctrl_c_on_run_stops_the_mission_and_prints_how_it_ended(cluster: DaemonCluster) -> None:
-    cmd = [*MISSIONCTL, "run", MISSION, "--config", str(cluster.hosts_file), "--speed", "5", "--json"]
+@pytest.mark.parametrize(("signum", "said"), [(signal.SIGINT, "Ctrl-C"), (signal.SIGTERM, "SIGTERM")])
+def test_ctrl_c_on_run_stops_the_mission_and_prints_how_it_ended(cluster: DaemonCluster, tmp_path: Path,
+                                                                  signum: int, said: str) -> None:
+    """A SIGTERM (safety audit 8) as a Ctrl-C: it killed the client, leaving the mission driving and the trace
+    empty."""
+    trace = tmp_path / "t.jsonl"
+    cmd = [*MISSIONCTL, "run", MISSION, "--config", str(cluster.hosts_file), "--speed", "5", "--json", "--trace",
+           str(trace)]
     proc = subprocess.Popen(cmd, cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
         client = cluster.client()
         eventually(lambda: any(m.get("outcome") is None for m in client.missions()), "the mission to run", 30, 0.05)
-        proc.send_signal(signal.SIGINT)
+        proc.send_signal(signum)
         out, err = proc.communicate(timeout=30)
         left = [m["id"] for m in client.missions() if m.get("outcome") is None]
     finally:
@@ -182,7 +188,9 @@ def test_ctrl_c_on_run_stops_the_mission_and_prints_how_it_ended(cluster: Daemon
         if any(m.get("outcome") is None for m in cluster.client().missions()):
             missionctl(cluster, "stop", "--all")  # so that a failure here does not fail the next test too
     assert proc.returncode == 1, err[-2000:]
-    assert "Ctrl-C: stopping mission" in err and "Traceback" not in err
+    assert f"{said}: stopping mission" in err and "Traceback" not in err
+    kinds = [json.loads(line)["kind"] for line in trace.read_text().splitlines()]
+    assert kinds[0] == "entered" and kinds[-1] == "finished", kinds[-3:]
     report = json.loads(out)
     assert report["outcome"] == "stopped" and report["reason"] == "stopped by operator"
     assert report["timeline"][0]["entered"] == 0.0, "the report keeps what came before the Ctrl-C"
