@@ -33,6 +33,11 @@ def predict(kind: str, method: str, args: Sequence[Any], kwargs: Mapping[str, An
                 y - radius * (math.cos(turned) - math.cos(heading)), turned)
     if kind == "Drive" and method == "stop":
         return pose
+    if kind == "Launcher" and method == "launch":  # where the thrown robot lands (its pose, not the launcher's)
+        turn, distance = _number(args, kwargs, 1, "heading"), _number(args, kwargs, 2, "distance")
+        if turn is None or distance is None:
+            return None
+        return x + distance * math.cos(heading + turn), y + distance * math.sin(heading + turn), heading + turn
     if kind == "Jump" and method == "jump":
         dx = _number(args, kwargs, 0, "dx")
         if dx is None:

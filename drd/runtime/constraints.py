@@ -104,13 +104,13 @@ class ConstraintGuard:
 
     def __call__(self, gate: DeviceGate, issuer: str, method: str, args: tuple[Any, ...],
                  kwargs: Mapping[str, Any]) -> str:
-        robot = gate.robot
-        if not robot or not self.active:
+        if not gate.robot or not self.active:
             return ""
-        relevant = [a for a in self.active if robot in a.robots and under(issuer, a.holder)]
+        robot = gate.moved(method, args, kwargs) or gate.robot  # a launch moves the Scout it throws, from the
+        relevant = [a for a in self.active if robot in a.robots and under(issuer, a.holder)]  # launcher's pose
         if not relevant:
             return ""
-        pose = self.pool.pose(robot)
+        pose = self.pool.pose(gate.robot)
         then = predict(gate.kind, method, args, kwargs, pose, self.horizon) if pose is not None else None
         if then is None:
             return ""

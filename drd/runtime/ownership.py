@@ -80,17 +80,22 @@ class DeviceGate:
         driver declares in `MOVES`: the issuer must hold that robot, `holds`), then the constraints in force. A
         command refused by a constraint also stops the setpoint in force (it was heading where it must not)."""
         why = self.verdict(issuer, epoch)
-        moved = self.spec.moves.get(method) if not why else None
-        if moved is not None:
-            index, name = moved
-            robot = str(args[index] if index < len(args) else kwargs.get(name, ""))
-            if holds is None or not holds(robot):
-                why = f"it does not hold {robot}, which {method} moves"
+        robot = self.moved(method, args, kwargs) if not why else None
+        if robot is not None and (holds is None or not holds(robot)):
+            why = f"it does not hold {robot}, which {method} moves"
         if not why and self.guard is not None:
             why = self.guard(self, issuer, method, args, kwargs)
             if why and self.commander is not None:
                 self.halt(at, self.commander, why)
         return why
+
+    def moved(self, method: str, args: tuple[Any, ...], kwargs: Mapping[str, Any]) -> str | None:
+        """The robot an action moves by name (`MOVES`: the Scout a launch throws), or None for any other command."""
+        found = self.spec.moves.get(method)
+        if found is None:
+            return None
+        index, name = found
+        return str(args[index] if index < len(args) else kwargs.get(name, ""))
 
     def execute(self, driver: object, issuer: str, epoch: int | None, method: str, args: tuple[Any, ...],
                 kwargs: Mapping[str, Any], at: float, holds: Holds | None = None) -> Any:

@@ -112,3 +112,25 @@ def test_constraints_are_checked_at_compile_time(catalog: Catalog) -> None:
         "    FollowCorridor", "    constraint fence: ranger.battery > 0.1\n    FollowCorridor")))
     assert messages(HANDLED.replace('event.name == "fence"', "event.nope")) == [
         "violation has no field nope"]
+
+
+THROWN = """
+mission Thrown {
+    needs ranger: Ranger
+    needs pup: Scout where pup.id == "scout1"
+    constraint tether: distance(pup, ranger) <= 1
+    LaunchScout(max_range: 5)
+}
+"""
+
+
+def test_a_launch_that_would_throw_a_constrained_scout_past_its_fence_is_refused(catalog: Catalog) -> None:
+    """Safety audit 8, D3: the guard predicted only the launcher's robot, so LaunchScout threw a Scout 5 m against a
+    1 m tether and the violation came after the landing. A launch is predicted where the Scout lands."""
+    report, records = dry(catalog, THROWN, until=10.0)
+    launches = [r for r in records if r["kind"] == "command" and r["method"] == "launch"]
+    assert launches and not any(r["accepted"] for r in launches), launches
+    assert "constraint tether" in launches[0]["reason"], launches[0]
+    assert report.outcome == "failure" and "scout1" not in {s.get("scout") for s in report.scouts}
+    x, y = report.tracks["scout1"][-1][1:3] if report.tracks.get("scout1") else (1.0, 0.0)
+    assert math.hypot(x - 1.0, y) < 1.0, (x, y)  # it never left the Ranger's magazine
