@@ -974,8 +974,6 @@ class _RecordWatch:
             if now >= next_print and finished is None:
                 next_print = now + self.every
                 self._progress(max(result.sim_time, clock), list(active), phases, now)
-                if self.trace is not None:  # what came so far is on disk, whatever ends this process
-                    self.trace.flush()
         result.outcome, result.reason = finished
         result.wall_time = time.monotonic() - (start if began is None else began)
         result.away = self.away_total
@@ -983,7 +981,10 @@ class _RecordWatch:
 
 
     def _progress(self, sim_time: float, active: list[str], phases: dict[str, str], now: float) -> None:
-        """The progress line, when due: each second on a terminal, on a pipe only when it changed (`ProgressGate`)."""
+        """The progress line, when due: each second on a terminal, on a pipe only when it changed (`ProgressGate`);
+        and the trace so far on disk, whatever ends this process."""
+        if self.trace is not None:
+            self.trace.flush()
         line = progress_line(sim_time, active, err.width, phases)
         if self.gate.due(line.plain, now):
             err.print(line)
