@@ -558,8 +558,9 @@ class Creator:
         if state is not None and state != inst.state:
             inst.state = state
             self._dirty = True
-        if call.op in _UNBINDS:  # its last words were said: a thread of its own that goes on commanding is refused
-            for binding in inst.bound.values():  # (not bound to a grant), as in process (audit 8, safety D1)
+        if call.op in _UNBINDS:  # its last words (a stop in `terminate`) go now, then a thread of its own that goes
+            self.arbiter.flush_from(f"{inst.mission}/{inst.path}", self._setpoint_failed)  # on commanding is
+            for binding in inst.bound.values():  # refused (not bound to a grant), as in process (safety audit 8 D1)
                 binding.epoch = None
         if call.op == "terminate" and call.status == MOVED:  # it goes on elsewhere: nothing of it stays here
             self._forget(_key(call))
