@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import codecs
 import stat
 from pathlib import Path
 
@@ -22,10 +23,12 @@ def _not_regular(mode: int) -> str:
 
 
 def decode(data: bytes, file: str, report: Reporter) -> str:
-    """UTF-8 text (without the byte order mark some editors write first), or a located error at the first bad
-    byte (and the text with replacements)."""
+    """UTF-8 text (without the byte order mark some editors write first: lines and columns are counted after it,
+    as the editor shows them), or a located error at the first bad byte (and the text with replacements)."""
+    if data.startswith(codecs.BOM_UTF8):  # stripped here, not by the `utf-8-sig` codec: its errors' positions
+        data = data[len(codecs.BOM_UTF8):]  # would be relative to the text after it, this function's to `data`
     try:
-        return data.decode("utf-8-sig")
+        return data.decode("utf-8")
     except UnicodeDecodeError as e:
         line = data.count(b"\n", 0, e.start) + 1
         line_start = data.rfind(b"\n", 0, e.start) + 1

@@ -187,7 +187,8 @@ def test_random_text_gives_located_diagnostics(catalog: Catalog, text: str) -> N
 
 
 @settings(max_examples=n(100), deadline=None, suppress_health_check=SLOW)
-@given(st.one_of(st.binary(), token_soup.map(lambda s: s.encode("utf-8")).flatmap(
+@given(st.one_of(st.binary(max_size=4096), st.binary(max_size=64).map(lambda b: b"\xef\xbb\xbf" + b),
+                 token_soup.map(lambda s: s.encode("utf-8")).flatmap(
     lambda b: st.tuples(st.just(b), st.binary(max_size=4), st.integers(0, len(b))).map(
         lambda t: t[0][:t[2]] + t[1] + t[0][t[2]:]))))
 def test_random_bytes_give_located_diagnostics(catalog: Catalog, data: bytes) -> None:

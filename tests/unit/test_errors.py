@@ -286,3 +286,12 @@ def test_a_file_saved_with_a_byte_order_mark_compiles(tmp_path: Path, catalog: C
     path.write_bytes("\ufeffmission M { Observe }\n".encode())
     result = compile_file(path, catalog)
     assert result.ok, [d.message for d in result.diagnostics]
+
+
+def test_a_bad_byte_after_a_byte_order_mark_is_located_as_the_editor_shows_it(tmp_path: Path, catalog: Catalog) -> None:
+    """The mark is not counted: the line and column are those after it, and the byte named is the bad one (the
+    `utf-8-sig` codec's error positions were relative to the text after the mark, this error's to the file's)."""
+    path = tmp_path / "bom.mission"
+    path.write_bytes(b"\xef\xbb\xbf\n\nX\xff\n")
+    (d,) = [d for d in compile_file(path, catalog).diagnostics if d.code == "encoding"]
+    assert (d.span.line, d.span.column) == (3, 2) and "byte 0xff" in d.message, d
