@@ -177,6 +177,11 @@ class CreatorError(ComponentFailure, ValueError):
     """A call refused outright (unknown component, bad parameter, a device of another host)."""
 
 
+class NoInstance(CreatorError):
+    """A call for an instance this host does not run (never started here, or retired): its reply says `lost`, so
+    the controller places a movable one again (`drd.cluster.remote.InstanceLost`)."""
+
+
 class Creator:
     def __init__(self, bus: Bus | None, cluster: Cluster, host: str, catalog: Catalog, *,
                  sim_service: Any = None, pool: WorkerPool | None = None,
@@ -328,6 +333,8 @@ class Creator:
                 inst = self._prepare(call)
                 self.terms.adopt(call.term)  # accepted: op, mission and component checked
                 reply = self._run(inst.worker, [(call, inst)], {})[0]
+            except NoInstance as e:
+                reply = ComponentReply(error=self._refusal(call, e), lost=True)
             finally:
                 refused = self._flush_sim()
                 self._publish()
@@ -373,7 +380,7 @@ class Creator:
                 calls, i = batch.calls, 0
                 while i < len(calls):
                     run: list[tuple[ComponentCall, Instance]] = []
-                    refused = ""
+                    refused: ComponentReply | None = None
                     while i < len(calls):
                         call = calls[i]
                         if call.op != "step":
@@ -382,7 +389,7 @@ class Creator:
                             inst = self._prepare(call)
                             self.terms.adopt(first.term)
                         except CreatorError as e:
-                            refused = f"{self.host}'s Creator refused step of {call.path}: {e}"
+                            refused = ComponentReply(error=self._refusal(call, e), lost=isinstance(e, NoInstance))
                             break
                         if run and inst.worker is not run[0][1].worker:
                             break
@@ -396,8 +403,8 @@ class Creator:
                         last = got[-1]
                         if len(got) < len(run) or last.events or last.dependencies or last.error:
                             break  # the controller reacts to this before the next step
-                    if refused:
-                        replies.append(ComponentReply(error=refused))
+                    if refused is not None:
+                        replies.append(refused)
                         break
             except Exception as e:  # the world stepped: the reply must still say so, or the controller is behind
                 if stepped is None:
@@ -414,6 +421,10 @@ class Creator:
         if stepped is None:
             return ComponentBatchReply(replies, records=records)
         return ComponentBatchReply(replies, stepped.time, stepped.version, records=records)
+
+    def _refusal(self, call: ComponentCall, e: CreatorError) -> str:
+        """A call refused here, worded as the controller words a refused call (`ComponentRouter._request`)."""
+        return f"{self.host}'s Creator refused {call.op} of {call.path}: {e}"
 
     def _step_world(self, dt: float) -> Any:
         """The cycle's simulation step, carried by the batch (`ComponentBatch.sim_step`): this host must serve the
@@ -497,7 +508,7 @@ class Creator:
         if call.op == "start":
             inst = self._start_instance(call, inst)
         elif inst is None:
-            raise CreatorError(f"no instance {call.path} of mission {call.mission} on {self.host}")
+            raise NoInstance(f"no instance {call.path} of mission {call.mission} on {self.host}")
         elif call.op == "resume" and call.bindings is not None and call.bindings != inst.bindings:
             self._rebind(inst, dict(call.bindings), _rank(call))
         for need, epoch in (call.epochs or {}).items():

@@ -81,12 +81,13 @@ class ComponentCall(Message):
     restore: list[Any] | None = None
 
 
-@message("drd.component.reply", 3)
+@message("drd.component.reply", 4)
 class ComponentReply(Message):
     """What the call did: `status` (after a step), outputs, events `[name, fields]`, log lines, shared data,
     dependency changes `[resource, key, value]`, and `error` if the component raised (the state fails);
     `records`: what the host's gates recorded meanwhile (`drd.cluster.gates.wire_record`); `snapshot`:
-    `[state]` when the instance's snapshot changed (after its start, every few steps, when it is moved)."""
+    `[state]` when the instance's snapshot changed (after its start, every few steps, when it is moved); `lost`:
+    the host runs no such instance (it retired it, e.g. when it lost its controller): a movable one is placed again."""
 
     status: str = ""
     outputs: dict[str, Any] | None = None
@@ -97,6 +98,7 @@ class ComponentReply(Message):
     error: str = ""
     records: list[dict[str, Any]] | None = None
     snapshot: list[Any] | None = None
+    lost: bool = False
 
 
 @message("drd.component.batch", 3)
@@ -136,6 +138,11 @@ class ComponentError(ComponentFailure):
 
 class HostDown(ComponentError):
     """The host of the call is down or did not answer: a movable component is placed again elsewhere."""
+
+
+class InstanceLost(ComponentError):
+    """The host answered that it runs no such instance (it retired it, e.g. after it lost its controller for a
+    while): a movable component is placed again from its last snapshot, as after a host loss."""
 
 
 class ControllerFrozen(ComponentError):
@@ -516,19 +523,27 @@ class RemoteComponent(Component):
     def step(self, now: float) -> Status:
         if self.local is not None and self.host is None:
             return self.local.step(now)
-        try:
-            if self.movable and self.host is not None and self.router.is_down(self.host):
-                raise HostDown(f"host {self.host} is down")
-            reply = self.router.step(self, now)
-        except HostDown:
-            if not self.movable:
-                raise
-            self._replace()
-            reply = self.router.step(self, now)
+        reply = self._step_placed(now)
         self._apply(reply)
         if reply.error:
             raise ComponentError(reply.error)
         return step_status(reply.status, self.name) if reply.status else Status.RUNNING  # one rule in both modes
+
+    def _step_placed(self, now: float) -> ComponentReply:
+        """The step's reply; a movable instance whose host was lost, or no longer runs it, is placed again first."""
+        try:
+            if self.movable and self.host is not None and self.router.is_down(self.host):
+                raise HostDown(f"host {self.host} is down")
+            reply = self.router.step(self, now)
+            if not (reply.lost and self.movable):
+                return reply
+            why, avoid = f"its host {self.host} no longer ran it", set()  # it answers: it may be chosen again
+        except HostDown:
+            if not self.movable:
+                raise
+            why, avoid = f"its host {self.host} was lost", {self.host or ""}
+        self._replace(why, avoid)
+        return self.router.step(self, now)
 
     def suspend(self) -> None:
         self._lifecycle("suspend")
@@ -548,7 +563,11 @@ class RemoteComponent(Component):
             self.local.terminate(status)
             return
         if self.host is not None and not (self.movable and self.router.is_down(self.host)):
-            self._call("terminate", status=str(status))  # a movable one on a lost host went with it
+            try:
+                self._call("terminate", status=str(status))  # a movable one on a lost host went with it
+            except InstanceLost:
+                if not self.movable:
+                    raise  # a movable one its host no longer runs is already gone
 
     # -- helpers --------------------------------------------------------------------------------------
 
@@ -564,11 +583,13 @@ class RemoteComponent(Component):
                 if self.movable and self.router.is_down(self.host):
                     raise HostDown(f"host {self.host} is down")
                 self._call(op)
-            except HostDown:
+            except (HostDown, InstanceLost) as e:
                 if not self.movable:
                     raise
-                self._replace()  # started afresh elsewhere: a resume needs nothing more, a suspend is sent
-                if op == "suspend":
+                lost = isinstance(e, HostDown)
+                self._replace(f"its host {self.host} " + ("was lost" if lost else "no longer ran it"),
+                              {self.host or ""} if lost else set())
+                if op == "suspend":  # started afresh: a resume needs nothing more, a suspend is sent
                     self._call(op)
 
     def _place(self, how: str, avoid: set[str], restore: list[Any] | None = None) -> None:
@@ -599,15 +620,14 @@ class RemoteComponent(Component):
             self.router.placed.append((path, host, how))
             return
 
-    def _replace(self) -> None:
-        """Its host is lost: start the instance again on another host, from its last snapshot (None if it sent
-        none: its state went with the host, and it is told so)."""
-        lost = self.host or ""
-        self.router.forget_reply(self)  # a step reply batched from the lost host is no longer ours
+    def _replace(self, why: str, avoid: set[str]) -> None:
+        """Its host is lost or no longer runs it (`why`): start the instance again on a host the policy picks, not
+        one of `avoid`, from its last snapshot (None if it sent none: its state is gone, and it is told so)."""
+        self.router.forget_reply(self)  # a step reply batched from the old host is no longer ours
         restore = self.state if self.state is not None else [None]
-        self._place("re-placed", {lost}, restore)
+        self._place("re-placed", avoid, restore)
         said = "from its last snapshot" if restore[0] is not None else "afresh (no snapshot)"
-        self._ctx.log(f"{self.name} placed again on {self.host} {said}: its host {lost} was lost")
+        self._ctx.log(f"{self.name} placed again on {self.host} {said}: {why}")
 
     def migrate(self, host: str) -> list[Any]:
         """Move the running instance to `host`: stopped where it runs as `moved` (its fresh snapshot comes back,
@@ -620,8 +640,11 @@ class RemoteComponent(Component):
         self.router.forget_reply(self)
         moved = self.state if self.state is not None else [None]
         if not self.router.is_down(old):
-            reply = self._call("terminate", status="moved")  # ComponentError: it stays where it is
-            moved = reply.snapshot if reply.snapshot is not None else moved
+            try:
+                reply = self._call("terminate", status="moved")  # ComponentError: it stays where it is
+                moved = reply.snapshot if reply.snapshot is not None else moved
+            except InstanceLost:  # its host no longer runs it: from its last snapshot
+                pass
         self.state = moved
         try:
             self.host = host
@@ -689,7 +712,7 @@ class RemoteComponent(Component):
         reply = self.router.call(self.host, msg)
         self._apply(reply)
         if reply.error:
-            raise ComponentError(reply.error)
+            raise (InstanceLost if reply.lost else ComponentError)(reply.error)
         return reply
 
     def _apply(self, reply: ComponentReply) -> None:

@@ -302,6 +302,23 @@ def test_a_batch_runs_in_one_round_trip_per_process_and_stops_at_an_event(creato
     assert replies[3].events == [["Seen", {"at": 2.0}]]
 
 
+def test_after_losing_its_controller_a_host_answers_that_it_runs_no_such_instance(creator: Creator) -> None:
+    """Its instances retired, the host's refusal of a later call says `lost` (alone and in a batch), so the
+    controller places a movable one again instead of failing the mission; another refusal does not say it."""
+    start(creator, "M/A")
+    start(creator, "M/B")
+    creator.controller_lost("frozen past the lease")
+    alone = step(creator, "M/A")
+    batch = creator.handle_batch(ComponentBatch([ComponentCall("step", MISSION, p, now=2.0)
+                                                 for p in ("M/A", "M/B")])).replies
+    for reply in (alone, batch[0]):
+        assert reply.lost and reply.error == f"ranger1's Creator refused step of M/A: no instance M/A of mission" \
+                                             f" {MISSION} on ranger1", reply
+    assert len(batch) == 1  # the controller places it again before the next step is sent
+    other = creator.handle_batch(ComponentBatch([ComponentCall("step", "m/1", "M/A")])).replies
+    assert not other[0].lost and "names a mission (without '/')" in other[0].error
+
+
 def test_manifest_scheduling_is_applied_to_the_process_it_is_placed_in(creator: Creator) -> None:
     pid = (start(creator, "M/N", "Niced").outputs or {})["pid"]
     other = (start(creator, "M/A").outputs or {})["pid"]

@@ -39,6 +39,7 @@ class Hosts:
         self.failing: set[str] = set()  # hosts whose Creator answers a start with an error
         self.silent: set[str] = set()  # hosts whose Creator takes calls and answers none (gone as they came)
         self.slow: set[str] = set()  # hosts whose Creator takes 0.2 s over a start (longer than it is given)
+        self.retired: set[str] = set()  # hosts that retired their instances: other calls than a start are `lost`
         self.terms: list[tuple[str, float, int]] = []  # (op, term, generation) of every call
         self.queryables = {host: self.serve(host) for host in serving}
 
@@ -57,6 +58,11 @@ class Hosts:
                 return None
             if host in self.slow and any(isinstance(c, ComponentCall) and c.op == "start" for c in calls):
                 time.sleep(0.2)
+            if host in self.retired and all(isinstance(c, ComponentCall) and c.op != "start" for c in calls):
+                lost = ComponentReply(error=f"{host}'s Creator refused it: no instance M/Wait of mission m on {host}",
+                                      lost=True)
+                return ComponentBatchReply([lost]) if isinstance(msg, ComponentBatch) else lost
+            self.retired.discard(host)  # a start: it runs one again
             replies = [ComponentReply(status="running" if c.op == "step" else "",
                                       error="Wait failed to start here: no worker" if host in self.failing
                                       and c.op == "start" else "") for c in calls]
@@ -229,6 +235,40 @@ def test_a_host_that_stops_answering_mid_mission_also_moves_it() -> None:
     assert comp.step(0.1) is Status.RUNNING
     assert comp.host == "b" and "a" in comp.router.gone
     assert hosts.calls == [("a", "start"), ("b", "start"), ("b", "step")]
+
+
+@pytest.mark.parametrize("op", ["step", "suspend"])
+def test_an_instance_its_host_no_longer_runs_starts_again_from_its_last_snapshot(op: str) -> None:
+    """A host frozen past its lease retires its instances; on waking it answers that it runs none (`lost`): a
+    movable one starts again where the policy says (that host may be chosen: it answers), from its last snapshot;
+    before, the mission failed with the refusal."""
+    hosts = Hosts(LocalBus(), ["a", "b"], ["a", "b"])
+    comp, logs = movable(hosts)
+    comp.start()
+    comp.state = [{"left": 3.5}]  # the last snapshot its host sent
+    hosts.retired.add("a")
+    assert (comp.step(0.1) is Status.RUNNING) if op == "step" else comp.suspend() is None
+    assert comp.host == "a" and "a" not in comp.router.gone
+    assert hosts.calls == [("a", "start"), ("a", op), ("a", "start"), ("a", op)]
+    assert list(comp.router.placed)[-1] == ("M/Wait", "a", "re-placed")
+    assert any("placed again on a from its last snapshot: its host a no longer ran it" in line for line in logs)
+
+
+def test_an_instance_its_host_no_longer_runs_ends_quietly_but_a_bound_one_fails() -> None:
+    hosts = Hosts(LocalBus(), ["a", "b"], ["a", "b"])
+    comp, _ = movable(hosts)
+    comp.start()
+    hosts.retired.add("a")
+    comp.terminate(Status.SUCCESS)  # nothing runs there to stop
+    assert hosts.calls[-1] == ("a", "terminate")
+    bound, _ = movable(hosts)
+    bound.start()
+    bound.movable = False  # as one bound to a's devices is
+    hosts.retired.add("a")
+    with pytest.raises(remote.InstanceLost, match="no instance"):
+        bound.terminate(Status.SUCCESS)
+    with pytest.raises(ComponentError, match="no instance"):
+        bound.step(0.1)
 
 
 def test_a_component_bound_to_devices_is_never_moved() -> None:
