@@ -146,11 +146,20 @@ class HostGuard:
         self.pool.telemetry = self._telemetry
         self.guard = ConstraintGuard(self.pool)
         self.watched: list[str] = []
+        self.checked: set[str] = set()  # this host's robots its gates' checks asked for: read with the watched
         self._reads = BackgroundRead(self._read_watched)
         gates.describe(*describe_devices(self.pool), self.guard)
 
     def _telemetry(self, robot: str) -> Mapping[str, float] | None:
-        return self.local(robot) if robot in self.mine else self.shipped.get(robot)
+        """A robot's live values for a gate's check: shipped by the controller, or read from this host's drivers
+        off the request's thread (`BackgroundRead`), as `telemetry` does: a driver waiting for its first message
+        (a ROS 2 robot's first battery state, up to 2 s) held the Creator's lock, so the world it serves did not
+        step, and the behavior's readings went stale. A robot not read yet is unknown, and the gate does not guess."""
+        if robot not in self.mine:
+            return self.shipped.get(robot)
+        self.checked.add(robot)  # from now on read with the watched ones
+        read: dict[str, dict[str, float]] = self._reads.get(TELEMETRY_WAIT) or {}
+        return read.get(robot)
 
     def apply(self, op: Op) -> None:
         """One operation from the controller (malformed ones are logged and ignored)."""
@@ -195,7 +204,8 @@ class HostGuard:
         first step) must not hold the Creator's reply, which the controller waits 1 s for at most."""
         if not self.watched:
             return None
-        robots = self._reads.get(TELEMETRY_WAIT) or {}
+        read = self._reads.get(TELEMETRY_WAIT) or {}
+        robots = {r: data for r, data in read.items() if r in self.watched}
         return {"kind": "telemetry", "mission": "", "host": self.host, "robots": robots}
 
     def close(self, wait: float = CLOSE_WAIT) -> None:
@@ -206,7 +216,8 @@ class HostGuard:
                      self.host)
 
     def _read_watched(self) -> dict[str, dict[str, float]]:
-        return {r: dict(data) for r in list(self.watched) if (data := self.local(r)) is not None}
+        robots = sorted(set(self.watched) | self.checked)  # each a copy made at once, under the GIL
+        return {r: dict(data) for r in robots if (data := self.local(r)) is not None}
 
 
 #: Seconds a reply waits for the watched robots' reading of this cycle before it takes the last one.

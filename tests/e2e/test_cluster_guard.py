@@ -4,6 +4,8 @@ The whole path on real daemons is in tests/e2e/test_cluster_multi.py."""
 
 from __future__ import annotations
 
+import threading
+import time
 from typing import Any
 
 import pytest
@@ -128,6 +130,53 @@ def test_a_host_refuses_a_command_that_would_take_its_robot_out_of_range_of_a_ro
     # another behavior's commands are not its constraint's business; an unguarded holder drives freely
     guard.apply(["unguard", holder, 1.3])
     gate.execute(wheels, "M-1/Keep/Go", 3, "set_velocity", (0.8, 0.0), {}, 1.4)
+
+
+class FirstBattery(Wheels):
+    """A ROS 2 drive before the robot's first battery state: the reading waits for it (`Latest.get`)."""
+
+    def __init__(self, x: float, y: float) -> None:
+        super().__init__(x, y)
+        self.arrived = threading.Event()
+
+    def battery(self) -> float:
+        assert self.arrived.wait(30), "the test never sent the battery state"
+        return 0.5
+
+
+def test_a_reading_that_waits_for_its_first_message_does_not_hold_a_guarded_command(cluster: Cluster) -> None:
+    """A constraint on the ROS 2 cluster: the guard read the drive's battery on the command's thread, under the
+    Creator's lock, and waited for its first message (2 s), which the world the host serves could not publish
+    without stepping: the behavior's scans went stale and the mission failed (found with hosts.ros2.yaml)."""
+    wheels = FirstBattery(1.0, 0.0)
+    guard, gates, _reports = host_guard(cluster, "ranger1", wheels)
+    gates.grant("ranger1.drive", "M-1/Keep", 3, 1.0)
+    guard.apply(guard_op("M-1/Keep", "distance(r, point(1, 0)) <= 1", ["ranger1"], {"r": ["resource", "ranger1"]}))
+    command = threading.Thread(target=gates.get("ranger1.drive").execute,
+                               args=(wheels, "M-1/Keep/Go", 3, "set_velocity", (0.8, 0.0), {}, 1.0))
+    command.start()
+    command.join(10)
+    done = not command.is_alive()
+    wheels.arrived.set()  # the battery state arrives: the read under way returns
+    command.join(10)
+    assert done and wheels.moves == [(0.8, 0.0)], "the command waited for a reading (or did not reach the drive)"
+    # read by then: the next command is checked against the robot's pose (1 m out, beyond the fence: refused)
+    wheels.pose = (2.5, 0.0, 0.0)
+    guard.local.clock = lambda: 1.1  # the next instant: read again
+    assert eventually_read(guard, "ranger1", 2.5)
+    with pytest.raises(NotHolder, match="constraint near"):
+        gates.get("ranger1.drive").execute(wheels, "M-1/Keep/Go", 3, "set_velocity", (0.8, 0.0), {}, 1.1)
+
+
+def eventually_read(guard: HostGuard, robot: str, x: float) -> bool:
+    """Whether the guard's background read sees `robot` at `x` within 10 s (it reads when asked)."""
+    deadline = time.monotonic() + 10
+    while time.monotonic() < deadline:
+        data = guard.pool.telemetry(robot) if guard.pool.telemetry is not None else None
+        if data is not None and data.get("x") == x:
+            return True
+        time.sleep(0.01)
+    return False
 
 
 def test_a_host_reports_the_robots_it_is_asked_to_watch_and_only_its_own(cluster: Cluster) -> None:

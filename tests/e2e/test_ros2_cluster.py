@@ -126,6 +126,21 @@ def test_the_corridor_mission_succeeds_on_the_clusters_served_robots(cluster: Da
         assert {e.node_name for e in scan.subscribers} == {"drd"}  # ranger1's ros2 RangeSensor reads it
 
 
+def test_a_geofenced_mission_on_the_served_robots_ends_at_its_fence(cluster: DaemonCluster, tmp_path: Path) -> None:
+    """A constraint from the first instant: the host's guard read the Ranger's battery on the command's thread and
+    waited 2 s for the robot's first battery state, holding the Creator, so the world it serves did not step and the
+    behavior's scans went stale (`HardwareError ... /ranger1/scan is 2.01 s old`); now the fence ends it."""
+    (tmp_path / "fenced.mission").write_text("mission Fenced {\n    needs ranger: Ranger\n"
+                                             "    constraint fence: distance(ranger, point(1, 0)) <= 3\n"
+                                             "    FollowCorridor(speed: 0.5)\n}\n")
+    done = subprocess.run([*MISSIONCTL, "run", str(tmp_path / "fenced.mission"), "--config", str(cluster.hosts_file),
+                           "--speed", SPEED, "--until", "60", "--json"], cwd=ROOT, capture_output=True, text=True,
+                          timeout=300, check=False)
+    report = json.loads(done.stdout)
+    assert done.returncode == 1 and report["reason"].startswith("constraint fence violated"), (
+        report["reason"], cluster.log("ranger1")[-3000:])
+
+
 def test_the_robot_gets_a_zero_twist_when_the_controller_dies(cluster: DaemonCluster, robots_port: int,
                                                              tmp_path: Path) -> None:
     """Last in this module: it kills the controller. The Ranger drives at the start of a mission (FindNewDoor);
