@@ -60,6 +60,10 @@ LOCKSTEP_WAIT = 5.0
 #: waits `LOCKSTEP_WAIT`). Local settings: nothing on the wire changes.
 LOCKSTEP_ZENOH = {"scouting/delay": 0,
                   "transport/link/tx/queue/congestion_control/drop/wait_before_drop": int(LOCKSTEP_WAIT * 1e6)}
+#: A served base stops once its `cmd_vel` has been quiet this many seconds of sim time, as ros2_control's
+#: `diff_drive_controller` does by default (`cmd_vel_timeout`): the robot's own last line (docs/ros2.md "Safety").
+CMD_VEL_TIMEOUT = 0.5
+
 #: The battery and the radio links go out every this many publications (0.5 s of sim time: well within a driver's
 #: `status_max_age`); the magazine too, and at once when a launch changes it.
 STATUS_EVERY = 5
@@ -90,6 +94,8 @@ class ServedRobots:
         self._streams: list[tuple[Callable[[Any], None], bool]] = []  # (send, a status stream)
         self._publishers: dict[str, Publisher] = {}  # the streams' publishers by key
         self._count = 0  # publications so far
+        self.commanded: dict[str, float] = {}  # robot -> sim time its last cmd_vel was carried out (while moving)
+        self.timeouts = 0  # bases stopped by their cmd_vel timeout
         self.robots: dict[str, _Served] = {}
         self._nodes: dict[str, Ros2Node] = {}
         self.rangers = {r.id for r in sim.world.rangers}
@@ -214,8 +220,9 @@ class ServedRobots:
                 _quietly(fn)
 
     def publish(self) -> None:
-        """Every robot's state now, and `/clock`."""
+        """Every robot's state now, and `/clock`; first, a base whose `cmd_vel` went quiet is stopped (`quiet`)."""
         with self.lock:
+            self._stop_quiet()
             st = self.now()
             status = self._count % STATUS_EVERY == 0
             self._count += 1
@@ -225,6 +232,23 @@ class ServedRobots:
             self._clock.publish_cdr(self.types.serialize(self.msg(mapping.CLOCK)(clock=st), mapping.CLOCK))
             if self.moving:
                 self._tf.publish_cdr(self.types.serialize(self._transforms(st, _poses(self.moving)), TF))
+
+    def _stop_quiet(self) -> None:
+        """Stop each base whose last `cmd_vel` is `CMD_VEL_TIMEOUT` s of sim time old (called after every step, in
+        each of the three ways the world is served): whoever drove it is gone, and a real base would stop too."""
+        now = self.sim.time
+        for rid, at in list(self.commanded.items()):
+            if now - at < CMD_VEL_TIMEOUT - 1e-9:
+                continue
+            del self.commanded[rid]
+            try:
+                if self.sim.command(rid) == (0.0, 0.0):
+                    continue
+                self.sim.stop(rid)
+            except SimError:  # lost meanwhile: nothing left to stop
+                continue
+            self.timeouts += 1
+            log.info("served %s: no cmd_vel for %.2f s of sim time: stopped (cmd_vel timeout)", rid, now - at)
 
     def _transforms(self, st: Any, frames: Iterable[tuple[str, str, Pose]]) -> Any:
         """A tf2_msgs/TFMessage of (parent, child, pose of child in parent) transforms, stamped `st` (REP 105)."""
@@ -333,7 +357,14 @@ def _drive(s: ServedRobots, rid: str, device: Device, opts: Ros2Options) -> None
         if not (math.isfinite(v) and math.isfinite(omega)):  # a NaN pose would end the world (clients audit D1)
             log.warning("served %s: cmd_vel refused: linear.x %r and angular.z %r must be finite", rid, v, omega)
             return
-        s.command(lambda: sim.set_velocity(rid, v, omega))
+        def carry_out() -> None:
+            sim.set_velocity(rid, v, omega)
+            if v or omega:
+                s.commanded[rid] = sim.time  # the timeout runs from here (`ServedRobots._stop_quiet`)
+            else:
+                s.commanded.pop(rid, None)
+
+        s.command(carry_out)
 
     s.subscribe(rid, opts, "cmd_vel", cmd_vel)
 

@@ -150,6 +150,25 @@ def test_a_twist_from_the_sdk_moves_the_simulated_ranger(served: tuple[ServedRob
 
 
 
+def test_a_base_whose_cmd_vel_goes_quiet_stops_as_a_real_one_would(served: tuple[ServedRobots, int],
+                                                                    sdk: Any) -> None:
+    """docs/ros2.md: the last line is the robot's own cmd_vel timeout. The served base kept its last Twist forever,
+    so a client that died mid-drive (or sent one Twist) drove it into the wall; it stops after 0.5 s of sim time."""
+    robots, port = served
+    pub = sdk.ROS2Publisher(topic="/ranger1/cmd_vel", msg_type=TWIST, domain_id=0, router_port=port)
+    vector = pub.session_mgr.store.types["geometry_msgs/msg/Vector3"]
+    try:
+        pub.publish(linear=vector(x=0.4, y=0.0, z=0.0), angular=vector(x=0.0, y=0.0, z=0.0))
+        eventually(lambda: robots.sim.command("ranger1") == (0.4, 0.0) or robots.timeouts, "the Twist to drive it")
+        eventually(lambda: robots.sim.command("ranger1") == (0.0, 0.0), "the base to stop on its own", timeout=10)
+        assert robots.timeouts == 1 and "ranger1" not in robots.commanded
+        stopped = robots.sim.pose("ranger1")
+        time.sleep(0.3)  # 1.2 s of sim time: it stays where it stopped
+        assert robots.sim.pose("ranger1").x == pytest.approx(stopped.x, abs=1e-9)
+    finally:
+        pub.close()
+
+
 def test_a_non_finite_twist_is_refused_and_the_world_goes_on(served: tuple[ServedRobots, int], sdk: Any) -> None:
     """Clients audit D1: one Twist with NaN (or inf) in it made the pose NaN and `drd sim --ros2` exit 70 (a cluster
     mission failed, "the simulator stopped answering"). It is refused and logged; the next good Twist drives."""
