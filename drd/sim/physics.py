@@ -274,17 +274,10 @@ class Simulation:
 
     def set_wheels(self, robot_id: str, v_left: float, v_right: float) -> None:
         """Differential drive: wheel speeds in m/s, scaled down together (same curvature) to the max speed. An empty
-        robot takes the command and turns no wheel (`command` reads 0, 0), as motors behind a cut-off would.
-
-        Raises:
-            SimError: a Scout still in its Ranger's magazine is asked to move: its wheels touch nothing, and a
-                behavior driving it would wait forever for it to arrive (a stop is taken).
-        """
+        robot takes the command and turns no wheel (`command` reads 0, 0), as motors behind a cut-off would."""
         if not (math.isfinite(v_left) and math.isfinite(v_right)):  # NaN would spread to the pose and every reading
             raise ValueError(f"wheel speeds must be finite, got {v_left!r} and {v_right!r}")
         r = self._robot(robot_id)
-        if r.state is RobotState.MAGAZINE and (v_left or v_right):
-            raise SimError(f"{robot_id} is in {r.carrier}'s magazine: its wheels touch nothing (launch it first)")
         if r.charge <= 0.0:  # an empty battery turns no wheel
             v_left = v_right = 0.0
         top = max(abs(v_left), abs(v_right))

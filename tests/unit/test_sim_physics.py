@@ -208,19 +208,6 @@ def test_launch_checks_its_scout_and_distance() -> None:
         sim.launch("s9", 0.0, 3)
 
 
-def test_a_scout_in_its_magazine_refuses_to_move_and_takes_a_stop() -> None:
-    """Its wheels touch nothing: the command was taken, nothing moved, and a behavior driving it waited forever."""
-    sim = Simulation(world_with((ranger_at(4.0, 0, UP),)), seed=6)
-    with pytest.raises(SimError, match="s1 is in ranger1's magazine: its wheels touch nothing"):
-        sim.set_velocity("s1", 0.3, 0.0)
-    sim.stop("s1")
-    assert sim.command("s1") == (0.0, 0.0) and sim.state("s1") is RobotState.MAGAZINE
-    sim.launch("s1", 0.0, 3.0)
-    sim.step(2.0)
-    sim.set_velocity("s1", 0.3, 0.0)  # on the floor: it drives
-    assert sim.command("s1") == (0.3, 0.0)
-
-
 def test_a_scout_jumps_a_low_obstacle_that_stops_it_rolling() -> None:
     # n1's cable tray spans y 2.0..2.4 at x 6.2..7.2 and is 0.15 m high
     world = world_with(scouts=(ScoutSpawn("a", 6.5, 1.7, UP), ScoutSpawn("b", 6.9, 1.7, UP)))
