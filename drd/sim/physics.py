@@ -267,10 +267,11 @@ class Simulation:
         return tuple(self._robot(ranger_id, alive=False).magazine)
 
     def set_max_speed(self, robot_id: str, speed: float) -> None:
-        """The wheels' top speed in m/s (a driver applies its device's `max_speed` option)."""
+        """The wheels' top speed in m/s (a driver applies its device's `max_speed` option). A setting, so a lost
+        robot takes it too: a controller restarted after a loss builds every driver again (its commands still fail)."""
         if speed <= 0:
             raise ValueError(f"max speed must be positive, got {speed}")
-        self._robot(robot_id).max_speed = speed
+        self._robot(robot_id, alive=False).max_speed = speed
 
     def set_wheels(self, robot_id: str, v_left: float, v_right: float) -> None:
         """Differential drive: wheel speeds in m/s, scaled down together (same curvature) to the max speed. An empty

@@ -103,6 +103,18 @@ def test_a_controller_started_again_resumes_the_mission_from_its_journal_as_on_a
         assert abs(before[0] - after[0]) < 0.02 and abs(before[1] - after[1]) < 0.02, (robot, before, after)
 
 
+def test_a_controller_started_again_after_a_robot_was_lost_resumes_without_it(tmp_path: Path) -> None:
+    """Clients audit 9, D1: the restarted controller built every driver again, the lost Scout's too, whose `max_speed`
+    the simulation refused: the run ended at 60 s with exit 2, no report and no `finished` in its trace."""
+    trace = tmp_path / "run.jsonl"
+    code, report, err = dry_run("missions/corridor_surveillance.mission", "--inject", "lose scout3 at 50s",
+                                "--inject", "kill controller at 60s", "--inject", "restart controller at 70s",
+                                "--trace", str(trace))
+    assert code == 0 and report["outcome"] == "success", err
+    assert [r["kind"] for r in map(json.loads, trace.read_text().splitlines())][-1] == "finished"
+    assert any(h["ended"] == "resource lost" for h in report["holds"])  # type: ignore[union-attr]
+
+
 def test_a_restart_needs_a_kill_before_it() -> None:
     code, _report, err = dry_run("missions/corridor_surveillance.mission", "--inject", "restart controller at 10s")
     assert code == 2 and "controller is not down then: write 'kill controller at ...' before it" in err, err
