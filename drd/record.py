@@ -731,6 +731,8 @@ class Recording:
     records: dict[str, list[rec.Record]] = field(default_factory=dict)
     #: Each record's `seq` (None when it has none: a dry-run's), in the order of `records`.
     seqs: dict[str, list[int | None]] = field(default_factory=dict)
+    #: The missions of the records in file order (the trace's causal order, across missions: docs/trace.md).
+    order: list[str] = field(default_factory=list)
     runs: list[dict[str, Any]] = field(default_factory=list)
     tracks: dict[str, list[tuple[float, float, float, float]]] = field(default_factory=dict)
     #: A Scout in a magazine: from when, carried by which Ranger (its frame's parent is the Ranger's).
@@ -742,15 +744,22 @@ class Recording:
     damage: str | None = None
 
     def trace_lines(self) -> Iterator[str]:
-        """The recorded records as the run's `--trace` wrote them (with `seq` where the run's lines had it)."""
+        """The recorded records as the run's `--trace` wrote them, in the file's order (a trace of several missions
+        interleaves them in causal order: one mission's `released` before another's `granted` of what it freed),
+        with `seq` where the run's lines had it."""
         from drd.runtime.trace import trace_line
 
-        for mission, records in self.records.items():
+        order = self.order
+        if len(order) != sum(map(len, self.records.values())):  # records put together by hand: mission by mission
+            order = [mission for mission, records in self.records.items() for _ in records]
+        taken = dict.fromkeys(self.records, 0)  # records of each mission written so far
+        for mission in order:
+            i = taken[mission]
+            taken[mission] = i + 1
             seqs = self.seqs.get(mission, [])
-            for i, r in enumerate(records):
-                line = trace_line(r, mission)
-                seq = seqs[i] if i < len(seqs) else None
-                yield line if seq is None else f'{line[:-1]},"seq":{seq}}}'
+            line = trace_line(self.records[mission][i], mission)
+            seq = seqs[i] if i < len(seqs) else None
+            yield line if seq is None else f'{line[:-1]},"seq":{seq}}}'
 
     def load_world(self, name: str) -> World | None:
         """The recorded world (its problems name `name`), or None when the recording has none."""
@@ -881,6 +890,7 @@ def _take(out: Recording, topic: str, data: bytes) -> None:
             key, seq = str(d.get("mission", "")), d.get("seq")
             out.records.setdefault(key, []).append(r)
             out.seqs.setdefault(key, []).append(seq if isinstance(seq, int) else None)
+            out.order.append(key)
     elif topic == RUNS:
         run = json.loads(data)
         if run.get("format") != FORMAT:

@@ -126,6 +126,22 @@ def test_replay_writes_the_trace_back_out_and_draws_the_run_from_the_recording_a
     assert "drew run.png" in done.stderr
 
 
+def test_the_trace_written_back_keeps_the_order_of_several_missions(tmp_path: Path) -> None:
+    """Clients audit 9, D2: the trace came back mission by mission, so one mission's `released` could follow
+    another's `granted` of what it freed; it comes back in the run's (causal) order, line for line."""
+    (tmp_path / "early.mission").write_text("mission Early {\n    start -> First\n    Wait(duration: 1s) as First\n"
+                                            "    First -> Second\n    Wait(duration: 3s) as Second\n}\n")
+    (tmp_path / "late.mission").write_text("mission Late {\n    Wait(duration: 2s) as Only\n}\n")
+    run = missionctl("dry-run", "early.mission", "late.mission", "--config", str(ROOT / "hosts.yaml"), "--record",
+                     "run.mcap", "--trace", "run.jsonl", cwd=tmp_path)
+    assert run.returncode == 0, run.stderr[-2000:]
+    missions = [json.loads(line)["mission"] for line in (tmp_path / "run.jsonl").read_text().splitlines()]
+    assert missions != sorted(missions), "the missions' records interleave in the run's trace"
+    done = missionctl("replay", "run.mcap", "--trace", "again.jsonl", cwd=tmp_path)
+    assert done.returncode == 0, done.stderr[-2000:]
+    assert (tmp_path / "again.jsonl").read_text() == (tmp_path / "run.jsonl").read_text()
+
+
 def test_a_recording_cut_short_by_a_crash_replays_what_it_holds(tmp_path: Path) -> None:
     """Small chunks, flushed each second of sim time: a file cut at 60 % (a crash mid-write) still reads."""
     run = missionctl("dry-run", str(CORRIDOR), "--config", str(ROOT / "hosts.yaml"), "--record", "run.mcap",
