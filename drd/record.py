@@ -38,6 +38,7 @@ import json
 import logging
 import math
 import re
+import shutil
 import struct
 import threading
 import weakref
@@ -933,10 +934,13 @@ def to_ros2_bag(path: Path, bag: Path) -> dict[str, int]:
     """Write the recording at `path` as a ROS 2 bag (a folder, MCAP storage, CDR messages) at `bag`: `/tf`
     (`tf2_msgs/TFMessage`), `/<robot>/scan` (`sensor_msgs/LaserScan`), `/rosout` (`rcl_interfaces/Log`) and each
     JSON channel as `std_msgs/String` on its own topic. Messages per topic written; RecordingError if `path` is not
-    a recording or `bag` exists. (`rosbags-convert` cannot: it reads ROS bags only, and refuses an MCAP file whose
-    profile is not `ros2`.)"""
-    from mcap.exceptions import McapError
-    from mcap.reader import make_reader
+    a recording or `bag` exists (nothing is left at `bag` then). A file cut short (a crash) gives what its complete
+    chunks hold, as `read` does. (`rosbags-convert` cannot: it reads ROS bags only, and refuses an MCAP file whose
+    profile is not `ros2`.)
+
+    The bag's metadata is rosbag2's version 8, whose `offered_qos_profiles` is a YAML string: Humble's rosbag2
+    reads that layout (and so does every later one), not version 9's list (the "Jazzy bags in Humble" problem)."""
+    from mcap.reader import NonSeekingReader
     from mcap_protobuf.decoder import DecoderFactory
     from rosbags.rosbag2 import StoragePlugin, Writer, WriterError
     from rosbags.typesys import Stores, get_typestore
@@ -944,21 +948,27 @@ def to_ros2_bag(path: Path, bag: Path) -> dict[str, int]:
     store, factory, counts = get_typestore(Stores.ROS2_HUMBLE), DecoderFactory(), dict[str, int]()
     connections: dict[str, Any] = {}
     try:
-        with path.open("rb") as fh, Writer(bag, version=9, storage_plugin=StoragePlugin.MCAP) as writer:
-            for schema, channel, message in make_reader(fh).iter_messages(log_time_order=False):
-                decode = None if schema is None or channel.message_encoding == "json" else \
-                    factory.decoder_for(channel.message_encoding, schema)
-                converted = _ros2(store, channel.topic, message.log_time,
-                                  message.data if decode is None else decode(message.data))
-                if converted is None:
-                    continue
-                topic, kind, msg = converted
-                if topic not in connections:
-                    connections[topic] = writer.add_connection(topic, kind, typestore=store)
-                writer.write(connections[topic], message.log_time, store.serialize_cdr(msg, kind))
-                counts[topic] = counts.get(topic, 0) + 1
-    except (OSError, McapError, WriterError, struct.error, EOFError) as e:
-        raise RecordingError(f"{path}: cannot write it as a ROS 2 bag at {bag}: {e}") from e
+        with path.open("rb") as fh, Writer(bag, version=8, storage_plugin=StoragePlugin.MCAP) as writer:
+            try:
+                for schema, channel, message in NonSeekingReader(fh).iter_messages(log_time_order=False):
+                    decode = None if schema is None or channel.message_encoding == "json" else \
+                        factory.decoder_for(channel.message_encoding, schema)
+                    converted = _ros2(store, channel.topic, message.log_time,
+                                      message.data if decode is None else decode(message.data))
+                    if converted is None:
+                        continue
+                    topic, kind, msg = converted
+                    if topic not in connections:
+                        connections[topic] = writer.add_connection(topic, kind, typestore=store)
+                    writer.write(connections[topic], message.log_time, store.serialize_cdr(msg, kind))
+                    counts[topic] = counts.get(topic, 0) + 1
+            except _damaged():  # cut short: the complete chunks before are the bag
+                if not counts:
+                    raise
+    except (OSError, WriterError) + _damaged() as e:
+        if bag.is_dir():  # what the writer began is no bag: nothing half-written is left behind
+            shutil.rmtree(bag, ignore_errors=True)
+        raise RecordingError(f"{path}: cannot write it as a ROS 2 bag at {bag}: {_unreadable(path, e)}") from e
     return counts
 
 

@@ -255,6 +255,42 @@ def test_a_recording_as_a_ros2_bag(corridor: Run, tmp_path: Path) -> None:
     assert read[0].header.frame_id == "ranger1" and read[0].angle_min == pytest.approx(scans[0].start_angle)
 
 
+def test_the_bags_metadata_is_the_layout_humble_parses(corridor: Run, tmp_path: Path) -> None:
+    """Clients audit 9, D5: version 9's `offered_qos_profiles` is a YAML list, which Humble's rosbag2 decodes as a
+    string (`as<std::string>()` for version >= 4) and refuses; version 8 writes the string every distribution reads."""
+    import yaml
+
+    from drd.record import to_ros2_bag
+
+    to_ros2_bag(corridor.path, tmp_path / "bag")
+    info = yaml.safe_load((tmp_path / "bag" / "metadata.yaml").read_text())["rosbag2_bagfile_information"]
+    assert info["version"] == 8 and info["storage_identifier"] == "mcap"
+    topics = [t["topic_metadata"] for t in info["topics_with_message_count"]]
+    assert topics and all(isinstance(t["offered_qos_profiles"], str) for t in topics)
+
+
+def test_a_cut_recording_gives_the_bag_of_its_complete_chunks_and_a_broken_one_no_folder(corridor: Run,
+                                                                                          tmp_path: Path) -> None:
+    """Clients audit 9, D3: `replay --ros2-bag` of a cut file failed with the MCAP reader's message and left a
+    folder with a 43-byte bag and no metadata; `replay` itself reads the same file up to the cut."""
+    from rosbags.rosbag2 import Reader
+
+    from drd.record import RecordingError, to_ros2_bag
+
+    data = corridor.path.read_bytes()
+    cut = tmp_path / "cut.mcap"
+    cut.write_bytes(data[:len(data) * 6 // 10])
+    counts = to_ros2_bag(cut, tmp_path / "bag")
+    full = to_ros2_bag(corridor.path, tmp_path / "whole")
+    assert 0 < sum(counts.values()) < sum(full.values())
+    with Reader(tmp_path / "bag") as bag:
+        assert {c.topic: c.msgcount for c in bag.connections} == counts
+    (tmp_path / "head.mcap").write_bytes(data[:30])
+    with pytest.raises(RecordingError, match="head.mcap: cannot write it as a ROS 2 bag"):
+        to_ros2_bag(tmp_path / "head.mcap", tmp_path / "none")
+    assert not (tmp_path / "none").exists()
+
+
 def numpy_float32(value: float) -> float:
     import numpy as np
 
