@@ -215,6 +215,24 @@ def check(records: Iterable[Mapping[str, Any]], sharable: Collection[str] = ()) 
     return report
 
 
+def unfinished(records: Iterable[Mapping[str, Any]]) -> list[Breach]:
+    """A mission with records and no `finished`: the trace was cut short (a crash, a writer killed, a file cut at a
+    line's end), or the mission still ran when it was read. Either way it is not a whole trace (docs/trace.md: a
+    truncated trace is never a pass)."""
+    last: dict[str, float] = {}
+    ended: set[str] = set()
+    for r in records:
+        mission = str(r.get("mission", ""))
+        last[mission] = float(r.get("at", 0.0) or 0.0)
+        if r.get("kind") == "finished":
+            ended.add(mission)
+        elif opens_restore(r):
+            ended.discard(mission)
+    return [Breach(at, "unfinished", f"{mission or 'the mission'} has no `finished` record: the trace was cut short,"
+                                     " or the mission still ran when it was written")
+            for mission, at in last.items() if mission not in ended]
+
+
 def opens_restore(r: Mapping[str, Any]) -> bool:
     """Whether `r` opens a restore (`released` with reason `controller lost`, or `restored`): the restored
     mission's clock goes on from its journal's last save, which may be before its last records."""

@@ -80,3 +80,17 @@ def test_with_the_hosts_file_the_radio_is_shared_and_nothing_is_said(trace: Path
     j = missionctl("check-trace", str(trace), "--sharable", "ranger1.radio", "--json", cwd=tmp_path)
     [result] = json.loads(j.stdout)
     assert j.returncode == 0 and result["sharable"] == ["ranger1.radio"] and "note" not in result
+
+
+def test_a_trace_cut_at_a_lines_end_is_no_pass(trace: Path, tmp_path: Path) -> None:
+    """Clients audit 9, D4: every line of the first 500 is a whole record, so the cut went unseen and the trace
+    passed; a mission with records and no `finished` is the sign of a cut (docs/trace.md: never a pass)."""
+    cut = tmp_path / "cut.jsonl"
+    cut.write_text("".join(trace.read_text().splitlines(keepends=True)[:500]))
+    r = missionctl("check-trace", str(cut), "--config", str(ROOT / "hosts.yaml"), "--json", cwd=tmp_path)
+    [result] = json.loads(r.stdout)
+    assert r.returncode == 1 and not result["ok"], r.stdout
+    assert [b["kind"] for b in result["breaches"]] == ["unfinished"]
+    assert "CorridorSurveillance-1 has no `finished` record" in result["breaches"][0]["detail"]
+    whole = missionctl("check-trace", str(trace), "--config", str(ROOT / "hosts.yaml"), cwd=tmp_path)
+    assert whole.returncode == 0, whole.stdout

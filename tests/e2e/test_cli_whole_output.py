@@ -31,6 +31,7 @@ GOOD_TRACE = [
     '{"kind":"command","at":1,"path":"M/a","device":"d1","method":"stop","epoch":1,"accepted":true,"reason":"",'
     '"mission":"M-1"}',
     '{"kind":"released","at":2,"path":"M/a","resources":["d1"],"reason":"exit","mission":"M-1"}',
+    '{"kind":"finished","at":2,"path":"M","outcome":"success","reason":"","mission":"M-1"}',
 ]
 
 
