@@ -92,6 +92,13 @@ class Pinned:
         return [c for c in candidates if c.id == self.id]
 
 
+def _unpinned(where: Where | None) -> Where | None:
+    """The need's own `where` under the pin of an earlier suspension: pinned again at each preemption, a holder
+    taking turns would wrap it once more per slice, until comparing two of them overflowed the stack (users
+    audit 9, D1: a RecursionError after some 650 slices)."""
+    return where.where if isinstance(where, Pinned) else where
+
+
 class ResourceManager:
     """The Resource Controller Manager's decisions, as a pure state machine (see module docstring).
 
@@ -606,7 +613,7 @@ class ResourceManager:
             return units, frozenset()
         given = dict(hold.given)
         given.update({name: c for name, c in hold.chosen.items() if name not in hold.alloc})
-        needs = tuple(dataclasses.replace(n, where=Pinned(hold.chosen[n.name].id, n.where))
+        needs = tuple(dataclasses.replace(n, where=Pinned(hold.chosen[n.name].id, _unpinned(n.where)))
                       for n in hold.request.needs if n.name in hold.alloc)  # resumed on what was taken from it
         request = dataclasses.replace(hold.request, needs=needs)
         key = (*request.rank, 1, 0.0, next(self._order))

@@ -177,6 +177,16 @@ def test_equals_rotate_round_robin_without_starvation() -> None:
     assert order == ["A", "B", "C", "A", "B", "C", "A"]
 
 
+def test_equals_take_turns_for_as_long_as_they_run() -> None:
+    """Users audit 9, D1: each preemption pinned the re-queued need over its previous pin, one layer a slice, until
+    comparing two needs overflowed the stack (a RecursionError after some 650 slices of a 5 s Fig. 8)."""
+    rm = manager(Unit("cam1", "Camera"), default_slice=1.0)
+    for name in ("A", "B"):
+        rm.request(Request(name, 1, (NeedRequest("camera", "Camera", where=lambda c, _chosen: c.id == "cam1"),)), 0.0)
+    order = [rm.holders("cam1")[0] for step in range(1, 3001) if rm.tick(float(step)) or True]
+    assert order[-4:] == ["B", "A", "B", "A"] and order.count("A") == 1500
+
+
 # -- sharable units, leases, fencing ---------------------------------------------------------
 
 
