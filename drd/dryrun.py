@@ -19,6 +19,7 @@ from pathlib import Path
 from typing import IO, Any
 
 from drd.bus import LocalNetwork
+from drd.errors import ConfigurationError
 from drd.executive import EntryPoints, Executive
 from drd.explain import Explainer
 from drd.hosts import Cluster, Role
@@ -328,12 +329,13 @@ def run_many(missions: Sequence[Mission], cluster: Cluster, world: World, catalo
     missions' priorities, then their behaviors'. `injections` happen on the way; `trace` gets every mission's
     records, each with its mission's id. Setting `stop` (the operator's Ctrl-C) stops the missions still running
     between two control cycles, never inside one, and the reports say what ran so far. `recorder` gets every
-    record, the robots' poses each cycle and each run's summary (`drd.record`, an MCAP file)."""
+    record, the robots' poses each cycle and each run's summary (`drd.record`, an MCAP file). ConfigurationError:
+    no mission, or a world and a hosts file that disagree (what the run raises besides is not the user's input)."""
     if not missions:
-        raise ValueError("no mission to run")
+        raise ConfigurationError("no mission to run")
     problems = check_hosts(world, cluster)
     if problems:
-        raise ValueError("\n".join(map(str, problems)))
+        raise ConfigurationError("\n".join(map(str, problems)))
     late = {i.target for i in injections if i.action is Action.JOIN}  # hosts whose daemon starts later
     sim, executive = team(cluster, world, catalog, seed=seed, registry=registry, late=late)
     life = ControllerLife(executive, functools.partial(executive_over, cluster, world, sim, catalog, registry),

@@ -17,6 +17,11 @@ from dsl import ast
 from dsl.errors import Span
 from dsl.exprtypes import snake
 
+#: The digits of the language's integers, as of its literals (`dsl.parser.MAX_INT_DIGITS`): a result beyond them is
+#: an error, not a number that grows (users audit 9, D4: squared 40 times, one big integer held the run for ever).
+INT_DIGITS = 18
+INT_LIMIT = 10 ** INT_DIGITS
+
 #: `count(type_name, predicate)`: how many known resources of a type satisfy the predicate.
 CountFn = Callable[[str, Callable[[object], bool] | None], int]
 #: `place(name)`: the rectangle (x0, y0, x1, y1) of a named region of the world (a room), or None.
@@ -160,6 +165,13 @@ class _Evaluator:
         return v
 
     def _binary(self, e: ast.Binary) -> object:
+        value = self._apply(e)
+        if type(value) is int and not -INT_LIMIT < value < INT_LIMIT:
+            raise EvalError(f"{e.op} gives an integer of more than {INT_DIGITS} digits (the language's integers have"
+                            f" at most {INT_DIGITS})", e.span)
+        return value
+
+    def _apply(self, e: ast.Binary) -> object:
         lhs, rhs = self.eval(e.left), self.eval(e.right)
         op = e.op
         try:

@@ -94,7 +94,20 @@ def _not_a_mission(name: str, report: Reporter) -> bool:
     return kind is not None
 
 
-def _add(program: Program, text: str, name: str, base: Path, report: Reporter, main: bool = True) -> None:
+#: Files deep in one chain of imports, at most (each level is a Python frame of `_add`).
+MAX_IMPORT_DEPTH = 64
+
+
+def _same_file(program: Program, target: Path) -> str | None:
+    """The name under which `target` was read already, if it was: compared as paths the system resolves, so
+    `sub/../sub/a.mission` is `sub/a.mission` (users audit 9, D2: never recognised, such a cycle recursed until
+    the interpreter's stack or the system's file name length gave out)."""
+    real = target.resolve()
+    return next((name for name in program.sources if Path(name).resolve() == real), None)
+
+
+def _add(program: Program, text: str, name: str, base: Path, report: Reporter, main: bool = True,
+         depth: int = 0) -> None:
     program.sources[name] = text
     if main and _not_a_mission(name, report):
         return
@@ -110,10 +123,14 @@ def _add(program: Program, text: str, name: str, base: Path, report: Reporter, m
     for imp in tree.imports:
         target = base / imp.path
         key = str(target)
-        if key in program.sources:
+        if key in program.sources or _same_file(program, target) is not None:
             continue
+        if depth >= MAX_IMPORT_DEPTH:
+            report.error("import", f"imports nest more than {MAX_IMPORT_DEPTH} files deep", imp.span,
+                         "import the shared files from the main mission instead of through a chain")
+            return
         sub = _read(target, key, report, imp.span)
         if sub is None:
             program.sources[key] = ""
             continue
-        _add(program, sub, key, target.parent, report, main=False)
+        _add(program, sub, key, target.parent, report, main=False, depth=depth + 1)

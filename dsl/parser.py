@@ -26,12 +26,13 @@ from lark.exceptions import UnexpectedCharacters, UnexpectedInput, UnexpectedTok
 from dsl import ast
 from dsl.ast import KEYWORDS
 from dsl.errors import Diagnostic, OverBudget, Reporter, Span
+from dsl.evaluate import INT_DIGITS
 from dsl.layout import Layout
 from dsl.unclosed import unclosed_block
 
 #: Literals beyond these are errors: no robot mission means them, and Python's own limits (4,300 digits for an
 #: int, inf for a float) would otherwise escape as an uncaught error or a silent infinity.
-MAX_INT_DIGITS = 18
+MAX_INT_DIGITS = INT_DIGITS  # the evaluator refuses results beyond them too
 MAX_NUMBER = 1e15
 MAX_DURATION = 365 * 86400.0
 

@@ -36,6 +36,7 @@ from drd.cli.common import (
     write_file,
 )
 from drd.cli.options import ComponentsOption
+from drd.errors import ConfigurationError
 from drd.signals import set_soon
 from dsl import Compiled, Limits, compile_file
 from dsl.catalog import Catalog
@@ -555,7 +556,7 @@ def _run_live(runs: list[Mission], cluster: Cluster, sim_world: World, cat: Cata
         with _ctrl_c_stops(stop), stuck_calls_end():
             try:
                 return run_many(runs, cluster, sim_world, cat, trace=fh, progress=progress, stop=stop, **options)
-            except ValueError as e:
+            except ConfigurationError as e:  # not ValueError: a bug's ValueError is an internal error (exit 70)
                 fail_all([str(e)])
     finally:
         if live is not None:

@@ -100,6 +100,33 @@ def test_imports_bring_behaviors(tmp_path: object, catalog: Catalog) -> None:
     assert [d.message.split(":")[0] for d in bad.diagnostics] == [f"cannot read imported file {missing}"]
 
 
+def test_a_file_reached_again_through_dotdot_is_the_same_file(tmp_path: object, catalog: Catalog) -> None:
+    """Users audit 9, D2: `sub/../sub/a.mission` was another name for `sub/a.mission`, so a cycle through `..` was
+    never seen: a RecursionError (exit 70), or a file name kilobytes long. Each file is read once, as any cycle is;
+    a chain of imports deeper than the limit is a located error."""
+    from pathlib import Path
+
+    from dsl import compile_file
+    from dsl.loader import MAX_IMPORT_DEPTH
+
+    base = Path(str(tmp_path))
+    (base / "lib").mkdir()
+    (base / "lib" / "moves.mission").write_text('import "../lib/more.mission"\nbehavior Shuffle { Wait }\n')
+    (base / "lib" / "more.mission").write_text('import "../lib/moves.mission"\nbehavior Blink { Wait }\n')
+    (base / "main.mission").write_text('import "lib/moves.mission"\nmission M {\n start -> Blink\n'
+                                       ' Blink -> Shuffle\n}\n')
+    result = compile_file(base / "main.mission", catalog)
+    assert result.ok, [d.message for d in result.diagnostics]
+    assert sorted(Path(name).resolve() for name in result.sources) == sorted(
+        p.resolve() for p in (base / "main.mission", base / "lib" / "moves.mission", base / "lib" / "more.mission"))
+    for i in range(MAX_IMPORT_DEPTH + 2):  # a chain c0 -> c1 -> ... one file too deep
+        (base / f"c{i}.mission").write_text(f'import "c{i + 1}.mission"\nbehavior C{i} {{ Wait }}\n')
+    (base / f"c{MAX_IMPORT_DEPTH + 2}.mission").write_text("behavior End { Wait }\n")
+    (base / "deep.mission").write_text('import "c0.mission"\nmission D { C0 }\n')
+    deep = compile_file(base / "deep.mission", catalog)
+    assert [d.message for d in deep.diagnostics] == [f"imports nest more than {MAX_IMPORT_DEPTH} files deep"]
+
+
 def expr(text: str) -> object:
     """The expression's tree, by the shared parser (building a parser of its own cost each case 50 ms)."""
     tree = parse_expression(text)
@@ -141,11 +168,21 @@ def test_count_uses_the_callback_with_a_predicate() -> None:
     ('1 + "a"', {}, "cannot apply + to 1 and a"),
     ("a.b", {"a": {}}, "has no b"),
     ("a.__class__", {"a": 1}, "1 has no __class__"),
+    # users audit 9, D4: an integer grew without bound (squared 40 times, the run never came back)
+    ("big * big", {"big": 10 ** 9}, "* gives an integer of more than 18 digits"),
+    ("big + 1", {"big": 10 ** 18 - 1}, "+ gives an integer of more than 18 digits"),
+    ("0 - big - 1", {"big": 10 ** 18 - 1}, "- gives an integer of more than 18 digits"),
 ])
 def test_evaluator_errors_are_located(text: str, names: dict[str, object], message: str) -> None:
     with pytest.raises(EvalError) as e:
         evaluate(expr(text), names)  # type: ignore[arg-type]
     assert message in e.value.message and e.value.span.line == 1
+
+
+def test_integers_up_to_18_digits_and_floats_of_any_size_are_numbers() -> None:
+    assert evaluate(expr("big * 9"), {"big": 10 ** 17}) == 9 * 10 ** 17
+    assert evaluate(expr("big * big"), {"big": 1e200}) == float("inf")  # floats overflow as floats do
+    assert evaluate(expr("0 - big"), {"big": 10 ** 18 - 1}) == 1 - 10 ** 18
 
 
 def test_guard_must_be_boolean() -> None:
