@@ -206,6 +206,8 @@ def _preview(chart: Statechart, config: Path, world: str | None, components: lis
         fail_all(e.problems)
     except ValueError as e:  # the world and the hosts file disagree (check_hosts)
         fail_all(str(e).splitlines())
+    if _unknown_rooms([chart], sim_world):
+        return INVALID
     if output is not None:
         write_file(output, _preview_text(chart, p, hosts_file, as_json), "plan")
         err.print(Text.assemble(("✓ ", "bold green"), f"wrote {output}"))
@@ -450,7 +452,28 @@ def _missions_and_team(missions: list[Path], param: list[str], hosts: Path, worl
     charts = _charts(missions, param, cat, cluster.limits if cluster is not None else DEFAULT)
     if charts is None:
         return None
-    return (charts, *_team_files(hosts, world, cat, charts, cluster))
+    team, sim_world = _team_files(hosts, world, cat, charts, cluster)
+    return None if _unknown_rooms(charts, sim_world) else (charts, team, sim_world)
+
+
+def _unknown_rooms(charts: list[Statechart], sim_world: World) -> bool:
+    """Whether a mission names a room the world lacks in an `inside(...)` (shown, located, as a compiler error):
+    such a constraint would guard nothing (`dsl.rooms`)."""
+    from dsl.rooms import unknown_rooms
+
+    rooms = {room.id for room in sim_world.rooms}
+    results = []
+    for chart in charts:
+        found = unknown_rooms(chart, rooms, sim_world.name)
+        if found:
+            sources = {}
+            for name in {d.span.file for d in found}:
+                try:
+                    sources[name] = Path(name).read_text(encoding="utf-8-sig")
+                except (OSError, ValueError):  # the line is shown when it can be read; the location always is
+                    pass
+            results.append(Compiled(chart.file, None, found, sources))
+    return bool(results) and not show_diagnostics(results)
 
 
 def _charts(missions: list[Path], param: list[str], cat: Catalog, limits: Limits) -> list[Statechart] | None:
