@@ -30,7 +30,7 @@ import functools
 import logging
 import threading
 import time
-from collections.abc import Callable, Container, Iterator, Mapping
+from collections.abc import Callable, Collection, Container, Iterator, Mapping
 from typing import Any
 
 from drd.bus import Bus, Message, Query, Reply, message
@@ -124,6 +124,24 @@ def request_data(req: RunMission) -> dict[str, Any]:
 
 def run_key(cluster: str) -> str:
     return f"drd/{cluster}/missions/run"
+
+
+class RoomsRefused(ValueError):
+    """The mission names rooms the world lacks (`dsl.rooms`): its located diagnostics, rendered."""
+
+    def __init__(self, lines: list[str]) -> None:
+        super().__init__("; ".join(lines))
+        self.lines = lines
+
+
+def refuse_unknown_rooms(chart: Any, rooms: Collection[str], world: str, req: RunMission) -> None:
+    """RoomsRefused when the mission names a room `world` lacks in an `inside(...)`: a geofence on a misspelled room
+    would guard nothing (users audit 9, D6)."""
+    from dsl.rooms import unknown_rooms
+
+    found = unknown_rooms(chart, rooms, world)
+    if found:
+        raise RoomsRefused(render(found, {req.file or "<mission>": req.source}))
 
 
 def render(diagnostics: list[Any], sources: dict[str, str]) -> list[str]:
@@ -433,7 +451,10 @@ class MissionRunner:
             return RunReply("", False, str(e).splitlines())
         priority = req.priority or chart.priority
         with self.starting:  # one start at a time: two first missions must not start two worlds
-            return self._start(req, chart, priority)
+            try:
+                return self._start(req, chart, priority)
+            except RoomsRefused as e:
+                return RunReply("", False, e.lines)
 
     def _start(self, req: RunMission, chart: Any, priority: int) -> RunReply:
         if req.give_up_at and time.time() > req.give_up_at:  # before a world is made for nobody
@@ -443,10 +464,13 @@ class MissionRunner:
             if req.world and req.world != world.name:
                 raise ValueError(f"world {world.name} is running (missions {', '.join(world.missions())}): a mission"
                                  f" joins it; run this one in {world.name}, or after they end")
+            places = self.controller.executive.pool.places
+            if places:
+                refuse_unknown_rooms(chart, set(places), world.name, req)
         else:
             if self.world is not None:  # its loop is ending: let it retire its missions first
                 self.world.thread.join(timeout=10)
-            world = self._new_world(req)
+            world = self._new_world(req, chart)
         with self.lock:
             if world.closed:  # its last mission ended while this one was compiled: start the world again
                 raise ValueError(f"world {world.name} ended just now: run the mission again")
@@ -485,7 +509,7 @@ class MissionRunner:
         executive.submit(chart, mid, listeners=listeners, registry=router.registry(), priority=priority,
                          resume=resume, since=since, paused=paused, earlier=earlier)
 
-    def _new_world(self, req: RunMission) -> WorldRun:
+    def _new_world(self, req: RunMission, chart: Any) -> WorldRun:
         if self.simulator is None:  # real robots: nothing to load or reset, the clock starts now
             with self.lock:
                 self.clock.start_mission()
@@ -500,6 +524,7 @@ class MissionRunner:
         problems = check_hosts(loaded, self.cluster)
         if problems:
             raise ValueError("; ".join(map(str, problems)))
+        refuse_unknown_rooms(chart, {room.id for room in loaded.rooms}, path.stem, req)  # before the world starts
         try:
             reset = self.sim(SimRequest("reset", world=path.stem, seed=req.seed))
         except Exception as e:

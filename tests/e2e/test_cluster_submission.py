@@ -87,3 +87,16 @@ def test_a_mission_over_the_size_limit_is_refused_by_the_client_before_it_is_sen
                        capture_output=True, text=True, timeout=60, check=False)
     assert r.returncode == 2 and "larger than 1 MiB" in r.stderr and "Traceback" not in r.stderr
     assert "big.mission" not in cluster.log("controller")
+
+
+def test_a_mission_naming_a_room_the_world_lacks_is_refused_located(cluster: DaemonCluster, tmp_path: Path) -> None:
+    """Users audit 9, D6 on a cluster: the controller has the world, the client may not; a misspelled room in a
+    geofence would guard nothing, so the controller refuses the mission before its world starts."""
+    fenced = tmp_path / "fenced.mission"
+    fenced.write_text('mission Fenced {\n    needs rig: Ranger\n    constraint pen: inside(rig, "n7")\n'
+                      '    FollowCorridor(speed: 0.3)\n}\n')
+    r = subprocess.run([*MISSIONCTL, "run", str(fenced), "--config", str(cluster.hosts_file)],
+                       capture_output=True, text=True, timeout=60, check=False)
+    assert r.returncode == 2, (r.stdout[-1000:], r.stderr[-1000:])
+    assert "fenced.mission:3:33: error: no room named n7 in world corridor" in r.stderr, r.stderr
+    assert "did you mean n1?" in r.stderr and "Traceback" not in r.stderr
