@@ -94,7 +94,7 @@ _PLACEMENT_KEYS = ("cpu", "memory", "instances", "affinity")
 #: in their manifests, `limits:`): a value outside is refused at load with the file, the key and the range.
 RANGES: Mapping[str, Limit] = {
     "lease": Limit(0.1, 600.0, duration=True),  # below a control period of the network, grants would flap
-    "slice": Limit(0.1, 86_400.0, duration=True),
+    "slice": Limit(0.2, 86_400.0, duration=True),  # two control cycles, as a mission's `for` (dsl.checker.MIN_SLICE)
     "capacity": Limit(1, 1_000_000),
     "cores": Limit(1, 4096, "cores"),
     "history": Limit(1, MAX_HISTORY, "missions"),

@@ -34,6 +34,12 @@ ZEROS = {"int": "0", "float": "0.0", "bool": "false", "str": '""', "duration": "
 MAX_INSTANCES = DEFAULT_INSTANCES
 
 
+#: The runtime's control cycle (seconds), which a time slice must outlast: a holder is resumed at one cycle and
+#: preempted at the next, so a shorter slice never lets it run (users audit 9, D3: `for 100ms` starved both).
+CONTROL_CYCLE = 0.1
+MIN_SLICE = 2 * CONTROL_CYCLE
+
+
 @dataclass
 class Program:
     """A mission file and its imports, parsed."""
@@ -313,9 +319,12 @@ class Checker:
             if q is not None and not q > 0:
                 self.report.error("quantity", f"quantity {q:g} asks for nothing: it must be above 0", n.quantity.span,
                                   "leave quantity out to take the whole resource")
-        if n.slice is not None and not n.slice.seconds > 0:
-            self.report.error("slice", f"a time slice of {n.slice.text} never lets the holder run: it must be longer"
-                              " than 0s", n.slice.span, "leave `for` out to hold the resource until released")
+        if n.slice is not None and not n.slice.seconds >= MIN_SLICE - 1e-9:
+            self.report.error("slice", f"a time slice of {n.slice.text} never lets the holder run: it is resumed at"
+                              f" one control cycle ({CONTROL_CYCLE:g}s) and preempted at the next; give at least"
+                              f" {MIN_SLICE * 1000:g}ms", n.slice.span,
+                              "a slice of 1s or more leaves most of it to the work; leave `for` out to hold the"
+                              " resource until released")
 
     # ------------------------------------------------------------- children
     def _children(self, b: ast.Behavior, body: Body, scope: Scope, seen: dict[str, Span]) -> None:

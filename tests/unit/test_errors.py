@@ -87,7 +87,11 @@ ERRORS: list[tuple[str, str, str, str | None]] = [
     ("quantity-zero", m("  needs r: RadioChannel quantity 0.0\n  Observe"),
      "2:34 quantity 0 asks for nothing: it must be above 0", None),
     ("slice-zero", m("  needs r: Ranger for 0s\n  Observe"),
-     "2:23 a time slice of 0s never lets the holder run: it must be longer than 0s", "leave `for` out"),
+     "2:23 a time slice of 0s never lets the holder run: it is resumed at one control cycle (0.1s) and preempted at"
+     " the next; give at least 200ms", "leave `for` out"),
+    ("slice-one-cycle", m("  needs r: Ranger for 100ms\n  Observe"),  # users audit 9, D3: both holders starved
+     "2:23 a time slice of 100ms never lets the holder run: it is resumed at one control cycle (0.1s) and"
+     " preempted at the next; give at least 200ms", "a slice of 1s or more"),
     ("negative-duration", m("  Wait(duration: -1s)"), "2:8 duration: a duration cannot be negative (-1 s)", None),
     ("remainder-by-zero", m("  var n: int = 1\n  Observe\n  Observe -> done / set n = n % 0"),
      "4:33 remainder by zero", "divisor is 0"),
