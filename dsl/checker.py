@@ -537,6 +537,11 @@ class Checker:
                 self.typer.expect(t.condition, "bool", tscope, "when")
             if t.delay is not None:
                 self.typer.expect(t.delay, "duration", tscope, "after")
+                delay = constant(t.delay)
+                if delay is not None and delay < 0:  # users audit 9: it fired at once, as `after 0s` does
+                    self.report.error("duration", f"after {delay:g}s: a duration cannot be negative (the source"
+                                      " cannot have been active for less than no time)", t.delay.span,
+                                      "write `after 0s` to leave as soon as the source is active")
             if t.guard is not None:
                 self.typer.expect(t.guard, "bool", tscope, "a guard")
             for a in t.actions:
@@ -558,7 +563,13 @@ class Checker:
         match a:
             case ast.SetAction(name=name, value=value):
                 var = next((v for v in body.vars if v.name == name), None)
-                if var is None:
+                param = next((p for p in b.params if p.name == name), None)
+                if var is None and param is not None:  # users audit 9, D12: the hint said to declare a var of
+                    self.report.error("read-only", f"set {name}: {name} is a parameter of {b.name}, which a"  # that
+                                      " transition cannot change", a.span,  # name, which was then declared twice
+                                      f"copy it into a var and set that: var current_{name}: {param.type.name}"
+                                      f" = {name}")
+                elif var is None:
                     kind = self.typer.infer(value, scope)  # the hint declares it with the type of what is set
                     kind, zero = (kind, ZEROS[kind]) if isinstance(kind, str) and kind in ZEROS else ("int", "0")
                     self.report.error("unknown-name", f"set {name}: {b.name} has no var {name}", a.span,

@@ -51,7 +51,7 @@ if TYPE_CHECKING:
     from drd.dryrun import DryRun
     from drd.record import Recorder
 
-from drd.cli.options import ConfigOption, ConnectOption, JsonOption, TimeoutOption
+from drd.cli.options import MAX_PRIORITY, ConfigOption, ConnectOption, JsonOption, TimeoutOption
 
 
 def register(app: typer.Typer) -> None:
@@ -479,7 +479,7 @@ def run(mission: Path = typer.Argument(..., help="The mission file.", show_defau
         seed: int = typer.Option(0, "--seed", help="Seed of the simulation."),
         param: list[str] = typer.Option([], "--param", "-p", show_default=False,
                                         help="NAME=VALUE: start the mission's variable NAME at VALUE (repeatable)."),
-        priority: int | None = typer.Option(None, "--priority", "-P", min=1, show_default=False,
+        priority: int | None = typer.Option(None, "--priority", "-P", min=1, max=MAX_PRIORITY, show_default=False,
                                      help="The mission's priority against the missions running with it (1 the"
                                           " highest) [default: its `mission ... priority`, else 1]."),
         trace: Path | None = typer.Option(None, "--trace", show_default=False,

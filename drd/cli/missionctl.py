@@ -35,7 +35,7 @@ from drd.cli.common import (
     version_option,
     write_file,
 )
-from drd.cli.options import ComponentsOption
+from drd.cli.options import MAX_PRIORITY, ComponentsOption
 from drd.errors import ConfigurationError
 from drd.signals import set_soon
 from dsl import Compiled, Limits, compile_file
@@ -377,7 +377,7 @@ _LIVE_OPTION = typer.Option(None, "--foxglove", show_default=False, metavar="[HO
 def dry_run(
     missions: list[Path] = typer.Argument(..., help="The mission file; several run together on one team, each "
                                                     "with its own report.", show_default=False),
-    priority: list[int] = typer.Option([], "--priority", "-P", min=1, show_default=False,
+    priority: list[int] = typer.Option([], "--priority", "-P", min=1, max=MAX_PRIORITY, show_default=False,
                                        help="The mission's priority against the others (1 the highest; default: "
                                             "its `mission ... priority`). Repeat it for each mission, in order."),
     param: list[str] = typer.Option([], "--param", "-p", show_default=False,

@@ -7,6 +7,12 @@ from pathlib import Path
 
 import typer
 
+from dsl.evaluate import INT_DIGITS
+
+#: The highest priority a command line may give: a number of at most 18 digits, as in a mission (`priority N`)
+#: and a `--param` (users audit 9: `--priority 99999999999999999999` ran, and the report carried it).
+MAX_PRIORITY = 10 ** INT_DIGITS - 1
+
 ComponentsOption = typer.Option(
     None, "--components", "-C", help="Extra folder of component manifests (repeatable; also $DRD_COMPONENTS).",
     show_default=False, metavar="DIR")

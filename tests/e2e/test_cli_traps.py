@@ -466,3 +466,11 @@ def test_a_missing_brace_names_the_block_never_closed_at_the_command_line(tmp_pa
     assert "    2 |     parallel all {" in done.stdout + done.stderr
     assert "before line 4" in done.stdout + done.stderr
     assert "reserved word" not in done.stdout + done.stderr
+
+
+def test_a_priority_of_more_than_18_digits_is_refused_as_in_a_mission() -> None:
+    """Users audit 9, D10: `--priority 99999999999999999999` ran (the report carried it), while `priority N` in the
+    file and `--param` refuse a number of more than 18 digits."""
+    r = missionctl("dry-run", "missions/corridor_surveillance.mission", "--priority", "99999999999999999999")
+    assert r.returncode == 2 and "--priority" in r.stderr and "999999999999999999" in r.stderr, r.stderr
+    assert r.stdout == ""

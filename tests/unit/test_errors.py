@@ -93,6 +93,15 @@ ERRORS: list[tuple[str, str, str, str | None]] = [
      "2:23 a time slice of 100ms never lets the holder run: it is resumed at one control cycle (0.1s) and"
      " preempted at the next; give at least 200ms", "a slice of 1s or more"),
     ("negative-duration", m("  Wait(duration: -1s)"), "2:8 duration: a duration cannot be negative (-1 s)", None),
+    # users audit 9, D11: `after -5s` fired at once, as `after 0s` does
+    ("negative-after", m("  start -> W\n  Wait as W\n  W -> done after -5s"),
+     "4:19 after -5s: a duration cannot be negative (the source cannot have been active for less than no time)",
+     "write `after 0s`"),
+    # users audit 9, D12: the hint said to declare a var of the parameter's name, which was then declared twice
+    ("set-a-parameter", m("  Inner", "behavior Inner(level: int = 1) {\n  start -> W\n  Wait as W\n"
+                                     "  W -> done / set level = 3\n}\n"),
+     "7:15 set level: level is a parameter of Inner, which a transition cannot change",
+     "var current_level: int = level"),
     ("remainder-by-zero", m("  var n: int = 1\n  Observe\n  Observe -> done / set n = n % 0"),
      "4:33 remainder by zero", "divisor is 0"),
     ("division-by-zero", m("  var x: float = 1.0 / 0\n  Observe"), "2:24 division by zero", None),
