@@ -407,7 +407,7 @@ class Checker:
             body = self.bodies[implicit_in]
             siblings = [k for k in body.children if k not in body.implicit]  # not the typo itself
             self.report.error("unknown-state", f"unknown state {name}: no child of {implicit_in} and no behavior "
-                              "has this name", span, did_you_mean(name, [*siblings, *known]))
+                              "has this name", span, did_you_mean(name, [*siblings, *known, "done", "fail"]))
             return None
         self.report.error("unknown-behavior", f"unknown behavior {name}", span, did_you_mean(name, known) or (
             "a behavior is a component with a manifest: drd's own, or one in a folder given with -C DIR or"
@@ -524,8 +524,9 @@ class Checker:
                 event = self.events.get(t.event)
                 if event is None:
                     self.report.error("unknown-event", f"unknown event {t.event}", t.span,
-                                      did_you_mean(t.event, self.events)
-                                      or f"known events: {', '.join(sorted(self.events)) or 'none'}")
+                                      did_you_mean(t.event, [*self.events, "error"])  # `on error` too
+                                      or f"known events: {', '.join(sorted(self.events)) or 'none'}; and"
+                                         " `on error` when a child fails")
                 if t.sender is not None and t.sender not in body.children:
                     self.report.error("unknown-state", f"on {t.event} from {t.sender}: {b.name} has no child"
                                       f" {t.sender}", t.span, did_you_mean(t.sender, body.children)

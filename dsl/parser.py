@@ -661,7 +661,7 @@ def syntax_diagnostic(e: UnexpectedInput, history: Sequence[Token], file: str, t
         where = (f"before {_show(tok)}" if tok.line == prev.end_line else f"at the end of line {prev.end_line}")
         return Diagnostic("syntax", f"syntax: expected {closer} after {_show(prev)}: the {_show(opener)} on line"
                                     f" {opener.line} is never closed", _after(file, prev), f"add {closer} {where}")
-    hint = _keyword_hint(tok, e.expected)
+    hint = _keyword_hint(tok, e.expected, prev)
     if prev is not None and tok.type == "LPAR" and len(earlier) >= 2 and earlier[-2].type == "ARROW":
         return Diagnostic("syntax", f"syntax: a transition's target is a state's name, not a call: "
                                     f"`-> {prev.value}(`", _span(file, tok),
@@ -778,10 +778,33 @@ def _describe(expected: set[str] | frozenset[str]) -> str:
     return words[0] if len(words) == 1 else ", ".join(words[:-1]) + " or " + words[-1]
 
 
-def _keyword_hint(tok: Token, expected: set[str] | frozenset[str]) -> str | None:
-    """Explain the usual causes: a keyword where a name belongs, or glued to a name."""
+#: Keywords a misspelled word is compared with (the short ones, `as`, `on`, `or`, would match too many names).
+_SPELLED = sorted(k for k in KEYWORDS if len(k) >= 4)
+
+
+def _misspelled(*tokens: Token | None) -> str | None:
+    """`did you mean needs?` when one of `tokens` (the word before the error, or at it) is a name one or two edits
+    from a keyword: `need rig: Ranger` was told "`rig` starts a new item" (users audit 9, D8)."""
+    from dsl.errors import did_you_mean
+
+    for tok in tokens:
+        if tok is not None and tok.type == "NAME" and str(tok.value) not in KEYWORDS and len(str(tok.value)) >= 3:
+            hint = did_you_mean(str(tok.value).lower(), _SPELLED)
+            if hint is not None:
+                return hint.replace("did you mean ", f"`{tok.value}` is no keyword: did you mean ")
+    return None
+
+
+def _keyword_hint(tok: Token, expected: set[str] | frozenset[str], prev: Token | None = None) -> str | None:
+    """Explain the usual causes: a misspelled keyword, a keyword where a name belongs, or glued to a name."""
     if tok.type in ("SET", "EMIT", "RELEASE", "LOG") and tok.type not in expected:
         return f"actions such as {tok.value} follow a / at the end of a transition: A -> B / {tok.value} ..."
+    if tok.type == "PARALLEL" and "NAME" in expected:
+        return ("a parallel block holds behaviors, not another parallel block: declare the inner one in a behavior"
+                " (`behavior Both { parallel all { ... } }`) and name that behavior here")
+    misspelled = _misspelled(prev, tok)
+    if misspelled is not None:
+        return misspelled
     if tok.type != "NAME" and tok.value in KEYWORDS and "NAME" in expected:
         return f"{tok.value} is a reserved word: choose another name"
     if tok.type == "NAME":
