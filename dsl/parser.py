@@ -802,16 +802,13 @@ def _keyword_hint(tok: Token, expected: set[str] | frozenset[str], prev: Token |
     if tok.type == "PARALLEL" and "NAME" in expected:
         return ("a parallel block holds behaviors, not another parallel block: declare the inner one in a behavior"
                 " (`behavior Both { parallel all { ... } }`) and name that behavior here")
-    misspelled = _misspelled(prev, tok)
-    if misspelled is not None:
-        return misspelled
     if tok.type != "NAME" and tok.value in KEYWORDS and "NAME" in expected:
         return f"{tok.value} is a reserved word: choose another name"
     if tok.type == "NAME":
         for kw in sorted(KEYWORDS, key=len, reverse=True):
             if kw.upper() in expected and tok.value.startswith(kw) and len(tok.value) > len(kw):
                 return f"put a space between {kw} and {tok.value[len(kw):]}"
-    return None
+    return _misspelled(prev, tok)
 
 
 _default: Parser | None = None

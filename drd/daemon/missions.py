@@ -43,6 +43,7 @@ from drd.daemon.logs import PLACEMENT_LOGGER
 from drd.daemon.migrate import Migrations
 from drd.daemon.placements import PlacementLog
 from drd.daemon.resume import Checkpoints, resume, wait_for_hosts
+from drd.errors import MissionInputError
 from drd.hosts import Cluster, Role
 from drd.journal import Journal
 from drd.placement import HostView, Recent
@@ -126,7 +127,7 @@ def run_key(cluster: str) -> str:
     return f"drd/{cluster}/missions/run"
 
 
-class RoomsRefused(ValueError):
+class RoomsRefused(MissionInputError):
     """The mission names rooms the world lacks (`dsl.rooms`): its located diagnostics, rendered."""
 
     def __init__(self, lines: list[str]) -> None:
@@ -368,7 +369,7 @@ class MissionRunner:
         """A `halted` for each drive of `host` a running mission holds, in that mission, by its holder."""
         from drd.runtime.records import Halted
 
-        drives = [d.id for d in self.cluster.host(host).devices if d.type == "Drive"]
+        drives = self._drives(host)
         with self.lock:
             executive = self.controller.executive
             now = self.clock.now()
@@ -377,6 +378,10 @@ class MissionRunner:
                     mission, _, path = holder.partition("/")
                     executive.record(mission, Halted(now, path, unit, "stop", f"host {host} down: its robots were"
                                                                               " stopped by the controller"))
+
+    def _drives(self, host: str) -> list[str]:
+        """The ids of `host`'s Drive devices: what moves a robot, and so what a halt is recorded for."""
+        return [d.id for d in self.cluster.host(host).devices if d.type == "Drive"]
 
     def _lose_robots(self) -> None:
         with self.lock:
@@ -648,7 +653,7 @@ class MissionRunner:
         audit 8, D6). Its robots are stopped by the controller when the host is found down (`halt_host`)."""
         from drd.runtime.records import Halted
 
-        drives = {d.id for d in self.cluster.host(host).devices if d.type == "Drive"}
+        drives = set(self._drives(host))
         with self.lock:
             for op in ops:
                 match op:

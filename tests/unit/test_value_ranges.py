@@ -242,7 +242,7 @@ def test_hosts_values_outside_their_ranges_are_refused_with_file_line_and_key(tm
     assert got["hosts.ranger1.devices.radio.capacity"] == (file, line_of(path, "capacity: 0"),
                                                            "0 is out of range: 1..1000000")
     assert got["hosts.ranger1.devices.drive.slice"][:2] == (file, line_of(path, "slice: -1s"))
-    assert "(100ms..24h), got str '-1s'" in got["hosts.ranger1.devices.drive.slice"][2]
+    assert "(200ms..24h), got str '-1s'" in got["hosts.ranger1.devices.drive.slice"][2]
     assert got["hosts.ranger1.robots.ranger1.properties.battery"] == (
         file, line_of(path, "battery: 3,"),
         "3 is out of range: 0..1 (Ranger's manifest, components/Ranger/manifest.yaml)")
