@@ -2,8 +2,9 @@
 routers, or a router, when the cluster has routers: ``options={"mode": ...}``).
 
 A thin mapping: ``put`` → ``Session.put``, ``subscribe`` → ``declare_subscriber``, ``serve`` →
-``declare_queryable``, ``request`` → ``Querier.get`` (all queryables, no consolidation, so
-every reply comes back; a querier declared per key and timeout, and kept), tokens →
+``declare_queryable`` (complete), ``request`` → ``Querier.get`` (no consolidation, so every reply comes back;
+on a concrete key the complete queryables, on a wildcard all that match; a querier declared per key and timeout,
+and kept), tokens →
 ``Session.liveliness()``. Schema checks and error
 containment come from :class:`drd.bus.base.Bus`.
 
@@ -48,7 +49,7 @@ from .base import (
     TokenCallback,
     log,
     )
-from .keys import check_key_expr
+from .keys import check_key_expr, is_concrete
 from .messages import MAX_SIZE, MalformedMessage, Message, decode, encode
 
 #: Seconds a bus waits for its zenoh session to close (a frozen peer would hold it 10 s).
@@ -88,6 +89,11 @@ BUS_MAX_MESSAGE = MAX_SIZE + (64 << 10)
 ZENOH_MAX_MESSAGE = 1 << 30
 
 _ALL = zenoh.QueryTarget.ALL
+#: A request on one concrete key goes to the complete queryables only, which every `serve` declares: a peer's
+#: queryable on `drd/<cluster>/**` that never answers (a buggy tool's, zenoh's default is not complete) held every
+#: controller call for its whole timeout and wedged the missions (wire audit 10, D1). A wildcard request still
+#: asks every matching queryable (a complete one must include the whole of the query's key expression).
+_COMPLETE = zenoh.QueryTarget.ALL_COMPLETE
 _NO_CONSOLIDATION = zenoh.ConsolidationMode.NONE
 
 
@@ -193,7 +199,7 @@ class ZenohBus(Bus):
             finally:
                 query.drop()  # type: ignore[no-untyped-call]  # finalize now, so the requester is not left waiting for a GC
 
-        queryable = self._zcall(self.session.declare_queryable, key_expr, on_query)
+        queryable = self._zcall(self.session.declare_queryable, key_expr, on_query, complete=True)
         return Queryable(key_expr, self._keep(queryable))
 
     def request_raw(self, key: str, data: bytes | None, timeout: float = DEFAULT_TIMEOUT) -> list[Reply]:
@@ -271,7 +277,8 @@ class ZenohBus(Bus):
         if timeout <= 0:
             raise ValueError(f"timeout must be positive, not {timeout!r}")
         querier: zenoh.Querier = self._zcall(
-            self.session.declare_querier, key, target=_ALL, consolidation=_NO_CONSOLIDATION, timeout=timeout
+            self.session.declare_querier, key, target=_COMPLETE if is_concrete(key) else _ALL,
+            consolidation=_NO_CONSOLIDATION, timeout=timeout
         )
         evicted = []  # let go once the lock is released: zenoh undeclares a querier when it is no longer referenced
         with self._lock:

@@ -268,6 +268,38 @@ def test_a_queryable_declared_after_the_first_request_is_reached_and_a_wildcard_
         assert pair.a.call(f"svc/many/{i}", Chat(str(i)), timeout=2.0) == Chat(f"m:{i}")
 
 
+def test_a_peers_silent_wildcard_queryable_is_not_asked_by_a_call(pair: Pair) -> None:
+    """Wire audit 10, D1: a plain zenoh peer's queryable on `svc/**` that never answers (zenoh's default: not
+    complete) was asked too, and every call waited its whole timeout for it: the controller's calls to its hosts
+    crawled and the missions with them. A call on a concrete key asks the complete queryables, which `serve`
+    declares; the peer never even sees it. A wildcard request still reaches it (it may serve part of the space)."""
+    if pair.kind != "zenoh":
+        pytest.skip("a plain zenoh peer's queryable")
+    import zenoh
+
+    seen: list[str] = []
+    held: list[zenoh.Query] = []
+
+    def silent(query: zenoh.Query) -> None:
+        seen.append(str(query.key_expr))
+        held.append(query)  # never answered, never dropped while the test runs
+
+    rogue_bus = pair.new_session()
+    rogue = rogue_bus.session.declare_queryable("svc/**", silent)  # type: ignore[attr-defined]
+    try:
+        pair.b.serve("svc/x/echo", echo("b"))
+        served(pair.a, "svc/x/echo")
+        eventually(lambda: pair.a.request("svc/*/echo", PROBE, timeout=0.3) is not None and seen,
+                   "the peer's queryable to be asked by a wildcard request (it is there)")
+        seen.clear()
+        for i in range(5):
+            assert pair.a.call("svc/x/echo", Chat(str(i)), timeout=5.0) == Chat(f"b:{i}")
+        assert seen == [], "the call asked the peer's silent queryable"
+    finally:
+        held.clear()
+        rogue.undeclare()
+
+
 def test_request_without_queryable_and_without_payload(pair: Pair) -> None:
     assert pair.a.request("svc/nobody", Chat("x"), timeout=0.5) == []
     with pytest.raises(BusTimeout, match="nothing answers there now"):  # not "within 0.5 s": nothing waited
