@@ -19,29 +19,39 @@ from collections.abc import Callable
 
 
 class RateLimit(logging.Filter):
-    """At most `burst` records per message template per `window` seconds."""
+    """At most `burst` records per message template and subject per `window` seconds, and `burst * SUBJECTS` per
+    template: the subject is the record's first argument (the key a rejected message came on, the host it named).
+    Keyed by template alone, a trickle of one junk message used every rejection's budget, and a forged host token
+    or load report was counted but never named (wire audit 10, D2); keyed by subject alone, a peer varying its keys
+    would make the limit nothing."""
+
+    SUBJECTS = 5  # subjects a template may name in full per window, at the most
 
     def __init__(self, burst: int = 10, window: float = 10.0, clock: Callable[[], float] = time.monotonic) -> None:
         super().__init__()
         self.burst, self.window, self.clock = burst, window, clock
         self._lock = threading.Lock()
-        self._windows: dict[str, tuple[float, int, int]] = {}  # template -> (window start, passed, dropped)
+        # template -> (window start, passed, dropped, passed per subject)
+        self._windows: dict[str, tuple[float, int, int, dict[str, int]]] = {}
 
     def filter(self, record: logging.LogRecord) -> bool:
         template = str(record.msg)
+        args = record.args
+        subject = str(args[0])[:200] if isinstance(args, tuple) and args else ""
         now = self.clock()
         with self._lock:
-            start, passed, dropped = self._windows.get(template, (now, 0, 0))
+            start, passed, dropped, subjects = self._windows.get(template, (now, 0, 0, {}))
             if now - start >= self.window:
-                start, passed = now, 0
-            if passed >= self.burst:
-                self._windows[template] = (start, passed, dropped + 1)
+                start, passed, subjects = now, 0, {}
+            if passed >= self.burst * self.SUBJECTS or subjects.get(subject, 0) >= self.burst:
+                self._windows[template] = (start, passed, dropped + 1, subjects)
                 return False
-            self._windows[template] = (start, passed + 1, 0)
+            subjects[subject] = subjects.get(subject, 0) + 1
+            self._windows[template] = (start, passed + 1, 0, subjects)
             if len(self._windows) > 1024:  # templates are few; never let this grow without bound
                 self._windows.clear()
         if dropped:
-            record.msg = f"{record.getMessage()} [{dropped} similar messages suppressed]"
+            record.msg = f"{record.getMessage()} [{dropped} messages of this kind suppressed]"
             record.args = ()
         return True
 

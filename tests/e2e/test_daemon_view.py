@@ -210,11 +210,21 @@ def test_resources_reply_lists_holders_queue_and_epochs(cluster: Cluster) -> Non
 def test_rate_limit_drops_floods_and_says_how_many() -> None:
     now = [0.0]
     limit = RateLimit(burst=3, window=10.0, clock=lambda: now[0])
-    records = [logging.LogRecord("drd.bus", logging.WARNING, "f", 1, "rejected %s", (i,), None) for i in range(10)]
+
+    def rejected(subject: str, why: int) -> logging.LogRecord:
+        return logging.LogRecord("drd.bus", logging.WARNING, "f", 1, "rejected %s: %s", (subject, why), None)
+
+    records = [rejected("host/r1/load", i) for i in range(10)]
     assert [limit.filter(r) for r in records] == [True] * 3 + [False] * 7
+    # wire audit 10, D2: the junk on one key used the template's whole budget, and a forged token went unnamed
+    forged = rejected("host/intruder/live", 0)
+    assert limit.filter(forged) and forged.getMessage() == "rejected host/intruder/live: 0 [7 messages of this" \
+                                                            " kind suppressed]"
+    varied = [limit.filter(rejected(f"k/{i}", i)) for i in range(20)]  # a peer varying its keys: still bounded
+    assert sum(varied) == 3 * RateLimit.SUBJECTS - 4  # 15 a window for the template; 4 passed before
     now[0] = 11.0
-    late = logging.LogRecord("drd.bus", logging.WARNING, "f", 1, "rejected %s", (99,), None)
-    assert limit.filter(late) and late.getMessage() == "rejected 99 [7 similar messages suppressed]"
+    late = rejected("host/r1/load", 99)
+    assert limit.filter(late) and "suppressed]" in late.getMessage()
     other = logging.LogRecord("drd.bus", logging.WARNING, "f", 1, "another %s", (1,), None)
     assert limit.filter(other)
 
