@@ -234,6 +234,8 @@ class SerializedBus(BusWrapper):
                 reply = handler(query)
             finally:
                 self._lock.release()
+            if isinstance(reply, Reply) and reply.error is not None and self._on_reject is not None:
+                self._on_reject(query.key, reply.error)  # an unknown op or mission: counted and logged too
             if self._read_only(query) and isinstance(reply, Message):
                 if len(self._last) > MAX_KEPT:  # pages asked once: forget them, keep the refreshed ones
                     self._last = {k: v for k, v in self._last.items() if k[1] == DEFAULT}

@@ -38,7 +38,7 @@ from pathlib import Path
 from typing import Any
 
 from drd.bus import Bus, BusError, LoadReport, Message, Ping, Pong, Query, Reply, Sample
-from drd.bus.base import Declaration
+from drd.bus.base import BusWrapper, Declaration, Handler, Queryable
 from drd.bus.messages import encode
 from drd.cluster.instances import InstanceInfo
 from drd.cluster.keys import ClusterKeys, cluster_of
@@ -70,6 +70,26 @@ from dsl.catalog import Catalog
 
 log = logging.getLogger("drd.daemon")
 rejects = logging.getLogger("drd.daemon.rejects")
+
+
+class RefusalsCounted(BusWrapper):
+    """The bus a daemon's Creator and simulator serve on: a request their handler refuses (an error reply: an
+    unknown op or component, a method off the simulator's allow-list, a world outside its folders) is counted in
+    `rejected` and logged on `drd.daemon.rejects`, as the daemon's own refusals are (docs/security.md: "refused,
+    counted and logged"; wire audit 10, D3: they were answered, and neither)."""
+
+    def __init__(self, inner: Bus, reject: Callable[[str, str], None]) -> None:
+        super().__init__(inner)
+        self.reject = reject
+
+    def serve(self, key_expr: str, handler: Handler) -> Queryable:
+        def counted(query: Query) -> Message | Reply | None:
+            answer = handler(query)
+            if isinstance(answer, Reply) and answer.error is not None:
+                self.reject(query.key, answer.error)
+            return answer
+
+        return self.inner.serve(key_expr, counted)
 
 MAX_EVENTS = 1000
 #: Seconds a view query waits for the daemon's lock before it reads without it.
@@ -291,11 +311,12 @@ class Daemon:
         self._serve(keys.db(me, "lookup"), self._lookup, Lookup)
         self._serve(keys.db(me, "query"), self._query, TraderRequest)
         roles = self.cluster.host(me).roles
+        refusing = RefusalsCounted(bus, self._reject)  # what the Creator and the simulator refuse is counted too
         if Role.SIMULATOR in roles:
-            self.sim_service = self._simulator(bus)
+            self.sim_service = self._simulator(refusing)
         from drd.cluster.creator import Creator
 
-        self.creator = Creator(bus, self.cluster, me, self.config.catalog,
+        self.creator = Creator(refusing, self.cluster, me, self.config.catalog,
                                sim_service=self.sim_service,
                                on_change=self._instances_changed, acting=self._acts_here)
         if Role.CONTROLLER in roles and self.cluster.store.replicated:

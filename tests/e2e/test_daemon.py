@@ -193,6 +193,27 @@ def test_malformed_messages_at_every_queryable_are_refused_and_cost_no_memory(cl
     print(f"\n{FLOOD * len(queryables)} malformed requests in {elapsed:.1f} s, RSS {growth / 2**20:+.1f} MB")
 
 
+def test_a_well_formed_command_the_controller_refuses_is_counted_and_logged(cluster: DaemonCluster,
+                                                                           client: ClusterClient) -> None:
+    """Wire audit 10, D3: an unknown command to the executive (and an unknown op or component at a Creator, a world
+    outside the simulator's folders) was answered with an error and neither counted nor logged, though
+    docs/security.md says refused requests are."""
+    from drd.bus import RemoteError
+    from drd.bus.zenoh_bus import ZenohBus
+    from drd.executive_messages import MissionCommand
+
+    line = f"rejected a message on {client.keys.executive}: unknown command 'FROBNICATE'"
+    with ZenohBus(connect=cluster.endpoints, name="prober") as bus:
+
+        def refused_and_logged() -> bool:  # asked again: a flood before may hold the log's limit for 10 s
+            with pytest.raises(RemoteError, match="unknown command 'FROBNICATE'"):
+                bus.call(client.keys.executive, MissionCommand("FROBNICATE"), timeout=5.0)
+            return line in cluster.log("controller")
+
+        eventually(refused_and_logged, "the refusal to be logged", 25)
+    assert client.daemon_status("controller").rejected["unknown command 'FROBNICATE'"] >= 1
+
+
 def test_a_second_controller_for_the_cluster_refuses_to_start(cluster: DaemonCluster, tmp_path: Path) -> None:
     """Issue #16: exactly one controller acts. A second `drd start --host controller` elsewhere (its own endpoint
     and run directory, the same cluster) sees the first one's token and refuses, naming it; nothing else changes."""
