@@ -83,6 +83,6 @@ class DriverTap:
                 continue
             poses[robot] = [float(x), float(y), float(heading)]
         now = self.clock()
-        readings, nxt, missed = self.observations.after(max(0, req.after), OBSERVE_PAGE)
+        readings, nxt, missed = self.observations.after(max(0, min(req.after, self.observations.next)), OBSERVE_PAGE)
         return WorldObservation(now, "", poses, {}, {}, readings, nxt, more=nxt < self.observations.next,
                                 missed=missed)

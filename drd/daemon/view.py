@@ -377,6 +377,11 @@ def runnable_components(host: Host, catalog: Catalog) -> list[str]:
     return sorted(t.name for t in catalog.components.values() if required_devices(t) <= types)
 
 
+#: At most this many instances on one host (a 64-bit count: the wire's JSON decoder takes any integer, and a 400-digit
+#: count was stored and shown by `missionctl hosts`; wire audit 10, D4).
+MAX_INSTANCES_REPORTED = 2**63 - 1
+
+
 def _sane(report: LoadReport) -> bool:
     numbers = (report.cpu, report.memory, report.load1)
-    return all(math.isfinite(v) and v >= 0 for v in numbers) and report.instances >= 0
+    return all(math.isfinite(v) and v >= 0 for v in numbers) and 0 <= report.instances <= MAX_INSTANCES_REPORTED

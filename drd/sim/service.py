@@ -348,7 +348,9 @@ class SimulationService:
             poses = {rid: [p.x, p.y, p.heading] for rid in sim.robots if rid not in carried and (p := sim.pose(rid))}
             intruders = {iid: [x, y] for iid, (x, y) in sim.intruders().items()}
             now, name = sim.time, self.world_name
-        readings, nxt, missed = observations.after(max(0, req.after), OBSERVE_PAGE)
+        # a cursor past the last reading asks for what comes next (one of 10**30 was echoed back in a reply no
+        # encoder could write: wire audit 10, D4)
+        readings, nxt, missed = observations.after(max(0, min(req.after, observations.next)), OBSERVE_PAGE)
         return WorldObservation(now, name, poses, carried, intruders, readings, nxt,
                                 more=nxt < observations.next, missed=missed)
 

@@ -105,10 +105,13 @@ def test_its_own_host_is_always_up(cluster: Cluster) -> None:
     (lambda v: v.load(report("intruder"), 0.0), "a load report from a host not in the hosts file"),
     (lambda v: v.load(report("ranger1"), 0.0, "ranger2"), "a load report for ranger1 published under ranger2"),
     (lambda v: v.load(LoadReport("ranger1", -1.0, 0.0, 0.0, 0, 0.0), 0.0), "a load report with out-of-range values"),
+    # wire audit 10, D4: the JSON decoder takes any integer; a 400-digit count was stored and shown
+    (lambda v: v.load(LoadReport("ranger1", 1.0, 0.0, 0.0, 10 ** 400, 0.0), 0.0),
+     "a load report with out-of-range values"),
     (lambda v: v.announce(announcement("ranger1", cluster="other"), 0.0), "an announcement for cluster 'other'"),
     (lambda v: v.announce(announcement("ranger1"), 0.0, "ranger2"),
      "an announcement for ranger1 published under ranger2"),
-], ids=["token", "load", "load-key", "load-values", "cluster", "announce-key"])
+], ids=["token", "load", "load-key", "load-values", "load-huge-count", "cluster", "announce-key"])
 def test_what_does_not_belong_is_rejected(cluster: Cluster, feed: object, detail: str) -> None:
     view = ClusterView(cluster, "controller")
     [change] = feed(view)  # type: ignore[operator]

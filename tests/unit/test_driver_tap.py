@@ -67,6 +67,11 @@ def test_each_new_scan_is_kept_once_at_most_one_a_control_cycle() -> None:
                                                            (100.35, [4.0, 4.0, 4.0])]
     assert scans[0]["robot"] == "ranger1" and scans[0]["max_range"] == 8.0 and scans[0]["fov"] == math.pi
     assert tap.observe(WorldObserve(reply.next)).readings == []  # a reader's cursor goes on from `next`
+    beyond = tap.observe(WorldObserve(10 ** 30))  # wire audit 10, D4: echoed back, no encoder could write it
+    assert beyond.readings == [] and beyond.next == reply.next
+    from drd.bus import decode, encode
+
+    assert decode(encode(beyond)) == beyond
 
 
 def test_poses_are_what_each_drive_reads_now_and_a_drive_that_cannot_say_is_left_out() -> None:
