@@ -17,7 +17,7 @@ import signal
 import time
 import typing
 from collections.abc import Callable, Iterator, Mapping, Sequence
-from contextlib import contextmanager
+from contextlib import contextmanager, suppress
 from dataclasses import asdict
 from pathlib import Path
 from types import FrameType
@@ -619,6 +619,8 @@ def _run_and_follow(client: ClusterClient, watch: _RecordWatch, request: Any, wa
     except KeyboardInterrupt as e:  # the operator's Ctrl-C stops the mission, not just this command
         if reply is None:  # before the controller took it: nothing runs
             raise
+        if isinstance(e, Terminated):
+            _ignore_sigterm()  # a SIGTERM held while submitting: the next must not cut the stop short either
         return _stop_on_interrupt(client, watch, reply.mission, reply.base, began,
                                   "SIGTERM" if isinstance(e, Terminated) else "Ctrl-C")
 
@@ -674,8 +676,10 @@ class Terminated(KeyboardInterrupt):
 
 @contextmanager
 def _terminate_as_interrupt() -> Iterator[None]:
-    """While the block runs, a SIGTERM raises `Terminated` in the main thread, as a Ctrl-C raises its interrupt."""
+    """While the block runs, a SIGTERM raises `Terminated` in the main thread, as a Ctrl-C raises its interrupt.
+    From the first on, later SIGTERMs are ignored until the process exits (`_ignore_sigterm`)."""
     def terminated(signum: int, frame: FrameType | None) -> None:
+        _ignore_sigterm()
         raise Terminated
 
     try:
@@ -685,8 +689,20 @@ def _terminate_as_interrupt() -> Iterator[None]:
         return
     try:
         yield
+    except Terminated:
+        raise  # SIGTERM stays ignored: the caller stops the mission and writes the report, then the process ends
     finally:
-        signal.signal(signal.SIGTERM, previous)
+        if signal.getsignal(signal.SIGTERM) is terminated:
+            signal.signal(signal.SIGTERM, previous)
+
+
+def _ignore_sigterm() -> None:
+    """Ignore SIGTERM from now on: the stop a first one started must not be cut short by the next. timeout(1),
+    a shell's job control and process managers send several (to the process, then to its group), and the second
+    one's default action killed the client mid-stop: no report, the trace cut, the mission left driving (cluster
+    audit 10, D2). A manager that must end it sends SIGKILL; the stop is bounded (5 s to ask, 15 s to follow)."""
+    with suppress(ValueError):  # not the main thread: nothing to change
+        signal.signal(signal.SIGTERM, signal.SIG_IGN)
 
 
 def _stop_on_interrupt(client: ClusterClient, watch: _RecordWatch, mission: str, base: float, began: float,

@@ -166,11 +166,14 @@ def test_detach_then_status_shows_the_active_states_then_stop(cluster: DaemonClu
     assert {m["id"]: m["outcome"] for m in s["missions"]}[mid] == "stopped"
 
 
-@pytest.mark.parametrize(("signum", "said"), [(signal.SIGINT, "Ctrl-C"), (signal.SIGTERM, "SIGTERM")])
+@pytest.mark.parametrize(("signals", "said"), [
+    ([signal.SIGINT], "Ctrl-C"), ([signal.SIGTERM], "SIGTERM"),
+    ([signal.SIGTERM] * 3, "SIGTERM"),  # as timeout(1) or job control send them: the second one killed the client
+], ids=["ctrl-c", "sigterm", "sigterm-burst"])
 def test_ctrl_c_on_run_stops_the_mission_and_prints_how_it_ended(cluster: DaemonCluster, tmp_path: Path,
-                                                                  signum: int, said: str) -> None:
+                                                                  signals: list[int], said: str) -> None:
     """A SIGTERM (safety audit 8) as a Ctrl-C: it killed the client, leaving the mission driving and the trace
-    empty."""
+    empty. Several SIGTERMs 10 ms apart (cluster audit 10, D2): the next ones are ignored while it stops."""
     trace = tmp_path / "t.jsonl"
     cmd = [*MISSIONCTL, "run", MISSION, "--config", str(cluster.hosts_file), "--speed", "5", "--json", "--trace",
            str(trace)]
@@ -178,7 +181,10 @@ def test_ctrl_c_on_run_stops_the_mission_and_prints_how_it_ended(cluster: Daemon
     try:
         client = cluster.client()
         eventually(lambda: any(m.get("outcome") is None for m in client.missions()), "the mission to run", 30, 0.05)
-        proc.send_signal(signum)
+        for i, signum in enumerate(signals):
+            if i:
+                time.sleep(0.01)
+            proc.send_signal(signum)
         out, err = proc.communicate(timeout=30)
         left = [m["id"] for m in client.missions() if m.get("outcome") is None]
     finally:
