@@ -23,6 +23,10 @@ from drd.cli.options import ConfigOption, ConnectOption, JsonOption
 #: Seconds the controller may take by default: the instance is stopped on one host and started on another (a
 #: first start on a host may load the component's module).
 TIMEOUT = 15.0
+#: The longest a move takes on the controller: stopped where it runs, started on the target (each call bounded by
+#: `drd.cluster.remote.START_TIMEOUT`, 5 s), started again where it was if the target refused it. A client that
+#: gives up sooner cannot say whether it moved (cluster audit 10, D3: exit 2, and it had moved).
+MOVE_BOUND = 15.0
 
 
 def register(app: typer.Typer) -> None:
@@ -39,10 +43,19 @@ def migrate(instance: str = typer.Argument(..., metavar="INSTANCE", show_default
             timeout: float = typer.Option(TIMEOUT, "--timeout", min=0.05,
                                           help="Seconds to wait for the controller to move it.")) -> int:
     """Move a running movable component to another host; it goes on from its state there."""
+    from drd.bus import BusTimeout
     from drd.daemon.migrate import Migrate, Migrated, migrate_key
 
     with cluster_client(config, connect, timeout, to="move a component") as client:
-        reply = client.bus.call(migrate_key(client.cluster), Migrate(instance, to), timeout=timeout)
+        try:
+            reply = client.bus.call(migrate_key(client.cluster), Migrate(instance, to), timeout=timeout)
+        except BusTimeout as e:
+            if e.unreached:
+                raise  # nothing took the request: the usual "no controller" error says so
+            fail(f"{instance}: the controller did not answer within {timeout:g} s, so whether it moved is not known"
+                 f" (a move may take up to {MOVE_BOUND:g} s when {to} is slow to start it, and is not called off)",
+                 hint=f"see where it runs now with `missionctl components`, and give --timeout {MOVE_BOUND:g} or"
+                      " more")
     if not isinstance(reply, Migrated):
         fail(f"the controller answered a {type(reply).TYPE}")
     state = reply.state[0] if reply.state else None  # the wire's `[state]`, as the docs give it: the state or null

@@ -12,6 +12,7 @@ from its last snapshot and still ends at its original deadline.
 from __future__ import annotations
 
 import json
+import os
 import re
 import signal
 import subprocess
@@ -127,6 +128,29 @@ def test_what_cannot_move_is_refused_and_nothing_moves(cluster: DaemonCluster, t
         out, err = proc.communicate(timeout=90)
     succeeded(cluster, proc, out, err)
     assert "moved from" not in cluster.log("controller").split(f"mission {mid} started")[-1]
+
+
+def test_a_move_not_answered_within_the_timeout_says_its_outcome_is_unknown(cluster: DaemonCluster,
+                                                                           tmp_path: Path) -> None:
+    """Cluster audit 10, D3: the client gave up (exit 2, "no reply"), which says nothing moved, while the
+    controller went on and sometimes moved it. Now it says whether it moved is not known, and where to look."""
+    mission = tmp_path / "linger.mission"
+    mission.write_text("mission Linger {\n    Wait(duration: 20s) as Hold\n}\n")
+    cmd = [*MISSIONCTL, "run", str(mission), "--config", str(cluster.hosts_file), "--speed", "2", "--json"]
+    with running(cmd) as proc:
+        mid, host = started_wait(cluster, proc, "Linger")
+        other = (WORKERS - {host}).pop()
+        pid = cluster.pid(other)
+        os.kill(pid, signal.SIGSTOP)  # it takes the start, and answers nothing until it is let go
+        try:
+            r = cluster.missionctl("migrate", f"{mid}/Linger/Hold", "--to", other, "--config",
+                                   str(cluster.hosts_file), "--timeout", "0.3", timeout=60)
+        finally:
+            os.kill(pid, signal.SIGCONT)
+        assert r.returncode == 2, (r.stdout, r.stderr)
+        assert "whether it moved is not known" in r.stderr and "missionctl components" in r.stderr, r.stderr
+        out, err = proc.communicate(timeout=90)
+    succeeded(cluster, proc, out, err)
 
 
 def test_a_wait_whose_host_is_killed_resumes_elsewhere_with_its_remaining_time(cluster: DaemonCluster,
