@@ -201,3 +201,17 @@ def test_mermaid_draws_a_parallel_states_finals_and_edges_outside_its_regions(ca
     assert lines.index('  state "fail" as s3') > close
     assert lines.index("  s1 --> s3 : on error") > close
     assert lines[lines.index("    --") - 1].strip().startswith('state "FollowCorridor')
+
+
+def test_an_emitted_duration_prints_as_a_duration_where_it_is_caught(catalog: Catalog) -> None:
+    """Users audit 9, D9: `emit Gap(span: pause + 1s)` then `log "{event.span}"` printed `10`, not `10s` (the field
+    was untyped, and a duration is a number of seconds at run time)."""
+    from dsl import ast
+
+    chart = compile_text("mission M {\n  parallel all { A; B }\n}\nbehavior A {\n  var pause: duration = 9s\n"
+                         "  Wait as w\n  w -> done / emit Gap(span: pause + 1s)\n}\nbehavior B {\n  Wait as w\n"
+                         '  w -> done on Gap / log "span {event.span}"\n}\n', catalog, "t.mission")
+    assert chart.statechart is not None, [d.message for d in chart.diagnostics]
+    logs = [a.message for s in chart.statechart.states.values() for t in s.transitions for a in t.actions
+            if isinstance(a, ast.LogAction)]
+    assert len(logs) == 1 and isinstance(logs[0], ast.Interp) and logs[0].durations == frozenset({1})

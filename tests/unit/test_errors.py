@@ -199,6 +199,11 @@ ERRORS: list[tuple[str, str, str, str | None]] = [
     ("duplicate-argument", m("  Observe(duration: 1s, duration: 2s)"), "2:25 duration is given twice", None),
     ("two-missions", m("  Observe", "mission N { Observe }"), "4:9 a file holds at most one mission; M came first",
      None),
+    # users audit 9, D9: an emitted field was untyped, so comparing a text with a number passed the checker
+    ("emitted-field-typed", m("  parallel all { A; B }", "behavior A {\n  Wait as w\n  w -> done / emit Gap(who:"
+                                                      ' "x")\n}\nbehavior B {\n  Wait as w\n'
+                                                      "  w -> done on Gap [event.who > 5]\n}\n"),
+     "10:21 cannot order str and int with >", None),
     # ---- misspelled keywords (users audit 9, D8: "`rig` starts a new item: put it on its own line")
     ("misspelled-needs", m("  need rig: Ranger\n  Calibrate"), "2:7 syntax: expected a newline or ; after `need`",
      "`need` is no keyword: did you mean needs?"),
