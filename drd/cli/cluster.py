@@ -974,19 +974,7 @@ class _RecordWatch:
             now = time.monotonic()
             if now >= next_poll and finished is None:  # a missed record must not hang us: ask the executive
                 next_poll = now + self.every
-                for m in self._missions(mission):
-                    if m.get("id") == mission and isinstance(m.get("time"), int | float):
-                        clock = max(clock, float(m["time"]) - base)
-                    if m.get("id") == mission and m.get("outcome"):
-                        time.sleep(0.5)  # the records in flight come first
-                        if self.held:  # (and those held for a catch-up that did not come: in order, as they are)
-                            self._requeue(mission, [])
-                        while not self.queue.empty():
-                            extra: Any = self.queue.get()
-                            if extra.mission == mission and extra.seq not in self.seqs:
-                                self.seqs.add(extra.seq)
-                                self._take(extra, result, base)
-                        finished = (m["outcome"], m.get("reason") or "")
+                clock, finished = self._polled(mission, result, base, clock)
             if now >= next_print and finished is None:
                 next_print = now + self.every
                 self._progress(max(result.sim_time, clock), list(active), phases, now)
@@ -995,6 +983,28 @@ class _RecordWatch:
         result.away = self.away_total
         return result
 
+
+    def _polled(self, mission: str, result: Any, base: float, clock: float) -> tuple[float, tuple[str, str] | None]:
+        """The mission's time as the executive says it, and its (outcome, reason) once it ended: then the records
+        still in flight (or held for a catch-up that did not come) are taken first, in order."""
+        finished = None
+        for m in self._missions(mission):
+            if m.get("id") == mission and isinstance(m.get("time"), int | float):
+                clock = max(clock, float(m["time"]) - base)
+            if m.get("id") == mission and m.get("outcome"):
+                time.sleep(0.5)  # the records in flight come first
+                if self.held:
+                    self._requeue(mission, [])
+                while not self.queue.empty():
+                    extra: Any = self.queue.get()
+                    if extra.mission == mission and extra.seq not in self.seqs:
+                        self.seqs.add(extra.seq)
+                        self._take(extra, result, base)
+                finished = (m["outcome"], m.get("reason") or "")
+                # no `finished` record says when it ended: the executive's time does (a mission that could not be
+                # resumed after its controller's loss ended with none, and its report said 0.0 s; cluster audit 10)
+                result.sim_time = max(result.sim_time, clock)
+        return clock, finished
 
     def _progress(self, sim_time: float, active: list[str], phases: dict[str, str], now: float) -> None:
         """The progress line, when due: each second on a terminal, on a pipe only when it changed (`ProgressGate`);

@@ -123,6 +123,27 @@ def test_drd_stop_all_and_start_end_a_mission_whose_world_is_gone_and_keep_the_h
         [m for m in before if before[m].get("outcome") is not None], "the same ended missions, in order"
 
 
+def test_a_quiet_mission_that_cannot_be_resumed_reports_how_long_it_ran(cluster: DaemonCluster,
+                                                                         tmp_path: Path) -> None:
+    """Cluster audit 10, D4: a mission whose records stopped after its start (a long Observe), ended unresumable by
+    `drd stop --all` + start, was reported at 0.0 s of sim time (the last record's), though `status` said 4.5 s."""
+    trace = tmp_path / "quiet.jsonl"
+    (tmp_path / "quiet.mission").write_text("mission Quiet {\n    needs rig: Ranger\n    Observe(duration: 60s)\n}\n")
+    cmd = [*MISSIONCTL, "run", str(tmp_path / "quiet.mission"), "--config", str(cluster.hosts_file), "--speed", "2",
+           "--json", "--trace", str(trace)]
+    with running(cmd) as run:
+        eventually(lambda: trace.exists() and bool(read_trace(trace)), "the mission to start", 60, poll=0.1)
+        mission = str(read_trace(trace)[0]["mission"])
+        eventually(lambda: (mission_time(cluster, mission) or 0.0) > 4.0, "4 s of the mission", 60, poll=0.2)
+        ran = mission_time(cluster, mission) or 0.0
+        _stop_and_start_all(cluster)
+        out, err = run.communicate(timeout=120)
+    report = json.loads(out)
+    assert run.returncode == 1 and "started again" in report["reason"], (out[-2000:], err[-2000:])
+    assert max(r["at"] for r in read_trace(trace)) < 1.0, "its records stop at its start"
+    assert report["sim_time"] >= ran, (report["sim_time"], ran)
+
+
 @pytest.fixture(scope="module")
 def slow_lease(tmp_path_factory: pytest.TempPathFactory) -> Iterator[DaemonCluster]:
     """The same cluster with a lease of 4 s, so a freeze of 2.6 s is a short one."""
