@@ -267,11 +267,11 @@ class Interpreter:
                 except COMPONENT_RAISES as e:  # component code is not ours to trust
                     host.failed(node, e)
                     status = _RUNNING
-                if self.events:  # what it emitted, now that its step returned: before the next one steps
-                    self._settle()
                 if status is not _RUNNING:  # a failure's reason: its last words, if it said any
                     said = self._said.pop(node.path, "") if self._said else ""
                     self._finish(node, status is _SUCCESS, "" if status is _SUCCESS else said or "failed")
+                if self.events:  # what it emitted, now that its step returned: before the next one steps; how
+                    self._settle()  # it ended first, its events pending (`_choose`: the first declared wins)
         finally:
             self._stepping = False
         if host.lagging:

@@ -166,6 +166,53 @@ def test_an_event_moves_a_state_once(catalog: Catalog) -> None:
     assert outcome == "success" and logs == ["B"]
 
 
+class SaysAndEnds(Timed):
+    """Step's Wait: emits an event in the step it ends in (as DetectDoor emits DoorDetected in the step it succeeds),
+    then fails when its `duration` is 2 s (the tests' choice), else succeeds. Any other Wait is a plain `Timed`."""
+
+    def start(self) -> None:
+        super().start()
+        assert self.ctx is not None
+        if not self.ctx.path.endswith("/Step"):
+            self.__class__ = Timed
+
+    def step(self, now: float) -> Status:
+        if super().step(now) is not Status.SUCCESS:
+            return Status.RUNNING
+        assert self.ctx is not None
+        self.ctx.emit("ScoutLaunched")  # an event the manifests declare, which no Wait emits otherwise
+        return Status.FAILURE if self.needed == 2.0 else Status.SUCCESS
+
+
+SAYS = """
+mission M {{
+    start -> Step
+    Wait(duration: {duration}) as Step
+{transitions}
+}}
+"""
+
+
+@pytest.mark.parametrize(("duration", "transitions", "outcome", "logs"), [
+    # semantics audit 11, D1: the event was handled before the step's own end, so the failure was lost
+    ("2s", ["Step -> A on ScoutLaunched"], "failure", []),
+    ("2s", ["Step -> A on ScoutLaunched", "Step -> B on error"], "success", ["A"]),  # caught: the first declared wins
+    ("2s", ["Step -> B on error", "Step -> A on ScoutLaunched"], "success", ["B"]),
+    # D2: the completion declared first lost to the event the step emitted
+    ("1s", ["Step -> B", "Step -> A on ScoutLaunched"], "success", ["B"]),
+    ("1s", ["Step -> A on ScoutLaunched", "Step -> B"], "success", ["A"]),
+], ids=["failure-uncaught", "failure-caught-event-first", "failure-caught-error-first", "completion-first",
+        "event-first"])
+def test_a_step_that_emits_and_ends_at_once(catalog: Catalog, duration: str, transitions: list[str], outcome: str,
+                                            logs: list[str]) -> None:
+    targets = sorted({t.split("-> ", 1)[1][0] for t in transitions})
+    lines = [*transitions, *(f'{x} -> done / log "{x}"' for x in targets), *(f"Wait as {x}" for x in targets)]
+    text = SAYS.format(duration=duration, transitions="\n".join(f"    {t}" for t in lines))
+    h = Harness(compiled(text, catalog), {"Wait": SaysAndEnds}, ranger_world(1, 2))
+    assert h.run(until=30) == outcome, h.interp.reason
+    assert [r.text for r in h.of(rec.Log) if r.text in ("A", "B")] == logs
+
+
 # ------------------------------------------------------------------ D4: [a..*]
 SPOTS = "mission M {{ Spot[{bounds}] }}\nbehavior Spot {{ needs s: Scout\n Wait(duration: 2s) }}"
 
