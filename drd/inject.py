@@ -17,7 +17,7 @@ Pure: parsing and checking against the cluster and the world; `drd.dryrun` appli
 from __future__ import annotations
 
 import re
-from collections.abc import Iterable
+from collections.abc import Collection, Iterable
 from dataclasses import dataclass
 from enum import StrEnum
 
@@ -77,9 +77,8 @@ def parse(text: str, *, hosts: set[str], robots: set[str], doors: set[str]) -> I
         raise InjectionError(f"bad time {m['at']!r} in {text!r}: write a duration such as 90s, 2min or 1.5h")
     known = {"host": hosts, "robot": robots, "door": doors}[TARGET[action]]
     if m["target"] not in known:
-        raise InjectionError(f"no {TARGET[action]} {m['target']!r} to {word} in {text!r}: known "
-                             f"{TARGET[action]}s are {', '.join(sorted(known)) or 'none'}"
-                             f"{_suggest(m['target'], known)}")
+        raise InjectionError(f"no {TARGET[action]} {m['target']!r} to {word} in {text!r}{_suggest(m['target'], known)}"
+                             f": known {TARGET[action]}s are {_some(known)}")
     return Injection(at, action, m["target"])
 
 
@@ -116,6 +115,18 @@ def _restarts_follow_kills(injections: list[Injection]) -> list[str]:
                 problems.append(f"{i}: {i.target} is not down then: write 'kill {i.target} at ...' before it")
             down.discard(i.target)
     return problems
+
+
+#: Names a refusal lists at most: at fleet size, every robot of a building on one line was 10 kB (scale audit 11).
+SHOWN_NAMES = 12
+
+
+def _some(names: Collection[str]) -> str:
+    """The first `SHOWN_NAMES` of `names` (sorted), and how many more there are."""
+    shown = sorted(names)
+    if len(shown) <= SHOWN_NAMES:
+        return ", ".join(shown) or "none"
+    return f"{', '.join(shown[:SHOWN_NAMES])} and {len(shown) - SHOWN_NAMES} more"
 
 
 def _suggest(name: str, candidates: Iterable[str]) -> str:

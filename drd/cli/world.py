@@ -8,7 +8,7 @@ checked by the loaders every command uses before anything is written, and existi
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -67,16 +67,16 @@ def generate(
         fail(f"{', '.join(existing)}: exists", hint="pass --force to overwrite, or another --out")
     if out_dir.exists() and not out_dir.is_dir():
         fail(f"--out {out_dir}: not a folder")
+    texts = {world_file: _header(f"A generated building ({b.wings} wings x {b.scouts} Scouts), for "
+                                 f"{hosts_file.name} beside worlds/; docs/worlds.md.") + _yaml(world_data),
+             hosts_file: _header(f"{b.robots} robots on {b.wings} Ranger hosts, every driver sim, for "
+                                 f"worlds/{world_file.name}; docs/hosts.md.") + _yaml(hosts_data)}
+    _fits(b, texts)
     try:
         world_file.parent.mkdir(parents=True, exist_ok=True)
-        say(f"writing {world_file}")
-        world_file.write_text(_header(f"A generated building ({b.wings} wings x {b.scouts} Scouts), for "
-                                      f"{hosts_file.name} beside worlds/; docs/worlds.md.") + _yaml(world_data),
-                              encoding="utf-8")
-        say(f"writing {hosts_file}")
-        hosts_file.write_text(_header(f"{b.robots} robots on {b.wings} Ranger hosts, every driver sim, for "
-                                      f"worlds/{world_file.name}; docs/hosts.md.") + _yaml(hosts_data),
-                              encoding="utf-8")
+        for path, text in texts.items():
+            say(f"writing {path}")
+            path.write_text(text, encoding="utf-8")
     except OSError as e:
         fail(f"cannot write to {out_dir}: {e.strerror or e}")
     summary = {"world": str(world_file), "hosts": str(hosts_file), "name": b.name, "wings": b.wings,
@@ -89,6 +89,21 @@ def generate(
                                                        f"{counted(b.wings, 'wing')}, {b.robots} robots"))
         err.print(f"  run it: missionctl dry-run missions/corridor_surveillance.mission --hosts {hosts_file}")
     return OK
+
+
+def _fits(b: Building, texts: Mapping[Path, str]) -> None:
+    """Refuse (exit 2, nothing written) a building whose files are larger than what every command reads
+    (`drd.config.MAX_CONFIG_BYTES`): they were written, and then refused by `dry-run` and `plan` (scale audit 11,
+    D1: from about 400 wings of 19 Scouts)."""
+    from drd.config import MAX_CONFIG_BYTES
+
+    for path, text in texts.items():
+        size = len(text.encode("utf-8"))
+        if size > MAX_CONFIG_BYTES:
+            most = max(1, b.wings * MAX_CONFIG_BYTES // size)
+            fail(f"{path} would be {size / 2**20:.1f} MiB, more than the {MAX_CONFIG_BYTES // 2**20} MiB every command"
+                 f" reads: {b.wings} wings of {b.scouts} Scouts is too large; nothing was written",
+                 hint=f"at most about {most} wings of {b.scouts} Scouts (fewer Scouts a wing allow more wings)")
 
 
 #: From this many robots, generation takes seconds (about 1 s per 1,000 robots, docs/design.md), so each step is

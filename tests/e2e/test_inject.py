@@ -31,7 +31,7 @@ def test_injections_are_read_with_the_languages_durations(text: str, expected: I
     ("kil ranger1 at 90s", "unknown injection 'kil' in 'kil ranger1 at 90s': use one of kill, join, restart, lose, "
                            "block, close, open (did you mean kill?)"),
     ("kill scout1 at 90s", "no host 'scout1' to kill"),
-    ("lose scout3 at 1s", "known robots are ranger1, scout1, scout2 (did you mean scout1?)"),
+    ("lose scout3 at 1s", "(did you mean scout1?): known robots are ranger1, scout1, scout2"),
     ("block door_n9 at 1s", "no door 'door_n9' to block"),
     ("kill ranger1 at soon", "bad time 'soon'"),
     ("kill ranger1", "cannot read injection 'kill ranger1': write ACTION TARGET at TIME"),
@@ -42,6 +42,17 @@ def test_a_bad_injection_says_what_is_wrong(text: str, message: str) -> None:
     with pytest.raises(InjectionError, match=None) as e:
         parse(text, **KNOWN)
     assert message in str(e.value)
+
+
+def test_at_fleet_size_a_refusal_names_a_few_known_targets_and_its_hint_first() -> None:
+    """Scale audit 11, D8: an unknown robot of a 1,000-robot building listed every id on one 10 kB line, the
+    did-you-mean at its end."""
+    robots = {f"scout{i}" for i in range(1, 1000)}
+    with pytest.raises(InjectionError) as e:
+        parse("lose scout99999 at 1s", hosts={"controller"}, robots=robots, doors=set())
+    message = str(e.value)
+    assert len(message) < 300 and message.endswith(" and 987 more"), message
+    assert "known robots are scout1, scout10, scout100," in message
 
 
 def test_all_problems_are_reported_together_and_good_ones_come_in_time_order() -> None:

@@ -45,3 +45,13 @@ def test_a_large_building_says_its_steps_and_writes_what_the_pure_dumper_writes(
 def test_a_small_building_says_only_what_it_wrote(tmp_path: Path) -> None:
     r = missionctl("world", "generate", "--wings", "2", "--scouts", "3", "--out", str(tmp_path))
     assert r.returncode == 0 and "building_2x3:" not in r.stderr and "wrote" in r.stderr
+
+
+def test_a_building_too_large_for_the_loaders_is_refused_and_nothing_is_written(tmp_path: Path) -> None:
+    """Scale audit 11, D1: 420 wings of 19 Scouts (in the documented range) wrote a 4.2 MiB hosts file, which
+    `dry-run` and `plan` then refused (files are read up to 4 MiB); the generator said "run it"."""
+    r = missionctl("world", "generate", "--wings", "420", "--out", str(tmp_path / "big"))
+    assert r.returncode == 2, r.stderr[-2000:]
+    assert "hosts.yaml would be 4.2 MiB, more than the 4 MiB every command reads" in r.stderr
+    assert "at most about 403 wings of 19 Scouts" in r.stderr and "run it" not in r.stderr
+    assert not (tmp_path / "big").exists()
