@@ -537,12 +537,11 @@ class RemoteComponent(Component):
             reply = self.router.step(self, now)
             if not (reply.lost and self.movable):
                 return reply
-            why, avoid = f"its host {self.host} no longer ran it", set()  # it answers: it may be chosen again
+            self._replace(host_lost=False)
         except HostDown:
             if not self.movable:
                 raise
-            why, avoid = f"its host {self.host} was lost", {self.host or ""}
-        self._replace(why, avoid)
+            self._replace(host_lost=True)
         return self.router.step(self, now)
 
     def suspend(self) -> None:
@@ -586,9 +585,7 @@ class RemoteComponent(Component):
             except (HostDown, InstanceLost) as e:
                 if not self.movable:
                     raise
-                lost = isinstance(e, HostDown)
-                self._replace(f"its host {self.host} " + ("was lost" if lost else "no longer ran it"),
-                              {self.host or ""} if lost else set())
+                self._replace(host_lost=isinstance(e, HostDown))
                 if op == "suspend":  # started afresh: a resume needs nothing more, a suspend is sent
                     self._call(op)
 
@@ -620,12 +617,15 @@ class RemoteComponent(Component):
             self.router.placed.append((path, host, how))
             return
 
-    def _replace(self, why: str, avoid: set[str]) -> None:
-        """Its host is lost or no longer runs it (`why`): start the instance again on a host the policy picks, not
-        one of `avoid`, from its last snapshot (None if it sent none: its state is gone, and it is told so)."""
+    def _replace(self, host_lost: bool) -> None:
+        """Its host is lost (`host_lost`: left out of this placement), or answered that it no longer runs it (it
+        may be chosen again): start the instance again where the policy says, from its last snapshot (None if it
+        sent none: its state is gone, and it is told so)."""
+        old = self.host or ""
+        why = f"its host {old} " + ("was lost" if host_lost else "no longer ran it")
         self.router.forget_reply(self)  # a step reply batched from the old host is no longer ours
         restore = self.state if self.state is not None else [None]
-        self._place("re-placed", avoid, restore)
+        self._place("re-placed", {old} if host_lost else set(), restore)
         said = "from its last snapshot" if restore[0] is not None else "afresh (no snapshot)"
         self._ctx.log(f"{self.name} placed again on {self.host} {said}: {why}")
 
