@@ -16,7 +16,8 @@ import math
 import re
 from typing import Any
 
-from components.behaviors.scan import ScanMemo, corridor, expected, wall_across
+from components.behaviors.scan import ScanMemo, corridor, expected, wall_across, wrap
+from drd.hw.interfaces import Scan
 from drd.runtime.component import Component, Status
 
 #: How far past the wall line (m) a beam must reach to count as looking through a gap.
@@ -96,6 +97,10 @@ def find_gaps(scan: Any, min_width: float, expect: tuple[float | None, float | N
     return out
 
 
+#: Turning faster than this (rad a control cycle; FollowCorridor turns on the spot at 0.08) is turning on the spot.
+TURNING = 0.05
+
+
 class DetectDoor(Component):
     """Succeeds with output `door` (odometry coordinates) and event DoorDetected on a new open door."""
 
@@ -103,6 +108,7 @@ class DetectDoor(Component):
         self.expect: tuple[float | None, float | None] = (None, None)
         self.memo = ScanMemo()  # what the scan helpers derive from this cycle's scan
         self.origin: tuple[float, float] | None = None  # where it started (odometry), once known
+        self.heading: float | None = None  # the odometry's heading at the last step
 
     def _just_started(self, pose: tuple[float, float, float] | None) -> bool:
         """Still within `LEAVE` of where it started: a wall ahead then is one it was left facing (the previous
@@ -121,6 +127,16 @@ class DetectDoor(Component):
         odo = self.ctx.services.odometry
         return odo() if odo is not None else None
 
+    def _expected(self, scan: Scan, pose: tuple[float, float, float] | None) -> tuple[float | None, float | None]:
+        """The wall distances to expect next, forgotten while the robot turns on the spot (FollowCorridor turning to
+        the corridor's line, or around): fits taken across the corridor are of other things (a room's wall through a
+        door locked the expectation at 1.68 m for a wall at 1.25 m, and the next door went unseen), and after a
+        turn around left and right have swapped."""
+        heading, self.heading = self.heading, (pose[2] if pose is not None else None)
+        if heading is not None and self.heading is not None and abs(wrap(self.heading - heading)) > TURNING:
+            return None, None
+        return expected(corridor(scan, self.expect, memo=self.memo), self.expect)
+
     def step(self, now: float) -> Status:
         min_width = float(self.ctx.params["min_width"])
         scan = self.device("ranges").scan()
@@ -130,7 +146,7 @@ class DetectDoor(Component):
         if wall_across(scan, memo=self.memo) and not self._just_started(found):
             self.ctx.log("the corridor ends here, with no new door")  # no new door between here and the end
             return Status.FAILURE
-        self.expect = expected(corridor(scan, self.expect, memo=self.memo), self.expect)
+        self.expect = self._expected(scan, found)
         pose = found or (0.0, 0.0, 0.0)
         log = self.input("visited")
         for gap in find_gaps(scan, min_width, self.expect, self.memo):

@@ -8,7 +8,22 @@ from __future__ import annotations
 
 import math
 
-from components.behaviors.scan import END, ScanMemo, clearance_ahead, corridor, expected, open_side, wall_across, wrap
+from components.behaviors.scan import (
+    END,
+    SAME_LINE,
+    ScanMemo,
+    Wall,
+    clearance_ahead,
+    corridor,
+    dominant_direction,
+    expected,
+    line_gap,
+    open_side,
+    segments,
+    strongest_wall,
+    wall_across,
+    wrap,
+)
 from drd.hw.interfaces import Scan
 from drd.runtime.component import Component, Status
 
@@ -21,6 +36,22 @@ TURN_RATE, TURNED = 0.8, 0.15
 #: Blocked short of the end for WAIT seconds (longer than a person takes to cross its path), it turns on the spot
 #: toward the more open side until FREE metres ahead are clear: the way out when the walls give no heading.
 WAIT, FREE = 3.0, 1.5
+
+
+def along(walls: tuple[Wall | None, Wall | None], heading: float,
+          direction: float | None) -> tuple[Wall | None, Wall | None]:
+    """The fitted walls that run along the corridor: within SAME_LINE of `direction` (the corridor's, in the frame
+    of `heading`, the robot's). When it is not known yet (None), both walls, or the one with more inliers if they
+    are not on one line. Why: started aimed at a door (AlignRanger's doing), the fit that follows the nearest
+    lateral distance can jump from the slanted corridor wall to a person in the doorway, and the robot then drove
+    through the door, taking the room for the corridor."""
+    left, right = walls
+    if direction is None:
+        if left is None or right is None or line_gap(left.angle, right.angle) <= SAME_LINE:
+            return walls
+        return (left, None) if left.inliers >= right.inliers else (None, right)
+    left, right = (None if w is None or line_gap(heading + w.angle, direction) > SAME_LINE else w for w in walls)
+    return left, right
 
 
 def unblock_turn(blocked_for: float, clearance: float, side: int | None, open_now: int) -> int | None:
@@ -41,26 +72,31 @@ class FollowCorridor(Component):
 
     The end is a wall across the way less than `END` metres ahead: then it stops and succeeds. Something
     narrower in the way (a person) only stops it until it has passed.
-    Started facing an end (a Ranger left there by the previous sweep), it first turns around on the spot.
+    Started facing an end (a Ranger left there by the previous sweep), it first turns around on the spot; started
+    at a steep angle to the corridor, it first turns on the spot to the corridor's line (`orient`).
     """
 
     def start(self) -> None:
         self.width: float | None = None
         self.expect: tuple[float | None, float | None] = (None, None)
         self.origin: tuple[float, float] | None = None
-        self.turn_to: float | None = None  # heading to turn to, when turning around
+        self.turn_to: float | None = None  # heading to turn to, on the spot: around, or to the corridor's line
+        self.turn_side = 1  # which way (+1 left, -1 right)
         self.memo = ScanMemo()  # what the scan helpers derive from this cycle's scan
         self.blocked_since: float | None = None  # when the way ahead was last found blocked short of the end
         self.unblocking: int | None = None  # the side of a turn out of a block, under way
+        self.direction: float | None = None  # the corridor's direction in the odometry frame, from the last walls
 
     def step(self, now: float) -> Status:
         speed = float(self.ctx.params["speed"])
         drive = self.device("drive")
         scan = self.device("ranges").scan()
         x, y, a = drive.odometry()
+        if self.origin is None and self.turn_to is None:
+            self.orient(scan, a)
         if self.turn_to is not None:
             if abs(wrap(self.turn_to - a)) > TURNED:
-                drive.set_velocity(0.0, TURN_RATE)
+                drive.set_velocity(0.0, self.turn_side * TURN_RATE)
                 return Status.RUNNING
             self.turn_to, self.origin = None, (x, y)
         if self.origin is None:
@@ -70,7 +106,7 @@ class FollowCorridor(Component):
         # turning out of a block, a wall across the way is the side wall it turns past, not the end
         if blocked and self.unblocking is None and wall_across(scan, memo=self.memo):
             if math.hypot(x - self.origin[0], y - self.origin[1]) < 0.5:  # started facing the end
-                self.turn_to = wrap(a + math.pi)
+                self.turn_to, self.turn_side = wrap(a + math.pi), 1
                 drive.set_velocity(0.0, TURN_RATE)
                 return Status.RUNNING
             drive.stop()
@@ -78,10 +114,21 @@ class FollowCorridor(Component):
             return Status.SUCCESS
         if self.unblock(now, blocked, clearance, scan):
             return Status.RUNNING
-        left, right = fitted = corridor(scan, self.expect, memo=self.memo)
-        self.expect = expected(fitted, self.expect)
+        if self.direction is None:  # the corridor's line not known yet: the long walls, not the nearest things
+            fitted = strongest_wall(scan, 1, self.memo), strongest_wall(scan, -1, self.memo)
+        else:
+            fitted = corridor(scan, self.expect, memo=self.memo)
+        left, right = kept = along(fitted, a, self.direction)
+        # a side whose fit was something else is fitted afresh (from the nearest wall) next time
+        self.expect = expected(kept, self.expect if kept == fitted else
+                               (self.expect[0] if kept[0] is fitted[0] else None,
+                                self.expect[1] if kept[1] is fitted[1] else None))
         walls = [w for w in (left, right) if w is not None]
-        heading = sum(w.angle for w in walls) / len(walls) if walls else 0.0  # the corridor's direction
+        if walls:
+            heading = sum(w.angle for w in walls) / len(walls)  # the corridor's direction, relative
+            self.direction = a + heading
+        else:  # no wall seen (doors both sides): the direction the walls last gave
+            heading = 0.0 if self.direction is None else wrap(self.direction - a)
         offset = 0.0  # how far left of the centre line the robot is
         if left and right:
             self.width = left.distance + right.distance
@@ -97,6 +144,19 @@ class FollowCorridor(Component):
         drive.set_velocity(0.0 if blocked else speed, omega)
         return Status.RUNNING
 
+    def orient(self, scan: Scan, heading: float) -> None:
+        """Started at a steep angle to the corridor (AlignRanger leaves a Ranger aimed at a door), turn on the spot
+        to the corridor's line first, the nearer way round: the wall fits assume walls that run roughly ahead, and
+        from a steep angle they fitted a person in the doorway or a jamb, and the robot drove into the room. The
+        line is that of the most wall length in reach (`scan.dominant_direction`); facing a wall too near to turn
+        by, the end-of-corridor rules decide."""
+        line = dominant_direction(segments(scan), SAME_LINE)
+        if line is None or abs(line) <= SAME_LINE or clearance_ahead(scan, memo=self.memo) < END:
+            return
+        self.turn_to, self.turn_side = wrap(heading + line), 1 if line > 0 else -1
+        self.ctx.log(f"FollowCorridor: {math.degrees(abs(line)):.0f} degrees off the corridor's line, turning "
+                     f"{'left' if line > 0 else 'right'} to it first")
+
     def unblock(self, now: float, blocked: bool, clearance: float, scan: Scan) -> bool:
         """Turn out of a lasting block (`unblock_turn`); True while turning. Says so in the log when it starts."""
         if not blocked and self.unblocking is None:
@@ -109,7 +169,7 @@ class FollowCorridor(Component):
         if side is None:
             if self.unblocking is not None:
                 self.unblocking, self.blocked_since = None, None
-                self.expect = (None, None)  # the walls are seen afresh from the new heading
+                self.expect, self.direction = (None, None), None  # the walls are seen afresh from the new heading
             return False
         if self.unblocking is None:
             self.ctx.log(f"FollowCorridor: blocked {clearance:.2f} m ahead for {now - self.blocked_since:.1f} s, "

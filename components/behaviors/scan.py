@@ -116,6 +116,81 @@ def front_range(scan: Scan, half_angle: float) -> float:
     return min(r for a, r in zip(b.angles, scan.ranges, strict=True) if abs(a) <= within)
 
 
+# -- straight lines ------------------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class Segment:
+    """A straight run of hits in the robot frame: its direction (rad, in [-pi/2, pi/2): a line has no way round)
+    and its length (m)."""
+
+    direction: float
+    length: float
+
+
+def segments(scan: Scan, reach: float = 4.0, gap: float = 0.3, tolerance: float = 0.05,
+             least: int = 5) -> list[Segment]:
+    """The straight walls a scan shows within `reach` metres, by split and merge: runs of consecutive hits less than
+    `gap` apart, each split at its point farthest from its chord until every point is within `tolerance` of it;
+    pieces of fewer than `least` hits are dropped. Why not the wall fits: they regress the lateral distance on the
+    distance ahead, which cannot describe a wall the robot faces at a steep angle."""
+    b, far = scan.beams(), min(reach, scan.max_range)
+    runs: list[list[tuple[float, float]]] = [[]]
+    for r, c, s in zip(scan.ranges, b.cos, b.sin, strict=True):
+        run = runs[-1]
+        if r >= far:
+            if run:
+                runs.append([])
+            continue
+        p = (r * c, r * s)
+        if run and math.dist(run[-1], p) >= gap:
+            run = []
+            runs.append(run)
+        run.append(p)
+    out: list[Segment] = []
+    for run in runs:
+        _split(run, tolerance, least, out)
+    return out
+
+
+def _split(pts: list[tuple[float, float]], tolerance: float, least: int, out: list[Segment]) -> None:
+    while len(pts) >= least:
+        (ax, ay), (bx, by) = pts[0], pts[-1]
+        length = math.hypot(bx - ax, by - ay)
+        if length == 0:
+            return
+        off = [abs((bx - ax) * (y - ay) - (by - ay) * (x - ax)) / length for x, y in pts]
+        worst = max(range(len(pts)), key=off.__getitem__)
+        if off[worst] <= tolerance:
+            direction = math.atan2(by - ay, bx - ax)
+            out.append(Segment(direction - math.pi * math.floor(direction / math.pi + 0.5), length))
+            return
+        _split(pts[:worst + 1], tolerance, least, out)
+        pts = pts[worst:]
+
+
+#: Walls more than SAME_LINE radians off the line they are expected on are something else (a person by a doorway, a
+#: room's wall through a door).
+SAME_LINE = 0.35
+
+
+def line_gap(a: float, b: float) -> float:
+    """How far apart the directions of two lines are (rad, 0..pi/2): a line is the same both ways."""
+    return abs(wrap(2 * (a - b))) / 2
+
+
+def dominant_direction(found: Sequence[Segment], within: float) -> float | None:
+    """The direction (rad, in [-pi/2, pi/2)) of the segment with the most length on its line: its own and that of
+    every segment within `within` radians of it. In a corridor, the two side walls (parallel) outweigh an end wall
+    or a room seen through a door. None when there is no segment."""
+    best, weight = None, 0.0
+    for s in found:
+        w = sum(t.length for t in found if line_gap(s.direction, t.direction) <= within)
+        if w > weight:
+            best, weight = s.direction, w
+    return best
+
+
 # -- corridor walls ------------------------------------------------------------------------------------------------
 
 
@@ -271,6 +346,24 @@ def _refine(xs: Floats, ys: Floats, first: Mask, side: int) -> Wall | None:
         c = my - m * mx
     a = math.atan(m)
     return Wall(c * math.cos(a), side * a, n)
+
+
+def strongest_wall(scan: Scan, side: int, memo: ScanMemo | None = None) -> Wall | None:
+    """The wall on one side (+1 left, -1 right) fitted with the most inliers, over every starting distance that
+    enough beams agree on (one per group within SPREAD): with nothing known yet of where the walls are, the long
+    wall of a corridor rather than the nearest thing abeam (a person by a doorway, a door's jamb)."""
+    data = _scratch(scan, memo)
+    support = _kept(data, ("side", side), lambda: _side(scan, side, data))[2]
+    best: Wall | None = None
+    start = -math.inf
+    for d in support:  # sorted
+        if d - start < SPREAD:
+            continue
+        start = d
+        wall = fit_wall(scan, side, d, memo)
+        if wall is not None and (best is None or wall.inliers > best.inliers):
+            best = wall
+    return best
 
 
 def corridor(scan: Scan, expect: tuple[float | None, float | None] = (None, None), jump: float = 0.4,
