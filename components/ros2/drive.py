@@ -125,7 +125,10 @@ class Ros2Drive(Ros2Driver):
         """x, y (m) and heading (rad): the robot's odometry seen from the mission's map (`origin` ∘ odom)."""
         assert self._odom is not None
         pose = self._odom.get().pose.pose
-        return compose(self.opts.origin, (float(pose.position.x), float(pose.position.y), yaw_of(pose.orientation)))
+        x, y, yaw = float(pose.position.x), float(pose.position.y), yaw_of(pose.orientation)
+        if not (math.isfinite(x) and math.isfinite(y) and math.isfinite(yaw)):
+            raise HardwareError(f"{self.describe()}: the robot does not know where it is (odometry {x}, {y}, {yaw})")
+        return compose(self.opts.origin, (x, y, yaw))
 
     def origin(self) -> tuple[float, float, float]:
         """Where the odometry began, in the mission's map: the `origin` option."""

@@ -2,11 +2,12 @@
 
 from __future__ import annotations
 
+import math
 from typing import Any
 
 from components.ros2 import Ros2Driver
 from drd.hosts import Device
-from drd.hw.interfaces import Scan
+from drd.hw.interfaces import HardwareError, Scan
 from drd.hw.ros2 import scan_ranges
 
 
@@ -29,8 +30,11 @@ class Ros2RangeSensor(Ros2Driver):
         msg = self._scan.get()
         if self._latest is not None and self._latest[0] is msg:
             return self._latest[1]
-        top = float(msg.range_max)
-        scan = Scan(scan_ranges(msg.ranges, float(msg.range_min), top), float(msg.angle_min),
-                    float(msg.angle_increment), top)
+        top, low, first, step = float(msg.range_max), float(msg.range_min), float(msg.angle_min), \
+            float(msg.angle_increment)
+        if not all(math.isfinite(v) for v in (top, low, first, step)) or top <= 0:
+            raise HardwareError(f"{self.describe()}: the laser's scan geometry is not usable (angle_min {first}, "
+                                f"angle_increment {step}, range_min {low}, range_max {top}): a faulted laser")
+        scan = Scan(scan_ranges(msg.ranges, low, top), first, step, top)
         self._latest = (msg, scan)
         return scan

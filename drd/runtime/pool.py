@@ -8,6 +8,7 @@ hosts.yaml when there is none). `predicting` shows a robot somewhere else for a 
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable, Iterable, Iterator, Mapping
 from contextlib import contextmanager
 
@@ -61,7 +62,9 @@ class ResourceView(Mapping[str, object]):
             if key in LIVE:
                 value = self._pool.live(c.id, key)
                 if value is not None:
-                    return value
+                    if math.isfinite(value):
+                        return value
+                    raise KeyError(key)  # the driver cannot tell now: not known, never the static value
         return self._pool.properties(c.id)[key]  # KeyError for an unknown property, as a mapping should
 
     def __iter__(self) -> Iterator[str]:

@@ -1,7 +1,9 @@
 """Where each robot is and the charge it has left, read from its own drivers (the dry-run's, in process).
 
 A robot's pose is what its Drive's odometry says (the robot's own belief, as on real hardware), its battery what
-its Drive reports (`Drive.battery()`), else the static `battery` of hosts.yaml. Read at most once per instant of
+its Drive reports (`Drive.battery()`), else the static `battery` of hosts.yaml. A reading the driver cannot give
+(it raises, or says NaN) is not known: a constraint on it cannot be measured, so it counts as broken (a NaN pose
+passed a geofence, a stale battery read as the static 1.0: ROS 2 audit 12). Read at most once per instant of
 the clock, and only when an expression asks (`ranger.x` in a guard, a constraint).
 """
 
@@ -48,14 +50,15 @@ class DriverTelemetry:
             return None
         out: dict[str, float] = {}
         try:  # the live `heading` in [-pi, pi], as a ROS yaw: odometry keeps counting turns (7.37 after one)
-            out["x"], out["y"], heading = drive.odometry()
-            out["heading"] = math.remainder(float(heading), math.tau)
+            x, y, heading = (float(v) for v in drive.odometry())
+            if math.isfinite(x) and math.isfinite(y) and math.isfinite(heading):  # NaN: where it is is not known
+                out["x"], out["y"], out["heading"] = x, y, math.remainder(heading, math.tau)
         except Exception:  # a lost robot cannot say where it is
-            return None
+            pass
         reading = getattr(drive, "battery", None)
         if callable(reading):
             try:
                 out["battery"] = float(reading())
-            except Exception:  # the driver cannot tell now: the static value stands
-                pass
+            except Exception:  # the driver cannot tell now (NaN, stale): not known, never the static value
+                out["battery"] = math.nan
         return out

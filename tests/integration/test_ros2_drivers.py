@@ -74,6 +74,7 @@ class FakeRobot:
         self.pose = [0.0, 0.0, 0.0]
         self.v = self.omega = 0.0
         self.silent = threading.Event()
+        self.faulted = threading.Event()  # NaN in the scan's geometry and the odometry's pose (ROS 2 audit 12)
         self.stopped = threading.Event()
         self.thread = threading.Thread(target=self._run, daemon=True)
         self.thread.start()
@@ -93,13 +94,16 @@ class FakeRobot:
                 x, y, a = self.pose
             if self.silent.is_set():
                 continue
+            bad = self.faulted.is_set()
+            if bad:
+                x = math.nan
             odom = self.make(ODOMETRY, header={"frame_id": "odom"}, child_frame_id="base_link",
                              pose={"pose": {"position": {"x": x, "y": y}, "orientation": quaternion(a)}})
             self.odom.publish(header=odom.header, child_frame_id=odom.child_frame_id, pose=odom.pose, twist=odom.twist)
             ranges = np.full(90, 2.0, dtype=np.float32)
             ranges[:10] = np.inf
             self.scan.publish(header=odom.header, angle_min=-math.pi / 2, angle_max=math.pi / 2,
-                              angle_increment=math.pi / 89, time_increment=0.0, scan_time=period, range_min=0.1,
+                              angle_increment=math.nan if bad else math.pi / 89, time_increment=0.0, scan_time=period, range_min=0.1,
                               range_max=4.0, ranges=ranges, intensities=np.zeros(0, dtype=np.float32))
 
     def last_twist(self) -> tuple[float, Any] | None:
@@ -263,6 +267,26 @@ def test_stale_or_missing_data_raise(robot: FakeRobot, router: int, link: Ros2Li
     finally:
         drive.close()
         elsewhere.close()
+
+
+def test_nan_geometry_or_pose_is_a_faulted_sensor_not_a_reading(robot: FakeRobot, router: int,
+                                                                link: Ros2Link) -> None:
+    """ROS 2 audit 12: a scan with a NaN angle_increment was read (a wall 0.3 m ahead unseen, the robot drove through
+    it) and a NaN pose passed a geofence; both now fail the reading, as a stale one does, so the behavior stops."""
+    drive = drive_of(router, link)
+    ranges = Ros2RangeSensor(device("RangeSensor", "ranges", endpoint=f"tcp/127.0.0.1:{router}"), "bot", link)
+    try:
+        eventually(lambda: _reads(drive.odometry) and _reads(ranges.scan), "the robot's odometry and scan")
+        assert math.isfinite(ranges.scan().angle_step)
+        robot.faulted.set()
+        eventually(lambda: not _reads(drive.odometry) and not _reads(ranges.scan), "the faulted readings refused")
+        with pytest.raises(HardwareError, match="does not know where it is"):
+            drive.odometry()
+        with pytest.raises(HardwareError, match="scan geometry is not usable"):
+            ranges.scan()
+    finally:
+        drive.close()
+        ranges.close()
 
 
 def test_messages_in_another_frame_are_dropped(robot: FakeRobot, router: int, link: Ros2Link) -> None:

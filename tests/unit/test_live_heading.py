@@ -33,3 +33,27 @@ def test_the_live_heading_is_within_a_turn(raw: float, live: float) -> None:
     data = DriverTelemetry(drivers, pool, lambda: 0.0)("c")
     assert data is not None and data["x"] == 1.0 and data["heading"] == pytest.approx(live)
     assert -math.pi <= data["heading"] <= math.pi
+
+
+class Faulted:
+    """A Drive whose odometry says NaN and whose battery reading fails (a stale topic, a NaN percentage)."""
+
+    def odometry(self) -> tuple[float, float, float]:
+        return (math.nan, 2.0, 0.0)
+
+    def battery(self) -> float:
+        raise RuntimeError("stale: older than 2 s")
+
+
+def test_a_reading_the_driver_cannot_give_is_not_known_never_the_static_value() -> None:
+    """ROS 2 audit 12: a NaN pose passed a geofence and a stale battery read as hosts.yaml's 1.0."""
+    pool = ResourcePool(ResourceManager())
+    pool.add([Unit("c.drive", "Drive", host="h"),
+              Aggregate("c", "Crawler", {"drive": "c.drive"}, {"battery": 1.0}, host="h")], 0.0)
+    pool.telemetry = DriverTelemetry(SimpleNamespace(robots={"c": {"drive": Faulted()}}, devices={}), pool,
+                                     lambda: 0.0)
+    assert pool.pose("c") is None
+    view = pool.view("c")
+    assert "battery" not in view and "x" not in view
+    with pytest.raises(KeyError):
+        view["battery"]
