@@ -103,8 +103,9 @@ class FakeRobot:
             ranges = np.full(90, 2.0, dtype=np.float32)
             ranges[:10] = np.inf
             self.scan.publish(header=odom.header, angle_min=-math.pi / 2, angle_max=math.pi / 2,
-                              angle_increment=math.nan if bad else math.pi / 89, time_increment=0.0, scan_time=period, range_min=0.1,
-                              range_max=4.0, ranges=ranges, intensities=np.zeros(0, dtype=np.float32))
+                              angle_increment=math.nan if bad else math.pi / 89, time_increment=0.0,
+                              scan_time=period, range_min=0.1, range_max=4.0, ranges=ranges,
+                              intensities=np.zeros(0, dtype=np.float32))
 
     def last_twist(self) -> tuple[float, Any] | None:
         with self.lock:
