@@ -6,6 +6,7 @@ located `Diagnostic`s (all of a file's in one run), never as a traceback.
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -85,9 +86,11 @@ def compile_file(path: str | Path, catalog: Catalog, limits: Limits = DEFAULT_LI
 
 
 def compile_text(text: str, catalog: Catalog, file: str = "<string>", budget: float | None = None,
-                 limits: Limits = DEFAULT_LIMITS) -> Compiled:
-    """Compile a mission given as text; with `budget` (seconds), compiling stops past it with a located error."""
+                 limits: Limits = DEFAULT_LIMITS, imports: Mapping[str, str] | None = None) -> Compiled:
+    """Compile a mission given as text; with `budget` (seconds), compiling stops past it with a located error.
+    Imports are read from the disk (relative to the cwd) or, given `imports`, only from those texts
+    (`dsl.loader.load_text`)."""
     from dsl.loader import load_text
 
     report = Reporter(budget=budget, limits=limits)
-    return _finish(load_text(text, file, report), catalog, report)
+    return _finish(load_text(text, file, report, imports=imports), catalog, report)

@@ -3,7 +3,9 @@
 from __future__ import annotations
 
 import codecs
+import os
 import stat
+from collections.abc import Mapping
 from pathlib import Path
 
 from dsl.checker import Program
@@ -38,11 +40,24 @@ def decode(data: bytes, file: str, report: Reporter) -> str:
         return data.decode("utf-8", errors="replace")
 
 
-def load_text(text: str, file: str, report: Reporter, base: Path | None = None) -> Program:
-    """Parse `text` as the main file; imports are read relative to `base` (default: the cwd)."""
+def load_text(text: str, file: str, report: Reporter, base: Path | None = None,
+              imports: Mapping[str, str] | None = None) -> Program:
+    """Parse `text` as the main file. Its imports are read from the disk relative to `base` (default: the cwd) or,
+    given `imports` (file name -> text, named as `load_file` names them: `imported_texts`), from there only: the
+    controller compiles what a client sent, relative to the main file's name, and never reads a file of its own
+    disk for it (users audit 12, D1: imports were read from the controller's working directory)."""
     program = Program(file, {}, {})
-    _add(program, text, file, base or Path.cwd(), report)
+    if imports is None:
+        _add(program, text, file, base or Path.cwd(), report)
+    else:
+        _add(program, text, file, Path(file).parent, report, sent=imports)
     return program
+
+
+def imported_texts(program: Program) -> dict[str, str]:
+    """The texts of the files a loaded program imports, by the names `load_text(imports=...)` looks them up by
+    (a file that could not be read is there as "": its error is the loader's report's)."""
+    return {name: text for name, text in program.sources.items() if name != program.main}
 
 
 def load_file(path: str | Path, report: Reporter) -> Program:
@@ -98,16 +113,33 @@ def _not_a_mission(name: str, report: Reporter) -> bool:
 MAX_IMPORT_DEPTH = 64
 
 
-def _same_file(program: Program, target: Path) -> str | None:
+def _same_file(program: Program, target: Path, on_disk: bool = True) -> str | None:
     """The name under which `target` was read already, if it was: compared as paths the system resolves, so
     `sub/../sub/a.mission` is `sub/a.mission` (users audit 9, D2: never recognised, such a cycle recursed until
-    the interpreter's stack or the system's file name length gave out)."""
+    the interpreter's stack or the system's file name length gave out); as names only (`normpath`) when the files
+    were sent rather than read."""
+    if not on_disk:
+        plain = os.path.normpath(target)
+        return next((name for name in program.sources if os.path.normpath(name) == plain), None)
     real = target.resolve()
     return next((name for name in program.sources if Path(name).resolve() == real), None)
 
 
+def _sent(sent: Mapping[str, str], key: str, report: Reporter, at: Span) -> str | None:
+    """An imported file's text from those a client sent with the mission, or a located error."""
+    text = sent.get(key)
+    if text is None:
+        plain = os.path.normpath(key)
+        text = next((t for name, t in sent.items() if os.path.normpath(name) == plain), None)
+    if text is None:
+        report.error("io", f"cannot read imported file {key}: it was not sent with the mission", at,
+                     "missionctl run sends the files a mission imports, read relative to the importing file; "
+                     "check that the file is there")
+    return text
+
+
 def _add(program: Program, text: str, name: str, base: Path, report: Reporter, main: bool = True,
-         depth: int = 0) -> None:
+         depth: int = 0, sent: Mapping[str, str] | None = None) -> None:
     program.sources[name] = text
     if main and _not_a_mission(name, report):
         return
@@ -123,14 +155,14 @@ def _add(program: Program, text: str, name: str, base: Path, report: Reporter, m
     for imp in tree.imports:
         target = base / imp.path
         key = str(target)
-        if key in program.sources or _same_file(program, target) is not None:
+        if key in program.sources or _same_file(program, target, sent is None) is not None:
             continue
         if depth >= MAX_IMPORT_DEPTH:
             report.error("import", f"imports nest more than {MAX_IMPORT_DEPTH} files deep", imp.span,
                          "import the shared files from the main mission instead of through a chain")
             return
-        sub = _read(target, key, report, imp.span)
+        sub = _read(target, key, report, imp.span) if sent is None else _sent(sent, key, report, imp.span)
         if sub is None:
             program.sources[key] = ""
             continue
-        _add(program, sub, key, target.parent, report, main=False, depth=depth + 1)
+        _add(program, sub, key, target.parent, report, main=False, depth=depth + 1, sent=sent)

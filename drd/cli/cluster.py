@@ -50,6 +50,7 @@ if TYPE_CHECKING:
     from drd.daemon.client import ClusterClient
     from drd.dryrun import DryRun
     from drd.record import Recorder
+    from dsl.checker import Program
 
 from drd.cli.options import MAX_PRIORITY, ConfigOption, ConnectOption, JsonOption, TimeoutOption
 
@@ -496,7 +497,7 @@ def run(mission: Path = typer.Argument(..., help="The mission file.", show_defau
     from drd.dryrun import summary
     from dsl.params import ParamError, parse_assignments
 
-    source = _mission_source(mission)
+    source, imports = _mission_source(mission)
     try:
         params = parse_assignments(param)
     except ParamError as e:
@@ -504,7 +505,8 @@ def run(mission: Path = typer.Argument(..., help="The mission file.", show_defau
     trace_out, recorder = _outputs(trace, record, foxglove, detach)
     wait = max(timeout, 15.0)
     request = RunMission(source, str(mission), world, speed, until, seed, params or None, priority,
-                         give_up_at=time.time() + wait - 0.5)  # the reply must still reach us after it
+                         give_up_at=time.time() + wait - 0.5,  # the reply must still reach us after it
+                         imports=imports)
     with cluster_client(config, connect, timeout, to="run a mission") as client:
         watch = _RecordWatch(client, trace_out, recorder, worlds=(config.absolute().parent,))
         try:
@@ -625,20 +627,24 @@ def _run_and_follow(client: ClusterClient, watch: _RecordWatch, request: Any, wa
                                   "SIGTERM" if isinstance(e, Terminated) else "Ctrl-C")
 
 
-def _mission_source(mission: Path) -> str:
-    """The mission's text, once it is known to be a mission file (the controller compiles it)."""
+def _mission_source(mission: Path) -> tuple[str, dict[str, str]]:
+    """The mission's text and those of the files it imports (read here, beside it: the controller compiles what it
+    is sent, never a file of its own disk), once it is known to be a mission file."""
+    from dsl.loader import imported_texts
+
     if not mission.exists():
         fail(f"{mission}: no such file (looked at {mission.absolute()})")
-    _not_a_mission(mission)  # a folder too: "is a directory", as validate says
+    imports = imported_texts(_not_a_mission(mission))  # a folder too: "is a directory", as validate says
     try:
-        return mission.read_text(encoding="utf-8")
+        return mission.read_text(encoding="utf-8"), imports
     except (OSError, UnicodeDecodeError) as e:
         fail(f"{mission}: cannot read it: {e}")
 
 
-def _not_a_mission(mission: Path) -> None:
+def _not_a_mission(mission: Path) -> Program:
     """Refuse here, before asking the cluster, a file that is no mission at all (a hosts file, a README, an empty
-    or comment-only file), as `validate` and `dry-run` do; the controller checks the rest."""
+    or comment-only file) or whose imports cannot be read, as `validate` and `dry-run` do; the controller checks the
+    rest. The program read, with the texts of its imports."""
     from dsl.errors import Reporter
     from dsl.loader import load_file
 
@@ -649,6 +655,7 @@ def _not_a_mission(mission: Path) -> None:
         from drd.cli.common import fail_diagnostics
 
         fail_diagnostics(early, program.sources)
+    return program
 
 
 @contextmanager

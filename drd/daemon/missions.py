@@ -70,7 +70,7 @@ RESUME_GRACE = 5.0
 NO_WORLD = "none (real robots)"
 
 
-@message("drd.mission.run", 3)
+@message("drd.mission.run", 4)
 class RunMission(Message):
     """Run this mission source (`file` names it in diagnostics) in world `world` at `speed` x real time."""
 
@@ -85,6 +85,9 @@ class RunMission(Message):
     #: The wall-clock time (`time.time()`) the client stops waiting for the reply; 0: it waits as long as it takes.
     #: The controller never starts a mission after it: a client that gave up never sees its mission start later.
     give_up_at: float = 0.0
+    #: The texts of the files the mission imports, by the names the client read them by (relative to `file`'s
+    #: folder, as the mission says): the controller never reads its own disk for a mission's imports.
+    imports: dict[str, str] | None = None
 
 
 @message("drd.mission.run-reply", 2)
@@ -435,8 +438,8 @@ class MissionRunner:
             raise ValueError("speed and until must be positive")
         if req.priority is not None and req.priority < 1:
             raise ValueError("priority must be 1 or more (1 is the highest)")
-        if len(req.source) > 1_000_000:
-            raise ValueError("mission source larger than 1 MB")
+        if len(req.source) + sum(len(k) + len(t) for k, t in (req.imports or {}).items()) > 1_000_000:
+            raise ValueError("mission source (with its imports) larger than 1 MB")
         if self.simulator is None:
             real_run_refusal(self.cluster, req)
         limits = self.cluster.limits
@@ -444,7 +447,8 @@ class MissionRunner:
                                                                        req.give_up_at - time.time())
         if budget <= 0:  # it waited behind other work until its client left: compiling it would be for nobody
             return _given_up(req)
-        compiled = compile_text(req.source, self.catalog, req.file or "<mission>", budget, limits)
+        compiled = compile_text(req.source, self.catalog, req.file or "<mission>", budget, limits,
+                                imports=req.imports or {})
         if not compiled.ok or compiled.statechart is None:
             diags = render(list(compiled.diagnostics), dict(compiled.sources))
             return RunReply("", False, diags or [f"{req.file}: declares no mission to run"])
