@@ -9,6 +9,7 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+import pytest
 from cluster_support import instances_only_hosts, serving_cluster
 
 from dsl import compile_text
@@ -36,21 +37,15 @@ def test_a_mission_that_imports_runs_on_the_cluster(tmp_path: Path) -> None:
 
 
 def test_the_controller_compiles_only_what_it_was_sent(tmp_path: Path, catalog: Catalog,
-                                                       monkeypatch: object) -> None:
+                                                       monkeypatch: pytest.MonkeyPatch) -> None:
     """A file of the same name on the compiling side's disk is never read: the sent text wins, a missing one is a
     located error."""
     (tmp_path / "missions" / "lib").mkdir(parents=True)
     (tmp_path / "missions" / "lib" / "common.mission").write_text("behavior Settle {\n    Nope(x: 1)\n}\n")
-    import os
-
-    here = os.getcwd()
-    os.chdir(tmp_path)
-    try:
-        sent = compile_text(MAIN, catalog, "missions/main.mission", imports={"missions/lib/common.mission": COMMON})
-        assert sent.ok, [d.message for d in sent.diagnostics]
-        missing = compile_text(MAIN, catalog, "missions/main.mission", imports={})
-    finally:
-        os.chdir(here)
+    monkeypatch.chdir(tmp_path)  # where a disk read would find the wrong file
+    sent = compile_text(MAIN, catalog, "missions/main.mission", imports={"missions/lib/common.mission": COMMON})
+    assert sent.ok, [d.message for d in sent.diagnostics]
+    missing = compile_text(MAIN, catalog, "missions/main.mission", imports={})
     assert not missing.ok
     (d,) = [d for d in missing.diagnostics if d.code == "io"]
     assert d.message == "cannot read imported file missions/lib/common.mission: it was not sent with the mission"
