@@ -92,8 +92,10 @@ class ComponentStuck(BaseException):
     leaving drd: where drd calls component code it catches `COMPONENT_RAISES`, and the state fails with it."""
 
 
-#: What a call into component code may raise that drd turns into that state's failure.
-COMPONENT_RAISES: tuple[type[BaseException], ...] = (Exception, ComponentStuck)
+#: What a call into component code may raise that drd turns into that state's failure. `SystemExit` too: a
+#: component (or a library it calls) that calls `sys.exit` ended `missionctl dry-run` with that code and no report
+#: (users audit 12, D4); a process ends with `os._exit` only, which nothing can catch.
+COMPONENT_RAISES: tuple[type[BaseException], ...] = (Exception, ComponentStuck, SystemExit)
 
 
 def raised(e: BaseException, when: str = "") -> str:

@@ -91,3 +91,27 @@ def test_a_component_call_that_never_returns_fails_its_state_and_the_run_reports
     assert report["sim_time"] < 60, "the run ended with the failure, not at --until"
     kinds = [json.loads(x)["kind"] for x in (kit / "t.jsonl").read_text().splitlines()]
     assert kinds[-1] == "finished"
+
+
+def test_a_component_that_calls_sys_exit_fails_its_state_and_on_error_catches_it(tmp_path: Path) -> None:
+    """Users audit 12, D4: `sys.exit(3)` in a step ended `missionctl dry-run` with exit 3, no report, no message."""
+    (tmp_path / "quitkit.py").write_text("import sys\nfrom drd.runtime.component import Component\n\n\n"
+                                         "class Quitter(Component):\n    def step(self, now):\n"
+                                         "        sys.exit(3)  # a library that exits on a fatal condition\n")
+    (tmp_path / "comps" / "Quitter").mkdir(parents=True)
+    (tmp_path / "comps" / "Quitter" / "manifest.yaml").write_text(
+        "name: Quitter\nkind: behavior\ndescription: Exits.\nentry_point: quitkit:Quitter\n")
+    (tmp_path / "m.mission").write_text("mission Quit {\n    start -> Q\n    Quitter as Q\n"
+                                        "    Q -> Recover on error / log \"caught\"\n"
+                                        "    Wait(duration: 1s) as Recover\n}\n")
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(tmp_path), str(ROOT)])}
+    r = subprocess.run([*MISSIONCTL, "dry-run", str(tmp_path / "m.mission"), "-C", str(tmp_path / "comps"),
+                        "--config", str(ROOT / "hosts.yaml"), "--json"],
+                       cwd=tmp_path, env=env, capture_output=True, text=True, timeout=120, check=False)
+    assert r.returncode == 0, (r.stdout[-1500:], r.stderr[-1500:])
+    report = json.loads(r.stdout)
+    assert report["outcome"] == "success"
+    q = next(t for t in report["timeline"] if t["path"] == "Quit/Q")
+    assert q["status"] == "failure"
+    said = json.dumps(report["logs"])
+    assert "component raised SystemExit: 3 (at quitkit.py:7, in step)" in said and '"caught"' in said, said
