@@ -112,6 +112,9 @@ class Executive:
         self.guard = ConstraintGuard(self.pool)  # the constraints in force, of every mission
         self.gates: Gates = self._gates(gates)
         self.pool.places = dict(self.services.get("places", {}))  # the world's rooms: `inside(ranger, "n1")`
+        catalog = self.services.get("catalog")
+        if isinstance(catalog, Catalog):
+            self.pool.references = catalog.references()
         self._ids = itertools.count(1)
         self.order: dict[str, int] = {}  # mission -> its start ordinal: the cursor of status pages
         self._ordinals = itertools.count(1)

@@ -272,6 +272,12 @@ class Catalog:
             props.update(t.parts)  # `ranger.camera` names the part
         return props
 
+    def references(self) -> dict[str, frozenset[str]]:
+        """Per robot type, its properties typed with a robot type (`carrier: Ranger`): their value names another
+        robot, which an expression reads as that robot (`scout.carrier.id`, `scout.carrier.battery`)."""
+        robots = {n for n, t in self.components.items() if t.kind is Kind.ARC}
+        return {n: frozenset(p for p, ty in self.properties(n).items() if ty in robots) for n in robots}
+
     def part_of(self, arc: str, rc_type: str) -> str | None:
         """The name of the single part of `arc` with type `rc_type`, if exactly one."""
         t = self.components.get(arc)

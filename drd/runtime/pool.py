@@ -65,7 +65,12 @@ class ResourceView(Mapping[str, object]):
                     if math.isfinite(value):
                         return value
                     raise KeyError(key)  # the driver cannot tell now: not known, never the static value
-        return self._pool.properties(c.id)[key]  # KeyError for an unknown property, as a mapping should
+        found = self._pool.properties(c.id)[key]  # KeyError for an unknown property, as a mapping should
+        if isinstance(found, str) and key in self._pool.references.get(c.type, ()):
+            named = self._pool.view(found)  # a property typed with a robot type reads as that robot
+            if named is not None:
+                return named
+        return found
 
     def __iter__(self) -> Iterator[str]:
         return iter(self._data())
@@ -98,6 +103,10 @@ class ResourcePool:
         self.candidates: dict[str, Candidate] = {}
         self._props: dict[str, dict[str, object]] = {}
         self.telemetry: Telemetry | None = None
+        #: Robot type -> its properties that name another robot (`Catalog.references`): `scout.carrier` reads as
+        #: that Ranger, so `scout.carrier.id == "ranger1"` holds (it type-checked and matched no robot: users
+        #: audit 12, D2). It compares equal to its id, so `scout.carrier == ranger` is unchanged.
+        self.references: Mapping[str, frozenset[str]] = {}
         self.places: dict[str, tuple[float, float, float, float]] = {}  # the world's named regions (rooms)
         self._seen: dict[str, dict[str, float]] = {}  # robot -> what `predicting` shows instead of its telemetry
         #: property -> (value -> ids with that string value, every id with a string value): `having`'s index,
