@@ -259,6 +259,7 @@ class Recorder:
             self._write(lambda w: w.attach(log_time=0, create_time=0, name=WORLD_ATTACHMENT,
                                            media_type="application/yaml", data=data))
         self.doors = {d.id: (d.a, d.b) for d in world.doors}
+        self.frames.scouts = frozenset(world.scout_ids)
         self.update_world(0.0, [*_building(world), *_bodies(world)])
 
     def update_world(self, at: float, entities: list[tuple[str, Any]]) -> None:
@@ -544,6 +545,7 @@ class _Frames:
         self.trail_new: dict[str, list[tuple[float, float]]] = {}
         self.pieces = 0
         self.trail_sent = 0.0
+        self.scouts: frozenset[str] = frozenset()  # the robots with a Scout's body (the world's), whatever their ids
 
     def transforms(self, at: float, poses: dict[str, tuple[float, float, float]], carried: dict[str, str]) -> Any:
         """This cycle's `FrameTransforms` (None when nothing moved and no keyframe is due): a Scout in a magazine is
@@ -589,7 +591,7 @@ class _Frames:
             if len(points) > 1:
                 self.pieces += 1
                 colour = INTRUDER_COLOUR if rid.startswith(INTRUDER) else (
-                    SCOUT_COLOUR if rid.startswith("scout") else RANGER_COLOUR)
+                    SCOUT_COLOUR if rid in self.scouts else RANGER_COLOUR)  # as the body (users audit 12, D5)
                 pieces.append(SceneEntity(frame_id="world", id=f"trail/{rid}/{self.pieces}", timestamp=_stamp(at),
                                           lines=[_line(points, _color(colour, 0.7), 0.04, strip=True)]))
         self.trail_new = {}

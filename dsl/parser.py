@@ -679,7 +679,7 @@ def syntax_diagnostic(e: UnexpectedInput, history: Sequence[Token], file: str, t
                           "every { needs a matching }" if closing else None)
     if "_SEP" in e.expected and not (e.expected & ITEM_STARTS) and prev is not None and tok.type != "_SEP":
         return Diagnostic("syntax", f"syntax: expected a newline or ; after {_show(prev)}", _after(file, prev),
-                          hint or f"{_show(tok)} starts a new item: put it on its own line")
+                          hint or _spaced_unit(prev, tok) or f"{_show(tok)} starts a new item: put it on its own line")
     return Diagnostic("syntax", f"syntax: {_describe_token_error(e)}", span, hint)
 
 
@@ -711,6 +711,21 @@ def _unknown_unit(file: str, prev: Token | None, tok: Token) -> Diagnostic | Non
                 f"a duration is at most {MAX_DURATION // 86400:g} days ({duration_text(MAX_DURATION)})")
     return Diagnostic("syntax", f"syntax: unknown duration unit {word} in `{prev.value}{word}`: write 250ms, 30s,"
                       " 5min or 2h", span, hint)
+
+
+def _spaced_unit(prev: Token, tok: Token) -> str | None:
+    """The hint for a duration written with a space before its unit (`2 s`, `5 minutes`): `write 2s` (users audit
+    12, D9: it said "`s` starts a new item")."""
+    word = str(tok.value)
+    size = _OWN_UNITS.get(word) or _UNIT_WORDS.get(word.lower())
+    if prev.type not in ("INT", "FLOAT") or tok.type != "NAME" or prev.end_line != tok.line or size is None:
+        return None
+    from dsl.catalog import duration_text
+
+    seconds = float(prev.value) * size
+    written = f"{prev.value}{word}" if word in _OWN_UNITS else duration_text(seconds)
+    return f"a duration's unit follows its number with no space: write {written}" if seconds <= MAX_DURATION \
+        else None
 
 
 #: The language's own duration units, with the seconds each is worth.

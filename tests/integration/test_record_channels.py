@@ -295,3 +295,28 @@ def numpy_float32(value: float) -> float:
     import numpy as np
 
     return float(np.float32(value))
+
+
+def test_a_trail_is_coloured_as_the_robots_body_not_by_its_id(tmp_path: Path) -> None:
+    """Users audit 12, D5: a trail was Scout-orange when the robot's id began with "scout", whatever its body."""
+    import yaml
+
+    from drd.record import RANGER_COLOUR, SCOUT_COLOUR
+    from drd.sim.world import parse_world
+
+    text = (ROOT / "worlds" / "corridor.yaml").read_text().replace("scout", "drone").replace("ranger1", "scout_rover")
+    world = parse_world(yaml.safe_load(text), str(tmp_path / "greenhouse.yaml"))
+    path = tmp_path / "trails.mcap"
+    recorder = Recorder(path)
+    try:
+        recorder.scene(world)
+        for k in range(12):
+            recorder.poses(0.1 * k, {"drone1": (0.2 * k, 0.0, 0.0), "scout_rover": (0.0, 0.2 * k, 0.0)})
+    finally:
+        recorder.close()
+    messages = Run(path, None, None, {}).messages()  # type: ignore[arg-type]
+    colours = {e.id.split("/")[1]: e.lines[0].color for topic, _s, _t, m in messages if topic == "/drd/trails"
+               for e in m.entities}
+    for rid, hex_ in (("drone1", SCOUT_COLOUR), ("scout_rover", RANGER_COLOUR)):
+        c, want = colours[rid], tuple(int(hex_[i:i + 2], 16) for i in (1, 3, 5))
+        assert (round(c.r * 255), round(c.g * 255), round(c.b * 255)) == want, rid

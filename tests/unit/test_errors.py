@@ -217,6 +217,10 @@ ERRORS: list[tuple[str, str, str, str | None]] = [
      "did you mean error?"),
     ("misspelled-done", m("  start -> Calibrate\n  Calibrate -> dne"),
      "3:16 unknown state dne: no child of M and no behavior has this name", "did you mean done?"),
+    # users audit 12, D9: `2 s` was told "`s` starts a new item"
+    ("spaced-unit", m("  Wait(duration: 2 s)"), "2:19 syntax: expected a newline or ; after `2`", "write 2s"),
+    ("spaced-unit-word", m("  Wait(duration: 5 minutes)"), "2:19 syntax: expected a newline or ; after `5`",
+     "write 5min"),
     # ---- resources
     ("ambiguous-binding", m("  needs a: Camera\n  needs b: Camera\n  Observe"),
      "4:3 ambiguous resource binding: camera (Camera) could come from a or b", "name one of them camera"),
