@@ -50,6 +50,20 @@ def measure(condition: ast.Expr, names: dict[str, object], count: CountFn | None
     return Measure(holds, margin, value, limit)
 
 
+def shown(condition: ast.Expr, m: Measure) -> str:
+    """How far from holding a constraint stands, in its own terms, for a reason a user reads: `6.05 against 6` for
+    a comparison (and what combines them), `3.64 m outside` for `inside(...)` (its margin is a signed depth, and
+    "-3.64 against 0" read as nonsense for a yes/no condition: users audit 12, D7), nothing for a plain condition."""
+    inner = condition
+    while isinstance(inner, ast.Unary) and inner.op == "not":
+        inner = inner.operand
+    if isinstance(inner, ast.Call) and inner.func == "inside":  # the value is the depth inside the rooms
+        return f"{abs(m.value):.2f} m {'inside' if m.value >= 0 else 'outside'}"
+    if isinstance(inner, ast.Binary) and inner.op in ("<", "<=", ">", ">=", "and", "or"):
+        return f"{m.value:.3g} against {m.limit:.3g}"
+    return ""
+
+
 def refuses(now: Measure, then: Measure) -> bool:
     """Whether a command taking the constraint from `now` to `then` must be refused: it breaks it and is worse."""
     return not then.holds and then.margin < now.margin - EPS

@@ -17,7 +17,7 @@ from typing import Any
 
 from drd.hw.motion import predict
 from drd.rcm import Aggregate
-from drd.rcm.constraints import Measure, refuses, text_of
+from drd.rcm.constraints import Measure, refuses, shown, text_of
 from drd.runtime.ownership import DeviceGate, under
 from drd.runtime.pool import ResourcePool, ResourceView
 from dsl import ast
@@ -123,6 +123,6 @@ class ConstraintGuard:
                 continue  # a condition that cannot be read now: the monitor reports it, the gate does not guess
             if refuses(before, after):
                 a.refused(after)
-                return (f"constraint {a.name} ({a.text}) would not hold: {after.value:.3g} against"
-                        f" {after.limit:.3g}")
+                said = shown(a.condition, after)
+                return f"constraint {a.name} ({a.text}) would not hold" + (f": {said}" if said else "")
         return ""

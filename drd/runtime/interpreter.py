@@ -26,7 +26,7 @@ from typing import Any, Literal, NamedTuple
 from drd.errors import COMPONENT_RAISES
 from drd.rcm import Deadlock, Granted, Released, ReleaseReason, ResourceManager, Revoked, Unit, Unsatisfiable
 from drd.rcm import Waiting as WaitingDecision
-from drd.rcm.constraints import Measure, measure
+from drd.rcm.constraints import Measure, measure, shown
 from drd.runtime import records as rec
 from drd.runtime.broker import ResourceBroker
 from drd.runtime.clock import Clock
@@ -1114,7 +1114,8 @@ class Interpreter:
                 if t.guard is None or self._truthy(domain, t.guard, event):
                     self._take(cand, t, event)
                     return
-        self._finish(node, False, f"constraint {a.name} violated: {a.text} ({m.value:.3g} against {m.limit:.3g})")
+        said = shown(a.condition, m)
+        self._finish(node, False, f"constraint {a.name} violated: {a.text}" + (f" ({said})" if said else ""))
 
     # ------------------------------------------------------------- resources
     def _apply(self, decisions: Iterable[object]) -> None:

@@ -9,6 +9,7 @@ from __future__ import annotations
 import io
 import json
 import math
+import re
 from typing import Any
 
 from drd.dryrun import DryRun, Mission, run_many
@@ -93,6 +94,14 @@ def test_a_region_constraint_stops_the_robot_where_it_would_leave(catalog: Catal
     report, _ = dry(catalog, ROOMS, until=40.0)
     assert report.outcome == "failure" and "constraint stay violated" in report.reason
     assert 3.4 < final_x(report) <= 4.05
+
+
+def test_a_broken_inside_says_how_far_outside_not_a_signed_number(catalog: Catalog) -> None:
+    """Users audit 12, D7: `inside(...)` broke "(-3.64 against 0)", a number for a yes/no condition."""
+    report, _ = dry(catalog, "mission Room {\n    needs ranger: Ranger\n    constraint stay: inside(ranger, \"n1\")\n"
+                             "    FollowCorridor(speed: 0.5)\n}\n", until=10.0)
+    assert report.outcome == "failure", report.reason
+    assert re.fullmatch(r'constraint stay violated: inside\(ranger, "n1"\) \(\d+\.\d\d m outside\)', report.reason)
 
 
 def test_a_battery_floor_can_be_read_and_checked(catalog: Catalog) -> None:
