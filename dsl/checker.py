@@ -472,8 +472,18 @@ class Checker:
                               b.name_span,
                               f"say which runs first (start -> {first}), or use a plan or a parallel block")
             return
+        if any(self._unknown(body, t.target) for t in starts):
+            return  # an unknown start target is reported as such; every child "never reached" would be its echo
         entry = {t.target for t in starts} or set(list(body.children)[:1])
         self._reachability(b, body, entry)
+
+    def _unknown(self, body: Body, key: str) -> bool:
+        """Whether `key` names nothing a state can be: no child, or a child of no known behavior or component (a
+        transition to an undeclared name makes one, reported as an unknown state)."""
+        if key in ("done", "fail"):
+            return False
+        child = body.children.get(key)
+        return child is None or (child.name not in self.behaviors and self.catalog.get(child.name) is None)
 
     def _plan(self, plan: ast.Plan) -> None:
         if plan.preallocate and plan.concurrent:

@@ -221,6 +221,9 @@ ERRORS: list[tuple[str, str, str, str | None]] = [
     ("spaced-unit", m("  Wait(duration: 2 s)"), "2:19 syntax: expected a newline or ; after `2`", "write 2s"),
     ("spaced-unit-word", m("  Wait(duration: 5 minutes)"), "2:19 syntax: expected a newline or ; after `5`",
      "write 5min"),
+    # users audit 12, D8: a misspelt start target made every child "never reached", hinting `Inspct -> ...`
+    ("misspelt-start-only", m("  start -> Calibrat\n  Calibrate\n  Observe\n  Calibrate -> Observe"),
+     "2:12 unknown state Calibrat: no child of M and no behavior has this name", "did you mean Calibrate?"),
     # ---- resources
     ("ambiguous-binding", m("  needs a: Camera\n  needs b: Camera\n  Observe"),
      "4:3 ambiguous resource binding: camera (Camera) could come from a or b", "name one of them camera"),
@@ -330,3 +333,10 @@ def test_a_bad_byte_after_a_byte_order_mark_is_located_as_the_editor_shows_it(tm
     path.write_bytes(b"\xef\xbb\xbf\n\nX\xff\n")
     (d,) = [d for d in compile_file(path, catalog).diagnostics if d.code == "encoding"]
     assert (d.span.line, d.span.column) == (3, 2) and "byte 0xff" in d.message, d
+
+
+def test_a_misspelt_start_target_is_one_error_not_every_child_never_reached(catalog: Catalog) -> None:
+    """Users audit 12, D8: each child was also "never reached", its hint naming the misspelt state."""
+    source = m("  start -> Calibrat\n  Calibrate\n  Observe\n  Calibrate -> Observe")
+    result = compile_text(source, catalog, "t.mission")
+    assert [d.code for d in result.diagnostics] == ["unknown-state"]
