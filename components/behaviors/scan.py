@@ -392,6 +392,8 @@ END = 0.9
 BODY = 0.35
 #: A wall across the way spans more than WIDER metres of the lane within ACROSS metres either side of the axis.
 ACROSS, WIDER = 0.9, 1.0
+#: Hits of neighbouring beams farther apart than JOINED metres are of different things (a wall across is one surface).
+JOINED = 0.25
 
 
 def clearance_ahead(scan: Scan, half_width: float = BODY, memo: ScanMemo | None = None) -> float:
@@ -424,5 +426,11 @@ def wall_across(scan: Scan, within: float = END, memo: ScanMemo | None = None) -
     depth = within + 0.25
     r, c, s = _ahead(scan, _scratch(scan, memo))
     x, y = r * c, r * s
-    across = y[(r < scan.max_range) & (0 < x) & (x < depth) & (-ACROSS < y) & (y < ACROSS)]
-    return bool(len(across)) and float(across.max()) - float(across.min()) >= WIDER
+    keep = np.flatnonzero((r < scan.max_range) & (0 < x) & (x < depth) & (-ACROSS < y) & (y < ACROSS))
+    if not len(keep):
+        return False
+    # one surface, not several things side by side: a person and the side wall beyond it, or a Ranger ahead and a
+    # wall, spanned WIDER together and were taken for the end (worlds audit 13, D3, D4)
+    xs, ys = x[keep], y[keep]
+    cut = np.flatnonzero((np.diff(keep) > 1) | (np.hypot(np.diff(xs), np.diff(ys)) > JOINED)) + 1
+    return any(float(part.max()) - float(part.min()) >= WIDER for part in np.split(ys, cut))

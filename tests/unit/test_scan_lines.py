@@ -65,3 +65,13 @@ def test_a_small_thing_near_by_does_not_hide_the_long_wall() -> None:
     assert nearest is not None and nearest.distance == pytest.approx(0.6, abs=0.03)  # the post
     wall = strongest_wall(cast(scene), 1)
     assert wall is not None and wall.distance == pytest.approx(1.25, abs=0.03) and abs(wall.angle) < 0.02
+
+
+def test_a_wall_across_is_one_surface_not_a_person_beside_a_wall() -> None:
+    """Worlds audit 13, D3: a person ahead and a side wall beyond spanned WIDER together: "end of the corridor"."""
+    from components.behaviors.scan import wall_across
+
+    person_and_wall = [((0.8, -0.3), (0.8, 0.1)), ((1.0, 0.5), (1.1, 0.88))]
+    assert not wall_across(cast(person_and_wall))
+    assert wall_across(cast([((0.8, -1.25), (0.8, 1.25))]))  # the end: one surface across the way
+    assert not wall_across(cast([((0.8, -0.25), (0.8, 0.25))]))  # a person alone
