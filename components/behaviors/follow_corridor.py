@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import math
 
+from components.behaviors.progress import Progress
 from components.behaviors.scan import (
     END,
     SAME_LINE,
@@ -36,9 +37,6 @@ TURN_RATE, TURNED = 0.8, 0.15
 #: Blocked short of the end for WAIT seconds (longer than a person takes to cross its path), it turns on the spot
 #: toward the more open side until FREE metres ahead are clear: the way out when the walls give no heading.
 WAIT, FREE = 3.0, 1.5
-#: Moved less than PROGRESS metres in STUCK seconds of running (time suspended does not count), it fails, as nav2's
-#: progress checker fails a goal: a person standing in the middle, a parked robot, a box it cannot get past.
-PROGRESS, STUCK = 0.5, 30.0
 
 
 def along(walls: tuple[Wall | None, Wall | None], heading: float,
@@ -90,26 +88,21 @@ class FollowCorridor(Component):
         self.unblocking: int | None = None  # the side of a turn out of a block, under way
         self.direction: float | None = None  # the corridor's direction in the odometry frame, from the last walls
         self.began: tuple[float, float] | None = None  # where it started (odometry)
-        self.progress: tuple[float, float] | None = None  # (time, distance): the farthest from `began` so far
+        self.progress = Progress()  # how far from `began` it has got (`components.behaviors.progress`)
 
     def resume(self) -> None:
-        self.progress = None  # the time it was suspended is not time it failed to move
+        self.progress.reset()
 
     def stuck(self, now: float, x: float, y: float) -> bool:
-        """No progress (PROGRESS metres farther from where it started than ever) for STUCK seconds: it says so in the
-        log (the failure's reason). Why: turning out of a block and back to the centre line, it met a person standing
-        in the middle, a parked Ranger or a box again and again, or shuttled back and forth before it, and a mission
-        without a bound of its own ran to the time limit (worlds audit 13, D3-D5)."""
+        """No farther from where it started than its best by PROGRESS metres for STUCK seconds: it says so in the log
+        (the failure's reason). Farthest-from-start, not distance moved: shuttling back and forth before a box moved it
+        more than that every few seconds. A person standing in the middle, a parked Ranger, a box it cannot get past
+        then end the search rather than hold a mission to its time limit (worlds audit 13, D3-D5)."""
         if self.began is None:
             self.began = (x, y)
-        away = math.hypot(x - self.began[0], y - self.began[1])
-        if self.progress is None or away >= self.progress[1] + PROGRESS:
-            self.progress = (now, away if self.progress is None else max(away, self.progress[1]))
+        if not self.progress.stalled(now, math.hypot(x - self.began[0], y - self.began[1])):
             return False
-        if now - self.progress[0] < STUCK:
-            return False
-        self.ctx.log(f"FollowCorridor: no progress: moved less than {PROGRESS:g} m in {STUCK:g} s (no way past what "
-                     "blocks the corridor)")
+        self.ctx.log(f"FollowCorridor: {self.progress.says()} (no way past what blocks the corridor)")
         return True
 
     def step(self, now: float) -> Status:

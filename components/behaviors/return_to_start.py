@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import math
 
+from components.behaviors.progress import Progress
 from components.behaviors.scan import clearance_ahead, wrap
 from drd.runtime.component import Component, Status
 
@@ -25,6 +26,10 @@ class ReturnToStart(Component):
     def start(self) -> None:
         origin = getattr(self.device("drive"), "origin", None)
         self.home = tuple(origin())[:2] if callable(origin) else (0.0, 0.0)
+        self.progress = Progress()  # how much nearer home it has got
+
+    def resume(self) -> None:
+        self.progress.reset()
 
     def step(self, now: float) -> Status:
         speed = float(self.ctx.params["speed"])
@@ -35,6 +40,11 @@ class ReturnToStart(Component):
         if dist < ARRIVED:
             drive.stop()
             return Status.SUCCESS
+        if self.progress.stalled(now, -dist):  # behind something it cannot get round (worlds audit 13, D1)
+            drive.stop()
+            self.ctx.log(f"ReturnToStart: {self.progress.says('nearer home')}, {dist:.2f} m away: something is in the"
+                         " way")
+            return Status.FAILURE
         err = wrap(math.atan2(dy, dx) - a)
         omega = max(-1.0, min(1.0, K_TURN * err))
         v = 0.0 if abs(err) > 0.6 else min(speed, 0.8 * dist) * math.cos(err)

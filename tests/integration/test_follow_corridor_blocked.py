@@ -88,5 +88,23 @@ def test_a_box_it_cannot_get_past_fails_the_search_with_a_reason_not_the_time_li
     # the previous code: stopped at the time limit, shuttling before the box
     assert report.outcome == "failure" and report.sim_time < 120, report.reason
     said = [line["text"] for line in report.logs()]
-    assert any("no progress: moved less than 0.5 m in 30 s" in t for t in said), said
+    assert any("no progress: got no more than 0.5 m farther in 30 s" in t for t in said), said
     assert max(x for _t, x, _y in report.tracks["ranger1"]) < 8.0 - 0.3  # it never went through the box
+
+
+def test_return_to_start_behind_something_it_cannot_get_round_fails_with_a_reason(catalog: Catalog) -> None:
+    """Worlds audit 13, D1: behind a box against a wall, ReturnToStart stood still to the time limit, saying nothing.
+    Here a person walks out of room r0 into the middle of the corridor behind the robot, and stays there."""
+    out_and_back = """
+mission OutAndBack {
+    needs ranger: Ranger
+    start -> FollowCorridor
+    FollowCorridor(speed: 0.5)
+    FollowCorridor -> ReturnToStart after 12s
+}
+"""
+    person = {"intruders": [{"id": "visitor", "path": [{"t": 0, "at": [4.0, 4.0]}, {"t": 10, "at": [4.0, 4.0]},
+                                                        {"t": 14, "at": [3.0, 0.0]}]}]}
+    report = dry(catalog, "visited", person, until=600.0, mission=out_and_back)
+    assert report.outcome == "failure" and report.sim_time < 120, (report.outcome, report.sim_time, report.reason)
+    assert "ReturnToStart: no progress: got no more than 0.5 m nearer home in 30 s" in report.reason, report.reason
