@@ -95,10 +95,10 @@ class ControllerLife:
             if not interp.finished and interp.root is not None:
                 self._saved[mid] = NodeImage.from_dict(capture(interp.root).to_dict())
         self._properties = property_changes(self.resources, executive.pool)
-        executive.abandon()  # a dead process says nothing more
         orphan = getattr(executive.gates, "orphan_all", None)
-        if orphan is not None:
-            orphan(now, "controller lost")  # the hosts stop every robot
+        if orphan is not None:  # the hosts stop every robot, and record it (`halted`), as a cluster's Creators do
+            orphan(now, f"controller {host} lost (killed)")
+        executive.abandon()  # a dead process says nothing more
         self.executive, self._died_at = None, now
         if self.takeover is not None:
             return (f"every robot stopped; {len(self._saved)} mission(s) wait for standby {self.takeover[1]}, which"

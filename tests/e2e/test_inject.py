@@ -100,6 +100,12 @@ def test_a_controller_started_again_resumes_the_mission_from_its_journal_as_on_a
     [restored] = [r for r in records if r["kind"] == "restored"]
     assert restored["at"] == pytest.approx(70.0, abs=0.11) and restored["since"] == pytest.approx(60.0, abs=0.11)
     assert not [r for r in records if 60.05 < r["at"] < 69.95], "a dead controller records nothing"
+    # the hosts stopped what was moving, and said so (readers audit 13, D3: nothing in the trace said it stopped)
+    moving = {r["device"] for r in records if r["kind"] == "command" and r["accepted"]
+              and r["method"] == "set_velocity" and 59.5 < r["at"] <= 60.05}
+    halted = {r["device"] for r in records if r["kind"] == "halted" and abs(r["at"] - 60.0) < 0.11
+              and r["reason"] == "controller controller lost (killed)"}
+    assert moving and moving <= halted, (moving, halted)
     released = [r for r in records if r["kind"] == "released" and r["reason"] == "controller lost"]
     assert released and all(r["at"] == restored["at"] for r in released)
     from drd.tracecheck import check
