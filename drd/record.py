@@ -807,6 +807,8 @@ def read(path: Path | str) -> Recording:
                             schema.id, factory.decoder_for(channel.message_encoding, schema))
                         if decoder is not None:
                             _take_poses(out, decoder(message.data), message.log_time)
+                    elif channel.message_encoding != "json":  # not drd's (a ROS 2 bag's CDR of the same topics)
+                        continue
                     elif channel.topic in (RECORDS, RUNS):
                         _take(out, channel.topic, message.data)
                     elif channel.topic in (CAMERA, LIGHT) and len(out.fovs) < 64:
@@ -826,7 +828,8 @@ def read(path: Path | str) -> Recording:
     except (OSError, ValueError) + damaged as e:
         raise RecordingError(f"{path}: cannot read it as a drd recording: {_unreadable(path, e)}") from e
     if not out.records and not out.runs:
-        raise RecordingError(f"{path}: no drd run in it")
+        raise RecordingError(f"{path}: no drd run in it (a drd recording has JSON messages on {RECORDS}: "
+                             "`missionctl dry-run --record` or `run --record` writes one)")
     if out.damage is None and not out.runs:
         out.damage = "it ends before the run's summary (cut short)"
     if not out.runs:  # cut before the end: each mission's summary from its records

@@ -253,6 +253,12 @@ def test_a_recording_as_a_ros2_bag(corridor: Run, tmp_path: Path) -> None:
                 if c.topic == "/ranger1/scan"]
     assert [list(m.ranges) for m in read] == [[numpy_float32(d) for d in s.ranges] for s in scans]
     assert read[0].header.frame_id == "ranger1" and read[0].angle_min == pytest.approx(scans[0].start_angle)
+    # the bag is no drd recording, and `replay` of it says so (readers audit 13, D11: a JSON decoder's message)
+    from drd.record import RecordingError
+    from drd.record import read as read_recording
+
+    with pytest.raises(RecordingError, match=r"no drd run in it \(a drd recording has JSON messages on"):
+        read_recording(next((tmp_path / "bag").glob("*.mcap")))
 
 
 def test_the_bags_metadata_is_the_layout_humble_parses(corridor: Run, tmp_path: Path) -> None:
