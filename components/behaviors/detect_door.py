@@ -23,13 +23,13 @@ from drd.runtime.component import Component, Status
 #: How far past the wall line (m) a beam must reach to count as looking through a gap.
 BEYOND = 0.5
 #: Only doors whose centre is within this angle of abeam are reported (the geometry is best there).
-ABEAM = math.radians(30)
+ABEAM = math.radians(45)
 _FAR = math.pi - 0.15  # beams closer than 0.15 rad to the wall's direction cross it too far away to tell
 #: How far (m) the Ranger must have moved since the start before a wall across the way is the corridor's end: as
 #: FollowCorridor, which turns around when it starts facing one.
 LEAVE = 0.5
 #: A maximal run of beams through the wall with a beam at the wall on both sides.
-_GAP = re.compile(r"(?<=w)b+(?=w)")
+_GAP = re.compile(r"(?<=w)s{0,8}b+s{0,8}(?=w)")
 
 
 def door_key(x: float, y: float, side: str) -> tuple[float, float, str]:

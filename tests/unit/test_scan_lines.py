@@ -75,3 +75,33 @@ def test_a_wall_across_is_one_surface_not_a_person_beside_a_wall() -> None:
     assert not wall_across(cast(person_and_wall))
     assert wall_across(cast([((0.8, -1.25), (0.8, 1.25))]))  # the end: one surface across the way
     assert not wall_across(cast([((0.8, -0.25), (0.8, 0.25))]))  # a person alone
+
+
+@pytest.mark.parametrize(("corridor_width", "door"), [(1.5, 1.0), (1.5, 1.2), (1.8, 1.5), (2.5, 1.5), (4.0, 2.6)])
+def test_a_door_wide_for_its_corridor_is_found_before_it_is_abeam(corridor_width: float, door: float) -> None:
+    """Worlds audit 13, D2: a door is found once both jambs are in view (the laser sees 90 degrees each side), with its
+    centre at most ABEAM off abeam; at 30 degrees a door wider than about 0.58 x the corridor never qualified."""
+    from components.behaviors.detect_door import find_gaps
+
+    h = corridor_width / 2
+    ahead = door / 2 + 0.05  # the rear jamb just ahead of the robot: the last moment both are seen
+    x0, x1 = ahead - door / 2 - 1.5, ahead + door / 2 + 1.5  # the room behind, wider than its door
+    walls = [((-10.0, h), (ahead - door / 2, h)), ((ahead + door / 2, h), (10.0, h)), ((-10.0, -h), (10.0, -h)),
+             ((x0, h), (x0, h + 3)), ((x1, h), (x1, h + 3)), ((x0, h + 3), (x1, h + 3))]
+    gaps = find_gaps(cast(walls), 0.7, (h, h))
+    assert len(gaps) == 1 and gaps[0]["side"] == "left", gaps
+    assert gaps[0]["width"] == pytest.approx(door, abs=0.1) and gaps[0]["x"] == pytest.approx(ahead, abs=0.1)
+
+
+@pytest.mark.parametrize("room", [1.4, 1.6, 2.0])
+def test_a_door_into_a_narrow_room_is_found(room: float) -> None:
+    """Worlds audit 13, D6: beams through a closet's door that meet its side wall within 0.5 m of the corridor's wall
+    line read as short, between the wall and the beams through: the gap needed a wall beam next to a through one."""
+    from components.behaviors.detect_door import find_gaps
+
+    h, door, ahead = 1.25, 1.0, 1.0
+    x0, x1 = ahead - room / 2, ahead + room / 2
+    walls = [((-10.0, h), (ahead - door / 2, h)), ((ahead + door / 2, h), (10.0, h)), ((-10.0, -h), (10.0, -h)),
+             ((x0, h), (x0, h + 4)), ((x1, h), (x1, h + 4)), ((x0, h + 4), (x1, h + 4))]
+    gaps = find_gaps(cast(walls), 0.7, (h, h))
+    assert len(gaps) == 1 and gaps[0]["width"] == pytest.approx(door, abs=0.15), gaps
