@@ -585,3 +585,33 @@ def test_a_pool_keeps_idle_workers_only_while_the_host_has_work(catalog_: Catalo
         p.release(taken)
     finally:
         p.close()
+
+
+class StoppableDrive(FakeDrive):
+    """A fake drive with a safe stop, so a gate records a `halted` when it stops it."""
+
+    SETPOINTS = ("set_velocity", "stop")
+    STOP = "stop"
+
+    def stop(self, epoch: int | None = None) -> None:
+        self.commands.append((0.0, 0.0, epoch, os.getpid()))
+
+
+def test_the_halts_on_losing_the_controller_are_at_the_last_time_it_said(cluster_: Cluster, catalog_: Catalog,
+                                                                         pool: WorkerPool) -> None:
+    """Cluster audit 14, D1: a retire (which says no time) set the host's clock to 0, and the halts it made when the
+    controller was lost then came at -11 s in the resumed mission's trace: a "time backwards" breach."""
+    drive = StoppableDrive()
+    creator = Creator(None, cluster_, "ranger1", catalog_, pool=pool,
+                      drivers=lambda world: HostDrivers({"ranger1.drive": drive}))
+    try:
+        grant = [["grant", "ranger1.drive", f"{MISSION}/M", 7, 0.0]]
+        start(creator, "M/D", mode="drive", epochs={"drive": 7}, gates=grant)
+        assert step(creator, "M/D", now=42.0).error == ""  # a setpoint in force, at 42 s
+        creator.handle(ComponentCall("retire", "other-1", ""))  # another mission ended meanwhile
+        creator.controller_lost("controller controller lost (test)")
+        records = step(creator, "M/D", now=43.0).records or []
+    finally:
+        creator.close()
+    halts = [r for r in records if r["kind"] == "halted"]
+    assert [(h["device"], h["at"]) for h in halts] == [("ranger1.drive", 42.0)], records
