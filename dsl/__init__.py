@@ -86,11 +86,12 @@ def compile_file(path: str | Path, catalog: Catalog, limits: Limits = DEFAULT_LI
 
 
 def compile_text(text: str, catalog: Catalog, file: str = "<string>", budget: float | None = None,
-                 limits: Limits = DEFAULT_LIMITS, imports: Mapping[str, str] | None = None) -> Compiled:
+                 limits: Limits = DEFAULT_LIMITS, imports: Mapping[str, str] | None = None,
+                 aliases: Mapping[str, str] | None = None) -> Compiled:
     """Compile a mission given as text; with `budget` (seconds), compiling stops past it with a located error.
-    Imports are read from the disk (relative to the cwd) or, given `imports`, only from those texts
-    (`dsl.loader.load_text`)."""
+    Imports are read from the disk (relative to the cwd) or, given `imports` (and the `aliases` of files sent once
+    under two names), only from those texts (`dsl.loader.load_text`)."""
     from dsl.loader import load_text
 
     report = Reporter(budget=budget, limits=limits)
-    return _finish(load_text(text, file, report, imports=imports), catalog, report)
+    return _finish(load_text(text, file, report, imports=imports, aliases=aliases), catalog, report)

@@ -41,23 +41,39 @@ def decode(data: bytes, file: str, report: Reporter) -> str:
 
 
 def load_text(text: str, file: str, report: Reporter, base: Path | None = None,
-              imports: Mapping[str, str] | None = None) -> Program:
+              imports: Mapping[str, str] | None = None, aliases: Mapping[str, str] | None = None) -> Program:
     """Parse `text` as the main file. Its imports are read from the disk relative to `base` (default: the cwd) or,
     given `imports` (file name -> text, named as `load_file` names them: `imported_texts`), from there only: the
     controller compiles what a client sent, relative to the main file's name, and never reads a file of its own
-    disk for it (users audit 12, D1: imports were read from the controller's working directory)."""
+    disk for it (users audit 12, D1: imports were read from the controller's working directory); `aliases` (name ->
+    name, `import_aliases`) are the other names the client's disk gave a file it sent once."""
     program = Program(file, {}, {})
     if imports is None:
         _add(program, text, file, base or Path.cwd(), report)
     else:
-        _add(program, text, file, Path(file).parent, report, sent=imports)
+        _add(program, text, file, Path(file).parent, report, sent=imports, aliases=aliases or {})
     return program
 
 
 def imported_texts(program: Program) -> dict[str, str]:
-    """The texts of the files a loaded program imports, by the names `load_text(imports=...)` looks them up by
-    (a file that could not be read is there as "": its error is the loader's report's)."""
+    """The texts of the files a loaded program imports, by the names `load_text(imports=...)` looks them up by (a file
+    that could not be read is there as "": its error is the loader's report's)."""
     return {name: text for name, text in program.sources.items() if name != program.main}
+
+
+def import_aliases(program: Program) -> dict[str, str]:
+    """The other names an import statement gives a file already read under one (`../app/sub/b.mission` for
+    `sub/b.mission`, a symlink): name -> the name it was read under, for `load_text(aliases=...)`, so a controller
+    compiles it once (reverify audit 14, D1: the second name was "not sent with the mission")."""
+    out: dict[str, str] = {}
+    for name, tree in program.files.items():
+        for imp in tree.imports:
+            key = str(Path(name).parent / imp.path)
+            if key not in program.sources:
+                same = _same_file(program, Path(key))
+                if same is not None:
+                    out[key] = same
+    return out
 
 
 def load_file(path: str | Path, report: Reporter) -> Program:
@@ -113,12 +129,16 @@ def _not_a_mission(name: str, report: Reporter) -> bool:
 MAX_IMPORT_DEPTH = 64
 
 
-def _same_file(program: Program, target: Path, on_disk: bool = True) -> str | None:
+def _same_file(program: Program, target: Path, on_disk: bool = True,
+               aliases: Mapping[str, str] | None = None) -> str | None:
     """The name under which `target` was read already, if it was: compared as paths the system resolves, so
     `sub/../sub/a.mission` is `sub/a.mission` (users audit 9, D2: never recognised, such a cycle recursed until
     the interpreter's stack or the system's file name length gave out); as names only (`normpath`) when the files
     were sent rather than read."""
     if not on_disk:
+        alias = (aliases or {}).get(str(target))
+        if alias is not None and alias in program.sources:
+            return alias
         plain = os.path.normpath(target)
         return next((name for name in program.sources if os.path.normpath(name) == plain), None)
     real = target.resolve()
@@ -139,7 +159,7 @@ def _sent(sent: Mapping[str, str], key: str, report: Reporter, at: Span) -> str 
 
 
 def _add(program: Program, text: str, name: str, base: Path, report: Reporter, main: bool = True,
-         depth: int = 0, sent: Mapping[str, str] | None = None) -> None:
+         depth: int = 0, sent: Mapping[str, str] | None = None, aliases: Mapping[str, str] | None = None) -> None:
     program.sources[name] = text
     if main and _not_a_mission(name, report):
         return
@@ -155,7 +175,7 @@ def _add(program: Program, text: str, name: str, base: Path, report: Reporter, m
     for imp in tree.imports:
         target = base / imp.path
         key = str(target)
-        if key in program.sources or _same_file(program, target, sent is None) is not None:
+        if key in program.sources or _same_file(program, target, sent is None, aliases) is not None:
             continue
         if depth >= MAX_IMPORT_DEPTH:
             report.error("import", f"imports nest more than {MAX_IMPORT_DEPTH} files deep", imp.span,
@@ -165,4 +185,4 @@ def _add(program: Program, text: str, name: str, base: Path, report: Reporter, m
         if sub is None:
             program.sources[key] = ""
             continue
-        _add(program, sub, key, target.parent, report, main=False, depth=depth + 1, sent=sent)
+        _add(program, sub, key, target.parent, report, main=False, depth=depth + 1, sent=sent, aliases=aliases)

@@ -497,7 +497,7 @@ def run(mission: Path = typer.Argument(..., help="The mission file.", show_defau
     from drd.dryrun import summary
     from dsl.params import ParamError, parse_assignments
 
-    source, imports = _mission_source(mission)
+    source, imports, aliases = _mission_source(mission)
     try:
         params = parse_assignments(param)
     except ParamError as e:
@@ -506,7 +506,7 @@ def run(mission: Path = typer.Argument(..., help="The mission file.", show_defau
     wait = max(timeout, 15.0)
     request = RunMission(source, str(mission), world, speed, until, seed, params or None, priority,
                          give_up_at=time.time() + wait - 0.5,  # the reply must still reach us after it
-                         imports=imports)
+                         imports=imports, aliases=aliases or None)
     with cluster_client(config, connect, timeout, to="run a mission") as client:
         watch = _RecordWatch(client, trace_out, recorder, worlds=(config.absolute().parent,))
         try:
@@ -627,16 +627,16 @@ def _run_and_follow(client: ClusterClient, watch: _RecordWatch, request: Any, wa
                                   "SIGTERM" if isinstance(e, Terminated) else "Ctrl-C")
 
 
-def _mission_source(mission: Path) -> tuple[str, dict[str, str]]:
-    """The mission's text and those of the files it imports (read here, beside it: the controller compiles what it
-    is sent, never a file of its own disk), once it is known to be a mission file."""
-    from dsl.loader import imported_texts
+def _mission_source(mission: Path) -> tuple[str, dict[str, str], dict[str, str]]:
+    """The mission's text, those of the files it imports and their other names (read here, beside it: the controller
+    compiles what it is sent, never a file of its own disk), once it is known to be a mission file."""
+    from dsl.loader import import_aliases, imported_texts
 
     if not mission.exists():
         fail(f"{mission}: no such file (looked at {mission.absolute()})")
-    imports = imported_texts(_not_a_mission(mission))  # a folder too: "is a directory", as validate says
+    program = _not_a_mission(mission)  # a folder too: "is a directory", as validate says
     try:
-        return mission.read_text(encoding="utf-8"), imports
+        return mission.read_text(encoding="utf-8"), imported_texts(program), import_aliases(program)
     except (OSError, UnicodeDecodeError) as e:
         fail(f"{mission}: cannot read it: {e}")
 

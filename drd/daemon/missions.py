@@ -88,6 +88,7 @@ class RunMission(Message):
     #: The texts of the files the mission imports, by the names the client read them by (relative to `file`'s
     #: folder, as the mission says): the controller never reads its own disk for a mission's imports.
     imports: dict[str, str] | None = None
+    aliases: dict[str, str] | None = None  # other names of a file in `imports` (`dsl.loader.import_aliases`)
 
 
 @message("drd.mission.run-reply", 2)
@@ -438,7 +439,8 @@ class MissionRunner:
             raise ValueError("speed and until must be positive")
         if req.priority is not None and req.priority < 1:
             raise ValueError("priority must be 1 or more (1 is the highest)")
-        if len(req.source) + sum(len(k) + len(t) for k, t in (req.imports or {}).items()) > 1_000_000:
+        if len(req.source) + sum(len(k) + len(t) for k, t in [*(req.imports or {}).items(),
+                                                               *(req.aliases or {}).items()]) > 1_000_000:
             raise ValueError("mission source (with its imports) larger than 1 MB")
         if self.simulator is None:
             real_run_refusal(self.cluster, req)
@@ -448,7 +450,7 @@ class MissionRunner:
         if budget <= 0:  # it waited behind other work until its client left: compiling it would be for nobody
             return _given_up(req)
         compiled = compile_text(req.source, self.catalog, req.file or "<mission>", budget, limits,
-                                imports=req.imports or {})
+                                imports=req.imports or {}, aliases=req.aliases)
         if not compiled.ok or compiled.statechart is None:
             diags = render(list(compiled.diagnostics), dict(compiled.sources))
             return RunReply("", False, diags or [f"{req.file}: declares no mission to run"])

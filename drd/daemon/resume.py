@@ -186,10 +186,11 @@ def _resume_one(runner: Any, journal: Journal, world: Any, job: Journaled, pause
     from dsl.params import ParamError, apply_params
 
     request = job.request
-    sent = request.get("imports")
+    sent, aliases = request.get("imports"), request.get("aliases")
     compiled = compile_text(str(request.get("source", "")), runner.catalog, str(request.get("file") or "<mission>"),
                             limits=runner.cluster.limits,
-                            imports={str(k): str(v) for k, v in sent.items()} if isinstance(sent, dict) else {})
+                            imports={str(k): str(v) for k, v in sent.items()} if isinstance(sent, dict) else {},
+                            aliases={str(k): str(v) for k, v in aliases.items()} if isinstance(aliases, dict) else {})
     try:
         if not compiled.ok or compiled.statechart is None:
             raise ValueError("; ".join(d.message for d in compiled.diagnostics) or "it declares no mission")

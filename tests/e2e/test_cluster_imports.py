@@ -50,3 +50,25 @@ def test_the_controller_compiles_only_what_it_was_sent(tmp_path: Path, catalog: 
     (d,) = [d for d in missing.diagnostics if d.code == "io"]
     assert d.message == "cannot read imported file missions/lib/common.mission: it was not sent with the mission"
     assert (d.span.file, d.span.line) == ("missions/main.mission", 1)
+
+
+def test_a_file_imported_under_two_names_is_sent_under_both(tmp_path: Path, catalog: Catalog,
+                                                            monkeypatch: pytest.MonkeyPatch) -> None:
+    """Reverify audit 14, D1: `sub/b.mission` and `../app/sub/b.mission` (from another folder) are one file; the client
+    read it once, sent it under the first name, and the controller refused the second as not sent."""
+    from dsl.errors import Reporter
+    from dsl.loader import import_aliases, imported_texts, load_file
+
+    (tmp_path / "app" / "sub").mkdir(parents=True)
+    (tmp_path / "lib").mkdir()
+    main = 'import "../lib/a.mission"\nimport "sub/b.mission"\nmission ImpMain {\n    start -> A1\n    A1 -> B1\n}\n'
+    (tmp_path / "app" / "main.mission").write_text(main)
+    (tmp_path / "lib" / "a.mission").write_text('import "../app/sub/b.mission"\nbehavior A1 { Wait(duration: 1s) }\n')
+    (tmp_path / "app" / "sub" / "b.mission").write_text("behavior B1 { Wait(duration: 1s) }\n")
+    monkeypatch.chdir(tmp_path / "app")
+    program = load_file("main.mission", Reporter())
+    sent, aliases = imported_texts(program), import_aliases(program)
+    assert set(sent) | set(aliases) == {"../lib/a.mission", "sub/b.mission", "../lib/../app/sub/b.mission"}
+    monkeypatch.chdir(tmp_path / "lib")  # the controller's side: nowhere near the files
+    compiled = compile_text(main, catalog, "main.mission", imports=sent, aliases=aliases)
+    assert compiled.ok, [d.message for d in compiled.diagnostics]
