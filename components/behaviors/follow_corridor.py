@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import math
 
-from components.behaviors.progress import Progress
+from components.behaviors.progress import Progress, allowance
 from components.behaviors.scan import (
     END,
     SAME_LINE,
@@ -88,7 +88,8 @@ class FollowCorridor(Component):
         self.unblocking: int | None = None  # the side of a turn out of a block, under way
         self.direction: float | None = None  # the corridor's direction in the odometry frame, from the last walls
         self.began: tuple[float, float] | None = None  # where it started (odometry)
-        self.progress = Progress()  # how far from `began` it has got (`components.behaviors.progress`)
+        # how far from `began` it has got (`components.behaviors.progress`), within a time its speed allows
+        self.progress = Progress(allowance=allowance(float(self.ctx.params["speed"])))
 
     def resume(self) -> None:
         self.progress.reset()

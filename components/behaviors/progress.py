@@ -5,8 +5,17 @@ tries again for ever, and a mission without a bound of its own ran to its time l
 
 from __future__ import annotations
 
+import math
+
 #: Metres a behavior must gain beyond its best within STUCK seconds of running.
 PROGRESS, STUCK = 0.5, 30.0
+
+
+def allowance(speed: float) -> float:
+    """STUCK seconds, or the time three PROGRESS steps take at a slow `speed` (m/s) if longer; never at speed 0 (a
+    robot told not to move makes no progress to miss). Reverify audit 14, D2: at 0.016 m/s, within the manifest's
+    range, an empty corridor failed at 30 s."""
+    return math.inf if speed <= 0 else max(STUCK, 3 * PROGRESS / speed)
 
 
 class Progress:

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import math
 
-from components.behaviors.progress import Progress
+from components.behaviors.progress import Progress, allowance
 from components.behaviors.scan import clearance_ahead, wrap
 from drd.runtime.component import Component, Status
 
@@ -26,7 +26,7 @@ class ReturnToStart(Component):
     def start(self) -> None:
         origin = getattr(self.device("drive"), "origin", None)
         self.home = tuple(origin())[:2] if callable(origin) else (0.0, 0.0)
-        self.progress = Progress()  # how much nearer home it has got
+        self.progress = Progress(allowance=allowance(float(self.ctx.params["speed"])))  # how much nearer home
 
     def resume(self) -> None:
         self.progress.reset()

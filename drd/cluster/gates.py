@@ -126,7 +126,8 @@ def from_wire(data: Mapping[str, Any]) -> tuple[str, rec.Record | Breach] | None
 def breach_of(data: Mapping[str, Any]) -> Breach | None:
     """A `breach` record's `Breach` (`drd.cluster.guard`), or None if malformed."""
     try:
-        m = Measure(bool(data["holds"]), float(data["margin"]), float(data["value"]), float(data["limit"]))
+        m = Measure(bool(data["holds"]), float(data["margin"]), float(data["value"]), float(data["limit"]),
+                    str(data.get("measured") or "compare"))
         return Breach(str(data["holder"]), str(data["name"]), m)
     except (KeyError, TypeError, ValueError):
         return None

@@ -196,7 +196,8 @@ class HostGuard:
 
     def _refused(self, active: Active, m: Measure) -> None:
         self.report({"kind": "breach", "mission": active.holder.partition("/")[0], "holder": active.holder,
-                     "name": active.name, "holds": m.holds, "margin": m.margin, "value": m.value, "limit": m.limit})
+                     "name": active.name, "holds": m.holds, "margin": m.margin, "value": m.value, "limit": m.limit,
+                     "measured": m.kind})
 
     def telemetry(self) -> dict[str, Any] | None:
         """The watched robots' live values, as a record (None when none is watched). Read off the request's

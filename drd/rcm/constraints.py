@@ -36,6 +36,7 @@ class Measure:
     margin: float
     value: float
     limit: float
+    kind: str = "compare"  # what value and limit are: a comparison's sides, "depth" in rooms (limit 0), or "bool"
 
 
 def measure(condition: ast.Expr, names: dict[str, object], count: CountFn | None = None,
@@ -46,22 +47,18 @@ def measure(condition: ast.Expr, names: dict[str, object], count: CountFn | None
         EvalError: the condition cannot be evaluated (an unknown room, a robot with no position...).
     """
     holds = truthy(condition, names, count, place)
-    margin, value, limit = _margin(condition, names, count, place)
-    return Measure(holds, margin, value, limit)
+    margin, value, limit, kind = _margin(condition, names, count, place)
+    return Measure(holds, margin, value, limit, kind)
 
 
-def shown(condition: ast.Expr, m: Measure) -> str:
+def shown(m: Measure) -> str:
     """How far from holding a constraint stands, in its own terms, for a reason a user reads: `6.05 against 6` for
-    a comparison (and what combines them), `3.64 m outside` for `inside(...)` (its margin is a signed depth, and
-    "-3.64 against 0" read as nonsense for a yes/no condition: users audit 12, D7), nothing for a plain condition."""
-    inner = condition
-    while isinstance(inner, ast.Unary) and inner.op == "not":
-        inner = inner.operand
-    if isinstance(inner, ast.Call) and inner.func == "inside":  # the value is the depth inside the rooms
+    a comparison, `3.64 m outside` for `inside(...)` (its margin is a signed depth, and "-3.64 against 0" read as
+    nonsense for a yes/no condition: users audit 12, D7), nothing for a plain condition; of an `and` or `or`, the
+    part that decided (reverify audit 14, D4)."""
+    if m.kind == "depth":
         return f"{abs(m.value):.2f} m {'inside' if m.value >= 0 else 'outside'}"
-    if isinstance(inner, ast.Binary) and inner.op in ("<", "<=", ">", ">=", "and", "or"):
-        return f"{m.value:.3g} against {m.limit:.3g}"
-    return ""
+    return f"{m.value:.3g} against {m.limit:.3g}" if m.kind == "compare" else ""
 
 
 def refuses(now: Measure, then: Measure) -> bool:
@@ -70,17 +67,17 @@ def refuses(now: Measure, then: Measure) -> bool:
 
 
 def _margin(e: ast.Expr, names: dict[str, object], count: CountFn | None,
-            place: PlaceFn | None) -> tuple[float, float, float]:
+            place: PlaceFn | None) -> tuple[float, float, float, str]:
     match e:
         case ast.Binary(op="<" | "<=" | ">" | ">=" as op, left=lhs, right=rhs):
             a, b = _number(lhs, names, count, place), _number(rhs, names, count, place)
-            return (b - a if op in ("<", "<=") else a - b), a, b
+            return (b - a if op in ("<", "<=") else a - b), a, b, "compare"
         case ast.Binary(op="and" | "or" as op, left=lhs, right=rhs):
             parts = [_margin(lhs, names, count, place), _margin(rhs, names, count, place)]
-            return min(parts) if op == "and" else max(parts)
+            return min(parts, key=_first) if op == "and" else max(parts, key=_first)
         case ast.Unary(op="not", operand=x):
-            m, v, lim = _margin(x, names, count, place)
-            return -m, v, lim
+            m, v, lim, kind = _margin(x, names, count, place)
+            return -m, v, lim, kind
         case ast.Call(func="inside", args=args) if args:
             where = coordinates(evaluate(args[0], names, count, place))
             if where is None:
@@ -93,9 +90,13 @@ def _margin(e: ast.Expr, names: dict[str, object], count: CountFn | None,
                     raise EvalError(f"no room named {name} in this world", room.span)
                 rects.append(rect)
             depth = signed_depth(*where, rects)
-            return depth, depth, 0.0
+            return depth, depth, 0.0, "depth"
     held = truthy(e, names, count, place)
-    return (0.0 if held else -1.0), (1.0 if held else 0.0), 1.0
+    return (0.0 if held else -1.0), (1.0 if held else 0.0), 1.0, "bool"
+
+
+def _first(part: tuple[float, float, float, str]) -> float:
+    return part[0]
 
 
 def _number(e: ast.Expr, names: dict[str, object], count: CountFn | None, place: PlaceFn | None) -> float:

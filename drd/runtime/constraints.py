@@ -123,6 +123,6 @@ class ConstraintGuard:
                 continue  # a condition that cannot be read now: the monitor reports it, the gate does not guess
             if refuses(before, after):
                 a.refused(after)
-                said = shown(a.condition, after)
+                said = shown(after)
                 return f"constraint {a.name} ({a.text}) would not hold" + (f": {said}" if said else "")
         return ""

@@ -1114,7 +1114,7 @@ class Interpreter:
                 if t.guard is None or self._truthy(domain, t.guard, event):
                     self._take(cand, t, event)
                     return
-        said = shown(a.condition, m)
+        said = shown(m)
         self._finish(node, False, f"constraint {a.name} violated: {a.text}" + (f" ({said})" if said else ""))
 
     # ------------------------------------------------------------- resources

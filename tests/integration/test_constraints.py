@@ -102,6 +102,10 @@ def test_a_broken_inside_says_how_far_outside_not_a_signed_number(catalog: Catal
                              "    FollowCorridor(speed: 0.5)\n}\n", until=10.0)
     assert report.outcome == "failure", report.reason
     assert re.fullmatch(r'constraint stay violated: inside\(ranger, "n1"\) \(\d+\.\d\d m outside\)', report.reason)
+    # joined with `and`, the part that decided says it (reverify audit 14, D4: "(-1.6 against 0)")
+    report, _ = dry(catalog, "mission Room {\n    needs ranger: Ranger\n    constraint stay: inside(ranger, \"n1\") and"
+                             " ranger.x < 30\n    FollowCorridor(speed: 0.5)\n}\n", until=10.0)
+    assert report.reason.endswith(" m outside)") and "against" not in report.reason, report.reason
 
 
 def test_a_battery_floor_can_be_read_and_checked(catalog: Catalog) -> None:
