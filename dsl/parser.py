@@ -655,6 +655,10 @@ def syntax_diagnostic(e: UnexpectedInput, history: Sequence[Token], file: str, t
     unit = _unknown_unit(file, prev, tok)
     if unit is not None:
         return unit
+    spaced = _spaced_unit(prev, tok) if prev is not None else None
+    if spaced is not None and prev is not None:  # wherever a duration was written `2 s` (reverify audit 14, D3)
+        return Diagnostic("syntax", f"syntax: a duration's unit follows its number with no space: "
+                                    f"`{prev.value} {tok.value}`", _span(file, tok), spaced)
     opener = left_open(tok, history, openers)
     if opener is not None and prev is not None:
         closer = "`)`" if opener.type == "LPAR" else "`]`"
@@ -679,7 +683,7 @@ def syntax_diagnostic(e: UnexpectedInput, history: Sequence[Token], file: str, t
                           "every { needs a matching }" if closing else None)
     if "_SEP" in e.expected and not (e.expected & ITEM_STARTS) and prev is not None and tok.type != "_SEP":
         return Diagnostic("syntax", f"syntax: expected a newline or ; after {_show(prev)}", _after(file, prev),
-                          hint or _spaced_unit(prev, tok) or f"{_show(tok)} starts a new item: put it on its own line")
+                          hint or f"{_show(tok)} starts a new item: put it on its own line")
     return Diagnostic("syntax", f"syntax: {_describe_token_error(e)}", span, hint)
 
 
@@ -724,8 +728,7 @@ def _spaced_unit(prev: Token, tok: Token) -> str | None:
 
     seconds = float(prev.value) * size
     written = f"{prev.value}{word}" if word in _OWN_UNITS else duration_text(seconds)
-    return f"a duration's unit follows its number with no space: write {written}" if seconds <= MAX_DURATION \
-        else None
+    return f"write {written}" if seconds <= MAX_DURATION else None
 
 
 #: The language's own duration units, with the seconds each is worth.

@@ -218,9 +218,13 @@ ERRORS: list[tuple[str, str, str, str | None]] = [
     ("misspelled-done", m("  start -> Calibrate\n  Calibrate -> dne"),
      "3:16 unknown state dne: no child of M and no behavior has this name", "did you mean done?"),
     # users audit 12, D9: `2 s` was told "`s` starts a new item"
-    ("spaced-unit", m("  Wait(duration: 2 s)"), "2:19 syntax: expected a newline or ; after `2`", "write 2s"),
-    ("spaced-unit-word", m("  Wait(duration: 5 minutes)"), "2:19 syntax: expected a newline or ; after `5`",
-     "write 5min"),
+    ("spaced-unit", m("  Wait(duration: 2 s)"),
+     "2:20 syntax: a duration's unit follows its number with no space: `2 s`", "write 2s"),
+    ("spaced-unit-word", m("  Wait(duration: 5 minutes)"),
+     "2:20 syntax: a duration's unit follows its number with no space: `5 minutes`", "write 5min"),
+    # reverify audit 14, D3: `5 min` was "did you mean emit?"
+    ("spaced-unit-min", m("  Wait(duration: 5 min)"),
+     "2:20 syntax: a duration's unit follows its number with no space: `5 min`", "write 5min"),
     # users audit 12, D8: a misspelt start target made every child "never reached", hinting `Inspct -> ...`
     ("misspelt-start-only", m("  start -> Calibrat\n  Calibrate\n  Observe\n  Calibrate -> Observe"),
      "2:12 unknown state Calibrat: no child of M and no behavior has this name", "did you mean Calibrate?"),
