@@ -94,8 +94,9 @@ class ComponentStuck(BaseException):
 
 #: What a call into component code may raise that drd turns into that state's failure. `SystemExit` too: a
 #: component (or a library it calls) that calls `sys.exit` ended `missionctl dry-run` with that code and no report
-#: (users audit 12, D4); a process ends with `os._exit` only, which nothing can catch.
-COMPONENT_RAISES: tuple[type[BaseException], ...] = (Exception, ComponentStuck, SystemExit)
+#: (users audit 12, D4); `GeneratorExit` printed a traceback (reverify audit 14, D5). `KeyboardInterrupt` is left
+#: alone: in a dry-run it is the operator's Ctrl-C. A process ends with `os._exit` only, which nothing can catch.
+COMPONENT_RAISES: tuple[type[BaseException], ...] = (Exception, ComponentStuck, SystemExit, GeneratorExit)
 
 
 def raised(e: BaseException, when: str = "") -> str:

@@ -93,11 +93,15 @@ def test_a_component_call_that_never_returns_fails_its_state_and_the_run_reports
     assert kinds[-1] == "finished"
 
 
-def test_a_component_that_calls_sys_exit_fails_its_state_and_on_error_catches_it(tmp_path: Path) -> None:
-    """Users audit 12, D4: `sys.exit(3)` in a step ended `missionctl dry-run` with exit 3, no report, no message."""
+@pytest.mark.parametrize(("raising", "said"), [("sys.exit(3)", "SystemExit: 3"),
+                                               ("raise GeneratorExit('done')", "GeneratorExit: done")])
+def test_a_component_that_calls_sys_exit_fails_its_state_and_on_error_catches_it(tmp_path: Path, raising: str,
+                                                                                said: str) -> None:
+    """Users audit 12, D4: `sys.exit(3)` in a step ended `missionctl dry-run` with exit 3, no report, no message;
+    reverify audit 14, D5: a `GeneratorExit` printed a traceback."""
     (tmp_path / "quitkit.py").write_text("import sys\nfrom drd.runtime.component import Component\n\n\n"
                                          "class Quitter(Component):\n    def step(self, now):\n"
-                                         "        sys.exit(3)  # a library that exits on a fatal condition\n")
+                                         f"        {raising}  # a library that exits on a fatal condition\n")
     (tmp_path / "comps" / "Quitter").mkdir(parents=True)
     (tmp_path / "comps" / "Quitter" / "manifest.yaml").write_text(
         "name: Quitter\nkind: behavior\ndescription: Exits.\nentry_point: quitkit:Quitter\n")
@@ -113,5 +117,5 @@ def test_a_component_that_calls_sys_exit_fails_its_state_and_on_error_catches_it
     assert report["outcome"] == "success"
     q = next(t for t in report["timeline"] if t["path"] == "Quit/Q")
     assert q["status"] == "failure"
-    said = json.dumps(report["logs"])
-    assert "component raised SystemExit: 3 (at quitkit.py:7, in step)" in said and '"caught"' in said, said
+    logs = json.dumps(report["logs"])
+    assert f"component raised {said} (at quitkit.py:7, in step)" in logs and '"caught"' in logs, logs
