@@ -646,6 +646,10 @@ def replay(
     from drd.dryrun import rebuilt
     from drd.record import INTRUDER, RecordingError, read
 
+    if file.is_dir():  # a ROS 2 bag is a folder; drd's recording is one .mcap file (reverify audit 14, D6)
+        inside = sorted(file.glob("*.mcap"))
+        fail(f"{file} is a folder, not a recording" + (f" (it holds {inside[0].name}: a ROS 2 bag's? give a file "
+                                                       "`--record` wrote)" if inside else ""))
     if not file.is_file():
         fail(f"{file}: no such file (looked at {file.absolute()})")
     try:

@@ -474,3 +474,13 @@ def test_a_priority_of_more_than_18_digits_is_refused_as_in_a_mission() -> None:
     r = missionctl("dry-run", "missions/corridor_surveillance.mission", "--priority", "99999999999999999999")
     assert r.returncode == 2 and "--priority" in r.stderr and "999999999999999999" in r.stderr, r.stderr
     assert r.stdout == ""
+
+
+def test_replay_of_a_folder_says_it_is_a_folder(tmp_path: Path) -> None:
+    """Reverify audit 14, D6: `replay BAG_FOLDER` (what `--ros2-bag` writes) said "no such file" of a folder that
+    exists."""
+    (tmp_path / "bag").mkdir()
+    (tmp_path / "bag" / "bag.mcap").write_bytes(b"")
+    done = missionctl("replay", str(tmp_path / "bag"), cwd=tmp_path)
+    assert done.returncode == 2
+    assert f"{tmp_path / 'bag'} is a folder, not a recording (it holds bag.mcap" in done.stderr, done.stderr
