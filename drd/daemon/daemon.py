@@ -266,6 +266,7 @@ class Daemon:
         self._announce_due = True
         self._watching = False  # a thread is asking the robots' hosts to watch them (`_publish_live`)
         self._next_load = 0.0
+        self._reannounce_until = 0.0  # after a freeze of its own: announce with every load report until then
         self._next_peer_check = 0.0
         self._checking = False
         self._all_reachable = False  # the last peer check found every peer (and said so)
@@ -469,8 +470,13 @@ class Daemon:
             self._next_load = now + aligned_wait(self.wall(), self.config.period, at_least=self.config.period / 2)
             self.bus.put(self.keys.load(self.host), self._sampler.sample(len(self._instances()), self.wall()))
             self._publish_live()
-        if self.creator is not None:  # before anything it serves: a freeze of its own ends its grants
-            self.creator.check_freeze()
+            if now < self._reannounce_until:
+                self._announce_due = True
+        if self.creator is not None and self.creator.check_freeze():  # before anything it serves: a freeze of its
+            # own ends its grants and retires its instances; the announcement saying so may go out before its
+            # session is back, and the list then never changes again (cluster audit 14, D2: a dead instance listed
+            # `running` until the next change): it is said again with each load report for two leases
+            self._reannounce_until = now + 2 * self.cluster.lease
         with self._lock:
             self._handle(self.view.tick(now))
             if self.controller is not None:

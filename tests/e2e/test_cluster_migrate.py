@@ -153,6 +153,33 @@ def test_a_move_not_answered_within_the_timeout_says_its_outcome_is_unknown(clus
     succeeded(cluster, proc, out, err)
 
 
+def test_a_host_frozen_past_the_lease_no_longer_lists_what_it_retired(cluster: DaemonCluster, tmp_path: Path) -> None:
+    """Cluster audit 14, D2: woken, the host retired its instance and announced so before its session was back: the
+    controller's Component Database listed the dead instance `running` (its pid gone) beside its re-placed copy."""
+    from cluster_support import LEASE
+
+    mission = tmp_path / "frozen.mission"
+    mission.write_text(f"mission Frozen {{\n    Wait(duration: {DURATION:g}s) as Hold\n}}\n")
+    cmd = [*MISSIONCTL, "run", str(mission), "--config", str(cluster.hosts_file), "--speed", "2", "--json"]
+    with running(cmd) as proc:
+        _mid, host = started_wait(cluster, proc, "Frozen")
+        os.kill(cluster.pid(host), signal.SIGSTOP)
+        try:
+            time.sleep(7 * LEASE)  # the audit's freeze: 7 s past a 3 s lease
+        finally:
+            os.kill(cluster.pid(host), signal.SIGCONT)
+
+        def listed() -> list[tuple[str, int]]:
+            r = cluster.missionctl("components", "--config", str(cluster.hosts_file), "--json", timeout=30)
+            return [(i["host"], i["pid"]) for i in json.loads(r.stdout)["instances"] if i["name"].endswith("Hold")]
+
+        eventually(lambda: [h for h, _pid in listed()] == [(WORKERS - {host}).pop()],
+                   "only the re-placed Wait listed", 30, poll=0.5)
+        assert all(os.path.exists(f"/proc/{pid}") for _h, pid in listed())
+        out, err = proc.communicate(timeout=120)
+    succeeded(cluster, proc, out, err)
+
+
 def test_a_wait_whose_host_is_killed_resumes_elsewhere_with_its_remaining_time(cluster: DaemonCluster,
                                                                                 tmp_path: Path) -> None:
     """Last in this module: a worker host is killed."""
