@@ -193,7 +193,9 @@ def cluster_client(config: Path, connect: list[str] | None, timeout: float,
         client = ClusterClient.connect(endpoints, cluster=name, options=options, timeout=timeout, prefer=prefer)
     except ClientError as e:
         hint = ("is a drd listening there? A cluster with security needs --config (for its credentials)" if connect
-                else f"start the daemons with `drd start --host NAME --config {config}`")
+                else f"start the daemons with `drd start --host NAME --config {config}`; if they run, check that this"
+                     f" file's cluster name ({name}) and credentials are theirs (the daemons ignore a client of another"
+                     " cluster, and refuse one without the password)")
         fail(str(e), hint=hint)
     try:
         yield client

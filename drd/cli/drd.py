@@ -180,7 +180,7 @@ def start(
     try:
         tr = transport(cluster, daemon=True, host=host)
     except SecurityError as e:
-        fail_all(e.problems, hint="security is configured, so drd will not start without it")
+        fail_all(e.problems, hint="see docs/security.md: drd starts only as securely as its hosts file says it must")
     rd = runfiles.run_dir(run_dir_opt)
     try:
         runfiles.prepare(rd, cluster.name)

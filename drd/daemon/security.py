@@ -120,7 +120,8 @@ def transport(cluster: Cluster, user: str | None = None, *, daemon: bool = False
         exposed = sorted(h for h, e in endpoints.items() if not is_loopback(e))
         if daemon and exposed and not sec.open:
             raise SecurityError([ConfigProblem(cluster.source, "cluster.security", (
-                f"mode none on a network: {', '.join(exposed)} listen beyond this machine, where anyone who reaches"
+                f"mode none on a network: {', '.join(exposed)} {'listens' if len(exposed) == 1 else 'listen'} beyond"
+                " this machine, where anyone who reaches"
                 " them could run missions and drive robots; use mode password or tls, or say `open: true` if that"
                 " is what you want"))])
         return Transport(sec.mode, endpoints, routers=routers)

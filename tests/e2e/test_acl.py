@@ -80,7 +80,7 @@ def test_an_open_cluster_on_a_network_is_refused_unless_said_on_purpose(tmp_path
     cluster = load_endpoints(tmp_path / "hosts.yaml")
     with pytest.raises(SecurityError) as e:
         transport(cluster, daemon=True)
-    assert "cluster.security" in str(e.value) and "controller listen beyond this machine" in str(e.value)
+    assert "cluster.security" in str(e.value) and "controller listens beyond this machine" in str(e.value)
     assert "open: true" in str(e.value)
     transport(cluster)  # a client may still talk to it
     (tmp_path / "hosts.yaml").write_text(NETWORK.format(security="{mode: none, open: true}"))
