@@ -55,7 +55,10 @@ class RemoteTelemetry:
             for robot, data in robots.items():
                 if self.robot_hosts.get(robot) != host or not isinstance(data, Mapping):
                     continue
-                self.latest[robot] = {k: float(v) for k, v in data.items() if k in KEYS and _finite(v)}
+                # a value the host could not read comes as null (JSON has no NaN): not known, kept as NaN so the pool
+                # answers it as such, never as hosts.yaml's static value (review of audit 12's D3)
+                self.latest[robot] = {k: float(v) if _finite(v) else math.nan for k, v in data.items()
+                                      if k in KEYS and (v is None or _number(v))}
 
     def due(self) -> list[str]:
         """The hosts with watched robots that sent nothing since the last call (to be asked now)."""
@@ -70,5 +73,9 @@ class RemoteTelemetry:
             self.latest, self.wanted, self._reported = {}, {}, set()
 
 
+def _number(v: object) -> bool:
+    return isinstance(v, int | float) and not isinstance(v, bool)
+
+
 def _finite(v: object) -> bool:
-    return isinstance(v, int | float) and not isinstance(v, bool) and math.isfinite(v)
+    return _number(v) and math.isfinite(v)  # type: ignore[arg-type]

@@ -57,3 +57,19 @@ def test_a_reading_the_driver_cannot_give_is_not_known_never_the_static_value() 
     assert "battery" not in view and "x" not in view
     with pytest.raises(KeyError):
         view["battery"]
+
+
+def test_on_a_cluster_a_reading_the_host_could_not_give_is_not_known_either() -> None:
+    """Review of ROS 2 audit 12, D3: the host sends a battery it cannot read as null (JSON has no NaN), and the
+    controller dropped it, so the pool fell back to hosts.yaml's 1.0."""
+    from drd.cluster.telemetry import RemoteTelemetry
+
+    pool = ResourcePool(ResourceManager())
+    pool.add([Unit("c.drive", "Drive", host="h"),
+              Aggregate("c", "Crawler", {"drive": "c.drive"}, {"battery": 1.0}, host="h")], 0.0)
+    remote = RemoteTelemetry({"c": "h"}, fetch=lambda host: None, send=lambda host, op: None, now=lambda: 0.0)
+    remote.seen("h", {"c": {"x": 1.0, "y": 2.0, "heading": 0.0, "battery": None}})
+    pool.telemetry = remote
+    assert pool.pose("c") == (1.0, 2.0, 0.0)
+    with pytest.raises(KeyError):
+        pool.view("c")["battery"]  # type: ignore[index]
