@@ -85,7 +85,7 @@ from drd.cluster.pipe import (
     reading_key,
 )
 from drd.cluster.pipe import Message as PipeMessage
-from drd.errors import ComponentFailure, debug_traceback, raised
+from drd.errors import COMPONENT_RAISES, ComponentFailure, debug_traceback, raised
 from drd.hw.commands import spec_of
 
 log = logging.getLogger("drd.cluster.workers")
@@ -711,7 +711,7 @@ def _shutdown(h: _Hosted | None) -> None:
     if h is not None and h.comp is not None:
         try:
             h.comp.shutdown()
-        except Exception:  # component code is not ours to trust, and this instance is gone anyway
+        except COMPONENT_RAISES:  # component code is not ours to trust, and this instance is gone anyway
             pass
 
 
@@ -741,7 +741,7 @@ def run_calls(calls: Sequence[Call], latest: dict[str, Any], link: _Link,
         if call.setup is not None:
             try:
                 h = _setup(call.path, call.setup, call.params, link)
-            except Exception as e:  # a failed start: the Creator forgets the instance
+            except COMPONENT_RAISES as e:  # a failed start (sys.exit too): the Creator forgets the instance
                 replies.append(CallReply(error=f"{type(e).__name__}: {e}", setup_failed=True))
                 break
             hosted[call.path] = h
@@ -750,7 +750,7 @@ def run_calls(calls: Sequence[Call], latest: dict[str, Any], link: _Link,
         if h is not None and call.op == "start" and call.restore is not None:
             try:  # before start: the state it had elsewhere (or None: it was lost)
                 h.comp.restore(call.restore[0] if call.restore else None)
-            except Exception as e:  # component code is not ours to trust: its start fails
+            except COMPONENT_RAISES as e:  # component code is not ours to trust: its start fails
                 replies.append(CallReply(error=f"component raised {type(e).__name__} in restore: {e}"))
                 break
         if h is None:
@@ -808,7 +808,8 @@ def _run_call(h: _Hosted, call: Call, link: _Link) -> CallReply:
             h.comp.terminate(Status(status) if status in Status.__members__.values() else Status.RUNNING)
         else:
             error = f"unknown op {op!r}"
-    except Exception as e:  # component code is not ours to trust: the state fails, the worker goes on
+    except COMPONENT_RAISES as e:  # component code is not ours to trust (a `sys.exit` too): the state fails,
+        # the worker goes on
         error = raised(e)
         if (tb := debug_traceback(e)) is not None:  # DRD_DEBUG=1 on this daemon: the traceback in the mission's log
             h.logs.append(tb)
@@ -843,7 +844,7 @@ def take_snapshot(h: _Hosted, force: bool = False) -> list[Any] | None:
         state = h.comp.snapshot()
         state = None if state is None else plain(dict(state))
         text = json.dumps(state, sort_keys=True, allow_nan=False)
-    except Exception as e:  # component code is not ours to trust
+    except COMPONENT_RAISES as e:  # component code is not ours to trust
         h.logs.append(f"its snapshot was not taken: {type(e).__name__}: {e}")
         return None
     if len(text) > MAX_SNAPSHOT:

@@ -54,6 +54,8 @@ class Probe(Component):
         mode = ctx.params.get("mode", "")
         if mode == "exit":
             os._exit(3)
+        if mode == "sys.exit":
+            sys.exit(3)
         if mode == "emit":
             ctx.emit("Seen", at=now)
         if mode == "huge":
@@ -317,6 +319,16 @@ def test_after_losing_its_controller_a_host_answers_that_it_runs_no_such_instanc
     assert len(batch) == 1  # the controller places it again before the next step is sent
     other = creator.handle_batch(ComponentBatch([ComponentCall("step", "m/1", "M/A")])).replies
     assert not other[0].lost and "names a mission (without '/')" in other[0].error
+
+
+def test_sys_exit_in_a_worker_fails_the_state_and_the_worker_goes_on(creator: Creator, pool: WorkerPool) -> None:
+    """Review of users audit 12, D4: the worker caught `Exception` around component code, so `sys.exit` ended the
+    worker process (the dry-run failed the state)."""
+    start(creator, "M/Quit", mode="sys.exit")
+    pid = (start(creator, "M/Other").outputs or {})["pid"]
+    r = step(creator, "M/Quit")
+    assert r.error.startswith("component raised SystemExit: 3 (at "), r.error
+    assert step(creator, "M/Other").outputs == {"pid": pid}  # the same worker, still serving
 
 
 def test_manifest_scheduling_is_applied_to_the_process_it_is_placed_in(creator: Creator) -> None:
