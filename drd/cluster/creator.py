@@ -200,6 +200,7 @@ class Creator:
         # the live controller's term, once a call of it was accepted: older ones are refused (drd.cluster.terms)
         self.terms = TermFence(host, Witness(bus, cluster).live if bus is not None else None)
         self._now = 0.0  # the controller's time of the call being served (the gates' records carry it)
+        self.losses = 0  # how many times it lost its controller (`controller_lost`): its daemon re-announces then
         self.arbiter = CycleArbiter(lambda: self._now, self._setpoint_failed)
         self._sim_service = sim_service  # this host's own SimulationService (drd.sim.service), if it has one
         self._bus = bus
@@ -285,6 +286,7 @@ class Creator:
         host's devices any more, so every actuator stops now and refuses commands until a controller grants it
         again, and every instance here is retired (it would run for a mission nobody executes)."""
         with self._lock:
+            self.losses += 1
             self._gates.orphan_all(self._now, reason)
             self.instances.clear()
             self._retire_all()

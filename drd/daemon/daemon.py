@@ -266,7 +266,8 @@ class Daemon:
         self._announce_due = True
         self._watching = False  # a thread is asking the robots' hosts to watch them (`_publish_live`)
         self._next_load = 0.0
-        self._reannounce_until = 0.0  # after a freeze of its own: announce with every load report until then
+        self._reannounce_until = 0.0  # after its controller was lost: announce with every load report until then
+        self._losses_seen = 0  # the Creator's `losses` when last looked at
         self._next_peer_check = 0.0
         self._checking = False
         self._all_reachable = False  # the last peer check found every peer (and said so)
@@ -472,11 +473,14 @@ class Daemon:
             self._publish_live()
             if now < self._reannounce_until:
                 self._announce_due = True
-        if self.creator is not None and self.creator.check_freeze():  # before anything it serves: a freeze of its
-            # own ends its grants and retires its instances; the announcement saying so may go out before its
-            # session is back, and the list then never changes again (cluster audit 14, D2: a dead instance listed
-            # `running` until the next change): it is said again with each load report for two leases
-            self._reannounce_until = now + 2 * self.cluster.lease
+        if self.creator is not None:  # before anything it serves: a freeze of its own ends its grants
+            self.creator.check_freeze()
+            if self.creator.losses != self._losses_seen:  # its controller lost (a freeze noticed by any thread, a
+                # token gone): its instances were retired, and the announcement saying so may have gone out before
+                # its session was back, the list never to change again (cluster audit 14, D2: a dead instance
+                # listed `running`): it is said again with each load report for two leases
+                self._losses_seen = self.creator.losses
+                self._reannounce_until = now + 2 * self.cluster.lease
         with self._lock:
             self._handle(self.view.tick(now))
             if self.controller is not None:
