@@ -432,5 +432,6 @@ def wall_across(scan: Scan, within: float = END, memo: ScanMemo | None = None) -
     # one surface, not several things side by side: a person and the side wall beyond it, or a Ranger ahead and a
     # wall, spanned WIDER together and were taken for the end (worlds audit 13, D3, D4)
     xs, ys = x[keep], y[keep]
-    cut = np.flatnonzero((np.diff(keep) > 1) | (np.hypot(np.diff(xs), np.diff(ys)) > JOINED)) + 1
+    # (by distance only: a beam of the wall with no return, or one past `depth`, does not cut it in two)
+    cut = np.flatnonzero(np.hypot(np.diff(xs), np.diff(ys)) > JOINED) + 1
     return any(float(part.max()) - float(part.min()) >= WIDER for part in np.split(ys, cut))

@@ -76,12 +76,11 @@ def plain_wall_across(scan: Scan, within: float) -> bool:
     if plain_clearance(scan, 0.35) >= within:
         return False
     far, depth = scan.max_range, within + 0.25
-    # the hits in the lane, by beam, split into surfaces where neighbouring beams' points are over 0.25 m apart
-    kept = [(i, r * c, r * s) for i, (r, c, s) in enumerate(plain_ahead(scan))
-            if r < far and 0 < r * c < depth and -0.9 < r * s < 0.9]
+    # the hits in the lane, in beam order, split into surfaces where consecutive hits are over 0.25 m apart
+    kept = [(r * c, r * s) for r, c, s in plain_ahead(scan) if r < far and 0 < r * c < depth and -0.9 < r * s < 0.9]
     surfaces: list[list[float]] = []
-    for k, (i, x, y) in enumerate(kept):
-        if k == 0 or i - kept[k - 1][0] > 1 or math.hypot(x - kept[k - 1][1], y - kept[k - 1][2]) > 0.25:
+    for k, (x, y) in enumerate(kept):
+        if k == 0 or math.hypot(x - kept[k - 1][0], y - kept[k - 1][1]) > 0.25:
             surfaces.append([])
         surfaces[-1].append(y)
     return any(max(ys) - min(ys) >= 1.0 for ys in surfaces)

@@ -9,6 +9,7 @@ import math
 import pytest
 
 from components.behaviors.scan import Segment, dominant_direction, fit_wall, line_gap, segments, strongest_wall
+from drd.hw.interfaces import Scan
 from tests.unit.test_scan_geometry import cast
 
 
@@ -75,6 +76,10 @@ def test_a_wall_across_is_one_surface_not_a_person_beside_a_wall() -> None:
     assert not wall_across(cast(person_and_wall))
     assert wall_across(cast([((0.8, -1.25), (0.8, 1.25))]))  # the end: one surface across the way
     assert not wall_across(cast([((0.8, -0.25), (0.8, 0.25))]))  # a person alone
+    end = cast([((0.8, -1.25), (0.8, 1.25))])
+    dropped = list(end.ranges)
+    dropped[90] = end.max_range  # one beam of the end wall with no return (review): still one wall
+    assert wall_across(Scan(tuple(dropped), end.angle_min, end.angle_step, end.max_range))
 
 
 @pytest.mark.parametrize(("corridor_width", "door"), [(1.5, 1.0), (1.5, 1.2), (1.8, 1.5), (2.5, 1.5), (4.0, 2.6)])
