@@ -721,7 +721,8 @@ def _spaced_unit(prev: Token, tok: Token) -> str | None:
     """The hint for a duration written with a space before its unit (`2 s`, `5 minutes`): `write 2s` (users audit
     12, D9: it said "`s` starts a new item")."""
     word = str(tok.value)
-    size = _OWN_UNITS.get(word) or _UNIT_WORDS.get(word.lower())
+    # not `m` or `d` apart: `<= 6 m` is a distance in metres, `2 d` a name (review: "write 6min")
+    size = _OWN_UNITS.get(word) or (_UNIT_WORDS.get(word.lower()) if len(word) > 2 else None)
     if prev.type not in ("INT", "FLOAT") or tok.type != "NAME" or prev.end_line != tok.line or size is None:
         return None
     from dsl.catalog import duration_text

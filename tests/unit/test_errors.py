@@ -339,6 +339,13 @@ def test_a_bad_byte_after_a_byte_order_mark_is_located_as_the_editor_shows_it(tm
     assert (d.span.line, d.span.column) == (3, 2) and "byte 0xff" in d.message, d
 
 
+def test_a_distance_in_metres_is_not_told_to_be_minutes(catalog: Catalog) -> None:
+    """Review: `<= 6 m` was told "write 6min" (the unit words had `m` for minutes)."""
+    source = m("  needs r: Ranger\n  constraint near: distance(r, point(0, 0)) <= 6 m\n  Calibrate")
+    hints = [d.hint or "" for d in compile_text(source, catalog, "t.mission").diagnostics]
+    assert hints and not any("min" in h for h in hints), hints
+
+
 def test_a_misspelt_start_target_is_one_error_not_every_child_never_reached(catalog: Catalog) -> None:
     """Users audit 12, D8: each child was also "never reached", its hint naming the misspelt state."""
     source = m("  start -> Calibrat\n  Calibrate\n  Observe\n  Calibrate -> Observe")
