@@ -92,7 +92,11 @@ class FollowCorridor(Component):
         self.progress = Progress(allowance=allowance(float(self.ctx.params["speed"])))
 
     def resume(self) -> None:
+        """Given the robot back, perhaps after another behavior drove it: the walls, the corridor's line, where it
+        started and how far it got are seen afresh (a turn to the line first, if need be), as at its start."""
         self.progress.reset()
+        self.expect, self.direction, self.origin, self.began = (None, None), None, None, None
+        self.turn_to, self.unblocking, self.blocked_since = None, None, None
 
     def stuck(self, now: float, x: float, y: float) -> bool:
         """No farther from where it started than its best by PROGRESS metres for STUCK seconds: it says so in the log
@@ -121,6 +125,7 @@ class FollowCorridor(Component):
                 drive.set_velocity(0.0, self.turn_side * TURN_RATE)
                 return Status.RUNNING
             self.turn_to, self.origin = None, (x, y)
+            self.expect = (None, None)  # turned around, left and right have swapped: the walls are fitted afresh
         if self.origin is None:
             self.origin = (x, y)
         clearance = clearance_ahead(scan, memo=self.memo)
