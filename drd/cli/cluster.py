@@ -637,10 +637,8 @@ def _mission_source(mission: Path) -> tuple[str, dict[str, str], dict[str, str]]
     if not mission.exists():
         fail(f"{mission}: no such file (looked at {mission.absolute()})")
     program = _not_a_mission(mission)  # a folder too: "is a directory", as validate says
-    try:
-        return mission.read_text(encoding="utf-8"), imported_texts(program), import_aliases(program)
-    except (OSError, UnicodeDecodeError) as e:
-        fail(f"{mission}: cannot read it: {e}")
+    # the text the loader read (once, with its checks), whose imports these are
+    return program.sources[program.main], imported_texts(program), import_aliases(program)
 
 
 def _not_a_mission(mission: Path) -> Program:

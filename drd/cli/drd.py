@@ -180,7 +180,11 @@ def start(
     try:
         tr = transport(cluster, daemon=True, host=host)
     except SecurityError as e:
-        fail_all(e.problems, hint="see docs/security.md: drd starts only as securely as its hosts file says it must")
+        from drd.hosts import SecurityMode
+
+        configured = cluster.security.mode is not SecurityMode.NONE
+        fail_all(e.problems, hint="security is configured, so drd will not start without it" if configured else
+                 "see docs/security.md: an open cluster is for this machine, or a network said to be open")
     rd = runfiles.run_dir(run_dir_opt)
     try:
         runfiles.prepare(rd, cluster.name)

@@ -55,6 +55,7 @@ def test_a_reading_the_driver_cannot_give_is_not_known_never_the_static_value() 
     assert pool.pose("c") is None
     view = pool.view("c")
     assert "battery" not in view and "x" not in view
+    assert "battery" not in dict(view) and len(view) == len(dict(view))  # a mapping of what it answers (review)
     with pytest.raises(KeyError):
         view["battery"]
 
