@@ -97,8 +97,8 @@ def find_gaps(scan: Any, min_width: float, expect: tuple[float | None, float | N
     return out
 
 
-#: Turning faster than this (rad a control cycle; FollowCorridor turns on the spot at 0.08) is turning on the spot.
-TURNING = 0.05
+#: Turned more than this (rad) from the heading its expected wall distances were taken at, they are another view's.
+TURNED = 0.35
 
 
 class DetectDoor(Component):
@@ -108,7 +108,7 @@ class DetectDoor(Component):
         self.expect: tuple[float | None, float | None] = (None, None)
         self.memo = ScanMemo()  # what the scan helpers derive from this cycle's scan
         self.origin: tuple[float, float] | None = None  # where it started (odometry), once known
-        self.heading: float | None = None  # the odometry's heading at the last step
+        self.heading: float | None = None  # the odometry's heading when the expected distances were (re)started
 
     def _just_started(self, pose: tuple[float, float, float] | None) -> bool:
         """Still within `LEAVE` of where it started: a wall ahead then is one it was left facing (the previous
@@ -128,13 +128,14 @@ class DetectDoor(Component):
         return odo() if odo is not None else None
 
     def _expected(self, scan: Scan, pose: tuple[float, float, float] | None) -> tuple[float | None, float | None]:
-        """The wall distances to expect next, forgotten while the robot turns on the spot (FollowCorridor turning to
-        the corridor's line, or around): fits taken across the corridor are of other things (a room's wall through a
-        door locked the expectation at 1.68 m for a wall at 1.25 m, and the next door went unseen), and after a
-        turn around left and right have swapped."""
-        heading, self.heading = self.heading, (pose[2] if pose is not None else None)
-        if heading is not None and self.heading is not None and abs(wrap(self.heading - heading)) > TURNING:
-            return None, None
+        """The wall distances to expect next, started afresh whenever the robot has turned TURNED from the heading
+        they were started at (FollowCorridor turning to the corridor's line, or around): fits taken from across the
+        corridor are of other things (a room's wall through a door locked the expectation at 1.68 m for a wall at
+        1.25 m, and the next door went unseen), and after a turn around left and right have swapped. By heading,
+        not by turn rate: a rate per step depends on how often it is stepped (on a cluster a door was missed)."""
+        heading = pose[2] if pose is not None else None
+        if heading is not None and (self.heading is None or abs(wrap(heading - self.heading)) > TURNED):
+            self.heading, self.expect = heading, (None, None)
         return expected(corridor(scan, self.expect, memo=self.memo), self.expect)
 
     def step(self, now: float) -> Status:

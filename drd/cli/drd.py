@@ -140,6 +140,15 @@ RunDirOption = typer.Option(None, "--run-dir", show_default=False,
 READY_TIMEOUT = 30.0  # how long `drd start --detach` waits for the daemon to declare its services
 
 
+def _security_hint(cluster: Any) -> str:
+    """What to do about a refused transport: the configured security's requirement, or the open cluster's limits."""
+    from drd.hosts import SecurityMode
+
+    if cluster.security.mode is not SecurityMode.NONE:
+        return "security is configured, so drd will not start without it"
+    return "see docs/security.md: an open cluster is for this machine, or a network said to be open"
+
+
 @app.command()
 def start(
     host: str = typer.Option(..., "--host", help="This host's name in the hosts file.", show_default=False),
@@ -180,11 +189,7 @@ def start(
     try:
         tr = transport(cluster, daemon=True, host=host)
     except SecurityError as e:
-        from drd.hosts import SecurityMode
-
-        configured = cluster.security.mode is not SecurityMode.NONE
-        fail_all(e.problems, hint="security is configured, so drd will not start without it" if configured else
-                 "see docs/security.md: an open cluster is for this machine, or a network said to be open")
+        fail_all(e.problems, hint=_security_hint(cluster))
     rd = runfiles.run_dir(run_dir_opt)
     try:
         runfiles.prepare(rd, cluster.name)

@@ -192,9 +192,7 @@ class Creator:
         `drivers(world)`: this host's drivers (`drd.hw.HostDrivers`) for a world, instead of those hosts.yaml names
         (a test's fakes); `acting()`: whether this process runs the controller that acts now, whose grants a freeze
         of its own took nothing from (`check_freeze`; default: whether the host has the controller role)."""
-        self.cluster = cluster
-        self.host = host
-        self.catalog = catalog
+        self.cluster, self.host, self.catalog = cluster, host, catalog
         self.instances: dict[str, Instance] = {}  # by `<mission>/<path>`
         self.calls = 0
         # the live controller's term, once a call of it was accepted: older ones are refused (drd.cluster.terms)
