@@ -147,9 +147,8 @@ class FollowCorridor(Component):
             fitted = corridor(scan, self.expect, memo=self.memo)
         left, right = kept = along(fitted, a, self.direction)
         # a side whose fit was something else is fitted afresh (from the nearest wall) next time
-        self.expect = expected(kept, self.expect if kept == fitted else
-                               (self.expect[0] if kept[0] is fitted[0] else None,
-                                self.expect[1] if kept[1] is fitted[1] else None))
+        left_was, right_was = (e if k is f else None for e, k, f in zip(self.expect, kept, fitted, strict=True))
+        self.expect = expected(kept, (left_was, right_was))
         walls = [w for w in (left, right) if w is not None]
         if walls:
             heading = sum(w.angle for w in walls) / len(walls)  # the corridor's direction, relative
