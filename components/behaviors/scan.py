@@ -6,8 +6,9 @@ the left. `Scan.beams()` gives every beam's angle, cosine and sine once per lase
 trigonometric function per beam. Offered: which beams a sector holds (`between`, `ahead`, `Beams.span`), the hit
 points in one (`points`), how open it is (`openness`), the nearest reading in the robot's path
 (`nearest_in_path`), the free distance ahead (`clearance_ahead`), the front reading (`front_range`), the corridor
-walls (`fit_wall`, `corridor`, `expected`) and whether a wall closes the way (`wall_across`); and the bearings the
-camera behaviors share (`wrap`, `region_bearings`, `circular_mean`).
+walls (`fit_wall`, `strongest_wall`, `corridor`, `expected`), the straight walls in reach and the line most of them
+run along (`segments`, `dominant_direction`, `line_gap`) and whether a wall closes the way (`wall_across`); and the
+bearings the camera behaviors share (`wrap`, `region_bearings`, `circular_mean`).
 
 Every function is pure. The costly ones (a side's points, a wall fit, the clearance) take an optional `ScanMemo`
 that the calling component owns, so what several of them derive from the one scan of a control cycle is computed
