@@ -446,9 +446,11 @@ def summary(r: DryRun) -> dict[str, Any]:
             "injections": r.injections, "scouts": r.scouts}
 
 
-def rebuilt(run: Mapping[str, Any], records: Sequence[rec.Record]) -> DryRun:
+def rebuilt(run: Mapping[str, Any], records: Sequence[rec.Record],
+            where: Callable[[str], tuple[float, float] | None] | None = None) -> DryRun:
     """The report of a recorded run, from its records (outcome, timeline, holds, waits, logs, doors, detections)
-    and its summary (times, injections, where the Scouts ended)."""
+    and its summary (times, injections, where the Scouts ended). A summary without the Scouts (a recording cut
+    short) keeps those its records launched, each where `where(scout)` says it was last (readers audit 13, D6)."""
     finished = next((r for r in reversed(records) if isinstance(r, rec.Finished)), None)
     end = f"the recording ends at {float(run['sim_time']):.1f} s, before the run did"
     result = DryRun(str(run["mission"]), finished.outcome if finished else "unfinished",
@@ -460,7 +462,13 @@ def rebuilt(run: Mapping[str, Any], records: Sequence[rec.Record]) -> DryRun:
         result.records.append(r)
         facts(result, r)
     result.injections = list(run.get("injections") or [])
-    result.scouts = list(run.get("scouts") or [])
+    if "scouts" in run:
+        result.scouts = list(run.get("scouts") or [])
+    elif where is not None:
+        for scout in result.scouts:
+            last = where(str(scout["scout"]))
+            if last is not None:
+                scout.update(x=round(last[0], 2), y=round(last[1], 2))
     return result
 
 

@@ -42,7 +42,7 @@ import shutil
 import struct
 import threading
 import weakref
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -197,7 +197,11 @@ class Recorder:
             _OPEN.add(self)
         self.error: str | None = None  # why the file stopped being written (the run went on without it)
         self.sink_errors = _SINK.count
-        self.channels: dict[str, Any] = {}  # the JSON channels, each made when first used (`json`)
+        # Every channel is made before the live view starts (a scan's too, in `scene`): a channel made mid-run is
+        # advertised with its first message, which a viewer then never gets, and a viewer subscribing at once may
+        # be refused it as unknown for the whole run (readers audit 13, D1, D2). A channel with no message is not
+        # written into the file.
+        self.channels: dict[str, Any] = {topic: self._json_channel(topic) for topic in JSON_SCHEMAS}
         self.lock = threading.Lock()
         self.tf = FrameTransformsChannel(TF, context=self.context)
         self.world = SceneUpdateChannel(WORLD, context=self.context)
@@ -213,6 +217,7 @@ class Recorder:
         self.flying: list[tuple[float, str, str, tuple[float, float]]] = []  # (t1, robot, kind, end), landings due
         self.entities: dict[str, Any] = {}  # the world's entities as they are now, for a viewer that joins late
         self.closed, self.flushed, self.now = False, 0.0, 0.0  # `now`: the latest sim time logged
+        self.kept = 0.0  # the sim time up to which the file's chunks were written (the last flush that succeeded)
         if serve is not None:
             self._serve(*serve)
 
@@ -244,11 +249,7 @@ class Recorder:
         self._channel(topic).log(_json(value), log_time=_ns(at))
 
     def _channel(self, topic: str) -> Any:
-        channel = self.channels.get(topic)
-        if channel is None:
-            with self.lock:  # a cluster run writes from several threads (`drd.cli.cluster._ClusterView`)
-                channel = self.channels.get(topic) or self.channels.setdefault(topic, self._json_channel(topic))
-        return channel
+        return self.channels[topic]
 
     def scene(self, world: World) -> None:
         """The world as a scene at time 0, and its file as the attachment `world.yaml`, so a replay can draw the
@@ -260,6 +261,8 @@ class Recorder:
                                            media_type="application/yaml", data=data))
         self.doors = {d.id: (d.a, d.b) for d in world.doors}
         self.frames.scouts = frozenset(world.scout_ids)
+        for robot in (*(r.id for r in world.rangers), *world.scout_ids):
+            self._scan_channel(robot)
         self.update_world(0.0, [*_building(world), *_bodies(world)])
 
     def update_world(self, at: float, entities: list[tuple[str, Any]]) -> None:
@@ -282,20 +285,27 @@ class Recorder:
 
     # -- the sensors, as their drivers read them (a `drd.sim.observe.SensorSink`; times are sim times)
 
-    def scan(self, robot: str, at: float, ranges: list[float], max_range: float, fov: float) -> None:
+    def _scan_channel(self, robot: str) -> Any:
         from foxglove.channels import LaserScanChannel
-        from foxglove.messages import LaserScan
 
         channel = self.scans.get(robot)
         if channel is None:
-            channel = self.scans[robot] = LaserScanChannel(SCAN + robot, context=self.context)
+            with self.lock:  # a cluster run writes from several threads (`drd.cli.cluster._ClusterView`)
+                channel = self.scans.get(robot) or self.scans.setdefault(
+                    robot, LaserScanChannel(SCAN + robot, context=self.context))
+        return channel
+
+    def scan(self, robot: str, at: float, ranges: list[float], max_range: float, fov: float) -> None:
+        from foxglove.messages import LaserScan
+
+        channel = self._scan_channel(robot)
         inf = math.inf  # a beam that hit nothing: +inf (REP 117), not a point at the laser's reach
         half = fov / 2 if len(ranges) > 1 else 0.0
         channel.log(LaserScan(timestamp=_stamp(at), frame_id=robot, pose=_pose(), start_angle=-half, end_angle=half,
                               ranges=[d if d < max_range else inf for d in ranges]), log_time=_ns(at))
 
     def camera(self, robot: str, at: float, fov: float, max_range: float, people: list[dict[str, float]]) -> None:
-        self._fov(robot, at, fov, max_range)
+        self.view(robot, at, fov, max_range)  # a simulator host older than `view` says it with the first frame
         self.json(CAMERA, at, {"robot": robot, "at": at, "fov": fov, "max_range": max_range, "detections": people})
         if people:
             self._seen(robot, at, people)
@@ -309,9 +319,9 @@ class Recorder:
             timestamp=_stamp(at), frame_id=robot, id=f"seen/{robot}", frame_locked=True, lines=[line],
             lifetime=Duration(sec=0, nsec=int(SEEN_FOR * 1e9)))]), log_time=_ns(at))
 
-    def _fov(self, robot: str, at: float, fov: float, max_range: float) -> None:
-        """A camera's field of view, drawn once, locked to its robot's frame (as long as the view's reach, at most
-        3 m: a wedge as long as a 10 m camera's would cover the building)."""
+    def view(self, robot: str, at: float, fov: float, max_range: float) -> None:
+        """A camera's field of view, drawn once (when it is first read), locked to its robot's frame (as long as
+        the view's reach, at most 3 m: a wedge as long as a 10 m camera's would cover the building)."""
         if robot in self.fovs:
             return
         self.fovs.add(robot)
@@ -413,6 +423,8 @@ class Recorder:
             self.flushed = at
             if self.writer is not None and not self.closed:
                 self._write(lambda w: w.flush())
+                if self.writer is not None:  # the flush went through
+                    self.kept = at
 
     def _write(self, op: Callable[[Any], object]) -> None:
         """`op(writer)`; on a write error (disk full) the file is closed as it is and the run goes on without it
@@ -424,13 +436,7 @@ class Recorder:
 
     def failed(self, e: BaseException) -> None:
         """Stop writing the file (closed as it is: its complete chunks stay readable), and keep one line saying
-        why, naming it (`error`, `drd.outputs.failures`)."""
-        if self.error is None:
-            why = _SINK.first if _SINK.count > self.sink_errors and _SINK.first else str(e).removeprefix(
-                "FoxgloveError: ")
-            self.error = (f"{self.path}: cannot write the recording: {why}; it stops at {self.now:.1f} s of sim"
-                          " time (its complete chunks are readable)")
-            outputs.failed(self.error)
+        why and where the readable file ends, naming it (`error`, `drd.outputs.failures`)."""
         writer, self.writer = self.writer, None
         _OPEN.discard(self)
         for _ in range(2 if writer is not None else 0):  # after a failed write it refuses once, then lets go
@@ -439,6 +445,18 @@ class Recorder:
                 break
             except RuntimeError:
                 continue
+        if self.error is None:
+            why = _SINK.first if _SINK.count > self.sink_errors and _SINK.first else str(e).removeprefix(
+                "FoxgloveError: ")
+            if "space" not in why and self.path is not None and _full(self.path):
+                why = f"No space left on device ({why})"
+            # where an independent reader's messages end (a chunk written between flushes may hold more than the
+            # last flush that went through, and what was logged after the last good chunk is lost: readers audit
+            # 13, D5 said a second too late)
+            end = _readable_until(self.path) if self.path is not None else None
+            self.error = (f"{self.path}: cannot write the recording: {why}; it stops at "
+                          f"{self.kept if end is None else end:.1f} s of sim time (its complete chunks are readable)")
+            outputs.failed(self.error)
 
     def where(self, robot: str) -> tuple[float, float] | None:
         """Where `robot` was last written on `/drd/tf` (its Ranger's place while carried), or None if never."""
@@ -452,8 +470,9 @@ class Recorder:
         for view in self.views.values():
             if view.changed_at is not None:
                 self._active(view)
-        for run in runs:
-            self._channel(RUNS).log(json.dumps({"format": FORMAT, **run}, default=_default), log_time=_ns(at))
+        for run in sorted(runs, key=lambda r: _ended(r, at)):  # each at its mission's end (readers audit 13, D9)
+            self._channel(RUNS).log(json.dumps({"format": FORMAT, **run}, default=_default),
+                                    log_time=_ns(_ended(run, at)))
         self.close()
 
     def close(self) -> None:
@@ -464,6 +483,37 @@ class Recorder:
                 _OPEN.discard(self)
             if self.server is not None:
                 self.server.stop()
+
+
+def _readable_until(path: Path) -> float | None:
+    """The sim time of the last message a reader gets from `path` in file order (None: none, or no file)."""
+    from mcap.reader import NonSeekingReader
+
+    last: int | None = None
+    try:
+        with path.open("rb") as fh:
+            try:
+                for _schema, _channel, message in NonSeekingReader(fh).iter_messages(log_time_order=False):
+                    last = message.log_time if last is None else max(last, message.log_time)
+            except _damaged():  # where the failed write left it
+                pass
+    except OSError:
+        return None
+    return None if last is None else last / 1e9
+
+
+def _full(path: Path) -> bool:
+    """Whether the file system holding `path` has no room left for another chunk."""
+    try:
+        return shutil.disk_usage(path.parent).free < CHUNK_BYTES
+    except OSError:
+        return False
+
+
+def _ended(run: Mapping[str, Any], at: float) -> float:
+    """When a run's mission ended (its summary's `sim_time`), at most `at` (the run's end)."""
+    ended = run.get("sim_time")
+    return min(float(ended), at) if isinstance(ended, (int, float)) and ended >= 0 else at
 
 
 def _late_viewers(r: Recorder) -> Any:
@@ -781,6 +831,11 @@ class Recording:
             return self.pose(carried[j - 1][1], at)
         return None if i == 0 else track[i - 1][1:]
 
+    def last_place(self, robot: str) -> tuple[float, float] | None:
+        """Where `robot` was when the recording ends (its Ranger's place while carried), or None if never."""
+        pose = self.pose(robot, math.inf)
+        return None if pose is None else (pose[0], pose[1])
+
     def robots(self) -> list[str]:
         """Every robot and intruder (`intruder/<id>`) the recording has a pose of."""
         return sorted({*self.tracks, *self.carried})
@@ -921,7 +976,7 @@ def state_at(recording: Recording, at: float) -> dict[str, Any]:
              for rid in recording.robots() if (p := recording.pose(rid, at)) is not None}
     ends = max([r.at for rs in recording.records.values() for r in rs] +
                [track[-1][0] for track in recording.tracks.values() if track], default=0.0)
-    return {"at": at, "ends": round(ends, 6), "missions": missions,
+    return {"at": at, "ends": round(ends, 6), "cut": recording.cut, "missions": missions,
             "robots": {k: v for k, v in where.items() if not k.startswith(INTRUDER)},
             "intruders": {k.removeprefix(INTRUDER): {"x": v["x"], "y": v["y"]} for k, v in where.items()
                           if k.startswith(INTRUDER)}}

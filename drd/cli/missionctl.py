@@ -668,7 +668,8 @@ def replay(
         return OK
     _check_render(render)
     _write_bag(file, ros2_bag)
-    reports = [rebuilt(run, recording.records.get(str(run.get("records")), [])) for run in recording.runs]
+    reports = [rebuilt(run, recording.records.get(str(run.get("records")), []), recording.last_place)
+               for run in recording.runs]
     _write_trace(recording, open_trace(trace))
     world = _recorded_world(recording, file) if render is not None else None
     for report in reports:

@@ -421,8 +421,9 @@ def print_state(state: dict[str, Any], console: Console | None = None) -> None:
     console = console or out
     console.print(Text.assemble(("at ", "bold"), f"{state['at']:.1f} s of sim time"))
     if state.get("ends") is not None and state["at"] > state["ends"] + 1e-6:
-        console.print(Text(f"  after the recording's end, at {state['ends']:.1f} s: this is the run as it ended",
-                           style="yellow"))
+        how = ("it was cut short, before the run ended: this is the run as far as it was recorded" if state.get("cut")
+               else "this is the run as it ended")
+        console.print(Text(f"  after the recording's end, at {state['ends']:.1f} s: {how}", style="yellow"))
     for m in state["missions"]:
         root = str(m["mission"])
         head = Text.assemble(("mission ", "bold"), str(m["id"]))

@@ -36,6 +36,9 @@ class SensorSink(Protocol):
 
     def light(self, robot: str, at: float, fov: float, regions: list[float]) -> None: ...
 
+    def view(self, robot: str, at: float, fov: float, max_range: float) -> None:
+        """`robot`'s camera was read for the first time (a frame or its brightness), whether or not it saw anyone."""
+
     def flight(self, flight: dict[str, Any]) -> None: ...
 
     def door(self, door: str, at: float, state: str) -> None: ...
@@ -50,6 +53,7 @@ class SensorTap:
         self.sim: Any = None
         self.last_scan: dict[str, float] = {}
         self.saw: dict[str, bool] = {}  # robot -> did its last camera frame passed on see someone
+        self.viewed: set[str] = set()  # robots whose camera was read (`SensorSink.view`)
 
     def tap(self, sim: Any) -> None:
         self.sim = sim
@@ -68,7 +72,8 @@ class SensorTap:
     def camera(self, read: Callable[..., list[Any]], robot: str, fov: float, max_range: float,
                min_light: float = 0.2) -> list[Any]:
         seen = read(robot, fov, max_range, min_light)
-        if seen or self.saw.get(robot, True):  # a frame with people, and the first without after them
+        self._viewed(robot, fov, max_range)
+        if seen or self.saw.get(robot, False):  # a frame with people, and the first without after them
             self.saw[robot] = bool(seen)
             people = [{"label": d.label, "bearing": d.bearing, "distance": d.distance, "light": d.light}
                       for d in seen]
@@ -78,8 +83,14 @@ class SensorTap:
     def brightness(self, read: Callable[..., list[float]], robot: str, fov: float, n_regions: int,
                    max_range: float = 10.0) -> list[float]:
         out = read(robot, fov, n_regions, max_range)
+        self._viewed(robot, fov, max_range)
         self.sink.light(robot, self.sim.time, fov, list(out))
         return out
+
+    def _viewed(self, robot: str, fov: float, max_range: float) -> None:
+        if robot not in self.viewed:
+            self.viewed.add(robot)
+            self.sink.view(robot, self.sim.time, fov, max_range)
 
     def launch(self, fly: Callable[..., Any], scout: str, heading: float, distance: float) -> Any:
         return self._flight(fly(scout, heading, distance))
@@ -122,6 +133,9 @@ class Observations:
     def light(self, robot: str, at: float, fov: float, regions: list[float]) -> None:
         self._add({"reading": "light", "robot": robot, "at": at, "fov": fov, "regions": regions})
 
+    def view(self, robot: str, at: float, fov: float, max_range: float) -> None:
+        self._add({"reading": "view", "robot": robot, "at": at, "fov": fov, "max_range": max_range})
+
     def flight(self, flight: dict[str, Any]) -> None:
         self._add({"reading": "flight", **flight})
 
@@ -150,6 +164,8 @@ def replay(reading: dict[str, Any], sink: SensorSink, offset: float = 0.0) -> No
         sink.camera(robot, at, float(reading["fov"]), float(reading["max_range"]), list(reading["people"]))
     elif kind == "light":
         sink.light(robot, at, float(reading["fov"]), [float(r) for r in reading["regions"]])
+    elif kind == "view":
+        sink.view(robot, at, float(reading["fov"]), float(reading["max_range"]))
     elif kind == "flight":
         sink.flight({**{k: v for k, v in reading.items() if k != "reading"}, "at": at,
                      "lands_at": float(reading["lands_at"]) + offset})

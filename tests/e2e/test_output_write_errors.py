@@ -49,6 +49,35 @@ def test_a_recording_on_a_full_disk_under_json_is_one_json_error(tmp_path: Path)
     assert error["code"] == 2 and error["error"].startswith("/dev/full: cannot write the recording")
 
 
+def test_a_recording_that_fails_mid_run_says_where_its_readable_part_ends(tmp_path: Path) -> None:
+    """Readers audit 13, D5: the error gave the time of the last message logged, a second past what the file
+    holds. A file size limit (RLIMIT_FSIZE; SIGXFSZ ignored, so a write past it fails with EFBIG) stops the writes
+    mid-run, as a full disk does; an independent reader says where the file's messages end."""
+    import resource
+    import signal
+
+    from mcap.reader import NonSeekingReader
+
+    def limited() -> None:
+        signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
+        resource.setrlimit(resource.RLIMIT_FSIZE, (300_000, 300_000))
+
+    run = subprocess.run([*MISSIONCTL, "dry-run", CORRIDOR, "--config", HOSTS, "--until", "120", "--record",
+                          "run.mcap"], cwd=tmp_path, capture_output=True, text=True, timeout=300, check=False,
+                         preexec_fn=limited)
+    assert run.returncode == 2 and "mission CorridorSurveillance" in run.stdout, run.stderr[-2000:]
+    [error] = [line for line in run.stderr.splitlines() if line.startswith("error:")]
+    said = float(error.split("it stops at ")[1].split(" s of sim time")[0])
+    last = 0
+    with (tmp_path / "run.mcap").open("rb") as fh:
+        try:
+            for _schema, _channel, message in NonSeekingReader(fh).iter_messages(log_time_order=False):
+                last = max(last, message.log_time)
+        except Exception:  # the chunk the failed write left open
+            pass
+    assert said > 5 and said == pytest.approx(last / 1e9, abs=0.05)  # the old code said 15.1 for 14.0
+
+
 def test_a_recorder_whose_writes_fail_mid_run_stops_its_file_and_says_why(capfd: pytest.CaptureFixture[str]) -> None:
     """No world attachment: the first failure is a chunk written while logging (the SDK only logs it), then the
     flush each second refuses; the run goes on, the error keeps the OS's reason, nothing spams stderr."""

@@ -48,7 +48,8 @@ def test_the_recording_is_plain_mcap_with_sim_time_and_foxglove_transforms(tmp_p
         assert summary.schemas[topics["/drd/world"].schema_id].name == "foxglove.SceneUpdate"
         assert summary.schemas[topics["/drd/records"].schema_id].name == "drd.Record"
         counts = {summary.channels[c].topic: n for c, n in summary.statistics.channel_message_counts.items()}
-        assert counts["/drd/world"] == 1 and counts["/drd/runs"] == 1
+        # the scene, then scout1's camera view when its camera is first read (its brightness, before any frame)
+        assert counts["/drd/world"] == 2 and counts["/drd/runs"] == 1
         records, tf_times = [], []
         for _schema, channel, message in reader.iter_messages():
             if channel.topic == "/drd/records":
@@ -157,3 +158,11 @@ def test_a_recording_cut_short_by_a_crash_replays_what_it_holds(tmp_path: Path) 
     assert 30 < report["sim_time"] < full["sim_time"]
     kept = [row for row in full["timeline"] if row["entered"] <= report["sim_time"] - 2]
     assert {row["path"] for row in kept} <= {row["path"] for row in report["timeline"]}
+    # the Scouts it launched, each where the recording last had it (readers audit 13, D6: none were listed)
+    launched = [s["scout"] for s in full["scouts"] if s["at"] <= report["sim_time"] - 2]
+    assert launched and [s["scout"] for s in report["scouts"]][:len(launched)] == launched
+    assert all(isinstance(s["x"], float) and isinstance(s["y"], float) for s in report["scouts"])
+    # past its end, the run as far as it was recorded, not "as it ended" (D7)
+    at = missionctl("replay", "cut.mcap", "--at", "1h", cwd=tmp_path).stdout
+    assert "it was cut short, before the run ended: this is the run as far as it was recorded" in at, at
+    assert json.loads(missionctl("replay", "cut.mcap", "--at", "1h", "--json", cwd=tmp_path).stdout)["cut"] is True

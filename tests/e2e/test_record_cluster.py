@@ -63,7 +63,9 @@ def test_a_cluster_run_records_hosts_loads_placements_and_poses(cluster: DaemonC
     placed = {(i["name"], i["host"]) for topic, _t, m in got if topic == "/drd/placements" for i in m["instances"]}
     assert any(name.endswith("FollowCorridor") and host == "ranger1" for name, host in placed), placed
     assert counts["/drd/records"] >= len(report["timeline"]) > 0
-    assert counts["/drd/active"] > 0 and counts["/drd/world"] == 1  # the world, as this installation has it
+    # the world, as this installation has it, then scout1's camera view when its camera is first read (the
+    # simulator host's `view` reading)
+    assert counts["/drd/active"] > 0 and counts["/drd/world"] == 2
     track = [(t, tf.translation.x) for topic, t, m in got if topic == "/drd/tf" for tf in m.transforms
              if tf.child_frame_id == "ranger1" and tf.parent_frame_id == "world"]
     assert len(track) > 5 and track[-1][1] > track[0][1] + 2  # it drove east along the corridor

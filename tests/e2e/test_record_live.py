@@ -106,6 +106,34 @@ def test_the_live_view_serves_scans_records_and_the_world_while_a_dry_run_runs(t
     assert {"walls", "door/door_n1", "body/ranger1"} <= {e.id for e in world.entities}
 
 
+def test_a_viewer_from_the_start_gets_every_message_the_file_has_the_first_launch_and_the_summary(
+        tmp_path: Path) -> None:
+    """Readers audit 13, D1, D2: a channel made mid-run went out with its first message (the first launch, the first
+    camera frame), which no viewer could have asked for, and `/drd/runs` never reached one."""
+    from mcap.reader import make_reader
+
+    port = free_port()
+    with (tmp_path / "stderr").open("wb") as stderr:
+        proc = subprocess.Popen([*MISSIONCTL, "dry-run", str(CORRIDOR), "--config", str(ROOT / "hosts.yaml"),
+                                 "--foxglove", f"127.0.0.1:{port}", "--speed", "2", "--until", "12", "--record",
+                                 "run.mcap"], cwd=tmp_path, stdout=subprocess.DEVNULL, stderr=stderr)
+        try:
+            with connect_when_up(port, proc) as ws:
+                got = receive(ws, {"/drd/runs": 1, "/drd/flights": 0, "/drd/tf": 0})
+            proc.wait(timeout=60)
+        finally:
+            proc.kill()
+            proc.wait(timeout=30)
+    since = got["/drd/tf"][0][0]  # the viewer had subscribed by then
+    with (tmp_path / "run.mcap").open("rb") as fh:
+        recorded = [(m.log_time, json.loads(m.data)) for _s, c, m in make_reader(fh).iter_messages()
+                    if c.topic == "/drd/flights" and m.log_time >= since]
+    assert recorded and recorded[0][1]["kind"] == "launch", recorded  # the first launch is at 5.6 s
+    assert got["/drd/flights"] == recorded
+    [(_t, summary)] = got["/drd/runs"]
+    assert summary["mission"] == "CorridorSurveillance" and summary["sim_time"] == pytest.approx(12.0, abs=0.11)
+
+
 def test_a_live_view_that_cannot_be_served_says_where_and_why(tmp_path: Path) -> None:
     with socket.socket() as taken:
         taken.bind(("127.0.0.1", 0))

@@ -326,3 +326,32 @@ def test_a_trail_is_coloured_as_the_robots_body_not_by_its_id(tmp_path: Path) ->
     for rid, hex_ in (("drone1", SCOUT_COLOUR), ("scout_rover", RANGER_COLOUR)):
         c, want = colours[rid], tuple(int(hex_[i:i + 2], 16) for i in (1, 3, 5))
         assert (round(c.r * 255), round(c.g * 255), round(c.b * 255)) == want, rid
+
+
+def test_a_frame_with_nobody_follows_one_with_someone_and_a_view_is_drawn_when_its_camera_is_first_read(
+        corridor: Run) -> None:
+    """Readers audit 13, D8: each camera's first frame was recorded although nobody was seen, and its field of view
+    was drawn only then (scout1's at 44.9 s, though its brightness was read from 7 s on)."""
+    messages = corridor.messages()
+    last: dict[str, bool] = {}
+    for topic, _s, _t, m in messages:
+        if topic == "/drd/camera":
+            assert m["detections"] or last.get(m["robot"]), f"{m['robot']} at {m['at']}: nobody, and nobody before"
+            last[m["robot"]] = bool(m["detections"])
+    first_read: dict[str, float] = {}
+    for robot, at, *_ in sorted(corridor.reads["camera"] + corridor.reads["brightness"], key=lambda r: r[1]):
+        first_read.setdefault(robot, at)
+    drawn = {e.frame_id: t for topic, _s, t, m in messages if topic == "/drd/world" for e in m.entities
+             if e.id.startswith("fov/")}
+    assert drawn == {robot: round(at * 1e9) for robot, at in first_read.items()} and len(drawn) >= 3
+
+
+def test_each_runs_summary_is_logged_when_its_mission_ended(tmp_path: Path) -> None:
+    """Readers audit 13, D9: the summary of a mission that ended first was logged at the end of the whole run."""
+    path = tmp_path / "runs.mcap"
+    recorder = Recorder(path)
+    recorder.end([{"mission": "Late", "sim_time": 29.1}, {"mission": "Early", "sim_time": 16.0},
+                  {"mission": "NoTime"}], 29.1)
+    logged = [(m["mission"], t) for topic, _s, t, m in Run(path, None, None, {}).messages()  # type: ignore[arg-type]
+              if topic == "/drd/runs"]
+    assert logged == [("Early", 16_000_000_000), ("Late", 29_100_000_000), ("NoTime", 29_100_000_000)]
