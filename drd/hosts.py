@@ -269,6 +269,10 @@ class Cluster:
     def robots(self) -> tuple[Robot, ...]:
         return tuple(r for h in self.hosts for r in h.robots)
 
+    def types(self) -> dict[str, str]:
+        """Each robot's type, by its id."""
+        return {r.id: r.type for r in self.robots}
+
     def resources(self) -> list[Unit | Aggregate]:
         """Units then aggregates, as `drd.runtime.pool.ResourcePool.add` takes them.
 

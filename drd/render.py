@@ -99,9 +99,10 @@ VIEW_REACH = 2.5
 
 
 def render(world: World, report: RunReport, path: Path, *, title: str | None = None,
-           views: Mapping[str, tuple[float, float]] | None = None) -> None:
+           views: Mapping[str, tuple[float, float]] | None = None, types: Mapping[str, str] | None = None) -> None:
     """Draw `report` (a `DryRun`) over `world` and write it to `path` (PNG, SVG or PDF, by suffix). `views`: where
-    each Scout looked at the end (robot -> heading, its camera's field of view, radians), drawn as a wedge.
+    each Scout looked at the end (robot -> heading, its camera's field of view, radians), drawn as a wedge. `types`:
+    each robot's type (robot id -> type, as the hosts file says), which the legend names its robots by.
 
     Raises:
         ValueError: the suffix is not one of `SUPPORTED_SUFFIXES` (checked before anything is drawn).
@@ -112,7 +113,7 @@ def render(world: World, report: RunReport, path: Path, *, title: str | None = N
     import matplotlib
 
     with matplotlib.rc_context(_STYLE):
-        fig = figure(world, report, title=title, views=views)
+        fig = figure(world, report, title=title, views=views, types=types)
         fig.savefig(path, format=fmt, dpi=150, metadata=_METADATA[fmt])
 
 
@@ -122,7 +123,7 @@ _STYLE: dict[Any, Any] = {"svg.fonttype": "none", "svg.hashsalt": "drd-render", 
 
 
 def figure(world: World, report: RunReport, *, title: str | None = None,
-           views: Mapping[str, tuple[float, float]] | None = None) -> Figure:
+           views: Mapping[str, tuple[float, float]] | None = None, types: Mapping[str, str] | None = None) -> Figure:
     """The picture `render` writes, laid out and with its labels placed (or left out), as a matplotlib `Figure`:
     for a caller that measures it (where the legend and title lie, which labels were kept) rather than saves it."""
     import matplotlib
@@ -139,7 +140,7 @@ def figure(world: World, report: RunReport, *, title: str | None = None,
         _draw_views(ax, world, report, views or {})
         _draw_findings(ax, world, report, labels)
         _frame(fig, ax, world)
-        _legend(fig, world, report, doors, bool(views))
+        _legend(fig, world, report, doors, bool(views), _kinds(world, types or {}))
         sub = _title(ax, world, report, title)
         _place_labels(fig, ax, labels, sub)
     return fig
@@ -724,8 +725,19 @@ def _move(label: Annotation, spot: _Spot) -> None:
     label.set_verticalalignment(spot[3])
 
 
-def _legend(fig: Figure, world: World, report: RunReport, doors: dict[str, DoorState], views: bool) -> None:
-    """One entry per kind of thing (not per robot), below the plot, listing only kinds the picture shows."""
+def _kinds(world: World, types: Mapping[str, str]) -> tuple[str, str]:
+    """What the legend calls the robots with a carrier's body and those with a carried one: their types (`Rover`,
+    `Drone/Probe`), or the world file's words for the bodies (Ranger, Scout) when the types are not known."""
+    big = "/".join(sorted({types.get(r.id, "Ranger") for r in world.rangers})) or "Ranger"
+    small = "/".join(sorted({types.get(rid, "Scout") for rid in world.scout_ids})) or "Scout"
+    return big, small
+
+
+def _legend(fig: Figure, world: World, report: RunReport, doors: dict[str, DoorState], views: bool,
+            kinds: tuple[str, str] = ("Ranger", "Scout")) -> None:
+    """One entry per kind of thing (not per robot), below the plot, listing only kinds the picture shows; the
+    robots named by `kinds` (`_kinds`)."""
+    big, small = kinds
     from matplotlib.lines import Line2D
     from matplotlib.patches import Patch
 
@@ -740,18 +752,18 @@ def _legend(fig: Figure, world: World, report: RunReport, doors: dict[str, DoorS
         (line(CLOSED_DOOR, linewidth=5.0), "closed door", DoorState.CLOSED in states),
         (line(BLOCKED_DOOR, linewidth=5.0), "blocked door", DoorState.BLOCKED in states),
         (Patch(facecolor=OBSTACLE, edgecolor="#4e342e", hatch="////"), "obstacle", bool(world.obstacles)),
-        (line(RANGERS[0], linewidth=1.8, marker="o", markevery=[0], markerfacecolor="white"), "Ranger path (start ○)",
+        (line(RANGERS[0], linewidth=1.8, marker="o", markevery=[0], markerfacecolor="white"), f"{big} path (start ○)",
          bool(world.rangers)),
-        (line(scout, linewidth=1.6, linestyle=(0, (4, 2.5))), "Scout flight", bool(world.scout_ids)),
+        (line(scout, linewidth=1.6, linestyle=(0, (4, 2.5))), f"{small} flight", bool(world.scout_ids)),
         (line(scout, linewidth=2.0, marker="h", markevery=[-1], markersize=9, markeredgecolor="white"),
-         "Scout rolling, placed", bool(world.scout_ids)),
+         f"{small} rolling, placed", bool(world.scout_ids)),
         (line(INTRUDER, linewidth=1.4, linestyle=(0, (1, 2)), marker="o", markevery=[-1], markerfacecolor="white"),
          "intruder path (end ○)", bool(world.intruders)),
         (line(DOOR_FOUND, linestyle="none", marker="D", markerfacecolor="none", markeredgewidth=2.0),
          "door found", bool(report.doors)),
         (line(scout, linestyle="none", marker="*", markersize=13, markeredgecolor="#5d4037"),
-         "sighting (the colour of the Scout that saw it)", bool(report.detections)),
-        (Patch(facecolor=scout, edgecolor=scout, alpha=0.3), "Scout's camera view, heading", views and
+         f"sighting (the colour of the {small} that saw it)", bool(report.detections)),
+        (Patch(facecolor=scout, edgecolor=scout, alpha=0.3), f"{small}'s camera view, heading", views and
          bool(report.scouts)),
         (line("#555555", linestyle="none", marker="o", markersize=4, markerfacecolor="white"), "time mark",
          bool(report.tracks)),

@@ -254,17 +254,20 @@ class Builder:
         value, last = arg.value, False
         if isinstance(value, ast.Call) and value.func == "last" and len(value.args) == 1 and value.where is None:
             value, last = value.args[0], True
-        near = data[0] if data else Level(Scope(()))
         offer: Offer | None
         if isinstance(value, ast.Attr) and isinstance(value.obj, ast.Name):
             key, field = value.obj.id, value.attr
+            # the nearest level where `key` is a sibling: the behavior's own, or an enclosing behavior's, as a
+            # binding by name or type searches (the ambiguous-input hint names those: users audit 12, D3)
+            near = next((level for level in data if level.outputs_of(key)), data[0] if data else Level(Scope(())))
             hits = [o for o in near.outputs_of(key) if o.name == field]
             if not hits:
                 outputs = sorted({o.name for o in near.outputs_of(key)})
-                self._error("unknown-input-source", f"{key}.{field} is not an output of a sibling of {child.name}",
-                            arg.span, f"{key}'s outputs: {', '.join(outputs)}" if outputs else
-                            f"siblings with outputs: {', '.join(sorted({o.key for o in near if not o.shared}))}"
-                            or None)
+                keys = sorted({o.key for level in data for o in level if not o.shared})
+                self._error("unknown-input-source", f"{key}.{field} is not an output of a sibling of {child.name}"
+                            " or of an enclosing behavior", arg.span, f"{key}'s outputs: {', '.join(outputs)}"
+                            if outputs else f"siblings with outputs: {', '.join(keys)}" if keys else
+                            "no sibling in scope has outputs")
                 return None
             offer = hits[0]
         elif isinstance(value, ast.Name):

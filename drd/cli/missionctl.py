@@ -432,7 +432,7 @@ def dry_run(
     if stop.is_set():  # on stderr, as `missionctl run` says it: stdout keeps the report alone
         err.print(Text.assemble(("■ ", "bold yellow"), f"Ctrl-C: stopped the dry-run at {reports[0].sim_time:.1f} s"
                                                        " of sim time; the report says what ran so far"))
-    _show_reports(reports, sim_world, render, as_json, _views(sims, cluster, sim_world))
+    _show_reports(reports, sim_world, render, as_json, _views(sims, cluster, sim_world), cluster.types())
     return OK if all(r.outcome == "success" for r in reports) else MISSION_FAILED
 
 
@@ -719,7 +719,7 @@ def _recorded_world(recording: Recording, file: Path) -> World:
 
 
 def _show_reports(reports: list[DryRun], sim_world: World | None, render: Path | None, as_json: bool,
-                  views: dict[str, tuple[float, float]] | None = None) -> None:
+                  views: dict[str, tuple[float, float]] | None = None, types: dict[str, str] | None = None) -> None:
     """The reports on stdout, then the picture: a picture that cannot be drawn after all (the disk filled up
     during the run) is said in one line naming it, and the report is not lost. The picture is drawn also when the
     report's reader went away (`| head`: exit 141 after it), as the trace and the recording are written."""
@@ -732,18 +732,18 @@ def _show_reports(reports: list[DryRun], sim_world: World | None, render: Path |
             for report in reports:
                 print_report(report, several=len(reports) > 1)
     finally:
-        _picture(reports, sim_world, render, views)
+        _picture(reports, sim_world, render, views, types)
 
 
 def _picture(reports: list[DryRun], sim_world: World | None, render: Path | None,
-          views: dict[str, tuple[float, float]] | None) -> None:
+             views: dict[str, tuple[float, float]] | None, types: dict[str, str] | None = None) -> None:
     from drd.dryrun import merged
 
     if render is not None and sim_world is not None:
         from drd.render import render as draw
 
         try:
-            draw(sim_world, reports[0] if len(reports) == 1 else merged(reports), render, views=views)
+            draw(sim_world, reports[0] if len(reports) == 1 else merged(reports), render, views=views, types=types)
         except OSError as e:
             fail(f"--render {render}: cannot write the picture: {e.strerror or e} (the report above is complete)")
         err.print(Text.assemble(("✓ ", "bold green"), f"drew {render}"))

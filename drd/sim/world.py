@@ -125,13 +125,14 @@ def check_hosts(world: World, cluster: Cluster) -> list[WorldProblem]:
     types = {r.id: r.type for r in cluster.robots}
     for robot in cluster.robots:
         if robot.type not in ("Ranger", "Scout") and robot.id not in rangers | scouts:  # a kind of the team's own
-            fail("rangers", f"no robot {robot.id!r} (a {robot.type}), which {cluster.source} configures: a robot of"
-                            " any type takes a body here, a Ranger's under rangers (0.3 m; only a Ranger carries"
-                            " Scouts) or a Scout's under scouts (0.08 m)")
+            fail("scouts" if robot.carrier else "rangers or scouts",  # a carried one's is a Scout's body
+                 f"no robot {robot.id!r} (a {robot.type}), which {cluster.source} configures: a robot of any type"
+                 " takes a body here, a Ranger's under rangers (0.3 m; only a Ranger carries Scouts) or a Scout's"
+                 " under scouts (0.08 m)")
         elif robot.type == "Ranger" and robot.id not in rangers:
             fail("rangers", f"no Ranger {robot.id!r}, which {cluster.source} configures")
         elif robot.type == "Scout" and robot.id not in scouts:
-            fail("rangers", f"no Scout {robot.id!r} in a magazine or in scouts, which {cluster.source} configures")
+            fail("scouts", f"no Scout {robot.id!r} in a magazine or in scouts, which {cluster.source} configures")
         elif robot.type == "Scout" and world.carrier(robot.id) != robot.carrier:
             carrier = world.carrier(robot.id)
             where = f"in the magazine of {carrier}" if carrier else "on the floor"

@@ -118,6 +118,34 @@ def test_two_candidates_of_the_inputs_type_are_ambiguous_and_an_explicit_binding
     assert d.code == "unknown-input-source" and d.span.line == 6 and "first, second" in (d.hint or "")
 
 
+WRAPPED = """\
+mission M {{
+    needs ranger: Ranger
+    plan {{ first < second < Aim }}
+    DetectDoor as first
+    DetectDoor as second
+    Aim
+}}
+
+behavior Aim {{ {align} }}
+"""
+
+
+def test_the_ambiguous_inputs_hint_binds_an_enclosing_behaviors_sibling_and_works(catalog: Catalog) -> None:
+    """Users audit 12, D3: the hint proposed `first.door` for an input whose candidates were siblings of its
+    enclosing behavior, then refused that binding ("not an output of a sibling", and an empty list)."""
+    [d] = errors(WRAPPED.format(align="AlignRanger"), catalog)
+    assert d.code == "ambiguous-input" and d.hint is not None
+    bound = d.hint.removeprefix("bind it: ")
+    r = compile_text(WRAPPED.format(align=bound), catalog, "t.mission")
+    assert r.ok, [x.message for x in r.diagnostics]
+    assert r.statechart is not None
+    [binding] = r.statechart.states["M/Aim/AlignRanger"].inputs
+    assert (binding.state, binding.field) == ("M/first", "door")
+    [d] = errors(WRAPPED.format(align="AlignRanger(door: frist.door)"), catalog)
+    assert d.code == "unknown-input-source" and "first, second" in (d.hint or "")
+
+
 def test_shared_data_binds_by_type_whatever_its_name_and_an_optional_input_may_stay_unbound(
         catalog: Catalog) -> None:
     text = "mission M {{\n    needs ranger: Ranger\n    {shared}\n    DetectDoor\n}}\n"

@@ -40,6 +40,7 @@ class Hosts:
         self.silent: set[str] = set()  # hosts whose Creator takes calls and answers none (gone as they came)
         self.slow: set[str] = set()  # hosts whose Creator takes 0.2 s over a start (longer than it is given)
         self.retired: set[str] = set()  # hosts that retired their instances: other calls than a start are `lost`
+        self.killed: dict[str, str] = {}  # hosts whose worker was killed: every call after a start fails so
         self.terms: list[tuple[str, float, int]] = []  # (op, term, generation) of every call
         self.queryables = {host: self.serve(host) for host in serving}
 
@@ -65,7 +66,8 @@ class Hosts:
             self.retired.discard(host)  # a start: it runs one again
             replies = [ComponentReply(status="running" if c.op == "step" else "",
                                       error="Wait failed to start here: no worker" if host in self.failing
-                                      and c.op == "start" else "") for c in calls]
+                                      and c.op == "start" else self.killed.get(host, "") if c.op != "start"
+                                      else "") for c in calls]
             return ComponentBatchReply(replies) if isinstance(msg, ComponentBatch) else replies[0]
         return serve
 
@@ -339,3 +341,19 @@ def test_a_batch_that_carries_the_step_brings_the_new_time_or_stops_the_cycle(st
         with pytest.raises(ComponentError, match="a did not step the simulation: ValueError: no simulation"):
             comp.step(0.1)
         assert isinstance(router.sim_error, ComponentError), "the mission loop stops the mission"
+
+
+def test_a_killed_workers_reason_is_said_by_its_step_alone() -> None:
+    """Users audit 12, D6: a stuck component's reason was logged twice on a cluster, by its failed step and again
+    by its `terminate`, which the dead process's host answered with the same words."""
+    hosts = Hosts(LocalBus(), ["a"], ["a"])
+    comp, _ = movable(hosts)
+    comp.start()
+    hosts.killed["a"] = "component process of M/Wait did not answer within 0.8 s (killed)"
+    with pytest.raises(ComponentError, match="did not answer within 0.8 s"):
+        comp.step(0.1)
+    comp.terminate(Status.FAILURE)  # said already: not raised again
+    assert hosts.calls[-1] == ("a", "terminate")
+    hosts.killed["a"] = "component process of M/Wait died (exit code -9)"  # something new is said
+    with pytest.raises(ComponentError, match="exit code -9"):
+        comp.terminate(Status.FAILURE)

@@ -107,3 +107,17 @@ def test_carrier_index_agrees_with_a_scan_of_the_magazines() -> None:
     assert w.carrier(w.rangers[2].magazine[0]) == w.rangers[2].id
     again = dataclasses.replace(w, rangers=w.rangers[:1])  # a new record: its own index, not the old one's
     assert again.carrier(w.rangers[2].magazine[0]) is None
+
+
+def test_the_legend_names_the_teams_own_robot_types() -> None:
+    """Users audit 12, D10: a Rover and Drone team's picture said "Ranger path" and "Scout flight"."""
+    w = parse_world(world(Building(1, 4)), "worlds/b.yaml")
+    types = {**{r.id: "Rover" for r in w.rangers}, **dict.fromkeys(w.scout_ids, "Drone")}
+
+    def labels(fig: Figure) -> list[str]:
+        return [t.get_text() for t in fig.legends[0].get_texts()]
+
+    own = labels(figure(w, crowded(w), types=types))
+    assert "Rover path (start ○)" in own and "Drone flight" in own and "Drone rolling, placed" in own
+    assert not any("Ranger" in label or "Scout" in label for label in own), own
+    assert "Ranger path (start ○)" in labels(figure(w, crowded(w)))  # no types known (a replay): the bodies' names

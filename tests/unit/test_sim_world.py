@@ -97,12 +97,28 @@ def test_a_robot_of_a_teams_own_type_missing_from_the_world_is_named_at_load(cat
         host, robots=(*host.robots, crawler)), *cluster.hosts[2:]))
     world = load_world(ROOT / "worlds" / "corridor.yaml")
     problems = [f"{p.key}: {p.message}" for p in check_hosts(world, own)]
-    assert problems == ["rangers: no robot 'bb8' (a Crawler), which hosts.yaml configures: a robot of any type takes"
+    assert problems == ["rangers or scouts: no robot 'bb8' (a Crawler), which hosts.yaml configures: a robot of any"
+                        " type takes"
                         " a body here, a Ranger's under rangers (0.3 m; only a Ranger carries Scouts) or a Scout's"
                         " under scouts (0.08 m)"]
     data = yaml.safe_load((ROOT / "worlds" / "corridor.yaml").read_text())
     data.setdefault("scouts", []).append({"id": "bb8", "at": list(world.rooms[0].center), "heading": 0})
     assert check_hosts(parse_world(data, "w.yaml"), own) == []
+
+
+def test_a_missing_carried_robot_or_scout_is_reported_under_scouts(catalog: Catalog) -> None:
+    """Users audit 12, D10: a missing Scout, or a missing robot of the team's own type with a carrier, was filed
+    under `rangers`; their bodies go under `scouts` (or a magazine)."""
+    import dataclasses
+
+    cluster = load_hosts(ROOT / "hosts.yaml", catalog)
+    data = yaml.safe_load((ROOT / "worlds" / "corridor.yaml").read_text())
+    data["rangers"][0]["magazine"] = [s for s in data["rangers"][0]["magazine"] if s != "scout6"]
+    assert [p.key for p in check_hosts(parse_world(data, "w.yaml"), cluster)] == ["scouts"]
+    renamed = tuple(dataclasses.replace(h, robots=tuple(dataclasses.replace(r, type="Drone") if r.id == "scout6"
+                                                         else r for r in h.robots)) for h in cluster.hosts)
+    assert [p.key for p in check_hosts(parse_world(data, "w.yaml"), dataclasses.replace(cluster, hosts=renamed))] \
+        == ["scouts"]
 
 # ---------------------------------------------------------------- geometry and the light map
 
