@@ -5,7 +5,7 @@ from __future__ import annotations
 import codecs
 import os
 import stat
-from collections.abc import Mapping
+from collections.abc import Collection, Mapping
 from pathlib import Path
 
 from dsl.checker import Program
@@ -139,18 +139,23 @@ def _same_file(program: Program, target: Path, on_disk: bool = True,
         alias = (aliases or {}).get(str(target))
         if alias is not None and alias in program.sources:
             return alias
-        plain = os.path.normpath(target)
-        return next((name for name in program.sources if os.path.normpath(name) == plain), None)
+        return _named(program.sources, str(target))
     real = target.resolve()
     return next((name for name in program.sources if Path(name).resolve() == real), None)
 
 
+def _named(names: Collection[str], key: str) -> str | None:
+    """The one of `names` that is `key` as a name (`normpath`: `sub/../a.mission` is `a.mission`), or None."""
+    if key in names:
+        return key
+    plain = os.path.normpath(key)
+    return next((name for name in names if os.path.normpath(name) == plain), None)
+
+
 def _sent(sent: Mapping[str, str], key: str, report: Reporter, at: Span) -> str | None:
     """An imported file's text from those a client sent with the mission, or a located error."""
-    text = sent.get(key)
-    if text is None:
-        plain = os.path.normpath(key)
-        text = next((t for name, t in sent.items() if os.path.normpath(name) == plain), None)
+    name = _named(sent, key)
+    text = None if name is None else sent[name]
     if text is None:
         report.error("io", f"cannot read imported file {key}: it was not sent with the mission", at,
                      "missionctl run sends the files a mission imports, read relative to the importing file; "

@@ -16,7 +16,7 @@ import math
 import re
 from typing import Any
 
-from components.behaviors.scan import ScanMemo, corridor, expected, wall_across, wrap
+from components.behaviors.scan import SAME_LINE, ScanMemo, corridor, expected, wall_across, wrap
 from drd.hw.interfaces import Scan
 from drd.runtime.component import Component, Status
 
@@ -97,10 +97,6 @@ def find_gaps(scan: Any, min_width: float, expect: tuple[float | None, float | N
     return out
 
 
-#: Turned more than this (rad) from the heading its expected wall distances were taken at, they are another view's.
-TURNED = 0.35
-
-
 class DetectDoor(Component):
     """Succeeds with output `door` (odometry coordinates) and event DoorDetected on a new open door."""
 
@@ -128,13 +124,13 @@ class DetectDoor(Component):
         return odo() if odo is not None else None
 
     def _expected(self, scan: Scan, pose: tuple[float, float, float] | None) -> tuple[float | None, float | None]:
-        """The wall distances to expect next, started afresh whenever the robot has turned TURNED from the heading
+        """The wall distances to expect next, started afresh whenever the robot has turned SAME_LINE from the heading
         they were started at (FollowCorridor turning to the corridor's line, or around): fits taken from across the
         corridor are of other things (a room's wall through a door locked the expectation at 1.68 m for a wall at
         1.25 m, and the next door went unseen), and after a turn around left and right have swapped. By heading,
         not by turn rate: a rate per step depends on how often it is stepped (on a cluster a door was missed)."""
         heading = pose[2] if pose is not None else None
-        if heading is not None and (self.heading is None or abs(wrap(heading - self.heading)) > TURNED):
+        if heading is not None and (self.heading is None or abs(wrap(heading - self.heading)) > SAME_LINE):
             self.heading, self.expect = heading, (None, None)
         return expected(corridor(scan, self.expect, memo=self.memo), self.expect)
 

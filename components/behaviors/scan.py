@@ -171,7 +171,8 @@ def _split(pts: list[tuple[float, float]], tolerance: float, least: int, out: li
 
 
 #: Walls more than SAME_LINE radians off the line they are expected on are something else (a person by a doorway, a
-#: room's wall through a door).
+#: room's wall through a door); a robot turned more than this from where its expected walls were taken sees another
+#: view (DetectDoor starts them afresh).
 SAME_LINE = 0.35
 
 
