@@ -203,6 +203,8 @@ class Wall:
     distance: float
     angle: float
     inliers: int
+    span: float = 0.0
+    """How far ahead its inliers reach from the rearmost to the foremost (m, along the robot's heading)."""
 
 
 class ScanMemo:
@@ -347,25 +349,37 @@ def _refine(xs: Floats, ys: Floats, first: Mask, side: int) -> Wall | None:
         m = sum((dxs * (iy - my)).tolist()) / sxx
         c = my - m * mx
     a = math.atan(m)
-    return Wall(c * math.cos(a), side * a, n)
+    return Wall(c * math.cos(a), side * a, n, float(ix.max() - ix.min()))
 
 
 def strongest_wall(scan: Scan, side: int, memo: ScanMemo | None = None) -> Wall | None:
-    """The wall on one side (+1 left, -1 right) fitted with the most inliers, over every starting distance that
-    enough beams agree on (one per group within SPREAD): with nothing known yet of where the walls are, the long
-    wall of a corridor rather than the nearest thing abeam (a person by a doorway, a door's jamb)."""
+    """The wall on one side (+1 left, -1 right) with nothing known yet of where the walls are: of the fits over every
+    starting distance that enough beams agree on (one per group within SPREAD), the one with the most inliers (the
+    long wall of a corridor rather than the nearest thing abeam: a person by a doorway, a door's jamb), or a nearer
+    one on its line with at least NEAR_SHARE of its inliers over NEAR_SPAN: a corridor wall cut by doors, not the room
+    wall beyond them that the doors show at length (worlds audit 13, D7: the Ranger steered into a hall)."""
     data = _scratch(scan, memo)
     support = _kept(data, ("side", side), lambda: _side(scan, side, data))[2]
-    best: Wall | None = None
+    fits: list[Wall] = []
     start = -math.inf
     for d in support:  # sorted
         if d - start < SPREAD:
             continue
         start = d
         wall = fit_wall(scan, side, d, memo)
-        if wall is not None and (best is None or wall.inliers > best.inliers):
-            best = wall
-    return best
+        if wall is not None:
+            fits.append(wall)
+    if not fits:
+        return None
+    best = max(fits, key=lambda w: w.inliers)
+    nearer = [w for w in fits if w.distance < best.distance and w.inliers >= NEAR_SHARE * best.inliers
+              and w.span >= NEAR_SPAN and line_gap(w.angle, best.angle) <= SAME_LINE]
+    return min(nearer, key=lambda w: w.distance) if nearer else best
+
+
+#: `strongest_wall`: a nearer wall on the strongest one's line is the corridor's with this share of its inliers, and
+#: reaching this far along it (m): a corridor wall cut by doors does, a bench or a person beside the robot does not.
+NEAR_SHARE, NEAR_SPAN = 1 / 3, 1.5
 
 
 def corridor(scan: Scan, expect: tuple[float | None, float | None] = (None, None), jump: float = 0.4,

@@ -69,3 +69,56 @@ def test_a_line_is_the_same_both_ways() -> None:
     assert math.isclose(line_gap(0.1, math.pi - 0.1), 0.2)
     assert math.isclose(line_gap(0.0, math.pi / 2), math.pi / 2)
     assert math.isclose(line_gap(2 * math.pi + 0.3, 0.0), 0.3)  # odometry headings are not wrapped
+
+
+HALL = """
+name: hall
+light: {ambient: 0.9}
+walls:
+  - {from: [0, 1.25], to: [24, 1.25]}
+  - {from: [0, -1.25], to: [24, -1.25]}
+  - {from: [0, -1.25], to: [0, 1.25]}
+  - {from: [24, -1.25], to: [24, 1.25]}
+rooms:
+  - {id: hall, rect: [4, 1.25, 16, 5.25], light: 0.6}
+doors:
+  - {id: a, at: [6, 1.25], width: 1.0}
+  - {id: b, at: [7.4, 1.25], width: 1.0}
+  - {id: c, at: [8.8, 1.25], width: 1.0}
+rangers:
+  - {id: ranger1, at: [1, 0], heading: 0, magazine: [scout1, scout2, scout3, scout4, scout5, scout6]}
+"""
+
+HUNT = """
+mission DoorHunt {
+    needs ranger: Ranger
+    shared found: DoorLog
+    start -> Seek
+    Seek -> Seek
+    Seek -> done on error
+}
+behavior Seek {
+    parallel until DetectDoor {
+        FollowCorridor(speed: 0.5)
+        AvoidObstacles(margin: 0.3)
+        DetectDoor(min_width: 0.7)
+    }
+}
+"""
+
+
+def test_doors_close_together_into_one_hall_are_each_found_and_the_ranger_stays_in_the_corridor(
+        catalog: Catalog) -> None:
+    """Worlds audit 13, D7: three doors 1.4 m apart into one hall. Restarted after the second door, FollowCorridor
+    took the hall's far wall, which the doors show at length, for the corridor's left wall, steered into the doorway
+    and sat blocked past the third door, which went unseen (2 of 3 found)."""
+    import yaml
+
+    from drd.hosts import load_hosts
+
+    world = parse_world(yaml.safe_load(HALL), "hall.yaml")
+    chart = compile_text(HUNT, catalog, "hunt.mission").statechart
+    assert chart is not None
+    [report] = run_many([Mission(chart)], load_hosts(ROOT / "hosts.yaml", catalog), world, catalog, until=120.0)
+    assert sorted(round(d["x"], 1) for d in report.doors) == [6.0, 7.4, 8.8]
+    assert all(abs(y) < 0.35 for _t, x, y in report.tracks["ranger1"] if x < 22), "it kept to the corridor"

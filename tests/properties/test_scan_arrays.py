@@ -58,7 +58,7 @@ def plain_fit(scan: Scan, side: int, expect: float | None) -> Wall | None:
         m = sum([dx * (y - my) for dx, y in zip(dxs, iy, strict=True)]) / sxx
         c = my - m * mx
     a = math.atan(m)
-    return Wall(c * math.cos(a), side * a, n)
+    return Wall(c * math.cos(a), side * a, n, max(ix) - min(ix))
 
 
 def plain_ahead(scan: Scan) -> list[tuple[float, float, float]]:
