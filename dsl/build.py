@@ -373,6 +373,16 @@ class Builder:
             if len(hits) > 1:
                 self._ambiguous(name, typ, hits, span)
                 return None
+        # none of the preferred robots is held: the other robot with such a part that the nearest ancestor holds
+        # (a team's own `Crawler` under a standard behavior whose manifest prefers `of: [Ranger, Scout]`), rather
+        # than asking the manager for another robot's (users audit 15, D1: FollowCorridor drove the Hauler on
+        # another host); two held by that ancestor are ambiguous
+        others = _distinct([h for h in held if h.type not in arcs and self.catalog.part_of(h.type, typ)])
+        nearest = [h for h in others if h.state == others[0].state]
+        if len(nearest) == 1:
+            return nearest[0].state, nearest[0].name, self.catalog.part_of(nearest[0].type, typ)
+        if len(nearest) > 1:
+            self._ambiguous(name, typ, nearest, span)
         return None
 
     def _ambiguous(self, name: str, typ: str, hits: list[_Held], span: Span) -> None:

@@ -1,0 +1,51 @@
+"""A standard behavior under a robot of the team's own type (users audit 15, D1): its manifest prefers the example
+robots (`drive of [Ranger, Scout]`), and a held `Crawler`, listed nowhere, did not serve it: the behavior asked the
+manager for a drive of its own and drove the Hauler on another host. When no preferred robot is held, the other
+robot with such a part that the nearest ancestor holds serves it (dsl.build, pure)."""
+
+from __future__ import annotations
+
+import dataclasses
+
+from drd.manifests import parse_manifest
+from dsl import compile_text
+from dsl.catalog import Catalog, ComponentType
+
+
+def arc(name: str, parts: dict[str, str]) -> ComponentType:
+    t, problems = parse_manifest({"name": name, "kind": "arc", "description": f"A {name}.", "extends": ["Robot"],
+                                  "parts": parts}, f"mine/{name}/manifest.yaml")
+    assert t is not None and problems == [], problems
+    return t
+
+
+def mine(catalog: Catalog) -> Catalog:
+    own = [arc("Crawler", {"drive": "Drive", "ranges": "RangeSensor", "camera": "Camera"}),
+           arc("Probe", {"drive": "Drive", "camera": "Camera"})]
+    return dataclasses.replace(catalog, components={**catalog.components, **{t.name: t for t in own}})
+
+
+def bound(text: str, catalog: Catalog, leaf: str) -> dict[str, tuple[str, str, str | None] | None]:
+    r = compile_text(text, mine(catalog), "mine.mission")
+    assert r.ok and r.statechart is not None, [d.message for d in r.diagnostics]
+    return {n.name: n.bound_to for n in r.statechart.states[leaf].needs}
+
+
+def test_a_held_robot_of_the_teams_own_type_serves_a_standard_behavior(catalog: Catalog) -> None:
+    text = "mission Sweep {\n    needs crawler: Crawler\n    FollowCorridor\n}\n"
+    assert bound(text, catalog, "Sweep/FollowCorridor") == {"drive": ("Sweep", "crawler", "drive"),
+                                                          "ranges": ("Sweep", "crawler", "ranges")}
+
+
+def test_the_nearest_holder_serves_and_a_preferred_robot_still_comes_first(catalog: Catalog) -> None:
+    nearest = ("mission Deploy {\n    needs crawler: Crawler\n    Look\n}\n"
+               "behavior Look {\n    needs probe: Probe\n    Observe\n}\n")
+    assert bound(nearest, catalog, "Deploy/Look/Observe") == {"camera": ("Deploy/Look", "probe", "camera")}
+    preferred = "mission Mixed {\n    needs crawler: Crawler\n    needs ranger: Ranger\n    Observe\n}\n"
+    assert bound(preferred, catalog, "Mixed/Observe") == {"camera": ("Mixed", "ranger", "camera")}
+
+
+def test_two_such_robots_held_together_are_ambiguous(catalog: Catalog) -> None:
+    text = "mission Two {\n    needs crawler: Crawler\n    needs probe: Probe\n    Observe\n}\n"
+    r = compile_text(text, mine(catalog), "two.mission")
+    assert [d.code for d in r.diagnostics if d.severity.value == "error"] == ["ambiguous-binding"]
