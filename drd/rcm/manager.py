@@ -181,9 +181,12 @@ class ResourceManager:
         affected = {h for u in touched for h in self._queue.claimants(u)}
         freed: set[str] = set()
         for holder in sorted(lost):
-            needs = self._holds[holder].names()
+            hold = self._holds[holder]
+            needs = hold.names()
+            cause = sorted({u for u in hold.quantities() if u in units} | {c.id for c in hold.chosen.values()
+                                                                           if c.id in aggs})
             released = self._end_hold(holder)
-            out.append(Released(holder, released, reason, needs))
+            out.append(Released(holder, released, reason, needs, tuple(cause)))
             freed.update(released)
         for cid in sorted(aggs | units):
             reg.remove(cid)

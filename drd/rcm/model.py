@@ -182,6 +182,8 @@ class Released:
     units: tuple[str, ...]
     reason: ReleaseReason
     needs: tuple[str, ...] = ()
+    #: The resources whose loss ended it (a host or a resource lost), of those it held: the rest went with them.
+    lost: tuple[str, ...] = ()
 
 
 @dataclass(frozen=True, slots=True)

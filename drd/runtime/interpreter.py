@@ -1203,7 +1203,7 @@ class Interpreter:
                 mine = [b.need for b in n.bindings.values() if b.holder == qualified]
                 if mine:
                     self.resources.unbind(n, f"{node.path} lost its grant ({reason})", mine)
-        ended = self.resources.lost(node, d.units, reason, d.needs)
+        ended = self.resources.lost(node, d.units, reason, d.needs, d.lost)
         if self.listeners:
             self._notify(rec.Released(self.clock.now(), node.path, ended, reason))
         if reason in ("exit", "release") or node.closing or node.reserved_by:

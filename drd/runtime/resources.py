@@ -156,16 +156,18 @@ class ResourceClient:
         for need, rid in node.grant.items():
             node.scope[need] = self.pool.view(rid)
 
-    def lost(self, node: Node, units: Iterable[str], reason: str, needs: Iterable[str] = ()) -> tuple[str, ...]:
+    def lost(self, node: Node, units: Iterable[str], reason: str, needs: Iterable[str] = (),
+             cause: Collection[str] = ()) -> tuple[str, ...]:
         """Units left a holder (revoked, released, lost): close their gates and forget the needs given back whole
         (`needs`, or every need once nothing is left); returns the resource ids that ended (those needs'
-        resources, then the units), as the `released` record lists them."""
+        resources, those in `cause` first: the lost robot before what went with it; then the units), as the
+        `released` record lists them."""
         units = tuple(units)
         gone = set(units)
         grant = node.grant or {}
         left = [u for u in node.units if u not in gone]
         names = list(grant) if not left else [n for n in needs if n in grant]
-        ids = [grant.pop(n) for n in names]
+        ids = sorted((grant.pop(n) for n in names), key=lambda r: r not in cause)  # stable: grant order after
         for n in names:
             node.scope.pop(n, None)
         holder, now = self.holder(node), self.now()

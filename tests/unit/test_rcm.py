@@ -334,7 +334,8 @@ def test_host_loss_releases_its_holders_and_rejects_waiters_that_cannot_be_met()
     rm.request(Request("AnyRanger", 2, (NeedRequest("ranger", "Ranger"),)), 0.0)
     rm.request(Request("SecondRanger", 2, (NeedRequest("ranger", "Ranger"),)), 0.0)
     decisions = rm.remove_host("r2", 1.0)
-    assert decisions[0] == Released("OnR2", ("r2.drive", "r2.cam", "r2.launcher"), "host lost", ("ranger",))
+    assert decisions[0] == Released("OnR2", ("r2.drive", "r2.cam", "r2.launcher"), "host lost", ("ranger",),
+                                    ("r2", "r2.cam", "r2.drive", "r2.launcher"))
     assert Unsatisfiable("AlsoR2", "ranger", "no Ranger satisfies the constraint") in decisions
     assert rm.queue() == ("SecondRanger",)
     assert rm.snapshot()["aggregates"].keys() == {"r1"}
@@ -347,10 +348,23 @@ def test_a_lost_robot_fails_only_its_holder_and_the_next_waiter_gets_another() -
     rm.request(Request("WithS2", 1, scout), 0.0)
     rm.request(Request("Third", 1, scout), 0.0)
     decisions = rm.remove(["s1", "s1.wheels", "not-there"], 1.0)
-    assert decisions[0] == Released("WithS1", ("s1.wheels",), "resource lost", ("scout",))
+    assert decisions[0] == Released("WithS1", ("s1.wheels",), "resource lost", ("scout",), ("s1", "s1.wheels"))
     assert "s1" not in rm.snapshot()["aggregates"] and rm.holders("s2.wheels") == ("WithS2",)
     assert rm.queue() == ("Third",)  # s2 is still held; Third waits for it, not for the lost s1
     assert granted(rm.release("WithS2", 2.0))["Third"].assignment == {"scout": "s2"}
+
+
+def test_a_lost_host_names_what_it_took_not_what_went_with_it() -> None:
+    """Users audit 15, D2: a behavior holding a robot on each of two hosts failed "lost crawler_a (host lost)" when
+    the other host, the Hauler's, was killed: the reason named the first resource of the grant."""
+    rm = fleet()
+    both = (NeedRequest("first", "Ranger", where=lambda c, _: c.id == "r1"),
+            NeedRequest("second", "Ranger", where=lambda c, _: c.id == "r2"))
+    rm.request(Request("Escort", 1, both), 0.0)
+    [released] = [d for d in rm.remove_host("r2", 1.0) if isinstance(d, Released)]
+    assert released.holder == "Escort" and set(released.units) == {"r1.drive", "r1.cam", "r1.launcher", "r2.drive",
+                                                                  "r2.cam", "r2.launcher"}
+    assert released.lost == ("r2", "r2.cam", "r2.drive", "r2.launcher")
 
 
 def test_a_new_unit_serves_waiters_and_epochs_survive_hot_plug() -> None:

@@ -227,6 +227,23 @@ def test_lost_host_fails_only_its_instances(catalog: Catalog) -> None:
     assert released and released[0].reason == "host lost"
 
 
+def test_a_behavior_holding_robots_on_two_hosts_fails_naming_the_one_lost(catalog: Catalog) -> None:
+    """Users audit 15, D2: "lost crawler_a (host lost)" when the Hauler's host went: the reason and the `released`
+    record named the grant's first robot, not the one on the lost host."""
+    from tests.runtime_support import Forever
+
+    text = ('mission M {\n needs a: Ranger where a.id == "ranger1"\n needs b: Ranger where b.id == "ranger2"\n'
+            ' Wait(duration: 100s)\n}')
+    h = Harness(compiled(text, catalog), {"Wait": Forever}, ranger_world(2, 1))
+    h.interp.start()
+    h.clock.advance(1.0)
+    h.interp.step()
+    h.interp.remove_host("ranger2")
+    [released] = [r for r in h.of(rec.Released) if r.path == "M"]
+    assert released.resources[0] == "ranger2" and released.reason == "host lost"
+    assert h.interp.outcome == "failure" and h.interp.reason == "lost ranger2 (host lost)"
+
+
 def test_new_scout_grows_a_running_multiplicity(catalog: Catalog) -> None:
     from tests.runtime_support import Forever
 
