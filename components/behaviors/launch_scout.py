@@ -4,7 +4,8 @@ The Scout is the `scout` resource the runtime bound (it fails when that one is n
 launcher throws only a Scout its behavior holds); without a binding (a test rig), the first of `loaded()`.
 The distance is `min(max_range, launcher.max_range, front - CLEARANCE)` where `front` is the front range beam
 (the room's far wall seen through the doorway): the Scout lands well inside the room, short of its back wall.
-Clearing the Scout's `carrier` in the Static Dependency Database is the runtime's job (on ScoutLaunched).
+The Scout's property naming its carrier (`carrier_property`, `carrier` by default) is cleared in the Static
+Dependency Database, so a `where` on it sees the Scout no longer aboard.
 Without a range sensor (the manifest gives this component the launcher only), the distance is the cap alone.
 """
 
@@ -44,8 +45,9 @@ class LaunchScout(Component):
             return Status.FAILURE
         landing = launcher.launch(scout, 0.0, distance)
         self.ctx.outputs["scout"] = scout
+        aboard = str(self.ctx.params["carrier_property"])
         try:  # it left the magazine: the Static Dependency Database must say so
-            self.update_dependency(str(scout), "carrier", "")
+            self.update_dependency(str(scout), aboard, "")
         except LookupError:
             pass  # run outside an executive (a test rig): nobody keeps the database
         self.ctx.outputs["landing"] = (landing.x, landing.y)

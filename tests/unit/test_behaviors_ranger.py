@@ -258,3 +258,19 @@ def test_align_ranger_drives_back_to_where_its_door_was_seen():
     p = rig.sim.pose("ranger1")
     assert math.hypot(p.x - door["from"]["x"], p.y - door["from"]["y"]) < 0.35, p
     assert abs(wrap(math.atan2(door["y"] - p.y, door["x"] - p.x) - p.heading)) < 0.1
+
+
+def test_launch_scout_clears_the_property_that_names_the_carrier():
+    """Users audit 15, D4: only a property named `carrier` was cleared at a launch; a team's carried robot that says
+    `mothership` stayed aboard for every `where`. `carrier_property` names it."""
+    import dataclasses
+
+    for params, key in (({}, "carrier"), ({"carrier_property": "mothership"}, "mothership")):
+        rig = Rig()
+        launch = rig.start(LaunchScout, needs={"launcher": ("ranger1", "launcher")}, robots={"scout": "scout1"},
+                           params=params)
+        updates: list[tuple[str, str, object]] = []
+        launch.ctx.services = dataclasses.replace(launch.ctx.services, dependencies=lambda r, k, v, out=updates:
+                                                  out.append((r, k, v)))
+        assert rig.run(launch, until=1.0) is Status.SUCCESS
+        assert updates == [("scout1", key, "")]
