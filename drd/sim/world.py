@@ -324,7 +324,7 @@ class _Reader(ConfigReader):
 
     def ranger(self, data: dict[Any, Any], key: str, blocking: geometry.SegmentIndex) -> RangerSpawn | None:
         self.keys(data, key, _RANGER, required=("id", "at"))
-        pose = self.pose(data, key, blocking, RANGER_RADIUS, "a Ranger")
+        pose = self.pose(data, key, blocking, RANGER_RADIUS, "a body under rangers")
         magazine: list[str] = []
         value = data.get("magazine", [])
         if not isinstance(value, list):
@@ -338,7 +338,7 @@ class _Reader(ConfigReader):
 
     def scout(self, data: dict[Any, Any], key: str, blocking: geometry.SegmentIndex) -> ScoutSpawn | None:
         self.keys(data, key, _SCOUT, required=("id", "at"))
-        pose = self.pose(data, key, blocking, SCOUT_RADIUS, "a Scout")
+        pose = self.pose(data, key, blocking, SCOUT_RADIUS, "a body under scouts")
         return ScoutSpawn(*pose) if pose else None
 
     def pose(self, data: dict[Any, Any], key: str, blocking: geometry.SegmentIndex, radius: float,

@@ -240,7 +240,7 @@ BAD: list[tuple[str, Callable[[dict[str, Any]], object], list[str]]] = [
     ("empty path", edit("intruders/0/path", []), ["intruders[0].path: expected at least one waypoint"]),
     ("heading in words", edit("rangers/0/heading", "east"), ["rangers[0].heading: expected a number, got 'east'"]),
     ("ranger in a wall", edit("rangers/0/at", [1, 0.8]),
-     ["rangers[0].at: 0.2 m from a wall or closed door; a Ranger needs 0.3 m"]),
+     ["rangers[0].at: 0.2 m from a wall or closed door; a body under rangers needs 0.3 m"]),
     ("scout in two places", edit("scouts/0/id", "s1"),
      ["scouts[0].id: 's1' is already the id of rangers[0].magazine[0]"]),
     ("magazine not a list", edit("rangers/0/magazine", "s1"),
