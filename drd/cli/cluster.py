@@ -552,11 +552,31 @@ def located(rendered: str) -> dict[str, Any]:
             "line": int(head["line"]), "column": int(head["column"]), "hint": hint, "notes": notes}
 
 
-def _refused(file: str, diagnostics: Sequence[str], as_json: bool) -> typing.NoReturn:
+def _structured(request: Any, diagnostics: Sequence[str]) -> list[dict[str, Any]]:
+    """The controller's diagnostics as `validate --json` gives them (`Diagnostic.to_dict`: with `code`, `end_line`,
+    `end_column`): this client's own compile of what it sent, when it renders the very same text (the same
+    components here as there); else what the rendered text says (`located`)."""
+    from drd.daemon.missions import render
+    from drd.errors import DrdError
+    from drd.manifests import load_catalog
+    from dsl import compile_text
+
+    try:
+        mine = compile_text(request.source, load_catalog(), request.file or "<mission>", imports=request.imports or {},
+                            aliases=request.aliases)
+    except DrdError:  # this client's components do not load: the controller's words alone
+        return [located(text) for text in diagnostics]
+    if render(list(mine.diagnostics), dict(mine.sources)) == list(diagnostics):
+        return [d.to_dict() for d in mine.diagnostics]
+    return [located(text) for text in diagnostics]
+
+
+def _refused(request: Any, diagnostics: Sequence[str], as_json: bool) -> typing.NoReturn:
     """The controller found the mission invalid: its diagnostics as it rendered them, or under `--json` one JSON
     error with them located, as `validate --json` and `dry-run --json` give it; exit 2."""
+    file = request.file
     if as_json:
-        found = [located(text) for text in diagnostics]
+        found = _structured(request, diagnostics)
         first = next((d for d in found if d["severity"] == "error"), found[0] if found else None)
         where = f"{first['file']}:{first['line']}:{first['column']}: " if first and "file" in first else ""
         fail(f"{file}: invalid: {where}{first['message'] if first else 'refused'}", INVALID, diagnostics=found)
@@ -599,7 +619,7 @@ def _run_and_follow(client: ClusterClient, watch: _RecordWatch, request: Any, wa
             if not isinstance(answer, RunReply):
                 fail(f"the controller answered a {type(answer).TYPE}")
             if not answer.ok:
-                _refused(request.file, answer.diagnostics, as_json)
+                _refused(request, answer.diagnostics, as_json)
             reply = answer
             if detach:
                 if as_json:

@@ -60,6 +60,11 @@ def test_an_invalid_mission_is_refused_by_the_controller_with_a_located_error(cl
     assert r.returncode == 2, r.stderr
     assert "bad.mission:2:" in r.stderr and "sped" in r.stderr  # file:line:col, the message, the caret
     assert "not run" in r.stderr
+    # under --json, the diagnostics `validate --json` gives (users audit 15, D6: no code, end_line, end_column)
+    as_json = missionctl(cluster, "run", str(bad), "--json")
+    [validated] = json.loads(missionctl(cluster, "validate", str(bad), "--json").stdout)
+    assert as_json.returncode == 2 and json.loads(as_json.stderr)["diagnostics"] == validated["diagnostics"]
+    assert {"code", "end_line", "end_column"} <= set(validated["diagnostics"][0])
 
 
 def test_a_valid_mission_too_large_to_send_is_refused_as_input_not_as_a_crash(cluster: DaemonCluster,
