@@ -48,13 +48,27 @@ class Compiled:
         return self.statechart
 
 
+#: The errors a file that could not be imported may explain: names it may have declared (behaviors, their events
+#: and types, their outputs), and what follows from not knowing them.
+FROM_IMPORTS = frozenset({"unknown-behavior", "unknown-state", "unknown-event", "unknown-type", "unknown-resource",
+                          "unknown-input-source", "missing-input", "ambiguous-input"})
+
+
+def _only_imports_missing(program: Program, report: Reporter) -> bool:
+    """Whether every error so far is an import that could not be read, located in a file that was parsed."""
+    return all(d.code in ("io", "import") and d.span.file in program.files
+               for d in report.diagnostics if d.severity is Severity.ERROR)
+
+
 def compile_program(program: Program, catalog: Catalog, report: Reporter) -> Statechart | None:
     """Check a parsed program and, if it has no errors and a mission, build its statechart."""
     from dsl.build import Builder
     from dsl.checker import Checker
 
-    if report.failed:  # syntax errors (or the budget spent): semantic checks would only echo them
-        return None
+    if report.failed and not _only_imports_missing(program, report):
+        return None  # syntax errors (or the budget spent): semantic checks would only echo them
+    if report.failed:  # the rest is checked, all but what the missing files may have declared (users audit 15, D7)
+        report.quiet = FROM_IMPORTS
     try:
         checked = Checker(program, catalog, report).run()
         mission = program.mission

@@ -173,6 +173,8 @@ class Reporter:
     budget: float | None = None
     limits: Limits = DEFAULT_LIMITS
     deadline: float = field(init=False, default=float("inf"))
+    #: Error codes not reported (`dsl.compile_program`: what a file that could not be imported may have declared).
+    quiet: frozenset[str] = frozenset()
 
     def __post_init__(self) -> None:
         if self.budget is not None:
@@ -192,7 +194,8 @@ class Reporter:
 
     def error(self, code: str, message: str, span: Span, hint: str | None = None,
               notes: Iterable[tuple[str, Span]] = ()) -> None:
-        self.diagnostics.append(Diagnostic(code, message, span, hint, tuple(notes)))
+        if code not in self.quiet:
+            self.diagnostics.append(Diagnostic(code, message, span, hint, tuple(notes)))
 
     def warning(self, code: str, message: str, span: Span, hint: str | None = None) -> None:
         self.diagnostics.append(Diagnostic(code, message, span, hint, severity=Severity.WARNING))
