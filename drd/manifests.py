@@ -47,7 +47,7 @@ from dsl.catalog import (
     Scheduling,
     inherit,
 )
-from dsl.errors import did_you_mean
+from dsl.errors import did_you_mean, edit_distance
 
 MANIFEST = "manifest.yaml"
 #: Extra component folders, os.pathsep-separated; later folders override earlier ones.
@@ -101,7 +101,9 @@ def parse_manifest(data: object, source: str) -> tuple[ComponentType | None, lis
     if not isinstance(data, dict):
         c.fail("", f"expected a mapping of manifest keys, got {got(data)}")
         return None, c.problems
-    kind = c.choice(data["kind"], "kind", Kind) if "kind" in data else None
+    # a misspelt kind (`behaviour`) is reported, and the rest is checked as the kind it is closest to, so that every
+    # other problem of the file is reported with it (users audit 15, D8: its unknown types were not)
+    kind = c.choice(data["kind"], "kind", Kind) or _closest(data["kind"], Kind) if "kind" in data else None
     allowed = KEYS[kind] if kind else KEY_ORDER
     abstract = data.get("abstract") is True and kind in (Kind.RC, Kind.ARC)
     if abstract:
@@ -123,6 +125,13 @@ def parse_manifest(data: object, source: str) -> tuple[ComponentType | None, lis
         return None, c.problems
     _check_rules(c, kind, data, fields)
     return ComponentType(name=name, kind=kind, source=source, **fields), c.problems
+
+
+def _closest(value: object, enum: type[_E]) -> _E | None:
+    """The member of `enum` whose value `value` is a misspelling of: within two edits, as `did_you_mean` says."""
+    text = str(value).lower()
+    best = min(enum, key=lambda m: edit_distance(text, str(m.value)))
+    return best if edit_distance(text, str(best.value)) <= 2 else None
 
 
 def _check_rules(c: _Checker, kind: Kind, data: Mapping[str, Any], fields: Mapping[str, Any]) -> None:

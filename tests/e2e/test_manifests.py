@@ -236,6 +236,10 @@ CASES = [
     case("unknown-key", manifest(parmas={}), "parmas: unknown key (did you mean params?)"),
     case("key-of-another-kind", manifest(parts={}), "parts: does not apply to a behavior manifest"),
     case("kind-typo", manifest(kind="behaviour"), "kind: unknown kind 'behaviour' (did you mean behavior?)"),
+    # the rest of a misspelt kind's manifest is checked as that kind (users audit 15, D8: its unknown types were not)
+    case("kind-typo-and-types", manifest(kind="behaviour", params={"rpm": {"type": "flaot", "default": 3}}),
+         "kind: unknown kind 'behaviour' (did you mean behavior?)",
+         "params.rpm.type: unknown type 'flaot' (did you mean float?)"),
     case("kind-unknown", manifest(kind="robot"),
          "kind: unknown kind 'robot' (expected one of behavior, rc, arc, data)"),
     case("name-syntax", manifest(name="3d"), f"name: '3d' is not a name {NAME_RULE}"),
