@@ -41,6 +41,7 @@ import re
 import shutil
 import struct
 import threading
+import time
 import weakref
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
@@ -75,6 +76,9 @@ INTRUDER = "intruder/"
 FORMAT = "drd-run-1"
 #: Where `--foxglove` serves when given no address: loopback only.
 LIVE_DEFAULT = ("127.0.0.1", 8765)
+#: How long (s) the live view stays up after the run's last message when a viewer is subscribed: the server drops
+#: what it has not sent yet when it stops (a viewer missed `/drd/runs`, readers audit 16, D2).
+LINGER = 1.0
 
 
 class RecordingError(ConfigurationError):
@@ -173,7 +177,7 @@ class Recorder:
     """Writes one run into `path` (None: no file) and serves it live on `serve` (host, port; None: not served):
     `scene` and `watch` once, `record` for each trace record, `poses` each control cycle, `end` once."""
 
-    def __init__(self, path: Path | None, *, serve: tuple[str, int] | None = None) -> None:
+    def __init__(self, path: Path | None, *, serve: tuple[str, int] | None = None, robots: Sequence[str] = ()) -> None:
         import foxglove
         from foxglove.channels import FrameTransformsChannel, LogChannel, SceneUpdateChannel
         from foxglove.mcap import MCAPCompression, MCAPWriteOptions
@@ -203,12 +207,15 @@ class Recorder:
         # written into the file.
         self.channels: dict[str, Any] = {topic: self._json_channel(topic) for topic in JSON_SCHEMAS}
         self.lock = threading.Lock()
+        self.viewers = 0  # subscriptions of the live view's clients (`close` lets them have the last messages)
         self.tf = FrameTransformsChannel(TF, context=self.context)
         self.world = SceneUpdateChannel(WORLD, context=self.context)
         self.trails = SceneUpdateChannel(TRAILS, context=self.context)
         self.seen = SceneUpdateChannel(SEEN, context=self.context)
         self.log = LogChannel(LOG, context=self.context)
         self.scans: dict[str, Any] = {}
+        for robot in robots:  # `robots`: whose laser channels to make now, before the live view starts
+            self._scan_channel(robot)
         self.views: dict[str, ActiveView] = {}
         self.frames = _Frames()
         self.sensors = SensorTap(self)  # a dry-run's simulation reports its readings here (`watch`)
@@ -261,6 +268,13 @@ class Recorder:
                                            media_type="application/yaml", data=data))
         self.doors = {d.id: (d.a, d.b) for d in world.doors}
         self.frames.scouts = frozenset(world.scout_ids)
+        # where every robot starts, at 0, as the scene draws them (the first cycle's poses are at 0.1 s: `replay
+        # --at 0` showed no robot, readers audit 16, D8)
+        spawned = {r.id: (r.x, r.y, r.heading) for r in world.rangers}
+        spawned.update({s.id: (s.x, s.y, s.heading) for s in world.scouts})
+        start = self.frames.transforms(0.0, spawned, {sid: r.id for r in world.rangers for sid in r.magazine})
+        if start is not None:
+            self.tf.log(start, log_time=0)
         for robot in (*(r.id for r in world.rangers), *world.scout_ids):
             self._scan_channel(robot)
         self.update_world(0.0, [*_building(world), *_bodies(world)])
@@ -470,8 +484,11 @@ class Recorder:
         for view in self.views.values():
             if view.changed_at is not None:
                 self._active(view)
-        for run in sorted(runs, key=lambda r: _ended(r, at)):  # each at its mission's end (readers audit 13, D9)
-            self._channel(RUNS).log(json.dumps({"format": FORMAT, **run}, default=_default),
+        # each at its mission's end (readers audit 13, D9), with its place in the run's report (`order`: a replay
+        # lists them so, not by when they ended: readers audit 16, D3)
+        ordered = sorted(enumerate(runs), key=lambda item: _ended(item[1], at))
+        for i, run in ordered:
+            self._channel(RUNS).log(json.dumps({"format": FORMAT, **run, "order": i}, default=_default),
                                     log_time=_ns(_ended(run, at)))
         self.close()
 
@@ -482,6 +499,8 @@ class Recorder:
                 self._write(lambda w: w.close())
                 _OPEN.discard(self)
             if self.server is not None:
+                if self.viewers:  # the last messages (`/drd/runs`) are queued for the viewers: stopping drops them
+                    time.sleep(LINGER)
                 self.server.stop()
 
 
@@ -522,7 +541,11 @@ def _late_viewers(r: Recorder) -> Any:
     from foxglove.websocket import ChannelView, Client, ServerListener
 
     class LateViewers(ServerListener):
+        def on_unsubscribe(self, client: Client, channel: ChannelView) -> None:
+            r.viewers -= 1
+
         def on_subscribe(self, client: Client, channel: ChannelView) -> None:
+            r.viewers += 1
             scene = r.scene_now() if channel.topic == WORLD else None
             if scene is not None:
                 r.world.log(scene, log_time=_ns(r.now))
@@ -746,12 +769,12 @@ _WAITER = {"type": "object", "required": ["path", "since", "needs", "blocked_by"
     "blockers": {"type": "integer", "minimum": 0}}}
 
 #: The JSON channels: their schema's name and JSON schema (named, so a viewer lists `drd.Record`, not anonymous).
-_NUM, _STR = {"type": "number"}, {"type": "string"}
+_NUM, _STR, _INT = {"type": "number"}, {"type": "string"}, {"type": "integer"}
 JSON_SCHEMAS: dict[str, tuple[str, dict[str, Any]]] = {
     RECORDS: ("drd.Record", {"type": "object", "required": ["kind", "at", "path", "mission"], "properties": {
         "kind": _STR, "at": _NUM, "path": _STR, "mission": _STR}}),
     RUNS: ("drd.Run", {"type": "object", "required": ["format", "mission", "records", "sim_time"], "properties": {
-        "format": _STR, "mission": _STR, "records": _STR, "sim_time": _NUM, "wall_time": _NUM}}),
+        "format": _STR, "mission": _STR, "records": _STR, "sim_time": _NUM, "wall_time": _NUM, "order": _INT}}),
     ACTIVE: ("drd.Active", {"type": "object", "required": ["mission", "id", "at", "active", "holds", "waiting"],
                             "properties": {"mission": _STR, "id": _STR, "at": _NUM, "outcome": {
                                 "type": ["string", "null"]}, "active": {"type": "array", "items": {
@@ -878,10 +901,11 @@ def read(path: Path | str) -> Recording:
             try:
                 out.world = next((a.data for a in NonSeekingReader(fh).iter_attachments()
                                   if a.name == WORLD_ATTACHMENT), None)
-            except damaged:
+            except damaged:  # a damaged summary section (a name not UTF-8: readers audit 16, D4): no world
                 pass
     except (OSError, ValueError) + damaged as e:
         raise RecordingError(f"{path}: cannot read it as a drd recording: {_unreadable(path, e)}") from e
+    out.runs.sort(key=lambda run: int(run["order"]) if isinstance(run.get("order"), int) else 0)  # the report's
     if not out.records and not out.runs:
         raise RecordingError(f"{path}: no drd run in it (a drd recording has JSON messages on {RECORDS}: "
                              "`missionctl dry-run --record` or `run --record` writes one)")
@@ -899,7 +923,8 @@ def _damaged() -> tuple[type[BaseException], ...]:
     (lz4 raises RuntimeError on a bad checksum or a broken frame, zstandard its ZstdError)."""
     from mcap.exceptions import McapError
 
-    kinds: list[type[BaseException]] = [McapError, struct.error, EOFError, RuntimeError]
+    kinds: list[type[BaseException]] = [McapError, struct.error, EOFError, RuntimeError,
+                                        UnicodeDecodeError]  # a record's name or type no longer UTF-8
     try:
         from zstandard import ZstdError
     except ImportError:  # mcap reads zstd chunks only when it is installed

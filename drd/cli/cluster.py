@@ -504,7 +504,7 @@ def run(mission: Path = typer.Argument(..., help="The mission file.", show_defau
         params = parse_assignments(param)
     except ParamError as e:
         fail(str(e))
-    trace_out, recorder = _outputs(trace, record, foxglove, detach)
+    trace_out, recorder = _outputs(trace, record, foxglove, detach, _robot_ids(config) if foxglove else ())
     wait = max(timeout, 15.0)
     request = RunMission(source, str(mission), world, speed, until, seed, params or None, priority,
                          give_up_at=time.time() + wait - 0.5,  # the reply must still reach us after it
@@ -595,13 +595,26 @@ def _scouts_ended(report: DryRun, recorder: Recorder) -> None:
             scout.update(x=round(where[0], 2), y=round(where[1], 2))
 
 
-def _outputs(trace: Path | None, record: Path | None, foxglove: str | None,
-             detach: bool) -> tuple[IO[str] | None, Recorder | None]:
+def _robot_ids(config: Path) -> list[str]:
+    """The robots of the hosts file, when this client's components read it (else none: their lasers are then
+    advertised when first seen)."""
+    from drd.errors import DrdError
+    from drd.hosts import load_hosts
+    from drd.manifests import load_catalog
+
+    try:
+        return [r.id for r in load_hosts(config, load_catalog()).robots]
+    except (DrdError, OSError):
+        return []
+
+
+def _outputs(trace: Path | None, record: Path | None, foxglove: str | None, detach: bool,
+             robots: Sequence[str] = ()) -> tuple[IO[str] | None, Recorder | None]:
     """The `--trace` file and the recorder of `--record` and `--foxglove`, which need the records as they come."""
     if (trace is not None or record is not None or foxglove is not None) and detach:
         given = "--trace" if trace is not None else "--record" if record is not None else "--foxglove"
         fail(f"{given} needs the records as they come: it cannot be used with --detach")
-    return open_trace(trace), live_recorder(record, foxglove)
+    return open_trace(trace), live_recorder(record, foxglove, robots)
 
 
 def _run_and_follow(client: ClusterClient, watch: _RecordWatch, request: Any, wait: float,
@@ -1135,14 +1148,15 @@ def shown_property(value: Any) -> str:
     return "0" if text == "-0" else text
 
 
-def live_recorder(record: Path | None, foxglove: str | None) -> Recorder | None:
-    """The recorder of `--record FILE` and `--foxglove [HOST:PORT]` (None when neither is asked), or a clear exit."""
+def live_recorder(record: Path | None, foxglove: str | None, robots: Sequence[str] = ()) -> Recorder | None:
+    """The recorder of `--record FILE` and `--foxglove [HOST:PORT]` (None when neither is asked), or a clear exit;
+    `robots`: those whose laser the live view advertises from its start."""
     if record is None and foxglove is None:
         return None
     from drd.record import Recorder, RecordingError
 
     try:
-        recorder = Recorder(record, serve=None if foxglove is None else live_address(foxglove))
+        recorder = Recorder(record, serve=None if foxglove is None else live_address(foxglove), robots=robots)
     except RecordingError as e:
         fail(str(e))
     if recorder.port is not None:

@@ -59,7 +59,9 @@ def test_the_recording_is_plain_mcap_with_sim_time_and_foxglove_transforms(tmp_p
             elif channel.topic == "/drd/tf":
                 tf_times.append(message.log_time)
     assert records == trace  # every record, as the trace has it
-    assert len(tf_times) == 200 and tf_times == sorted(tf_times) and tf_times[-1] == 20_000_000_000
+    # every robot where it starts at 0 (readers audit 16, D8: `replay --at 0` showed none), then each cycle
+    assert len(tf_times) == 201 and tf_times == sorted(tf_times) and tf_times[0] == 0
+    assert tf_times[-1] == 20_000_000_000
 
 
 def test_a_file_that_is_not_a_recording_is_refused_clearly(tmp_path: Path) -> None:
@@ -92,6 +94,7 @@ def test_replay_at_shows_the_mission_and_every_robot_at_that_time(tmp_path: Path
         state: dict[str, object] = json.loads(done.stdout)
         return state
 
+    assert set(at("0")["robots"]) == {"ranger1", *(f"scout{i}" for i in range(1, 7))}  # readers audit 16, D8
     start, later = at("0.1"), at("10s")
     robots0, robots10 = start["robots"], later["robots"]
     assert isinstance(robots0, dict) and isinstance(robots10, dict)
@@ -134,13 +137,16 @@ def test_the_trace_written_back_keeps_the_order_of_several_missions(tmp_path: Pa
                                             "    First -> Second\n    Wait(duration: 3s) as Second\n}\n")
     (tmp_path / "late.mission").write_text("mission Late {\n    Wait(duration: 2s) as Only\n}\n")
     run = missionctl("dry-run", "early.mission", "late.mission", "--config", str(ROOT / "hosts.yaml"), "--record",
-                     "run.mcap", "--trace", "run.jsonl", cwd=tmp_path)
+                     "run.mcap", "--trace", "run.jsonl", "--json", cwd=tmp_path)
     assert run.returncode == 0, run.stderr[-2000:]
     missions = [json.loads(line)["mission"] for line in (tmp_path / "run.jsonl").read_text().splitlines()]
     assert missions != sorted(missions), "the missions' records interleave in the run's trace"
-    done = missionctl("replay", "run.mcap", "--trace", "again.jsonl", cwd=tmp_path)
+    done = missionctl("replay", "run.mcap", "--trace", "again.jsonl", "--json", cwd=tmp_path)
     assert done.returncode == 0, done.stderr[-2000:]
     assert (tmp_path / "again.jsonl").read_text() == (tmp_path / "run.jsonl").read_text()
+    # the reports in the order given, as the run printed them, though Late ended first (readers audit 16, D3)
+    assert [r["id"] for r in json.loads(done.stdout)] == [r["id"] for r in json.loads(run.stdout)] == \
+        ["Early-1", "Late-2"]
 
 
 def test_a_recording_cut_short_by_a_crash_replays_what_it_holds(tmp_path: Path) -> None:
@@ -166,3 +172,18 @@ def test_a_recording_cut_short_by_a_crash_replays_what_it_holds(tmp_path: Path) 
     at = missionctl("replay", "cut.mcap", "--at", "1h", cwd=tmp_path).stdout
     assert "it was cut short, before the run ended: this is the run as far as it was recorded" in at, at
     assert json.loads(missionctl("replay", "cut.mcap", "--at", "1h", "--json", cwd=tmp_path).stdout)["cut"] is True
+
+
+def test_a_damaged_summary_section_loses_the_world_not_the_run(tmp_path: Path) -> None:
+    """Readers audit 16, D4: one byte flipped in the attachment index's media type (near the file's end) made
+    `replay` refuse a file whose every message was intact ("'utf-8' codec can't decode byte")."""
+    run = missionctl("dry-run", str(CORRIDOR), "--config", str(ROOT / "hosts.yaml"), "--until", "10", "--record",
+                     "run.mcap", "--json", cwd=tmp_path)
+    data = bytearray((tmp_path / "run.mcap").read_bytes())
+    at = data.rfind(b"application/yaml")
+    assert at > len(data) // 2, "the attachment index is in the summary section"
+    data[at] = 0x92
+    (tmp_path / "flipped.mcap").write_bytes(bytes(data))
+    replay = missionctl("replay", "flipped.mcap", "--json", cwd=tmp_path)
+    assert replay.returncode == 1, replay.stderr[-2000:]  # stopped at --until, as the run
+    assert json.loads(replay.stdout)["timeline"] == json.loads(run.stdout)["timeline"]

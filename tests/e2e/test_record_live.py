@@ -119,7 +119,7 @@ def test_a_viewer_from_the_start_gets_every_message_the_file_has_the_first_launc
                                  "run.mcap"], cwd=tmp_path, stdout=subprocess.DEVNULL, stderr=stderr)
         try:
             with connect_when_up(port, proc) as ws:
-                got = receive(ws, {"/drd/runs": 1, "/drd/flights": 0, "/drd/tf": 0})
+                got = receive(ws, {"/drd/runs": 1, "/drd/flights": 0, "/drd/tf": 0, "/drd/scan/ranger1": 0})
             proc.wait(timeout=60)
         finally:
             proc.kill()
@@ -128,6 +128,10 @@ def test_a_viewer_from_the_start_gets_every_message_the_file_has_the_first_launc
     with (tmp_path / "run.mcap").open("rb") as fh:
         recorded = [(m.log_time, json.loads(m.data)) for _s, c, m in make_reader(fh).iter_messages()
                     if c.topic == "/drd/flights" and m.log_time >= since]
+    with (tmp_path / "run.mcap").open("rb") as fh:  # the laser, advertised before the view started (audit 16, D1)
+        scans = [m.log_time for _s, c, m in make_reader(fh).iter_messages() if c.topic == "/drd/scan/ranger1"
+                 and m.log_time >= since]
+    assert scans and [t for t, _scan in got["/drd/scan/ranger1"]] == scans
     assert recorded and recorded[0][1]["kind"] == "launch", recorded  # the first launch is at 5.6 s
     assert got["/drd/flights"] == recorded
     [(_t, summary)] = got["/drd/runs"]
