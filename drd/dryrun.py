@@ -157,15 +157,19 @@ class DryRun:
         """Who waited for resources, from when until the grant (or until it gave up by exiting)."""
         rows: list[dict[str, Any]] = []
         since: dict[str, rec.Waiting] = {}
+        asked: dict[str, tuple[str, ...]] = {}  # each path's last request: a wait after a preemption names none
         for r in self.records:
             if isinstance(r, rec.Waiting):
                 since.setdefault(r.path, r)
+                if r.needs:
+                    asked[r.path] = tuple(r.needs)
             elif isinstance(r, rec.Granted | rec.Exited) and r.path in since:
                 w = since.pop(r.path)
-                rows.append({"path": r.path, "from": report_time(w.at), "to": report_time(r.at), "needs": list(w.needs),
+                rows.append({"path": r.path, "from": report_time(w.at), "to": report_time(r.at),
+                             "needs": list(w.needs or asked.get(r.path, ())),
                              "ended": "granted" if isinstance(r, rec.Granted) else "exited"})
-        rows += [{"path": p, "from": report_time(w.at), "to": report_time(self.sim_time), "needs": list(w.needs),
-                  "ended": "still waiting"}
+        rows += [{"path": p, "from": report_time(w.at), "to": report_time(self.sim_time),
+                  "needs": list(w.needs or asked.get(p, ())), "ended": "still waiting"}
                  for p, w in since.items()]
         return sorted(rows, key=lambda w: (w["from"], w["path"]))
 

@@ -131,3 +131,17 @@ def test_every_line_of_the_text_report_fits_the_width_log_lines_wrapped_whole() 
     assert lines[at + 1].startswith(" " * 11), "the rest of the line is indented under the path"
     door = next(i for i, line in enumerate(lines) if "DetectDoor" in line)
     assert lines[door + 1].strip() == "y=-120.25"
+
+
+def test_a_wait_after_a_preemption_says_what_it_waits_for() -> None:
+    """Users audit 15 (a note): a holder preempted at a slice boundary is queued again with a `waiting` record of no
+    needs (docs/trace.md); its row in the waits table had empty needs."""
+    report = DryRun("M", "success", "", 20.0, 1.0)
+    report.records += [rec.Entered(0.0, f"{M}/A", "A"), rec.Waiting(0.0, f"{M}/A", NEEDS),
+                       rec.Granted(0.0, f"{M}/A", {"ranger": "ranger1", "scout": "scout1"}),
+                       rec.Revoked(5.0, f"{M}/A", ("ranger1",), "preempted by M/B"),
+                       rec.Released(5.0, f"{M}/A", ("ranger1",), "revoked"),
+                       rec.Waiting(5.0, f"{M}/A", (), (f"{M}/B",)),
+                       rec.Granted(10.0, f"{M}/A", {"ranger": "ranger1", "scout": "scout1"})]
+    assert [(w["from"], w["to"], w["needs"]) for w in report.waits()] == [(0.0, 0.0, list(NEEDS)),
+                                                                         (5.0, 10.0, list(NEEDS))]
