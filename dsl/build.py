@@ -4,7 +4,8 @@ The mission is expanded from its root: each child becomes a state whose id is it
 (`CorridorSurveillance/RoomSurveillance[*]/FindNewDoor/DetectDoor`). Resource needs are
 bound here, where the exact ancestors are known (the reference, "Resources"): by name,
 else by type if exactly one is in scope, else through a part of an aggregate the
-manifest prefers (`camera: Camera of [Scout, Ranger]`), else the state asks the Resource
+manifest prefers (`camera: Camera of [Scout, Ranger]`), else (none preferred is held)
+one robot of the team's own type with every such part, else the state asks the Resource
 Controller Manager itself. Completion transitions the language implies (plan order, and
 "a child with no way out makes its behavior done") are generated, marked `generated`.
 """
@@ -13,6 +14,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, replace
+from pathlib import PurePath
 
 from dsl import ast
 from dsl.catalog import Catalog, ComponentType, InputSpec, Kind, Limit
@@ -342,10 +344,35 @@ class Builder:
         ct = self.catalog.get(child.name)
         if ct is None or ct.kind is not Kind.BEHAVIOR:
             return ()
-        return tuple(ResourceNeed(spec.name, spec.type, None, spec.quantity, None,
-                                  self._bind(spec.name, spec.type, spec.of, held, child.span, parts=True),
-                                  span=child.span)
-                     for spec in ct.needs)
+        bound = [self._bind(spec.name, spec.type, spec.of, held, child.span, parts=True) for spec in ct.needs]
+        if not any(b is not None for b, spec in zip(bound, ct.needs, strict=True) if spec.of):
+            bound = self._team_robot(ct, bound, held, child.span)
+        return tuple(ResourceNeed(spec.name, spec.type, None, spec.quantity, None, b, span=child.span)
+                     for spec, b in zip(ct.needs, bound, strict=True))
+
+    def _team_robot(self, ct: ComponentType, bound: list[tuple[str, str, str | None] | None],
+                    held: tuple[_Held, ...], span: Span) -> list[tuple[str, str, str | None] | None]:
+        """`ct`'s needs that name the robots they prefer (`of`), none of which is held: all served by one robot of
+        a type its manifest's folder does not define (a team's own `Crawler` under a standard behavior), the one
+        the nearest ancestor holds that has a part for every such need, rather than each asked of the manager,
+        which granted another robot's (users audit 15, D1: FollowCorridor drove the Hauler on another host).
+        A type the manifest's folder defines and `of` leaves out (a Scout under a Ranger-only behavior) is left
+        out on purpose; a robot lacking one of the parts (a laser) serves none, so one behavior's drive and
+        sensors stay on one robot; two such robots held by that ancestor are ambiguous."""
+        wanted = [spec for spec in ct.needs if spec.of]
+        if not wanted:
+            return bound
+        home = _folder(ct.source)
+        fits = _distinct([h for h in held if _folder(getattr(self.catalog.get(h.type), "source", "")) != home
+                          and all(self.catalog.part_of(h.type, spec.type) for spec in wanted)])
+        nearest = [h for h in fits if h.state == fits[0].state]
+        if len(nearest) > 1:
+            self._ambiguous(wanted[0].name, wanted[0].type, nearest, span)
+        if len(nearest) != 1:
+            return bound
+        robot = nearest[0]
+        return [(robot.state, robot.name, self.catalog.part_of(robot.type, spec.type)) if spec.of else b
+                for spec, b in zip(ct.needs, bound, strict=True)]
 
     def _bind(self, name: str, typ: str, of: tuple[str, ...], held: tuple[_Held, ...], span: Span,
               parts: bool) -> tuple[str, str, str | None] | None:
@@ -373,16 +400,6 @@ class Builder:
             if len(hits) > 1:
                 self._ambiguous(name, typ, hits, span)
                 return None
-        # none of the preferred robots is held: the other robot with such a part that the nearest ancestor holds
-        # (a team's own `Crawler` under a standard behavior whose manifest prefers `of: [Ranger, Scout]`), rather
-        # than asking the manager for another robot's (users audit 15, D1: FollowCorridor drove the Hauler on
-        # another host); two held by that ancestor are ambiguous
-        others = _distinct([h for h in held if h.type not in arcs and self.catalog.part_of(h.type, typ)])
-        nearest = [h for h in others if h.state == others[0].state]
-        if len(nearest) == 1:
-            return nearest[0].state, nearest[0].name, self.catalog.part_of(nearest[0].type, typ)
-        if len(nearest) > 1:
-            self._ambiguous(name, typ, nearest, span)
         return None
 
     def _ambiguous(self, name: str, typ: str, hits: list[_Held], span: Span) -> None:
@@ -410,6 +427,11 @@ def _literal(value: object, type_name: str) -> ast.Expr:
 
 def _completion(domain: str, source: str, target: str, preallocate: bool = False) -> Transition:
     return Transition(source, target, domain, ast.TriggerKind.COMPLETION, generated=True, preallocate=preallocate)
+
+
+def _folder(source: str) -> str:
+    """The components folder a manifest (`DIR/Name/manifest.yaml`) comes from."""
+    return str(PurePath(source).parent.parent) if source else ""
 
 
 def _distinct(hits: list[_Held]) -> list[_Held]:

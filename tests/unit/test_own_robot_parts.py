@@ -49,3 +49,16 @@ def test_two_such_robots_held_together_are_ambiguous(catalog: Catalog) -> None:
     text = "mission Two {\n    needs crawler: Crawler\n    needs probe: Probe\n    Observe\n}\n"
     r = compile_text(text, mine(catalog), "two.mission")
     assert [d.code for d in r.diagnostics if d.severity.value == "error"] == ["ambiguous-binding"]
+
+
+def test_a_standard_robot_the_manifest_leaves_out_and_a_robot_missing_a_part_serve_nothing(catalog: Catalog) -> None:
+    """The review of the first version: a Scout's wheels served DetectDoor's `drive of [Ranger]` while its laser was
+    asked of the manager (one behavior steering one robot by another's scans), and two held Scouts made a valid
+    mission ambiguous. A type its manifest's folder defines and `of` leaves out stays out; a robot without one of
+    the parts (a Probe has no laser) serves none of them."""
+    scout = bound("mission Sweep {\n    needs s: Scout\n    DetectDoor\n}\n", catalog, "Sweep/DetectDoor")
+    assert scout == {"drive": None, "ranges": None}
+    two = "mission Two {\n    needs a: Scout\n    needs b: Scout\n    DetectDoor\n}\n"
+    assert compile_text(two, mine(catalog), "two.mission").ok
+    probe = bound("mission Roll {\n    needs p: Probe\n    FollowCorridor\n}\n", catalog, "Roll/FollowCorridor")
+    assert probe == {"drive": None, "ranges": None}
