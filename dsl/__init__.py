@@ -48,10 +48,10 @@ class Compiled:
         return self.statechart
 
 
-#: The errors a file that could not be imported may explain: names it may have declared (behaviors, their events
-#: and types, their outputs), and what follows from not knowing them.
-FROM_IMPORTS = frozenset({"unknown-behavior", "unknown-state", "unknown-event", "unknown-type", "unknown-resource",
-                          "unknown-input-source", "missing-input", "ambiguous-input"})
+#: The errors a file that could not be imported may explain: the behaviors it may have declared, the events they
+#: emit and the outputs they offer, and what follows from not knowing them. Not types: a mission file declares none.
+FROM_IMPORTS = frozenset({"unknown-behavior", "unknown-state", "unknown-event", "unknown-input-source",
+                          "missing-input", "ambiguous-input"})
 
 
 def _only_imports_missing(program: Program, report: Reporter) -> bool:

@@ -74,10 +74,11 @@ def test_a_missing_import_hides_only_what_the_missing_file_may_have_declared(cat
     """Users audit 15, D7: an import that could not be read was the file's only error, though its own needs and
     transitions had others; what the missing file may declare (behaviors, their events) is still not reported."""
     source = ('import "nowhere.mission"\nmission M {\n  needs r: Ranger where r.batery > 0.5\n  start -> Sweep\n'
-              '  Sweep -> done on SweepDone\n  Sweep(speed: 1s)\n  Wait(duration: 3)\n}\n')
+              '  Sweep -> done on SweepDone\n  Sweep(speed: 1s)\n  Wait(duration: 3)\n  needs c: Camra\n}\n')
     errors = compile_text(source, catalog, "t.mission", imports={}).diagnostics
     codes = [d.code for d in errors if d.severity.value == "error"]
     assert codes[0] == "io" and "nowhere.mission" in errors[0].message
     assert "Ranger has no property batery" in [d.message for d in errors]
     assert not {"unknown-behavior", "unknown-event", "unknown-state"} & set(codes)
     assert "duration expects duration, got int" in [d.message for d in errors]  # Wait's, a component it knows
+    assert "unknown-resource" in codes  # a type: no mission file declares one (review)
