@@ -347,7 +347,7 @@ def run_many(missions: Sequence[Mission], cluster: Cluster, world: World, catalo
                           **_controllers(cluster))
     start = time.perf_counter()
     if recorder is not None:
-        recorder.scene(world)
+        recorder.scene(world, starts=True)
         recorder.watch(sim)  # what the sensors read, launches, landings and door changes, from now on
     ends: dict[str, tuple[float, float]] = {}  # mission id -> (sim, wall) seconds at its end: its own report's times
     with life.together():  # missions of one instant: by priority, not by their order on the command line

@@ -230,13 +230,15 @@ def _waiting(records: Iterator[rec.Record]) -> list[dict[str, Any]]:
     `records` (`current_blockers`), `holds` what that holder holds then (need -> unit)."""
     waits: dict[str, dict[str, Any]] = {}
     holds: dict[str, dict[str, str]] = {}
+    asked: dict[str, list[str]] = {}  # each path's last request: a wait after a preemption names none (trace.md)
     units = UnitTypes()
     for r in records:
         units.take(r)
         if isinstance(r, rec.Waiting):
-            w = waits.setdefault(r.path, {"path": r.path, "since": round(r.at, 6), "needs": [], "blocked_by": []})
             if r.needs:
-                w["needs"] = list(r.needs)
+                asked[r.path] = list(r.needs)
+            w = waits.setdefault(r.path, {"path": r.path, "since": round(r.at, 6), "needs": asked.get(r.path, []),
+                                          "blocked_by": []})
             if r.blocked_by:
                 w["blocked_by"], w["held"] = list(r.blocked_by), r.holds
         elif isinstance(r, rec.Granted):

@@ -129,8 +129,8 @@ def parse_manifest(data: object, source: str) -> tuple[ComponentType | None, lis
 
 def _closest(value: object, enum: type[_E]) -> _E | None:
     """The member of `enum` whose value `value` is a misspelling of: within two edits, as `did_you_mean` says."""
-    text = str(value).lower()
-    best = min(enum, key=lambda m: edit_distance(text, str(m.value)))
+    text = str(value).lower()  # ties go to the first by name, as `did_you_mean`'s hint names it
+    best = min(sorted(enum, key=lambda m: str(m.value)), key=lambda m: edit_distance(text, str(m.value)))
     return best if edit_distance(text, str(best.value)) <= 2 else None
 
 

@@ -72,6 +72,8 @@ SEEN_FOR = 0.3
 TRAIL_STEP = 0.1
 #: The frame of an intruder (a person walking through the world, not a robot): `intruder/<id>`.
 INTRUDER = "intruder/"
+#: The id prefix of a camera's field of view in the world's scene (`fov/<robot>`).
+FOV = "fov/"
 #: The version of this layout, in the file's metadata (`drd` record `format`).
 FORMAT = "drd-run-1"
 #: Where `--foxglove` serves when given no address: loopback only.
@@ -201,10 +203,10 @@ class Recorder:
             _OPEN.add(self)
         self.error: str | None = None  # why the file stopped being written (the run went on without it)
         self.sink_errors = _SINK.count
-        # Every channel is made before the live view starts (a scan's too, in `scene`): a channel made mid-run is
-        # advertised with its first message, which a viewer then never gets, and a viewer subscribing at once may
-        # be refused it as unknown for the whole run (readers audit 13, D1, D2). A channel with no message is not
-        # written into the file.
+        # Every channel is made before the live view starts (each of `robots`' lasers too; another robot's when the
+        # world is drawn, or at its first scan): a channel made mid-run is advertised with its first message, which
+        # a viewer then never gets, and a viewer subscribing at once may be refused it as unknown for the whole run
+        # (readers audits 13 and 16). A channel with no message is not written into the file.
         self.channels: dict[str, Any] = {topic: self._json_channel(topic) for topic in JSON_SCHEMAS}
         self.lock = threading.Lock()
         self.viewers = 0  # subscriptions of the live view's clients (`close` lets them have the last messages)
@@ -258,9 +260,10 @@ class Recorder:
     def _channel(self, topic: str) -> Any:
         return self.channels[topic]
 
-    def scene(self, world: World) -> None:
+    def scene(self, world: World, starts: bool = False) -> None:
         """The world as a scene at time 0, and its file as the attachment `world.yaml`, so a replay can draw the
-        run without it."""
+        run without it; `starts`: the run starts the world, so every robot is where the world file puts it at 0 (a
+        dry-run; not a cluster's mission, which may join a world that has run for a while)."""
         source = Path(world.source)
         if self.writer is not None and source.is_file():
             data = source.read_bytes()
@@ -268,16 +271,19 @@ class Recorder:
                                            media_type="application/yaml", data=data))
         self.doors = {d.id: (d.a, d.b) for d in world.doors}
         self.frames.scouts = frozenset(world.scout_ids)
-        # where every robot starts, at 0, as the scene draws them (the first cycle's poses are at 0.1 s: `replay
-        # --at 0` showed no robot, readers audit 16, D8)
+        if starts:  # where every robot starts, at 0 (the first cycle's poses are at 0.1 s: `replay --at 0` showed
+            self._starts(world)  # no robot, readers audit 16, D8)
+        for robot in (*(r.id for r in world.rangers), *world.scout_ids):
+            self._scan_channel(robot)
+        self.update_world(0.0, [*_building(world), *_bodies(world)])
+
+    def _starts(self, world: World) -> None:
+        """Every robot's start pose on `/drd/tf` at 0 (a Scout in a magazine as its Ranger's frame)."""
         spawned = {r.id: (r.x, r.y, r.heading) for r in world.rangers}
         spawned.update({s.id: (s.x, s.y, s.heading) for s in world.scouts})
         start = self.frames.transforms(0.0, spawned, {sid: r.id for r in world.rangers for sid in r.magazine})
         if start is not None:
             self.tf.log(start, log_time=0)
-        for robot in (*(r.id for r in world.rangers), *world.scout_ids):
-            self._scan_channel(robot)
-        self.update_world(0.0, [*_building(world), *_bodies(world)])
 
     def update_world(self, at: float, entities: list[tuple[str, Any]]) -> None:
         """Add or replace entities (id, entity) of the world's scene at sim time `at`."""
@@ -339,13 +345,14 @@ class Recorder:
         if robot in self.fovs:
             return
         self.fovs.add(robot)
-        from foxglove.messages import SceneEntity
+        from foxglove.messages import KeyValuePair, SceneEntity
 
         reach = min(max_range, 3.0)
         arc = [(reach * math.cos(a), reach * math.sin(a)) for a in (-fov / 2 + fov * k / 8 for k in range(9))]
-        entity = SceneEntity(timestamp=_stamp(at), frame_id=robot, id=f"fov/{robot}", frame_locked=True,
+        entity = SceneEntity(timestamp=_stamp(at), frame_id=robot, id=f"{FOV}{robot}", frame_locked=True,
+                             metadata=[KeyValuePair(key="fov", value=repr(float(fov)))],  # radians, for `read`
                              lines=[_line([(0.0, 0.0), *arc, (0.0, 0.0)], _color(SCOUT_COLOUR, 0.6), 0.02, True)])
-        self.update_world(at, [(f"fov/{robot}", entity)])
+        self.update_world(at, [(f"{FOV}{robot}", entity)])
 
     def light(self, robot: str, at: float, fov: float, regions: list[float]) -> None:
         self.json(LIGHT, at, {"robot": robot, "at": at, "fov": fov, "regions": regions})
@@ -542,10 +549,12 @@ def _late_viewers(r: Recorder) -> Any:
 
     class LateViewers(ServerListener):
         def on_unsubscribe(self, client: Client, channel: ChannelView) -> None:
-            r.viewers -= 1
+            with r.lock:  # the server's threads
+                r.viewers -= 1
 
         def on_subscribe(self, client: Client, channel: ChannelView) -> None:
-            r.viewers += 1
+            with r.lock:
+                r.viewers += 1
             scene = r.scene_now() if channel.topic == WORLD else None
             if scene is not None:
                 r.world.log(scene, log_time=_ns(r.now))
@@ -683,6 +692,7 @@ class ActiveView:
         self.below: dict[str, int] = {}  # path -> how many active paths are under it (0: a leaf)
         self.suspended: set[str] = set()
         self.waits: dict[str, dict[str, Any]] = {}
+        self.asked: dict[str, list[str]] = {}  # each path's last request's needs
         self.holds: dict[str, dict[str, str]] = {}  # path -> need -> unit (aggregates' parts too)
         self.needs: dict[str, dict[str, str]] = {}  # the same without aggregates' parts (who blocks whom)
         self.units = UnitTypes()  # each unit's type: who is in a waiter's way now
@@ -701,9 +711,10 @@ class ActiveView:
         elif isinstance(r, rec.Resumed):
             self.suspended.discard(r.path)
         elif isinstance(r, rec.Waiting):
-            w = self.waits.setdefault(r.path, {"path": r.path, "since": round(r.at, 6), "needs": [],
-                                               "blocked_by": []})
-            w["needs"] = list(r.needs) or w["needs"]
+            if r.needs:  # its last request: a wait after a preemption names none (docs/trace.md)
+                self.asked[r.path] = list(r.needs)
+            w = self.waits.setdefault(r.path, {"path": r.path, "since": round(r.at, 6),
+                                               "needs": self.asked.get(r.path, []), "blocked_by": []})
             if r.blocked_by:
                 w["blocked_by"], w["held"] = list(r.blocked_by), r.holds
         elif isinstance(r, rec.Granted):
@@ -880,11 +891,13 @@ def read(path: Path | str) -> Recording:
         with path.open("rb") as fh:
             try:
                 for schema, channel, message in NonSeekingReader(fh).iter_messages(log_time_order=False):
-                    if channel.topic == TF and schema is not None:
+                    if channel.topic in (TF, WORLD) and schema is not None:
                         decoder = decoders.get(schema.id) or decoders.setdefault(
                             schema.id, factory.decoder_for(channel.message_encoding, schema))
-                        if decoder is not None:
+                        if decoder is not None and channel.topic == TF:
                             _take_poses(out, decoder(message.data), message.log_time)
+                        elif decoder is not None:  # each camera's view, drawn when it is first read
+                            _take_views(out, decoder(message.data))
                     elif channel.message_encoding != "json":  # not drd's (a ROS 2 bag's CDR of the same topics)
                         continue
                     elif channel.topic in (RECORDS, RUNS):
@@ -966,6 +979,19 @@ def _take_poses(out: Recording, decoded: Any, log_time: int) -> None:
         heading = math.atan2(math.sin(h), math.cos(h))  # in (-pi, pi]
         out.tracks.setdefault(t.child_frame_id, []).append(
             (log_time / 1e9, t.translation.x, t.translation.y, heading))
+
+
+def _take_views(out: Recording, scene: Any) -> None:
+    """The cameras' fields of view a `/drd/world` update draws (`Recorder.view`: an entity `fov/<robot>` with
+    its `fov` in radians), so a replay knows a camera that never saw anyone."""
+    for e in scene.entities:
+        if e.id.startswith(FOV):
+            fov = next((m.value for m in e.metadata if m.key == "fov"), None)
+            try:
+                if fov is not None:  # (a file written before the views said it: its camera frames say it)
+                    out.fovs.setdefault(e.id.removeprefix(FOV), float(fov))
+            except ValueError:
+                continue
 
 
 def _take(out: Recording, topic: str, data: bytes) -> None:

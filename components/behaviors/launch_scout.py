@@ -43,9 +43,9 @@ class LaunchScout(Component):
         if distance < MIN_THROW:
             self.ctx.log(f"LaunchScout: target out of range ({distance:.2f} m)")
             return Status.FAILURE
+        aboard = str(self.ctx.params["carrier_property"])  # read before the throw: a throw is not undone
         landing = launcher.launch(scout, 0.0, distance)
         self.ctx.outputs["scout"] = scout
-        aboard = str(self.ctx.params["carrier_property"])
         try:  # it left the magazine: the Static Dependency Database must say so
             self.update_dependency(str(scout), aboard, "")
         except LookupError:

@@ -505,7 +505,7 @@ class RemoteComponent(Component):
 
     def start(self) -> None:
         self._resolve()
-        restore, self._restore, self.state = self._restore, None, None
+        restore, self._restore, self.state, self._failed = self._restore, None, None, ""
         if self.host is None and not self.movable:
             if self.local is None:
                 self.local = self.router.local[self.name]()

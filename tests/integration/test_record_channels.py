@@ -17,6 +17,7 @@ from mcap_protobuf.decoder import DecoderFactory
 from drd.dryrun import DryRun, run
 from drd.hosts import load_hosts
 from drd.record import Recorder, read, state_at
+from drd.runtime import records as rec
 from drd.sim.physics import Simulation
 from drd.sim.world import load_world
 from dsl import compile_file
@@ -355,3 +356,18 @@ def test_each_runs_summary_is_logged_when_its_mission_ended(tmp_path: Path) -> N
     logged = [(m["mission"], t) for topic, _s, t, m in Run(path, None, None, {}).messages()  # type: ignore[arg-type]
               if topic == "/drd/runs"]
     assert logged == [("Early", 16_000_000_000), ("Late", 29_100_000_000), ("NoTime", 29_100_000_000)]
+
+
+def test_a_replay_knows_the_view_of_a_camera_that_never_saw_anyone(corridor: Run, tmp_path: Path) -> None:
+    """The review of readers audit 13's D8 fix: with no empty first frame recorded, a camera read only for people
+    (no brightness) that never saw anyone left no field of view a replay could read (`replay --render` drew no
+    wedge for it); the view's entity says it."""
+    recording = read(corridor.path)
+    read_cameras = {robot for robot, *_ in corridor.reads["camera"] + corridor.reads["brightness"]}
+    assert set(recording.fovs) == read_cameras and len(read_cameras) >= 3
+    path = tmp_path / "view.mcap"
+    recorder = Recorder(path)
+    recorder.record("M-1", rec.Entered(0.0, "M", "M"))
+    recorder.view("lookout", 1.0, 1.2, 5.0)  # a camera read, nobody seen: no frame, no brightness
+    recorder.end([{"mission": "M", "id": "M-1", "records": "M-1", "sim_time": 2.0}], 2.0)
+    assert read(path).fovs == {"lookout": 1.2}

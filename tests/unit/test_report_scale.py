@@ -145,3 +145,10 @@ def test_a_wait_after_a_preemption_says_what_it_waits_for() -> None:
                        rec.Granted(10.0, f"{M}/A", {"ranger": "ranger1", "scout": "scout1"})]
     assert [(w["from"], w["to"], w["needs"]) for w in report.waits()] == [(0.0, 0.0, list(NEEDS)),
                                                                          (5.0, 10.0, list(NEEDS))]
+    # and as `replay --at`, `explain` and `/drd/active` say it meanwhile (the review: only the table was fixed)
+    meanwhile = report.records[:-1]
+    assert [w["needs"] for w in Explainer(meanwhile).waiting_now()] == [list(NEEDS)]
+    view = ActiveView("M-1")
+    for r in meanwhile:
+        view.take(r)
+    assert [w["needs"] for w in view.state(7.0)["waiting"]] == [list(NEEDS)]
