@@ -22,6 +22,7 @@ from drd.sim.world import parse_world
 from dsl import compile_file, compile_text
 from dsl.catalog import Catalog
 from tests.conftest import ROOT
+from tests.integration.test_follow_corridor_blocked import HUNT  # door after door, on error done
 
 PATROL = """
 mission WingPatrol priority 1 {
@@ -87,23 +88,6 @@ doors:
   - {id: c, at: [8.8, 1.25], width: 1.0}
 rangers:
   - {id: ranger1, at: [1, 0], heading: 0, magazine: [scout1, scout2, scout3, scout4, scout5, scout6]}
-"""
-
-HUNT = """
-mission DoorHunt {
-    needs ranger: Ranger
-    shared found: DoorLog
-    start -> Seek
-    Seek -> Seek
-    Seek -> done on error
-}
-behavior Seek {
-    parallel until DetectDoor {
-        FollowCorridor(speed: 0.5)
-        AvoidObstacles(margin: 0.3)
-        DetectDoor(min_width: 0.7)
-    }
-}
 """
 
 
