@@ -21,7 +21,7 @@ from typing import IO, Any
 from drd.bus import LocalNetwork
 from drd.errors import ConfigurationError
 from drd.executive import EntryPoints, Executive
-from drd.explain import Explainer
+from drd.explain import Explainer, LastRequest
 from drd.hosts import Cluster, Role
 from drd.hw.drivers import HostDrivers, drivers_for
 from drd.inject import Action, Injection
@@ -157,19 +157,18 @@ class DryRun:
         """Who waited for resources, from when until the grant (or until it gave up by exiting)."""
         rows: list[dict[str, Any]] = []
         since: dict[str, rec.Waiting] = {}
-        asked: dict[str, tuple[str, ...]] = {}  # each path's last request: a wait after a preemption names none
+        asked = LastRequest()
         for r in self.records:
             if isinstance(r, rec.Waiting):
                 since.setdefault(r.path, r)
-                if r.needs:
-                    asked[r.path] = tuple(r.needs)
+                asked.take(r)
             elif isinstance(r, rec.Granted | rec.Exited) and r.path in since:
                 w = since.pop(r.path)
                 rows.append({"path": r.path, "from": report_time(w.at), "to": report_time(r.at),
-                             "needs": list(w.needs or asked.get(r.path, ())),
+                             "needs": list(w.needs) or asked.of(r.path),
                              "ended": "granted" if isinstance(r, rec.Granted) else "exited"})
         rows += [{"path": p, "from": report_time(w.at), "to": report_time(self.sim_time),
-                  "needs": list(w.needs or asked.get(p, ())), "ended": "still waiting"}
+                  "needs": list(w.needs) or asked.of(p), "ended": "still waiting"}
                  for p, w in since.items()]
         return sorted(rows, key=lambda w: (w["from"], w["path"]))
 

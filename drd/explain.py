@@ -228,30 +228,61 @@ def _active(records: Iterator[rec.Record], waiting: set[str]) -> list[dict[str, 
 def _waiting(records: Iterator[rec.Record]) -> list[dict[str, Any]]:
     """`[{path, since, needs, blocked_by: [{path, holds}], blockers}]`: each waiter with who is in its way after
     `records` (`current_blockers`), `holds` what that holder holds then (need -> unit)."""
-    waits: dict[str, dict[str, Any]] = {}
-    holds: dict[str, dict[str, str]] = {}
-    asked: dict[str, list[str]] = {}  # each path's last request: a wait after a preemption names none (trace.md)
-    units = UnitTypes()
+    waiters = Waiters()
     for r in records:
-        units.take(r)
+        waiters.take(r)
+    return waiters.waiting()
+
+
+class LastRequest:
+    """Each behavior's last request for resources: what it waits for, as a wait after a preemption names none
+    (docs/trace.md; the dry-run's report, `explain` and a recording's `/drd/active` all read it so)."""
+
+    def __init__(self) -> None:
+        self._needs: dict[str, list[str]] = {}
+
+    def take(self, r: rec.Waiting) -> list[str]:
+        """The needs `r` waits for: its own, else the last ones its behavior asked."""
+        if r.needs:
+            self._needs[r.path] = list(r.needs)
+        return self.of(r.path)
+
+    def of(self, path: str) -> list[str]:
+        return list(self._needs.get(path, ()))
+
+
+class Waiters:
+    """Who waits for resources, and behind whom, kept from a mission's records as they come (`take`): what
+    `explain` says after the last record and a recording's `/drd/active` at each change."""
+
+    def __init__(self) -> None:
+        self.waits: dict[str, dict[str, Any]] = {}  # path -> the wait, in the order they began
+        self.holds: dict[str, dict[str, str]] = {}  # path -> need -> unit, without aggregates' parts
+        self.asked = LastRequest()
+        self.units = UnitTypes()
+
+    def take(self, r: rec.Record) -> None:
+        self.units.take(r)
         if isinstance(r, rec.Waiting):
-            if r.needs:
-                asked[r.path] = list(r.needs)
-            w = waits.setdefault(r.path, {"path": r.path, "since": round(r.at, 6), "needs": asked.get(r.path, []),
-                                          "blocked_by": []})
+            needs = self.asked.take(r)
+            w = self.waits.setdefault(r.path, {"path": r.path, "since": round(r.at, 6), "needs": needs,
+                                               "blocked_by": []})
             if r.blocked_by:
                 w["blocked_by"], w["held"] = list(r.blocked_by), r.holds
         elif isinstance(r, rec.Granted):
-            waits.pop(r.path, None)
-            holds[r.path] = {k: v for k, v in r.named.items() if "." not in k}
+            self.waits.pop(r.path, None)
+            self.holds[r.path] = {k: v for k, v in r.named.items() if "." not in k}
         elif isinstance(r, rec.Released):
             gone = set(r.resources)
-            holds[r.path] = {k: v for k, v in holds.get(r.path, {}).items() if v not in gone}
+            self.holds[r.path] = {k: v for k, v in self.holds.get(r.path, {}).items() if v not in gone}
         elif isinstance(r, rec.Exited):
-            waits.pop(r.path, None)
-            holds.pop(r.path, None)
-    by_type = units.holders_by_type(holds)
-    return [blocked(w, holds, current_blockers(w, by_type, waits)) for w in waits.values()]
+            self.waits.pop(r.path, None)
+            self.holds.pop(r.path, None)
+
+    def waiting(self) -> list[dict[str, Any]]:
+        """Each waiter now, with who is in its way (`current_blockers`) and what each of them holds."""
+        by_type = self.units.holders_by_type(self.holds)
+        return [blocked(w, self.holds, current_blockers(w, by_type, self.waits)) for w in self.waits.values()]
 
 
 #: How many blockers a waiting behavior names with what each holds (`blocked_by`); `blockers` counts them all, so

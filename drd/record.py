@@ -52,7 +52,7 @@ import orjson
 
 from drd import outputs
 from drd.errors import ConfigurationError
-from drd.explain import UnitTypes, blocked, current_blockers
+from drd.explain import Waiters
 from drd.runtime import records as rec
 from drd.sim.model import INTRUDER_RADIUS, RANGER_RADIUS, SCOUT_RADIUS, DoorState, World
 from drd.sim.observe import SCAN_EVERY, SensorTap
@@ -691,17 +691,14 @@ class ActiveView:
         self.active: dict[str, float] = {}  # path -> since, in the order entered
         self.below: dict[str, int] = {}  # path -> how many active paths are under it (0: a leaf)
         self.suspended: set[str] = set()
-        self.waits: dict[str, dict[str, Any]] = {}
-        self.asked: dict[str, list[str]] = {}  # each path's last request's needs
         self.holds: dict[str, dict[str, str]] = {}  # path -> need -> unit (aggregates' parts too)
-        self.needs: dict[str, dict[str, str]] = {}  # the same without aggregates' parts (who blocks whom)
-        self.units = UnitTypes()  # each unit's type: who is in a waiter's way now
+        self.waiters = Waiters()  # who waits, behind whom
         self.outcome: str | None = None
         self.changed_at: float | None = None
 
     def take(self, r: rec.Record) -> None:
         """Apply one record; `changed_at` is its time when it changed the configuration."""
-        self.units.take(r)
+        self.waiters.take(r)
         if isinstance(r, rec.Entered):
             self._enter(r)
         elif isinstance(r, rec.Exited):
@@ -711,21 +708,12 @@ class ActiveView:
         elif isinstance(r, rec.Resumed):
             self.suspended.discard(r.path)
         elif isinstance(r, rec.Waiting):
-            if r.needs:  # its last request: a wait after a preemption names none (docs/trace.md)
-                self.asked[r.path] = list(r.needs)
-            w = self.waits.setdefault(r.path, {"path": r.path, "since": round(r.at, 6),
-                                               "needs": self.asked.get(r.path, []), "blocked_by": []})
-            if r.blocked_by:
-                w["blocked_by"], w["held"] = list(r.blocked_by), r.holds
+            pass  # `waiters` took it: a change all the same
         elif isinstance(r, rec.Granted):
-            self.waits.pop(r.path, None)
-            named = r.named
-            self.holds[r.path] = named
-            self.needs[r.path] = {k: v for k, v in named.items() if "." not in k}
+            self.holds[r.path] = r.named
         elif isinstance(r, rec.Released):
             gone = set(r.resources)
             self.holds[r.path] = {k: v for k, v in self.holds.get(r.path, {}).items() if v not in gone}
-            self.needs[r.path] = {k: v for k, v in self.needs.get(r.path, {}).items() if v not in gone}
         elif isinstance(r, rec.Finished):
             self.outcome = r.outcome
         else:
@@ -745,23 +733,20 @@ class ActiveView:
             for prefix in _prefixes(path):
                 self.below[prefix] -= 1
         self.suspended.discard(path)
-        self.waits.pop(path, None)
         self.holds.pop(path, None)
-        self.needs.pop(path, None)
 
     def state(self, at: float) -> dict[str, Any]:
         """The configuration now: as `state_at` gives a mission at `at` (`mission`, `id`, `outcome`, `active`,
         `holds`, `waiting`), with `at`."""
         def state(path: str) -> str:
-            if path in self.waits:
+            if path in self.waiters.waits:
                 return "waiting"
             frozen = any(path == s or path.startswith((s + "/", s + "[")) for s in self.suspended)
             return "suspended" if frozen else "running"
 
         active = sorted(({"path": p, "since": round(t, 6), "state": state(p)} for p, t in self.active.items()
                          if not self.below.get(p)), key=lambda row: (row["since"], row["path"]))  # as `explain`'s
-        by_type = self.units.holders_by_type(self.needs)
-        waiting = [blocked(w, self.needs, current_blockers(w, by_type, self.waits)) for w in self.waits.values()]
+        waiting = self.waiters.waiting()
         return {"mission": self.name, "id": self.mission, "at": at, "outcome": self.outcome, "active": active,
                 "holds": {p: held for p, held in self.holds.items() if held}, "waiting": waiting}
 
