@@ -270,6 +270,7 @@ class Daemon:
         self._losses_seen = 0  # the Creator's `losses` when last looked at
         self._next_peer_check = 0.0
         self._checking = False
+        self._claims: set[tuple[int, float]] = set()  # other daemons' claims to this host, being checked
         self._all_reachable = False  # the last peer check found every peer (and said so)
         self._closed = False
         self._controller_clock = controller_clock
@@ -666,22 +667,51 @@ class Daemon:
             # another daemon as this host announces under this host's key: one that names this host under its own
             # key is a peer faking it (security audit D1: a worker's own credentials stopped the controller)
             if msg.host == self.host and host == self.host and (msg.pid, msg.started) != (os.getpid(), self.started):
-                newer = (self.started, os.getpid()) > (msg.started, msg.pid)  # the later one gives way
-                with self._lock:  # two daemons claim this host (they met after both started): say so
-                    self._record("conflict", self.host, f"another drd (pid {msg.pid}) runs as host {self.host};"
-                                 " host names must be unique in the cluster" + ("; this one, started later, stops"
-                                                                                 if newer else ""))
-                    if not newer:  # the later one may not have heard us (we announce to newcomers only): tell it
+                if (self.started, os.getpid()) > (msg.started, msg.pid):  # the later one gives way, if it is one
+                    self._check_claim(msg.pid, msg.started)
+                else:  # the later one may not have heard us (we announce to newcomers only): tell it
+                    with self._lock:
                         self._announce_due = True
-                if newer and self._stop is not None:
-                    self.stop_reason = f"conflict: another drd (pid {msg.pid}) runs as host {self.host}"
-                    self._stop.set()
                 return
             self._apply(lambda now: self.view.announce(msg, now, host))
         elif isinstance(msg, Leaving) and msg.host == host:
             self._apply(lambda now: self.view.leaving(msg.host, msg.reason, now))
         else:
             self._reject(sample.key, f"expected a drd.daemon.announce or a matching goodbye, got a {type(msg).TYPE}")
+
+    def _check_claim(self, pid: int, started: float) -> None:
+        """Another drd, started earlier, announced itself as this host (two daemons met after both started): stop,
+        once it answers a status query on this host's key as that daemon. An announcement alone, forged or replayed
+        (one from a daemon gone since), stops nothing: it is refused and logged (wire audit 17, D1). Asked on a
+        thread of its own, once per claim at a time (a subscriber's callback must not wait on a query)."""
+        claim = (pid, started)
+        with self._lock:
+            if claim in self._claims:
+                return
+            self._claims.add(claim)
+
+        def check() -> None:
+            try:
+                replies = self.bus.request(self.keys.status(self.host), timeout=min(2.0, self.cluster.lease))
+                there = any(isinstance(r.payload, DaemonStatus) and r.payload.host == self.host
+                            and (r.payload.pid, r.payload.started) == claim for r in replies)
+            except BusError:  # closing meanwhile
+                return
+            finally:
+                with self._lock:
+                    self._claims.discard(claim)
+            if not there:
+                self._reject(self.keys.announce(self.host), f"an announcement of another drd (pid {pid}) as host "
+                             f"{self.host} that no daemon answers for: ignored")
+                return
+            with self._lock:
+                self._record("conflict", self.host, f"another drd (pid {pid}) runs as host {self.host}; host names "
+                             "must be unique in the cluster; this one, started later, stops")
+            if self._stop is not None:
+                self.stop_reason = f"conflict: another drd (pid {pid}) runs as host {self.host}"
+                self._stop.set()
+
+        threading.Thread(target=check, name="drd-claim-check", daemon=True).start()
 
     def _apply(self, update: Callable[[float], list[Change]]) -> None:
         with self._lock:

@@ -5,6 +5,10 @@ from __future__ import annotations
 
 import logging
 import os
+import threading
+import time
+from collections.abc import Callable
+from dataclasses import replace
 from pathlib import Path
 
 import pytest
@@ -416,14 +420,33 @@ def test_the_daemon_refuses_and_counts_what_it_cannot_use(cluster: Cluster, cata
         tool.put(keys.announce("ranger2"), Announcement("controller", "lab", 1, 0.0, [], [], [], {}, ""))
         assert all(e.kind != "conflict" for e in daemon.events) and "conflict" not in daemon.stop_reason, (
             "a peer naming this host under another host's key is refused, not obeyed (security audit D1)")
-        tool.put(keys.announce("controller"), Announcement("controller", "lab", 1, 0.0, [], [], [], {}, ""))
-        assert daemon.events[-1].kind == "conflict" and "another drd (pid 1) runs as host controller" in (
-            daemon.events[-1].detail)
         status = daemon.status()
         assert status.bus["malformed"] == 7
         assert sum(status.rejected.values()) == 9
+        stop = threading.Event()
+        daemon._stop = stop  # as `run` sets it: what a conflict sets
+        claim = Announcement("controller", "lab", 1, 0.0, [], [], [], {}, "")
+        tool.put(keys.announce("controller"), claim)  # forged, or replayed from a daemon gone since: nobody answers
+        wait_until(lambda: sum(daemon.status().rejected.values()) == 10, "the unanswered claim to be refused")
+        assert not stop.is_set() and all(e.kind != "conflict" for e in daemon.events), (
+            "an announcement alone stops no daemon (wire audit 17, D1)")
+        assert any(k.startswith("an announcement of another drd (pid 1) as host controller")
+                   for k in daemon.status().rejected)
+        other = daemon.status()
+        tool.serve(keys.status("controller"), lambda q: replace(other, pid=1, started=0.0))  # a daemon answers
+        tool.put(keys.announce("controller"), claim)
+        wait_until(stop.is_set, "the daemon started later to stop")
+        assert daemon.events[-1].kind == "conflict" and "another drd (pid 1) runs as host controller" in (
+            daemon.events[-1].detail) and daemon.stop_reason.startswith("conflict: another drd (pid 1)")
     finally:
         daemon.close()
+
+
+def wait_until(done: Callable[[], bool], what: str, timeout: float = 10.0) -> None:
+    deadline = time.monotonic() + timeout
+    while not done():
+        assert time.monotonic() < deadline, f"timed out waiting for {what}"
+        time.sleep(0.01)
 
 
 def test_drd_stop_never_touches_another_clusters_daemons(tmp_path: Path) -> None:
