@@ -314,7 +314,8 @@ class Bus(ABC):
     # -- receive-side rules shared by the implementations
     def _reject(self, where: str, key: str, reason: str) -> None:
         self.stats.bump("malformed")
-        log.warning("bus %s: rejected malformed %s on %r: %s", self.name, where, key, reason)
+        log.warning("bus %s: rejected malformed %s on %r: %s", self.name, where, key, reason,
+                    extra={"subject": key})  # the log's limit is per key (drd.daemon.logs.RateLimit)
 
     def _on_sample(self, callback: SampleCallback, key: str, data: bytes) -> None:
         """Decode a publication and hand it to the callback; never raises."""
@@ -327,14 +328,14 @@ class Bus(ABC):
             callback(Sample(key, msg))
         except Exception:
             self.stats.bump("callback_errors")
-            log.exception("bus %s: subscriber callback on %r raised", self.name, key)
+            log.exception("bus %s: subscriber callback on %r raised", self.name, key, extra={"subject": key})
 
     def _on_token(self, callback: TokenCallback, key: str, alive: bool) -> None:
         try:
             callback(key, alive)
         except Exception:
             self.stats.bump("callback_errors")
-            log.exception("bus %s: token watcher on %r raised", self.name, key)
+            log.exception("bus %s: token watcher on %r raised", self.name, key, extra={"subject": key})
 
     def _answer(self, handler: Handler, query_key: str, queryable: str, data: bytes | None) -> Answer | None:
         """Run a handler on raw request bytes; the answer to send back, or None for silence.
@@ -352,7 +353,8 @@ class Bus(ABC):
             result = handler(Query(query_key, payload, queryable))
         except Exception as exc:
             self.stats.bump("handler_errors")
-            log.exception("bus %s: handler for %r raised on %r", self.name, queryable, query_key)
+            log.exception("bus %s: handler for %r raised on %r", self.name, queryable, query_key,
+                          extra={"subject": query_key})
             return Answer.failure(default_key, f"{type(exc).__name__}: {exc}")
         key = default_key
         if not isinstance(result, Message):

@@ -20,10 +20,12 @@ from collections.abc import Callable
 
 class RateLimit(logging.Filter):
     """At most `burst` records per message template and subject per `window` seconds, and `burst * SUBJECTS` per
-    template: the subject is the record's first argument (the key a rejected message came on, the host it named).
+    template: the subject is the record's `subject` (`extra={"subject": key}`: the bus's lines, whose first argument
+    is the bus's own name), else its first argument (the key a rejected message came on, the host it named).
     Keyed by template alone, a trickle of one junk message used every rejection's budget, and a forged host token
     or load report was counted but never named (wire audit 10, D2); keyed by subject alone, a peer varying its keys
-    would make the limit nothing."""
+    would make the limit nothing; keyed by the bus's name, junk on one key hid a malformed load report on another
+    (wire audit 17, D2)."""
 
     SUBJECTS = 5  # subjects a template may name in full per window, at the most
 
@@ -37,7 +39,10 @@ class RateLimit(logging.Filter):
     def filter(self, record: logging.LogRecord) -> bool:
         template = str(record.msg)
         args = record.args
-        subject = str(args[0])[:200] if isinstance(args, tuple) and args else ""
+        subject = getattr(record, "subject", None)
+        if subject is None:
+            subject = args[0] if isinstance(args, tuple) and args else ""
+        subject = str(subject)[:200]
         now = self.clock()
         with self._lock:
             start, passed, dropped, subjects = self._windows.get(template, (now, 0, 0, {}))

@@ -234,6 +234,15 @@ def test_rate_limit_drops_floods_and_says_how_many() -> None:
     assert limit.filter(late) and "suppressed]" in late.getMessage()
     other = logging.LogRecord("drd.bus", logging.WARNING, "f", 1, "another %s", (1,), None)
     assert limit.filter(other)
+    # wire audit 17, D2: the bus's lines name the bus first; their subject is the key they give
+    bus_line = "bus %s: rejected malformed %s on %r: %s"
+    junk = [logging.makeLogRecord({"name": "drd.bus", "msg": bus_line, "subject": "host/controller/live",
+                                   "args": ("ranger1", "publication", "host/controller/live", "bad JSON")})
+            for _ in range(5)]
+    assert [limit.filter(r) for r in junk] == [True] * 3 + [False] * 2
+    load = logging.makeLogRecord({"name": "drd.bus", "msg": bus_line, "subject": "host/ranger1/load",
+                                  "args": ("ranger1", "publication", "host/ranger1/load", "bad JSON")})
+    assert limit.filter(load) and "host/ranger1/load" in load.getMessage()
 
 
 def secured(tmp_path: Path, catalog: Catalog, security: str) -> Cluster:
