@@ -275,6 +275,8 @@ class Transition:
     span: Span = field(default=NOWHERE, compare=False, repr=False, kw_only=True)
     source_span: Span = field(default=NOWHERE, compare=False, repr=False, kw_only=True)
     target_span: Span = field(default=NOWHERE, compare=False, repr=False, kw_only=True)
+    event_span: Span = field(default=NOWHERE, compare=False, repr=False, kw_only=True)  # `on E`'s E
+    sender_span: Span = field(default=NOWHERE, compare=False, repr=False, kw_only=True)  # `from X`'s X
 
 
 @dataclass(frozen=True, slots=True)

@@ -16,7 +16,7 @@ import networkx as nx
 
 from dsl import ast
 from dsl.catalog import SCALAR_TYPES, Catalog, ComponentType, Kind, ParamSpec, RecordSpec, possessive
-from dsl.errors import Reporter, Span, did_you_mean
+from dsl.errors import NOWHERE, Reporter, Span, did_you_mean
 from dsl.exprtypes import ANY, Scope, Type, Typer, assignable, constant, show
 from dsl.limits import DEFAULT_INSTANCES
 from dsl.linearize import find_cycle, plan_graph
@@ -533,13 +533,13 @@ class Checker:
             if t.kind is ast.TriggerKind.EVENT and t.event is not None:
                 event = self.events.get(t.event)
                 if event is None:
-                    self.report.error("unknown-event", f"unknown event {t.event}", t.span,
+                    self.report.error("unknown-event", f"unknown event {t.event}", _or(t.event_span, t.span),
                                       did_you_mean(t.event, [*self.events, "error"])  # `on error` too
                                       or f"known events: {', '.join(sorted(self.events)) or 'none'}; and"
                                          " `on error` when a child fails")
                 if t.sender is not None and t.sender not in body.children:
                     self.report.error("unknown-state", f"on {t.event} from {t.sender}: {b.name} has no child"
-                                      f" {t.sender}", t.span, did_you_mean(t.sender, body.children)
+                                      f" {t.sender}", _or(t.sender_span, t.span), did_you_mean(t.sender, body.children)
                                       or f"its children: {', '.join(body.children) or 'none'}")
             if t.preallocate:
                 self._preallocating(t)
@@ -652,3 +652,8 @@ def _written_type(e: ast.Expr) -> str:
                                                                                _written_type(right)):
             return "duration"
     return ANY
+
+
+def _or(span: Span, whole: Span) -> Span:
+    """`span`, or `whole` where the parser gave none (a transition built in code)."""
+    return whole if span == NOWHERE else span

@@ -25,7 +25,7 @@ from lark.exceptions import UnexpectedCharacters, UnexpectedInput, UnexpectedTok
 
 from dsl import ast
 from dsl.ast import KEYWORDS
-from dsl.errors import Diagnostic, OverBudget, Reporter, Span
+from dsl.errors import NOWHERE, Diagnostic, OverBudget, Reporter, Span
 from dsl.evaluate import INT_DIGITS
 from dsl.layout import Layout
 from dsl.unclosed import unclosed_block
@@ -241,10 +241,12 @@ class _Builder(Transformer):  # type: ignore[type-arg]
         for part in (pre, cond or delay or event_tok, guard and guard[1], actions and actions[-1]):
             if part is not None:
                 end = part
+        sender, name_tok, sender_tok = rest or (None, None, None)
         return ast.Transition(str(src), str(dst), kind, event, cond, delay, guard and guard[0],
-                              tuple(actions or ()), preallocate=pre is not None, sender=rest[0] if rest else None,
-                              span=self.cover(src, end),
-                              source_span=self.tspan(src), target_span=self.tspan(dst))
+                              tuple(actions or ()), preallocate=pre is not None, sender=sender,
+                              span=self.cover(src, end), source_span=self.tspan(src), target_span=self.tspan(dst),
+                              event_span=self.tspan(name_tok) if name_tok is not None else NOWHERE,
+                              sender_span=self.tspan(sender_tok) if sender_tok is not None else NOWHERE)
 
     def constraint(self, c: list[Any]) -> ast.Constraint:
         return ast.Constraint(str(c[1]), c[2], span=self.cover(c[0], c[2]))
@@ -262,7 +264,8 @@ class _Builder(Transformer):  # type: ignore[type-arg]
 
     def on_event(self, c: list[Any]) -> tuple[Any, ...]:
         name, _, sender = c
-        return ast.TriggerKind.EVENT, str(name), None, None, sender or name, str(sender) if sender else None
+        return (ast.TriggerKind.EVENT, str(name), None, None, sender or name, str(sender) if sender else None, name,
+                sender)
 
     def after(self, c: list[Any]) -> tuple[Any, ...]:
         return ast.TriggerKind.TIMEOUT, None, None, c[0], None
