@@ -124,32 +124,41 @@ def check_hosts(world: World, cluster: Cluster) -> list[WorldProblem]:
 
     types = {r.id: r.type for r in cluster.robots}
     for robot in cluster.robots:
-        if robot.type not in ("Ranger", "Scout") and robot.id not in rangers | scouts:  # a kind of the team's own
-            fail("scouts" if robot.carrier else "rangers or scouts",  # a carried one's is a Scout's body
-                 f"no robot {robot.id!r} (a {robot.type}), which {cluster.source} configures: a robot of any type"
-                 " takes a body here, a Ranger's under rangers (0.3 m; only a Ranger carries Scouts) or a Scout's"
-                 " under scouts (0.08 m)")
-        elif robot.type == "Ranger" and robot.id not in rangers:
+        if robot.type == "Ranger" and robot.id not in rangers:
             fail("rangers", f"no Ranger {robot.id!r}, which {cluster.source} configures")
         elif robot.type == "Scout" and robot.id not in scouts:
             fail("scouts", f"no Scout {robot.id!r} in a magazine or in scouts, which {cluster.source} configures")
-        elif robot.type == "Scout" and world.carrier(robot.id) != robot.carrier:
-            carrier = world.carrier(robot.id)
-            where = f"in the magazine of {carrier}" if carrier else "on the floor"
-            carried = f"carried by {robot.carrier}" if robot.carrier else "not carried"
-            kind = types.get(carrier or "", "Ranger")
-            fix = (f"put it in {robot.carrier}'s magazine here, or remove its carrier there" if robot.carrier else
-                   f"move it from {carrier}'s magazine to scouts here, or give it carrier: {carrier} there"
-                   if kind == "Ranger" else
-                   f"move it from {carrier}'s magazine to scouts here: {carrier} is a {kind}, and only a Ranger"
-                   " carries Scouts (a Scout's carrier is a Ranger)")
-            fail(_spawn_key(world, robot.id), f"Scout {robot.id!r} starts {where}, but {cluster.source} has it"
-                                              f" {carried}: {fix}")
+        elif robot.id not in rangers | scouts:  # a kind of the team's own
+            fail("scouts" if robot.carrier else "rangers or scouts",  # a carried one's is a Scout's body
+                 f"no robot {robot.id!r} (a {robot.type}), which {cluster.source} configures: a robot of any type"
+                 " takes a body here, a Ranger's under rangers (0.3 m, with a magazine for the robots it carries)"
+                 " or a Scout's under scouts or in a magazine (0.08 m)")
+        elif (robot.id in scouts or robot.carrier) and world.carrier(robot.id) != robot.carrier:
+            # any carried body, whatever its type (users audit 17, D2: a team's Beacon on the floor ran)
+            fail(_spawn_key(world, robot.id), _carrier_mismatch(world, cluster, robot.id, robot.type,
+                                                                robot.carrier, types))
     configured = {r.id for r in cluster.robots}
     for rid in [*sorted(rangers), *world.scout_ids]:
         if rid not in configured:
             fail(_spawn_key(world, rid), f"robot {rid!r} is not configured in {cluster.source}")
     return problems
+
+
+def _carrier_mismatch(world: World, cluster: Cluster, rid: str, kind: str, configured: str | None,
+                      types: Mapping[str, str]) -> str:
+    """Why the world and hosts.yaml disagree on what carries robot `rid` (a `kind`), and how to make them agree."""
+    carrier = world.carrier(rid)
+    where = f"in the magazine of {carrier}" if carrier else "on the floor" if rid in world.scout_ids else (
+        "under rangers (a body no magazine holds)")
+    carried = f"carried by {configured}" if configured else "not carried"
+    if configured:
+        fix = f"put it in {configured}'s magazine here, or remove its carrier there"
+    elif kind == "Scout" and types.get(carrier or "", "Ranger") != "Ranger":  # `Scout` declares `carrier: Ranger`
+        fix = (f"move it from {carrier}'s magazine to scouts here: {carrier} is a {types[carrier or '']}, and"
+               " only a Ranger carries Scouts (a Scout's carrier is a Ranger)")
+    else:
+        fix = f"move it from {carrier}'s magazine to scouts here, or give it carrier: {carrier} there"
+    return f"{kind} {rid!r} starts {where}, but {cluster.source} has it {carried}: {fix}"
 
 
 def _spawn_key(world: World, rid: str) -> str:

@@ -99,8 +99,8 @@ def test_a_robot_of_a_teams_own_type_missing_from_the_world_is_named_at_load(cat
     problems = [f"{p.key}: {p.message}" for p in check_hosts(world, own)]
     assert problems == ["rangers or scouts: no robot 'bb8' (a Crawler), which hosts.yaml configures: a robot of any"
                         " type takes"
-                        " a body here, a Ranger's under rangers (0.3 m; only a Ranger carries Scouts) or a Scout's"
-                        " under scouts (0.08 m)"]
+                        " a body here, a Ranger's under rangers (0.3 m, with a magazine for the robots it carries)"
+                        " or a Scout's under scouts or in a magazine (0.08 m)"]
     data = yaml.safe_load((ROOT / "worlds" / "corridor.yaml").read_text())
     data.setdefault("scouts", []).append({"id": "bb8", "at": list(world.rooms[0].center), "heading": 0})
     assert check_hosts(parse_world(data, "w.yaml"), own) == []
@@ -119,6 +119,24 @@ def test_a_missing_carried_robot_or_scout_is_reported_under_scouts(catalog: Cata
                                                          else r for r in h.robots)) for h in cluster.hosts)
     assert [p.key for p in check_hosts(parse_world(data, "w.yaml"), dataclasses.replace(cluster, hosts=renamed))] \
         == ["scouts"]
+
+
+def test_a_carried_robot_of_a_teams_own_type_is_checked_against_its_carrier(catalog: Catalog) -> None:
+    """Users audit 17, D2: only robots typed `Scout` had their carrier checked, so a team's Beacon that hosts.yaml
+    has carried by a Ranger but the world puts on the floor ran (and a launch found an empty magazine)."""
+    import dataclasses
+
+    cluster = load_hosts(ROOT / "hosts.yaml", catalog)
+    renamed = dataclasses.replace(cluster, hosts=tuple(dataclasses.replace(h, robots=tuple(
+        dataclasses.replace(r, type="Beacon") if r.id == "scout6" else r for r in h.robots)) for h in cluster.hosts))
+    assert check_hosts(load_world(ROOT / "worlds" / "corridor.yaml"), renamed) == []  # in ranger1's magazine
+    data = yaml.safe_load((ROOT / "worlds" / "corridor.yaml").read_text())
+    data["rangers"][0]["magazine"] = [s for s in data["rangers"][0]["magazine"] if s != "scout6"]
+    data.setdefault("scouts", []).append({"id": "scout6", "at": list(load_world(
+        ROOT / "worlds" / "corridor.yaml").rooms[0].center), "heading": 0})
+    problems = [f"{p.key}: {p.message}" for p in check_hosts(parse_world(data, "w.yaml"), renamed)]
+    assert problems == [f"scouts[{len(data['scouts']) - 1}]: Beacon 'scout6' starts on the floor, but hosts.yaml has"
+                        " it carried by ranger1: put it in ranger1's magazine here, or remove its carrier there"]
 
 # ---------------------------------------------------------------- geometry and the light map
 
