@@ -21,7 +21,7 @@ from typing import IO, Any
 from drd.bus import LocalNetwork
 from drd.errors import ConfigurationError
 from drd.executive import EntryPoints, Executive
-from drd.explain import Explainer, LastRequest
+from drd.explain import Explainer, LastRequest, within
 from drd.hosts import Cluster, Role
 from drd.hw.drivers import HostDrivers, drivers_for
 from drd.inject import Action, Injection
@@ -98,7 +98,10 @@ class DryRun:
 
     def timeline(self) -> list[dict[str, Any]]:
         """Each entry of a behavior instance, in the order entered: when it was entered and exited, and how it
-        ended. A state entered again (a self-transition, a loop) gets a row per entry: its earlier runs happened."""
+        ended. A state entered again (a self-transition, a loop) gets a row per entry: its earlier runs happened.
+        A restore from the journal ends the mission's entries in force as `controller lost`, at the time the journal
+        saved (what ran after it was undone), and enters its states again (users audit 17, D3: they stayed
+        `active` in the report of a mission that succeeded)."""
         rows: list[dict[str, Any]] = []
         open_: dict[str, dict[str, Any]] = {}  # path -> the row of its entry in force
         for r in self.records:
@@ -109,6 +112,10 @@ class DryRun:
                 entry = open_.pop(r.path, None)
                 if entry is not None:
                     entry.update(exited=report_time(r.at), status=r.status)
+            elif isinstance(r, rec.Restored):
+                for path in [p for p in open_ if within(p, r.path)]:
+                    entry = open_.pop(path)
+                    entry.update(exited=max(entry["entered"], report_time(r.since)), status="controller lost")
         return rows
 
     def holds(self) -> list[dict[str, Any]]:

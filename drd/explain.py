@@ -213,6 +213,10 @@ def _active(records: Iterator[rec.Record], waiting: set[str]) -> list[dict[str, 
             suspended.add(r.path)
         elif isinstance(r, rec.Resumed):
             suspended.discard(r.path)
+        elif isinstance(r, rec.Restored):  # its states are entered again, those still in force as saved
+            for path in [p for p in active if within(p, r.path)]:
+                del active[path]
+            suspended = {p for p in suspended if not within(p, r.path)}
 
     def state(path: str) -> str:
         if path in waiting:
@@ -278,6 +282,9 @@ class Waiters:
         elif isinstance(r, rec.Exited):
             self.waits.pop(r.path, None)
             self.holds.pop(r.path, None)
+        elif isinstance(r, rec.Restored):  # its holds ended (`released`), its waiters ask again
+            for path in [p for p in self.waits if within(p, r.path)]:
+                del self.waits[path]
 
     def waiting(self) -> list[dict[str, Any]]:
         """Each waiter now, with who is in its way (`current_blockers`) and what each of them holds."""
@@ -374,6 +381,11 @@ def _leaves(paths: Iterator[str] | dict[str, Any]) -> list[str]:
     every = list(paths)
     owners = {owner for q in every for owner in _owners(q)}
     return [p for p in every if p not in owners]
+
+
+def within(path: str, root: str) -> bool:
+    """Whether `path` is `root` or below it (`root/...`, `root[i]...`)."""
+    return path == root or path.startswith((root + "/", root + "["))
 
 
 def _owners(path: str) -> list[str]:

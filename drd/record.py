@@ -52,7 +52,7 @@ import orjson
 
 from drd import outputs
 from drd.errors import ConfigurationError
-from drd.explain import Waiters
+from drd.explain import Waiters, within
 from drd.runtime import records as rec
 from drd.sim.model import INTRUDER_RADIUS, RANGER_RADIUS, SCOUT_RADIUS, DoorState, World
 from drd.sim.observe import SCAN_EVERY, SensorTap
@@ -716,6 +716,10 @@ class ActiveView:
             self.holds[r.path] = {k: v for k, v in self.holds.get(r.path, {}).items() if v not in gone}
         elif isinstance(r, rec.Finished):
             self.outcome = r.outcome
+        elif isinstance(r, rec.Restored):  # its states are entered again: those in force as the journal saved them
+            for path in [p for p in self.active if within(p, r.path)]:
+                self._exit(path)
+            self.outcome = None
         else:
             return
         self.changed_at = r.at

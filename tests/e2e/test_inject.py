@@ -108,6 +108,11 @@ def test_a_controller_started_again_resumes_the_mission_from_its_journal_as_on_a
     assert moving and moving <= halted, (moving, halted)
     released = [r for r in records if r["kind"] == "released" and r["reason"] == "controller lost"]
     assert released and all(r["at"] == restored["at"] for r in released)
+    # users audit 17, D3: the entries the restore ended are closed in the report, the ones after it end as they did
+    lost = [row for row in report["timeline"] if row["status"] == "controller lost"]  # type: ignore[union-attr]
+    assert lost and all(row["exited"] == pytest.approx(60.0, abs=0.11) for row in lost), lost
+    assert {row["path"] for row in lost} >= {"CorridorSurveillance", "CorridorSurveillance/RoomSurveillance[4]"}
+    assert all(row["exited"] is not None for row in report["timeline"]), "a succeeded mission left rows active"  # type: ignore[union-attr]
     from drd.tracecheck import check
 
     assert check(records, {"ranger1.radio"}).ok

@@ -143,3 +143,36 @@ def test_a_team_that_lost_its_instances_gives_the_leafs_words(catalog: Catalog) 
     assert [r.text for r in h.of(rec.Log) if r.path == "Team/Post"] == ["an instance failed: no door in sight"] * 2
     r = DryRun("Team", finished.outcome, finished.reason, finished.at, 0.0, records=h.records)
     assert "failed; last failure: no door in sight)" in text_of(r, 200)[0]
+
+
+def test_a_restore_ends_what_ran_before_it_in_the_timeline_explain_and_the_live_view() -> None:
+    """Users audit 17, D3: after a controller was lost and the mission restored from its journal, the entries from
+    before stayed `active` (no exit) in the report of a mission that succeeded; a state entered after the journal's
+    save and not entered again stayed active in `explain` and a recording's `/drd/active`."""
+    from drd.explain import Explainer
+    from drd.record import ActiveView
+
+    records: list[rec.Record] = [
+        rec.Entered(0.0, "M", "M"), rec.Entered(0.0, "M/A", "M/A"), rec.Entered(0.0, "M/B[0]", "M/B[*]"),
+        rec.Waiting(1.0, "M/B[0]", ("s: Scout",)),
+        rec.Entered(5.5, "M/A/C", "M/A/C"),  # after the journal's save at 5.0: undone by the restore
+        rec.Restored(8.0, "M", since=5.0, paused=3.0),
+        rec.Entered(8.0, "M", "M"), rec.Entered(8.0, "M/A", "M/A"), rec.Entered(8.0, "M/B[0]", "M/B[*]"),
+        rec.Granted(8.0, "M/B[0]", {"s": "scout1"}, {"scout1": 1}),
+        rec.Exited(9.0, "M/B[0]", "M/B[*]", "success"), rec.Exited(9.0, "M/A", "M/A", "success"),
+        rec.Exited(9.0, "M", "M", "success"),
+    ]
+    rows = report(records[:-3]).timeline()
+    assert [(r["path"], r["entered"], r["exited"], r["status"]) for r in rows[:4]] == [
+        ("M", 0.0, 5.0, "controller lost"), ("M/A", 0.0, 5.0, "controller lost"),
+        ("M/B[0]", 0.0, 5.0, "controller lost"), ("M/A/C", 5.5, 5.5, "controller lost")]
+    assert [(r["path"], r["exited"]) for r in report(records).timeline()[4:]] == [("M", 9.0), ("M/A", 9.0),
+                                                                                 ("M/B[0]", 9.0)]
+    now = Explainer(records[:-3]).active_now()
+    assert [(a["path"], a["since"], a["state"]) for a in now] == [("M/A", 8.0, "running"), ("M/B[0]", 8.0, "running")]
+    view = ActiveView("M-1")
+    for r in records[:-3]:
+        view.take(r)
+    state = view.state(8.0)
+    assert [(a["path"], a["since"]) for a in state["active"]] == [("M/A", 8.0), ("M/B[0]", 8.0)]
+    assert state["waiting"] == [] and state["holds"] == {"M/B[0]": {"s": "scout1"}}
