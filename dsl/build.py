@@ -346,7 +346,9 @@ class Builder:
             return ()
         bound = [self._bind(spec.name, spec.type, spec.of, held, child.span, parts=True) for spec in ct.needs]
         if not any(b is not None for b, spec in zip(bound, ct.needs, strict=True) if spec.of):
-            bound = self._team_robot(ct, bound, held, child.span)
+            served = self._team_robot(ct, bound, held, child.span)
+            if served is not bound:  # under a team's own robot: so are the robots it acts on (users audit 17, D1)
+                bound = self._team_carried(ct, served, held, child.span)
         return tuple(ResourceNeed(spec.name, spec.type, None, spec.quantity, None, b, span=child.span)
                      for spec, b in zip(ct.needs, bound, strict=True))
 
@@ -373,6 +375,35 @@ class Builder:
         robot = nearest[0]
         return [(robot.state, robot.name, self.catalog.part_of(robot.type, spec.type)) if spec.of else b
                 for spec, b in zip(ct.needs, bound, strict=True)]
+
+    def _team_carried(self, ct: ComponentType, bound: list[tuple[str, str, str | None] | None],
+                      held: tuple[_Held, ...], span: Span) -> list[tuple[str, str, str | None] | None]:
+        """Under a team's own robot (`_team_robot` served `ct`'s parts from it), `ct`'s needs of a robot type its
+        manifest's folder defines that nothing held serves (LaunchScout's `scout: Scout` under a Crawler carrying
+        Beacons): each served by the robot of a team's own type that the nearest ancestor holds and that no other
+        need of `ct` uses, rather than asked of the manager for a type the team has none of (users audit 17, D1);
+        two such robots held there are ambiguous."""
+        home = _folder(ct.source)
+        used = {(b[0], b[1]) for b in bound if b is not None}
+        out = list(bound)
+        for i, (spec, b) in enumerate(zip(ct.needs, bound, strict=True)):
+            need_type = self.catalog.get(spec.type)
+            if b is not None or spec.of or need_type is None or need_type.kind is not Kind.ARC or (
+                    _folder(need_type.source) != home):
+                continue
+            fits = _distinct([h for h in held if (h.state, h.name) not in used and self._team_arc(h.type, home)])
+            nearest = [h for h in fits if h.state == fits[0].state]
+            if len(nearest) > 1:
+                self._ambiguous(spec.name, spec.type, nearest, span)
+            elif nearest:
+                out[i] = (nearest[0].state, nearest[0].name, None)
+                used.add((nearest[0].state, nearest[0].name))
+        return out
+
+    def _team_arc(self, name: str, home: str) -> bool:
+        """Whether `name` is a robot type (an arc) of a folder other than `home`: a team's own."""
+        t = self.catalog.get(name)
+        return t is not None and t.kind is Kind.ARC and _folder(t.source) != home
 
     def _bind(self, name: str, typ: str, of: tuple[str, ...], held: tuple[_Held, ...], span: Span,
               parts: bool) -> tuple[str, str, str | None] | None:

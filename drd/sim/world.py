@@ -133,8 +133,9 @@ def check_hosts(world: World, cluster: Cluster) -> list[WorldProblem]:
                  f"no robot {robot.id!r} (a {robot.type}), which {cluster.source} configures: a robot of any type"
                  " takes a body here, a Ranger's under rangers (0.3 m, with a magazine for the robots it carries)"
                  " or a Scout's under scouts or in a magazine (0.08 m)")
-        elif (robot.id in scouts or robot.carrier) and world.carrier(robot.id) != robot.carrier:
-            # any carried body, whatever its type (users audit 17, D2: a team's Beacon on the floor ran)
+        elif (robot.type == "Scout" or robot.carrier) and world.carrier(robot.id) != robot.carrier:
+            # a Scout, or a robot of any type the hosts file has carried (users audit 17, D2: a team's Beacon on the
+            # floor ran); a team's robot in a magazine without `carrier` may name its carrier otherwise (`mothership`)
             fail(_spawn_key(world, robot.id), _carrier_mismatch(world, cluster, robot.id, robot.type,
                                                                 robot.carrier, types))
     configured = {r.id for r in cluster.robots}

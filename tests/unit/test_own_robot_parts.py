@@ -21,7 +21,9 @@ def arc(name: str, parts: dict[str, str]) -> ComponentType:
 
 def mine(catalog: Catalog) -> Catalog:
     own = [arc("Crawler", {"drive": "Drive", "ranges": "RangeSensor", "camera": "Camera"}),
-           arc("Probe", {"drive": "Drive", "camera": "Camera"})]
+           arc("Probe", {"drive": "Drive", "camera": "Camera"}),
+           arc("Tender", {"drive": "Drive", "ranges": "RangeSensor", "launcher": "Launcher"}),
+           arc("Beacon", {"wheels": "Drive"})]
     return dataclasses.replace(catalog, components={**catalog.components, **{t.name: t for t in own}})
 
 
@@ -62,3 +64,21 @@ def test_a_standard_robot_the_manifest_leaves_out_and_a_robot_missing_a_part_ser
     assert compile_text(two, mine(catalog), "two.mission").ok
     probe = bound("mission Roll {\n    needs p: Probe\n    FollowCorridor\n}\n", catalog, "Roll/FollowCorridor")
     assert probe == {"drive": None, "ranges": None}
+
+
+def test_the_robot_a_standard_behavior_acts_on_is_the_teams_own_under_the_teams_robot(catalog: Catalog) -> None:
+    """Users audit 17, D1: LaunchScout under a Tender carrying Beacons asked the manager for a `Scout` (its need's
+    type), which the team has none of: the run failed, `validate` said nothing. Under a team's own robot, a need of
+    a robot type the manifest's folder defines is served by the other robot of the team's own type held nearest."""
+    text = ("mission Drop {\n    needs tender: Tender\n    Place\n}\n"
+            "behavior Place {\n    needs beacon: Beacon\n    LaunchScout(carrier_property: \"mothership\")\n}\n")
+    assert bound(text, catalog, "Drop/Place/LaunchScout") == {
+        "ranges": ("Drop", "tender", "ranges"), "launcher": ("Drop", "tender", "launcher"),
+        "scout": ("Drop/Place", "beacon", None)}
+    two = ("mission Drop {\n    needs tender: Tender\n    Place\n}\n"
+           "behavior Place {\n    needs b1: Beacon\n    needs b2: Beacon\n    LaunchScout\n}\n")
+    r = compile_text(two, mine(catalog), "two.mission")
+    assert [d.code for d in r.diagnostics if d.severity.value == "error"] == ["ambiguous-binding"]
+    # under the example's own robots nothing changes: a Scout held serves it by type, none held is asked for
+    ranger = "mission Drop {\n    needs ranger: Ranger\n    needs beacon: Beacon\n    LaunchScout\n}\n"
+    assert bound(ranger, catalog, "Drop/LaunchScout")["scout"] is None
