@@ -35,6 +35,18 @@ class Ros2RangeSensor(Ros2Driver):
         if not all(math.isfinite(v) for v in (top, low, first, step)) or top <= 0:
             raise HardwareError(f"{self.describe()}: the laser's scan geometry is not usable (angle_min {first}, "
                                 f"angle_increment {step}, range_min {low}, range_max {top}): a faulted laser")
+        count, said = len(msg.ranges), _beams_said(first, float(msg.angle_max), step)
+        if count == 0 or 2 * count < said:  # a laser that lost its data but still heartbeats: never free space
+            raise HardwareError(f"{self.describe()}: the laser gives {count} beams where its scan's angles say "
+                                f"{said}: a faulted laser (ROS 2 audit 17: an empty scan read as free space)")
         scan = Scan(scan_ranges(msg.ranges, low, top), first, step, top)
         self._latest = (msg, scan)
         return scan
+
+
+def _beams_said(angle_min: float, angle_max: float, increment: float) -> int:
+    """How many beams a LaserScan's angles say it has (0 when they do not say: a zero or non-finite step)."""
+    if increment == 0 or not math.isfinite(angle_max):
+        return 0
+    beams = round((angle_max - angle_min) / increment) + 1
+    return beams if 0 < beams <= 1_000_000 else 0

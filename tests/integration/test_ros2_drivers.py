@@ -75,6 +75,8 @@ class FakeRobot:
         self.v = self.omega = 0.0
         self.silent = threading.Event()
         self.faulted = threading.Event()  # NaN in the scan's geometry and the odometry's pose (ROS 2 audit 12)
+        self.blind = threading.Event()  # scans with no beams (ROS 2 audit 17), or fewer than the angles say
+        self.beams = 0
         self.stopped = threading.Event()
         self.thread = threading.Thread(target=self._run, daemon=True)
         self.thread.start()
@@ -102,6 +104,8 @@ class FakeRobot:
             self.odom.publish(header=odom.header, child_frame_id=odom.child_frame_id, pose=odom.pose, twist=odom.twist)
             ranges = np.full(90, 2.0, dtype=np.float32)
             ranges[:10] = np.inf
+            if self.blind.is_set():
+                ranges = ranges[:self.beams]
             self.scan.publish(header=odom.header, angle_min=-math.pi / 2, angle_max=math.pi / 2,
                               angle_increment=math.nan if bad else math.pi / 89, time_increment=0.0,
                               scan_time=period, range_min=0.1, range_max=4.0, ranges=ranges,
@@ -160,6 +164,15 @@ def test_ros2_drive_drives_a_robot_written_with_the_sdk(robot: FakeRobot, router
     finally:
         drive.close()
         ranges.close()
+
+
+def _refusal(reading: Any) -> str:
+    """Why `reading` fails now ("" when it reads)."""
+    try:
+        reading()
+        return ""
+    except HardwareError as e:
+        return str(e)
 
 
 def _reads(reading: Any) -> bool:
@@ -287,6 +300,26 @@ def test_nan_geometry_or_pose_is_a_faulted_sensor_not_a_reading(robot: FakeRobot
             ranges.scan()
     finally:
         drive.close()
+        ranges.close()
+
+
+def test_a_scan_without_its_beams_is_a_faulted_laser_not_free_space(robot: FakeRobot, router: int,
+                                                                    link: Ros2Link) -> None:
+    """ROS 2 audit 17, D2: a laser publishing well-formed scans with no ranges (lost data, still heartbeating) was
+    read as nothing in sight, and FollowCorridor drove the robot 2 m through a wall. A scan with fewer than half
+    the beams its angles say fails the reading, as a stale one does; 89 of 90 (a driver's rounding) is read."""
+    ranges = Ros2RangeSensor(device("RangeSensor", "ranges", endpoint=f"tcp/127.0.0.1:{router}"), "bot", link)
+    try:
+        eventually(lambda: _reads(ranges.scan), "the robot's scan")
+        for beams in (0, 30):
+            robot.beams = beams
+            robot.blind.set()
+            said = f"the laser gives {beams} beams where its scan's angles say 90"
+            eventually(lambda said=said: said in _refusal(ranges.scan), f"a scan of {beams} beams refused")
+        robot.beams = 89
+        eventually(lambda: _reads(ranges.scan), "a scan one beam short read")
+        assert len(ranges.scan().ranges) == 89
+    finally:
         ranges.close()
 
 
