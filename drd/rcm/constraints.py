@@ -16,6 +16,7 @@ it holds, -1 when not. Pure: the names (with the robots' poses) are given.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 from dsl import ast
@@ -36,7 +37,14 @@ class Measure:
     margin: float
     value: float
     limit: float
-    kind: str = "compare"  # what value and limit are: a comparison's sides, "depth" in rooms (limit 0), or "bool"
+    kind: str = "compare"  # what value and limit are: a comparison's sides, "depth" in rooms (limit 0), or "bool";
+    #: "unknown": it could not be measured (`note` says why), value and limit NaN
+    note: str = ""
+
+    @staticmethod
+    def unknown(why: str) -> Measure:
+        """A constraint that could not be measured for too long: broken, for `why`."""
+        return Measure(False, -math.inf, math.nan, math.nan, "unknown", why)
 
 
 def measure(condition: ast.Expr, names: dict[str, object], count: CountFn | None = None,
@@ -56,6 +64,8 @@ def shown(m: Measure) -> str:
     a comparison, `3.64 m outside` for `inside(...)` (its margin is a signed depth, and "-3.64 against 0" read as
     nonsense for a yes/no condition: users audit 12, D7), nothing for a plain condition; of an `and` or `or`, the
     part that decided (reverify audit 14, D4)."""
+    if m.kind == "unknown":
+        return f"not measured: {m.note}"
     if m.kind == "depth":
         return f"{abs(m.value):.2f} m {'inside' if m.value >= 0 else 'outside'}"
     return f"{m.value:.3g} against {m.limit:.3g}" if m.kind == "compare" else ""

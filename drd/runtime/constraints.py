@@ -25,6 +25,9 @@ from dsl.evaluate import EvalError
 
 #: Seconds ahead a command is judged by: two control cycles, so a robot stops before its boundary, not past it.
 HORIZON = 0.2
+#: Seconds a constraint may go unmeasured (a stale or NaN battery, a pose the robot does not know, a robot not read
+#: yet at the first instant on a cluster) before it counts as broken (ROS 2 audit 17, D1: a robot drove on).
+UNMEASURED = 2.0
 
 
 @dataclass(eq=False)
@@ -41,6 +44,7 @@ class Active:
     names: Callable[[], Mapping[str, object]] = dict  # the declaring behavior's scope (what a host guard is sent)
     violated: bool = False  # broken, or a command refused, since it last held with nothing refused
     refused_at: float = -1.0
+    unmeasured_since: float | None = None  # when it last became impossible to measure (None: measured)
     text: str = field(default="", init=False)
 
     def __post_init__(self) -> None:

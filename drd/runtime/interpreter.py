@@ -31,7 +31,7 @@ from drd.runtime import records as rec
 from drd.runtime.broker import ResourceBroker
 from drd.runtime.clock import Clock
 from drd.runtime.component import Registry, Status, step_status
-from drd.runtime.constraints import Active, ConstraintGuard, robots_named
+from drd.runtime.constraints import UNMEASURED, Active, ConstraintGuard, robots_named
 from drd.runtime.hosting import ComponentHost
 from drd.runtime.ownership import Arbiter, Gates, LocalGates, NoGates
 from drd.runtime.pool import ResourcePool
@@ -1074,11 +1074,17 @@ class Interpreter:
             for a in actives:
                 try:
                     m = a.measure()
-                except EvalError as e:
-                    if not a.violated and self.listeners:
-                        self._notify(rec.Log(now, node.path, f"constraint {a.name} cannot be measured: {e.message}"))
-                    a.violated = True
-                    continue
+                except EvalError as e:  # not known for UNMEASURED seconds: broken (docs/reference.md)
+                    if a.unmeasured_since is None:
+                        a.unmeasured_since = now
+                        if self.listeners:
+                            self._notify(rec.Log(now, node.path, f"constraint {a.name} cannot be measured: "
+                                                                 f"{e.message}"))
+                    if now - a.unmeasured_since < UNMEASURED - 1e-9:
+                        continue
+                    m = Measure.unknown(f"{e.message}, for {UNMEASURED:g} s")
+                else:
+                    a.unmeasured_since = None
                 if m.holds:
                     if now - a.refused_at > 0.15:  # held, and nothing refused in the last cycle: armed again
                         a.violated = False

@@ -12,6 +12,8 @@ import math
 import re
 from typing import Any
 
+import pytest
+
 from drd.dryrun import DryRun, Mission, run_many
 from drd.hosts import load_hosts
 from drd.sim.world import load_world
@@ -113,6 +115,25 @@ def test_a_battery_floor_can_be_read_and_checked(catalog: Catalog) -> None:
     report, records = dry(catalog, text, until=10.0)
     assert report.outcome == "failure" and "constraint fence violated: ranger.battery >= 2" in report.reason
     assert final_x(report) < 1.2  # it never drove: the floor was broken from the start
+
+
+def test_a_constraint_that_cannot_be_measured_for_two_seconds_counts_as_broken(catalog: Catalog) -> None:
+    """ROS 2 audit 17, D1: a stale or NaN battery made `ranger.battery >= 0.5` impossible to measure; it was logged
+    once and guarded nothing, and the robot drove on. Not measurable for `UNMEASURED` seconds, a constraint breaks:
+    the robot stops and the behavior gets `violation` (here it fails, naming why)."""
+    from drd.runtime.constraints import UNMEASURED
+
+    text = FENCED.replace("    constraint fence: distance(ranger, point(1, 0)) <= 6",
+                          '    var room: str = "nowhere"\n    constraint fence: inside(ranger, room)')
+    report, records = dry(catalog, text, until=20.0)
+    assert report.outcome == "failure", report.reason
+    assert report.reason == ('constraint fence violated: inside(ranger, room) (not measured: no room named nowhere'
+                             f' in this world, for {UNMEASURED:g} s)'), report.reason
+    logged = [r for r in records if r["kind"] == "log" and "cannot be measured" in r["text"]]
+    violation = [r for r in records if r["kind"] == "event" and r["name"] == "violation"]
+    assert len(logged) == 1 and violation
+    assert violation[0]["at"] - logged[0]["at"] == pytest.approx(UNMEASURED, abs=0.11)
+    assert final_x(report) < 1.0 + 0.5 * (UNMEASURED + 0.5)  # stopped once broken, not at the corridor's end
 
 
 def test_constraints_are_checked_at_compile_time(catalog: Catalog) -> None:
