@@ -2,9 +2,9 @@
 
 A robot's pose is what its Drive's odometry says (the robot's own belief, as on real hardware), its battery what
 its Drive reports (`Drive.battery()`), else the static `battery` of hosts.yaml. A reading the driver cannot give
-(it raises, or says NaN) is not known: a constraint on it cannot be measured, so after 2 s it counts as broken (a NaN pose
-passed a geofence, a stale battery read as the static 1.0: ROS 2 audit 12). Read at most once per instant of
-the clock, and only when an expression asks (`ranger.x` in a guard, a constraint).
+(it raises, or says NaN) is not known: a constraint on it cannot be measured, so after 2 s it counts as broken (a
+NaN pose passed a geofence, a stale battery read as the static 1.0: ROS 2 audit 12). Read at most once per instant
+of the clock, and only when an expression asks (`ranger.x` in a guard, a constraint).
 """
 
 from __future__ import annotations
