@@ -36,6 +36,7 @@ class Latest:
         self.at = 0.0
         self.count = 0
         self.wrong_frame = 0
+        self.seen_frame: tuple[str, str | None] = ("", None)  # the last frame (and child) dropped
         self.arrived = threading.Condition()
         self.since = self.link.now()  # the first message is waited for until `max_age` after this, once
 
@@ -44,6 +45,7 @@ class Latest:
         child = message.child_frame_id if self.child is not None else None
         if frame != self.frame or child != self.child:
             self.wrong_frame += 1
+            self.seen_frame = (message.header.frame_id, child)
             if self.wrong_frame == 1:
                 log.warning("%s: %s in frame %r (child %r), not %r (child %r): dropped", self.what, self.topic, frame,
                             child, self.frame, self.child)
@@ -63,15 +65,23 @@ class Latest:
             if self.message is None and left > 0:
                 self.arrived.wait_for(lambda: self.message is not None, left)
             message, at = self.message, self.at
+        if message is None and self.wrong_frame:  # the router is up: the frames disagree
+            want, got = _frames(self.frame, self.child), _frames(*self.seen_frame)
+            raise HardwareError(f"{self.what}: no message on {self.topic} in {want} within {self.max_age:g} s: "
+                                f"{self.wrong_frame} came in {got}; the driver's frame options must name the frames "
+                                "the robot publishes")
         if message is None:
-            why = f"{self.wrong_frame} in another frame" if self.wrong_frame else "none"
-            raise HardwareError(f"{self.what}: no message on {self.topic} ({why} within {self.max_age:g} s; is the "
-                                f"robot's router at {self.endpoint} up and publishing it?)")
+            raise HardwareError(f"{self.what}: no message on {self.topic} (none within {self.max_age:g} s; is "
+                                f"{self.link.source(self.endpoint)} up and publishing it?)")
         age = self.link.now() - at
         if age > self.max_age:
             raise HardwareError(f"{self.what}: the latest message on {self.topic} is {age:.2f} s old (stale: older "
                                 f"than {self.max_age:g} s)")
         return message
+
+
+def _frames(frame: str | None, child: str | None) -> str:
+    return f"frame {frame!r}" + (f" (child {child!r})" if child is not None else "")
 
 
 class Ros2Driver:

@@ -344,6 +344,10 @@ class Ros2Link:
                 found = self._sessions[endpoint] = Ros2Session.connect(endpoint, types=self.types)
             return found
 
+    def source(self, endpoint: str) -> str:
+        """Where a robot's messages come from, in words: its router, or the dry-run's simulator (one session)."""
+        return "the dry-run's simulated robot" if self._shared is not None else f"the robot's router at {endpoint}"
+
     def node(self, endpoint: str, domain_id: int, namespace: str) -> Ros2Node:
         session = self.session(endpoint)
         with self._lock:

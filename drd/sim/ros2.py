@@ -110,6 +110,7 @@ class ServedRobots:
         self._tf_static = root.publisher("/tf_static", TF, QoS(durability=Durability.TRANSIENT_LOCAL, depth=1))
         self.moving: list[Callable[[], tuple[str, str, Pose]]] = []  # per robot: (odom, base_link, pose in odom)
         self.fixed: list[tuple[str, str]] = []  # (base_link, sensor frame): the sensors sit at the robot's centre
+        self.bases: dict[str, str] = {}  # robot -> its base frame
         try:
             for robot in cluster.robots:
                 if robot.id in sim.robots:
@@ -123,11 +124,12 @@ class ServedRobots:
     # -- building ----------------------------------------------------------------------------------------
 
     def _serve(self, robot: Robot, devices: Mapping[str, Device]) -> None:
-        for device_id in robot.parts.values():
-            device = devices.get(device_id)
-            if device is None:
-                continue
-            opts = Ros2Options.of(device, robot.id) if device.driver == "ros2" else Ros2Options(namespace=robot.id)
+        parts = [(d, Ros2Options.of(d, robot.id) if d.driver == "ros2" else Ros2Options(namespace=robot.id))
+                 for device_id in robot.parts.values() if (d := devices.get(device_id)) is not None]
+        # the frames the hosts file names (a real robot's, kept for its dry-run: ROS 2 audit 17, D3), else the robot's
+        self.bases[robot.id] = next((o.frames["base_frame"] for _, o in parts if "base_frame" in o.frames),
+                                    f"{robot.id}/base_link")
+        for device, opts in parts:
             builder = _BUILDERS.get(device.type)
             if builder is not None:
                 builder(self, robot.id, device, opts)
@@ -320,7 +322,7 @@ def _drive(s: ServedRobots, rid: str, device: Device, opts: Ros2Options) -> None
         sim.set_max_speed(rid, _option(device, "max_speed", math.inf))
     origin = sim.origin(rid)
     start = (origin.x, origin.y, origin.heading)
-    odom_frame, base_frame = f"{rid}/odom", f"{rid}/base_link"
+    odom_frame, base_frame = opts.frames.get("odom_frame", f"{rid}/odom"), s.bases[rid]
     odometry_, pose_, point, quaternion = (s.msg(t) for t in (
         mapping.ODOMETRY, "geometry_msgs/msg/Pose", "geometry_msgs/msg/Point", "geometry_msgs/msg/Quaternion"))
     with_cov, twist_cov, twist, vector = (s.msg(t) for t in ("geometry_msgs/msg/PoseWithCovariance",
@@ -384,8 +386,8 @@ def _range_sensor(s: ServedRobots, rid: str, device: Device, opts: Ros2Options) 
     fov = math.radians(_option(device, "fov", 180.0))
     step = fov / (beams - 1) if beams > 1 else 0.0
     lo = -fov / 2 if beams > 1 else 0.0
-    frame = f"{rid}/laser"
-    s.fixed.append((f"{rid}/base_link", frame))
+    frame = opts.frames.get("scan_frame", f"{rid}/laser")
+    s.fixed.append((s.bases[rid], frame))
 
     laser_scan, none = s.msg(mapping.LASER_SCAN), np.zeros(0, dtype=np.float32)
 
@@ -405,8 +407,8 @@ def _camera(s: ServedRobots, rid: str, device: Device, opts: Ros2Options) -> Non
     resolution = int(_option(device, "resolution", 640))
     max_range = _option(device, "max_range", 10.0)
     min_light = _option(device, "min_light", 0.2)
-    frame = f"{rid}/camera"
-    s.fixed.append((f"{rid}/base_link", frame))
+    frame = opts.frames.get("camera_frame", f"{rid}/camera")
+    s.fixed.append((s.bases[rid], frame))
     pixel = fov / resolution
 
     image_ = s.msg(mapping.IMAGE)

@@ -67,3 +67,27 @@ def test_missionctl_dry_run_on_hosts_ros2_yaml(tmp_path: Path) -> None:
     report = json.loads(done.stdout)
     report = report[0] if isinstance(report, list) else report
     assert report["outcome"] == "success" and len(report["scouts"]) == 6
+
+
+def test_a_real_robots_frames_in_the_hosts_file_are_the_dry_runs_too(catalog: Catalog, tmp_path: Path) -> None:
+    """ROS 2 audit 17, D3: a real robot's hosts file naming its frames (as docs/ros2.md advises) could not be
+    dry-run: the served simulator stamped `ranger1/odom`..., the drivers dropped every message, and the error asked
+    whether the real robot's router was up. The served robots now publish in the frames the hosts file names."""
+    import yaml
+
+    data = yaml.safe_load((ROOT / "hosts.ros2.yaml").read_text(encoding="utf-8"))
+    devices = data["hosts"]["ranger1"]["devices"]
+    frames = {"drive": {"odom_frame": "k7_odom", "base_frame": "k7_base"}, "ranges": {"scan_frame": "k7_lidar"},
+              "camera": {"camera_frame": "k7_cam"}}
+    for name, given in frames.items():
+        devices[name].setdefault("driver_options", {}).update(given)
+    hosts = tmp_path / "hosts.yaml"
+    hosts.write_text(yaml.safe_dump(data), encoding="utf-8")
+    text = "mission Forward {\n    needs ranger: Ranger\n    FollowCorridor(speed: 0.4)\n" \
+           "    FollowCorridor -> done after 5s\n}\n"
+    compiled = compile_text(text, catalog, "forward.mission")
+    assert compiled.ok and compiled.statechart is not None
+    [report] = run_many([Mission(compiled.statechart)], load_hosts(hosts, catalog),
+                        load_world(ROOT / "worlds" / "corridor.yaml"), catalog, until=20.0)
+    assert report.outcome == "success", report.reason
+    assert report.tracks["ranger1"][-1][1] > 1.5  # it drove on the scans and odometry it read in those frames

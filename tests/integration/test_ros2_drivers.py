@@ -329,7 +329,9 @@ def test_messages_in_another_frame_are_dropped(robot: FakeRobot, router: int, li
     wrong = drive_of(router, link, odom_frame="odom", base_frame="bot/base_footprint", max_age=0.3)
     try:
         eventually(lambda: _reads(right.odometry), "odometry in the frames expected")
-        with pytest.raises(HardwareError, match=r"no message on /bot/odom \(\d+ in another frame"):
+        # the frames it came in, not the router's address (ROS 2 audit 17, D3: the router was up)
+        with pytest.raises(HardwareError, match=r"no message on /bot/odom in frame 'odom' \(child 'bot/base_footprint'"
+                                                r"\) within 0.3 s: \d+ came in frame 'odom' \(child 'base_link'\)"):
             wrong.odometry()
     finally:
         right.close()
