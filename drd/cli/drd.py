@@ -19,7 +19,7 @@ import threading
 import time
 from pathlib import Path
 from types import FrameType
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, NoReturn
 
 import typer
 from rich.table import Table
@@ -295,17 +295,19 @@ def _serve(cluster: Cluster, host: str, cat: Catalog, tr: Transport, rd: Path, c
     if daemon.stop_reason.startswith("conflict"):  # met another drd of this host name, which started first
         fail(f"drd {host} stopped: {daemon.stop_reason.removeprefix('conflict: ')}",
              hint="host names are unique in a cluster: stop one of them, or start this one as another host")
-    _exit_if_lingering()
-    return OK
+    _exit_stopped()
 
 
 #: Seconds a stopped daemon waits for the threads still running (a library's callback threads) before it exits.
 LINGER = 2.0
 
 
-def _exit_if_lingering() -> None:
-    """A stopped daemon exits even if a library left a thread running: the interpreter would wait for it forever
-    (zenoh's callback threads of a session nobody closed), and `drd stop` would have to kill it."""
+def _exit_stopped() -> NoReturn:
+    """End a stopped daemon (everything it ran is closed, its run file released) without the interpreter's
+    shutdown: a library's thread still running would be waited for forever (zenoh's callback threads of a session
+    nobody closed), or, a daemon thread in native code, torn down mid-call, and the process would abort after its
+    `stopped` line ("FATAL: exception not rethrown", exit 134: ROS 2 audit 17, D5). Non-daemon threads get
+    `LINGER` seconds to end first."""
     deadline = time.monotonic() + LINGER
     for t in threading.enumerate():
         if t is not threading.main_thread() and not t.daemon:
@@ -315,7 +317,7 @@ def _exit_if_lingering() -> None:
     if left:
         logging.getLogger("drd.daemon").warning("exiting with %d thread(s) still running: %s", len(left),
                                                 ", ".join(sorted(left)[:5]))
-        end_now(OK)
+    end_now(OK)
 
 
 def _configure_logging(host: str, log_file: Path | None, level: int) -> None:
