@@ -271,6 +271,7 @@ class Daemon:
         self._next_peer_check = 0.0
         self._checking = False
         self._claims: set[tuple[int, float]] = set()  # other daemons' claims to this host, being checked
+        self._standby: Any = None  # drd.hw.safestop.StandbyLinks of a controller with `ros2` robots
         self._all_reachable = False  # the last peer check found every peer (and said so)
         self._closed = False
         self._controller_clock = controller_clock
@@ -360,8 +361,11 @@ class Daemon:
         from drd.daemon.missions import MissionRunner
 
         me = self.host
-        if any(d.driver == "ros2" and d.type == "Drive" for d in self.cluster.devices):
-            import drd.hw.safestop  # noqa: F401 - now, not when a host is lost (0.17 s: the robot moves meanwhile)
+        if any(d.driver == "ros2" and d.type == "Drive" for d in self.cluster.devices) and self._standby is None:
+            from drd.hw.safestop import StandbyLinks  # now, not when a host is lost (0.17 s: the robot moves meanwhile)
+
+            self._standby = StandbyLinks()  # and its sessions to the robots' routers (ROS 2 audit 17, D4)
+            self._standby.warm(self.cluster)
         with self._exec_lock:
             controller = Controller(bus, self.cluster, self.config.catalog, me, self._exec_lock,
                                     on_reject=self._reject, on_change=self._controller_change,
@@ -521,6 +525,8 @@ class Daemon:
             self.election.resign()
         if self.runner is not None:
             self.runner.close()  # joins the mission loop, which takes the lock
+        if self._standby is not None:
+            self._standby.close()
         with self._exec_lock:
             if self.controller is not None:
                 self.controller.close()
@@ -743,7 +749,7 @@ class Daemon:
         its `ros2` robots from here, on a thread (never the loop's time), unless it comes back meanwhile, and its
         simulated robots stop in the running world (`MissionRunner.halt_host`)."""
         stop_robots(self.cluster, host, f"host {host} down ({detail}), stopped by controller {self.host}",
-                    still=lambda: self.view.state(host) is HostState.DOWN)
+                    still=lambda: self.view.state(host) is HostState.DOWN, standby=self._standby)
         if self.runner is not None:  # its simulated robots: in the running world
             self.runner.halt_host(host)
 
@@ -881,7 +887,7 @@ class Daemon:
 
 
 def stop_robots(cluster: Cluster, host: str, why: str, *, still: Callable[[], bool] = lambda: True,
-                wait: float = 0.0) -> None:
+                wait: float = 0.0, standby: Any = None) -> None:
     """A zero Twist to each `ros2` Drive of `host`'s robots (`drd.hw.safestop`), best effort, on a thread; waits up
     to `wait` s for it. Nothing at all (not even an import) for a host with none."""
     if not any(d.driver == "ros2" and d.type == "Drive" for d in cluster.host(host).devices):
@@ -891,7 +897,7 @@ def stop_robots(cluster: Cluster, host: str, why: str, *, still: Callable[[], bo
         from drd.hw.safestop import stop_host_robots
 
         try:
-            stop_host_robots(cluster, host, why, still=still, wait=wait)
+            stop_host_robots(cluster, host, why, still=still, wait=wait, standby=standby)
         except Exception:  # best effort: a stop that cannot be sent must not take the daemon down
             log.exception("zero Twists to host %s's robots", host)
 

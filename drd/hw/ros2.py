@@ -344,6 +344,18 @@ class Ros2Link:
                 found = self._sessions[endpoint] = Ros2Session.connect(endpoint, types=self.types)
             return found
 
+    def connected(self, endpoint: str) -> bool:
+        """Whether this link has a session to `endpoint` open now and linked to its router (a client session whose
+        router went away drops what it puts, silently)."""
+        with self._lock:
+            found = self._shared or self._sessions.get(endpoint)
+        if found is None:
+            return False
+        try:
+            return bool(list(found.bus.session.info.routers_zid()))
+        except Exception:  # closed meanwhile
+            return False
+
     def source(self, endpoint: str) -> str:
         """Where a robot's messages come from, in words: its router, or the dry-run's simulator (one session)."""
         return "the dry-run's simulated robot" if self._shared is not None else f"the robot's router at {endpoint}"
