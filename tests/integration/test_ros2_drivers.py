@@ -323,6 +323,34 @@ def test_a_scan_without_its_beams_is_a_faulted_laser_not_free_space(robot: FakeR
         ranges.close()
 
 
+def test_zeros_on_a_loss_go_out_through_the_standby_session_else_one_of_their_own(robot: FakeRobot,
+                                                                                    router: int) -> None:
+    """ROS 2 audit 17, D4: the controller opened a session to the robot's router only once a host was lost (0.15 to
+    0.21 s before the first zero). Its standby session, linked to the router, carries the zeros; closed (or its
+    router gone), a stop opens a session of its own, as before."""
+    from drd.hw.safestop import DriveStop, StandbyLinks, send_zeros
+
+    endpoint = f"tcp/127.0.0.1:{router}"
+    stops = [DriveStop("h", "bot", "drive", endpoint, 0, "bot", "cmd_vel")]
+    standby = StandbyLinks()
+    try:
+        standby.link.session(endpoint)
+        eventually(lambda: standby.link.connected(endpoint), "the standby session linked to the router")
+        before = len(robot.twists)
+        assert send_zeros(stops, "a test", standby=standby, gap=0.05) == []
+        assert sum(standby.link.sent.values()) == 3  # through the standby session
+        eventually(lambda: len(robot.twists) >= before + 3, "three zeros at the robot")
+    finally:
+        standby.close()
+    assert not standby.link.connected(endpoint)
+    before = len(robot.twists)
+    assert send_zeros(stops, "a test", standby=standby, gap=0.05) == []  # a session of its own
+    assert sum(standby.link.sent.values()) == 3
+    eventually(lambda: len(robot.twists) >= before + 3, "three zeros more at the robot")
+    last = robot.last_twist()
+    assert last is not None and last[1].linear.x == 0.0 and last[1].angular.z == 0.0
+
+
 def test_messages_in_another_frame_are_dropped(robot: FakeRobot, router: int, link: Ros2Link) -> None:
     """The fake robot's odometry is in `odom` / `base_link`: a Drive told to expect other frames takes none of it."""
     right = drive_of(router, link, odom_frame="odom", base_frame="base_link")
