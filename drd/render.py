@@ -208,7 +208,7 @@ def _title(ax: Axes, world: World, report: RunReport, title: str | None) -> Text
     """One line naming the mission and its outcome (green or red), one with the time and the counts (returned: the
     labels left out at the figure's scale are said under it)."""
     counts = [f"{_n(len(rows), noun)}{what}" for rows, noun, what in (
-        (report.doors, "door", " found"), (report.scouts, "Scout", " placed"), (report.detections, "detection", ""))
+        (report.doors, "door", " found"), (report.scouts, "robot", " launched"), (report.detections, "detection", ""))
         if rows]  # the standard components' events: a mission of other components has none to count
     stats = "  ·  ".join([f"sim time {report.sim_time:.1f} s", *counts])
     sub = ax.set_title(stats, loc="left", fontsize=10, color="#444444", pad=8)

@@ -118,7 +118,7 @@ def report_view(r: DryRun, several: bool = False, width: int = 80) -> list[Rende
         if len(logs) > LOG_LINES:
             parts.append(Text(f"  … and {len(logs) - LOG_LINES} more (--json or --trace have them all)", style="dim"))
     parts += _events_lines(r.events(), root, width)
-    for title, rows in (("doors found", r.doors), ("Scouts placed", r.scouts), ("intruders detected", r.detections)):
+    for title, rows in (("doors found", r.doors), ("robots launched", r.scouts), ("intruders detected", r.detections)):
         if not rows:  # the standard components' events: a mission of other components says nothing of them
             continue
         parts.append(Text(f"{title}: {len(rows)}", style="bold"))

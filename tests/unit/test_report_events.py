@@ -38,7 +38,7 @@ def test_a_missions_own_events_are_counted_by_name_with_their_first() -> None:
     assert "events: 3 (2 kinds)" in text
     assert "Spotted x2, first at 36.3 s by Glance: label=night_porter" in text
     assert "Counted x1, first at 40.0 s by Tally\n" in text
-    for shipped in ("doors found", "Scouts placed", "intruders detected"):
+    for shipped in ("doors found", "robots launched", "intruders detected"):
         assert shipped not in text, f"{shipped!r}: a count of events this mission cannot emit"
 
 
