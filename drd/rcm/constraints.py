@@ -83,7 +83,17 @@ def _margin(e: ast.Expr, names: dict[str, object], count: CountFn | None,
             a, b = _number(lhs, names, count, place), _number(rhs, names, count, place)
             return (b - a if op in ("<", "<=") else a - b), a, b, "compare"
         case ast.Binary(op="and" | "or" as op, left=lhs, right=rhs):
-            parts = [_margin(lhs, names, count, place), _margin(rhs, names, count, place)]
+            # a side that cannot be measured does not decide: the condition held or broke by the other (`measure`
+            # has its truth from the short-circuit evaluation; a holding `x or unknown` is not broken: review)
+            parts: list[tuple[float, float, float, str]] = []
+            unknown: list[EvalError] = []
+            for side in (lhs, rhs):
+                try:
+                    parts.append(_margin(side, names, count, place))
+                except EvalError as err:
+                    unknown.append(err)
+            if not parts:
+                raise unknown[0]
             return min(parts, key=_first) if op == "and" else max(parts, key=_first)
         case ast.Unary(op="not", operand=x):
             m, v, lim, kind = _margin(x, names, count, place)

@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import collections
 import functools
+import math
 from collections.abc import Callable, Iterable, Mapping
 from typing import Any, Literal, NamedTuple
 
@@ -1296,7 +1297,10 @@ class Interpreter:
 
 
 def _violation_fields(a: Active, m: Measure) -> dict[str, Any]:
-    return {"name": a.name, "resource": ", ".join(a.robots), "value": m.value, "limit": m.limit}
+    def known(v: float) -> float | None:  # a constraint not measured has no value: null, as JSON says it
+        return v if math.isfinite(v) else None
+
+    return {"name": a.name, "resource": ", ".join(a.robots), "value": known(m.value), "limit": known(m.limit)}
 
 
 def stop_together(missions: Iterable[Interpreter], reason: str) -> None:

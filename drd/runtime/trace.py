@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import math
 from typing import IO, Any
 
 from drd.runtime.records import Record
@@ -21,7 +22,21 @@ def trace_line(record: Record, mission: str = "", exact: bool = False) -> str:
         data["at"] = round(data["at"], 6)  # float steps (0.1 s ten times) would read 0.9999999999999999
     if mission:
         data["mission"] = mission
-    return json.dumps(data, default=_default, separators=(",", ":"))
+    try:
+        return json.dumps(data, default=_default, separators=(",", ":"), allow_nan=False)
+    except ValueError:  # a NaN or an infinity (a component's event field): JSON has none, so null, as orjson writes
+        return json.dumps(_finite(data), default=_default, separators=(",", ":"), allow_nan=False)
+
+
+def _finite(value: Any) -> Any:
+    """`value` with every non-finite float (at any depth) as None."""
+    if isinstance(value, float):
+        return value if math.isfinite(value) else None
+    if isinstance(value, dict):
+        return {k: _finite(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [_finite(v) for v in value]
+    return value
 
 
 class TraceWriter:
