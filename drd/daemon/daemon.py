@@ -68,6 +68,11 @@ from drd.runtime.clock import Clock
 from drd.trader import TraderError, compile_query
 from dsl.catalog import Catalog
 
+#: Times a claim to this host is checked, a lease apart, before it is refused (`Daemon._check_claim`).
+CLAIM_TRIES = 3
+#: Kinds of rejected messages counted apart in `status`; the rest count as "other".
+MAX_REJECTED_KINDS = 64
+
 log = logging.getLogger("drd.daemon")
 rejects = logging.getLogger("drd.daemon.rejects")
 
@@ -270,7 +275,8 @@ class Daemon:
         self._losses_seen = 0  # the Creator's `losses` when last looked at
         self._next_peer_check = 0.0
         self._checking = False
-        self._claims: set[tuple[int, float]] = set()  # other daemons' claims to this host, being checked
+        self._claim_next: tuple[int, float, bool] | None = None  # the latest claim to this host not checked yet
+        self._claim_checking = False  # a thread checks claims
         self._standby: Any = None  # drd.hw.safestop.StandbyLinks of a controller with `ros2` robots
         self._all_reachable = False  # the last peer check found every peer (and said so)
         self._closed = False
@@ -673,11 +679,11 @@ class Daemon:
             # another daemon as this host announces under this host's key: one that names this host under its own
             # key is a peer faking it (security audit D1: a worker's own credentials stopped the controller)
             if msg.host == self.host and host == self.host and (msg.pid, msg.started) != (os.getpid(), self.started):
-                if (self.started, os.getpid()) > (msg.started, msg.pid):  # the later one gives way, if it is one
-                    self._check_claim(msg.pid, msg.started)
-                else:  # the later one may not have heard us (we announce to newcomers only): tell it
+                later = (self.started, os.getpid()) > (msg.started, msg.pid)  # the later one gives way, if it is one
+                if not later:  # the later one may not have heard us (we announce to newcomers only): tell it
                     with self._lock:
                         self._announce_due = True
+                self._check_claim(msg.pid, msg.started, stops=later)
                 return
             self._apply(lambda now: self.view.announce(msg, now, host))
         elif isinstance(msg, Leaving) and msg.host == host:
@@ -685,39 +691,56 @@ class Daemon:
         else:
             self._reject(sample.key, f"expected a drd.daemon.announce or a matching goodbye, got a {type(msg).TYPE}")
 
-    def _check_claim(self, pid: int, started: float) -> None:
-        """Another drd, started earlier, announced itself as this host (two daemons met after both started): stop,
-        once it answers a status query on this host's key as that daemon. An announcement alone, forged or replayed
-        (one from a daemon gone since), stops nothing: it is refused and logged (wire audit 17, D1). Asked on a
-        thread of its own, once per claim at a time (a subscriber's callback must not wait on a query)."""
-        claim = (pid, started)
+    def _check_claim(self, pid: int, started: float, stops: bool) -> None:
+        """Another drd announced itself as this host (two daemons met after both started): once it answers a status
+        query on this host's key as that daemon, a conflict is recorded, and the one started later (`stops`) stops.
+        An announcement alone, forged or replayed (one from a daemon gone since), changes nothing: refused and logged
+        (wire audit 17, D1). One thread checks the latest claim at a time, asking up to `CLAIM_TRIES` times a lease
+        apart (a daemon slow to answer is still found; a flood of claims costs one query at a time, not a thread
+        each: review); a subscriber's callback must not wait on a query."""
         with self._lock:
-            if claim in self._claims:
+            self._claim_next = (pid, started, stops)
+            if self._claim_checking:
                 return
-            self._claims.add(claim)
+            self._claim_checking = True
+        threading.Thread(target=self._check_claims, name="drd-claim-check", daemon=True).start()
 
-        def check() -> None:
+    def _check_claims(self) -> None:
+        while True:
+            with self._lock:
+                claim, self._claim_next = self._claim_next, None
+                if claim is None or self._closed:
+                    self._claim_checking = False
+                    return
+            try:
+                self._check_one_claim(*claim)
+            except Exception:  # never leave the checking flag set: the next claim would go unchecked
+                log.exception("checking a claim to host %s", self.host)
+
+    def _check_one_claim(self, pid: int, started: float, stops: bool) -> None:
+        for attempt in range(CLAIM_TRIES):
+            if attempt:
+                time.sleep(self.cluster.lease)
+            if self._closed:
+                return
             try:
                 replies = self.bus.request(self.keys.status(self.host), timeout=min(2.0, self.cluster.lease))
-                there = any(isinstance(r.payload, DaemonStatus) and r.payload.host == self.host
-                            and (r.payload.pid, r.payload.started) == claim for r in replies)
             except BusError:  # closing meanwhile
                 return
-            finally:
-                with self._lock:
-                    self._claims.discard(claim)
-            if not there:
-                self._reject(self.keys.announce(self.host), f"an announcement of another drd (pid {pid}) as host "
-                             f"{self.host} that no daemon answers for: ignored")
-                return
-            with self._lock:
-                self._record("conflict", self.host, f"another drd (pid {pid}) runs as host {self.host}; host names "
-                             "must be unique in the cluster; this one, started later, stops")
-            if self._stop is not None:
-                self.stop_reason = f"conflict: another drd (pid {pid}) runs as host {self.host}"
-                self._stop.set()
-
-        threading.Thread(target=check, name="drd-claim-check", daemon=True).start()
+            if any(isinstance(r.payload, DaemonStatus) and r.payload.host == self.host
+                   and (r.payload.pid, r.payload.started) == (pid, started) for r in replies):
+                break
+        else:
+            self._reject(self.keys.announce(self.host), f"an announcement of another drd as host {self.host} that no"
+                         f" daemon answers for: ignored (pid {pid})")
+            return
+        with self._lock:
+            self._record("conflict", self.host, f"another drd (pid {pid}) runs as host {self.host}; host names must "
+                         "be unique in the cluster; " + ("this one, started later, stops" if stops else
+                                                         "the other, started later, stops"))
+        if stops and self._stop is not None:
+            self.stop_reason = f"conflict: another drd (pid {pid}) runs as host {self.host}"
+            self._stop.set()
 
     def _apply(self, update: Callable[[float], list[Change]]) -> None:
         with self._lock:
@@ -775,8 +798,11 @@ class Daemon:
         log.log(level, "host %s %s: %s", host, kind, detail)
 
     def _reject(self, where: str, reason: str) -> None:
-        with self._lock:
-            self.rejected[reason.split(":", 1)[0][:80]] += 1
+        kind = reason.split(":", 1)[0][:80]
+        with self._lock:  # bounded, whatever a peer varies in what it sends (review: 14,000 kinds outgrew `status`)
+            if kind not in self.rejected and len(self.rejected) >= MAX_REJECTED_KINDS - 1:  # and "other"
+                kind = "other"
+            self.rejected[kind] += 1
         rejects.warning("rejected a message on %s: %s", where, reason)
 
     # -- queryables ------------------------------------------------------------------------------
