@@ -174,6 +174,11 @@ class DryRun:
                 rows.append({"path": r.path, "from": report_time(w.at), "to": report_time(r.at),
                              "needs": list(w.needs) or asked.of(r.path),
                              "ended": "granted" if isinstance(r, rec.Granted) else "exited"})
+            elif isinstance(r, rec.Restored):  # its waiters ask again, as the journal saved them (review)
+                for path in [p for p in since if within(p, r.path)]:
+                    w = since.pop(path)
+                    rows.append({"path": path, "from": report_time(w.at), "to": report_time(max(w.at, r.since)),
+                                 "needs": list(w.needs) or asked.of(path), "ended": "controller lost"})
         rows += [{"path": p, "from": report_time(w.at), "to": report_time(self.sim_time),
                   "needs": list(w.needs) or asked.of(p), "ended": "still waiting"}
                  for p, w in since.items()]

@@ -168,6 +168,8 @@ def test_a_restore_ends_what_ran_before_it_in_the_timeline_explain_and_the_live_
         ("M/B[0]", 0.0, 5.0, "controller lost"), ("M/A/C", 5.5, 5.5, "controller lost")]
     assert [(r["path"], r["exited"]) for r in report(records).timeline()[4:]] == [("M", 9.0), ("M/A", 9.0),
                                                                                  ("M/B[0]", 9.0)]
+    assert [(w["path"], w["from"], w["to"], w["ended"]) for w in report(records).waits()] == [
+        ("M/B[0]", 1.0, 5.0, "controller lost")]  # the wait the restore ended; asked again and granted at once
     now = Explainer(records[:-3]).active_now()
     assert [(a["path"], a["since"], a["state"]) for a in now] == [("M/A", 8.0, "running"), ("M/B[0]", 8.0, "running")]
     view = ActiveView("M-1")
