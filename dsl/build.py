@@ -385,20 +385,30 @@ class Builder:
         two such robots held there are ambiguous."""
         home = _folder(ct.source)
         used = {(b[0], b[1]) for b in bound if b is not None}
+        carriers = {h.type for h in held if (h.state, h.name) in used}  # the team's robot serving the parts
         out = list(bound)
         for i, (spec, b) in enumerate(zip(ct.needs, bound, strict=True)):
             need_type = self.catalog.get(spec.type)
             if b is not None or spec.of or need_type is None or need_type.kind is not Kind.ARC or (
                     _folder(need_type.source) != home):
                 continue
-            fits = _distinct([h for h in held if (h.state, h.name) not in used and self._team_arc(h.type, home)])
+            # a robot of a team's own type that names such a carrier in a property (a Beacon's `mothership:
+            # Crawler`), as the standard `Scout` names its `carrier: Ranger`; the one named as the need first
+            fits = _distinct([h for h in held if (h.state, h.name) not in used and self._team_arc(h.type, home)
+                              and self._carried_by(h.type, carriers)])
             nearest = [h for h in fits if h.state == fits[0].state]
+            nearest = [h for h in nearest if h.name == spec.name] or nearest
             if len(nearest) > 1:
                 self._ambiguous(spec.name, spec.type, nearest, span)
             elif nearest:
                 out[i] = (nearest[0].state, nearest[0].name, None)
                 used.add((nearest[0].state, nearest[0].name))
         return out
+
+    def _carried_by(self, name: str, carriers: set[str]) -> bool:
+        """Whether robot type `name` has a property typed with one of `carriers` (or a type they extend)."""
+        kinds = {k for c in carriers for k in (c, *self.catalog.supertypes(c))}
+        return any(t in kinds for t in self.catalog.properties(name).values())
 
     def _team_arc(self, name: str, home: str) -> bool:
         """Whether `name` is a robot type (an arc) of a folder other than `home`: a team's own."""

@@ -12,9 +12,10 @@ from dsl import compile_text
 from dsl.catalog import Catalog, ComponentType
 
 
-def arc(name: str, parts: dict[str, str]) -> ComponentType:
+def arc(name: str, parts: dict[str, str], properties: dict[str, str] | None = None) -> ComponentType:
     t, problems = parse_manifest({"name": name, "kind": "arc", "description": f"A {name}.", "extends": ["Robot"],
-                                  "parts": parts}, f"mine/{name}/manifest.yaml")
+                                  "parts": parts, **({"properties": properties} if properties else {})},
+                                 f"mine/{name}/manifest.yaml")
     assert t is not None and problems == [], problems
     return t
 
@@ -23,7 +24,7 @@ def mine(catalog: Catalog) -> Catalog:
     own = [arc("Crawler", {"drive": "Drive", "ranges": "RangeSensor", "camera": "Camera"}),
            arc("Probe", {"drive": "Drive", "camera": "Camera"}),
            arc("Tender", {"drive": "Drive", "ranges": "RangeSensor", "launcher": "Launcher"}),
-           arc("Beacon", {"wheels": "Drive"})]
+           arc("Beacon", {"wheels": "Drive"}, {"mothership": "Tender"})]
     return dataclasses.replace(catalog, components={**catalog.components, **{t.name: t for t in own}})
 
 
@@ -79,6 +80,12 @@ def test_the_robot_a_standard_behavior_acts_on_is_the_teams_own_under_the_teams_
            "behavior Place {\n    needs b1: Beacon\n    needs b2: Beacon\n    LaunchScout\n}\n")
     r = compile_text(two, mine(catalog), "two.mission")
     assert [d.code for d in r.diagnostics if d.severity.value == "error"] == ["ambiguous-binding"]
+    named = two.replace("needs b2: Beacon", "needs scout: Beacon")  # what the ambiguity's hint says to do (review)
+    assert bound(named, catalog, "Drop/Place/LaunchScout")["scout"] == ("Drop/Place", "scout", None)
+    # a robot that names no carrier of the Tender's type is not thrown: another Tender, a Probe (review)
+    other = "mission Drop {\n    needs tender: Tender\n    Place\n}\nbehavior Place {\n    needs spare: Tender\n" \
+            "    needs p: Probe\n    LaunchScout\n}\n"
+    assert bound(other, catalog, "Drop/Place/LaunchScout")["scout"] is None
     # under the example's own robots nothing changes: a Scout held serves it by type, none held is asked for
     ranger = "mission Drop {\n    needs ranger: Ranger\n    needs beacon: Beacon\n    LaunchScout\n}\n"
     assert bound(ranger, catalog, "Drop/LaunchScout")["scout"] is None
