@@ -16,7 +16,7 @@ import math
 import re
 from typing import Any
 
-from components.behaviors.scan import SAME_LINE, ScanMemo, corridor, expected, wall_across, wrap
+from components.behaviors.scan import SAME_LINE, ScanMemo, along, corridor, expected, wall_across, wrap
 from drd.hw.interfaces import Scan
 from drd.runtime.component import Component, Status
 
@@ -56,8 +56,11 @@ def known(log: Any, x: float, y: float, side: str, width: float) -> bool:
 
 def find_gaps(scan: Any, min_width: float, expect: tuple[float | None, float | None] = (None, None),
               memo: ScanMemo | None = None) -> list[dict[str, float | str]]:
-    """Door gaps in one scan, in the robot frame: {width, x, y, side, bearing}."""
-    walls = corridor(scan, expect, memo=memo)
+    """Door gaps in one scan, in the robot frame: {width, x, y, side, bearing}. Of two fitted walls not on one line
+    only the one with more inliers is a corridor wall (`along`): turning back to the corridor's line after a launch,
+    the fit on the other side followed an obstacle's face, and a door was reported in mid-corridor (worlds audit 17,
+    D1: a Scout was thrown into the corridor)."""
+    walls = along(corridor(scan, expect, memo=memo), 0.0, None)
     b = scan.beams()
     out: list[dict[str, float | str]] = []
     for wall, sgn, side in ((walls[0], 1, "left"), (walls[1], -1, "right")):

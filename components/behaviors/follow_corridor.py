@@ -13,12 +13,11 @@ from components.behaviors.scan import (
     END,
     SAME_LINE,
     ScanMemo,
-    Wall,
+    along,
     clearance_ahead,
     corridor,
     dominant_direction,
     expected,
-    line_gap,
     open_side,
     segments,
     strongest_wall,
@@ -37,22 +36,6 @@ TURN_RATE, TURNED = 0.8, 0.15
 #: Blocked short of the end for WAIT seconds (longer than a person takes to cross its path), it turns on the spot
 #: toward the more open side until FREE metres ahead are clear: the way out when the walls give no heading.
 WAIT, FREE = 3.0, 1.5
-
-
-def along(walls: tuple[Wall | None, Wall | None], heading: float,
-          direction: float | None) -> tuple[Wall | None, Wall | None]:
-    """The fitted walls that run along the corridor: within SAME_LINE of `direction` (the corridor's, in the frame
-    of `heading`, the robot's). When it is not known yet (None), both walls, or the one with more inliers if they
-    are not on one line. Why: started aimed at a door (AlignRanger's doing), the fit that follows the nearest
-    lateral distance can jump from the slanted corridor wall to a person in the doorway, and the robot then drove
-    through the door, taking the room for the corridor."""
-    left, right = walls
-    if direction is None:
-        if left is None or right is None or line_gap(left.angle, right.angle) <= SAME_LINE:
-            return walls
-        return (left, None) if left.inliers >= right.inliers else (None, right)
-    left, right = (None if w is None or line_gap(heading + w.angle, direction) > SAME_LINE else w for w in walls)
-    return left, right
 
 
 def unblock_turn(blocked_for: float, clearance: float, side: int | None, open_now: int) -> int | None:

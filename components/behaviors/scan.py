@@ -393,6 +393,22 @@ def corridor(scan: Scan, expect: tuple[float | None, float | None] = (None, None
     return out[0], out[1]
 
 
+def along(walls: tuple[Wall | None, Wall | None], heading: float,
+          direction: float | None) -> tuple[Wall | None, Wall | None]:
+    """The fitted walls that run along the corridor: within SAME_LINE of `direction` (the corridor's, in the frame
+    of `heading`, the robot's). When it is not known yet (None), both walls, or the one with more inliers if they
+    are not on one line. Why: started aimed at a door (AlignRanger's doing), the fit that follows the nearest
+    lateral distance can jump from the slanted corridor wall to a person in the doorway, and the robot then drove
+    through the door, taking the room for the corridor."""
+    left, right = walls
+    if direction is None:
+        if left is None or right is None or line_gap(left.angle, right.angle) <= SAME_LINE:
+            return walls
+        return (left, None) if left.inliers >= right.inliers else (None, right)
+    left, right = (None if w is None or line_gap(heading + w.angle, direction) > SAME_LINE else w for w in walls)
+    return left, right
+
+
 def expected(walls: tuple[Wall | None, Wall | None],
              expect: tuple[float | None, float | None]) -> tuple[float | None, float | None]:
     """The wall distances to expect in the next scan: those of the walls just fitted, else the last known."""

@@ -13,8 +13,7 @@ from __future__ import annotations
 
 import math
 
-from components.behaviors.follow_corridor import along
-from components.behaviors.scan import SAME_LINE, Wall, line_gap
+from components.behaviors.scan import SAME_LINE, Wall, along, line_gap
 from drd.dryrun import Mission, run_many
 from drd.hosts import parse_hosts
 from drd.sim import building
@@ -106,3 +105,39 @@ def test_doors_close_together_into_one_hall_are_each_found_and_the_ranger_stays_
     [report] = run_many([Mission(chart)], load_hosts(ROOT / "hosts.yaml", catalog), world, catalog, until=120.0)
     assert sorted(round(d["x"], 1) for d in report.doors) == [6.0, 7.4, 8.8]
     assert all(abs(y) < 0.35 for _t, x, y in report.tracks["ranger1"] if x < 22), "it kept to the corridor"
+
+
+OBSTACLE = """
+name: obstacle
+light: {ambient: 0.9, dark: [{at: [9.5, 4.5], radius: 1.5}]}
+walls:
+  - {from: [0, 1.25], to: [20, 1.25]}
+  - {from: [0, -1.25], to: [20, -1.25]}
+  - {from: [0, -1.25], to: [0, 1.25]}
+  - {from: [20, -1.25], to: [20, 1.25]}
+rooms:
+  - {id: r1, rect: [4, 1.25, 10, 5], light: 0.6}
+doors:
+  - {id: d1, at: [5.4, 1.25], width: 1.0}
+obstacles:
+  - {rect: [6.5, -0.9, 7.2, -0.5], height: 0.2}
+rangers:
+  - {id: ranger1, at: [1, 0], heading: 0, magazine: [scout1, scout2, scout3, scout4, scout5, scout6]}
+"""
+
+
+def test_an_obstacle_by_a_wall_is_no_door(catalog: Catalog) -> None:
+    """Worlds audit 17, D1: turning back to the corridor's line after the launch into d1, DetectDoor fitted the
+    right wall to a low obstacle's face, not on the left wall's line, and reported a door in mid-corridor at
+    (6.04, -0.94); a Scout was thrown into the corridor. Of two walls not on one line, the weaker is no wall."""
+    import yaml
+
+    from drd.hosts import load_hosts
+
+    world = parse_world(yaml.safe_load(OBSTACLE), "obstacle.yaml")
+    chart = compile_file(ROOT / "missions" / "corridor_surveillance.mission", catalog).statechart
+    assert chart is not None
+    [report] = run_many([Mission(chart)], load_hosts(ROOT / "hosts.yaml", catalog), world, catalog, until=120.0)
+    assert [(round(d["x"], 1), round(d["y"], 1)) for d in report.doors] == [(5.4, 1.2)]  # d1, and nothing else
+    for scout in report.to_dict()["scouts"]:
+        assert world.room_at(scout["x"], scout["y"]) is not None, scout  # every thrown Scout ended in a room
