@@ -172,12 +172,18 @@ def _spawn_key(world: World, rid: str) -> str:
     return next((f"scouts[{i}]" for i, s in enumerate(world.scouts) if s.id == rid), "scouts")
 
 
+#: The largest box a world's walls, rooms and robots may span (square metres): its light map keeps a cell per square
+#: metre (2 km x 2 km took 1.1 GB at the first light reading; 4 km ran out of memory: worlds audit 17, D6).
+MAX_AREA = 1_000_000
+
+
 class _Reader(ConfigReader):
     """Collects problems; each reader reports what is wrong and returns None (or a safe value) to go on with."""
 
     def __init__(self, source: str) -> None:
         super().__init__(source)
         self.ids: dict[str, str] = {}  # id -> key path of the entry that took it
+        self.obstacles: list[Obstacle] = []
 
     # -- the sections
 
@@ -198,6 +204,7 @@ class _Reader(ConfigReader):
         gaps = self.gaps(doors, walls)
         solid = [Wall(*p) for i, w in enumerate(walls.segments) for p in geometry.cut(w, gaps.get(i, ()))]
         obstacles = [o for _, v, k in self.entries(data, "obstacles") if (o := self.obstacle(v, k))]
+        self.obstacles = obstacles  # a robot may not start in one (`pose`)
         intruders = [n for _, v, k in self.entries(data, "intruders") if (n := self.intruder(v, k))]
         blocking = geometry.SegmentIndex([(w.a, w.b) for w in solid]
                                          + [(d.a, d.b) for d in doors if d.state is not DoorState.OPEN])
@@ -208,8 +215,14 @@ class _Reader(ConfigReader):
         for rid, _ in battery.start:
             if rid not in robots:
                 self.fail(f"battery.start.{rid}", f"no robot {rid!r} in this world")
-        return World(name or "", tuple(solid), tuple(doors), tuple(rooms), ambient, tuple(dark), tuple(obstacles),
-                     tuple(intruders), tuple(rangers), tuple(scouts), description, self.source, battery)
+        built = World(name or "", tuple(solid), tuple(doors), tuple(rooms), ambient, tuple(dark), tuple(obstacles),
+                      tuple(intruders), tuple(rangers), tuple(scouts), description, self.source, battery)
+        x0, y0, x1, y1 = built.bounds
+        if (x1 - x0) * (y1 - y0) > MAX_AREA:  # the light map keeps a cell per square metre of it (worlds audit 17)
+            self.fail("", f"the world spans {_num(round(x1 - x0, 1))} x {_num(round(y1 - y0, 1))} m, more than "
+                          f"{MAX_AREA:,} square metres: its walls, rooms and robots must fit in a smaller box (a "
+                          "long corridor is fine: a 500-wing building is 64 x 6,749 m)")
+        return built
 
     def battery(self, value: object, key: str) -> Battery:
         data = self.mapping(value, key)
@@ -361,6 +374,11 @@ class _Reader(ConfigReader):
             if clearance < radius:
                 self.fail(f"{key}.at", f"{_num(round(clearance, 3))} m from a wall or closed door;"
                           f" {what} needs {_num(radius)} m")
+            for i, o in enumerate(self.obstacles):  # worlds audit 17, D7: a Ranger inside one ran, stuck, 30 s
+                gap = math.hypot(max(o.x0 - at[0], 0.0, at[0] - o.x1), max(o.y0 - at[1], 0.0, at[1] - o.y1))
+                if gap < radius:
+                    self.fail(f"{key}.at", f"{_num(round(gap, 3))} m from obstacles[{i}]" + (
+                        " (inside it)" if gap == 0 else "") + f"; {what} needs {_num(radius)} m")
         if rid is None or at is None or heading is None:
             return None
         return rid, at[0], at[1], math.radians(heading)

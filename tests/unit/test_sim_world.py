@@ -265,6 +265,15 @@ BAD: list[tuple[str, Callable[[dict[str, Any]], object], list[str]]] = [
      ["rangers[0].magazine: expected a list of Scout ids, got 's1'"]),
     ("null value", edit("obstacles", [{"rect": [7, 2, 8, 3], "height": None}]),
      ["obstacles[0].height: expected a number, got null"]),
+    # worlds audit 17, D7: a Ranger inside an obstacle loaded, and failed 30 s in with "no progress"
+    ("robot in an obstacle", edit("obstacles", [{"rect": [0.5, -0.5, 1.5, 0.5], "height": 0.2}]),
+     ["rangers[0].at: 0 m from obstacles[0] (inside it); a body under rangers needs 0.3 m"]),
+    ("robot by an obstacle", edit("obstacles", [{"rect": [3.05, 3.05, 3.5, 3.5], "height": 0.2}]),
+     ["scouts[0].at: 0.071 m from obstacles[0]; a body under scouts needs 0.08 m"]),
+    # worlds audit 17, D6: 2 km x 2 km took 1.1 GB at the first light reading; 4 km ran out of memory (exit 70)
+    ("a world too large", edit("walls/0/to", [1012, 1001]),
+     ["the world spans 1012 x 1005 m, more than 1,000,000 square metres: its walls, rooms and robots must fit in a"
+      " smaller box (a long corridor is fine: a 500-wing building is 64 x 6,749 m)"]),
 ]
 
 
