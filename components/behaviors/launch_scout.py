@@ -36,12 +36,18 @@ class LaunchScout(Component):
             return Status.FAILURE
         scout = bound if bound is not None else loaded[0]  # unbound: a test rig without resources
         distance = min(float(self.ctx.params["max_range"]), float(launcher.max_range))
+        front: float | None = None
         if "ranges" in self.ctx.devices:
             scan = self.device("ranges").scan()
             front = front_range(scan, FRONT)
             distance = min(distance, front - CLEARANCE)
         if distance < MIN_THROW:
-            self.ctx.log(f"LaunchScout: target out of range ({distance:.2f} m)")
+            # what stands in the way, in the user's words (worlds audit 17, D9: "target out of range (0.79 m)"
+            # said nothing of the door closed in front of the launcher)
+            blocked = front is not None and front - CLEARANCE < MIN_THROW
+            self.ctx.log(f"LaunchScout: something {front:.2f} m ahead (a closed or blocked door, a wall): no room"
+                         f" for a throw of at least {MIN_THROW:g} m" if blocked and front is not None else
+                         f"LaunchScout: target out of range ({distance:.2f} m; at least {MIN_THROW:g} m)")
             return Status.FAILURE
         aboard = str(self.ctx.params["carrier_property"])  # read before the throw: a throw is not undone
         landing = launcher.launch(scout, 0.0, distance)

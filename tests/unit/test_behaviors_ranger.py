@@ -6,6 +6,7 @@ Ground truth (`rig.sim.pose`) is used for the assertions only; the behaviors see
 from __future__ import annotations
 
 import math
+import re
 from pathlib import Path
 
 import yaml
@@ -138,6 +139,23 @@ def test_launch_scout_lands_in_the_room_behind_the_open_door():
     p = rig.sim.pose("scout1")
     assert 2.0 < p.x < 8.0 and 1.25 < p.y < 6.25, p  # room n1
     assert rig.sim.magazine("ranger1") == ("scout2", "scout3", "scout4", "scout5", "scout6")
+
+
+def test_launch_scout_before_a_closed_door_says_what_is_in_the_way():
+    """Worlds audit 17, D9: a door closed between its detection and the launch failed the instance with "target out
+    of range (0.79 m)", which read as the launcher's range. Turned to face the corridor's end wall 1 m behind it (a
+    closed door is a wall to the laser too), it says something is in the way, and throws nothing."""
+    rig = Rig()
+    rig.sim.set_velocity("ranger1", 0.0, 1.0)
+    rig.sim.run_until(math.pi)
+    rig.sim.set_velocity("ranger1", 0.0, 0.0)
+    assert abs(abs(rig.sim.pose("ranger1").heading) - math.pi) < 0.2  # facing the west end, 1 m away
+    launch = rig.start(LaunchScout, needs={"launcher": ("ranger1", "launcher"), "ranges": ("ranger1", "ranges")},
+                       robots={"scout": "scout1"})
+    assert rig.run(launch, until=rig.sim.time + 1.0) is Status.FAILURE
+    assert re.search(r"LaunchScout: something [01]\.\d\d m ahead \(a closed or blocked door, a wall\): no room for a "
+                     r"throw of at least 1\.5 m", rig.logs[-1]), rig.logs
+    assert rig.sim.magazine("ranger1")[0] == "scout1"
 
 
 def test_launch_scout_throws_only_the_scout_it_holds():
