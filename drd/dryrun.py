@@ -504,6 +504,8 @@ def _conclude(results: list[DryRun], running: list[Any], sim: Simulation, wall: 
         for scout in result.scouts:
             pose = sim.pose(scout["scout"])
             scout.update(x=round(pose.x, 2), y=round(pose.y, 2))
+            if sim.state(scout["scout"]) == "lost":  # where it was lost: it has no place at the end (worlds audit 17)
+                scout["lost"] = True
         result.tracks = tracks
 
 

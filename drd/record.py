@@ -411,7 +411,8 @@ class Recorder:
     def cycle(self, sim: Any) -> None:
         """The end of a control cycle of `sim`: where every robot and intruder is (`poses`)."""
         carried = {scout: r.id for r in sim.world.rangers for scout in sim.magazine(r.id)}
-        poses = {rid: (p.x, p.y, p.heading) for rid in sim.robots if rid not in carried and (p := sim.pose(rid))}
+        poses = {rid: (p.x, p.y, p.heading) for rid in sim.robots  # a lost robot is gone: no pose (worlds audit 17)
+                 if rid not in carried and sim.state(rid) != "lost" and (p := sim.pose(rid))}
         for iid, (x, y) in sim.intruders().items():
             poses[INTRUDER + iid] = (x, y, 0.0)
         self.poses(sim.time, poses, carried)

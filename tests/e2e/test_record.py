@@ -29,6 +29,13 @@ def test_a_replay_prints_the_report_the_run_printed(tmp_path: Path) -> None:
     replay = missionctl("replay", str(tmp_path / "run.mcap"), "--json", cwd=tmp_path / "elsewhere")
     assert replay.returncode == run.returncode, replay.stderr[-2000:]
     assert json.loads(replay.stdout) == json.loads(run.stdout)
+    # worlds audit 17, D8: the lost Scout is said lost, and the recording has no pose of it after its loss
+    [lost] = [s for s in json.loads(run.stdout)["scouts"] if s["scout"] == "scout1"]
+    assert lost.get("lost") is True
+    with (tmp_path / "run.mcap").open("rb") as fh:
+        frames = [message.log_time for _s, channel, message in make_reader(fh).iter_messages()
+                  if channel.topic == "/drd/tf" and b"scout1" in message.data]
+    assert frames and max(frames) < 40.05e9
     text_run = missionctl("replay", str(tmp_path / "run.mcap"), cwd=tmp_path / "elsewhere")
     assert text_run.stdout.startswith("mission CorridorSurveillance  ")
 
