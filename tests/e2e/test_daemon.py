@@ -10,6 +10,7 @@ wall clock (same machine, same clock).
 from __future__ import annotations
 
 import json
+import math
 import os
 import re
 import signal
@@ -171,6 +172,7 @@ def test_malformed_messages_at_every_queryable_are_refused_and_cost_no_memory(cl
     proc = psutil.Process(cluster.pid("controller"))
     subscribed = [keys.load("ranger1"), keys.announce("ranger2")]
     flooder = Flood(cluster.endpoints[0])
+    flooding = time.monotonic()
     try:
         flooder.requests(queryables, payloads, 250)  # warm up: zenoh's and the allocator's pools
         before = proc.memory_info().rss
@@ -189,7 +191,10 @@ def test_malformed_messages_at_every_queryable_are_refused_and_cost_no_memory(cl
     assert growth < 20 * 2**20, f"RSS grew by {growth / 2**20:.1f} MB"
     assert client.hosts().hosts[1].state == "up"
     log = cluster.log("controller")
-    assert log.count("rejected") < 500, "rejections must be logged rate-limited"
+    # rate-limited as docs/daemon.md says: per template (the bus's, the daemon's refusals) at most 50 lines a 10 s
+    # window, whatever keys the junk came on (each key's 10 lines a window: wire audit 17, D2)
+    windows = math.ceil((time.monotonic() - flooding) / 10) + 1
+    assert log.count("rejected") <= 2 * 50 * windows, "rejections must be logged rate-limited"
     print(f"\n{FLOOD * len(queryables)} malformed requests in {elapsed:.1f} s, RSS {growth / 2**20:+.1f} MB")
 
 
