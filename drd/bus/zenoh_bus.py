@@ -195,7 +195,8 @@ class ZenohBus(Bus):
                 else:  # the query's own key expression when it is the reply's: zenoh need not parse it again
                     query.reply(query_key_expr if answer.key == query_key else answer.key, answer.data)
             except Exception:  # a closing session, a reply key zenoh refuses: log, never crash
-                log.exception("bus %s: could not answer a query on %r", self.name, key_expr)
+                log.exception("bus %s: could not answer a query on %r", self.name, key_expr,
+                              extra={"subject": key_expr})  # the log's limit is per key
             finally:
                 query.drop()  # type: ignore[no-untyped-call]  # finalize now, so the requester is not left waiting for a GC
 

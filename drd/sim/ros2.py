@@ -322,7 +322,7 @@ def _drive(s: ServedRobots, rid: str, device: Device, opts: Ros2Options) -> None
         sim.set_max_speed(rid, _option(device, "max_speed", math.inf))
     origin = sim.origin(rid)
     start = (origin.x, origin.y, origin.heading)
-    odom_frame, base_frame = opts.frames.get("odom_frame", f"{rid}/odom"), s.bases[rid]
+    odom_frame, base_frame = opts.frames.get("odom_frame", f"{rid}/odom"), opts.frames.get("base_frame", s.bases[rid])
     odometry_, pose_, point, quaternion = (s.msg(t) for t in (
         mapping.ODOMETRY, "geometry_msgs/msg/Pose", "geometry_msgs/msg/Point", "geometry_msgs/msg/Quaternion"))
     with_cov, twist_cov, twist, vector = (s.msg(t) for t in ("geometry_msgs/msg/PoseWithCovariance",

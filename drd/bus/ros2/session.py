@@ -83,7 +83,9 @@ class Dispatcher:
             try:
                 callback(sample)
             except Exception:  # a callback's own error: logged, the others still run
-                log.exception("ros2 %s: a subscription callback raised", self.name)
+                key = str(getattr(sample, "key_expr", ""))
+                log.exception("ros2 %s: a subscription callback raised on %s", self.name, key,
+                              extra={"subject": key})  # the log's limit is per key
 
     def close(self) -> None:
         """Stop the thread once the samples already queued have run (not waited for: a callback may be the closer)."""
