@@ -293,16 +293,19 @@ def _serve(cluster: Cluster, host: str, cat: Catalog, tr: Transport, rd: Path, c
     finally:
         runfiles.release(rd, info)
     if daemon.stop_reason.startswith("conflict"):  # met another drd of this host name, which started first
-        fail(f"drd {host} stopped: {daemon.stop_reason.removeprefix('conflict: ')}",
-             hint="host names are unique in a cluster: stop one of them, or start this one as another host")
-    _exit_stopped()
+        try:
+            fail(f"drd {host} stopped: {daemon.stop_reason.removeprefix('conflict: ')}",
+                 hint="host names are unique in a cluster: stop one of them, or start this one as another host")
+        except typer.Exit as e:  # said; the process ends as a stopped daemon does (review)
+            _exit_stopped(e.exit_code)
+    _exit_stopped(OK)
 
 
 #: Seconds a stopped daemon waits for the threads still running (a library's callback threads) before it exits.
 LINGER = 2.0
 
 
-def _exit_stopped() -> NoReturn:
+def _exit_stopped(code: int) -> NoReturn:
     """End a stopped daemon (everything it ran is closed, its run file released) without the interpreter's
     shutdown: a library's thread still running would be waited for forever (zenoh's callback threads of a session
     nobody closed), or, a daemon thread in native code, torn down mid-call, and the process would abort after its
@@ -317,7 +320,7 @@ def _exit_stopped() -> NoReturn:
     if left:
         logging.getLogger("drd.daemon").warning("exiting with %d thread(s) still running: %s", len(left),
                                                 ", ".join(sorted(left)[:5]))
-    end_now(OK)
+    end_now(code)
 
 
 def _configure_logging(host: str, log_file: Path | None, level: int) -> None:
