@@ -1606,8 +1606,16 @@ def _missions_view(missions: list[dict[str, Any]], width: int = 80, explain: boo
         if isinstance(resumed, dict) and isinstance(resumed.get("paused"), int | float):
             head.append(f"  resumed after its controller was lost ({float(resumed['paused']):.1f} s without one)",
                         style="yellow")
-        tree = Tree(head)
         root = m.get("tree")
+        if root and m.get("outcome") is None:  # what the mission itself holds, or waits for (`needs` at its top)
+            held = [str(v) for k, v in (root.get("resources") or {}).items() if "." not in k]
+            if held:
+                head.append("  " + ", ".join(held), style="dim")
+            if isinstance(root.get("waiting_for"), dict):  # cluster audit 17, D1: "running", nothing said why
+                head.append("  waiting", style="dim")
+                for why in why_lines(waits_text(root["waiting_for"]), max(20, width - 1)):
+                    head.append("\n" + why, style="dim")
+        tree = Tree(head)
         if root and m.get("outcome") is None:
             shown = [0]
             for child in root.get("children") or []:

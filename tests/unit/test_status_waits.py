@@ -149,3 +149,21 @@ def test_a_restore_clears_what_was_suspended_before_the_controller_was_lost() ->
     for r in (rec.Restored(9.3, "HogN", 7.0, 2.0), rec.Waiting(9.3, "HogN", ("r: Ranger",)), rec.Granted(17.3, "HogN")):
         track_phase(phases, r)
     assert str(progress_line(18.0, active, 80, phases)).endswith("active Rogue"), phases
+
+
+def test_a_mission_that_holds_or_waits_at_its_top_says_so_on_its_line() -> None:
+    """Cluster audit 17, D1: `mission HighHold { needs ranger: Ranger where ... }` waiting showed `running` and
+    nothing under it (only the root's children were drawn); its holder's root-level grant was not shown either."""
+    data = status()
+    waiter = data["resources"]["queue"][0]
+    waiter["holder"] = "Starved-92/Starved"
+    data["resources"]["units"][1]["queue"] = [waiter["holder"]]
+    data["missions"][1]["tree"] = {"path": "Starved", "kind": "compound", "phase": "waiting", "resources": {},
+                                   "children": []}
+    data["missions"][0]["tree"] = {"path": "CamHog", "kind": "leaf", "phase": "active",
+                                   "resources": {"ranger": "ranger2", "ranger.drive": "ranger2.drive"},
+                                   "children": []}
+    shown = " ".join(text(status_view(data)).split())
+    assert "CamHog-91 running 9s ranger2" in shown
+    assert 'Starved-92 running 8s waiting for ranger: Ranger where ranger.id == "ranger2" (mission priority 3, ' \
+           "priority 1) blocked by CamHog-91/HoldEast (ranger: ranger2)" in shown, shown
