@@ -93,7 +93,8 @@ def report_view(r: DryRun, several: bool = False, width: int = 80) -> list[Rende
                                                  head)]
     parts += [Text(f"  {_relative(d['path'], root)} failed at {d['at']:.1f} s: {d['reason']}", style="yellow")
               for d in lost]
-    pace = f"{r.real_time_factor:.0f}x real time"
+    factor = r.real_time_factor  # one decimal below 10x: "4x (4x asked: could not keep up)" read as a contradiction
+    pace = f"{factor:.1f}x real time" if factor < 9.95 else f"{factor:.0f}x real time"
     if not r.kept_up:  # say so, rather than leave the operator to compare with what they asked
         pace += f" ({r.speed:g}x asked: the {'cluster' if r.on_cluster else 'machine'} could not keep up)"
     away = f" ({r.away:.1f} s of it without a controller)" if r.away else ""

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import io
 
+import pytest
 from rich.console import Console  # noqa: TID251 - rendering the report at a chosen width
 
 from drd.cli.report import print_report
@@ -74,3 +75,17 @@ def test_a_mission_that_ended_at_once_has_no_pace() -> None:
     print_report(at_once, console=Console(file=sink, width=120))
     text = sink.getvalue()
     assert "sim time 0.0 s · wall time 0.40 s" in text and "real time" not in text and "keep up" not in text
+
+
+def test_the_pace_leaves_out_the_time_without_a_controller_and_is_given_to_a_tenth_below_10x() -> None:
+    """Cluster audit 17, D4: a run at 3.65x with a 10 s outage read "1.59x real time"; and 3.5x, rounded, read
+    "4x real time (4x asked: the cluster could not keep up)"."""
+    resumed = DryRun("Hold", "success", "", 36.5, 20.0, speed=4.0, on_cluster=True, mission_id="H-1", away=10.0)
+    assert resumed.real_time_factor == pytest.approx(3.65) and resumed.kept_up
+    slow = DryRun("Hold", "success", "", 35.0, 10.0, speed=4.0, on_cluster=True, mission_id="H-2")
+    sink = io.StringIO()
+    for run in (resumed, slow):
+        print_report(run, console=Console(file=sink, width=120))
+    text = sink.getvalue()
+    assert "wall time 20.00 s (10.0 s of it without a controller) · 3.6x real time\n" in text, text
+    assert "3.5x real time (4x asked: the cluster could not keep up)" in text
