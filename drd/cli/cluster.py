@@ -649,7 +649,7 @@ def _run_and_follow(client: ClusterClient, watch: _RecordWatch, request: Any, wa
                                f"{reply.speed:g}x, set by the mission that opened it", style="yellow"))
         if interrupted:
             raise Terminated if signal.SIGTERM in interrupted else KeyboardInterrupt
-        with _terminate_as_interrupt():
+        with _terminate_as_interrupt(), _interrupt_once():
             report = watch.follow(reply.mission, request.until / reply.speed + 120.0, reply.base, began)
         report.speed = reply.speed
         return report
@@ -743,6 +743,37 @@ def _ignore_sigterm() -> None:
     audit 10, D2). A manager that must end it sends SIGKILL; the stop is bounded (5 s to ask, 15 s to follow)."""
     with suppress(ValueError):  # not the main thread: nothing to change
         signal.signal(signal.SIGTERM, signal.SIG_IGN)
+
+
+#: Seconds after a Ctrl-C within which another is the same one delivered twice (timeout(1) passes a SIGINT on to
+#: its child, which the terminal's process group got too: cluster audit 17, D3), not the operator's second.
+SAME_INTERRUPT = 1.0
+
+
+@contextmanager
+def _interrupt_once() -> Iterator[None]:
+    """While the block runs, a Ctrl-C raises KeyboardInterrupt, as Python's own handler does; from the first on,
+    another within `SAME_INTERRUPT` seconds of it is the same one delivered twice and is ignored. After an interrupt
+    the handler stays (as `_terminate_as_interrupt`'s SIGTERM does) for the stop that follows, where a later Ctrl-C
+    gives up waiting for the report; the process ends after that."""
+    first: list[float] = []
+
+    def interrupted(signum: int, frame: FrameType | None) -> None:
+        if first and time.monotonic() - first[0] < SAME_INTERRUPT:
+            return
+        first.append(time.monotonic())
+        raise KeyboardInterrupt
+
+    try:
+        previous = signal.signal(signal.SIGINT, interrupted)
+    except ValueError:  # not the main thread
+        yield
+        return
+    try:
+        yield
+    finally:
+        if not first and signal.getsignal(signal.SIGINT) is interrupted:
+            signal.signal(signal.SIGINT, previous)
 
 
 def _stop_on_interrupt(client: ClusterClient, watch: _RecordWatch, mission: str, base: float, began: float,
