@@ -22,6 +22,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from drd.hosts import Cluster
+from drd.hw.interfaces import HardwareError
 from drd.hw.ros2 import RELIABLE, TWIST, OptionsError, Ros2Link, Ros2Options
 
 log = logging.getLogger("drd.hw.safestop")
@@ -115,7 +116,7 @@ def send_zeros(stops: Sequence[DriveStop], why: str, *, still: Callable[[], bool
     return _send(stops, why, still, repeat, gap, Ros2Link(period=None), own=True)
 
 
-class _StandbyFailed(Exception):
+class _StandbyFailed(HardwareError):
     """A publisher could not be made on a standby session (closed meanwhile, its router restarted)."""
 
 

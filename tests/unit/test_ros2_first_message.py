@@ -29,7 +29,8 @@ class Waits(threading.Condition):
 def test_the_first_message_is_waited_for_once_until_max_age_after_subscribing() -> None:
     clock = [10.0]
     driver = SimpleNamespace(describe=lambda: "base.drive", opts=SimpleNamespace(endpoint="tcp/127.0.0.1:7447"),
-                             link=SimpleNamespace(now=lambda: clock[0]))
+                             link=SimpleNamespace(now=lambda: clock[0],
+                                                  source=lambda endpoint: f"the robot's router at {endpoint}"))
     latest = Latest(driver, "battery", "/base/battery_state", 2.0)  # type: ignore[arg-type]
     waits = latest.arrived = Waits()
     clock[0] = 10.5
