@@ -512,7 +512,8 @@ def run(mission: Path = typer.Argument(..., help="The mission file.", show_defau
     with cluster_client(config, connect, timeout, to="run a mission") as client:
         watch = _RecordWatch(client, trace_out, recorder, worlds=(config.absolute().parent,))
         try:
-            report = _run_and_follow(client, watch, request, wait, detach, as_json)
+            with _interrupt_once() as interrupts:  # from before `follow` to the end of the stop a Ctrl-C starts
+                report = _run_and_follow(client, watch, request, wait, detach, as_json, interrupts)
         finally:
             watch.close()
             if trace_out is not None:
@@ -618,7 +619,7 @@ def _outputs(trace: Path | None, record: Path | None, foxglove: str | None, deta
 
 
 def _run_and_follow(client: ClusterClient, watch: _RecordWatch, request: Any, wait: float,
-                    detach: bool, as_json: bool) -> DryRun | None:
+                    detach: bool, as_json: bool, interrupts: list[float]) -> DryRun | None:
     """Submit the mission, then follow it to its end (None when detached: its id is printed, under `--json` as an
     object). Ctrl-C before the controller took it stops nothing; after, it stops the mission and the report says
     how it ended. The report's pace is the world's: a mission that joins a running world runs at its speed."""
@@ -648,8 +649,9 @@ def _run_and_follow(client: ClusterClient, watch: _RecordWatch, request: Any, wa
                 err.print(Text(f"  --speed {request.speed:g} not applied: the running world {reply.world} goes at "
                                f"{reply.speed:g}x, set by the mission that opened it", style="yellow"))
         if interrupted:
+            interrupts.append(time.monotonic())  # held until now: its second delivery is the same Ctrl-C
             raise Terminated if signal.SIGTERM in interrupted else KeyboardInterrupt
-        with _terminate_as_interrupt(), _interrupt_once():
+        with _terminate_as_interrupt():
             report = watch.follow(reply.mission, request.until / reply.speed + 120.0, reply.base, began)
         report.speed = reply.speed
         return report
@@ -717,23 +719,31 @@ class Terminated(KeyboardInterrupt):
 @contextmanager
 def _terminate_as_interrupt() -> Iterator[None]:
     """While the block runs, a SIGTERM raises `Terminated` in the main thread, as a Ctrl-C raises its interrupt.
-    From the first on, later SIGTERMs are ignored until the process exits (`_ignore_sigterm`)."""
+    From the first on, later SIGTERMs are ignored until the process exits (`_ignore_sigterm`): the caller stops the
+    mission and writes the report, then the process ends."""
     def terminated(signum: int, frame: FrameType | None) -> None:
         _ignore_sigterm()
         raise Terminated
 
+    with _signal_handled(signal.SIGTERM, terminated, kept=lambda: False):
+        yield
+
+
+@contextmanager
+def _signal_handled(signum: int, handler: Callable[[int, FrameType | None], None],
+                    kept: Callable[[], bool]) -> Iterator[None]:
+    """`handler` for `signum` while the block runs (in the main thread: elsewhere nothing changes), and the previous
+    one back after it unless `kept()` says a stop under way needs it still, or the handler replaced itself."""
     try:
-        previous = signal.signal(signal.SIGTERM, terminated)
+        previous = signal.signal(signum, handler)
     except ValueError:  # not the main thread
         yield
         return
     try:
         yield
-    except Terminated:
-        raise  # SIGTERM stays ignored: the caller stops the mission and writes the report, then the process ends
     finally:
-        if signal.getsignal(signal.SIGTERM) is terminated:
-            signal.signal(signal.SIGTERM, previous)
+        if not kept() and signal.getsignal(signum) is handler:
+            signal.signal(signum, previous)
 
 
 def _ignore_sigterm() -> None:
@@ -751,11 +761,12 @@ SAME_INTERRUPT = 1.0
 
 
 @contextmanager
-def _interrupt_once() -> Iterator[None]:
+def _interrupt_once() -> Iterator[list[float]]:
     """While the block runs, a Ctrl-C raises KeyboardInterrupt, as Python's own handler does; from the first on,
     another within `SAME_INTERRUPT` seconds of it is the same one delivered twice and is ignored. After an interrupt
     the handler stays (as `_terminate_as_interrupt`'s SIGTERM does) for the stop that follows, where a later Ctrl-C
-    gives up waiting for the report; the process ends after that."""
+    gives up waiting for the report; the process ends after that. Yields the times of the interrupts taken (a
+    caller that raised one itself, held while it could not be, adds its time)."""
     first: list[float] = []
 
     def interrupted(signum: int, frame: FrameType | None) -> None:
@@ -764,16 +775,8 @@ def _interrupt_once() -> Iterator[None]:
         first.append(time.monotonic())
         raise KeyboardInterrupt
 
-    try:
-        previous = signal.signal(signal.SIGINT, interrupted)
-    except ValueError:  # not the main thread
-        yield
-        return
-    try:
-        yield
-    finally:
-        if not first and signal.getsignal(signal.SIGINT) is interrupted:
-            signal.signal(signal.SIGINT, previous)
+    with _signal_handled(signal.SIGINT, interrupted, kept=lambda: bool(first)):
+        yield first
 
 
 def _stop_on_interrupt(client: ClusterClient, watch: _RecordWatch, mission: str, base: float, began: float,

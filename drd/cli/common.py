@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import io
 import json
-import math
 import os
 import sys
 import traceback
@@ -25,6 +24,7 @@ from rich.text import Text
 
 from drd import outputs
 from drd.errors import DrdError, debugging
+from drd.runtime.trace import finite
 
 if TYPE_CHECKING:  # the mission language loads only for the commands that use it
     from drd.record import Recorder
@@ -278,17 +278,6 @@ def catalog(extra: Sequence[Path] | None) -> Catalog:
         fail_all(e.problems)
 
 
-def _finite(data: Any) -> Any:
-    """`data` with every float that is not finite (inf, NaN) as null: what a `--json` output may hold."""
-    if isinstance(data, float):
-        return data if math.isfinite(data) else None
-    if isinstance(data, dict):
-        return {k: _finite(v) for k, v in data.items()}
-    if isinstance(data, list | tuple):
-        return [_finite(v) for v in data]
-    return data
-
-
 def print_json(data: Any, default: Callable[[Any], Any] | None = None) -> None:
     """Print `data` as indented JSON on stdout: highlighted on a terminal, else plain `json.dumps`.
 
@@ -298,7 +287,7 @@ def print_json(data: Any, default: Callable[[Any], Any] | None = None) -> None:
     try:
         text = json.dumps(data, default=default, allow_nan=False)
     except ValueError:  # an inf or a NaN somewhere: JSON has neither, and a strict reader refuses the file
-        text = json.dumps(_finite(data), default=default, allow_nan=False)
+        text = json.dumps(finite(data), default=default, allow_nan=False)
     if out.is_terminal:
         out.print_json(text)
         return

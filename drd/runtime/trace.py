@@ -25,18 +25,19 @@ def trace_line(record: Record, mission: str = "", exact: bool = False) -> str:
     try:
         return json.dumps(data, default=_default, separators=(",", ":"), allow_nan=False)
     except ValueError:  # a NaN or an infinity (a component's event field): JSON has none, so null, as orjson writes
-        return json.dumps(_finite(data), default=_default, separators=(",", ":"), allow_nan=False)
+        return json.dumps(finite(data), default=_default, separators=(",", ":"), allow_nan=False)
 
 
-def _finite(value: Any) -> Any:
-    """`value` with every non-finite float (at any depth) as None."""
-    if isinstance(value, float):
-        return value if math.isfinite(value) else None
-    if isinstance(value, dict):
-        return {k: _finite(v) for k, v in value.items()}
-    if isinstance(value, list | tuple):
-        return [_finite(v) for v in value]
-    return value
+def finite(data: Any) -> Any:
+    """`data` with every float that is not finite (inf, NaN), at any depth, as None: what strict JSON may hold (a
+    trace line, a `--json` output)."""
+    if isinstance(data, float):
+        return data if math.isfinite(data) else None
+    if isinstance(data, dict):
+        return {k: finite(v) for k, v in data.items()}
+    if isinstance(data, list | tuple):
+        return [finite(v) for v in data]
+    return data
 
 
 class TraceWriter:

@@ -203,7 +203,7 @@ def test_ctrl_c_on_run_stops_the_mission_and_prints_how_it_ended(cluster: Daemon
     assert proc.returncode == 1, err[-2000:]
     assert f"{said}: stopping mission" in err and "Traceback" not in err
     kinds = [json.loads(line)["kind"] for line in trace.read_text().splitlines()]
-    assert kinds[0] == "entered" and kinds[-1] == "finished", kinds[-3:]
+    assert kinds and kinds[0] == "entered" and kinds[-1] == "finished", (kinds[-3:], err[-3000:], out[-500:])
     report = json.loads(out)
     assert report["outcome"] == "stopped" and report["reason"] == "stopped by operator"
     assert report["timeline"][0]["entered"] == 0.0, "the report keeps what came before the Ctrl-C"
