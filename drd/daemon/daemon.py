@@ -516,8 +516,10 @@ class Daemon:
             return
         self._closed = True
         runner = self.runner
-        if self.election is None and runner is not None and runner.journal is not None:
-            runner.suspend()  # before the goodbye (no host lost meanwhile): journaled as running, for the next start
+        if runner is not None and runner.journal is not None:  # journaled as running, for the next start or the
+            runner.suspend()  # standby: before the goodbye (no host lost meanwhile), its world's loop ends without
+            # stopping them (an elected one's loop stopped them in words: "ended stopped", "the world is gone", while
+            # the standby resumed them: cluster audit 17, D5)
         try:
             self.bus.put(self.keys.announce(self.host), Leaving(self.host, reason or self.stop_reason))
         except Exception:  # the bus may already be gone; leaving must go on

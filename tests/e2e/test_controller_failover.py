@@ -81,7 +81,9 @@ def acting(cluster: DaemonCluster) -> str:
 
 
 def term_of(cluster: DaemonCluster, name: str) -> int:
-    return max(int(t) for t in re.findall(r"elected the acting controller \(term (\d+)", cluster.log(name)))
+    """Its latest term, 0 before it was first elected (a standby not elected yet: `eventually` asks again)."""
+    found = re.findall(r"elected the acting controller \(term (\d+)", cluster.log(name))
+    return max((int(t) for t in found), default=0)
 
 
 def mission_time(cluster: DaemonCluster, mission: str) -> float | None:
@@ -206,6 +208,7 @@ def test_a_clean_stop_of_the_acting_controller_hands_its_mission_over(cluster: D
     check_report(cluster, run, out, err, mission, trace, noticed=False)
     after = cluster.log(first).split("received SIGTERM")[-1]
     assert "stops acting" not in after and "stepped down" not in after  # it resigned; nobody fenced it
+    assert "ended stopped" not in after and "the world is gone" not in after, after  # cluster audit 17, D5
     cluster.start(first)
     cluster.wait_ready([first])
     eventually(lambda: f"standby controller: {standby} acts" in cluster.log(first), f"{first} standing by", 30)
