@@ -84,7 +84,9 @@ class Simulation:
             body = pymunk.Body(body_type=pymunk.Body.KINEMATIC)
             body.position = self._walking[intruder.id] = intruder.position(0.0)
             shape = pymunk.Circle(body, intruder.radius)
-            shape.filter = pymunk.ShapeFilter(categories=INTRUDER, mask=RANGER | SCOUT)
+            # seen by lasers and cameras, touching no robot: a timed path cannot yield, so a person who pushed
+            # would shove a Ranger through a doorway; a real one steps around a robot in the way
+            shape.filter = pymunk.ShapeFilter(categories=INTRUDER, mask=EVERYTHING & ~(RANGER | SCOUT))
             self.space.add(body, shape)
             self._intruders[intruder.id] = body
             self._intruder_trails[intruder.id] = [(0.0, *body.position)]
@@ -170,7 +172,7 @@ class Simulation:
     def _substep(self, h: float) -> None:
         t1 = self.time + h
         walks = []
-        for intruder in self.world.intruders:  # kinematic: they push robots, nothing pushes them
+        for intruder in self.world.intruders:  # kinematic, passing robots by: nothing pushes them, they push nothing
             body = self._intruders[intruder.id]
             (x0, y0), (x1, y1) = self._walking[intruder.id], intruder.position(t1)  # it stands at x0, y0
             set_velocity(body, (x1 - x0) / h, (y1 - y0) / h)

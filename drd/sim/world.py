@@ -184,6 +184,7 @@ class _Reader(ConfigReader):
         super().__init__(source)
         self.ids: dict[str, str] = {}  # id -> key path of the entry that took it
         self.obstacles: list[Obstacle] = []
+        self.enclosure: tuple[float, float, float, float] | None = None  # the walls' box, when there are walls
 
     # -- the sections
 
@@ -200,6 +201,9 @@ class _Reader(ConfigReader):
         near_rooms = _Rooms(rooms)
         self.overlaps(near_rooms)
         walls = geometry.SegmentIndex(geometry.merge(raw))
+        if raw:  # a robot may not start outside the building (`pose`)
+            xs, ys = [x for a, b in raw for x in (a[0], b[0])], [y for a, b in raw for y in (a[1], b[1])]
+            self.enclosure = (min(xs), min(ys), max(xs), max(ys))
         doors = [door for _, v, k in self.entries(data, "doors") if (door := self.door(v, k, walls, near_rooms))]
         gaps = self.gaps(doors, walls)
         solid = [Wall(*p) for i, w in enumerate(walls.segments) for p in geometry.cut(w, gaps.get(i, ()))]
@@ -374,6 +378,10 @@ class _Reader(ConfigReader):
             if clearance < radius:
                 self.fail(f"{key}.at", f"{_num(round(clearance, 3))} m from a wall or closed door;"
                           f" {what} needs {_num(radius)} m")
+            box = self.enclosure  # worlds audit 17, D7: a Ranger 18 m outside the building ran until --until
+            if box and not (box[0] < at[0] < box[2] and box[1] < at[1] < box[3]):
+                self.fail(f"{key}.at", f"outside the building: its walls span x {_num(box[0])}..{_num(box[2])}, "
+                          f"y {_num(box[1])}..{_num(box[3])}")
             for i, o in enumerate(self.obstacles):  # worlds audit 17, D7: a Ranger inside one ran, stuck, 30 s
                 gap = math.hypot(max(o.x0 - at[0], 0.0, at[0] - o.x1), max(o.y0 - at[1], 0.0, at[1] - o.y1))
                 if gap < radius:

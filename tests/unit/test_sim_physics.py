@@ -252,6 +252,26 @@ def test_intruders_walk_their_paths_and_leave_trajectories() -> None:
         assert len(sim.trajectory(intruder.id)) > 10
 
 
+def test_a_person_walking_through_a_standing_ranger_is_seen_and_shoves_nothing() -> None:
+    """A timed path cannot yield: if people pushed, one walking the corridor would carry a Ranger through a door
+    (worlds audit 17, D2). The laser still sees the person, and a Scout on the floor stays put too."""
+    walker = Intruder("walker", (Waypoint(0, 0.0, 0.0), Waypoint(16, 8.0, 0.0)))  # through both robots
+    world = replace(CORRIDOR, rangers=(ranger_at(5.0, 0.0, math.pi),), scouts=(ScoutSpawn("x", 5.5, 0.0, 0.0),),
+                    intruders=(walker,))
+    sim = Simulation(world, seed=3)
+    sim.step(0.5)
+    before = sim.pose("ranger1"), sim.pose("x")
+    seen = []
+    for _ in range(16):
+        sim.step(1.0)
+        x = sim.intruders()["walker"][0]
+        if 1.0 < 5.0 - x < 7.0:  # ahead of the Ranger, which faces -x: its middle beam stops at the person
+            seen.append(sim.ranges("ranger1", 181, 8.0)[90] == pytest.approx(5.0 - x - walker.radius, abs=0.1))
+    assert (sim.pose("ranger1"), sim.pose("x")) == before
+    assert sim.intruders()["walker"] == pytest.approx((8.0, 0.0))
+    assert seen and all(seen)
+
+
 def test_step_divides_a_long_step_into_fixed_ones() -> None:
     sim = Simulation(CORRIDOR, seed=0, dt=0.05)
     sim.step(0.2)

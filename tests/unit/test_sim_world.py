@@ -270,6 +270,8 @@ BAD: list[tuple[str, Callable[[dict[str, Any]], object], list[str]]] = [
      ["rangers[0].at: 0 m from obstacles[0] (inside it); a body under rangers needs 0.3 m"]),
     ("robot by an obstacle", edit("obstacles", [{"rect": [3.05, 3.05, 3.5, 3.5], "height": 0.2}]),
      ["scouts[0].at: 0.071 m from obstacles[0]; a body under scouts needs 0.08 m"]),
+    ("robot outside the building", edit("rangers/0/at", [13, 0]),  # it loaded, and ran until --until
+     ["rangers[0].at: outside the building: its walls span x 0..12, y -4..4"]),
     # worlds audit 17, D6: 2 km x 2 km took 1.1 GB at the first light reading; 4 km ran out of memory (exit 70)
     ("a world too large", edit("walls/0/to", [1012, 1001]),
      ["the world spans 1012 x 1005 m, more than 1,000,000 square metres: its walls, rooms and robots must fit in a"
