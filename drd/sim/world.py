@@ -201,9 +201,9 @@ class _Reader(ConfigReader):
         near_rooms = _Rooms(rooms)
         self.overlaps(near_rooms)
         walls = geometry.SegmentIndex(geometry.merge(raw))
-        if raw:  # a robot may not start outside the building (`pose`)
+        if raw and not any(p.key.startswith("walls") for p in self.problems):  # a robot may not start outside
             xs, ys = [x for a, b in raw for x in (a[0], b[0])], [y for a, b in raw for y in (a[1], b[1])]
-            self.enclosure = (min(xs), min(ys), max(xs), max(ys))
+            self.enclosure = (min(xs), min(ys), max(xs), max(ys))  # the building (`pose`), once the walls are sound
         doors = [door for _, v, k in self.entries(data, "doors") if (door := self.door(v, k, walls, near_rooms))]
         gaps = self.gaps(doors, walls)
         solid = [Wall(*p) for i, w in enumerate(walls.segments) for p in geometry.cut(w, gaps.get(i, ()))]
