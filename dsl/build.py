@@ -60,8 +60,36 @@ class Builder:
     def build(self, mission: ast.Behavior, file: str) -> Statechart:
         root = ast.Child(mission.name, span=mission.name_span)
         self._instance(mission.name, mission.name, root, None, 0, 1, (), ())
+        self._nested_instances(mission.name)
         return Statechart(mission.name, mission.name, dict(self.states), file, mission.priority or 1,
                           self.report.limits.instances)
+
+    def _nested_instances(self, root: str) -> None:
+        """Refuse constant multiplicities whose instances multiply past the limit: `Outer[1000] { Inner[1000] }` is a
+        million live instances, each multiplicity within the limit alone (semantics audit 18, #2). Counted as the
+        runtime counts them, every level's instances (`Outer[40] { Inner[25] }` is 40 + 1,000); the runtime also
+        bounds what evaluated counts and sibling multiplicities add up to."""
+        limit = self.report.limits.instances
+        stack = [(root, 1, 0, "")]
+        while stack:
+            sid, factor, total, outer = stack.pop()
+            state = self.states[sid]
+            m = state.multiplicity
+            count = constant(m.high if m.high is not None else m.low) if m is not None else None
+            if m is not None and count is not None and 0 < count <= limit:
+                factor, inner = factor * int(count), f"{state.name}[{int(count)}]"
+                total += factor
+                if total > limit and outer:
+                    if ("multiplicity", m.span) not in self._reported:
+                        self._reported.add(("multiplicity", m.span))
+                        self.report.error(
+                            "multiplicity", f"{inner} inside {outer} makes {total:,} instances alive at once, above "
+                            f"the limit of {limit:,} in a mission", m.span, "nested multiplicities multiply: an "
+                            "instance per robot or task at one level, or raise the limit (hosts.yaml "
+                            "cluster.limits.instances)")
+                    continue
+                outer = f"{inner} inside {outer}" if outer else inner
+            stack.extend((child, factor, total, outer) for child in reversed(state.children))
 
     def build_library(self) -> None:
         """Build each behavior no other one uses as if a mission that holds nothing ran it: its binding errors

@@ -154,10 +154,10 @@ class Interpreter:
         self._timed: dict[Node, None] = {}  # nodes with `after`/`when` transitions
         self._listening: dict[str, dict[Node, None]] = {  # event name -> nodes with `on` transitions
             event: {} for plan in self._plans.values() for event in plan.on_event}
-        self._last_tick = -1.0
-        self._settling = False
+        self._last_tick, self._settling = -1.0, False
         self._stepping = False  # components are being stepped (`step`): their events wait for their step
         self._taken: list[tuple[str, str, str]] = []
+        self._alive_instances = 0  # of multiplicities, in the whole mission: `max_instances` bounds them all
         self._loops = LoopWatch()  # why the chart loops without time passing, ended by `_run_to_completion`
         # Events a transition took before their dispatch (a tie it won), with the states that transition entered:
         # those do not hear the same event again when it is dispatched (`_take_chosen`).
@@ -374,6 +374,8 @@ class Interpreter:
         """Enter `state` at `path`; `scope` (its parameters) becomes the node's own, not a copy."""
         plan = self._plans[state.id]
         node = Node(state, path, parent, self.clock.now(), plan, scope)
+        if parent is not None and parent.state.kind is MULTI:
+            self._alive_instances += 1
         if self._entering is not None:
             self._entering.append(node)
         if parent is not None:
@@ -619,9 +621,8 @@ class Interpreter:
                                       f"resources allow only {star} (one per distinct set its needs accept: {needs})"
                                       + (f": {never}" if never else ""))
             return
-        if max(low, high) > self.chart.max_instances:
-            self._finish(node, False, f"{node.state.name} would create {max(low, high)} instances, above the limit "
-                                      f"of {self.chart.max_instances}")
+        if max(low, high) > self.chart.max_instances - self._alive_instances:
+            self._finish(node, False, self._too_many(node, max(low, high)))
             return
         node.bounds = (low, high)
         if high < low:
@@ -631,6 +632,16 @@ class Interpreter:
             self._finish(node, True)
             return
         self._grow_multi(node)
+
+    def _too_many(self, node: Node, wanted: int) -> str:
+        """Why a multiplicity may not create `wanted` instances: above the limit alone, or with the mission's other
+        live instances (those of the other multiplicities, and of this one's other copies when it is nested)."""
+        limit, alive = self.chart.max_instances, self._alive_instances
+        if wanted > limit or not alive:
+            return f"{node.state.name} would create {wanted} instances, above the limit of {limit}"
+        return (f"{node.state.name} would create {wanted} instances, with {alive} already alive in the mission: above "
+                f"the limit of {limit} instances in all (nested multiplicities multiply; hosts.yaml "
+                "cluster.limits.instances raises it)")
 
     def _capacity(self, node: Node) -> int:
         """For `[a..*]`: as many instances as could each hold distinct resources for the template's own needs
@@ -670,8 +681,9 @@ class Interpreter:
                              self.pool.count))
             except (EvalError, TypeError, ValueError):
                 continue
-            if high > node.bounds[1]:
-                node.bounds = (node.bounds[0], min(high, self.chart.max_instances))
+            if high > node.bounds[1]:  # no more than the mission's limit leaves room for
+                room = node.instances + self.chart.max_instances - self._alive_instances
+                node.bounds = (node.bounds[0], max(node.bounds[1], min(high, self.chart.max_instances, room)))
                 self._grow_multi(node)
 
     def _flush(self) -> None:
@@ -1025,6 +1037,8 @@ class Interpreter:
             elif n.outputs:  # a composite's outputs are its children's, merged (FindNewDoor.door)
                 parent.outputs[n.state.name] = {k: v for child in n.outputs.values() for k, v in child.items()}
         n.phase = DONE
+        if parent is not None and parent.state.kind is MULTI:
+            self._alive_instances -= 1
         if n in self._constraints:
             del self._constraints[n]
             self.guard.remove(resources.holder(n))

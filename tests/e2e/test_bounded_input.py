@@ -238,6 +238,44 @@ def test_a_dry_run_of_a_component_whose_code_is_missing_is_refused_before_it_run
     assert "Bogus/manifest.yaml: entry_point: no module nowhere.bogus" in done.stderr
 
 
+NESTED = """mission Nested {{
+    Outer[{outer}]
+}}
+behavior Outer {{
+    var n: int = {inner}
+    Inner[{count}]
+}}
+behavior Inner {{
+    Wait(duration: 1s)
+}}
+"""
+
+
+def test_nested_multiplicities_are_bounded_together_where_written_and_when_evaluated(tmp_path: Path) -> None:
+    """Semantics audit 18, #2: each multiplicity within the limit alone, `Outer[1000] { Inner[1000] }` validated as a
+    million instances, and a tenth of it took 36 s and 1 GB for 2 s of sim time."""
+    import json
+
+    (tmp_path / "written.mission").write_text(NESTED.format(outer=1000, inner=0, count=1000))
+    refused = missionctl("validate", "written.mission", cwd=tmp_path)
+    assert refused.returncode == 2
+    assert ("written.mission:6:10: error: Inner[1000] inside Outer[1000] makes 1,001,000 instances alive at once, "
+            "above the limit of 1,000 in a mission") in refused.stderr, refused.stderr
+    (tmp_path / "evaluated.mission").write_text(NESTED.format(outer=40, inner=30, count="n"))
+    assert missionctl("validate", "evaluated.mission", cwd=tmp_path).returncode == 0  # n is not known before
+    ran = missionctl("dry-run", "evaluated.mission", "--config", str(ROOT / "hosts.yaml"), "--json", cwd=tmp_path)
+    report = json.loads(ran.stdout)
+    assert ran.returncode == 1 and report["sim_time"] == 0.0, ran.stderr[-1000:]
+    assert "Inner would create 30 instances, with 1000 already alive in the mission: above the limit of 1000 " \
+           "instances in all" in report["reason"], report["reason"]
+    # the count comes back as instances end: two multiplicities of 600 one after the other both run
+    (tmp_path / "sequence.mission").write_text(
+        "mission Sequence {\n    start -> First\n    Wait(duration: 1s)[600] as First\n"
+        "    Wait(duration: 1s)[600] as Second\n    First -> Second\n    Second -> done\n}\n")
+    ran = missionctl("dry-run", "sequence.mission", "--config", str(ROOT / "hosts.yaml"), "--json", cwd=tmp_path)
+    assert ran.returncode == 0 and json.loads(ran.stdout)["outcome"] == "success", ran.stdout[-2000:]
+
+
 def test_a_cluster_raises_the_instance_limit_for_its_missions_and_validate_checks_against_it(tmp_path: Path) -> None:
     """`cluster.limits.instances`: the written bound, the evaluated one and `validate --config` all follow it."""
     import json
