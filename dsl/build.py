@@ -377,8 +377,24 @@ class Builder:
             served = self._team_robot(ct, bound, held, child.span)
             if served is not bound:  # under a team's own robot: so are the robots it acts on (users audit 17, D1)
                 bound = self._team_carried(ct, served, held, child.span)
+        else:
+            bound = self._same_robot(ct, bound, held)
         return tuple(ResourceNeed(spec.name, spec.type, None, spec.quantity, None, b, span=child.span)
                      for spec, b in zip(ct.needs, bound, strict=True))
+
+    def _same_robot(self, ct: ComponentType, bound: list[tuple[str, str, str | None] | None],
+                    held: tuple[_Held, ...]) -> list[tuple[str, str, str | None] | None]:
+        """`ct`'s needs that name the robots they prefer (`of`) and that nothing bound, while its others are bound
+        to one robot: served by that robot's parts where it has them, so one behavior's drive and sensors stay on one
+        robot. A Watch given a team's Probe by name for its `drive` (the ambiguity error's own hint) watched through
+        another Probe's camera, asked of the manager (users audit 18, #1)."""
+        robots = {(b[0], b[1]) for b, spec in zip(bound, ct.needs, strict=True) if b is not None and spec.of}
+        if len(robots) != 1 or all(b is not None for b in bound):
+            return bound
+        (state, name), = robots
+        robot = next(h for h in held if (h.state, h.name) == (state, name))
+        return [(state, name, part) if b is None and spec.of and (part := self.catalog.part_of(robot.type, spec.type))
+                else b for spec, b in zip(ct.needs, bound, strict=True)]
 
     def _team_robot(self, ct: ComponentType, bound: list[tuple[str, str, str | None] | None],
                     held: tuple[_Held, ...], span: Span) -> list[tuple[str, str, str | None] | None]:

@@ -89,3 +89,14 @@ def test_the_robot_a_standard_behavior_acts_on_is_the_teams_own_under_the_teams_
     # under the example's own robots nothing changes: a Scout held serves it by type, none held is asked for
     ranger = "mission Drop {\n    needs ranger: Ranger\n    needs beacon: Beacon\n    LaunchScout\n}\n"
     assert bound(ranger, catalog, "Drop/LaunchScout")["scout"] is None
+
+
+def test_a_robot_named_for_one_need_serves_the_behaviors_other_parts_too(catalog: Catalog) -> None:
+    """Users audit 18, #1: with a Crawler and a Probe held, Watch is ambiguous, and the error's hint says to name one
+    `drive`; done so, Watch drove the Probe and watched through another Probe's camera, asked of the manager."""
+    text = "mission Look {\n    needs crawler: Crawler\n    needs drive: Probe\n    Watch(duration: 5s)\n}\n"
+    assert bound(text, catalog, "Look/Watch") == {"drive": ("Look", "drive", "drive"),
+                                                  "camera": ("Look", "drive", "camera")}
+    # a preferred robot (a Scout) serving the camera by itself still does, as before
+    scout = "mission Look {\n    needs drive: Probe\n    needs s: Scout\n    Watch(duration: 5s)\n}\n"
+    assert bound(scout, catalog, "Look/Watch")["camera"] == ("Look", "s", "camera")
