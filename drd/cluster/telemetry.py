@@ -2,7 +2,8 @@
 
 A robot's pose and battery are its own drivers' (`drd.runtime.telemetry.DriverTelemetry`), and its drivers are on
 its host. The controller asks for a robot only when an expression reads it (`ranger.x` in a guard, a constraint's
-condition): the first read fetches it at once (one round trip, so a mission never starts on a guess), and from
+condition): the first read fetches it at once (one round trip, so a mission never starts on a guess: a robot its host has not
+reported yet is not known, `NOT_YET`), and from
 then on the robot's host is asked to `watch` it and sends its values with every reply (`drd.cluster.gates`
 `telemetry` records). A host nobody called in a control cycle is asked at the cycle's end (`due`), so the
 values read at the start of a cycle are those after the previous one. A world started again starts from none.
@@ -12,11 +13,17 @@ from __future__ import annotations
 
 import math
 import threading
+import time
 from collections.abc import Callable, Mapping
 from typing import Any
 
 #: Keys a host may report (`drd.runtime.pool.LIVE`); anything else in a reply is ignored.
 KEYS = frozenset({"x", "y", "heading", "battery"})
+#: A watched robot whose host has not reported it yet: every live value not known (`ResourceView` then answers none
+#: of them, never hosts.yaml's static `battery`), until the host's report says which its drivers can read.
+NOT_YET = {k: math.nan for k in KEYS}
+#: Seconds the first read of a robot waits for its host to have read it, and the pause between two asks.
+FIRST_READ, FIRST_READ_PAUSE = 2.5, 0.05
 
 
 class RemoteTelemetry:
@@ -46,7 +53,20 @@ class RemoteTelemetry:
         if new:
             self.send(host, ["watch", watch, self.now()])
             self.fetch(host)
-        return self.latest.get(robot)
+            self._first_read(host, robot)
+        # not reported (its host down, or its drivers still silent): not known, never hosts.yaml's static battery,
+        # so a `where ranger.battery > 0.5` does not grant a robot at 30 % on its 1.0 (ros2 audit 18, #1)
+        return self.latest.get(robot, NOT_YET)
+
+    def _first_read(self, host: str, robot: str) -> None:
+        """Ask `host` again until it has read `robot` once, for FIRST_READ s at most: its drivers read off the
+        request's thread, and a ROS 2 robot's first battery state may come a second or two after the watch (the
+        first grant of a `where` on it waits for that, once per robot and world; a simulated robot's comes with
+        the watch's own reply)."""
+        deadline = time.monotonic() + FIRST_READ
+        while robot not in self.latest and time.monotonic() < deadline:
+            time.sleep(FIRST_READ_PAUSE)
+            self.fetch(host)
 
     def seen(self, host: str, robots: Mapping[str, Any]) -> None:
         """A host's report: the live values of the robots it watches (only its own robots are taken)."""

@@ -74,3 +74,32 @@ def test_on_a_cluster_a_reading_the_host_could_not_give_is_not_known_either() ->
     assert pool.pose("c") == (1.0, 2.0, 0.0)
     with pytest.raises(KeyError):
         pool.view("c")["battery"]  # type: ignore[index]
+
+
+def test_a_robot_on_another_host_is_not_known_until_its_host_has_read_it() -> None:
+    """ROS 2 audit 18, #1: the controller's first read of a ROS 2 robot came before its first battery state, the
+    value read as hosts.yaml's 1.0, and `where ranger.battery > 0.5` granted a robot at 30 %. The first read asks
+    the host again until it has read the robot; a host that never does leaves it not known."""
+    from drd.cluster import telemetry as remote
+
+    asked: list[str] = []
+
+    def fetch(host: str) -> None:  # the host reads its robot on the third ask (its driver's first message)
+        asked.append(host)
+        if len(asked) == 3:
+            telemetry.seen(host, {"c": {"x": 1.0, "y": 2.0, "heading": 0.0, "battery": 0.3}})
+
+    telemetry = remote.RemoteTelemetry({"c": "h", "d": "silent"}, fetch, lambda host, op: None, lambda: 0.0)
+    pool = ResourcePool(ResourceManager())
+    pool.add([Unit("c.drive", "Drive", host="h"), Aggregate("c", "Crawler", {"drive": "c.drive"}, {"battery": 1.0},
+                                                           host="h"),
+              Unit("d.drive", "Drive", host="silent"),
+              Aggregate("d", "Crawler", {"drive": "d.drive"}, {"battery": 1.0}, host="silent")], 0.0)
+    pool.telemetry = telemetry
+    assert pool.view("c")["battery"] == 0.3 and asked == ["h"] * 3
+    remote.FIRST_READ = 0.2  # a host that never reads it: given up on, and the robot's values are not known
+    try:
+        with pytest.raises(KeyError):
+            pool.view("d")["battery"]
+    finally:
+        remote.FIRST_READ = 2.5
