@@ -2,10 +2,9 @@
 
 A robot's pose and battery are its own drivers' (`drd.runtime.telemetry.DriverTelemetry`), and its drivers are on
 its host. The controller asks for a robot only when an expression reads it (`ranger.x` in a guard, a constraint's
-condition): the first read fetches it at once (one round trip, so a mission never starts on a guess: a robot its host has not
-reported yet is not known, `NOT_YET`), and from
-then on the robot's host is asked to `watch` it and sends its values with every reply (`drd.cluster.gates`
-`telemetry` records). A host nobody called in a control cycle is asked at the cycle's end (`due`), so the
+condition): the first read fetches it at once (round trips until its host has read it, so a mission never starts
+on a guess: a robot its host has not reported yet is not known, `NOT_YET`), and from then on the robot's host
+is asked to `watch` it and sends its values with every reply (`drd.cluster.gates` `telemetry` records). A host nobody called in a control cycle is asked at the cycle's end (`due`), so the
 values read at the start of a cycle are those after the previous one. A world started again starts from none.
 """
 
@@ -21,7 +20,7 @@ from typing import Any
 KEYS = frozenset({"x", "y", "heading", "battery"})
 #: A watched robot whose host has not reported it yet: every live value not known (`ResourceView` then answers none
 #: of them, never hosts.yaml's static `battery`), until the host's report says which its drivers can read.
-NOT_YET = {k: math.nan for k in KEYS}
+NOT_YET = dict.fromkeys(KEYS, math.nan)
 #: Seconds the first read of a robot waits for its host to have read it, and the pause between two asks.
 FIRST_READ, FIRST_READ_PAUSE = 2.5, 0.05
 

@@ -340,8 +340,17 @@ def test_drd_to_drd_through_a_router_with_attachments(router: tuple[Ros2Session,
         assert first is not None and first.gid == cmd.gid and first.sequence_number >= 1
         with pytest.raises(TypeError, match="publishes geometry_msgs/msg/Twist"):
             cmd.publish(jazzy().make(SCAN))
-        session.session.put(sub.key, b"not cdr")  # a payload that does not decode: counted, not raised
+        attached = Attachment(7, 0, bytes(16)).encode()
+        session.session.put(sub.key, b"not cdr", attachment=attached)  # a payload that does not decode: counted
         eventually(lambda: sub.dropped == 1, "the bad payload to be dropped")
+        # a good Twist without rmw_zenoh's attachment (or with one too short to be it): dropped, as rmw_zenoh's
+        # subscriptions drop it (ros2 audit 18, #2: a plain put claiming odometry at x = 50 broke a geofence)
+        heard, twist = len(got), jazzy().serialize(jazzy().make(TWIST), TWIST)
+        session.session.put(sub.key, twist)
+        session.session.put(sub.key, twist, attachment=attached[:20])
+        eventually(lambda: sub.dropped == 3, "the samples without an attachment to be dropped")
+        session.session.put(sub.key, twist, attachment=attached)
+        eventually(lambda: len(got) == heard + 1, "the attached one to be heard")
         driver.close()
         with pytest.raises(BusError, match="closed"):
             cmd.publish({"linear": {"x": 0.1}})

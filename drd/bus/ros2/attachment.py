@@ -14,6 +14,8 @@ import zenoh
 from zenoh.ext import Int64, z_deserialize, z_serialize
 
 GID_SIZE = 16  # RMW_GID_STORAGE_SIZE
+#: The bytes of an attachment: two int64, the GID's length (one LEB128 byte) and the GID.
+ATTACHMENT_SIZE = 8 + 8 + 1 + GID_SIZE
 
 
 @dataclass(frozen=True, slots=True)
