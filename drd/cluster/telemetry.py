@@ -2,10 +2,11 @@
 
 A robot's pose and battery are its own drivers' (`drd.runtime.telemetry.DriverTelemetry`), and its drivers are on
 its host. The controller asks for a robot only when an expression reads it (`ranger.x` in a guard, a constraint's
-condition): the first read fetches it at once (round trips until its host has read it, so a mission never starts
-on a guess: a robot its host has not reported yet is not known, `NOT_YET`), and from then on the robot's host
-is asked to `watch` it and sends its values with every reply (`drd.cluster.gates` `telemetry` records). A host nobody called in a control cycle is asked at the cycle's end (`due`), so the
-values read at the start of a cycle are those after the previous one. A world started again starts from none.
+condition): the first read fetches it at once (round trips until its host has read it, so a mission never starts on
+a guess: a robot its host has not reported yet is not known, `NOT_YET`), and from then on the robot's host is asked
+to `watch` it and sends its values with every reply (`drd.cluster.gates` `telemetry` records). A host nobody called
+in a control cycle is asked at the cycle's end (`due`), so the values read at the start of a cycle are those after
+the previous one. A world started again starts from none.
 """
 
 from __future__ import annotations
