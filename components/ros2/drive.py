@@ -15,6 +15,22 @@ from drd.hw.ros2 import compose, yaw_of
 log = logging.getLogger("drd.ros2")
 
 
+
+#: How far outside 0..1 a `percentage` may stray and still be the charge (rounding): farther, it is on another scale.
+PERCENTAGE_SLACK = 0.01
+
+
+def charge(percentage: float, device: str) -> float:
+    """The charge left, 0..1, from a BatteryState's `percentage`; HardwareError when the robot does not know it (NaN)
+    or says it on another scale: a driver writing 30.0 for 30 % read as a full battery, so a battery floor never
+    held (ros2 audit 18, #4). The ROS message's range is 0..1; a reading within PERCENTAGE_SLACK of it is clamped."""
+    if not math.isfinite(percentage):
+        raise HardwareError(f"{device}: the robot does not know its charge (percentage is NaN)")
+    if not -PERCENTAGE_SLACK <= percentage <= 1 + PERCENTAGE_SLACK:
+        raise HardwareError(f"{device}: battery percentage {percentage:g} is outside 0..1, the range of "
+                            "sensor_msgs/BatteryState (a driver on a 0..100 scale?): the charge is not known")
+    return min(1.0, max(0.0, percentage))
+
 class Ros2Drive(Ros2Driver):
     """A ROS 2 mobile base. Options: `max_speed` (m/s, a manifest property); `driver_options`: see docs/ros2.md
     (`origin`, `watchdog`, `max_rate`, `max_age`, topics and frames)."""
@@ -138,7 +154,4 @@ class Ros2Drive(Ros2Driver):
         """The charge left, 0..1: `battery_state`'s `percentage`."""
         if self._battery is None:
             raise HardwareError(f"{self.describe()}: no battery topic (topics: {{battery: false}})")
-        charge = float(self._battery.get().percentage)
-        if not math.isfinite(charge):
-            raise HardwareError(f"{self.describe()}: the robot does not know its charge (percentage is NaN)")
-        return min(1.0, max(0.0, charge))
+        return charge(float(self._battery.get().percentage), self.describe())

@@ -4,6 +4,7 @@
 
 from __future__ import annotations
 
+import math
 import threading
 from types import SimpleNamespace
 from typing import Any
@@ -42,3 +43,14 @@ def test_the_first_message_is_waited_for_once_until_max_age_after_subscribing() 
         with pytest.raises(HardwareError, match="no message on /base/battery_state"):
             latest.get()
     assert len(waits.timeouts) == 1  # later readings answer at once
+
+
+def test_a_battery_percentage_on_another_scale_is_not_known() -> None:
+    """ROS 2 audit 18, #4: a robot reporting 30.0 (30 %, a driver on 0..100) read as a full battery, so a battery
+    floor of 0.5 never held; NaN was already not known. Rounding just past 0..1 is the charge, clamped."""
+    from components.ros2.drive import charge
+
+    assert charge(0.3, "d") == 0.3 and charge(1.004, "d") == 1.0 and charge(-0.002, "d") == 0.0
+    for bad in (30.0, 1.5, -0.2, math.nan, math.inf):
+        with pytest.raises(HardwareError, match="not know its charge|outside 0..1"):
+            charge(bad, "d")
