@@ -11,6 +11,10 @@ from drd.hw.interfaces import HardwareError, Scan
 from drd.hw.ros2 import scan_ranges
 
 
+#: The most beams a scan may have: the densest 2D lasers give a few thousand (0.0625 degrees over 360: 5,760).
+MAX_BEAMS = 20_000
+
+
 class Ros2RangeSensor(Ros2Driver):
     """A ROS 2 laser. Options: `beams`, `max_range` (manifest properties: what the device is said to have; the
     scan itself says what it has). `driver_options`: `max_age`, `scan_frame`, `topics: {scan: ...}`."""
@@ -36,6 +40,9 @@ class Ros2RangeSensor(Ros2Driver):
             raise HardwareError(f"{self.describe()}: the laser's scan geometry is not usable (angle_min {first}, "
                                 f"angle_increment {step}, range_min {low}, range_max {top}): a faulted laser")
         count, said = len(msg.ranges), _beams_said(first, float(msg.angle_max), step)
+        if count > MAX_BEAMS:  # converted and shipped every cycle, a 4 MB scan stalled the host (ros2 audit 18, #3)
+            raise HardwareError(f"{self.describe()}: the laser gives {count:,} beams, more than {MAX_BEAMS:,}: "
+                                "not a scan drd reads (a 2D laser has a few thousand)")
         if count == 0 or 2 * count < said:  # a laser that lost its data but still heartbeats: never free space
             raise HardwareError(f"{self.describe()}: the laser gives {count} beams where its scan's angles say "
                                 f"{said}: a faulted laser (ROS 2 audit 17: an empty scan read as free space)")

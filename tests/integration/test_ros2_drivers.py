@@ -323,6 +323,22 @@ def test_a_scan_without_its_beams_is_a_faulted_laser_not_free_space(robot: FakeR
         ranges.close()
 
 
+def test_a_scan_of_absurd_size_is_a_faulted_laser(robot: FakeRobot, router: int, link: Ros2Link,
+                                                 monkeypatch: pytest.MonkeyPatch) -> None:
+    """ROS 2 audit 18, #3: 1,000,000-beam scans (4 MB, 5 a second) were converted and shipped every cycle, the
+    host's control loop fell behind and the mission failed blaming the host. A scan of more than MAX_BEAMS fails the
+    reading, naming the laser (here the limit is lowered under the fake robot's 90 beams)."""
+    from components.ros2 import range_sensor
+
+    ranges = Ros2RangeSensor(device("RangeSensor", "ranges", endpoint=f"tcp/127.0.0.1:{router}"), "bot", link)
+    try:
+        eventually(lambda: _reads(ranges.scan), "the robot's scan")
+        monkeypatch.setattr(range_sensor, "MAX_BEAMS", 60)
+        eventually(lambda: "the laser gives 90 beams, more than 60" in _refusal(ranges.scan), "the scan refused")
+    finally:
+        ranges.close()
+
+
 def test_zeros_on_a_loss_go_out_through_the_standby_session_else_one_of_their_own(robot: FakeRobot,
                                                                                     router: int) -> None:
     """ROS 2 audit 17, D4: the controller opened a session to the robot's router only once a host was lost (0.15 to
