@@ -10,7 +10,6 @@ from drd.hosts import Device
 from drd.hw.interfaces import HardwareError, Scan
 from drd.hw.ros2 import scan_ranges
 
-
 #: The most beams a scan may have: the densest 2D lasers give a few thousand (0.0625 degrees over 360: 5,760).
 MAX_BEAMS = 20_000
 
