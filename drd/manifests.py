@@ -144,6 +144,11 @@ def _check_rules(c: _Checker, kind: Kind, data: Mapping[str, Any], fields: Mappi
         c.fail("capacity", "required when sharable is true")
     if not data.get("sharable") and data.get("capacity") is not None:
         c.fail("capacity", "only a sharable rc has a capacity")
+    needs = {n.name for n in fields.get("needs", ())}
+    for p in fields.get("params", ()):
+        if p.property_of is not None and p.property_of not in needs:
+            c.fail(f"params.{p.name}.property_of", f"{p.property_of!r} is not one of the behavior's needs"
+                   + (f" ({', '.join(sorted(needs))})" if needs else ""))
     for clash in fields.get("properties", {}).keys() & fields.get("parts", {}).keys():
         c.fail(f"properties.{clash}", "also the name of a part")
     for name in fields.get("limits", {}):
@@ -249,12 +254,15 @@ def _params(c: _Checker, value: object, key: str) -> tuple[ParamSpec, ...]:
             if why:
                 c.fail(f"{path}.default", f"{why}: a default must lie in its own range")
         description = c.text(spec.get("description", ""), f"{path}.description")
-        out.append(ParamSpec(name, type_, default, "default" not in spec, description, limit))
+        of = c.text(spec["property_of"], f"{path}.property_of") or None if "property_of" in spec else None
+        if of is not None and type_ != "str":
+            c.fail(f"{path}.property_of", f"names a property: the parameter must be a str, not {type_}")
+        out.append(ParamSpec(name, type_, default, "default" not in spec, description, limit, of))
     return tuple(out)
 
 
 #: The keys of one parameter: its range (`min`, `max`, `unit`) is declared beside its type and default.
-PARAM_KEYS = ("type", "default", "min", "max", "unit", "description")
+PARAM_KEYS = ("type", "default", "min", "max", "unit", "description", "property_of")
 #: The parameter types that take a range.
 NUMERIC = ("int", "float", "duration")
 

@@ -379,8 +379,37 @@ class Builder:
                 bound = self._team_carried(ct, served, held, child.span)
         else:
             bound = self._same_robot(ct, bound, held)
+        self._property_params(ct, child, bound, held)
         return tuple(ResourceNeed(spec.name, spec.type, None, spec.quantity, None, b, span=child.span)
                      for spec, b in zip(ct.needs, bound, strict=True))
+
+    def _property_params(self, ct: ComponentType, child: ast.Child,
+                         bound: list[tuple[str, str, str | None] | None], held: tuple[_Held, ...]) -> None:
+        """Each `str` parameter naming a property of the robot a need is bound to (`property_of` in the manifest):
+        the robot's type (a subtype's, or one it extends) must have it. LaunchScout's `carrier_property` left at
+        `carrier` for a team's Probe naming its carrier `dock` cleared nothing, and the next `where probe.dock ==
+        hauler` picked the thrown Probe again (users audit 18, #2)."""
+        for p in ct.params:
+            if p.property_of is None:
+                continue
+            arg = next((a for a in child.args or () if a.name == p.name), None)
+            value = arg.value.value if arg is not None and isinstance(arg.value, ast.Literal) else (
+                p.default if arg is None else None)
+            index = next((i for i, n in enumerate(ct.needs) if n.name == p.property_of), None)
+            if not isinstance(value, str) or index is None:
+                continue  # an expression is evaluated on entry; a manifest naming no need was refused at load
+            b, spec = bound[index], ct.needs[index]
+            robot = next((h.type for h in held if b is not None and b[2] is None and (h.state, h.name) == b[:2]),
+                         spec.type if b is None else None)
+            if robot is None:
+                continue
+            kinds = {*self.catalog.subtypes(robot), *self.catalog.supertypes(robot)}
+            has = sorted({k for t in kinds for k in getattr(self.catalog.get(t), "properties", {})})
+            if value not in has:
+                self._error("parameter", f"{ct.name}'s {p.name} {value!r} is not a property of {robot}, whose "
+                            f"{spec.name} it names" + (f" (it has {', '.join(has)})" if has else ""),
+                            arg.span if arg is not None else child.span,
+                            f"pass {p.name}: \"...\" naming the property of {robot} it means")
 
     def _same_robot(self, ct: ComponentType, bound: list[tuple[str, str, str | None] | None],
                     held: tuple[_Held, ...]) -> list[tuple[str, str, str | None] | None]:

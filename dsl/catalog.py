@@ -107,6 +107,9 @@ class ParamSpec:
     #: The range of a numeric parameter (its manifest's `min`, `max`, `unit`): a constant argument outside it is a
     #: located compile error, an evaluated one fails the state as it is entered.
     limit: Limit | None = None
+    #: A `str` parameter that names a property of the robot one of the behavior's needs is bound to (LaunchScout's
+    #: `carrier_property` of its `scout`): the compiler checks the robot's type has it, where the type is known.
+    property_of: str | None = None
 
 
 @dataclass(frozen=True, slots=True)

@@ -31,7 +31,7 @@ class LaunchScout(Component):
             return Status.FAILURE
         bound = self.ctx.resources.get("scout")
         if bound is not None and bound not in loaded:  # the launcher throws only the Scout this behavior holds
-            self.ctx.log(f"LaunchScout: {bound}, the Scout it holds, is not in this Ranger's magazine"
+            self.ctx.log(f"LaunchScout: {bound}, the robot it holds, is not in its launcher's magazine"
                          f" ({', '.join(loaded)})")
             return Status.FAILURE
         scout = bound if bound is not None else loaded[0]  # unbound: a test rig without resources

@@ -48,7 +48,7 @@ class ServoToGoal(Component):
             return Status.FAILURE
         if not self.radio.link_ok():
             if self.link_was_ok:
-                self.ctx.log("radio link lost: stopped, waiting for the Ranger")
+                self.ctx.log("radio link lost: stopped, waiting for the link to come back")
             self.link_was_ok = False
             self.drive.stop()
             return Status.RUNNING

@@ -166,7 +166,7 @@ def test_launch_scout_throws_only_the_scout_it_holds():
     assert rig.run(launch, until=1.0) is Status.SUCCESS and launch.ctx.outputs["scout"] == "scout2"
     launch = rig.start(LaunchScout, needs={"launcher": ("ranger1", "launcher")}, robots={"scout": "scout2"})
     assert rig.run(launch, until=rig.sim.time + 1.0) is Status.FAILURE
-    assert "scout2, the Scout it holds, is not in this Ranger's magazine" in rig.logs[-1], rig.logs
+    assert "scout2, the robot it holds, is not in its launcher's magazine" in rig.logs[-1], rig.logs
     assert rig.sim.magazine("ranger1") == ("scout1", "scout3", "scout4", "scout5", "scout6")
 
 

@@ -81,6 +81,12 @@ def test_the_robot_a_standard_behavior_acts_on_is_the_teams_own_under_the_teams_
     r = compile_text(two, mine(catalog), "two.mission")
     assert [d.code for d in r.diagnostics if d.severity.value == "error"] == ["ambiguous-binding"]
     named = two.replace("needs b2: Beacon", "needs scout: Beacon")  # what the ambiguity's hint says to do (review)
+    # users audit 18, #2: the default `carrier_property` names a property a Beacon does not have (it says
+    # `mothership`): the thrown Beacon would still read as aboard
+    r = compile_text(named, mine(catalog), "named.mission")
+    assert [d.message for d in r.diagnostics] == ["LaunchScout's carrier_property 'carrier' is not a property of "
+                                                  "Beacon, whose scout it names (it has battery, mothership)"]
+    named = named.replace("    LaunchScout\n", "    LaunchScout(carrier_property: \"mothership\")\n")
     assert bound(named, catalog, "Drop/Place/LaunchScout")["scout"] == ("Drop/Place", "scout", None)
     # a robot that names no carrier of the Tender's type is not thrown: another Tender, a Probe (review)
     other = "mission Drop {\n    needs tender: Tender\n    Place\n}\nbehavior Place {\n    needs spare: Tender\n" \
