@@ -339,10 +339,10 @@ class Checker:
                 self.report.error("duplicate", f"{child.key} names both a child and a declaration in {b.name}",
                                   child.span)
         for key, child in body.children.items():
-            self._child(child, scope, b.name if key in body.implicit else None)
+            self._child(child, scope, b.name if key in body.implicit else None, b.name)
 
-    def _child(self, child: ast.Child, scope: Scope, implicit_in: str | None = None) -> None:
-        target = self._callee(child.name, child.span, implicit_in)
+    def _child(self, child: ast.Child, scope: Scope, implicit_in: str | None = None, within: str = "") -> None:
+        target = self._callee(child.name, child.span, implicit_in, within)
         if child.priority is not None and child.priority < 1:
             self.report.error("priority", "priority must be 1 or more (1 is the highest)", child.span)
         if child.mult is not None:
@@ -391,7 +391,10 @@ class Checker:
         self.report.error("range", f"{arg.name} {why} ({possessive(target.name)} manifest, {target.source})",
                           arg.value.span, f"give {arg.name} a value within {spec.limit.text}{keep}")
 
-    def _callee(self, name: str, span: Span, implicit_in: str | None = None) -> ast.Behavior | ComponentType | None:
+    def _callee(self, name: str, span: Span, implicit_in: str | None = None,
+                within: str = "") -> ast.Behavior | ComponentType | None:
+        """The behavior or component a child names; an unknown one is reported with a suggestion, never the behavior
+        it is written in (`Liar` in `mission Lies` suggested `Lies`, which then includes itself: users audit 18, #4)."""
         if name in self.behaviors:
             return self.behaviors[name]
         ct = self.catalog.get(name)
@@ -402,7 +405,7 @@ class Checker:
                               f"resources are acquired with needs: needs x: {name}" if ct.is_resource else
                               f"data is declared with shared: shared x: {name}")
             return None
-        known = [*self.behaviors, *self.catalog.names(Kind.BEHAVIOR)]
+        known = [k for k in (*self.behaviors, *self.catalog.names(Kind.BEHAVIOR)) if k != within]
         if implicit_in is not None:  # named only in a transition or plan: the user meant a state
             body = self.bodies[implicit_in]
             siblings = [k for k in body.children if k not in body.implicit]  # not the typo itself

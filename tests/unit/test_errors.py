@@ -353,3 +353,13 @@ def test_a_misspelt_start_target_is_one_error_not_every_child_never_reached(cata
     source = m("  start -> Calibrat\n  Calibrate\n  Observe\n  Calibrate -> Observe")
     result = compile_text(source, catalog, "t.mission")
     assert [d.code for d in result.diagnostics] == ["unknown-state"]
+
+
+def test_an_unknown_behavior_is_never_offered_the_behavior_it_is_written_in(catalog: Catalog) -> None:
+    """Users audit 18, #4: `Liar` in `mission Lies` suggested `Lies`, which then included itself; a sibling behavior
+    of a close name is still offered."""
+    lies = compile_text("mission Lies {\n    start -> Fib\n    Liar as Fib\n}\n", catalog, "t.mission")
+    assert [d.message for d in lies.diagnostics] == ["unknown behavior Liar"]
+    assert "did you mean" not in (lies.diagnostics[0].hint or "")
+    other = compile_text("mission Lies {\n    Liar\n}\nbehavior Lier {\n    Wait(duration: 1s)\n}\n", catalog, "t.mission")
+    assert other.diagnostics[0].hint == "did you mean Lier?"
