@@ -361,5 +361,6 @@ def test_an_unknown_behavior_is_never_offered_the_behavior_it_is_written_in(cata
     lies = compile_text("mission Lies {\n    start -> Fib\n    Liar as Fib\n}\n", catalog, "t.mission")
     assert [d.message for d in lies.diagnostics] == ["unknown behavior Liar"]
     assert "did you mean" not in (lies.diagnostics[0].hint or "")
-    other = compile_text("mission Lies {\n    Liar\n}\nbehavior Lier {\n    Wait(duration: 1s)\n}\n", catalog, "t.mission")
+    other = compile_text("mission Lies {\n    Liar\n}\nbehavior Lier {\n    Wait(duration: 1s)\n}\n", catalog,
+                         "t.mission")
     assert other.diagnostics[0].hint == "did you mean Lier?"
