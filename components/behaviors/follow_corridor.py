@@ -113,8 +113,9 @@ class FollowCorridor(Component):
             self.origin = (x, y)
         clearance = clearance_ahead(scan, memo=self.memo)
         blocked = clearance < END
-        # turning out of a block, a wall across the way is the side wall it turns past, not the end
-        if blocked and self.unblocking is None and wall_across(scan, memo=self.memo):
+        # turning out of a block, a wall across the way is the side wall it turns past, not the end; a wall across
+        # with a door in it is the end though the way through the door is free (worlds audit 17, D4)
+        if self.unblocking is None and wall_across(scan, memo=self.memo):
             if math.hypot(x - self.origin[0], y - self.origin[1]) < 0.5:  # started facing the end
                 self.turn_to, self.turn_side = wrap(a + math.pi), 1
                 drive.set_velocity(0.0, TURN_RATE)

@@ -450,20 +450,61 @@ def _ahead(scan: Scan, data: dict[Any, Any]) -> tuple[Floats, Floats, Floats]:
 
 
 def wall_across(scan: Scan, within: float = END, memo: ScanMemo | None = None) -> bool:
-    """The corridor ends here: the way ahead is blocked within `within` metres, and by something wider than a
-    person (hits ahead spanning over `WIDER` metres across, looking within `ACROSS` of the axis: inside the
-    corridor's side walls), so an intruder walking by is not taken for the end."""
+    """The corridor ends here: one surface across the way (`surface_across`), or a wall across with a door in it
+    (`door_across`), which ends the corridor though the way through its door is free."""
+    return surface_across(scan, within, memo) or door_across(scan, within, memo)
+
+
+def surface_across(scan: Scan, within: float = END, memo: ScanMemo | None = None) -> bool:
+    """The way ahead is blocked within `within` metres, and by something wider than a person (hits ahead spanning
+    over `WIDER` metres across, looking within `ACROSS` of the axis: inside the corridor's side walls), so an
+    intruder walking by is not taken for the end."""
     if clearance_ahead(scan, memo=memo) >= within:
-        return False
-    depth = within + 0.25
-    r, c, s = _ahead(scan, _scratch(scan, memo))
-    x, y = r * c, r * s
-    keep = np.flatnonzero((r < scan.max_range) & (0 < x) & (x < depth) & (-ACROSS < y) & (y < ACROSS))
-    if not len(keep):
         return False
     # one surface, not several things side by side: a person and the side wall beyond it, or a Ranger ahead and a
     # wall, spanned WIDER together and were taken for the end (worlds audit 13, D3, D4)
+    return any(float(py.max()) - float(py.min()) >= WIDER for _, py in _surfaces(scan, within, memo))
+
+
+def door_across(scan: Scan, within: float = END, memo: ScanMemo | None = None) -> bool:
+    """A wall across the way within `within` metres with a door in it: straight pieces on one line, at most 30
+    degrees off square, that span `WIDER` together. With a door at the corridor's end the way ahead was free, and a
+    Ranger drove through it into the room and said "the corridor ends here" from there (worlds audit 17, D4). A
+    person's or a robot's round side is no straight piece, so two people abreast are still not a wall."""
+    if clearance_ahead(scan, ACROSS, memo) >= within:
+        return False
+    flat = [(px, py) for px, py in _surfaces(scan, within, memo) if len(py) >= 3 and _straight_across(px, py)]
+    if len(flat) < 2:
+        return False
+    fx, fy = np.concatenate([px for px, _ in flat]), np.concatenate([py for _, py in flat])
+    return float(fy.max()) - float(fy.min()) >= WIDER and _straight_across(fx, fy, SQUARE)
+
+
+def _surfaces(scan: Scan, within: float, memo: ScanMemo | None) -> list[tuple[Floats, Floats]]:
+    """The hits ahead within `within` + 0.25 m and `ACROSS` of the axis, in beam order, split into surfaces where
+    neighbouring hits are over JOINED apart (by distance only: a beam of the wall with no return, or one past the
+    depth, does not cut it in two): each as (xs, ys)."""
+    r, c, s = _ahead(scan, _scratch(scan, memo))
+    x, y = r * c, r * s
+    keep = np.flatnonzero((r < scan.max_range) & (0 < x) & (x < within + 0.25) & (-ACROSS < y) & (y < ACROSS))
     xs, ys = x[keep], y[keep]
-    # (by distance only: a beam of the wall with no return, or one past `depth`, does not cut it in two)
     cut = np.flatnonzero(np.hypot(np.diff(xs), np.diff(ys)) > JOINED) + 1
-    return any(float(part.max()) - float(part.min()) >= WIDER for part in np.split(ys, cut))
+    return list(zip(np.split(xs, cut), np.split(ys, cut), strict=True)) if len(keep) else []
+
+
+#: How far (m) the hits of a straight surface may stray from their line (the laser's noise, a few hundredths).
+FLAT = 0.06
+
+
+#: How steep (depth per metre across) a wall with a door in it may run across the way: 30 degrees off square.
+SQUARE = math.tan(math.radians(30))
+
+
+def _straight_across(xs: Floats, ys: Floats, steep: float = 1.0) -> bool:
+    """Whether hits lie on one straight surface across the way: deeper than wide by at most `steep`, each within
+    FLAT of the line fitted to them."""
+    across = float(ys.max()) - float(ys.min())
+    if across <= 0 or float(xs.max()) - float(xs.min()) > steep * across:
+        return False
+    slope, offset = np.polyfit(ys, xs, 1)
+    return abs(float(slope)) <= steep and float(np.abs(xs - (slope * ys + offset)).max()) <= FLAT

@@ -108,3 +108,16 @@ mission OutAndBack {
     report = dry(catalog, "visited", person, until=600.0, mission=out_and_back)
     assert report.outcome == "failure" and report.sim_time < 120, (report.outcome, report.sim_time, report.reason)
     assert "ReturnToStart: no progress: got no more than 0.5 m nearer home in 30 s" in report.reason, report.reason
+
+
+def test_a_door_in_the_end_wall_is_the_corridors_end_not_a_way_on(catalog: Catalog) -> None:
+    """Worlds audit 17, D4: with a door in the end wall the way ahead was free, the Ranger drove through it into the
+    room, and DetectDoor said "the corridor ends here" from inside the room. The wall across with a door in it is
+    the end: the Ranger stops in the corridor."""
+    end_door = {"rooms": [{"id": "r0", "rect": [3, 1.25, 7, 5.25], "light": 0.6},
+                          {"id": "r_end", "rect": [20, -2.5, 24, 2.5], "light": 0.6}],
+                "doors": [{"id": "d0", "at": [5, 1.25], "width": 1.0}, {"id": "d_end", "at": [20, 0], "width": 1.0}]}
+    report = dry(catalog, "end_door", end_door, until=120.0, mission=SWEEP)
+    assert report.outcome == "success", report.reason
+    assert "end of the corridor" in [line["text"] for line in report.logs()]
+    assert 18.5 < max(x for _t, x, _y in report.tracks["ranger1"]) < 20 - 0.3  # to the end, never through its door

@@ -14,7 +14,16 @@ import math
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from components.behaviors.scan import SECTORS, SPREAD, SUPPORT, ScanMemo, Wall, clearance_ahead, fit_wall, wall_across
+from components.behaviors.scan import (
+    SECTORS,
+    SPREAD,
+    SUPPORT,
+    ScanMemo,
+    Wall,
+    clearance_ahead,
+    fit_wall,
+    surface_across,
+)
 from drd.hw.interfaces import Scan
 
 FAR = 8.0
@@ -136,5 +145,5 @@ def test_the_array_geometry_is_the_plain_geometry(scan: Scan, left: float | None
         assert clearance_ahead(scan, half) == plain_clearance(scan, half)
         assert clearance_ahead(scan, half, memo) == plain_clearance(scan, half)
         assert type(clearance_ahead(scan, half, memo)) is float
-    assert wall_across(scan, within) is plain_wall_across(scan, within)
-    assert wall_across(scan, within, memo) is plain_wall_across(scan, within)
+    assert surface_across(scan, within) is plain_wall_across(scan, within)
+    assert surface_across(scan, within, memo) is plain_wall_across(scan, within)
