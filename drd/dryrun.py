@@ -531,9 +531,7 @@ def _inject(inj: Injection, sim: Simulation, life: ControllerLife, cluster: Clus
             executive.add_resources(found)
         what += f": {len(found)} resources joined the manager"
     elif inj.action is Action.KILL:
-        robots = [r.id for r in cluster.host(inj.target).robots if r.id in sim.robots]
-        for rid in robots:
-            sim.lose(rid)  # nothing drives them any more
+        robots = _halt_host_robots(sim, cluster, inj.target)
         life.gone.update(r.id for r in cluster.resources() if r.host == inj.target)
         if executive is not None:
             executive.remove_host(inj.target)
@@ -552,6 +550,16 @@ def _inject(inj: Injection, sim: Simulation, life: ControllerLife, cluster: Clus
         what += f": the door is now {state[inj.action].value}"
     return {"at": round(sim.time, 3), "action": inj.action.value, "target": inj.target, "injection": str(inj),
             "effect": what}
+
+
+def _halt_host_robots(sim: Simulation, cluster: Cluster, host: str) -> list[str]:
+    """A killed host's robots stop where they are and stay in the world, bodies the others' lasers see, as a
+    cluster's simulator keeps them (records audit 18, #1: they were lost, and a Ranger drove through where one
+    stood); a `restart` gives them back to the manager as they are. A robot lost before stays lost."""
+    robots = [r.id for r in cluster.host(host).robots if r.id in sim.robots and sim.state(r.id) != "lost"]
+    for rid in robots:
+        sim.stop(rid)  # its daemon is gone: nothing drives it any more
+    return robots
 
 
 def _controllers(cluster: Cluster) -> dict[str, Any]:

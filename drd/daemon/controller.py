@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import threading
 import zlib
-from collections.abc import Callable, Collection, Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, replace
 from typing import Any
 
@@ -83,17 +83,6 @@ class Membership:
 def host_resources(cluster: Cluster, host: str) -> list[Unit | Aggregate]:
     """The units and aggregates of one host, as `ResourcePool.add` takes them."""
     return [c for c in cluster.resources() if c.host == host]
-
-
-def without_robots(found: Sequence[Unit | Aggregate], absent: Collection[str]) -> tuple[list[Unit | Aggregate],
-                                                                                    list[str]]:
-    """`found` without the robots `absent` and the exclusive units that are their parts (a shared radio stays), and
-    the robots left out, in order (recovery audit D3: a lost robot's host came back, its Ranger was granted to the
-    next mission and failed it at once, `ranger1 is lost`)."""
-    robots = [c for c in found if isinstance(c, Aggregate) and c.id in absent]
-    parts = {u for r in robots for u in r.parts.values()}
-    kept = [c for c in found if c not in robots and not (isinstance(c, Unit) and c.id in parts and not c.sharable)]
-    return kept, [r.id for r in robots]
 
 
 #: One waiter as the manager tells it (`ResourceManager.waiters`): its request, the units it claims, who is in its way.
@@ -318,10 +307,6 @@ class Controller:
         self._lock = lock
         self._on_change = on_change
         self._host_states = host_states
-        #: the robots the running world has lost (`MissionRunner.lost_robots`): their resources stay out of the
-        #: manager when their host comes back, since they are no longer in that world
-        self.absent: Callable[[], Collection[str]] = lambda: ()
-        self._left_out: dict[str, list[str]] = {}  # host -> its robots left out of the manager (`absent`)
         expect = {self.keys.executive: (MissionCommand,), self.keys.executive_status: (MissionCommand,),
                   self.keys.resources: (ResourcesRequest, ViewRequest, type(None))}
         serialized = SerializedBus(bus, lock, expect=expect, on_reject=on_reject)
@@ -340,16 +325,6 @@ class Controller:
         serialized.keep(self.keys.resources, lambda: resources_page(self.resources()))
         serialized.keep(self.keys.executive, self.executive.status)
         serialized.keep(self.keys.executive_status, self.executive.status)
-
-    def add_left_out(self) -> None:
-        """A new world starts with every robot: the resources left out because an earlier world had lost them
-        (`absent`) come back to the manager, for the hosts still present (called with the executive's lock)."""
-        left, self._left_out = self._left_out, {}
-        for host, robots in left.items():
-            if host in self.membership.present:
-                found = host_resources(self.cluster, host)
-                kept, _ = without_robots(found, robots)
-                self.executive.add_resources([c for c in found if c not in kept])
 
     def host_up(self, host: str) -> None:
         self._queue(self.membership.up(host, self.clock.now()))
@@ -413,13 +388,9 @@ class Controller:
         pool, now = self.executive.pool, self.executive.clock.now()
         for action in actions:
             if action.kind == "add":
-                found, gone = without_robots(host_resources(self.cluster, action.host), self.absent())
-                if gone:
-                    self._left_out[action.host] = gone
+                found = host_resources(self.cluster, action.host)  # its robots stood in the world meanwhile
                 self.executive.add_resources(found)  # hot-plug: running multiplicities may grow
-                detail = f"{len(found)} resources added to the manager" + (
-                    f"; not {', '.join(gone)}: they left the running world when the host was lost (back with the"
-                    " next world)" if gone else "")
+                detail = f"{len(found)} resources added to the manager"
             else:
                 if any(not m.finished for m in self.executive.missions.values()):
                     self.executive.remove_host(action.host)  # every mission settles the consequences now

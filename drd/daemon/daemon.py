@@ -787,11 +787,10 @@ class Daemon:
         return rec is not None and rec.announcement is not None and "executive" in rec.announcement.services
 
     def _controller_change(self, kind: str, host: str, detail: str) -> None:
-        """The controller's news: recorded; a host whose resources left the manager (its lease ran out, so it
-        did not come back) also leaves the running mission's simulation with its robots."""
+        """The controller's news: recorded. A host whose resources left the manager keeps its robots in the running
+        world, stopped where `halt_host` stopped them when it went down (records audit 18, #1: they left it, and a
+        Ranger drove through where one stood); they are its resources again when it comes back."""
         self._record(kind, host, detail)
-        if kind == "resources-removed" and self.runner is not None:
-            self.runner.host_lost(host)
 
     def _record(self, kind: str, host: str, detail: str, at: float | None = None) -> None:
         wall = self.wall() if at is None else self._to_wall(at)

@@ -225,11 +225,8 @@ class MissionRunner:
         self.world: WorldRun | None = None
         self.starting = threading.Lock()
         self.generation = 0  # worlds started so far: a Creator builds its drivers again for a new one
-        self.lost: list[str] = []  # hosts seen down whose robots the world's loop stops in the simulator
         self.halting: list[str] = []  # hosts seen down whose simulated robots the loop stops now (`halt_host`)
         self.retirements: dict[str, list[ComponentCall]] = {}  # host -> retire calls it missed (`owed`)
-        self.lost_robots: set[str] = set()  # robots the running world lost with their host (`Controller.absent`)
-        controller.absent = lambda: self.lost_robots
         self._hosts_lock = threading.Lock()  # `halting` and `retirements`: the daemon's thread never waits for `lock`
         self.journal = journal
         self.checkpoints = Checkpoints(journal) if journal is not None else None
@@ -307,14 +304,6 @@ class MissionRunner:
         if self.journal is not None:
             self.journal.close()
 
-    def host_lost(self, host: str) -> None:
-        """A host's resources left the manager: it went down and did not come back within the lease (called
-        with the executive's lock held). Its robots leave the simulation at the next control cycle, when the
-        mission loop talks to the simulator anyway; a short freeze costs nothing, as for its grants. Real robots
-        have no simulation to leave: their drivers' watchdogs stop them."""
-        if self.current is not None and self.simulator is not None:
-            self.lost.append(host)
-
     def host_back(self, host: str) -> None:
         """`host` reports again after it was down: the running missions take it for a host again (`ComponentRouter
         .back`), and the retirements it missed meanwhile are sent to it, on a thread of their own (recovery audit
@@ -349,7 +338,7 @@ class MissionRunner:
         """`host` went silent past its lease: its simulated robots stop at the next control cycle, as a zero
         Twist stops its `ros2` robots (recovery audit D0: a robots' host frozen for a lease and a half left its
         Ranger driving on in the simulator at its last setpoint, its holder gone, the gates' stops for that host
-        dropped while it was down). Its robots stay in the world until its resources leave the manager."""
+        dropped while it was down). Its robots stay in the world, stopped, whether it comes back or not."""
         if self.current is not None:
             with self._hosts_lock:
                 self.halting.append(host)
@@ -386,14 +375,6 @@ class MissionRunner:
     def _drives(self, host: str) -> list[str]:
         """The ids of `host`'s Drive devices: what moves a robot, and so what a halt is recorded for."""
         return [d.id for d in self.cluster.host(host).devices if d.type == "Drive"]
-
-    def _lose_robots(self) -> None:
-        with self.lock:
-            hosts, self.lost = self.lost, []
-        for host, robots, gone in self._robots_in_sim(hosts, lambda ids: SimRequest("lose", args=ids)):
-            self.lost_robots |= set(robots)  # out of this world, the Scouts of a lost Ranger's magazine with it
-            log.info("host %s lost: its robots %s left the simulation (nothing drives them)", host,
-                     ", ".join(gone) or "(none were there)")
 
     def _robots_in_sim(self, hosts: list[str], request: Callable[[list[str]], SimRequest]
                        ) -> Iterator[tuple[str, list[str], Any]]:
@@ -543,8 +524,6 @@ class MissionRunner:
         with self.lock:
             self.clock.start_mission()
             self._reset_dependencies(self.controller.executive)
-            self.lost_robots = set()
-            self.controller.add_left_out()  # a new world has every robot again
             return self.open_world(path.stem, loaded, reset, self.generation + 1, req.speed)
 
     def open_world(self, name: str, loaded: Any, reply: SimReply | None, generation: int,
@@ -564,7 +543,7 @@ class MissionRunner:
         self.telemetry.reset()  # the hosts build their drivers (and guards) again for the new world
         rooms = loaded.rooms if loaded is not None else ()
         self.controller.executive.pool.places = {r.id: (r.x0, r.y0, r.x1, r.y1) for r in rooms}
-        self.world, self.lost, self.halting, self.lost_robots = world, [], [], set()
+        self.world, self.halting = world, []
         return world
 
     def place(self, component: str, params: Mapping[str, Any], exclude: Mapping[str, str] | frozenset[str],
@@ -748,8 +727,6 @@ class WorldRun:
                         break
                 if runner.halting:
                     runner._halt_robots()
-                if runner.lost:
-                    runner._lose_robots()
                 watched = self._after_freeze(watched)
                 with runner.lock:
                     stepped = self._real_cycle(sim_time) if self.real else self._cycle(sim_time)

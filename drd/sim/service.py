@@ -11,8 +11,6 @@ serves it on one queryable, `drd/<cluster>/sim`, with `SimRequest` messages:
 - `attr` (name): one of `ALLOWED_ATTRS` (`jump_height`, `max_jump`);
 - `multi` (args: `[[method, [args...]], ...]`): several `call`s in order in one request; the value is one
   `[value, error]` pair per call (a refused call does not stop the others);
-- `lose` (args: robot ids): the controller's word that those robots' host is lost: nothing drives them any
-  more, so they leave the world as in the dry-run's `kill HOST` (the value lists those that were there).
 
 Every `SimReply` carries the simulation's `time` and `version`, so that a `RemoteSimulation` keeps them
 current without asking. On the other hosts the `sim` drivers get a `RemoteSimulation`: duck-typed to the
@@ -64,7 +62,7 @@ ROOT = Path(__file__).resolve().parents[2]
 
 @message("drd.sim.request", 1)
 class SimRequest(Message):
-    """`op` is reset, step, call, multi, lose or attr; see the module docstring."""
+    """`op` is reset, step, call, multi or attr; see the module docstring."""
 
     op: str
     method: str = ""
@@ -279,11 +277,6 @@ class SimulationService:
                     raise ValueError(f"step dt must be in (0, 1] s, got {req.dt}")
                 sim.step(req.dt)
                 return SimReply(None, sim.time, sim.version, self.world_name)
-            if req.op == "lose":
-                ids = [r for r in (req.args or []) if isinstance(r, str) and r in sim.robots]
-                for rid in ids:
-                    sim.lose(rid)
-                return SimReply(ids, sim.time, sim.version, self.world_name)
             if req.op == "attr":
                 if req.method not in ALLOWED_ATTRS:
                     raise ValueError(f"attribute {req.method!r} is not served (allowed: {sorted(ALLOWED_ATTRS)})")
