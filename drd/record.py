@@ -278,9 +278,11 @@ class Recorder:
         self.update_world(0.0, [*_building(world), *_bodies(world)])
 
     def _starts(self, world: World) -> None:
-        """Every robot's start pose on `/drd/tf` at 0 (a Scout in a magazine as its Ranger's frame)."""
+        """Every robot's start pose on `/drd/tf` at 0 (a Scout in a magazine as its Ranger's frame), and every
+        intruder's: the scene at 0 locks their bodies to their frames (records audit 18, #3: they came at 0.1 s)."""
         spawned = {r.id: (r.x, r.y, r.heading) for r in world.rangers}
         spawned.update({s.id: (s.x, s.y, s.heading) for s in world.scouts})
+        spawned.update({INTRUDER + i.id: (*i.position(0.0), 0.0) for i in world.intruders})
         start = self.frames.transforms(0.0, spawned, {sid: r.id for r in world.rangers for sid in r.magazine})
         if start is not None:
             self.tf.log(start, log_time=0)

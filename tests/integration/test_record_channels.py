@@ -165,6 +165,23 @@ def test_the_final_poses_are_the_dry_runs(corridor: Run) -> None:
     assert {k: (round(v[1], 2), round(v[2], 2)) for k, v in last.items() if k in scouts} == scouts
 
 
+def test_every_frame_the_scene_locks_a_body_to_at_0_has_a_pose_at_0(corridor: Run) -> None:
+    """Records audit 18, #3: the scene at 0 locks each intruder's body to `intruder/<id>`, whose first transform came
+    at 0.1 s; a viewer then had a body on a frame that did not exist yet."""
+    at0: set[str] = set()
+    locked: set[str] = set()
+    for topic, _s, log_time, m in corridor.messages():
+        if topic == "/drd/tf" and log_time == 0:
+            at0 |= {tf.child_frame_id for tf in m.transforms}
+        elif topic == "/drd/world" and log_time == 0:
+            locked |= {e.frame_id for e in m.entities if e.frame_locked}
+    world = load_world(ROOT / "worlds" / "corridor.yaml")
+    assert {f"intruder/{i.id}" for i in world.intruders} <= locked
+    assert locked <= at0, locked - at0
+    poses = {iid: read(corridor.path).pose(f"intruder/{iid}", 0.0) for iid in (i.id for i in world.intruders)}
+    assert poses == {i.id: (*i.position(0.0), 0.0) for i in world.intruders}
+
+
 def test_a_scout_in_its_magazine_is_its_rangers_frame(corridor: Run) -> None:
     recording = read(corridor.path)
     launched = {s["scout"]: s["at"] for s in corridor.report.scouts}
