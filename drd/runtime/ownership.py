@@ -62,6 +62,8 @@ class DeviceGate:
     kind: str = ""  # its RC type (Drive, Jump...): how a command moves the robot
     robot: str = ""  # the robot it moves ("" for a device several robots share)
     guard: Guard | None = None  # the constraints in force (`drd.runtime.constraints.ConstraintGuard`)
+    # why the setpoint in force stops once the command a constraint refused is recorded (`admit`, `_record`)
+    stopping: str = ""
 
     def verdict(self, issuer: str, epoch: int | None) -> str:
         """Why `issuer` may not command now ("" if it may)."""
@@ -78,7 +80,9 @@ class DeviceGate:
               at: float, holds: Holds | None = None) -> str:
         """Why this command may not go ("" if it may): the holder's authority, the robot it moves (an action the
         driver declares in `MOVES`: the issuer must hold that robot, `holds`), then the constraints in force. A
-        command refused by a constraint also stops the setpoint in force (it was heading where it must not)."""
+        command refused by a constraint also stops the setpoint in force (it was heading where it must not), once
+        the refused command is recorded (`_record`): the `halted` it causes comes after it (records audit 18, #4)."""
+        self.stopping = ""
         why = self.verdict(issuer, epoch)
         robot = self.moved(method, args, kwargs) if not why else None
         if robot is not None and (holds is None or not holds(robot)):
@@ -86,7 +90,7 @@ class DeviceGate:
         if not why and self.guard is not None:
             why = self.guard(self, issuer, method, args, kwargs)
             if why and self.commander is not None:
-                self.halt(at, self.commander, why)
+                self.stopping = why
         return why
 
     def moved(self, method: str, args: tuple[Any, ...], kwargs: Mapping[str, Any]) -> str | None:
@@ -157,6 +161,10 @@ class DeviceGate:
     def _record(self, at: float, issuer: str, method: str, epoch: int | None, why: str) -> None:
         mission, path = _split(issuer)
         self.sink(mission, rec.Command(at, path, self.device, method, epoch, not why, why))
+        if self.stopping:
+            stopping, self.stopping = self.stopping, ""
+            if self.commander is not None:
+                self.halt(at, self.commander, stopping)
 
 
 #: A gate's guard: (gate, issuer, method, args, kwargs) -> why the command may not go, "" if it may.

@@ -64,6 +64,20 @@ def test_a_robot_driving_out_of_its_geofence_is_stopped_at_the_boundary_and_the_
     assert refused and "constraint fence" in refused[0]["reason"]
 
 
+def test_the_halt_a_refusal_causes_comes_after_the_refused_command(catalog: Catalog) -> None:
+    """Records audit 18, #4: docs/trace.md's causal order. The `halted` a constraint's refusal causes (same reason)
+    was written before the refused `command`."""
+    _report, records = dry(catalog, FENCED, until=40.0)
+    lines = [(i, r) for i, r in enumerate(records) if r["kind"] in ("command", "halted") and "constraint fence" in
+             r.get("reason", "")]
+    halts = [(i, r) for i, r in lines if r["kind"] == "halted"]
+    assert halts
+    for i, halt in halts:
+        cause = [j for j, r in lines if r["kind"] == "command" and r["reason"] == halt["reason"]
+                 and r["at"] == halt["at"] and r["device"] == halt["device"]]
+        assert cause and cause[0] < i, (i, halt, cause)
+
+
 HANDLED = """
 mission Patrol {
     needs ranger: Ranger
