@@ -233,6 +233,9 @@ class Interpreter:
             if n.grant:
                 held = tuple(dict.fromkeys([*n.grant.values(), *n.epochs]))
                 self._notify(rec.Released(now, n.path, held, "controller lost"))
+        # rounded to the microsecond as a trace line's `at` (records audit 18, #5: `since` 50.00000000000044); kept
+        # so in the record itself, since a recording's records differ from the trace's only by `at`
+        since, paused = round(since, 6), round(paused, 6)
         self._notify(rec.Restored(now, image.path, since, paused))
         self.resumed = (now, since, paused)
         self._restore = Restore(image, self.pool.view)  # followed until each saved state is entered or gone

@@ -163,8 +163,10 @@ class Resumed(Record):
 @dataclass(frozen=True, slots=True)
 class Restored(Record):
     """The mission was entered again from its journal after its controller was lost: its state as saved at
-    `since`, after `paused` seconds (wall time) without a controller (the holds of the lost controller ended,
-    `released` with reason `controller lost`, just before)."""
+    `since` (sim time), after `paused` seconds without a controller (the holds of the lost controller ended,
+    `released` with reason `controller lost`, just before). On a cluster `paused` is wall time: the world waits for
+    its controller, so sim time stands still meanwhile. A dry-run's world goes on without one (the robots stand
+    still): its `paused` is sim time, the outage it predicts (records audit 18, #5)."""
 
     since: float = 0.0
     paused: float = 0.0
