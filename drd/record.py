@@ -225,6 +225,7 @@ class Recorder:
         self.doors: dict[str, tuple[tuple[float, float], tuple[float, float]]] = {}  # the scene's, by id
         self.flying: list[tuple[float, str, str, tuple[float, float]]] = []  # (t1, robot, kind, end), landings due
         self.entities: dict[str, Any] = {}  # the world's entities as they are now, for a viewer that joins late
+        self.gone: set[str] = set()  # the lost robots whose body (and view) left the scene (`cycle`)
         self.closed, self.flushed, self.now = False, 0.0, 0.0  # `now`: the latest sim time logged
         self.kept = 0.0  # the sim time up to which the file's chunks were written (the last flush that succeeded)
         if serve is not None:
@@ -293,6 +294,19 @@ class Recorder:
 
         self.entities.update(entities)
         self.world.log(SceneUpdate(entities=[e for _, e in entities]), log_time=_ns(at))
+
+    def delete_robots(self, at: float, robots: list[str]) -> None:
+        """Lost robots leave the world's scene at sim time `at`: a deletion of each one's body and camera view, as
+        Foxglove's SceneUpdate deletes (records audit 18, #2: a lost Scout's body stayed, drawn at its last pose)."""
+        from foxglove.messages import SceneEntityDeletion, SceneEntityDeletionType, SceneUpdate
+
+        self.gone.update(robots)
+        ids = [e for rid in robots for e in (f"body/{rid}", f"{FOV}{rid}") if e in self.entities]
+        for entity in ids:
+            del self.entities[entity]
+        if ids:
+            self.world.log(SceneUpdate(deletions=[SceneEntityDeletion(
+                timestamp=_stamp(at), type=SceneEntityDeletionType.MatchingId, id=e) for e in ids]), log_time=_ns(at))
 
     def scene_now(self) -> Any:
         """The world's scene as it is now (None before `scene`)."""
@@ -411,10 +425,14 @@ class Recorder:
         view.changed_at = None
 
     def cycle(self, sim: Any) -> None:
-        """The end of a control cycle of `sim`: where every robot and intruder is (`poses`)."""
+        """The end of a control cycle of `sim`: where every robot and intruder is (`poses`); a robot lost in this
+        cycle leaves the scene."""
         carried = {scout: r.id for r in sim.world.rangers for scout in sim.magazine(r.id)}
+        lost = [rid for rid in sim.robots if sim.state(rid) == "lost"]
+        if len(lost) > len(self.gone):
+            self.delete_robots(sim.time, [rid for rid in lost if rid not in self.gone])
         poses = {rid: (p.x, p.y, p.heading) for rid in sim.robots  # a lost robot is gone: no pose (worlds audit 17)
-                 if rid not in carried and sim.state(rid) != "lost" and (p := sim.pose(rid))}
+                 if rid not in carried and rid not in self.gone and (p := sim.pose(rid))}
         for iid, (x, y) in sim.intruders().items():
             poses[INTRUDER + iid] = (x, y, 0.0)
         self.poses(sim.time, poses, carried)
@@ -817,6 +835,8 @@ class Recording:
     #: A Scout in a magazine: from when, carried by which Ranger (its frame's parent is the Ranger's).
     carried: dict[str, list[tuple[float, str]]] = field(default_factory=dict)
     fovs: dict[str, float] = field(default_factory=dict)  # each camera's field of view (radians), by robot
+    #: A lost robot: when its body left the world's scene (a deletion on `/drd/world`); `state_at` has it no more.
+    gone: dict[str, float] = field(default_factory=dict)
     world: bytes | None = None  # the world file the run used (`world.yaml` attachment), if it was a file
     cut: bool = False  # the file ends before the run did (a crash): what its complete chunks held
     #: Why the reading stopped early (a cut or a damaged chunk: where in the file, and the reader's error), or None.
@@ -889,7 +909,7 @@ def read(path: Path | str) -> Recording:
                         if decoder is not None and channel.topic == TF:
                             _take_poses(out, decoder(message.data), message.log_time)
                         elif decoder is not None:  # each camera's view, drawn when it is first read
-                            _take_views(out, decoder(message.data))
+                            _take_views(out, decoder(message.data), message.log_time)
                     elif channel.message_encoding != "json":  # not drd's (a ROS 2 bag's CDR of the same topics)
                         continue
                     elif channel.topic in (RECORDS, RUNS):
@@ -973,9 +993,13 @@ def _take_poses(out: Recording, decoded: Any, log_time: int) -> None:
             (log_time / 1e9, t.translation.x, t.translation.y, heading))
 
 
-def _take_views(out: Recording, scene: Any) -> None:
+def _take_views(out: Recording, scene: Any, log_time: int = 0) -> None:
     """The cameras' fields of view a `/drd/world` update draws (`Recorder.view`: an entity `fov/<robot>` with
-    its `fov` in radians), so a replay knows a camera that never saw anyone."""
+    its `fov` in radians), so a replay knows a camera that never saw anyone; and the bodies it deletes (a lost
+    robot's: `Recorder.delete_robots`)."""
+    for d in scene.deletions:
+        if d.id.startswith("body/"):
+            out.gone.setdefault(d.id.removeprefix("body/"), log_time / 1e9)
     for e in scene.entities:
         if e.id.startswith(FOV):
             fov = next((m.value for m in e.metadata if m.key == "fov"), None)
@@ -1016,7 +1040,8 @@ def state_at(recording: Recording, at: float) -> dict[str, Any]:
                          "outcome": ended.outcome if ended else None, "active": ex.active_now(),
                          "holds": ex.holds_now(), "waiting": ex.waiting_now()})
     where = {rid: {"x": round(p[0], 3), "y": round(p[1], 3), "heading": round(p[2], 4)}
-             for rid in recording.robots() if (p := recording.pose(rid, at)) is not None}
+             for rid in recording.robots() if (p := recording.pose(rid, at)) is not None
+             and recording.gone.get(rid, math.inf) > at + 1e-9}  # a lost robot is no longer in the world
     ends = max([r.at for rs in recording.records.values() for r in rs] +
                [track[-1][0] for track in recording.tracks.values() if track], default=0.0)
     return {"at": at, "ends": round(ends, 6), "cut": recording.cut, "missions": missions,
