@@ -154,8 +154,8 @@ class Interpreter:
         self._timed: dict[Node, None] = {}  # nodes with `after`/`when` transitions
         self._listening: dict[str, dict[Node, None]] = {  # event name -> nodes with `on` transitions
             event: {} for plan in self._plans.values() for event in plan.on_event}
-        self._last_tick, self._settling = -1.0, False
-        self._stepping = False  # components are being stepped (`step`): their events wait for their step
+        # in a run to completion; in entries outside one (`_entered`); components being stepped (their events wait)
+        self._last_tick, self._settling, self._holding, self._stepping = -1.0, False, 0, False
         self._taken: list[tuple[str, str, str]] = []
         self._alive_instances = 0  # of multiplicities, in the whole mission: `max_instances` bounds them all
         self._loops = LoopWatch()  # why the chart loops without time passing, ended by `_run_to_completion`
@@ -217,7 +217,7 @@ class Interpreter:
             raise RuntimeError("this interpreter has already started")
         self._taken = []
         root_state = self._states[self.chart.root]
-        self._enter(root_state, root_state.id, None, {})
+        self._entered(lambda: self._enter(root_state, root_state.id, None, {}))
         self._settle()
         self._flush()
         return MacroStep(self.clock.now(), 0, tuple(self._taken), self.outcome)
@@ -293,8 +293,8 @@ class Interpreter:
         if self.listeners:
             self._notify(record)
         self.events.append(record)
-        if not self._settling and not self._stepping and self.root is not None:  # from outside: run it now
-            self._settle()
+        if not self._settling and not self._stepping and not self._holding and self.root is not None:
+            self._settle()  # from outside: run it now
 
     def stop(self, reason: str = "stopped by operator", outcome: Literal["stopped", "failure"] = "stopped") -> None:
         """Shut everything down, children first; idempotent. `outcome` "failure": what stops it is no one's choice
@@ -373,6 +373,19 @@ class Interpreter:
         return out
 
     # ------------------------------------------------------------- entering
+    def _entered(self, work: Callable[[], object]) -> None:
+        """Do `work` (entries made outside a run to completion), then deliver what it emitted. An event emitted as
+        a parallel's first child is entered (its start action) is heard by the siblings entered after it, as
+        inside a run to completion: the spec's children start together, and an event reaches every state
+        listening at that instant (semantics audit 18, #1: dispatched at once, it missed them at t=0)."""
+        self._holding += 1
+        try:
+            work()
+        finally:
+            self._holding -= 1
+        if self.events and not (self._holding or self._settling or self._stepping) and self.root is not None:
+            self._settle()
+
     def _enter(self, state: State, path: str, parent: Node | None, scope: dict[str, Any]) -> Node:
         """Enter `state` at `path`; `scope` (its parameters) becomes the node's own, not a copy."""
         plan = self._plans[state.id]
@@ -1143,6 +1156,10 @@ class Interpreter:
 
     # ------------------------------------------------------------- resources
     def _apply(self, decisions: Iterable[object]) -> None:
+        """The manager's decisions about this mission's holders; what they enter is entered whole (`_entered`)."""
+        self._entered(lambda: self._decide(decisions))
+
+    def _decide(self, decisions: Iterable[object]) -> None:
         holders = self.resources.holders
         for d in decisions:
             holder = getattr(d, "holder", None) or getattr(d, "victim", None)
