@@ -579,9 +579,9 @@ class Interpreter:
         if kind is ast.TriggerKind.CHANGE:
             if t.condition is None or not self._truthy(node, t.condition, None):
                 return False
-        elif kind is ast.TriggerKind.TIMEOUT:
+        elif kind is ast.TriggerKind.TIMEOUT:  # from the behavior's entry: one overdue at the grant fires then
             delay = self._delay(node, t)
-            if delay is None or delay > TIME_EPS:
+            if delay is None or self.clock.now() - node.entered < delay - TIME_EPS:
                 return False
         elif kind is not ast.TriggerKind.COMPLETION:
             return False
@@ -834,7 +834,7 @@ class Interpreter:
             for t in node.state.transitions:
                 if t.kind is ast.TriggerKind.TIMEOUT:
                     delay = self._delay(domain, t)
-                    if delay is None or now - node.entered < delay - TIME_EPS:
+                    if delay is None or now - self._since(node) < delay - TIME_EPS:
                         continue
                 elif t.kind is ast.TriggerKind.CHANGE:
                     if t.condition is None or not self._truthy(domain, t.condition, None):
@@ -846,6 +846,14 @@ class Interpreter:
                     self._take_chosen(node, choice or (t, None), None)
                     return True
         return False
+
+    @staticmethod
+    def _since(node: Node) -> float:
+        """What `node`'s `after` transitions count from: its entry; for a behavior's `start` state (waiting for a
+        `start -> X after D`), the behavior's, its needs' wait included, as for a child waiting for its own
+        (reference.md; semantics audit 18, #3: it counted from the grant)."""
+        parent = node.parent
+        return parent.entered if node.plan.starting and parent is not None else node.entered
 
     def _choose(self, node: Node, domain: Node, ok: bool | None, current: rec.Event | None = None
                 ) -> tuple[Transition, rec.Event | None] | None:
@@ -865,7 +873,7 @@ class Interpreter:
                 continue
             if kind is ast.TriggerKind.TIMEOUT:
                 delay = self._delay(domain, t)
-                if delay is None or now - node.entered < delay - TIME_EPS:
+                if delay is None or now - self._since(node) < delay - TIME_EPS:
                     continue
             elif kind is ast.TriggerKind.CHANGE:
                 if t.condition is None or not self._truthy(domain, t.condition, None):

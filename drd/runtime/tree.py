@@ -48,7 +48,7 @@ _NO_REUSE: Mapping[str, tuple[str, str, str]] = MappingProxyType({})
 class StatePlan:
     """What entering and exiting a state needs to know, worked out once per chart, not per entry."""
 
-    __slots__ = ("requested", "adopted", "on_event", "timed", "defaults", "reserves")
+    __slots__ = ("requested", "adopted", "on_event", "timed", "defaults", "reserves", "starting")
 
     def __init__(self, state: State):
         self.requested = tuple(n for n in state.needs if n.requested)  # asked of the manager on entry
@@ -64,6 +64,8 @@ class StatePlan:
         # the completion transitions that preallocate their target's needs when this state is entered
         self.reserves = tuple(t for t in state.transitions
                               if t.kind is ast.TriggerKind.COMPLETION and t.preallocate)
+        # a behavior's waiting `start` state (dsl.build): its `after`s count from the behavior's entry
+        self.starting = state.parent is not None and state.id == f"{state.parent}/start"
 
 
 @dataclass(eq=False, slots=True, init=False)
