@@ -747,10 +747,10 @@ class Interpreter:
             if self.resources.flush():  # this instant's requests, by priority (spec audit D1)
                 continue
             return
-        if self.root is not None:
-            self._exit(self.root, "failure")
-        too_many = f"livelock: more than {MAX_MICROSTEPS} transitions without time passing"
-        self._end("failure", self._loops.looping or too_many)
+        why = self._loops.looping or f"livelock: more than {MAX_MICROSTEPS} transitions without time passing"
+        if self.root is not None:  # the root failed on its own: its `exited` says why (semantics audit 18, #5)
+            self._exit(self.root, "failure", why)
+        self._end("failure", why)
 
     def _complete(self, node: Node, ok: bool, why: str) -> None:
         if not ok and not why and node.state.kind is MULTI:  # too few instances left (`_instance_done`)

@@ -1,0 +1,59 @@
+"""What a livelock leaves in the trace: the root's `exited` says why, as its `finished` does (semantics audit 18,
+#5), and the per-transition bound takes one transition exactly MAX_REPEATS times (#6)."""
+
+from __future__ import annotations
+
+import pytest
+
+from drd.runtime import records as rec
+from dsl import compile_text
+from dsl.catalog import Catalog
+from tests.runtime_support import Harness, Timed, ranger_world
+
+#: One state that feeds itself: each turn emits the event it listens to.
+SELF_EMIT = """
+mission M {
+    start -> A
+    Wait(duration: 100s) as A
+    A -> A on Tick / emit Tick(n: 1)
+    A -> A after 1s / emit Tick(n: 0)
+}
+"""
+
+#: Two behaviors that feed each other: each of Pong's turns emits what moves Ping, and Ping's emit moves Pong.
+RING = """
+mission M { parallel all { Ping; Pong } }
+behavior Ping {
+    start -> A
+    Wait(duration: 1s) as A
+    Wait(duration: 9s) as B
+    A -> B / emit Hit(n: 0)
+    B -> A on Hit
+    A -> B on Hit / emit Hit(n: 1)
+}
+behavior Pong {
+    start -> C
+    Wait(duration: 9s) as C
+    C -> C on Hit / emit Hit(n: 2)
+}
+"""
+
+#: A zero-time timer back to its own source.
+ZERO_TIME = "mission M {\n start -> A\n Wait(duration: 1h) as A\n A -> A after 0s\n}\n"
+
+
+def run(catalog: Catalog, text: str) -> Harness:
+    result = compile_text(text, catalog, "t.mission")
+    assert result.ok and result.statechart is not None
+    h = Harness(result.statechart, {"Wait": Timed}, ranger_world(1, 0))
+    assert h.run(until=5) == "failure"
+    return h
+
+
+@pytest.mark.parametrize("text", [SELF_EMIT, RING, ZERO_TIME], ids=["self_emit", "ring", "zero_time"])
+def test_root_exited_says_why_a_livelock_failed_it(catalog: Catalog, text: str) -> None:
+    h = run(catalog, text)
+    reason = h.interp.reason
+    assert reason.startswith("livelock: ")
+    assert [(r.status, r.reason) for r in h.of(rec.Exited) if r.path == "M"] == [("failure", reason)]
+    assert [r.reason for r in h.of(rec.Finished)] == [reason]
