@@ -64,9 +64,9 @@ __all__ = ["MAX_BEHAVIOR_TURNS", "MAX_MICROSTEPS", "MAX_REPEATS", "Interpreter",
 
 #: Transitions one macro step may take before the chart is declared livelocked.
 MAX_MICROSTEPS = 10_000
-#: Times one node may take one same transition in one instant before it is a loop of zero-time transitions (`A -> A
-#: after 0s`): on a cluster each turn starts and stops a remote component, so 10,000 turns held the controller's
-#: mission loop for 20 s (wedge audit D1).
+#: Times one node may take one same transition in one instant, the last making it a loop of zero-time transitions
+#: (`A -> A after 0s`): on a cluster each turn starts and stops a remote component, so 10,000 turns held the
+#: controller's mission loop for 20 s (wedge audit D1).
 MAX_REPEATS = 100
 #: Transitions between the children of one behavior in one instant before it is a loop of zero-time transitions
 #: through several of them: a ring of 100 states took each of its transitions 99 times, 9,900 remote starts and
@@ -83,24 +83,27 @@ _RUNNING, _SUCCESS, _FAILURE = Status.RUNNING, Status.SUCCESS, Status.FAILURE
 
 class LoopWatch:
     """The turns each node took of each transition in the current instant, and the transitions within each behavior:
-    past MAX_REPEATS of one, or MAX_BEHAVIOR_TURNS in one behavior, the chart loops without time passing (`looping`
-    says where), however few transitions that is in all."""
+    at MAX_REPEATS of one, or past MAX_BEHAVIOR_TURNS in one behavior, the chart loops without time passing
+    (`looping` says where, and the run to completion stops before another turn), however few transitions that is."""
 
     def __init__(self) -> None:
         self.at = -1.0
-        self.turns: dict[tuple[str, str], int] = {}  # (node path, target path) -> turns at `at`
+        self.turns: dict[tuple[str, int], int] = {}  # (node path, id of the transition) -> turns at `at`
         self.within: dict[str, int] = {}  # behavior path -> transitions between its children at `at`
         self.looping = ""
 
-    def turn(self, now: float, path: str, target: str) -> None:
+    def turn(self, now: float, path: str, target: str, transition: Transition) -> None:
+        """`path` took `transition` to `target`. Its MAX_REPEATS-th turn of one transition is the last (semantics
+        audit 18, #6: a 101st was taken, which a first turn by another transition of the same source and target hid)."""
         if now != self.at:
             self.at, self.turns, self.within = now, {}, {}
-        turns = self.turns[path, target] = self.turns.get((path, target), 0) + 1
+        key = (path, id(transition))  # the chart's transitions live as long as the interpreter
+        turns = self.turns[key] = self.turns.get(key, 0) + 1
         behavior = path.rpartition("/")[0]
         within = self.within[behavior] = self.within.get(behavior, 0) + 1
         if self.looping:
             return
-        if turns > MAX_REPEATS:
+        if turns >= MAX_REPEATS:
             self.looping = (f"livelock: {path} -> {target} taken {MAX_REPEATS} times without time passing (a loop of"
                             " zero-time transitions)")
         elif within > MAX_BEHAVIOR_TURNS:
@@ -963,7 +966,7 @@ class Interpreter:
         target = self._states[t.target]
         target_path = f"{domain.path}/{target.name}"
         self._taken.append((node.path, target_path, t.kind))  # a StrEnum: a str, without `.value`
-        self._loops.turn(self.clock.now(), node.path, target_path)
+        self._loops.turn(self.clock.now(), node.path, target_path, t)
         if self.listeners:
             self._notify(rec.Taken(self.clock.now(), node.path, target_path, t.kind.value, trigger_label(t)))
         if node.phase is not DONE:

@@ -57,3 +57,19 @@ def test_root_exited_says_why_a_livelock_failed_it(catalog: Catalog, text: str) 
     assert reason.startswith("livelock: ")
     assert [(r.status, r.reason) for r in h.of(rec.Exited) if r.path == "M"] == [("failure", reason)]
     assert [r.reason for r in h.of(rec.Finished)] == [reason]
+
+
+@pytest.mark.parametrize(("text", "looping", "trigger"), [
+    (SELF_EMIT, ("M/A", "M/A"), "event"),  # its first turn, at 1 s, is the `after 1s` one: another transition
+    (RING, ("M/Pong/C", "M/Pong/C"), "event"),
+    (ZERO_TIME, ("M/A", "M/A"), "timeout"),
+], ids=["self_emit", "ring", "zero_time"])
+def test_one_transition_is_taken_exactly_max_repeats_times(catalog: Catalog, text: str, looping: tuple[str, str],
+                                                          trigger: str) -> None:
+    from drd.runtime.interpreter import MAX_REPEATS
+
+    h = run(catalog, text)
+    source, target = looping
+    assert h.interp.reason.startswith(f"livelock: {source} -> {target} taken {MAX_REPEATS} times")
+    turns = [r for r in h.of(rec.Taken) if (r.path, r.target, r.trigger) == (source, target, trigger)]
+    assert len(turns) == MAX_REPEATS and len({r.at for r in turns}) == 1
