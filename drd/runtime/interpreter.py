@@ -83,7 +83,7 @@ _RUNNING, _SUCCESS, _FAILURE = Status.RUNNING, Status.SUCCESS, Status.FAILURE
 
 class LoopWatch:
     """The turns each node took of each transition in the current instant, and the transitions within each behavior:
-    at MAX_REPEATS of one, or past MAX_BEHAVIOR_TURNS in one behavior, the chart loops without time passing
+    at MAX_REPEATS of one, or at MAX_BEHAVIOR_TURNS in one behavior, the chart loops without time passing
     (`looping` says where, and the run to completion stops before another turn), however few transitions that is."""
 
     def __init__(self) -> None:
@@ -106,7 +106,7 @@ class LoopWatch:
         if turns >= MAX_REPEATS:
             self.looping = (f"livelock: {path} -> {target} taken {MAX_REPEATS} times without time passing (a loop of"
                             " zero-time transitions)")
-        elif within > MAX_BEHAVIOR_TURNS:
+        elif within >= MAX_BEHAVIOR_TURNS:  # the 1,000th is the last, as the reference says, not a 1,001st
             self.looping = (f"livelock: {MAX_BEHAVIOR_TURNS:,} transitions between the states of {behavior} without"
                             f" time passing (a loop of zero-time transitions through them, the last {path} ->"
                             f" {target})")
