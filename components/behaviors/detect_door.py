@@ -16,7 +16,7 @@ import math
 import re
 from typing import Any
 
-from components.behaviors.scan import SAME_LINE, ScanMemo, along, corridor, expected, wall_across, wrap
+from components.behaviors.scan import SAME_LINE, Openings, ScanMemo, along, corridor, expected, wall_across, wrap
 from drd.hw.interfaces import Scan
 from drd.runtime.component import Component, Status
 
@@ -106,6 +106,7 @@ class DetectDoor(Component):
     def start(self) -> None:
         self.expect: tuple[float | None, float | None] = (None, None)
         self.memo = ScanMemo()  # what the scan helpers derive from this cycle's scan
+        self.openings = Openings()  # an L's or a T's corner is no end: FollowCorridor turns there
         self.origin: tuple[float, float] | None = None  # where it started (odometry), once known
         self.heading: float | None = None  # the odometry's heading when the expected distances were (re)started
 
@@ -143,7 +144,10 @@ class DetectDoor(Component):
         found = self._pose()
         if self.origin is None and found is not None:
             self.origin = found[:2]
-        if wall_across(scan, memo=self.memo) and not self._just_started(found):
+        if found is not None:
+            self.openings.update(scan, found[0], found[1], self.expect)
+        if wall_across(scan, memo=self.memo) and not self._just_started(found) and (
+                found is None or self.openings.turn(found[0], found[1]) is None):
             self.ctx.log("the corridor ends here, with no new door")  # no new door between here and the end
             return Status.FAILURE
         self.expect = self._expected(scan, found)

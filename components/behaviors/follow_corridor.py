@@ -7,11 +7,13 @@ fits, clearance, the end wall) is `components.behaviors.scan`, shared with the o
 from __future__ import annotations
 
 import math
+from typing import Any
 
 from components.behaviors.progress import Progress, allowance
 from components.behaviors.scan import (
     END,
     SAME_LINE,
+    Openings,
     ScanMemo,
     along,
     clearance_ahead,
@@ -67,6 +69,7 @@ class FollowCorridor(Component):
         self.turn_to: float | None = None  # heading to turn to, on the spot: around, or to the corridor's line
         self.turn_side = 1  # which way (+1 left, -1 right)
         self.memo = ScanMemo()  # what the scan helpers derive from this cycle's scan
+        self.openings = Openings()  # where each side's wall has been missing: an L's or a T's corner
         self.blocked_since: float | None = None  # when the way ahead was last found blocked short of the end
         self.unblocking: int | None = None  # the side of a turn out of a block, under way
         self.direction: float | None = None  # the corridor's direction in the odometry frame, from the last walls
@@ -80,6 +83,7 @@ class FollowCorridor(Component):
         self.progress.reset()
         self.expect, self.direction, self.origin, self.began = (None, None), None, None, None
         self.turn_to, self.unblocking, self.blocked_since = None, None, None
+        self.openings.reset()
 
     def stuck(self, now: float, x: float, y: float) -> bool:
         """No farther from where it started than its best by PROGRESS metres for STUCK seconds: it says so in the log
@@ -115,14 +119,9 @@ class FollowCorridor(Component):
         blocked = clearance < END
         # turning out of a block, a wall across the way is the side wall it turns past, not the end; a wall across
         # with a door in it is the end though the way through the door is free (worlds audit 17, D4)
+        self.openings.update(scan, x, y, self.expect)
         if self.unblocking is None and wall_across(scan, memo=self.memo):
-            if math.hypot(x - self.origin[0], y - self.origin[1]) < 0.5:  # started facing the end
-                self.turn_to, self.turn_side = wrap(a + math.pi), 1
-                drive.set_velocity(0.0, TURN_RATE)
-                return Status.RUNNING
-            drive.stop()
-            self.ctx.log("end of the corridor")
-            return Status.SUCCESS
+            return self.at_wall_across(drive, x, y, a)
         if self.unblock(now, blocked, clearance, scan):
             return Status.RUNNING
         if self.direction is None:  # the corridor's line not known yet: the long walls, not the nearest things
@@ -152,6 +151,25 @@ class FollowCorridor(Component):
         # something narrower than the corridor in the way (a person, or a wall we are angled into): turn on the
         # spot as the walls say and wait for the way to clear
         drive.set_velocity(0.0 if blocked else speed, omega)
+        return Status.RUNNING
+
+    def at_wall_across(self, drive: Any, x: float, y: float, a: float) -> Status:
+        """A wall across the way: where the corridor turns (an L's or a T's corner), turn to the open side; started
+        facing it (a Ranger left there by the previous sweep), turn around; else this is the end."""
+        assert self.origin is not None
+        side = self.openings.turn(x, y)
+        if side is not None:  # the corridor goes on to that side (worlds audit 17, D5: an L's second leg)
+            self.ctx.log(f"FollowCorridor: the corridor turns {'left' if side > 0 else 'right'} here")
+            self.turn_to, self.turn_side = wrap(a + side * math.pi / 2), side
+            self.direction, self.expect = None, (None, None)  # the new leg's walls are fitted afresh
+            self.openings.reset()
+        elif math.hypot(x - self.origin[0], y - self.origin[1]) < 0.5:  # started facing the end
+            self.turn_to, self.turn_side = wrap(a + math.pi), 1
+        else:
+            drive.stop()
+            self.ctx.log("end of the corridor")
+            return Status.SUCCESS
+        drive.set_velocity(0.0, self.turn_side * TURN_RATE)
         return Status.RUNNING
 
     def orient(self, scan: Scan, heading: float) -> None:

@@ -508,3 +508,60 @@ def _straight_across(xs: Floats, ys: Floats, steep: float = 1.0) -> bool:
         return False
     slope, offset = np.polyfit(ys, xs, 1)
     return abs(float(slope)) <= steep and float(np.abs(xs - (slope * ys + offset)).max()) <= FLAT
+
+
+# -- where the corridor turns --------------------------------------------------------------------------------------
+
+#: At a wall across the way, a side whose wall has been missing abeam for TURN metres of the way is where the corridor
+#: turns: an L's or a T's other leg is a corridor wide (2.5 m, less the 0.9 m the robot stops short of the wall); a
+#: door, even one beside the end wall, is narrower.
+TURN = 1.3
+#: How far past a side's wall line (m) the beam straight to that side must reach for the side to count as open.
+PAST_WALL = 0.5
+#: A side's wall line (m from the axis) when the walls were not seen: half the shipped corridors' width.
+HALF_WIDTH = 1.25
+
+
+class Openings:
+    """Where each side's wall has been missing abeam since (odometry): an L's corner has a wall across the way, and was
+    taken for the corridor's end, its second leg never searched (worlds audit 17, D5). Fed each cycle's scan and
+    pose (`update`); at a wall across, `turn` says the side the corridor goes on to, if any. Pure."""
+
+    def __init__(self) -> None:
+        self.since: dict[int, tuple[float, float] | None] = {1: None, -1: None}
+
+    def update(self, scan: Scan, x: float, y: float, walls: tuple[float | None, float | None]) -> None:
+        """This cycle's scan at (x, y); `walls`: the expected distances of the left and right walls, if known."""
+        for side in (1, -1):
+            reach = abeam(scan, side)
+            line = walls[0 if side > 0 else 1] or HALF_WIDTH
+            if reach is not None and reach > line + PAST_WALL:
+                if self.since[side] is None:
+                    self.since[side] = (x, y)
+            else:
+                self.since[side] = None
+
+    def turn(self, x: float, y: float) -> int | None:
+        """The side (+1 left, -1 right; left first, at a T) open abeam for TURN metres up to (x, y), or None."""
+        for side in (1, -1):
+            start = self.since[side]
+            if start is not None and math.hypot(x - start[0], y - start[1]) >= TURN:
+                return side
+        return None
+
+    def reset(self) -> None:
+        """Turned: what was abeam is no longer."""
+        self.since = {1: None, -1: None}
+
+
+def abeam(scan: Scan, side: int) -> float | None:
+    """The range of the beam straight to `side` (+1 left, -1 right; the nearest within 3 degrees), or None when the
+    laser does not look there."""
+    b = scan.beams()
+    target = side * math.pi / 2
+    i = bisect.bisect_left(b.angles, target)
+    near = [k for k in (i - 1, i) if 0 <= k < len(b.angles) and abs(b.angles[k] - target) <= math.radians(3)]
+    if not near:
+        return None
+    k = min(near, key=lambda k: abs(b.angles[k] - target))
+    return scan.ranges[k]

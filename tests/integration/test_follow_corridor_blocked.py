@@ -121,3 +121,24 @@ def test_a_door_in_the_end_wall_is_the_corridors_end_not_a_way_on(catalog: Catal
     assert report.outcome == "success", report.reason
     assert "end of the corridor" in [line["text"] for line in report.logs()]
     assert 18.5 < max(x for _t, x, _y in report.tracks["ranger1"]) < 20 - 0.3  # to the end, never through its door
+
+
+def test_an_l_shaped_corridors_corner_is_turned_and_its_second_leg_searched(catalog: Catalog) -> None:
+    """Worlds audit 17, D5: the corner of an L has a wall across the way, and was taken for the corridor's end: the
+    second leg (two doors) was never searched. At a wall across, a side whose wall has been missing abeam for a
+    corridor's width is where the corridor goes on: FollowCorridor turns there and DetectDoor does not end."""
+    ell = {"walls": [{"from": [0, -1.25], "to": [15, -1.25]}, {"from": [15, -1.25], "to": [15, 15]},
+                     {"from": [0, 1.25], "to": [12.5, 1.25]}, {"from": [12.5, 1.25], "to": [12.5, 15]},
+                     {"from": [0, -1.25], "to": [0, 1.25]}, {"from": [12.5, 15], "to": [15, 15]}],
+           "rooms": [{"id": "south", "rect": [4, -5, 10, -1.25], "light": 0.6},
+                     {"id": "west", "rect": [8, 3, 12.5, 8], "light": 0.6},
+                     {"id": "east", "rect": [15, 5, 20, 10], "light": 0.6}],
+           "doors": [{"id": "d_south", "at": [7, -1.25], "width": 1.0}, {"id": "d_west", "at": [12.5, 5.5], "width": 1},
+                     {"id": "d_east", "at": [15, 7.5], "width": 1.0}]}
+    report = dry(catalog, "ell", ell, until=400.0)
+    assert report.outcome == "success", report.reason
+    found = sorted((round(d["x"] * 2) / 2, round(d["y"] * 2) / 2) for d in report.doors)
+    assert found == [(7.0, -1.5), (12.5, 5.5), (15.0, 7.5)], report.doors  # each door once, the second leg's too
+    said = [line["text"] for line in report.logs()]
+    assert "FollowCorridor: the corridor turns left here" in said, said
+    assert max(y for _t, _x, y in report.tracks["ranger1"]) > 13.5  # to the second leg's end (y = 15)
