@@ -28,6 +28,9 @@ _FAR = math.pi - 0.15  # beams closer than 0.15 rad to the wall's direction cros
 #: How far (m) the Ranger must have moved since the start before a wall across the way is the corridor's end: as
 #: FollowCorridor, which turns around when it starts facing one.
 LEAVE = 0.5
+#: How long (s) a wall across may stand before a Ranger that has not left it yet ends the search all the same: turning
+#: away takes FollowCorridor a few seconds; one that stands there did not (it ended, and the search stood for ever).
+SETTLE = 20.0
 #: A maximal run of beams through the wall with a beam at the wall on both sides.
 _GAP = re.compile(r"(?<=w)s{0,8}b+s{0,8}(?=w)")
 
@@ -108,15 +111,20 @@ class DetectDoor(Component):
         self.memo = ScanMemo()  # what the scan helpers derive from this cycle's scan
         self.openings = Openings()  # an L's or a T's corner is no end: FollowCorridor turns there
         self.origin: tuple[float, float] | None = None  # where it started (odometry), once known
+        self.began: float | None = None  # when it was first stepped
         self.heading: float | None = None  # the odometry's heading when the expected distances were (re)started
 
-    def _just_started(self, pose: tuple[float, float, float] | None) -> bool:
+    def resume(self) -> None:
+        """Given the Ranger back: `SETTLE` counts afresh (FollowCorridor, resumed too, turns away first)."""
+        self.began = None
+
+    def _just_started(self, pose: tuple[float, float, float] | None, now: float) -> bool:
         """Still within `LEAVE` of where it started: a wall ahead then is one it was left facing (the previous
         instance launched its Scout from there, or the sweep ended there), which FollowCorridor turns away from,
         sweeping back; it is the corridor's end once the Ranger has moved (a sweep back finds the doors missed on the
         way out). Without odometry, any wall across the way is the end."""
         return pose is not None and self.origin is not None and math.hypot(
-            pose[0] - self.origin[0], pose[1] - self.origin[1]) < LEAVE
+            pose[0] - self.origin[0], pose[1] - self.origin[1]) < LEAVE and now - (self.began or now) < SETTLE
 
     def _pose(self) -> tuple[float, float, float] | None:
         """Odometry, from the robot's Drive if this component was given one (the runtime may add it), else from
@@ -142,11 +150,13 @@ class DetectDoor(Component):
         min_width = float(self.ctx.params["min_width"])
         scan = self.device("ranges").scan()
         found = self._pose()
+        if self.began is None:
+            self.began = now
         if self.origin is None and found is not None:
             self.origin = found[:2]
         if found is not None:
-            self.openings.update(scan, found[0], found[1], self.expect)
-        if wall_across(scan, memo=self.memo) and not self._just_started(found) and (
+            self.openings.update(scan, found[0], found[1])
+        if wall_across(scan, memo=self.memo) and not self._just_started(found, now) and (
                 found is None or self.openings.turn(found[0], found[1]) is None):
             self.ctx.log("the corridor ends here, with no new door")  # no new door between here and the end
             return Status.FAILURE

@@ -516,10 +516,9 @@ def _straight_across(xs: Floats, ys: Floats, steep: float = 1.0) -> bool:
 #: turns: an L's or a T's other leg is a corridor wide (2.5 m, less the 0.9 m the robot stops short of the wall); a
 #: door, even one beside the end wall, is narrower.
 TURN = 1.3
-#: How far past a side's wall line (m) the beam straight to that side must reach for the side to count as open.
-PAST_WALL = 0.5
-#: A side's wall line (m from the axis) when the walls were not seen: half the shipped corridors' width.
-HALF_WIDTH = 1.25
+#: How far (m) the beam straight to a side must reach for that side to count as open: past a side wall, which in a
+#: corridor is at most its width away.
+OPEN_ABEAM = 2.5
 
 
 class Openings:
@@ -530,12 +529,12 @@ class Openings:
     def __init__(self) -> None:
         self.since: dict[int, tuple[float, float] | None] = {1: None, -1: None}
 
-    def update(self, scan: Scan, x: float, y: float, walls: tuple[float | None, float | None]) -> None:
-        """This cycle's scan at (x, y); `walls`: the expected distances of the left and right walls, if known."""
+    def update(self, scan: Scan, x: float, y: float) -> None:
+        """This cycle's scan at (x, y). The same from the same scan and odometry, so FollowCorridor and DetectDoor,
+        each keeping its own, agree on where the corridor turns (a disagreement left a search standing for ever)."""
         for side in (1, -1):
             reach = abeam(scan, side)
-            line = walls[0 if side > 0 else 1] or HALF_WIDTH
-            if reach is not None and reach > line + PAST_WALL:
+            if reach is not None and reach > OPEN_ABEAM:
                 if self.since[side] is None:
                     self.since[side] = (x, y)
             else:

@@ -142,3 +142,26 @@ def test_an_l_shaped_corridors_corner_is_turned_and_its_second_leg_searched(cata
     said = [line["text"] for line in report.logs()]
     assert "FollowCorridor: the corridor turns left here" in said, said
     assert max(y for _t, _x, y in report.tracks["ranger1"]) > 13.5  # to the second leg's end (y = 15)
+
+
+def test_a_t_junctions_bar_is_searched_both_ways_and_the_search_ends(catalog: Catalog) -> None:
+    """Worlds audit 19, D1: after turning into a T's bar, the Ranger left at the bar's end read the end wall 0.905 m
+    away (the laser's noise), turned 88 degrees to that wall's line and took the side wall for the end; DetectDoor,
+    not moved since, never ended the search, which stood until the time limit. Both arms of the bar are searched."""
+    dark = [{"at": at, "radius": 1.5} for at in ([4.6, 1.85], [13.1, 6.6], [20.6, 6.6], [13.1, -10.4], [20.6, -10.4])]
+    tee = {"light": {"ambient": 0.9, "dark": dark},
+           "walls": [{"from": [0, -1.25], "to": [0, 1.25]}, {"from": [0, 1.25], "to": [17.5, 1.25]},
+                     {"from": [0, -1.25], "to": [17.5, -1.25]}, {"from": [17.5, 1.25], "to": [17.5, 15]},
+                     {"from": [17.5, -15], "to": [17.5, -1.25]}, {"from": [20, -15], "to": [20, 15]},
+                     {"from": [17.5, 15], "to": [20, 15]}, {"from": [17.5, -15], "to": [20, -15]}],
+           "rooms": [{"id": "a1", "rect": [4, 1.25, 9, 6.25]}, {"id": "nw", "rect": [12.5, 6, 17.5, 11]},
+                     {"id": "ne", "rect": [20, 6, 25, 11]}, {"id": "sw", "rect": [12.5, -11, 17.5, -6]},
+                     {"id": "se", "rect": [20, -11, 25, -6]}],
+           "doors": [{"id": "d_a1", "at": [6.5, 1.25], "width": 1.0}, {"id": "d_nw", "at": [17.5, 8.5], "width": 1},
+                     {"id": "d_ne", "at": [20, 9], "width": 1.0}, {"id": "d_sw", "at": [17.5, -8.5], "width": 1},
+                     {"id": "d_se", "at": [20, -9], "width": 1.0}]}
+    surveillance = (ROOT / "missions" / "corridor_surveillance.mission").read_text(encoding="utf-8")
+    report = dry(catalog, "tee", tee, until=900.0, mission=surveillance)
+    assert report.outcome == "success" and report.sim_time < 600, (report.outcome, report.sim_time, report.reason)
+    found = sorted((round(d["x"]), round(d["y"])) for d in report.doors)
+    assert found == [(6, 1), (17, -9), (17, 8), (20, -9), (20, 9)], report.doors

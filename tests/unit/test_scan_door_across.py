@@ -68,10 +68,10 @@ def test_a_side_open_abeam_for_a_corridors_width_is_where_it_turns_a_door_is_not
 
     openings = Openings()
     for x in (10.0, 10.5, 11.0, 11.5):  # a door 1 m wide on the left, then the wall again
-        openings.update(side(4.0 if 10.4 < x < 11.4 else 1.25, 1.25), x, 0.0, (1.25, 1.25))
+        openings.update(side(4.0 if 10.4 < x < 11.4 else 1.25, 1.25), x, 0.0)
     assert openings.turn(11.5, 0.0) is None
     for x in (12.0, 12.5, 13.0, 13.0 + TURN):  # the left wall ends at 12: the other leg, beyond the laser's range
-        openings.update(side(FAR, 1.25), x, 0.0, (1.25, 1.25))
+        openings.update(side(FAR, 1.25), x, 0.0)
     assert openings.turn(13.0 + TURN, 0.0) == 1
     openings.reset()
     assert openings.turn(13.0 + TURN, 0.0) is None
