@@ -87,6 +87,17 @@ class RemoteTelemetry:
             self._reported = set()
         return hosts
 
+    def forget(self, host: str) -> None:
+        """`host` is back after it was down: a restarted daemon watches nothing, so its robots are watched (and
+        read first) again at their next read, and what it sent before is no longer theirs (a Ranger driven after its
+        host's restart kept the x of before the crash, and a `where ranger.x > 30` was granted on it: cluster
+        audit 19, #2)."""
+        with self._lock:
+            self.wanted.pop(host, None)
+            self._reported.discard(host)
+            for robot in [r for r, h in self.robot_hosts.items() if h == host]:
+                self.latest.pop(robot, None)
+
     def reset(self) -> None:
         """A new world: no robot is known or watched any more (the hosts' drivers are built again)."""
         with self._lock:

@@ -306,12 +306,13 @@ class MissionRunner:
 
     def host_back(self, host: str) -> None:
         """`host` reports again after it was down: the running missions take it for a host again (`ComponentRouter
-        .back`), and the retirements it missed meanwhile are sent to it, on a thread of their own (recovery audit
-        D1: a frozen host's instances and worker processes of an ended mission ran on until the controller's
-        restart, counted in its placement load)."""
+        .back`), its robots' live values are read afresh, and the retirements it missed meanwhile are sent to it, on
+        a thread of their own (recovery audit D1: a frozen host's instances and worker processes of an ended mission
+        ran on until the controller's restart, counted in its placement load)."""
         world = self.world
         for router in list(world.routers.values()) if world is not None else []:
             router.back(host)
+        self.telemetry.forget(host)  # its robots are watched again: a restarted daemon watches none
         with self._hosts_lock:
             calls = self.retirements.pop(host, [])
         if calls:

@@ -103,3 +103,22 @@ def test_a_robot_on_another_host_is_not_known_until_its_host_has_read_it() -> No
             pool.view("d")["battery"]
     finally:
         remote.FIRST_READ = 2.5
+
+
+def test_a_host_back_after_it_was_down_has_its_robots_watched_and_read_again() -> None:
+    """Cluster audit 19, #2: a restarted host's daemon watches nothing; the controller kept the x its robot had before
+    the crash, and a `where ranger.x > 30` was granted on it. `forget` makes the next read watch and fetch anew."""
+    from drd.cluster.telemetry import RemoteTelemetry
+
+    sent: list[tuple[str, list[object]]] = []
+    x = [35.0]
+
+    def fetch(host: str) -> None:
+        telemetry.seen(host, {"c": {"x": x[0], "y": 0.0, "heading": 0.0, "battery": 1.0}})
+
+    telemetry = RemoteTelemetry({"c": "h"}, fetch, lambda host, op: sent.append((host, op)), lambda: 0.0)
+    assert telemetry("c")["x"] == 35.0 and len(sent) == 1
+    x[0] = 25.0  # driven after the restart; the host reports it only once it watches the robot again
+    assert telemetry("c")["x"] == 35.0 and len(sent) == 1  # watched already: the last report
+    telemetry.forget("h")
+    assert telemetry("c")["x"] == 25.0 and sent[-1] == ("h", ["watch", ["c"], 0.0]) and len(sent) == 2
