@@ -8,12 +8,11 @@ failed (`MissingDependency` when what it imports is not installed), or it has no
 from __future__ import annotations
 
 import importlib
-import os
 import re
 import traceback
 from typing import Any
 
-from drd.errors import ComponentFailure
+from drd.errors import ComponentFailure, shown_path
 
 #: `package.module:Name` (what a manifest's `entry_point` must look like).
 ENTRY_POINT = re.compile(r"[A-Za-z_]\w*(\.[A-Za-z_]\w*)*:[A-Za-z_]\w*", re.ASCII)
@@ -54,7 +53,7 @@ def load(entry: str) -> Any:
         if e.name.partition(".")[0] == module_name.partition(".")[0]:  # a module of its own package: broken
             raise EntryPointError(f"module {module_name} failed to import: {e}") from e
         raise MissingDependency(f"module {module_name} failed to import: {e}", e.name) from e
-    except SyntaxError as e:  # where, as a mission's error says it: file:line:column, the line and a caret
+    except SyntaxError as e:  # where, as a mission's error says it: file:line:column, and the line
         raise EntryPointError(f"module {module_name} failed to import: {located(e)}") from e
     except Exception as e:  # a module that raises at import is broken, not missing
         raise EntryPointError(f"module {module_name} failed to import: {type(e).__name__}: {e}{where(e)}") from e
@@ -64,16 +63,11 @@ def load(entry: str) -> Any:
         raise EntryPointError(f"module {module_name} has no {name} (for {entry})") from None
 
 
-def _shown(path: str) -> str:
-    """A path as errors show it: relative to the working folder when under it."""
-    return os.path.relpath(path) if path.startswith(os.getcwd() + os.sep) else path
-
-
 def located(e: SyntaxError) -> str:
     """A syntax error of a component's module as `path:line:column: SyntaxError: message`, and the line it is in:
     `(fuse.py, line 5)` named neither the folder nor the column (users audit 18, #5). One line: a configuration
     error's renderer prefixes every line."""
-    head = f"{_shown(e.filename or '?')}:{e.lineno or 0}:{e.offset or 0}: {type(e).__name__}: {e.msg}"
+    head = f"{shown_path(e.filename or '?')}:{e.lineno or 0}:{e.offset or 0}: {type(e).__name__}: {e.msg}"
     line = (e.text or "").strip()
     return f"{head}, in `{line}`" if line else head
 
@@ -81,4 +75,4 @@ def located(e: SyntaxError) -> str:
 def where(e: BaseException) -> str:
     """` (at path:line)`: the innermost frame of the module that raised at import, so the author finds the line."""
     frames = [f for f in traceback.extract_tb(e.__traceback__) if "importlib" not in f.filename]
-    return f" (at {_shown(frames[-1].filename)}:{frames[-1].lineno})" if frames else ""
+    return f" (at {shown_path(frames[-1].filename)}:{frames[-1].lineno})" if frames else ""

@@ -111,9 +111,13 @@ def raised(e: BaseException, when: str = "") -> str:
     if frames:
         own = [f for f in frames if components_own(f.filename)]
         last = (own or frames)[-1]
-        path = os.path.relpath(last.filename) if last.filename.startswith(os.getcwd() + os.sep) else last.filename
-        text += f" (at {path}:{last.lineno}, in {last.name})"
+        text += f" (at {shown_path(last.filename)}:{last.lineno}, in {last.name})"
     return text
+
+
+def shown_path(path: str) -> str:
+    """A source path as errors show it: relative to the working folder when under it."""
+    return os.path.relpath(path) if path.startswith(os.getcwd() + os.sep) else path
 
 
 def debug_traceback(e: BaseException) -> str | None:
