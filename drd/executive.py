@@ -255,6 +255,15 @@ class Executive:
         for m in self.missions.values():
             m.remove_host(host)
 
+    def set_host_offline(self, host: str, offline: bool) -> None:
+        """A host seen down keeps its resources in the shared manager, but no one new gets them until it is back;
+        back online, every running mission may be granted or grow into them. Taken offline, nothing is settled: it
+        may be applied mid-cycle (`Controller.apply_offline`)."""
+        self.pool.set_host_offline(host, offline, self.clock.now())
+        for m in list(self.missions.values()) if not offline else ():
+            if not m.finished:
+                m.grow()
+
     def remove_resources(self, resource_ids: Iterable[str], reason: ReleaseReason = "resource lost") -> None:
         """Resources are gone (a lost robot): the same as a lost host, for just these."""
         ids = tuple(resource_ids)

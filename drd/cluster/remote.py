@@ -212,12 +212,15 @@ class ComponentRouter:
                  gates: RemoteGates | None = None,
                  records: Callable[[str, Record | Breach], None] = lambda mission, record: None,
                  cycle: SimCycle | None = None, generation: int = 0, term: float = 0.0,
-                 frozen: Callable[[float], float] = lambda since: 0.0):
+                 frozen: Callable[[float], float] = lambda since: 0.0,
+                 on_down: Callable[[str], None] = lambda host: None):
         """`frozen(since)`: seconds this controller's daemon was frozen after `since` (`time.monotonic()`), 0.0 if
-        not (`Daemon.frozen_since`)."""
+        not (`Daemon.frozen_since`); `on_down(host)`: told when a call fails because `host` is down or did not
+        answer, before the failure is raised (the manager takes its resources offline first)."""
         self.bus = bus
         self.cluster = cluster
         self.frozen = frozen
+        self.on_down = on_down
         self.resource_hosts = dict(resource_hosts)
         self.me = me
         self.active = active
@@ -343,6 +346,7 @@ class ComponentRouter:
         answer is marked gone, so later calls fail at once (the daemon removes it at lease expiry), until the daemon
         sees it up again (`back`)."""
         if self.is_down(host):
+            self.on_down(host)
             raise HostDown(f"host {host} is down: " + ("it ran the simulator, so the world is gone"
                                                         if host and host == self.simulator else
                                                         "the component cannot run there"))
@@ -366,6 +370,7 @@ class ComponentRouter:
                 self._forget_late_start(host, msg)  # still register there is terminated (best effort)
             else:
                 self.gone.add(host)
+            self.on_down(host)
             raise HostDown(f"host {host} did not answer {op} within {timeout:g} s ({e})") from None
         deliver(getattr(reply, "records", None), self.records, self.gates.seen if self.gates is not None else None)
         return reply, time.perf_counter() - t0

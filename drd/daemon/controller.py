@@ -37,7 +37,8 @@ from dsl.catalog import Catalog
 
 @dataclass(frozen=True, slots=True)
 class Action:
-    """What the shell must do to the manager: `add` or `remove` the resources of `host`."""
+    """What the shell must do to the manager: `add` or `remove` the resources of `host`, or take them `offline` (seen
+    down: kept for a lease, grants and all, but granted to no one new) and back `online`."""
 
     kind: str
     host: str
@@ -52,17 +53,19 @@ class Membership:
         self.removal: dict[str, float] = {}
 
     def up(self, host: str, now: float) -> list[Action]:
-        """A host came up: cancel a pending removal, add its resources if they are not there."""
-        self.removal.pop(host, None)
+        """A host came up: cancel a pending removal (its resources are back online), or add its resources."""
+        if self.removal.pop(host, None) is not None:
+            return [Action("online", host)]
         if host in self.present:
             return []
         self.present.add(host)
         return [Action("add", host)]
 
     def down(self, host: str, now: float) -> list[Action]:
-        """A host went down: its resources leave one lease from now (unless it comes back)."""
+        """A host went down: its resources go offline now and leave one lease from now (unless it comes back)."""
         if host in self.present and host not in self.removal:
             self.removal[host] = now + self.lease
+            return [Action("offline", host)]
         return []
 
     def due(self, now: float) -> list[Action]:
@@ -331,11 +334,29 @@ class Controller:
 
     def host_down(self, host: str) -> None:
         now = self.clock.now()
-        self.membership.down(host, now)
+        self._queue(self.membership.down(host, now))
         if host in self.membership.removal and self._on_change is not None:
             self._on_change("resources-pending", host,
                             f"its resources leave the manager in {self.membership.removal[host] - now:.2f} s"
-                            " unless it comes back")
+                            " unless it comes back, and are granted to no one new meanwhile")
+
+    def apply_offline(self, host: str) -> None:
+        """Apply a queued `offline` of `host` now: a call found the host down mid-cycle (on the mission loop, which
+        holds the executive's lock), and the failure it ends its holder with must not hand that host's robots to a
+        waiter before the next cycle's `flush` (cluster audit 19, #1: granted, it failed in the same instant). Only
+        when it is the first action of that host queued (they keep their order) and the lock is free or this
+        thread's."""
+        if not self._lock.acquire(blocking=False):
+            return
+        try:
+            with self._pending_lock:
+                first = next((a for a in self._pending if a.host == host), None)
+                if first is None or first.kind != "offline":
+                    return
+                self._pending.remove(first)
+            self._apply([first])
+        finally:
+            self._lock.release()
 
     def holds(self, host: str) -> bool:
         """Whether the manager holds `host`'s resources now (added, and no action of it still queued): a journal's
@@ -391,6 +412,9 @@ class Controller:
                 found = host_resources(self.cluster, action.host)  # its robots stood in the world meanwhile
                 self.executive.add_resources(found)  # hot-plug: running multiplicities may grow
                 detail = f"{len(found)} resources added to the manager"
+            elif action.kind in ("offline", "online"):  # told by the `down` event's resources-pending, and `up`
+                self.executive.set_host_offline(action.host, action.kind == "offline")
+                continue
             else:
                 if any(not m.finished for m in self.executive.missions.values()):
                     self.executive.remove_host(action.host)  # every mission settles the consequences now

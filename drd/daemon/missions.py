@@ -496,7 +496,7 @@ class MissionRunner:
                                  place=functools.partial(self.place, mission=mid) if self.host_views else None,
                                  gates=self.gates,
                                  records=executive.record, cycle=world.cycle, generation=world.generation,
-                                 term=self.term, frozen=self.frozen)
+                                 term=self.term, frozen=self.frozen, on_down=self.controller.apply_offline)
         world.add(mid, router, base, until)
         listeners = [functools.partial(self.checkpoints.note, mid)] if self.checkpoints is not None else []
         executive.submit(chart, mid, listeners=listeners, registry=router.registry(), priority=priority,

@@ -132,6 +132,9 @@ class ResourceManager:
         self._needs: dict[tuple[NeedRequest, ...], tuple[NeedRequest, ...]] = {}  # `_canonical`'s shared tuples
         #: `_blockers_of`' memo of the holders in the way of a claims' demand: (registry version, demand, them)
         self._held_memo: tuple[int, dict[str, float] | None, frozenset[str]] = (-1, None, frozenset())
+        #: host -> the resources it had when `remove_host` dropped them, until it adds one again: a need that one of
+        #: them would meet is told that its host is down, not that no robot satisfies it (cluster audit 19, #4)
+        self._shelf: dict[str, list[Candidate]] = {}
 
     # -- hot-plug and the Static Dependency Database -------------------------------------------
 
@@ -139,6 +142,7 @@ class ResourceManager:
         """Register an RC; waiters of its type are reconsidered (it may be just what they need)."""
         out = self._begin(now)
         self._reg.add(unit)
+        self._shelf.pop(unit.host, None)
         self._reconsider(self._queue.of_type(unit.type), now, out, {unit.id})
         return self._finish(now, out)
 
@@ -146,6 +150,7 @@ class ResourceManager:
         """Register an ARC instance; its parts must be registered units."""
         out = self._begin(now)
         self._reg.add(aggregate)
+        self._shelf.pop(aggregate.host, None)
         self._reconsider(self._queue.of_type(aggregate.type), now, out, set(aggregate.units))
         return self._finish(now, out)
 
@@ -158,7 +163,21 @@ class ResourceManager:
         reg = self._reg
         ids = [u for u, unit in reg.units.items() if unit.host == host]
         ids += [a for a, agg in reg.aggregates.items() if agg.host == host]
+        if ids:
+            self._shelf[host] = [reg.candidate(cid) for cid in ids]
         return self.remove(ids, now, "host lost")
+
+    def set_host_offline(self, host: str, offline: bool, now: float) -> tuple[Decision, ...]:
+        """A host seen down (`offline`) keeps its units until `remove_host`, grants and all (a short freeze costs
+        nothing), but none of them is granted to anyone new: a waiter would get a robot whose components cannot run.
+        Back online, the waiters they may serve are served."""
+        out = self._begin(now)
+        units = [u for u, unit in self._reg.units.items() if unit.host == host]
+        self._reg.set_offline(units, offline)
+        if not offline and units:
+            self._frees += 1  # room given back: waiters that failed before are tried again
+            self._dispatch(units, now, out)
+        return self._finish(now, out)
 
     def remove(self, resource_ids: Iterable[str], now: float,
                reason: ReleaseReason = "resource lost") -> tuple[Decision, ...]:
@@ -226,7 +245,7 @@ class ResourceManager:
         out = self._begin(now)
         self._check_new_holder(request.holder)
         request = self._canonical(request)
-        problem = diagnose(request.needs, self._reg)
+        problem = self._diagnose(request.needs)
         if at <= now or problem is not None:
             self._admit(request, now, out, reserved_at=at)
         else:
@@ -312,7 +331,7 @@ class ResourceManager:
     def never(self, needs: tuple[NeedRequest, ...]) -> str | None:
         """Why these needs can never be met on the known resources (`need: reason`, as an `Unsatisfiable` says
         it), or None if they can."""
-        found = diagnose(needs, self._reg)
+        found = self._diagnose(needs)
         return None if found is None else f"resource need {found[0]} can never be satisfied: {found[1]}"
 
     def queue(self) -> tuple[str, ...]:
@@ -402,7 +421,7 @@ class ResourceManager:
             return
         alts, capped = self._reg.alternatives(request.needs, {}, self.max_alternatives)
         if not alts:  # not even on an empty system: say which need and why
-            out.append(Unsatisfiable(request.holder, *(diagnose(request.needs, self._reg) or ("", ""))))
+            out.append(Unsatisfiable(request.holder, *(self._diagnose(request.needs) or ("", ""))))
             return
         demand = self._enqueue(wait, alts, capped)
         out.append(Waiting(request.holder, tuple(sorted(self._blockers_of(wait, demand)))))
@@ -488,7 +507,7 @@ class ResourceManager:
                     shared[id(needs)] = (needs, alts, claims)
             if not alts:
                 self._queue.remove(wait)
-                need, reason = self._gone(needs) or diagnose(needs, self._reg, wait.given) or ("", "")
+                need, reason = self._gone(needs) or self._diagnose(needs, wait.given) or ("", "")
                 out.append(Unsatisfiable(holder, need, reason))
                 continue
             self._queue.reclaim(wait, claims)
@@ -504,10 +523,26 @@ class ResourceManager:
                 return need.name, f"{pin.id}, which it held when it was suspended, is gone"
         return None
 
+    def _diagnose(self, needs: tuple[NeedRequest, ...],
+                  given: Mapping[str, Candidate] | None = None) -> tuple[str, str] | None:
+        """`diagnose`, naming the hosts down whose resources would meet the needs (a robot of theirs is not gone for
+        good: a mission needing ranger2 while its host is down is told so, not that no Ranger satisfies it)."""
+        found = diagnose(needs, self._reg, given)
+        if found is None or not self._shelf:
+            return found
+        down = [host for host, shelved in sorted(self._shelf.items())
+                if diagnose(needs, self._reg.including(shelved), given) is None]
+        if not down:
+            return found
+        hosts = f"host {down[0]} is" if len(down) == 1 else f"hosts {', '.join(down)} are"
+        return found[0], f"{found[1]} while {hosts} down (its resources left the manager)"
+
     # -- granting ------------------------------------------------------------------------------
 
     def _room(self, unit_id: str, wait: Wait, preempt: bool) -> float:
         """How much of a unit `wait` may take now (optionally counting preemptible holders)."""
+        if unit_id in self._reg.offline:
+            return 0.0  # its host is down: no one new gets it, preempting its holder or not
         unit = self._reg.units[unit_id]
         holders = self._reg.used.get(unit_id)
         room = self._reg.free(unit_id)
@@ -623,7 +658,7 @@ class ResourceManager:
         wait = Wait(request, key, hold.since, resumed=True, given=given)
         alts, capped = self._reg.alternatives(request.needs, given, self.max_alternatives)
         if not alts:  # what it held no longer fits its needs (a Scout moved to another Ranger): never resumable
-            need, reason = diagnose(request.needs, self._reg, given) or ("", "")
+            need, reason = self._diagnose(request.needs, given) or ("", "")
             out.append(Unsatisfiable(holder, need, reason))
             return units, frozenset()
         self._enqueue(wait, alts, capped)

@@ -126,7 +126,10 @@ class Registry:
         self.epochs: dict[str, int] = {}
         self.used: dict[str, dict[str, float]] = {}  # unit -> holder -> quantity
         self.load: dict[str, float] = {}
-        self.full: set[str] = set()  # units with no room left (capacity - load <= EPS)
+        self.full: set[str] = set()  # units with no room left (capacity - load <= EPS), or offline
+        #: units of a host seen down and not yet removed: kept (their grants survive a short freeze) but with no room
+        #: for anyone new, so a waiter is not granted a robot whose host cannot run its components
+        self.offline: set[str] = set()
         self.version = 0  # bumped on any change of resources or usage (what a cached answer depends on)
         self._by_type: dict[str, list[str]] = {}
         self._demands: dict[tuple[str, float], dict[str, float]] = {}
@@ -200,6 +203,15 @@ class Registry:
         self._typed_units.pop(candidate.type, None)
         self._alternatives.clear()
 
+    def including(self, extra: Iterable[Candidate]) -> Registry:
+        """A new registry of these resources and `extra` (those of a known id left out), unused: what could be."""
+        found = Registry()
+        known: dict[str, Candidate] = {**self.units, **self.aggregates}
+        every = [*known.values(), *(c for c in extra if c.id not in known)]
+        for candidate in sorted(every, key=lambda c: isinstance(c, Aggregate)):
+            found.add(candidate)
+        return found
+
     def replace(self, candidate: Candidate) -> None:
         """Swap in a new version of a registered resource (same id and type)."""
         self.version += 1
@@ -207,10 +219,7 @@ class Registry:
             self.aggregates[candidate.id] = candidate
         else:
             self.units[candidate.id] = candidate
-            if candidate.capacity - self.load.get(candidate.id, 0.0) <= EPS:  # a new capacity may change room
-                self.full.add(candidate.id)
-            else:
-                self.full.discard(candidate.id)
+            self._refill(candidate.id)  # a new capacity may change room
         self._typed.pop(candidate.type, None)
         self._alternatives.clear()
 
@@ -226,6 +235,7 @@ class Registry:
         self.units.pop(cid, None)
         self.load.pop(cid, None)
         self.full.discard(cid)
+        self.offline.discard(cid)
         self._demands.clear()
         self._typed.pop(candidate.type, None)
         self._typed_units.pop(candidate.type, None)
@@ -258,7 +268,25 @@ class Registry:
         return {"units": units, "aggregates": aggregates}
 
     def free(self, unit_id: str) -> float:
-        return self.units[unit_id].capacity - self.load.get(unit_id, 0.0)
+        """Room left on a unit: none while it is offline."""
+        return 0.0 if unit_id in self.offline else self.units[unit_id].capacity - self.load.get(unit_id, 0.0)
+
+    def set_offline(self, unit_ids: Iterable[str], offline: bool) -> None:
+        """Take registered units offline (no room for anyone new; their holders keep them) or back online."""
+        for unit_id in unit_ids:
+            if offline:
+                self.offline.add(unit_id)
+            else:
+                self.offline.discard(unit_id)
+            self._refill(unit_id)
+        self.version += 1
+
+    def _refill(self, unit_id: str) -> None:
+        """Keep `full` true to a unit's room."""
+        if self.free(unit_id) <= EPS:
+            self.full.add(unit_id)
+        else:
+            self.full.discard(unit_id)
 
     def set_use(self, unit_id: str, holder: str, quantity: float) -> None:
         """Record what `holder` takes of a unit (0 removes it), keeping the load sum exact."""
@@ -269,14 +297,11 @@ class Registry:
         else:
             used.pop(holder, None)
         if used:
-            load = self.load[unit_id] = sum(used.values())
+            self.load[unit_id] = sum(used.values())
         else:
             del self.used[unit_id]
-            load = self.load[unit_id] = 0.0
-        if self.units[unit_id].capacity - load <= EPS:
-            self.full.add(unit_id)
-        else:
-            self.full.discard(unit_id)
+            self.load[unit_id] = 0.0
+        self._refill(unit_id)
 
     def next_epoch(self, unit_id: str) -> int:
         self.epochs[unit_id] += 1

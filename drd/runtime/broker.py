@@ -90,6 +90,9 @@ class ResourceBroker:
     def remove_host(self, host: str, now: float) -> tuple[Decision, ...]:
         return self._publish(self.rcm.remove_host(host, now))
 
+    def set_host_offline(self, host: str, offline: bool, now: float) -> tuple[Decision, ...]:
+        return self._publish(self.rcm.set_host_offline(host, offline, now))
+
     def remove(self, resource_ids: Iterable[str], now: float,
                reason: ReleaseReason = "resource lost") -> tuple[Decision, ...]:
         return self._publish(self.rcm.remove(resource_ids, now, reason))

@@ -163,6 +163,10 @@ class ResourcePool:
             del self.candidates[rid]
         self.broker.remove_host(host, now)
 
+    def set_host_offline(self, host: str, offline: bool, now: float) -> None:
+        """A host seen down keeps its resources, but no one new is granted them until it is back (`offline` False)."""
+        self.broker.set_host_offline(host, offline, now)
+
     def remove(self, resource_ids: Iterable[str], now: float, reason: ReleaseReason = "resource lost") -> None:
         """Forget resources that vanished (a lost robot); the manager frees their grants."""
         ids = set(resource_ids)

@@ -184,7 +184,8 @@ def test_membership_removes_a_host_one_lease_after_it_went_down() -> None:
     m = Membership(3.0, {"controller"})
     assert [(a.kind, a.host) for a in m.up("ranger1", 0.0)] == [("add", "ranger1")]
     assert m.up("ranger1", 0.5) == []
-    m.down("ranger1", 1.0)
+    assert [(a.kind, a.host) for a in m.down("ranger1", 1.0)] == [("offline", "ranger1")]
+    assert m.down("ranger1", 1.5) == []  # seen down again: still one removal, one lease after the first
     assert m.pending(2.0) == {"ranger1": 2.0}
     assert m.due(3.9) == []
     assert [(a.kind, a.host) for a in m.due(4.0)] == [("remove", "ranger1")]
@@ -194,7 +195,8 @@ def test_membership_removes_a_host_one_lease_after_it_went_down() -> None:
 def test_membership_keeps_a_host_that_comes_back_within_the_lease() -> None:
     m = Membership(3.0, {"ranger1"})
     m.down("ranger1", 0.0)
-    assert m.up("ranger1", 1.0) == []
+    assert [(a.kind, a.host) for a in m.up("ranger1", 1.0)] == [("online", "ranger1")]
+    assert m.up("ranger1", 1.5) == []
     assert m.due(10.0) == [] and m.present == {"ranger1"}
 
 

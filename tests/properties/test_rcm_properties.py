@@ -119,6 +119,7 @@ class ResourcePool(RuleBasedStateMachine):
         self.requests: dict[str, Request] = {}
         self.epochs: dict[str, int] = {}
         self.down: set[str] = set()
+        self.offline: set[str] = set()  # hosts seen down, their units kept but granted to no one new
         self.reduced: set[str] = set()  # holders that gave back a need: resumed with fewer needs
         self.held: dict[str, dict[str, str]] = {}  # holder -> need -> the resource its grant named
         self.suspended: dict[str, dict[str, str]] = {}  # a revoked holder -> what it held when suspended
@@ -200,6 +201,7 @@ class ResourcePool(RuleBasedStateMachine):
         assert len(exclusive) == len(set(exclusive)), "an exclusive unit assigned twice"
         assert grant.units == tuple(dict.fromkeys(u for c in chosen.values() for u in units_of(c)))
         for unit in grant.units:
+            assert snap["units"][unit]["host"] not in self.offline, f"{unit} granted while its host is down"
             assert grant.epochs[unit] > self.epochs.get(unit, 0)
             self.epochs[unit] = grant.epochs[unit]
 
@@ -261,7 +263,15 @@ class ResourcePool(RuleBasedStateMachine):
     def lose_host(self, host: str) -> None:
         if host not in self.down:
             self.down.add(host)
+            self.offline.discard(host)
             self.apply(self.rm.remove_host(host, self.now))
+
+    @rule(host=st.sampled_from(ROBOT_HOSTS), offline=st.booleans())
+    def host_seen(self, host: str, offline: bool) -> None:
+        """Seen down (offline) or back within the lease."""
+        if host not in self.down:
+            (self.offline.add if offline else self.offline.discard)(host)
+            self.apply(self.rm.set_host_offline(host, offline, self.now))
 
     @rule(host=st.sampled_from(ROBOT_HOSTS))
     def restore_host(self, host: str) -> None:
@@ -276,7 +286,9 @@ class ResourcePool(RuleBasedStateMachine):
 
     @rule()
     def drain(self) -> None:
-        """Liveness: once every holder lets go and time passes, every waiter is served."""
+        """Liveness: once every host is back, every holder lets go and time passes, every waiter is served."""
+        for host in sorted(self.offline):
+            self.host_seen(host, False)
         for _ in range(500):
             if not self.waiting and not self.pending:
                 break
@@ -335,7 +347,7 @@ class ResourcePool(RuleBasedStateMachine):
             def room(unit: str) -> float:
                 info = units[unit]
                 holders: Mapping[str, float] = info["holders"]
-                if unit in claimed:
+                if unit in claimed or info["host"] in self.offline:
                     return 0.0
                 if holders and not info["sharable"] and all(preemptible(h) for h in holders):
                     return float(info["capacity"])

@@ -336,9 +336,58 @@ def test_host_loss_releases_its_holders_and_rejects_waiters_that_cannot_be_met()
     decisions = rm.remove_host("r2", 1.0)
     assert decisions[0] == Released("OnR2", ("r2.drive", "r2.cam", "r2.launcher"), "host lost", ("ranger",),
                                     ("r2", "r2.cam", "r2.drive", "r2.launcher"))
-    assert Unsatisfiable("AlsoR2", "ranger", "no Ranger satisfies the constraint") in decisions
+    assert Unsatisfiable("AlsoR2", "ranger", "no Ranger satisfies the constraint while host r2 is down (its resources"
+                         " left the manager)") in decisions
     assert rm.queue() == ("SecondRanger",)
     assert rm.snapshot()["aggregates"].keys() == {"r1"}
+
+
+def test_a_host_seen_down_keeps_its_grants_but_gives_nothing_new_until_it_is_back() -> None:
+    """Cluster audit 19, #1: in the lease after a host died, a waiter was granted the robot its holder had just given
+    back, and failed at once: the robot's components could not run on the dead host."""
+    rm = fleet()
+    any_ranger = (NeedRequest("ranger", "Ranger"),)
+    rm.request(Request("OnR1", 1, (NeedRequest("ranger", "Ranger", where=lambda c, _: c.id == "r1"),)), 0.0)
+    rm.request(Request("OnR2", 1, (NeedRequest("ranger", "Ranger", where=lambda c, _: c.id == "r2"),)), 0.0)
+    rm.request(Request("Waiter", 2, any_ranger), 0.0)
+    assert rm.set_host_offline("r2", True, 1.0) == ()
+    assert rm.holders("r2.drive") == ("OnR2",) and rm.renew("OnR2", 1.5) == (Renewed("OnR2", 101.5),)
+    assert not granted(rm.release("OnR2", 2.0)) and rm.queue() == ("Waiter",)
+    assert not granted(rm.request(Request("Scouting", 1, (NeedRequest("scout", "Scout"),)), 2.0))
+    back = granted(rm.set_host_offline("r2", False, 3.0))
+    assert back["Scouting"].assignment == {"scout": "s1"} and back["Waiter"].assignment == {"ranger": "r2"}
+
+
+def test_a_host_offline_past_its_lease_loses_its_grants_and_its_waiters_keep_waiting() -> None:
+    rm = fleet()
+    rm.request(Request("OnR2", 1, (NeedRequest("ranger", "Ranger", where=lambda c, _: c.id == "r2"),)), 0.0)
+    rm.request(Request("OnR1", 1, (NeedRequest("ranger", "Ranger", where=lambda c, _: c.id == "r1"),)), 0.0)
+    rm.request(Request("Waiter", 2, (NeedRequest("ranger", "Ranger"),)), 0.0)
+    rm.set_host_offline("r2", True, 1.0)
+    lost = rm.remove_host("r2", 4.0)
+    assert [(d.holder, d.reason) for d in of(Released, lost)] == [("OnR2", "host lost")] and not granted(lost)
+    assert rm.queue() == ("Waiter",)  # r1 is still there: it waits for it
+    for part in ("drive", "cam", "launcher"):  # the host back later: its resources added again, online
+        rm.add_unit(Unit(f"r2.{part}", part.capitalize(), host="r2"), 5.0)
+    back = rm.add_aggregate(Aggregate("r2", "Ranger", {p: f"r2.{p}" for p in ("drive", "cam", "launcher")}, {},
+                                      host="r2"), 5.0)
+    assert granted(back)["Waiter"].assignment == {"ranger": "r2"}
+
+
+def test_a_need_only_a_down_hosts_robot_would_meet_names_that_host() -> None:
+    """Cluster audit 19, #4: a mission needing ranger2 while its host was down failed "no Ranger satisfies the
+    constraint", as if the constraint were wrong."""
+    rm = fleet()
+    r2 = (NeedRequest("ranger", "Ranger", where=lambda c, _: c.id == "r2"),)
+    ghost = (NeedRequest("ranger", "Ranger", where=lambda c, _: c.id == "r9"),)
+    rm.remove_host("r2", 1.0)
+    assert rm.request(Request("OnR2", 1, r2), 2.0) == (Unsatisfiable(
+        "OnR2", "ranger", "no Ranger satisfies the constraint while host r2 is down (its resources left the manager)"),)
+    assert rm.request(Request("OnR9", 1, ghost), 2.0) == (
+        Unsatisfiable("OnR9", "ranger", "no Ranger satisfies the constraint"),)  # no host down would meet it
+    rm.add_unit(Unit("r2.drive", "Drive", host="r2"), 3.0)  # back: what it had is no longer shelved
+    assert rm.request(Request("Again", 1, r2), 3.0) == (
+        Unsatisfiable("Again", "ranger", "no Ranger satisfies the constraint"),)
 
 
 def test_a_lost_robot_fails_only_its_holder_and_the_next_waiter_gets_another() -> None:
