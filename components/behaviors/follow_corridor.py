@@ -91,7 +91,8 @@ class FollowCorridor(Component):
         """No farther from where it started than its best by PROGRESS metres for STUCK seconds: it says so in the log
         (the failure's reason). Farthest-from-start, not distance moved: shuttling back and forth before a box moved it
         more than that every few seconds. A person standing in the middle, a parked Ranger, a box it cannot get past
-        then end the search rather than hold a mission to its time limit (worlds audit 13, D3-D5)."""
+        then end the search rather than hold a mission to its time limit (worlds audit 13, D3-D5). Where it started is
+        the last corner it turned at, if any (`at_wall_across`)."""
         if self.began is None:
             self.began = (x, y)
         if not self.progress.stalled(now, math.hypot(x - self.began[0], y - self.began[1])):
@@ -165,6 +166,11 @@ class FollowCorridor(Component):
             self.turn_to, self.turn_side = wrap(a + side * math.pi / 2), side
             self.direction, self.expect = None, (None, None)  # the new leg's walls are fitted afresh
             self.openings.reset()
+            if self.began is not None and math.hypot(x - self.began[0], y - self.began[1]) >= self.progress.step:
+                # progress counts from the corner on: a U brings the Ranger back nearer where it started while it
+                # drives on freely (worlds audit 19, D7); a corner reached without getting anywhere resets nothing
+                self.began = None
+                self.progress.reset()
         elif math.hypot(x - self.origin[0], y - self.origin[1]) < 0.5:  # started facing the end
             self.turn_to, self.turn_side = wrap(a + math.pi), 1
         else:

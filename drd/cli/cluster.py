@@ -765,18 +765,26 @@ def _interrupt_once() -> Iterator[list[float]]:
     """While the block runs, a Ctrl-C raises KeyboardInterrupt, as Python's own handler does; from the first on,
     another within `SAME_INTERRUPT` seconds of it is the same one delivered twice and is ignored. After an interrupt
     the handler stays (as `_terminate_as_interrupt`'s SIGTERM does) for the stop that follows, where a later Ctrl-C
-    gives up waiting for the report; the process ends after that. Yields the times of the interrupts taken (a
-    caller that raised one itself, held while it could not be, adds its time)."""
+    gives up waiting for the report; the process ends after that, and an interrupt then is ignored: the stop is
+    done, and one raised while the report is printed or the trace closed escaped every handler (the client died of
+    SIGINT, exit -2). Python runs the handler when the main thread is back from a blocking call, so the second
+    delivery of one Ctrl-C, held through the stop's call on a busy machine, could run it more than `SAME_INTERRUPT`
+    after the first. Yields the times of the interrupts taken (a caller that raised one itself, held while it could
+    not be, adds its time)."""
     first: list[float] = []
+    ended: list[bool] = []
 
     def interrupted(signum: int, frame: FrameType | None) -> None:
-        if first and time.monotonic() - first[0] < SAME_INTERRUPT:
+        if ended or first and time.monotonic() - first[0] < SAME_INTERRUPT:
             return
         first.append(time.monotonic())
         raise KeyboardInterrupt
 
     with _signal_handled(signal.SIGINT, interrupted, kept=lambda: bool(first)):
-        yield first
+        try:
+            yield first
+        finally:
+            ended.append(True)
 
 
 def _stop_on_interrupt(client: ClusterClient, watch: _RecordWatch, mission: str, base: float, began: float,

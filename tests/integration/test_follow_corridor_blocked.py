@@ -165,3 +165,18 @@ def test_a_t_junctions_bar_is_searched_both_ways_and_the_search_ends(catalog: Ca
     assert report.outcome == "success" and report.sim_time < 600, (report.outcome, report.sim_time, report.reason)
     found = sorted((round(d["x"]), round(d["y"])) for d in report.doors)
     assert found == [(6, 1), (17, -9), (17, 8), (20, -9), (20, 9)], report.doors
+
+
+def test_a_u_corridor_is_swept_to_its_far_end_though_that_end_is_nearer_the_start(catalog: Catalog) -> None:
+    """Worlds audit 19, D7: progress was the distance from where FollowCorridor started, which a U's last leg brings
+    back down (from 20 m to 7.5 m here): driving freely along it, the sweep failed "no progress ... no way past what
+    blocks the corridor". Progress counts from the last corner turned at."""
+    walls = [((0, -1.25), (0, 1.25)), ((0, -1.25), (20, -1.25)), ((20, -1.25), (20, 8.75)), ((0, 8.75), (20, 8.75)),
+             ((0, 6.25), (0, 8.75)), ((0, 1.25), (17.5, 1.25)), ((17.5, 1.25), (17.5, 6.25)), ((0, 6.25), (17.5, 6.25))]
+    u = {"walls": [{"from": list(a), "to": list(b)} for a, b in walls], "rooms": [], "doors": []}
+    report = dry(catalog, "ushape", u, until=200.0, mission=SWEEP)
+    assert report.outcome == "success", report.reason
+    said = [line["text"] for line in report.logs()]
+    assert said.count("FollowCorridor: the corridor turns left here") == 2, said
+    end = report.tracks["ranger1"][-1]
+    assert end[1] < 2.5 and end[2] > 6.5, end  # at the far end of the last leg
