@@ -513,8 +513,10 @@ def _conclude(results: list[DryRun], running: list[Any], sim: Simulation, wall: 
 
 
 def _inject(inj: Injection, sim: Simulation, life: ControllerLife, cluster: Cluster,
-            later: Sequence[Injection] = ()) -> dict[str, Any]:
-    """Apply one injected failure now (`later`: the injections still to come); the record says what it did."""
+            later: Sequence[Injection] = (), leaving: dict[str, float] | None = None) -> dict[str, Any]:
+    """Apply one injected failure now (`later`: the injections still to come; `leaving`: killed hosts -> when their
+    resources leave the manager, one lease after the kill, as on a cluster); the record says what it did."""
+    leaving = {} if leaving is None else leaving
     what = str(inj)
     executive = life.executive  # None while the controller is down: the manager learns it when it starts again
     controller = inj.action in (Action.KILL, Action.RESTART) and Role.CONTROLLER in cluster.host(inj.target).roles
@@ -527,15 +529,25 @@ def _inject(inj: Injection, sim: Simulation, life: ControllerLife, cluster: Clus
     elif inj.action in (Action.JOIN, Action.RESTART):
         found = [r for r in cluster.resources() if r.host == inj.target]
         life.gone.difference_update(r.id for r in found)
+        back = leaving.pop(inj.target, None) is not None  # within its lease: the manager still has its resources
         if executive is not None:
-            executive.add_resources(found)
-        what += f": {len(found)} resources joined the manager"
+            executive.host_restarted([r.id for r in found])
+        if executive is not None and back and all(r.id in executive.pool.candidates for r in found):
+            executive.set_host_offline(inj.target, False)
+            what += ": back within its lease, its resources may be granted again"
+        else:
+            if executive is not None:
+                executive.add_resources([r for r in found if r.id not in executive.pool.candidates])
+            what += f": {len(found)} resources joined the manager"
     elif inj.action is Action.KILL:
         robots = _halt_host_robots(sim, cluster, inj.target)
-        life.gone.update(r.id for r in cluster.resources() if r.host == inj.target)
+        ids = [r.id for r in cluster.resources() if r.host == inj.target]
+        life.gone.update(ids)
         if executive is not None:
-            executive.remove_host(inj.target)
-        what += f": its resources left the manager; {', '.join(robots) or 'no robot'} stopped"
+            executive.host_died(inj.target, ids)
+        leaving[inj.target] = sim.time + cluster.lease
+        what += (f": its components died with it, {', '.join(robots) or 'no robot'} stopped; its resources are granted"
+                 f" to no one new and leave the manager at {leaving[inj.target]:.1f} s (its lease) unless it restarts")
     elif inj.action is Action.LOSE:
         sim.lose(inj.target)
         life.gone.update(_robot_resources(cluster, inj.target))
@@ -581,13 +593,24 @@ class _Injections:
         self.pending = sorted(injections)
         self.sim, self.life, self.cluster, self.results = sim, life, cluster, results
         self.electing: dict[str, Any] | None = None  # the row that says a standby will take over
+        self.leaving: dict[str, float] = {}  # a killed host -> when its resources leave the manager
+        self.killed: dict[str, dict[str, Any]] = {}  # a killed host -> the row of its kill
 
     def now(self) -> None:
         """Apply those due at the simulation's time, then let the controllers' life go on (an election)."""
         sim, life = self.sim, self.life
+        for host, at in sorted(self.leaving.items(), key=lambda item: (item[1], item[0])):
+            if at <= sim.time + 1e-9:  # its lease ran out: its resources leave, their holders lose them
+                del self.leaving[host]
+                if life.executive is not None:
+                    life.executive.remove_host(host)
+                self.killed[host]["effect"] += f"; at {sim.time:.1f} s its resources left the manager"
         while self.pending and self.pending[0].at <= sim.time + 1e-9:
             before = life.takeover
-            effect = _inject(self.pending.pop(0), sim, life, self.cluster, self.pending)
+            inj = self.pending.pop(0)
+            effect = _inject(inj, sim, life, self.cluster, self.pending, self.leaving)
+            if inj.target in self.leaving:
+                self.killed[inj.target] = effect
             for result in self.results:
                 result.injections.append(effect)
             if life.takeover is not None and life.takeover is not before:

@@ -115,6 +115,11 @@ def raised(e: BaseException, when: str = "") -> str:
     return text
 
 
+def host_down_reason(host: str) -> str:
+    """Why a component of a host that is down fails: a cluster's call to it, and a dry-run's `kill`, say the same."""
+    return f"host {host} is down: the component cannot run there"
+
+
 def shown_path(path: str) -> str:
     """A source path as errors show it: relative to the working folder when under it."""
     return os.path.relpath(path) if path.startswith(os.getcwd() + os.sep) else path

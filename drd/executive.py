@@ -15,7 +15,7 @@ import collections
 import functools
 import itertools
 import logging
-from collections.abc import Callable, Iterable, Mapping
+from collections.abc import Callable, Collection, Iterable, Mapping
 from contextlib import AbstractContextManager
 from typing import Any
 
@@ -25,6 +25,7 @@ from drd import entrypoints
 from drd.bus import Bus, Message, Query, Reply
 from drd.bus.messages import encode
 from drd.entrypoints import EntryPointError
+from drd.errors import host_down_reason
 from drd.executive_messages import MissionCommand, MissionRecord, MissionRecords, MissionStatus
 from drd.paging import PAGE_BYTES, fill
 from drd.rcm import ReleaseReason, ResourceManager, Unit
@@ -263,6 +264,19 @@ class Executive:
         for m in list(self.missions.values()) if not offline else ():
             if not m.finished:
                 m.grow()
+
+    def host_died(self, host: str, units: Collection[str]) -> None:
+        """A host's daemon died (a dry-run's `kill`): as on a cluster, its resources go offline (they leave at its
+        lease's end, `remove_host`) and the components bound to its `units` fail, as calls to a dead host do."""
+        self.set_host_offline(host, True)
+        for m in list(self.missions.values()):
+            if not m.finished:
+                m.components_lost(units, host_down_reason(host))
+
+    def host_restarted(self, units: Collection[str]) -> None:
+        """A host's daemon started again (a dry-run's `restart`): components bound to its `units` may run again."""
+        for m in self.missions.values():
+            m.components_back(units)
 
     def remove_resources(self, resource_ids: Iterable[str], reason: ReleaseReason = "resource lost") -> None:
         """Resources are gone (a lost robot): the same as a lost host, for just these."""

@@ -2,8 +2,10 @@
 
 Pure: parsing and checking against the cluster and the world; `drd.dryrun` applies them. What each does:
 
-- `kill HOST`: the host's daemon dies. The manager drops its resources (grants freed, the behaviors
-  holding them fail or degrade as the language says) and the robots it drives stop where they are, in the world.
+- `kill HOST`: the host's daemon dies. The components bound to its devices die with it (their states fail, as
+  calls to a dead host do on a cluster), its resources go offline and leave the manager one lease later unless it
+  restarts (grants freed then, the behaviors still holding them fail or degrade as the language says), and the
+  robots it drives stop where they are, in the world.
 - `lose ROBOT`: one robot is gone (a Scout falls down the stairs): its resources leave the manager, the
   instance that held it fails, the rest of the mission goes on.
 - `join HOST`: the host's daemon starts late: until then the manager does not know its resources (its robots

@@ -40,7 +40,7 @@ from typing import Any
 
 from drd.bus import Bus, BusError, Message, RemoteError, message
 from drd.cluster.gates import GateUpdate, RemoteGates, deliver, take_pending
-from drd.errors import ComponentFailure
+from drd.errors import ComponentFailure, host_down_reason
 from drd.runtime.component import Component, Context, Status, step_status
 from drd.runtime.constraints import Breach
 from drd.runtime.records import Record, plain
@@ -347,9 +347,8 @@ class ComponentRouter:
         sees it up again (`back`)."""
         if self.is_down(host):
             self.on_down(host)
-            raise HostDown(f"host {host} is down: " + ("it ran the simulator, so the world is gone"
-                                                        if host and host == self.simulator else
-                                                        "the component cannot run there"))
+            raise HostDown(f"host {host} is down: it ran the simulator, so the world is gone"
+                           if host and host == self.simulator else host_down_reason(host))
         ops = self.gates.take(host) if self.gates is not None else None
         if ops:  # the gate operations queued for that host go first
             msg = dataclasses.replace(msg, gates=ops)

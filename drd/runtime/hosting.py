@@ -9,7 +9,7 @@ epoch it was bound with. Component code is not ours to trust: whatever it raises
 
 from __future__ import annotations
 
-from collections.abc import Callable, Iterator, Mapping
+from collections.abc import Callable, Iterable, Iterator, Mapping
 from typing import Any
 
 from drd.errors import COMPONENT_RAISES, ComponentFailure, logged, raised
@@ -44,6 +44,8 @@ class ComponentHost:
         self._made: dict[str, tuple[Component, Context, _Bindings]] = {}  # per instance path, reused on re-entry
         self._previous: dict[tuple[str, str], Any] = {}  # (path, input) -> a `last(...)` input's next value
         self._lagging: dict[Node, None] = {}  # running leaves with `last(...)` inputs
+        #: units of hosts whose daemon died (a dry-run's `kill`) -> why a component bound to one cannot run
+        self.dead: dict[str, str] = {}
 
     def active(self) -> Iterator[tuple[Node, Component]]:
         """The components stepped in this cycle, in order (active ones only)."""
@@ -84,6 +86,10 @@ class ComponentHost:
                 self.failed(node, e)
                 return
             self._made[node.path] = (comp, ctx, lazy)
+        why = self._dead_binding(lazy)
+        if why is not None:  # as a start on a host that is down fails on a cluster
+            self.on_failure(node, why)
+            return
         node.component, node.context = comp, ctx
         if node.state.inputs:
             self.read_inputs(node, entry=True)
@@ -95,6 +101,37 @@ class ComponentHost:
             self.failed(node, e)
             return
         self.running[node] = None
+
+    def die(self, units: Mapping[str, str]) -> list[tuple[Node, str]]:
+        """The daemon that served these units died (unit -> why): the running leaves bound to one, each with why,
+        are gone without a last call (their process died with it); until `revive`, a leaf bound to one fails as it
+        starts. On a cluster a component runs where its devices are (`drd.cluster.remote.RemoteComponent._resolve`)."""
+        self.dead.update(units)
+        found = []
+        for node in list(self.running):
+            made = self._made.get(node.path)
+            why = None if made is None or node.component is None else self._dead_binding(made[2])
+            if why is not None:
+                self.running.pop(node, None)
+                node.component = None
+                found.append((node, why))
+        return found
+
+    def revive(self, units: Iterable[str]) -> None:
+        """The host of these units is back: components bound to them start again."""
+        for unit in units:
+            self.dead.pop(unit, None)
+
+    def _dead_binding(self, lazy: _Bindings) -> str | None:
+        """Why a component of these bindings cannot run (bound to a unit of a dead host), or None (bound now if it
+        was not yet, only while some host is dead)."""
+        if not self.dead:
+            return None
+        try:
+            bindings: Mapping[str, Binding] = lazy.get(2)
+        except BindingError:  # a need no longer held: it fails at its first call anyway
+            return None
+        return next((self.dead[b.unit] for b in bindings.values() if b.unit in self.dead), None)
 
     def _emitter(self, path: str, component: str) -> Callable[..., None]:
         """The `emit` of a component instance: checked against its manifest's `events` (`drd.runtime.emits`) when

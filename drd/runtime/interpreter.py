@@ -335,6 +335,17 @@ class Interpreter:
         self.pool.remove_host(host, self.clock.now())
         self._settle()
 
+    def components_lost(self, units: Iterable[str], reason: str) -> None:
+        """The components bound to these units died with their host (a dry-run's `kill`): each fails with `reason`,
+        as a call to a dead host fails on a cluster, and so does one started on them until `components_back`."""
+        for node, why in self.host.die(dict.fromkeys(units, reason)):
+            self._finish(node, False, why)
+        self._settle()
+
+    def components_back(self, units: Iterable[str]) -> None:
+        """The host of these units is back (a dry-run's `restart`): components bound to them may start again."""
+        self.host.revive(units)
+
     def remove_resources(self, resource_ids: Iterable[str], reason: ReleaseReason = "resource lost") -> None:
         """Resources vanished (a lost robot): as for a host, only for these."""
         self.pool.remove(resource_ids, self.clock.now(), reason)

@@ -69,11 +69,41 @@ def dry_run(mission: str, *args: str) -> tuple[int, dict[str, object], str]:
 
 
 def test_killing_the_host_of_the_camera_fails_the_mission_at_that_time() -> None:
+    """As on a cluster (cluster audit 19, #3): the Observe running on the camera's host dies with it, and its
+    behavior fails saying so, giving its grant back as it exits; the resources would leave one lease later."""
     code, report, _ = dry_run(str(shared_examples() / "shared_camera.mission"), "--inject", "kill ranger1 at 12s")
     assert code == 1 and report["outcome"] == "failure"
+    assert report["reason"] == "host ranger1 is down: the component cannot run there", report["reason"]
     assert report["injections"][0]["at"] == pytest.approx(12.0, abs=0.11)
+    assert "leave the manager at 15.0 s (its lease)" in report["injections"][0]["effect"]
     ends = {h["ended"] for h in report["holds"]}  # type: ignore[union-attr]
-    assert "host lost" in ends and report["sim_time"] == pytest.approx(12.0, abs=0.11)
+    assert "exited" in ends and "host lost" not in ends and report["sim_time"] == pytest.approx(12.0, abs=0.11)
+
+
+def test_a_mission_waiting_for_a_killed_hosts_robot_waits_for_its_restart(tmp_path: Path) -> None:
+    """Cluster audit 19, #1, #3 and #4, predicted: the holder of ranger2 fails with its host, a waiter for ranger2 is
+    not granted it while its host is down; restarted within the lease, the host's resources are still there and the
+    waiter gets ranger2; restarted after it, they left the manager at the lease's end and the waiter fails then,
+    saying that the host is down."""
+    hold = 'mission HoldTwo {\n    needs ranger: Ranger where ranger.id == "ranger2"\n    Observe(duration: 60s)\n}\n'
+    wait = hold.replace("HoldTwo {", "Waiter priority 2 {").replace("60s", "2s")
+    (tmp_path / "hold.mission").write_text(hold)
+    (tmp_path / "wait.mission").write_text(wait)
+    for restart in (7, 30):  # the lease is 3 s
+        missions = [str(tmp_path / "hold.mission"), str(tmp_path / "wait.mission")]
+        r = subprocess.run(["missionctl", "dry-run", *missions, "--config", str(ROOT / "hosts.two_rangers.yaml"),
+                            "--json", "--inject", "kill ranger2 at 5s", "--inject", f"restart ranger2 at {restart}s"],
+                           cwd=ROOT, capture_output=True, text=True, timeout=300, check=False)
+        held, waiter = json.loads(r.stdout)
+        assert held["reason"] == "host ranger2 is down: the component cannot run there", held["reason"]
+        assert [(h["from"], h["ended"]) for h in held["holds"]] == [(0.0, "exited")], held["holds"]
+        if restart == 7:
+            assert waiter["outcome"] == "success", (waiter["outcome"], waiter["reason"])
+            assert [h["from"] for h in waiter["holds"]] == [7.0], waiter["holds"]
+            assert "back within its lease" in held["injections"][1]["effect"], held["injections"]
+        else:
+            assert (waiter["outcome"], waiter["sim_time"]) == ("failure", 8.0), waiter
+            assert waiter["reason"].endswith("while host ranger2 is down (its resources left the manager)")
 
 
 def test_killing_the_controller_ends_the_mission_as_on_a_cluster() -> None:

@@ -554,7 +554,10 @@ def test_random_missions_and_failures_keep_ownership(cat: Catalog, team: tuple[C
     # the examples reached what the invariant is about: drives driven, slices taken, holds ended every way
     assert seen["examples"] >= EXAMPLES // 2, seen
     assert seen["driven"] >= EXAMPLES // 2, seen
-    assert seen.get("revoked", 0) > 0 and seen.get("refused", 0) > 0, seen
+    # refused commands came mostly from a killed host's components, whose last words followed their lost grant: they
+    # now die with it, as on a cluster, and say nothing; the gate refusing is shown for sure by
+    # `test_the_gate_refuses_the_last_words_of_a_lost_robots_holder`
+    assert seen.get("revoked", 0) > 0, seen
     reasons = {k for k in seen if k.startswith("released: ")}
     assert {"released: exit", "released: revoked", "released: release"} <= reasons, seen
     assert reasons & {"released: host lost", "released: resource lost"}, seen
@@ -576,6 +579,16 @@ def test_corpus_entry_keeps_ownership(entry: Path, cat: Catalog, team: tuple[Clu
     assert not problems, "\n".join(problems[:10])
     assert check(out.records, sharable=set(caps)).accepted > 0 or "leak" in entry.stem, \
         "the entry drives nothing: it proves nothing"
+
+
+def test_the_gate_refuses_the_last_words_of_a_lost_robots_holder(cat: Catalog, team: tuple[Cluster, World]) -> None:
+    """The refusal the random examples must show, shown for sure: scout1 is lost under a rogue pusher, whose last
+    words as it is terminated come after its grant went."""
+    entry = CORPUS / "last_words_of_a_lost_robots_holder.yaml"
+    out = run_scenario(Scenario.from_yaml(entry.read_text(encoding="utf-8")), cat, team)
+    refused = [r for r in out.records if r["kind"] == "command" and not r.get("accepted")]
+    assert refused, [r for r in out.records if r["kind"] in ("command", "released", "finished")][-8:]
+    assert {r["device"] for r in refused} == {"ranger1.scout1.wheels"}, refused
 
 
 def test_the_corpus_is_there() -> None:
