@@ -62,8 +62,12 @@ from dsl.statechart import ResourceNeed, State, Statechart, Transition
 __all__ = ["MAX_BEHAVIOR_TURNS", "MAX_MICROSTEPS", "MAX_REPEATS", "Interpreter", "Listener", "MacroStep", "Node",
            "Phase"]
 
-#: Transitions one macro step may take before the chart is declared livelocked.
+#: Transitions one macro step may take before the chart is declared livelocked, plus MICROSTEPS_PER_INSTANCE per
+#: instance of a multiplicity alive: 30,000 Waits of `Outer[30] { Inner[1000] }` (a raised instances limit) finish
+#: in one instant, each a one-shot completion, and a fixed 10,000 failed that loop-free mission (semantics audit 18,
+#: #4). Loops are caught by MAX_REPEATS and MAX_BEHAVIOR_TURNS long before; this is a backstop.
 MAX_MICROSTEPS = 10_000
+MICROSTEPS_PER_INSTANCE = 10
 #: Times one node may take one same transition in one instant, the last making it a loop of zero-time transitions
 #: (`A -> A after 0s`): on a cluster each turn starts and stops a remote component, so 10,000 turns held the
 #: controller's mission loop for 20 s (wedge audit D1).
@@ -739,12 +743,16 @@ class Interpreter:
                 self._deaf.clear()
 
     def _run_to_completion(self) -> None:
-        taken = len(self._taken)
+        taken, bound = len(self._taken), self._microsteps()  # as many as were alive at the start, or since
         for _ in range(MAX_ITERATIONS):
             if self.outcome is not None:
                 return
-            if self._loops.looping or len(self._taken) - taken > MAX_MICROSTEPS:
+            if self._loops.looping:
                 break
+            if len(self._taken) - taken > bound:
+                bound = max(bound, self._microsteps())  # instances entered since allow more
+                if len(self._taken) - taken > bound:
+                    break
             if self._finishing:
                 node, ok, why = self._finishing.pop(0)
                 if node.phase is not DONE or node is self.root:
@@ -761,10 +769,14 @@ class Interpreter:
             if self.resources.flush():  # this instant's requests, by priority (spec audit D1)
                 continue
             return
-        why = self._loops.looping or f"livelock: more than {MAX_MICROSTEPS} transitions without time passing"
+        why = self._loops.looping or f"livelock: more than {bound:,} transitions without time passing"
         if self.root is not None:  # the root failed on its own: its `exited` says why (semantics audit 18, #5)
             self._exit(self.root, "failure", why)
         self._end("failure", why)
+
+    def _microsteps(self) -> int:
+        """Transitions one instant may take: MAX_MICROSTEPS, and more as many instances are alive."""
+        return MAX_MICROSTEPS + MICROSTEPS_PER_INSTANCE * self._alive_instances
 
     def _complete(self, node: Node, ok: bool, why: str) -> None:
         if not ok and not why and node.state.kind is MULTI:  # too few instances left (`_instance_done`)

@@ -73,3 +73,16 @@ def test_one_transition_is_taken_exactly_max_repeats_times(catalog: Catalog, tex
     assert h.interp.reason.startswith(f"livelock: {source} -> {target} taken {MAX_REPEATS} times")
     turns = [r for r in h.of(rec.Taken) if (r.path, r.target, r.trigger) == (source, target, trigger)]
     assert len(turns) == MAX_REPEATS and len({r.at for r in turns}) == 1
+
+
+def test_thousands_of_instances_finishing_together_are_no_livelock(catalog: Catalog) -> None:
+    """Semantics audit 18, #4: with the instances limit raised, 11,000 Waits finishing at t=1 took 11,000 one-shot
+    completions in one instant, and the fixed 10,000-transition backstop failed that loop-free mission; the bound
+    grows by 10 per instance alive. A loop among them is still caught (by its own transition's count)."""
+    from dsl.limits import Limits
+
+    text = "mission Wide {\n    Inner[11000]\n}\nbehavior Inner {\n    Wait(duration: 1s)\n}\n"
+    result = compile_text(text, catalog, "wide.mission", limits=Limits(instances=20_000))
+    assert result.ok and result.statechart is not None, [d.message for d in result.diagnostics]
+    h = Harness(result.statechart, {"Wait": Timed}, ranger_world(1, 0))
+    assert h.run(until=5) == "success", h.interp.reason
