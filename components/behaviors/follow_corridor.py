@@ -7,7 +7,6 @@ fits, clearance, the end wall) is `components.behaviors.scan`, shared with the o
 from __future__ import annotations
 
 import math
-from typing import Any
 
 from components.behaviors.progress import Progress, allowance
 from components.behaviors.scan import (
@@ -26,7 +25,7 @@ from components.behaviors.scan import (
     wall_across,
     wrap,
 )
-from drd.hw.interfaces import Scan
+from drd.hw.interfaces import Drive, Scan
 from drd.runtime.component import Component, Status
 
 #: How much farther than END (m) a wall across still counts as the end a Ranger was left facing (the laser's noise).
@@ -156,7 +155,7 @@ class FollowCorridor(Component):
         drive.set_velocity(0.0 if blocked else speed, omega)
         return Status.RUNNING
 
-    def at_wall_across(self, drive: Any, x: float, y: float, a: float) -> Status:
+    def at_wall_across(self, drive: Drive, x: float, y: float, a: float) -> Status:
         """A wall across the way: where the corridor turns (an L's or a T's corner), turn to the open side; started
         facing it (a Ranger left there by the previous sweep), turn around; else this is the end."""
         assert self.origin is not None

@@ -35,7 +35,7 @@ from collections.abc import Callable, Iterator, Mapping
 from contextlib import contextmanager
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from drd.bus import DEFAULT_TIMEOUT, Bus, BusError, LoadReport, Message, Ping, Pong, Query, Reply, Sample
 from drd.bus.base import BusWrapper, Declaration, Handler, Queryable
@@ -67,6 +67,9 @@ from drd.paging import by_position
 from drd.runtime.clock import Clock
 from drd.trader import TraderError, compile_query
 from dsl.catalog import Catalog
+
+if TYPE_CHECKING:  # only a controller with `ros2` robots imports it
+    from drd.hw.safestop import StandbyLinks
 
 #: Times a claim to this host is checked, a lease apart, before it is refused (`Daemon._check_claim`).
 CLAIM_TRIES = 3
@@ -277,7 +280,7 @@ class Daemon:
         self._checking = False
         self._claim_next: tuple[int, float, bool] | None = None  # the latest claim to this host not checked yet
         self._claim_checking = False  # a thread checks claims
-        self._standby: Any = None  # drd.hw.safestop.StandbyLinks of a controller with `ros2` robots
+        self._standby: StandbyLinks | None = None  # of a controller with `ros2` robots
         self._all_reachable = False  # the last peer check found every peer (and said so)
         self._closed = False
         self._controller_clock = controller_clock
