@@ -19,7 +19,7 @@ from pathlib import Path
 from typing import IO, Any
 
 from drd.bus import LocalNetwork
-from drd.errors import ConfigurationError
+from drd.errors import ConfigurationError, host_down_reason
 from drd.executive import EntryPoints, Executive
 from drd.explain import Explainer, LastRequest, within
 from drd.hosts import Cluster, Role
@@ -326,9 +326,11 @@ def executive_over(cluster: Cluster, world: World, sim: Simulation, catalog: Cat
     if callable(sync):  # served over ROS 2: the new drivers get the robots' state before any behavior reads it
         sync()
     places = {room.id: (room.x0, room.y0, room.x1, room.y1) for room in world.rooms}
-    return Executive(LocalNetwork().session("controller"), SimulationClock(sim), registry or EntryPoints(catalog),
-                     cluster=cluster.name, resources=[r for r in cluster.resources() if r.id not in gone],
-                     lease=cluster.lease, services={"drivers": drivers, "places": places})
+    executive = Executive(LocalNetwork().session("controller"), SimulationClock(sim), registry or EntryPoints(catalog),
+                          cluster=cluster.name, resources=[r for r in cluster.resources() if r.id not in gone],
+                          lease=cluster.lease, services={"drivers": drivers, "places": places})
+    executive.absent(r for r in cluster.resources() if r.id in gone)  # hosts down or not joined yet
+    return executive
 
 
 def run(chart: Statechart, cluster: Cluster, world: World, catalog: Catalog, **options: Any) -> DryRun:
@@ -358,6 +360,8 @@ def run_many(missions: Sequence[Mission], cluster: Cluster, world: World, catalo
     sim, executive = team(cluster, world, catalog, seed=seed, registry=registry, late=late)
     life = ControllerLife(executive, functools.partial(executive_over, cluster, world, sim, catalog, registry),
                           cluster.resources(), [r.id for r in cluster.resources() if r.host in late],
+                          grace=cluster.resume_grace,
+                          down=[h.name for h in cluster.hosts if h.devices and h.name in late],
                           **_controllers(cluster))
     start = time.perf_counter()
     if recorder is not None:
@@ -529,6 +533,7 @@ def _inject(inj: Injection, sim: Simulation, life: ControllerLife, cluster: Clus
     elif inj.action in (Action.JOIN, Action.RESTART):
         found = [r for r in cluster.resources() if r.host == inj.target]
         life.gone.difference_update(r.id for r in found)
+        life.down.discard(inj.target)
         back = leaving.pop(inj.target, None) is not None  # within its lease: the manager still has its resources
         if executive is not None:
             executive.host_restarted([r.id for r in found])
@@ -543,11 +548,18 @@ def _inject(inj: Injection, sim: Simulation, life: ControllerLife, cluster: Clus
         robots = _halt_host_robots(sim, cluster, inj.target)
         ids = [r.id for r in cluster.resources() if r.host == inj.target]
         life.gone.update(ids)
-        if executive is not None:
-            executive.host_died(inj.target, ids)
-        leaving[inj.target] = sim.time + cluster.lease
-        what += (f": its components died with it, {', '.join(robots) or 'no robot'} stopped; its resources are granted"
-                 f" to no one new and leave the manager at {leaving[inj.target]:.1f} s (its lease) unless it restarts")
+        if cluster.host(inj.target).devices:  # a controller started again waits for it
+            life.down.add(inj.target)
+        if Role.SIMULATOR in cluster.host(inj.target).roles:  # the world is gone with it, as on a cluster
+            _world_lost(executive, inj.target)
+            what += f": it ran the simulator, so the world is gone: every mission failed; {', '.join(robots)} stopped"
+        else:
+            if executive is not None:
+                executive.host_died(inj.target, ids)
+            leaving[inj.target] = sim.time + cluster.lease
+            what += (f": its components died with it, {', '.join(robots) or 'no robot'} stopped; its resources are"
+                     f" granted to no one new and leave the manager at {leaving[inj.target]:.1f} s (its lease) unless"
+                     " it restarts")
     elif inj.action is Action.LOSE:
         sim.lose(inj.target)
         life.gone.update(_robot_resources(cluster, inj.target))
@@ -562,6 +574,13 @@ def _inject(inj: Injection, sim: Simulation, life: ControllerLife, cluster: Clus
         what += f": the door is now {state[inj.action].value}"
     return {"at": round(sim.time, 3), "action": inj.action.value, "target": inj.target, "injection": str(inj),
             "effect": what}
+
+
+def _world_lost(executive: Executive | None, host: str) -> None:
+    """The simulator's host died: every mission still running fails with a cluster's words."""
+    for interp in list(executive.missions.values()) if executive is not None else ():
+        if not interp.finished:
+            interp.stop(host_down_reason(host, simulator=True), outcome="failure")
 
 
 def _halt_host_robots(sim: Simulation, cluster: Cluster, host: str) -> list[str]:
@@ -602,19 +621,19 @@ class _Injections:
         for host, at in sorted(self.leaving.items(), key=lambda item: (item[1], item[0])):
             if at <= sim.time + 1e-9:  # its lease ran out: its resources leave, their holders lose them
                 del self.leaving[host]
-                if life.executive is not None:
+                if life.executive is not None:  # (a controller down has no manager: it starts without them)
                     life.executive.remove_host(host)
-                self.killed[host]["effect"] += f"; at {sim.time:.1f} s its resources left the manager"
+                    self.killed[host]["effect"] += f"; at {sim.time:.1f} s its resources left the manager"
         while self.pending and self.pending[0].at <= sim.time + 1e-9:
-            before = life.takeover
+            before = (life.takeover, life.resuming)
             inj = self.pending.pop(0)
             effect = _inject(inj, sim, life, self.cluster, self.pending, self.leaving)
             if inj.target in self.leaving:
                 self.killed[inj.target] = effect
             for result in self.results:
                 result.injections.append(effect)
-            if life.takeover is not None and life.takeover is not before:
-                self.electing = effect  # it says when the standby took over
+            if (life.takeover, life.resuming) != before and (life.takeover or life.resuming) is not None:
+                self.electing = effect  # it says when the standby took over, or the controller resumed
         taken = life.tick(sim.time)
         if taken is not None and self.electing is not None:
             self.electing["effect"] += f"; at {sim.time:.1f} s {taken}"

@@ -115,9 +115,11 @@ def raised(e: BaseException, when: str = "") -> str:
     return text
 
 
-def host_down_reason(host: str) -> str:
-    """Why a component of a host that is down fails: a cluster's call to it, and a dry-run's `kill`, say the same."""
-    return f"host {host} is down: the component cannot run there"
+def host_down_reason(host: str, simulator: bool = False) -> str:
+    """Why a component of a host that is down fails (every mission of its world, if it ran the `simulator`): a
+    cluster's call to it, and a dry-run's `kill`, say the same."""
+    return f"host {host} is down: " + ("it ran the simulator, so the world is gone" if simulator else
+                                       "the component cannot run there")
 
 
 def shown_path(path: str) -> str:

@@ -265,6 +265,15 @@ class Executive:
             if not m.finished:
                 m.grow()
 
+    def absent(self, resources: Iterable[Any]) -> None:
+        """Resources of the team the manager does not have now, by host (hosts down or not joined yet): a need only
+        they would meet fails saying that their host is down, until it joins (`ResourceManager.shelve`)."""
+        by_host: dict[str, list[Any]] = {}
+        for r in resources:
+            by_host.setdefault(r.host, []).append(r)
+        for host, found in sorted(by_host.items()):
+            self.broker.rcm.shelve(host, found)
+
     def host_died(self, host: str, units: Collection[str]) -> None:
         """A host's daemon died (a dry-run's `kill`): as on a cluster, its resources go offline (they leave at its
         lease's end, `remove_host`) and the components bound to its `units` fail, as calls to a dead host do."""

@@ -30,6 +30,8 @@ from dsl.errors import did_you_mean
 from dsl.limits import Limits
 
 DEFAULT_LEASE = 3.0
+#: Seconds beyond two leases a restarted controller waits for the hosts with devices before it resumes its missions.
+RESUME_GRACE = 5.0
 #: Finished missions a controller keeps for `status` and `stop` (each is its statechart and its records' facts,
 #: tens of KB): 3,800 kept made a status reply outgrow the transport.
 DEFAULT_HISTORY, MAX_HISTORY = 100, 1000
@@ -248,6 +250,12 @@ class Cluster:
         """The (first) host with the RCM and the Mission Executive: the one controller, or with a replicated store
         the first of the controllers, one of which is elected to act (`controllers`)."""
         return next(h for h in self.hosts if Role.CONTROLLER in h.roles)
+
+    @property
+    def resume_grace(self) -> float:
+        """Seconds a controller started again waits for the hosts with devices before it resumes the journal's
+        missions (two leases and RESUME_GRACE): on a cluster, and in a dry-run's `restart`."""
+        return 2 * self.lease + RESUME_GRACE
 
     @property
     def controllers(self) -> list[Host]:

@@ -38,9 +38,11 @@ class ControllerLife:
 
     def __init__(self, executive: Executive, make: Callable[[Collection[str]], Executive],
                  resources: Iterable[Any], gone: Collection[str] = (), *, controllers: Sequence[str] = (),
-                 election: float = 0.0) -> None:
+                 election: float = 0.0, grace: float = 0.0, down: Iterable[str] = ()) -> None:
         """`controllers`: the controller hosts, the acting one first (several: a replicated store elects);
-        `election`: the election's lease, seconds (0: one controller, no election)."""
+        `election`: the election's lease, seconds (0: one controller, no election); `grace`: how long a controller
+        started again waits for the hosts with devices that are `down` before it resumes (`drd start`'s two leases
+        and 5 s, `drd.daemon.missions.MissionRunner._resume`)."""
         self.executive: Executive | None = executive
         self.acting = controllers[0] if controllers else ""
         self.standbys = list(controllers[1:])  # alive standby controllers, in the order they would win
@@ -55,6 +57,9 @@ class ControllerLife:
         self._saved: dict[str, NodeImage] = {}
         self._properties: dict[str, dict[str, Any]] = {}
         self._died_at = 0.0
+        self.grace = grace
+        self.down: set[str] = set(down)  # hosts with devices down now (killed, or not joined yet)
+        self.resuming: tuple[float, str] | None = None  # (until when, which controller) waits for `down` to resume
 
     def together(self) -> AbstractContextManager[None]:
         """Missions submitted in this block start as one: their requests are granted by priority, not by which was
@@ -106,7 +111,13 @@ class ControllerLife:
         return f"every robot stopped; {len(self._saved)} mission(s) wait for the controller"
 
     def tick(self, now: float) -> str | None:
-        """A standby's takeover, when its time came: what happened (None: nothing)."""
+        """A standby's takeover, when its time came, or a restarted controller's resume once the hosts it waits for
+        are back (or its grace ran out): what happened (None: nothing)."""
+        if self.resuming is not None and (not self.down or now >= self.resuming[0] - 1e-9):
+            _until, host = self.resuming
+            self.resuming = None
+            without = f" without {', '.join(sorted(self.down))} (still down)" if self.down else ""
+            return f"{host} resumed{without}: " + self._resume(now, host)
         if self.takeover is None or now < self.takeover[0] - 1e-9:
             return None
         _when, host = self.takeover
@@ -125,6 +136,10 @@ class ControllerLife:
         if self.election and now < self._died_at + self.election - 1e-9:  # the dead one's key lingers until then
             self.takeover = (self._died_at + self.election, host or self.acting)
             return f"campaigns: elected once the lost controller's lease runs out, at {self.takeover[0]:g} s"
+        if self.down and self.grace > 0:  # as `drd start` does: the hosts with devices first (cluster audit 20, #3)
+            self.resuming = (now + self.grace, host)
+            return (f"waits for {', '.join(sorted(self.down))} (down) to resume the missions, until"
+                    f" {now + self.grace:g} s at most")
         return self._resume(now, host)
 
     def _resume(self, now: float, host: str) -> str:

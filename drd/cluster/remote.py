@@ -347,8 +347,7 @@ class ComponentRouter:
         sees it up again (`back`)."""
         if self.is_down(host):
             self.on_down(host)
-            raise HostDown(f"host {host} is down: it ran the simulator, so the world is gone"
-                           if host and host == self.simulator else host_down_reason(host))
+            raise HostDown(host_down_reason(host, simulator=bool(host) and host == self.simulator))
         ops = self.gates.take(host) if self.gates is not None else None
         if ops:  # the gate operations queued for that host go first
             msg = dataclasses.replace(msg, gates=ops)

@@ -83,6 +83,20 @@ class Membership:
         return {h: max(0.0, at - now) for h, at in sorted(self.removal.items())}
 
 
+def coalesced(pending: list[Action], action: Action) -> list[Action]:
+    """`pending` with `action` queued after it, but a host's return cancels its departure if that is still queued: a
+    mission loop held up applied a removal due before the host was back after it had rejoined, then added the
+    resources again, and a waiter for its robot failed in between (cluster audit 20, #2). `add` after a queued
+    `remove` becomes `online` (its units are still in the manager, offline); `online` after a queued `offline`
+    cancels both. Pure."""
+    undone = {"add": "remove", "online": "offline"}.get(action.kind)
+    last = next((i for i in range(len(pending) - 1, -1, -1) if pending[i].host == action.host), None)
+    if undone is None or last is None or pending[last].kind != undone:
+        return [*pending, action]
+    rest = pending[:last] + pending[last + 1:]
+    return [*rest, Action("online", action.host)] if action.kind == "add" else rest
+
+
 def host_resources(cluster: Cluster, host: str) -> list[Unit | Aggregate]:
     """The units and aggregates of one host, as `ResourcePool.add` takes them."""
     return [c for c in cluster.resources() if c.host == host]
@@ -320,6 +334,7 @@ class Controller:
         self.executive = Executive(serialized, clock or self.mission_clock, EntryPoints(catalog), cluster=cluster.name,
                                    resources=host_resources(cluster, me), lease=cluster.lease,
                                    history=cluster.history)
+        self.executive.absent(c for c in cluster.resources() if c.host != me)  # until each host is seen up
         self.membership = Membership(cluster.lease, {me})
         self._pending: list[Action] = []  # membership actions the executive has not applied yet
         self._pending_lock = threading.Lock()
@@ -373,9 +388,11 @@ class Controller:
 
     def _queue(self, actions: list[Action]) -> None:
         """Membership actions for the executive: applied now if its lock is free, else by the mission loop at its
-        next cycle (`flush`): the daemon's view never waits for a mission loop held up by a slow host."""
+        next cycle (`flush`): the daemon's view never waits for a mission loop held up by a slow host. A return
+        cancels a departure still queued (`coalesced`)."""
         with self._pending_lock:
-            self._pending += actions
+            for action in actions:
+                self._pending = coalesced(self._pending, action)
         self.flush(blocking=False)
 
     def flush(self, blocking: bool = True) -> None:

@@ -64,8 +64,6 @@ CALL_TIMEOUT = 1.0
 RECENT_PLACEMENT = 3.0
 #: Wall seconds between two refreshes of the answers status queries get while the mission loop is held up.
 REFRESH_EVERY = 0.5
-#: Seconds beyond two leases a restarted controller waits for the hosts before it resumes the journal's missions.
-RESUME_GRACE = 5.0
 #: The world of a cluster with no simulator host: its missions drive the real robots, in real time.
 NO_WORLD = "none (real robots)"
 
@@ -218,7 +216,7 @@ class MissionRunner:
         executive.status_extras = self._status_extras
         # robots' pose and battery come with the hosts' replies; constraints are guarded on the devices' hosts
         self.telemetry = RemoteTelemetry({r.id: r.host for r in cluster.robots if r.host}, self._fetch,
-                                         self.gates.send, clock.now)
+                                         self.gates.send, clock.now, lambda host: self.host_down(host))
         self.gates.seen = self.telemetry.seen
         executive.pool.telemetry = self.telemetry
         executive.guard = self.guard = SharedGuard(executive.pool, self.gates.device_hosts, self.gates.send, clock.now)
@@ -245,7 +243,7 @@ class MissionRunner:
         assert self.journal is not None
         hosts = sorted({h.name for h in self.cluster.hosts if h.devices} | ({self.simulator} if self.simulator else
                                                                                set()))
-        down = wait_for_hosts(self, hosts, 2 * self.cluster.lease + RESUME_GRACE)
+        down = wait_for_hosts(self, hosts, self.cluster.resume_grace)
         if down:
             log.warning("resuming without %s (still down)", ", ".join(down))
         try:

@@ -167,6 +167,14 @@ class ResourceManager:
             self._shelf[host] = [reg.candidate(cid) for cid in ids]
         return self.remove(ids, now, "host lost")
 
+    def shelve(self, host: str, resources: Iterable[Candidate]) -> None:
+        """Resources of `host` the manager does not have now (a configured host down, or not joined yet), kept aside
+        until it adds one: a need only they would meet is told that the host is down (`_diagnose`), not that no
+        robot satisfies it (cluster audit 20, #4: a controller restarted while ranger2 was down). No decision."""
+        found = [c for c in resources if c.id not in self._reg.units and c.id not in self._reg.aggregates]
+        if found:
+            self._shelf[host] = found
+
     def set_host_offline(self, host: str, offline: bool, now: float) -> tuple[Decision, ...]:
         """A host seen down (`offline`) keeps its units until `remove_host`, grants and all (a short freeze costs
         nothing), but none of them is granted to anyone new: a waiter would get a robot whose components cannot run.
@@ -535,7 +543,7 @@ class ResourceManager:
         if not down:
             return found
         hosts = f"host {down[0]} is" if len(down) == 1 else f"hosts {', '.join(down)} are"
-        return found[0], f"{found[1]} while {hosts} down (its resources left the manager)"
+        return found[0], f"{found[1]} while {hosts} down (its resources are not in the manager)"
 
     # -- granting ------------------------------------------------------------------------------
 

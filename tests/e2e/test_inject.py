@@ -69,13 +69,12 @@ def dry_run(mission: str, *args: str) -> tuple[int, dict[str, object], str]:
 
 
 def test_killing_the_host_of_the_camera_fails_the_mission_at_that_time() -> None:
-    """As on a cluster (cluster audit 19, #3): the Observe running on the camera's host dies with it, and its
-    behavior fails saying so, giving its grant back as it exits; the resources would leave one lease later."""
+    """As on a cluster (cluster audit 19, #3 and 20, #1): hosts.yaml's ranger1 also runs the simulator, so the
+    world is gone with it and the mission fails saying so, its grants given back as it exits."""
     code, report, _ = dry_run(str(shared_examples() / "shared_camera.mission"), "--inject", "kill ranger1 at 12s")
     assert code == 1 and report["outcome"] == "failure"
-    assert report["reason"] == "host ranger1 is down: the component cannot run there", report["reason"]
+    assert report["reason"] == "host ranger1 is down: it ran the simulator, so the world is gone", report["reason"]
     assert report["injections"][0]["at"] == pytest.approx(12.0, abs=0.11)
-    assert "leave the manager at 15.0 s (its lease)" in report["injections"][0]["effect"]
     ends = {h["ended"] for h in report["holds"]}  # type: ignore[union-attr]
     assert "exited" in ends and "host lost" not in ends and report["sim_time"] == pytest.approx(12.0, abs=0.11)
 
@@ -103,7 +102,7 @@ def test_a_mission_waiting_for_a_killed_hosts_robot_waits_for_its_restart(tmp_pa
             assert "back within its lease" in held["injections"][1]["effect"], held["injections"]
         else:
             assert (waiter["outcome"], waiter["sim_time"]) == ("failure", 8.0), waiter
-            assert waiter["reason"].endswith("while host ranger2 is down (its resources left the manager)")
+            assert waiter["reason"].endswith("while host ranger2 is down (its resources are not in the manager)")
 
 
 def test_killing_the_controller_ends_the_mission_as_on_a_cluster() -> None:
@@ -245,3 +244,40 @@ def test_an_injection_the_missions_ended_before_is_reported_not_injected(tmp_pat
     text = subprocess.run(["missionctl", "dry-run", str(mission), "--inject", "kill ranger1 at 50s"], cwd=ROOT,
                           capture_output=True, text=True, timeout=300, check=False).stdout
     assert "not injected at 50.0 s" in text
+
+
+def test_killing_the_simulators_host_fails_every_mission_as_on_a_cluster(tmp_path: Path) -> None:
+    """Cluster audit 20, #1: `kill ranger1` (the simulator's host of the two-Ranger team) let a mission on ranger2 go
+    on to success; on a cluster the world is gone with that host and every mission of it fails."""
+    (tmp_path / "far.mission").write_text('mission Far {\n    needs r: Ranger where r.id == "ranger2"\n'
+                                          "    Wait(duration: 40s)\n}\n")
+    r = subprocess.run(["missionctl", "dry-run", str(tmp_path / "far.mission"), "--config",
+                        str(ROOT / "hosts.two_rangers.yaml"), "--json", "--inject", "kill ranger1 at 10s"],
+                       cwd=ROOT, capture_output=True, text=True, timeout=300, check=False)
+    assert r.returncode == 1, r.stderr[-2000:]
+    report = json.loads(r.stdout)
+    assert (report["outcome"], report["sim_time"]) == ("failure", 10.0), report
+    assert report["reason"] == "host ranger1 is down: it ran the simulator, so the world is gone"
+
+
+def test_a_controller_restarted_waits_for_the_hosts_with_devices_as_drd_start_does(tmp_path: Path) -> None:
+    """Cluster audit 20, #3 and #4: the dry-run's `restart controller` resumed at once, while ranger2 was still down,
+    and the mission holding ranger2 failed "no Ranger satisfies the constraint"; `drd start` waits for the hosts with
+    devices (two leases and 5 s at most). Back a second later, ranger2 is held again; never back, the mission fails
+    when the wait ends, saying that ranger2's host is down."""
+    (tmp_path / "hold.mission").write_text('mission Hold {\n    needs r: Ranger where r.id == "ranger2"\n'
+                                           "    Wait(duration: 40s)\n}\n")
+    base = ["missionctl", "dry-run", str(tmp_path / "hold.mission"), "--config", str(ROOT / "hosts.two_rangers.yaml"),
+            "--json", "--inject", "kill ranger2 at 10s", "--inject", "kill controller at 11s", "--inject",
+            "restart controller at 15s"]
+    back = subprocess.run([*base, "--inject", "restart ranger2 at 16s"], cwd=ROOT, capture_output=True, text=True,
+                          timeout=300, check=False)
+    report = json.loads(back.stdout)
+    assert report["outcome"] == "success", report["reason"]
+    assert [(h["from"], h["ended"]) for h in report["holds"]] == [(0.0, "controller lost"), (16.0, "exited")]
+    assert "waits for ranger2 (down) to resume the missions, until 26 s at most; at 16.0 s" in \
+        report["injections"][2]["effect"], report["injections"]
+    never = subprocess.run(base, cwd=ROOT, capture_output=True, text=True, timeout=300, check=False)
+    report = json.loads(never.stdout)
+    assert (report["outcome"], report["sim_time"]) == ("failure", 26.0), report  # 15 s + two leases (3 s) + 5 s
+    assert report["reason"].endswith("while host ranger2 is down (its resources are not in the manager)")

@@ -61,7 +61,7 @@ def test_a_killed_hosts_robots_stay_in_the_recorded_world_stopped(tmp_path: Path
 def test_a_killed_hosts_robot_stands_on_the_floor_and_a_restart_gives_it_back(catalog: Catalog) -> None:
     cluster, world = _team(catalog)
     sim = Simulation(world, seed=0)
-    life = SimpleNamespace(executive=None, gone=set())  # the controller's host lives on; no manager to tell
+    life = SimpleNamespace(executive=None, gone=set(), down=set())  # the controller's host lives on: no manager
     sim.set_velocity("ranger2", 0.3, 0.0)
     sim.step(0.5)
     _inject(_parse("kill ranger2 at 0.5s", cluster, world), sim, life, cluster)  # type: ignore[arg-type]

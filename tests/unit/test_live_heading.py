@@ -122,3 +122,15 @@ def test_a_host_back_after_it_was_down_has_its_robots_watched_and_read_again() -
     assert telemetry("c")["x"] == 35.0 and len(sent) == 1  # watched already: the last report
     telemetry.forget("h")
     assert telemetry("c")["x"] == 25.0 and sent[-1] == ("h", ["watch", ["c"], 0.0]) and len(sent) == 2
+
+
+def test_the_first_read_of_a_robot_whose_host_is_down_is_not_waited_for() -> None:
+    """Cluster audit 20, #2: each robot of a host that was down read first held the mission loop for FIRST_READ
+    (2.5 s), and missions started in its lease stalled the world for 10 s. Asked once, not again while it is down."""
+    from drd.cluster.telemetry import NOT_YET, RemoteTelemetry
+
+    asked: list[str] = []
+    down = {"h"}
+    telemetry = RemoteTelemetry({"c": "h"}, asked.append, lambda host, op: None, lambda: 0.0,
+                                down=lambda host: host in down)
+    assert telemetry("c") is NOT_YET and asked == ["h"]

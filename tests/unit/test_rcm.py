@@ -337,7 +337,7 @@ def test_host_loss_releases_its_holders_and_rejects_waiters_that_cannot_be_met()
     assert decisions[0] == Released("OnR2", ("r2.drive", "r2.cam", "r2.launcher"), "host lost", ("ranger",),
                                     ("r2", "r2.cam", "r2.drive", "r2.launcher"))
     assert Unsatisfiable("AlsoR2", "ranger", "no Ranger satisfies the constraint while host r2 is down (its resources"
-                         " left the manager)") in decisions
+                         " are not in the manager)") in decisions
     assert rm.queue() == ("SecondRanger",)
     assert rm.snapshot()["aggregates"].keys() == {"r1"}
 
@@ -382,12 +382,26 @@ def test_a_need_only_a_down_hosts_robot_would_meet_names_that_host() -> None:
     ghost = (NeedRequest("ranger", "Ranger", where=lambda c, _: c.id == "r9"),)
     rm.remove_host("r2", 1.0)
     assert rm.request(Request("OnR2", 1, r2), 2.0) == (Unsatisfiable(
-        "OnR2", "ranger", "no Ranger satisfies the constraint while host r2 is down (its resources left the manager)"),)
+        "OnR2", "ranger", "no Ranger satisfies the constraint while host r2 is down (its resources are not in the"
+                          " manager)"),)
     assert rm.request(Request("OnR9", 1, ghost), 2.0) == (
         Unsatisfiable("OnR9", "ranger", "no Ranger satisfies the constraint"),)  # no host down would meet it
     rm.add_unit(Unit("r2.drive", "Drive", host="r2"), 3.0)  # back: what it had is no longer shelved
     assert rm.request(Request("Again", 1, r2), 3.0) == (
         Unsatisfiable("Again", "ranger", "no Ranger satisfies the constraint"),)
+
+
+def test_resources_shelved_at_the_start_name_their_host_until_it_joins() -> None:
+    """Cluster audit 20, #4: a controller restarted while ranger2 was down never had its resources; a mission that
+    needed it failed "no Ranger satisfies the constraint"."""
+    rm = manager(Unit("r1.drive", "Drive", host="r1"))
+    rm.shelve("r2", [Unit("r2.drive", "Drive", host="r2"), Unit("r1.drive", "Drive", host="r1")])  # r1's: known
+    on_r2 = (NeedRequest("drive", "Drive", where=lambda c, _: c.id == "r2.drive"),)
+    [unsat] = rm.request(Request("OnR2", 1, on_r2), 1.0)
+    assert isinstance(unsat, Unsatisfiable) and unsat.reason.endswith("while host r2 is down (its resources are not"
+                                                                      " in the manager)")
+    assert granted(rm.add_unit(Unit("r2.drive", "Drive", host="r2"), 2.0)) == {}  # joined: nothing waited
+    assert granted(rm.request(Request("Again", 1, on_r2), 2.0))["Again"].units == ("r2.drive",)
 
 
 def test_a_lost_robot_fails_only_its_holder_and_the_next_waiter_gets_another() -> None:
