@@ -46,6 +46,7 @@ class ComponentHost:
         self._lagging: dict[Node, None] = {}  # running leaves with `last(...)` inputs
         #: units of hosts whose daemon died (a dry-run's `kill`) -> why a component bound to one cannot run
         self.dead: dict[str, str] = {}
+        self._failed_with: dict[str, str] = {}  # leaf path -> the words its failure was logged with, until it leaves
 
     def active(self) -> Iterator[tuple[Node, Component]]:
         """The components stepped in this cycle, in order (active ones only)."""
@@ -88,6 +89,7 @@ class ComponentHost:
             self._made[node.path] = (comp, ctx, lazy)
         why = self._dead_binding(lazy)
         if why is not None:  # as a start on a host that is down fails on a cluster
+            self.notify(rec.Log(self.now(), node.path, why))
             self.on_failure(node, why)
             return
         node.component, node.context = comp, ctx
@@ -114,6 +116,7 @@ class ComponentHost:
             if why is not None:
                 self.running.pop(node, None)
                 node.component = None
+                self.notify(rec.Log(self.now(), node.path, why))  # as a cluster's call to the dead host logs it
                 found.append((node, why))
         return found
 
@@ -210,10 +213,12 @@ class ComponentHost:
         if comp is None:
             return
         self.running.pop(node, None)
+        said = self._failed_with.pop(node.path, None)
         try:
             comp.terminate(_FINAL_STATUS.get(status, _RUNNING))
-        except COMPONENT_RAISES as e:  # the node is leaving anyway: just say so
-            self.notify(rec.Log(self.now(), node.path, _words(e)))
+        except COMPONENT_RAISES as e:  # the node is leaving anyway: just say so, unless its failure just did (a
+            if _words(e) != said:  # call to a dead host fails its step and its terminate alike: cluster audit 20, #6)
+                self.notify(rec.Log(self.now(), node.path, _words(e)))
 
     def shutdown(self) -> None:
         """The mission ended: every instance made is dropped for good (`Component.shutdown`, once each); what one
@@ -241,7 +246,8 @@ class ComponentHost:
         """`node` fails with what `e` says: a component's own exception located in its code, a reason already said
         (`ComponentFailure.said`) or the runtime's refusal to bind a need (`BindingError`) as it is."""
         why = str(e) if _said(e) else raised(e)
-        self.notify(rec.Log(self.now(), node.path, _words(e)))
+        self._failed_with[node.path] = words = _words(e)
+        self.notify(rec.Log(self.now(), node.path, words))
         self.on_failure(node, why)
 
     def command_failed(self, owner: object, e: Exception) -> None:
