@@ -542,8 +542,8 @@ class ResourceManager:
                 if diagnose(needs, self._reg.including(shelved), given) is None]
         if not down:
             return found
-        hosts = f"host {down[0]} is" if len(down) == 1 else f"hosts {', '.join(down)} are"
-        return found[0], f"{found[1]} while {hosts} down (its resources are not in the manager)"
+        hosts = f"host {down[0]} is down (its" if len(down) == 1 else f"hosts {', '.join(down)} are down (their"
+        return found[0], f"{found[1]} while {hosts} resources are not in the manager)"
 
     # -- granting ------------------------------------------------------------------------------
 
