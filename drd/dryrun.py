@@ -552,7 +552,8 @@ def _inject(inj: Injection, sim: Simulation, life: ControllerLife, cluster: Clus
             life.down.add(inj.target)
         if Role.SIMULATOR in cluster.host(inj.target).roles:  # the world is gone with it, as on a cluster
             _world_lost(executive, inj.target)
-            what += f": it ran the simulator, so the world is gone: every mission failed; {', '.join(robots) or 'no robot'} stopped"
+            what += (": it ran the simulator, so the world is gone: every mission failed;"
+                     f" {', '.join(robots) or 'no robot'} stopped")
         else:
             if executive is not None:
                 executive.host_died(inj.target, ids)
