@@ -168,7 +168,9 @@ class DaemonCluster:
 
 @contextmanager
 def running(cmd: Sequence[str]) -> Iterator[subprocess.Popen[str]]:
-    """A command (`missionctl run ...`) running in the background; killed and reaped if still running after."""
+    """A command (`missionctl run ...`) running in the background; killed and reaped if still running after, and its
+    pipes closed either way (left open by a test that failed before reading them, they were collected as an
+    unclosed file later, in another test, which pytest then failed)."""
     proc = subprocess.Popen(list(cmd), cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
         yield proc
@@ -176,6 +178,9 @@ def running(cmd: Sequence[str]) -> Iterator[subprocess.Popen[str]]:
         if proc.poll() is None:
             proc.kill()
             proc.communicate(timeout=10)
+        for pipe in (proc.stdout, proc.stderr):
+            if pipe is not None:
+                pipe.close()
 
 
 def succeeded(cluster: DaemonCluster, proc: subprocess.Popen[str], out: str, err: str) -> dict[str, object]:
@@ -234,8 +239,9 @@ def corridor_hosts(cluster: DaemonCluster, *, simulator_on_controller: bool = Fa
 
 
 def read_trace(path: Path) -> list[dict[str, Any]]:
-    """A `--trace` file's records."""
-    return [json.loads(line) for line in path.read_text().splitlines() if line.strip()]
+    """A `--trace` file's records: its whole lines (one read while the client writes may end in half a record)."""
+    return [json.loads(line) for line in path.read_text().splitlines(keepends=True)
+            if line.strip() and line.endswith("\n")]
 
 
 @contextmanager
