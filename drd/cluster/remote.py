@@ -152,9 +152,11 @@ class ControllerFrozen(ComponentError):
 
 
 def frozen_reason(away: float) -> str:
-    """Why a mission cannot go on after its controller was frozen `away` seconds, past the lease."""
-    return (f"this controller was frozen for {away:.1f} s, longer than the lease: its hosts stopped the robots and"
-            " retired the mission's instances meanwhile")
+    """Why a mission cannot go on after its controller was frozen `away` seconds, past the lease: one text whether a
+    call timed out across the freeze (`ControllerFrozen`, said as it is) or the mission loop stops the missions
+    first (CI saw the call's text without the `ControllerFrozen:` the docs give)."""
+    return (f"ControllerFrozen: this controller was frozen for {away:.1f} s, longer than the lease: its hosts stopped"
+            " the robots and retired the mission's instances meanwhile")
 
 
 #: Seconds a Creator may take to register a started instance (its first start on a host may load its module).

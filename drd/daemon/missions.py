@@ -772,7 +772,7 @@ class WorldRun:
             with runner.lock:
                 deliver(records, runner.controller.executive.record, runner.telemetry.seen)
                 for mid in self._unfinished():  # they cannot go on: fail them saying why (not "lost r (expired)")
-                    runner.controller.executive.missions[mid].stop(f"ControllerFrozen: {frozen_reason(away)}",
+                    runner.controller.executive.missions[mid].stop(frozen_reason(away),
                                                                    outcome="failure")
         return time.monotonic()
 
