@@ -51,22 +51,44 @@ class Membership:
         self.lease = lease
         self.present: set[str] = set(present or ())
         self.removal: dict[str, float] = {}
+        self.suspected: set[str] = set()  # hosts whose resources a timed-out call took offline (`silent`)
 
     def up(self, host: str, now: float) -> list[Action]:
         """A host came up: cancel a pending removal (its resources are back online), or add its resources."""
+        suspected = host in self.suspected
+        self.suspected.discard(host)
         if self.removal.pop(host, None) is not None:
             return [Action("online", host)]
         if host in self.present:
-            return []
+            return [Action("online", host)] if suspected else []
         self.present.add(host)
         return [Action("add", host)]
 
     def down(self, host: str, now: float) -> list[Action]:
         """A host went down: its resources go offline now and leave one lease from now (unless it comes back)."""
+        self.suspected.discard(host)  # offline already: for good now, unless it comes back
         if host in self.present and host not in self.removal:
             self.removal[host] = now + self.lease
             return [Action("offline", host)]
         return []
+
+    def silent(self, host: str) -> list[Action]:
+        """A call to `host` timed out while the view still has it up: its resources go offline now, provisionally.
+        A frozen host stops answering at once but is judged down only when its load reports have been missing for a
+        lease; its holder's call failed in between, and a waiter granted its robot failed in the same instant
+        (CI, the SIGSTOP variant of cluster audit 19, #1). Back online at its next report (`heard`), or down for
+        good (`down`)."""
+        if host not in self.present or host in self.removal or host in self.suspected:
+            return []
+        self.suspected.add(host)
+        return [Action("offline", host)]
+
+    def heard(self, host: str) -> list[Action]:
+        """A load report from `host`: a host suspected by `silent` answers again, its resources are back online."""
+        if host not in self.suspected:
+            return []
+        self.suspected.discard(host)
+        return [] if host in self.removal else [Action("online", host)]
 
     def due(self, now: float) -> list[Action]:
         """Removals whose lease ran out, in time order."""
@@ -345,33 +367,55 @@ class Controller:
         serialized.keep(self.keys.executive_status, self.executive.status)
 
     def host_up(self, host: str) -> None:
-        self._queue(self.membership.up(host, self.clock.now()))
+        with self._pending_lock:  # the mission loop suspects hosts too (`apply_offline`)
+            actions = self.membership.up(host, self.clock.now())
+        self._queue(actions)
 
     def host_down(self, host: str) -> None:
         now = self.clock.now()
-        self._queue(self.membership.down(host, now))
+        with self._pending_lock:
+            actions = self.membership.down(host, now)
+        self._queue(actions)
         if host in self.membership.removal and self._on_change is not None:
             self._on_change("resources-pending", host,
                             f"its resources leave the manager in {self.membership.removal[host] - now:.2f} s"
                             " unless it comes back, and are granted to no one new meanwhile")
 
     def apply_offline(self, host: str) -> None:
-        """Apply a queued `offline` of `host` now: a call found the host down mid-cycle (on the mission loop, which
-        holds the executive's lock), and the failure it ends its holder with must not hand that host's robots to a
-        waiter before the next cycle's `flush` (cluster audit 19, #1: granted, it failed in the same instant). Only
-        when it is the first action of that host queued (they keep their order) and the lock is free or this
-        thread's."""
+        """Take `host`'s resources offline now: a call found the host down, or it did not answer, mid-cycle (on the
+        mission loop, which holds the executive's lock), and the failure it ends its holder with must not hand that
+        host's robots to a waiter before the next cycle's `flush` (cluster audit 19, #1: granted, it failed in the
+        same instant). A queued `offline` is applied if it is the first action of that host queued (they keep their
+        order); with none queued, a host the view still has up is suspected (`Membership.silent`) until it reports
+        again (`heard`). Only when the lock is free or this thread's."""
         if not self._lock.acquire(blocking=False):
             return
         try:
             with self._pending_lock:
                 first = next((a for a in self._pending if a.host == host), None)
-                if first is None or first.kind != "offline":
+                if first is None:
+                    actions = self.membership.silent(host)
+                elif first.kind == "offline":
+                    self._pending.remove(first)
+                    actions = [first]
+                else:
                     return
-                self._pending.remove(first)
-            self._apply([first])
+            self._apply(actions)
+            if first is None and actions and self._on_change is not None:
+                self._on_change("resources-offline", host, "a call to it did not answer: its resources are granted"
+                                " to no one new until it reports again")
         finally:
             self._lock.release()
+
+    def heard(self, host: str) -> None:
+        """A load report from `host` (accepted by the view): a host suspected by `apply_offline` is back online."""
+        if host not in self.membership.suspected:  # the usual case, at every report: no lock
+            return
+        with self._pending_lock:
+            actions = self.membership.heard(host)
+        self._queue(actions)
+        if actions and self._on_change is not None:
+            self._on_change("resources-online", host, "it reports again: its resources may be granted")
 
     def holds(self, host: str) -> bool:
         """Whether the manager holds `host`'s resources now (added, and no action of it still queued): a journal's
@@ -384,7 +428,9 @@ class Controller:
     def step(self) -> None:
         """Apply removals that fell due. Missions are stepped in lockstep with the simulator by their own
         loop (`drd.daemon.missions.WorldRun`), not here."""
-        self._queue(self.membership.due(self.clock.now()))
+        with self._pending_lock:
+            actions = self.membership.due(self.clock.now())
+        self._queue(actions)
 
     def _queue(self, actions: list[Action]) -> None:
         """Membership actions for the executive: applied now if its lock is free, else by the mission loop at its

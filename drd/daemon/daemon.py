@@ -637,7 +637,10 @@ class Daemon:
         if not isinstance(report, LoadReport):
             self._reject(sample.key, f"expected a drd.load, got a {type(report).TYPE}")
             return
-        self._apply(lambda now: self.view.load(report, now, _host_of(sample.key)))
+        changes = self._apply(lambda now: self.view.load(report, now, _host_of(sample.key)))
+        controller = self.controller  # (None once it resigns, on another thread)
+        if controller is not None and not any(c.kind == "rejected" for c in changes):
+            controller.heard(report.host)  # a host a timed-out call suspected answers again
 
     def _on_live(self, sample: Sample) -> None:
         report = sample.payload
@@ -747,9 +750,11 @@ class Daemon:
             self.stop_reason = f"conflict: another drd (pid {pid}) runs as host {self.host}"
             self._stop.set()
 
-    def _apply(self, update: Callable[[float], list[Change]]) -> None:
+    def _apply(self, update: Callable[[float], list[Change]]) -> list[Change]:
         with self._lock:
-            self._handle(update(self.clock()))
+            changes = update(self.clock())
+            self._handle(changes)
+        return changes
 
     def _handle(self, changes: list[Change]) -> None:
         """Record, log and act on what the view reports (called with the lock held)."""

@@ -411,6 +411,42 @@ def test_daemons_on_a_local_bus_see_each_other_and_the_controller_follows(cluste
     assert ctl.view.state("ranger1") is HostState.DOWN or ctl.bus.closed
 
 
+def test_a_host_a_call_found_silent_is_granted_to_no_one_until_it_reports_again(cluster: Cluster,
+                                                                                catalog: Catalog) -> None:
+    """A frozen host stops answering a lease before its missing reports make it down: the call that timed out
+    (`ComponentRouter(on_down=Controller.apply_offline)`) ends its holder, whose robot must go to no waiter then
+    (CI: granted in that instant, the waiter failed at once); its next load report, through the daemon, brings it
+    back. Asserted from the manager's decisions."""
+    net = LocalNetwork()
+    clocks = Clocks()
+    daemons = {h: Daemon(DaemonConfig(cluster, h, catalog, load_period=0.25), net.session(h), clock=clocks.mono,
+                         wall=clocks.wall, controller_clock=clocks.sim) for h in ("controller", "ranger1")}
+    for d in daemons.values():
+        d.start()
+    for d in daemons.values():
+        d.step()
+    ctl = daemons["controller"]
+    try:
+        assert ctl.controller is not None and ctl.view.state("ranger1") is HostState.UP
+        broker = ctl.controller.executive.broker
+        need = (NeedRequest("cam", "Camera"),)
+        assert type(broker.request(Request("m/a", 1, need), clocks.sim.now())[0]).__name__ == "Granted"
+        decided: list[object] = []
+        broker.attach(decided.extend)
+        broker.request(Request("m/b", 1, need), clocks.sim.now())  # waits: the one Camera is m/a's
+        ctl.controller.apply_offline("ranger1")  # a call to ranger1 did not answer; the view still has it up
+        assert ctl.view.state("ranger1") is HostState.UP and ctl.events[-1].kind == "resources-offline"
+        broker.release("m/a", clocks.sim.now())  # the holder the call failed
+        assert not [d for d in decided if type(d).__name__ == "Granted"], decided
+        clocks.sim.advance(0.3)
+        daemons["ranger1"].step()  # its next load report
+        assert ctl.events[-1].kind == "resources-online"
+        assert [getattr(d, "holder", None) for d in decided if type(d).__name__ == "Granted"] == ["m/b"], decided
+    finally:
+        for d in daemons.values():
+            d.close()
+
+
 def test_the_daemon_refuses_and_counts_what_it_cannot_use(cluster: Cluster, catalog: Catalog) -> None:
     net = LocalNetwork()
     daemon = Daemon(DaemonConfig(cluster, "controller", catalog), net.session("controller"))

@@ -38,3 +38,20 @@ def test_the_membership_and_the_queue_agree_on_a_host_back_after_its_lease() -> 
     m = Membership(3.0, {"controller", "r2"})
     got = queued(*m.down("r2", 0.0), *m.due(3.0), *m.up("r2", 5.0))
     assert kinds(got) == [("offline", "r2"), ("online", "r2")] and "r2" in m.present
+
+
+def test_a_call_that_did_not_answer_takes_a_host_offline_until_its_next_report() -> None:
+    """A frozen host stops answering a lease before the view judges it down: the call's timeout takes its resources
+    offline (the holder the call fails must not hand its robot to a waiter), its next report brings them back."""
+    m = Membership(3.0, {"controller", "r2"})
+    assert kinds(m.silent("r2")) == [("offline", "r2")]
+    assert m.silent("r2") == [] and m.silent("r9") == []  # once; a host not in the manager has nothing to take
+    assert kinds(m.heard("r2")) == [("online", "r2")] and m.heard("r2") == []
+
+
+def test_a_suspected_host_that_goes_down_stays_offline_until_it_is_up_again() -> None:
+    m = Membership(3.0, {"controller", "r2"})
+    got = queued(*m.silent("r2"), *m.down("r2", 1.0), *m.heard("r2"))  # a report in flight: not the host back
+    assert kinds(got) == [("offline", "r2"), ("offline", "r2")]
+    assert m.silent("r2") == []  # down already: nothing more to suspect
+    assert kinds(m.up("r2", 2.0)) == [("online", "r2")] and m.heard("r2") == []
