@@ -327,7 +327,8 @@ def with_waits(data: dict[str, Any]) -> dict[str, Any]:
         if found is not None:
             node["waiting_for"] = {"needs": found["needs"], "where": found.get("where", {}),
                                    "mission_priority": found.get("mission_priority", 1),
-                                   "priority": found["priority"], "blocked_by": found.get("blocked_by", [])}
+                                   "priority": found["priority"], "blocked_by": found.get("blocked_by", []),
+                                   "offline": found.get("offline", [])}
         return node
 
     return {**data, "missions": [{**m, "tree": mark(m["tree"], str(m.get("id")))} if isinstance(m.get("tree"), dict)
@@ -345,6 +346,7 @@ def waits_text(why: dict[str, Any]) -> tuple[str, str]:
                                                            f" ({', '.join(f'{k}: {v}' for k, v in b['holds'].items())})"
                                                            if b.get("holds") else "")
                 for b in why.get("blocked_by") or []]
+    blockers += [f"host {host} (offline: down, or it did not answer)" for host in why.get("offline") or []]
     count = f" {len(blockers)}:" if len(blockers) > 1 else ""
     return text, (f"blocked by{count} {', '.join(blockers)}" if blockers else "")
 
@@ -1617,6 +1619,9 @@ def _leaving(data: dict[str, Any]) -> list[RenderableType]:
         for host, left in data["removing"].items()]
     parts += [Text(f"{host} is unresponsive: its resources left the manager until it reports again", style="yellow")
               for host, state in states.items() if host not in data["removing"] and state == "unresponsive"]
+    silent = sorted({str(u["host"]) for u in data["units"] if u.get("offline")} - set(data["removing"]) - set(states))
+    parts += [Text(f"{host} did not answer a call: its resources are granted to no one new until it reports again",
+                   style="yellow") for host in silent]
     return parts
 
 

@@ -141,11 +141,14 @@ def resources_reply(snapshot: Mapping[str, Any], cluster: str, answered_by: str,
     holds: Mapping[str, Mapping[str, Any]] = snapshot.get("holds", {})
     views = {request.holder: (claims, blockers) for request, claims, blockers in waiters or ()}
     requests = {request.holder: request for request, _, _ in waiters or ()}
+    offline = {str(uid): str(u["host"] or "") for uid, u in dict(snapshot.get("units", {})).items()
+               if u.get("offline")}
     queue = [WaiterInfo(str(w["holder"]), int(w["priority"]), str(w.get("mission") or ""),
                         {str(k): str(v) for k, v in dict(w.get("needs", {})).items()},
                         int(w.get("mission_priority") or 1), _wheres(requests.get(str(w["holder"]))),
                         _blockers(views.get(str(w["holder"])), holds, aggregates, {str(q["holder"]) for q in
-                                                                                   snapshot.get("queue", [])}))
+                                                                                   snapshot.get("queue", [])}),
+                        sorted({offline[u] for u in views.get(str(w["holder"]), (frozenset(), ()))[0] if u in offline}))
              for w in snapshot.get("queue", [])]
     robot_of: dict[str, set[str]] = {}
     for agg in aggregates.values():
@@ -158,7 +161,7 @@ def resources_reply(snapshot: Mapping[str, Any], cluster: str, answered_by: str,
                                                else bool(types & set(w.needs.values())))]
         units.append(UnitInfo(uid, str(u["type"]), str(u["host"] or ""), bool(u["sharable"]), float(u["capacity"]),
                               float(u["load"]), int(u["epoch"]), sorted(map(str, dict(u["holders"]))), waiting,
-                              {str(k): v for k, v in dict(u.get("properties", {})).items()}))
+                              {str(k): v for k, v in dict(u.get("properties", {})).items()}, uid in offline))
     robots = [RobotInfo(aid, str(a["type"]), str(a["host"] or ""),
                         {str(k): str(v) for k, v in dict(a["parts"]).items()},
                         sorted(h for h, hold in holds.items() if aid in dict(hold.get("assignment", {})).values()))

@@ -191,6 +191,7 @@ class UnitInfo(Message):
     holders: list[str]
     queue: list[str]
     properties: dict[str, Any]
+    offline: bool = False  # its host is down or did not answer a call: granted to no one new, its holders keep it
 
 
 @message("drd.rcm.robot", 1)
@@ -218,7 +219,7 @@ class BlockerInfo(Message):
 class WaiterInfo(Message):
     """A request waiting in the manager's queue, in service order. Its rank is (`mission_priority`, `priority`):
     the mission's priority decides first. `where`: need -> its `where` as written (needs without one are absent);
-    `blocked_by`: who is in its way now."""
+    `blocked_by`: who is in its way now; `offline`: the hosts of units it claims that are offline."""
 
     holder: str
     priority: int
@@ -227,6 +228,7 @@ class WaiterInfo(Message):
     mission_priority: int = 1
     where: dict[str, str] = {}
     blocked_by: list[BlockerInfo] = []
+    offline: list[str] = []  # hosts whose robots it could take are offline (down, or did not answer): it waits for them
 
 
 @message("drd.rcm.resources-request", 1)

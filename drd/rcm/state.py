@@ -253,6 +253,7 @@ class Registry:
                 "epoch": self.epochs[u],
                 "holders": dict(sorted(self.used.get(u, {}).items())),
                 "properties": dict(unit.properties),
+                "offline": u in self.offline,
             }
             for u, unit in sorted(self.units.items())
         }

@@ -438,10 +438,14 @@ def test_a_host_a_call_found_silent_is_granted_to_no_one_until_it_reports_again(
         assert ctl.view.state("ranger1") is HostState.UP and ctl.events[-1].kind == "resources-offline"
         broker.release("m/a", clocks.sim.now())  # the holder the call failed
         assert not [d for d in decided if type(d).__name__ == "Granted"], decided
+        view = ctl.controller.resources()  # what `missionctl status` and `resources` are told
+        assert [(w.holder, w.offline) for w in view.queue] == [("m/b", ["ranger1"])]
+        assert {u.id for u in view.units if u.offline} == {u.id for u in view.units if u.host == "ranger1"} != set()
         clocks.sim.advance(0.3)
         daemons["ranger1"].step()  # its next load report
         assert ctl.events[-1].kind == "resources-online"
         assert [getattr(d, "holder", None) for d in decided if type(d).__name__ == "Granted"] == ["m/b"], decided
+        assert not [u.id for u in ctl.controller.resources().units if u.offline]
     finally:
         for d in daemons.values():
             d.close()

@@ -54,13 +54,31 @@ def test_a_waiting_missions_tree_says_what_it_waits_for_its_rank_and_who_blocks_
     assert node["waiting_for"] == {"needs": {"ranger": "Ranger"}, "where": {"ranger": 'ranger.id == "ranger2"'},
                                    "mission_priority": 3, "priority": 1,
                                    "blocked_by": [{"holder": "CamHog-91/CamHog/HoldEast",
-                                                   "holds": {"ranger": "ranger2"}, "waiting": False}]}
+                                                   "holds": {"ranger": "ranger2"}, "waiting": False}],
+                                   "offline": []}
     shown = " ".join(text(status_view(status())).split())
     assert 'WantEast waiting for ranger: Ranger where ranger.id == "ranger2" (mission priority 3, priority 1) ' \
            "blocked by CamHog-91/HoldEast (ranger: ranger2)" in shown
     assert "Starved-92/WantEast (mission priority 3, priority 1)" in shown
     ranger1 = next(line for line in text(status_view(status())).splitlines() if "ranger1 Ranger" in line)
     assert "Starved" not in ranger1, "it can never take ranger1"
+
+
+def test_a_waiter_for_the_robots_of_a_host_offline_is_told_it_waits_for_that_host() -> None:
+    """No holder is in its way: the robot it may take is on a host seen down, or that did not answer a call (its
+    resources are granted to no one new meanwhile); `status` said it waited, blocked by no one."""
+    data = status()
+    resources = data["resources"]
+    waiter = resources["queue"][0]
+    waiter["blocked_by"], waiter["offline"] = [], ["ranger2"]
+    ranger2 = resources["units"][1]
+    ranger2.update(holders=[], load=0.0, offline=True)
+    resources["robots"][1]["holders"] = []
+    [node] = status_json(data)["missions"][1]["tree"]["children"]
+    assert node["waiting_for"]["offline"] == ["ranger2"]
+    shown = " ".join(text(status_view(data)).split())
+    assert "(mission priority 3, priority 1) blocked by host ranger2 (offline: down, or it did not answer)" in shown
+    assert "ranger2 did not answer a call: its resources are granted to no one new until it reports again" in shown
 
 
 def cli_text(renderable: Any, width: int) -> str:
