@@ -175,6 +175,15 @@ class ResourceManager:
         if found:
             self._shelf[host] = found
 
+    def shelved(self, rid: str) -> Candidate | None:
+        """A resource on the shelf by id (its host is down or not joined), or None: the `where` of a need only it
+        would meet reads it (`scout.carrier.id == "ranger2"` while ranger2's host is down: cluster audit 20, #5)."""
+        for found in self._shelf.values() if self._shelf else ():
+            for c in found:
+                if c.id == rid:
+                    return c
+        return None
+
     def set_host_offline(self, host: str, offline: bool, now: float) -> tuple[Decision, ...]:
         """A host seen down (`offline`) keeps its units until `remove_host`, grants and all (a short freeze costs
         nothing), but none of them is granted to anyone new: a waiter would get a robot whose components cannot run.

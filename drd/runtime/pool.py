@@ -67,7 +67,7 @@ class ResourceView(Mapping[str, object]):
                     raise KeyError(key)  # the driver cannot tell now: not known, never the static value
         found = self._pool.properties(c.id)[key]  # KeyError for an unknown property, as a mapping should
         if isinstance(found, str) and key in self._pool.references.get(c.type, ()):
-            named = self._pool.view(found)  # a property typed with a robot type reads as that robot
+            named = self._pool.named(found)  # a property typed with a robot type reads as that robot
             if named is not None:
                 return named
         return found
@@ -182,7 +182,11 @@ class ResourcePool:
         self.broker.set_property(rid, key, value, now)
 
     def properties(self, rid: str) -> dict[str, object]:
-        return self._props.get(rid, {})
+        found = self._props.get(rid)
+        if found is None:  # perhaps on the shelf: its host is down (`ResourceManager.shelved`)
+            shelved = self.broker.rcm.shelved(rid)
+            return dict(shelved.properties) if shelved is not None else {}
+        return found
 
     def having(self, cands: Iterable[Candidate], prop: str, value: str) -> list[Candidate]:
         """The candidates, in order, less those whose property `prop` (as a `ResourceView` reads it: not a part of
@@ -220,6 +224,15 @@ class ResourcePool:
 
     def view(self, rid: str) -> ResourceView | None:
         c = self.candidates.get(rid)
+        return ResourceView(c, self) if c is not None else None
+
+    def named(self, rid: str) -> ResourceView | None:
+        """The robot a property names (`scout.carrier`), as an expression reads it; one whose host is down is read
+        from the manager's shelf, so a `where` through it (`scout.carrier.id == "ranger2"`) that only a robot of that
+        host would meet is told that its host is down, not that nothing satisfies it (cluster audit 20, #5)."""
+        c = self.candidates.get(rid)
+        if c is None:
+            c = self.broker.rcm.shelved(rid)
         return ResourceView(c, self) if c is not None else None
 
     def units(self, rid: str) -> tuple[str, ...]:

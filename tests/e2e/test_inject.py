@@ -260,6 +260,23 @@ def test_killing_the_simulators_host_fails_every_mission_as_on_a_cluster(tmp_pat
     assert report["reason"] == "host ranger1 is down: it ran the simulator, so the world is gone"
 
 
+def test_a_need_through_the_carrier_of_a_host_down_is_told_that_the_host_is_down(tmp_path: Path) -> None:
+    """Cluster audit 20, #5: a Scout needed by `s.carrier.id == "ranger2"` after ranger2's host left the manager
+    failed "no Scout satisfies the constraint" (the carrier it names could not be read); a need by the Scout's own id
+    said that the host was down."""
+    (tmp_path / "late.mission").write_text(
+        "mission Late {\n    plan {\n        Pause < TakeScout\n    }\n}\n\n"
+        "behavior Pause {\n    Wait(duration: 10s)\n}\n\n"
+        'behavior TakeScout {\n    needs s: Scout where s.carrier.id == "ranger2"\n    Wait(duration: 2s)\n}\n')
+    r = subprocess.run(["missionctl", "dry-run", str(tmp_path / "late.mission"), "--config",
+                        str(ROOT / "hosts.two_rangers.yaml"), "--json", "--inject", "kill ranger2 at 2s"],
+                       cwd=ROOT, capture_output=True, text=True, timeout=300, check=False)
+    assert r.returncode == 1, r.stderr[-2000:]
+    report = json.loads(r.stdout)
+    assert report["reason"] == ("resource need s can never be satisfied: no Scout satisfies the constraint while host"
+                                " ranger2 is down (its resources are not in the manager)"), report["reason"]
+
+
 def test_a_controller_restarted_waits_for_the_hosts_with_devices_as_drd_start_does(tmp_path: Path) -> None:
     """Cluster audit 20, #3 and #4: the dry-run's `restart controller` resumed at once, while ranger2 was still down,
     and the mission holding ranger2 failed "no Ranger satisfies the constraint"; `drd start` waits for the hosts with
