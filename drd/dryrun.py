@@ -368,12 +368,14 @@ def run_many(missions: Sequence[Mission], cluster: Cluster, world: World, catalo
         recorder.scene(world, starts=True)
         recorder.watch(sim)  # what the sensors read, launches, landings and door changes, from now on
     ends: dict[str, tuple[float, float]] = {}  # mission id -> (sim, wall) seconds at its end: its own report's times
+    results: list[DryRun] = []
+    due = _Injections(injections, sim, life, cluster, results)
     with life.together():  # missions of one instant: by priority, not by their order on the command line
-        results = [_submit(life, m, n, speed, trace, recorder, functools.partial(_note_end, ends, start))
-                   for n, m in enumerate(missions, 1)]
+        results += [_submit(life, m, n, speed, trace, recorder, functools.partial(_note_end, ends, start))
+                    for n, m in enumerate(missions, 1)]
+        due.at_start()  # before their first grants (asked when this block ends)
     with _Heap() as heap:
-        _loop(life, sim, until, speed, stop, progress, progress_every, recorder, heap,
-              _Injections(injections, sim, life, cluster, results), start)
+        _loop(life, sim, until, speed, stop, progress, progress_every, recorder, heap, due, start)
     why = "stopped by operator" if stop is not None and stop.is_set() else f"sim time limit of {until:g} s reached"
     life.end(why)
     _conclude(results, [life.interpreters[r.mission_id or ""] for r in results], sim, time.perf_counter() - start,
@@ -638,6 +640,21 @@ class _Injections:
         taken = life.tick(sim.time)
         if taken is not None and self.electing is not None:
             self.electing["effect"] += f"; at {sim.time:.1f} s {taken}"
+
+    def at_start(self) -> None:
+        """Apply those at 0 s before the missions' first grants (cluster audit 20, #7: `kill ranger2 at 0s` took
+        effect at 0.1 s, and ranger2 had been granted meanwhile), up to the first that kills or restarts a
+        controller: that one needs the missions' first cycle, and so do those after it (they keep their order)."""
+        while self.pending and self.pending[0].at <= 1e-9:
+            inj = self.pending[0]
+            if inj.action in (Action.KILL, Action.RESTART) and Role.CONTROLLER in self.cluster.host(inj.target).roles:
+                return
+            self.pending.pop(0)
+            effect = _inject(inj, self.sim, self.life, self.cluster, self.pending, self.leaving)
+            if inj.target in self.leaving:
+                self.killed[inj.target] = effect
+            for result in self.results:
+                result.injections.append(effect)
 
     def left_over(self) -> None:
         """The missions ended first: say so of those never applied, rather than drop them without a word."""

@@ -277,6 +277,22 @@ def test_a_need_through_the_carrier_of_a_host_down_is_told_that_the_host_is_down
                                 " ranger2 is down (its resources are not in the manager)"), report["reason"]
 
 
+def test_a_host_killed_at_0s_is_down_before_the_first_grants(tmp_path: Path) -> None:
+    """Cluster audit 20, #7: `kill ranger2 at 0s` took effect at 0.1 s, after ranger2 had been granted, and its
+    holder failed with the host; now it is down from the start: the mission waits, and holds ranger2 from its
+    restart."""
+    (tmp_path / "hold.mission").write_text('mission HoldTwo {\n    needs ranger: Ranger where ranger.id == "ranger2"\n'
+                                           "    Observe(duration: 5s)\n}\n")
+    r = subprocess.run(["missionctl", "dry-run", str(tmp_path / "hold.mission"), "--config",
+                        str(ROOT / "hosts.two_rangers.yaml"), "--json", "--inject", "kill ranger2 at 0s",
+                        "--inject", "restart ranger2 at 2s"], cwd=ROOT, capture_output=True, text=True, timeout=300,
+                       check=False)
+    report = json.loads(r.stdout)
+    assert report["outcome"] == "success", report["reason"]
+    assert [(h["from"], h["ended"]) for h in report["holds"]] == [(2.0, "exited")], report["holds"]
+    assert [i["at"] for i in report["injections"]] == [0.0, 2.0], report["injections"]
+
+
 def test_a_controller_restarted_waits_for_the_hosts_with_devices_as_drd_start_does(tmp_path: Path) -> None:
     """Cluster audit 20, #3 and #4: the dry-run's `restart controller` resumed at once, while ranger2 was still down,
     and the mission holding ranger2 failed "no Ranger satisfies the constraint"; `drd start` waits for the hosts with
