@@ -321,7 +321,10 @@ class ComponentRouter:
             reply = self.step_sim(dt)
         except Exception as e:
             self.sim_error = e
-            raise ComponentError(f"the simulator did not step: {e}") from None
+            sim = self.simulator
+            if sim and self.is_down(sim):  # the first words a leaf fails with name the host, as the mission's do
+                raise ComponentError(host_down_reason(sim, simulator=True)) from None
+            raise ComponentError(f"the simulator{f' on host {sim}' if sim else ''} did not step: {e}") from None
         self.steps_alone.add("simulator", time.perf_counter() - t0)
         self.sim_time, self.sim_version = reply.time, reply.version
         return 0.0

@@ -43,7 +43,7 @@ from drd.daemon.logs import PLACEMENT_LOGGER
 from drd.daemon.migrate import Migrations
 from drd.daemon.placements import PlacementLog
 from drd.daemon.resume import Checkpoints, resume, wait_for_hosts
-from drd.errors import MissionInputError
+from drd.errors import MissionInputError, host_down_reason
 from drd.hosts import Cluster, Role
 from drd.journal import Journal
 from drd.placement import HostView, Recent
@@ -799,9 +799,11 @@ class WorldRun:
                 pass
         if self.cycle.sim_error is not None:
             self.closed = True
+            sim = runner.simulator or ""
+            why = (host_down_reason(sim, simulator=True) if sim and runner.host_down(sim)  # the dry-run's words
+                   else f"the simulator on {sim} stopped answering: {self.cycle.sim_error}")
             for mid in self._unfinished():  # the world is gone: a failure, as when a component finds it gone first
-                executive.missions[mid].stop(
-                    f"the simulator on {runner.simulator} stopped answering: {self.cycle.sim_error}", "failure")
+                executive.missions[mid].stop(why, "failure")
             return None
         sim_time = self.cycle.sim_time
         runner.clock.set_sim(sim_time)

@@ -311,9 +311,12 @@ def test_the_cycles_simulation_step_rides_on_a_batch_to_the_simulator_host_else_
     def down(dt: float) -> Any:
         raise TimeoutError("no answer")
     router.step_sim, router.pending_step = down, 0.1
-    with pytest.raises(ComponentError, match="the simulator did not step: no answer"):
-        router.step_first(None)
+    with pytest.raises(ComponentError, match="^host gone is down: it ran the simulator, so the world is gone$"):
+        router.step_first(None)  # its host is down: the words the mission fails with
     assert isinstance(router.sim_error, TimeoutError)
+    router.simulator, router.pending_step = "ranger1", 0.1
+    with pytest.raises(ComponentError, match="^the simulator on host ranger1 did not step: no answer$"):
+        router.step_first(None)
 
 
 @pytest.mark.parametrize("steps", [True, False])
