@@ -351,7 +351,8 @@ class ComponentRouter:
         answer is marked gone, so later calls fail at once (the daemon removes it at lease expiry), until the daemon
         sees it up again (`back`)."""
         if self.is_down(host):
-            self.on_down(host)
+            if self.dead(host):  # seen down: its queued `offline` now; one only this mission took for gone (a call
+                self.on_down(host)  # timed out) was told then, and telling again would undo what its reports did
             raise HostDown(host_down_reason(host, simulator=bool(host) and host == self.simulator))
         ops = self.gates.take(host) if self.gates is not None else None
         if ops:  # the gate operations queued for that host go first
