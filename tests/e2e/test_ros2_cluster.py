@@ -111,7 +111,8 @@ def test_the_corridor_mission_succeeds_on_the_clusters_served_robots(cluster: Da
                           check=False)
     assert done.returncode == 0, (done.stdout[-1000:], done.stderr[-2000:], cluster.log("ranger1")[-3000:])
     report = json.loads(done.stdout)
-    assert report["outcome"] == "success" and len(report["scouts"]) == 6 and report["doors"]
+    assert report["outcome"] == "success" and len(report["scouts"]) == 6 and report["doors"], (  # which room, when
+        report["outcome"], report["reason"], report["doors"], report["scouts"], cluster.tails("controller"))
     # an independent rmw_zenoh client of the cluster's router sees the served robots and drd's drivers on it
     with ros2_sdk(message_types(), [TWIST, LASER_SCAN], tmp_path / "msgs") as sdk:
         listed: dict[str, list[str]] = {}
