@@ -183,3 +183,34 @@ def test_a_host_frozen_for_less_than_its_lease_delays_the_mission_and_queries_st
     assert run.returncode == 0, (err[-2000:], cluster.log("controller")[-3000:])
     assert json.loads(out)["outcome"] == "success"
     assert "ranger1 down" not in cluster.log("controller"), cluster.log("controller")[-2000:]
+
+
+def test_a_resumed_missions_report_ends_what_was_in_force_at_the_loss_not_at_its_last_change(
+        cluster: DaemonCluster, tmp_path: Path) -> None:
+    """Users audit 21, #1: a state that runs on without changing (FollowCorridor) is journaled once, when entered;
+    after a kill -9 of the controller 4 s later, the report ended it `controller lost` at 0.1 s and the client said
+    "resumed from its state at 0.1 s", while the trace held the 4 s of commands it sent meanwhile. The world's
+    clock is saved every second: the report ends it there (the dry-run ends it at the kill)."""
+    (tmp_path / "go.mission").write_text("mission GoOn {\n    needs r: Ranger\n    start -> Go\n"
+                                         "    Go -> done after 8s\n}\n\nbehavior Go {\n"
+                                         "    FollowCorridor(speed: 0.3)\n}\n")
+    trace = tmp_path / "go.jsonl"
+    cmd = [*MISSIONCTL, "run", str(tmp_path / "go.mission"), "--config", str(cluster.hosts_file), "--speed", "1",
+           "--json", "--trace", str(trace)]
+    with running(cmd) as run:
+        eventually(lambda: trace.exists() and any(r["kind"] == "command" and r["at"] >= 4.0
+                                                  for r in read_trace(trace)), "4 s of driving", 60, poll=0.1)
+        cluster.procs["controller"].send_signal(signal.SIGKILL)
+        cluster.procs["controller"].wait(timeout=10)
+        time.sleep(1.5)
+        cluster.start("controller")
+        out, err = run.communicate(timeout=120)
+    assert run.returncode == 0, (out[-2000:], err[-3000:], cluster.log("controller")[-4000:])
+    report = json.loads(out)
+    recs = read_trace(trace)
+    [restored] = [r for r in recs if r["kind"] == "restored"]
+    driven = max(r["at"] for r in recs if r["kind"] == "command" and r["seq"] < restored["seq"])
+    assert driven - 1.5 <= restored["since"] <= driven + 1e-6, (restored, driven)  # saved within a second of it
+    [lost] = [row for row in report["timeline"] if row["path"] == "GoOn/Go" and row["status"] == "controller lost"]
+    assert lost["exited"] == pytest.approx(restored["since"], abs=0.051) and lost["exited"] >= 3.0, lost
+    assert f"resumed from its state at {restored['since']:.1f} s" in err, err[-2000:]
