@@ -414,7 +414,8 @@ class Checker:
             return None
         self.report.error("unknown-behavior", f"unknown behavior {name}", span, did_you_mean(name, known) or (
             "a behavior is a component with a manifest: drd's own, or one in a folder given with -C DIR or"
-            " $DRD_COMPONENTS (docs/components.md)"))
+            " $DRD_COMPONENTS (on a cluster, to the controller's `drd start`, which compiles the mission;"
+            " docs/components.md)"))
         return None
 
     def _multiplicity(self, m: ast.Multiplicity, scope: Scope) -> None:

@@ -311,6 +311,8 @@ def test_an_unknown_behavior_says_where_behaviors_come_from_and_nothing_about_it
     result = compile_text(m("  Spin(turns: 2) as spin\n  spin -> done when spin.spun.turns > 1"), catalog, "t.mission")
     assert [d.message for d in result.diagnostics] == ["unknown behavior Spin"]
     assert result.diagnostics[0].hint is not None and "-C DIR or $DRD_COMPONENTS" in result.diagnostics[0].hint
+    assert "on a cluster, to the controller's `drd start`" in result.diagnostics[0].hint  # `run` takes no -C (users
+    # audit 21, #4: the hint sent to `missionctl run` said -C DIR, which it does not take)
 
 
 def test_rendered_error_shows_line_and_caret(catalog: Catalog) -> None:
