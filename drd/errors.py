@@ -108,11 +108,21 @@ def raised(e: BaseException, when: str = "") -> str:
     (`debug_traceback`), not into the reason every summary repeats."""
     text = f"component raised {type(e).__name__}{when}: {e}"
     frames = traceback.extract_tb(e.__traceback__)
-    if frames:
+    if isinstance(e, ComponentFailure) and e.where:  # said where in the component's code (an emit replayed)
+        text += f" (at {e.where})"
+    elif frames:
         own = [f for f in frames if components_own(f.filename)]
         last = (own or frames)[-1]
         text += f" (at {shown_path(last.filename)}:{last.lineno}, in {last.name})"
     return text
+
+
+def own_caller() -> str | None:
+    """Where the component's own code called into drd now (`mykit/spin.py:12, in step`, as `raised` says it), or
+    None when no frame of its own is on the stack: a call a worker records to replay on the controller (an emit)
+    is refused there, far from that line."""
+    own = [f for f in traceback.extract_stack()[:-1] if components_own(f.filename)]
+    return f"{shown_path(own[-1].filename)}:{own[-1].lineno}, in {own[-1].name}" if own else None
 
 
 def host_down_reason(host: str, simulator: bool = False) -> str:

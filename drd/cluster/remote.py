@@ -43,6 +43,7 @@ from drd.cluster.gates import GateUpdate, RemoteGates, deliver, take_pending
 from drd.errors import ComponentFailure, host_down_reason
 from drd.runtime.component import Component, Context, Status, step_status
 from drd.runtime.constraints import Breach
+from drd.runtime.emits import EmitError
 from drd.runtime.records import Record, plain
 
 
@@ -83,7 +84,8 @@ class ComponentCall(Message):
 
 @message("drd.component.reply", 4)
 class ComponentReply(Message):
-    """What the call did: `status` (after a step), outputs, events `[name, fields]`, log lines, shared data,
+    """What the call did: `status` (after a step), outputs, events `[name, fields, where]` (`where`: the line of the
+    component's emit, for a refusal), log lines, shared data,
     dependency changes `[resource, key, value]`, and `error` if the component raised (the state fails);
     `records`: what the host's gates recorded meanwhile (`drd.cluster.gates.wire_record`); `snapshot`:
     `[state]` when the instance's snapshot changed (after its start, every few steps, when it is moved); `lost`:
@@ -752,5 +754,9 @@ class RemoteComponent(Component):
             if update is not None and len(dep) == 3:
                 update(str(dep[0]), str(dep[1]), dep[2])
         for event in reply.events or ():
-            if len(event) == 2 and isinstance(event[1], dict):
-                ctx.emit(str(event[0]), **event[1])
+            if len(event) in (2, 3) and isinstance(event[1], dict):
+                try:
+                    ctx.emit(str(event[0]), **event[1])
+                except EmitError as e:  # refused here: it says the line of the component's emit, as in process
+                    e.where = e.where or (str(event[2]) if len(event) == 3 and event[2] else None)
+                    raise

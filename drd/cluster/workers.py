@@ -857,6 +857,7 @@ def take_snapshot(h: _Hosted, force: bool = False) -> list[Any] | None:
 
 
 def _setup(path: str, setup: Setup, params: dict[str, Any] | None, link: _Link) -> _Hosted:
+    from drd.errors import own_caller
     from drd.runtime.component import Context, Services
     from drd.runtime.records import plain
 
@@ -865,7 +866,7 @@ def _setup(path: str, setup: Setup, params: dict[str, Any] | None, link: _Link) 
     devices = {need: DeviceProxy(link, path, need, names, setup.commands.get(need, ()))
                for need, names in setup.methods.items()}
     ctx = Context(path, dict(params or {}), dict(setup.resources),
-                  lambda ev, **f: h.events.append([ev, plain(f)]),
+                  lambda ev, **f: h.events.append([ev, plain(f), own_caller()]),
                   lambda text: h.logs.append(str(text)),
                   lambda: h.now, devices=devices,
                   services=Services(dependencies=lambda rid, k, v: h.deps.append([rid, k, plain(v)])))
