@@ -498,6 +498,7 @@ class RemoteComponent(Component):
         self.state: list[Any] | None = None  # [its last snapshot] as its host sent it (None: none yet)
         self._restore: list[Any] | None = None  # [state] to restore at its next start (`restore`)
         self._failed = ""  # the error its last step failed with (its `terminate` does not say it again)
+        self._started = False  # its host accepted its last start (else a terminate finds no instance there)
 
     # -- lifecycle ------------------------------------------------------------------------------------
 
@@ -527,10 +528,12 @@ class RemoteComponent(Component):
             return
         names = self.router.param_names(self.name)
         self._params = {k: plain(v) for k, v in self._ctx.params.items() if names is None or k in names}
+        self._started = False
         if self.movable:
             self._place("placed", set(), restore)
         else:
             self._call("start", params=self._params, bindings=self._bindings, rank=self._rank, restore=restore)
+        self._started = True
 
     def step(self, now: float) -> Status:
         if self.local is not None and self.host is None:
@@ -578,8 +581,9 @@ class RemoteComponent(Component):
             try:
                 self._call("terminate", status=str(status))  # a movable one on a lost host went with it
             except InstanceLost:
-                if not self.movable:
-                    raise  # a movable one its host no longer runs is already gone
+                if not self.movable and self._started:
+                    raise  # a movable one its host no longer runs is already gone; one whose start failed (its
+                    # module did not import there) never ran (users audit 21, #6: a second, spurious fault logged)
             except ComponentError as e:
                 if str(e) != self._failed:  # a dead process answers each call as its step's failure said
                     raise  # (users audit 12, D6: logged twice)

@@ -273,6 +273,26 @@ def test_an_instance_its_host_no_longer_runs_ends_quietly_but_a_bound_one_fails(
         bound.step(0.1)
 
 
+
+def test_a_bound_instance_whose_start_failed_ends_without_a_second_fault() -> None:
+    """Users audit 21, #6: its module did not import on its host, so the start failed and no instance ran there;
+    its terminate then logged "refused terminate ...: no instance", which read as a second fault."""
+    from drd.runtime.ownership import Binding
+
+    hosts = Hosts(LocalBus(), ["a", "b"], ["a", "b"])
+    router = ComponentRouter(hosts.bus, "t", {"a.drive": "a"}, "controller", local={}, mission="m",
+                             world="corridor", timeout=0.05, dead=lambda h: h in hosts.dead, place=hosts.place)
+    bound = RemoteComponent("FollowCorridor", router)  # bound to a's drive: it runs there or nowhere
+    bound.setup(Context("M/F", {}, {}, lambda ev, **f: None, lambda s: None, lambda: 0.0,
+                        bindings={"drive": Binding("drive", "a.drive", "M")}))
+    hosts.failing.add("a")
+    with pytest.raises(ComponentError, match="failed to start here"):
+        bound.start()
+    hosts.retired.add("a")  # it answers that it runs no such instance
+    bound.terminate(Status.FAILURE)  # nothing ran there: nothing to say
+    assert hosts.calls[-1] == ("a", "terminate")
+
+
 def test_a_component_bound_to_devices_is_never_moved() -> None:
     hosts = Hosts(LocalBus(), ["a", "b"], ["a", "b"])
     router = ComponentRouter(hosts.bus, "t", {"a.drive": "a"}, "controller", local={},
