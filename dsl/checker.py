@@ -10,7 +10,7 @@ statechart is built (`dsl.build`).
 from __future__ import annotations
 
 from collections.abc import Iterable, Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import networkx as nx
 
@@ -256,8 +256,12 @@ class Checker:
             self.report.error("priority", "priority must be 1 or more (1 is the highest)", b.name_span)
         for n in body.needs:  # all needs first: `where` may relate them (solved together)
             declare(n.name, n.type.name, n.span, "resource")
+        vars_ = {v.name: (f"var {v.name} cannot be read in a need's where", "a var is read by its behavior's "
+                          "transitions, guards and actions only; give the value to a child behavior as a parameter"
+                          f" and declare the need there: behavior Child({v.name}: {v.type.name}) {{ needs ..."
+                          f" where ... == {v.name} }}") for v in body.vars}
         for n in body.needs:
-            self._need(n, self._scope(b, locals_))
+            self._need(n, replace(self._scope(b, locals_), hidden=vars_))
         for s in body.shared:
             t = self._type_ref(s.type, data=True)
             declare(s.name, t or ANY, s.span, "shared")

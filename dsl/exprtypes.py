@@ -67,9 +67,12 @@ class Scope:
     children: Mapping[str, str] = field(default_factory=dict)
     event: RecordSpec | None | bool = False
     open: bool = False
+    #: names declared in the behavior that this expression may not read, each with why and what to do instead (a
+    #: `var` in a need's `where`: "unknown name" was wrong for a name declared two lines above)
+    hidden: Mapping[str, tuple[str, str]] = field(default_factory=dict)
 
     def with_names(self, extra: Mapping[str, Type]) -> Scope:
-        return Scope({**self.names, **extra}, self.children, self.event, self.open)
+        return Scope({**self.names, **extra}, self.children, self.event, self.open, self.hidden)
 
 
 class Typer:
@@ -131,6 +134,10 @@ class Typer:
         if name in scope.children:
             return ChildRef(scope.children[name])
         if scope.open:
+            return ANY
+        if name in scope.hidden:
+            why, hint = scope.hidden[name]
+            self.report.error("unknown-name", why, expr.span, hint)
             return ANY
         self.report.error("unknown-name", f"unknown name {name}", expr.span,
                           did_you_mean(name, [*scope.names, *scope.children]))

@@ -366,3 +366,12 @@ def test_an_unknown_behavior_is_never_offered_the_behavior_it_is_written_in(cata
     other = compile_text("mission Lies {\n    Liar\n}\nbehavior Lier {\n    Wait(duration: 1s)\n}\n", catalog,
                          "t.mission")
     assert other.diagnostics[0].hint == "did you mean Lier?"
+
+
+def test_a_var_read_in_a_needs_where_is_told_it_is_a_var_and_how_to_pass_it(catalog: Catalog) -> None:
+    """Users audit 21, #7: `unknown name lane_name` for a var declared two lines above, with no hint."""
+    text = 'mission M {\n    var lane_name: str = "west"\n    needs rig: Ranger where rig.id == lane_name\n' \
+           "    Wait(duration: 1s)\n}\n"
+    [d] = compile_text(text, catalog, "t.mission").diagnostics
+    assert d.message == "var lane_name cannot be read in a need's where" and str(d.span) == "t.mission:3:39"
+    assert d.hint is not None and "behavior Child(lane_name: str)" in d.hint
