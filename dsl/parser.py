@@ -405,7 +405,8 @@ class _Builder(Transformer):  # type: ignore[type-arg]
                 if buf:
                     parts.append("".join(buf))
                     buf = []
-                inner = self.subparse(raw[i + 1:close], self._at(tok, i + 1)) if self.subparse else None
+                inner = self.subparse(raw[i + 1:close].replace('\\"', '"'),  # a string in it: {x == \"a\"}
+                                      self._at(tok, i + 1)) if self.subparse else None
                 if inner is not None:
                     parts.append(inner)
                 i = close + 1
@@ -516,11 +517,15 @@ class Parser:
             result = self.lark.parse(text, start="expr")
         except UnexpectedInput as e:
             result = None
+            char = e.char if isinstance(e, UnexpectedCharacters) else None
+            what = f"unexpected character `{char}`" if char is not None else \
+                _describe_token_error(e).replace("the end of the file", "the end of the expression")
+            hint = ('a string in an interpolation is written in escaped double quotes: "lane {x == \\"east\\"}"'
+                    if char in ("'", "\\") else "write \\{ for a literal brace")
             b.errors.append(Diagnostic(
-                "syntax", "bad expression in string interpolation: "
-                + _describe_token_error(e).replace("the end of the file", "the end of the expression"),
+                "syntax", "bad expression in string interpolation: " + what,
                 Span(b.file, at.line or 1, (at.column or 1) + e.column - 1,
-                     at.line or 1, (at.column or 1) + e.column), "write \\{ for a literal brace"))
+                     at.line or 1, (at.column or 1) + e.column), hint))
         finally:
             b.line_offset, b.column_offset = saved
             self.layout.restore(layout)

@@ -375,3 +375,17 @@ def test_a_var_read_in_a_needs_where_is_told_it_is_a_var_and_how_to_pass_it(cata
     [d] = compile_text(text, catalog, "t.mission").diagnostics
     assert d.message == "var lane_name cannot be read in a need's where" and str(d.span) == "t.mission:3:39"
     assert d.hint is not None and "behavior Child(lane_name: str)" in d.hint
+
+
+def test_a_string_in_an_interpolation_is_written_escaped_and_a_quote_of_another_kind_is_told_so(
+        catalog: Catalog) -> None:
+    """Users audit 21, #5: no spelling of a string inside `{...}` worked, and the error was lark's own words ("No
+    terminal matches '\\' ... at line 1 col 40") with a hint about braces."""
+    ok = compile_text(m('  Wait(duration: 1s) as w\n  w -> done / log "n: {count(Ranger where ranger.id =='
+                        ' \\"ranger1\\")}"'), catalog, "t.mission")
+    assert ok.ok, [d.message for d in ok.diagnostics]
+    bad = compile_text(m("  Wait(duration: 1s) as w\n  w -> done / log \"n: {count(Ranger where ranger.id =="
+                         " 'ranger1')}\""), catalog, "t.mission")
+    [d] = bad.diagnostics
+    assert d.message == "bad expression in string interpolation: unexpected character `'`", d.message
+    assert d.hint is not None and 'escaped double quotes' in d.hint and "line 1 col" not in d.message
