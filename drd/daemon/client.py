@@ -266,7 +266,7 @@ class ClusterClient:
                     raise BusTimeout(f"no time left for the page after {after}")
                 page = _expect(self.bus.call(self.keys.executive_status, ask(after), timeout=remaining), want)
             except BusTimeout:
-                raise ClientError(f"{who} does not answer on {self.keys.executive_status} within {limit:g} s"
+                raise ClientError(f"{who} does not answer on {self.keys.executive_status} within {round(limit, 1):g} s"
                                   " (is the controller's drd up?)") from None
             yield page
             nxt = int(getattr(page, "next", 0))
