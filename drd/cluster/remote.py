@@ -377,6 +377,8 @@ class ComponentRouter:
             else:
                 self.gone.add(host)
             self.on_down(host)
+            if self.dead(host):  # the view has it down now (its token vanished: the call ended at once): the words
+                raise HostDown(host_down_reason(host, simulator=host == self.simulator)) from None  # of the dry-run
             raise HostDown(f"host {host} did not answer {op} within {timeout:g} s ({e})") from None
         deliver(getattr(reply, "records", None), self.records, self.gates.seen if self.gates is not None else None)
         return reply, time.perf_counter() - t0

@@ -380,3 +380,23 @@ def test_a_killed_workers_reason_is_said_by_its_step_alone() -> None:
     hosts.killed["a"] = "component process of M/Wait died (exit code -9)"  # something new is said
     with pytest.raises(ComponentError, match="exit code -9"):
         comp.terminate(Status.FAILURE)
+
+
+def test_a_call_that_fails_as_its_host_is_seen_down_says_so_in_the_dry_runs_words() -> None:
+    """Faults audit 21, #3: kill -9 of a worker mid-call: the reason said "did not answer step within 6 s (... the
+    query ended after 0.0 s ...)", contradicting itself; the view had the host down by then."""
+    hosts = Hosts(LocalBus(), ["a", "b"], ["a", "b"])
+    asked: list[str] = []
+
+    def dead(host: str) -> bool:  # up when the call is made, down when it has failed
+        asked.append(host)
+        return len(asked) > 1
+
+    router = ComponentRouter(hosts.bus, "t", {"a.drive": "a"}, "controller", local={}, mission="m",
+                             world="corridor", timeout=0.05, dead=dead, place=hosts.place)
+    comp = RemoteComponent("FollowCorridor", router)
+    comp.setup(Context("M/F", {}, {}, lambda ev, **f: None, lambda s: None, lambda: 0.0))
+    comp.host = "a"
+    hosts.silent.add("a")
+    with pytest.raises(HostDown, match="^host a is down: the component cannot run there$"):
+        comp.step(0.1)
