@@ -15,8 +15,8 @@ import collections
 import functools
 import itertools
 import logging
-from collections.abc import Callable, Collection, Iterable, Mapping
-from contextlib import AbstractContextManager
+from collections.abc import Callable, Collection, Iterable, Iterator, Mapping
+from contextlib import contextmanager
 from typing import Any
 
 import orjson
@@ -186,10 +186,16 @@ class Executive:
             interp.start()
         return mid
 
-    def together(self) -> AbstractContextManager[None]:
+    @contextmanager
+    def together(self) -> Iterator[None]:
         """Missions submitted in this block ask for resources as one: by priority, not by which was submitted first
-        (`drd.runtime.broker.ResourceBroker.together`: a controller resuming its missions, a dry-run starting)."""
-        return self.broker.together()
+        (`drd.runtime.broker.ResourceBroker.together`: a controller resuming its missions, a dry-run starting).
+        What their grants then entered is run to completion at once, as a mission started alone is: a component
+        that fails as it starts ends its state at that instant (users audit 21, #2: a cycle later in a dry-run)."""
+        with self.broker.together():
+            yield
+        for interp in list(self.missions.values()):
+            interp.settle()
 
     def restore_history(self, ended: Iterable[tuple[str, Mapping[str, Any]]]) -> None:
         """Missions that ended before a restart (id, status as listed then), in the order they ended: `status`

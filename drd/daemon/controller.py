@@ -130,13 +130,15 @@ WaiterView = tuple[Request, frozenset[str], tuple[str, ...]]
 
 def resources_reply(snapshot: Mapping[str, Any], cluster: str, answered_by: str,
                     removing: Mapping[str, float], hosts: Mapping[str, str] | None = None,
-                    waiters: Sequence[WaiterView] | None = None) -> ResourcesReply:
+                    waiters: Sequence[WaiterView] | None = None,
+                    shelved: Mapping[str, Sequence[str]] | None = None) -> ResourcesReply:
     """`ResourceManager.snapshot()` as the wire's view: each unit with holders, queue and epoch.
 
     A unit's queue lists the waiters that claim it (`waiters`, from `ResourceManager.waiters`: a need's `where`
     narrows what it may take), in service order; without `waiters`, those that need its type or the type of a robot
-    using it (a coarser guess: a waiter for ranger2 would stand in ranger1's queue too).
-    """
+    using it (a coarser guess: a waiter for ranger2 would stand in ranger1's queue too). A waiter's `offline` hosts
+    are those of the offline units it claims and those down whose resources would serve it (`shelved`, from
+    `ResourceManager.shelf_waiters`)."""
     aggregates: Mapping[str, Mapping[str, Any]] = snapshot.get("aggregates", {})
     holds: Mapping[str, Mapping[str, Any]] = snapshot.get("holds", {})
     views = {request.holder: (claims, blockers) for request, claims, blockers in waiters or ()}
@@ -148,7 +150,8 @@ def resources_reply(snapshot: Mapping[str, Any], cluster: str, answered_by: str,
                         int(w.get("mission_priority") or 1), _wheres(requests.get(str(w["holder"]))),
                         _blockers(views.get(str(w["holder"])), holds, aggregates, {str(q["holder"]) for q in
                                                                                    snapshot.get("queue", [])}),
-                        sorted({offline[u] for u in views.get(str(w["holder"]), (frozenset(), ()))[0] if u in offline}))
+                        sorted({offline[u] for u in views.get(str(w["holder"]), (frozenset(), ()))[0] if u in offline}
+                               | set((shelved or {}).get(str(w["holder"]), ()))))
              for w in snapshot.get("queue", [])]
     robot_of: dict[str, set[str]] = {}
     for agg in aggregates.values():
@@ -459,7 +462,7 @@ class Controller:
         rcm = self.executive.broker.rcm
         hosts = self._host_states() if self._host_states is not None else {}
         return resources_reply(rcm.snapshot(), self.cluster.name, self.me, self.membership.pending(self.clock.now()),
-                               hosts, rcm.waiters())
+                               hosts, rcm.waiters(), rcm.shelf_waiters())
 
     def close(self) -> None:
         self._queryable.close()

@@ -175,6 +175,22 @@ class ResourceManager:
         if found:
             self._shelf[host] = found
 
+    def shelf_waiters(self) -> dict[str, list[str]]:
+        """Holder -> the hosts on the shelf (down, or not joined) whose resources could serve that waiter: it waits
+        for them too, as for the holders in its way (faults audit 21, #2: `status` named only the holder of the
+        other Ranger while the host down was what it waited for). Read-only, for `missionctl status`."""
+        if not self._shelf or not self._queue.waits:
+            return {}
+        found: dict[str, list[str]] = {}
+        for host, resources in sorted(self._shelf.items()):
+            ids, reg = {c.id for c in resources}, self._reg.including(resources)
+            for holder in self._queue.order():
+                wait = self._queue.waits[holder]
+                alts, _ = reg.alternatives(wait.request.needs, wait.given, self.max_alternatives)
+                if any(c.id in ids for alt in alts for c in alt.chosen.values()):
+                    found.setdefault(holder, []).append(host)
+        return found
+
     def shelved(self, rid: str) -> Candidate | None:
         """A resource on the shelf by id (its host is down or not joined), or None: the `where` of a need only it
         would meet reads it (`scout.carrier.id == "ranger2"` while ranger2's host is down: cluster audit 20, #5)."""

@@ -391,6 +391,12 @@ class Interpreter:
         return out
 
     # ------------------------------------------------------------- entering
+    def settle(self) -> None:
+        """Run to completion what entries made outside one left to do (a failure as a component started, an event),
+        unless a step or a run to completion is under way (it will)."""
+        if not (self._holding or self._settling or self._stepping) and self.root is not None:
+            self._settle()
+
     def _entered(self, work: Callable[[], object]) -> None:
         """Do `work` (entries made outside a run to completion), then deliver what it emitted. An event emitted as
         a parallel's first child is entered (its start action) is heard by the siblings entered after it, as

@@ -434,12 +434,15 @@ def test_a_host_a_call_found_silent_is_granted_to_no_one_until_it_reports_again(
         decided: list[object] = []
         broker.attach(decided.extend)
         broker.request(Request("m/b", 1, need), clocks.sim.now())  # waits: the one Camera is m/a's
+        view = ctl.controller.resources()  # ranger2 never joined: its Camera would serve m/b (faults audit 21, #2)
+        assert [(w.holder, [b.holder for b in w.blocked_by], w.offline) for w in view.queue] == [
+            ("m/b", ["m/a"], ["ranger2"])]
         ctl.controller.apply_offline("ranger1")  # a call to ranger1 did not answer; the view still has it up
         assert ctl.view.state("ranger1") is HostState.UP and ctl.events[-1].kind == "resources-offline"
         broker.release("m/a", clocks.sim.now())  # the holder the call failed
         assert not [d for d in decided if type(d).__name__ == "Granted"], decided
         view = ctl.controller.resources()  # what `missionctl status` and `resources` are told
-        assert [(w.holder, w.offline) for w in view.queue] == [("m/b", ["ranger1"])]
+        assert [(w.holder, w.offline) for w in view.queue] == [("m/b", ["ranger1", "ranger2"])]
         assert {u.id for u in view.units if u.offline} == {u.id for u in view.units if u.host == "ranger1"} != set()
         clocks.sim.advance(0.3)
         daemons["ranger1"].step()  # its next load report
