@@ -544,7 +544,10 @@ class RemoteComponent(Component):
         self._apply(reply)
         if reply.error:
             self._failed = reply.error
-            raise ComponentError(reply.error)
+            sim = self.router.simulator
+            if sim and self.router.dead(sim):  # its reading found the world gone (a BusTimeout on the simulator's
+                raise ComponentError(host_down_reason(sim, simulator=True))  # key): the dry-run's words (faults
+            raise ComponentError(reply.error)  # audit 21, #1)
         return step_status(reply.status, self.name) if reply.status else Status.RUNNING  # one rule in both modes
 
     def _step_placed(self, now: float) -> ComponentReply:

@@ -400,3 +400,25 @@ def test_a_call_that_fails_as_its_host_is_seen_down_says_so_in_the_dry_runs_word
     hosts.silent.add("a")
     with pytest.raises(HostDown, match="^host a is down: the component cannot run there$"):
         comp.step(0.1)
+
+
+def test_a_step_that_failed_as_the_simulators_host_went_down_says_the_world_is_gone() -> None:
+    """Faults audit 21, #1: a camera reading of a leaf on a worker found the simulator gone with its host, and the
+    leaf failed with `component raised BusTimeout: no reply on 'drd/<cluster>/sim' ... (at observe.py:49, in
+    step)`, naming no host, where the dry-run says the world is gone."""
+    from drd.runtime.ownership import Binding
+
+    hosts = Hosts(LocalBus(), ["a", "b"], ["a", "b"])
+    router = ComponentRouter(hosts.bus, "t", {"a.camera": "a"}, "controller", local={}, mission="m",
+                             world="corridor", timeout=0.05, dead=lambda h: h in hosts.dead, place=hosts.place)
+    router.simulator = "s"
+    comp = RemoteComponent("Observe", router)
+    comp.setup(Context("M/O", {}, {}, lambda ev, **f: None, lambda s: None, lambda: 0.0,
+                       bindings={"camera": Binding("camera", "a.camera", "M")}))
+    comp.start()
+    hosts.killed["a"] = "component raised BusTimeout: no reply on 'drd/t/sim': nothing answers there now"
+    with pytest.raises(ComponentError, match="BusTimeout"):  # the simulator's host is not seen down: as it is
+        comp.step(0.1)
+    hosts.dead.add("s")
+    with pytest.raises(ComponentError, match="^host s is down: it ran the simulator, so the world is gone$"):
+        comp.step(0.2)
