@@ -86,7 +86,7 @@ from drd.cluster.workers import (
     device_methods,
     scheduling_of,
 )
-from drd.errors import ComponentFailure, raised
+from drd.errors import ComponentFailure, HardwareFailure, raised
 from drd.hosts import Cluster, Role
 from drd.hw.commands import spec_of
 from drd.profiling import Sampler
@@ -458,7 +458,12 @@ class Creator:
         logged and skipped: the gates keep what they had)."""
         if not ops:
             return
-        self._drivers_for(world, generation)
+        try:
+            self._drivers_for(world, generation)
+        except HardwareFailure as e:  # a world no longer run (the simulator's host restarted): its gates are moot
+            log.warning("creator %s: %d gate operations of world %s (generation %d) not applied: %s", self.host,
+                        len(ops), world, generation, e)  # one line, not a handler's traceback (faults audit 21, #5)
+            return
         gates = self._gates
         for op in ops:
             try:

@@ -156,3 +156,26 @@ def test_a_new_world_closes_the_last_worlds_guard_and_keeps_nothing_of_it(cluste
     del creator
     gc.collect()
     assert built[-1]() is None  # no thread kept the closed Creator's world
+
+
+def test_gate_operations_of_a_world_no_longer_run_are_dropped_with_one_line(cluster: Cluster, catalog: Catalog,
+                                                                          caplog: pytest.LogCaptureFixture) -> None:
+    """Faults audit 21, #5: the simulator's host restarted (no world runs there); the controller's gate operations
+    of the ended world raised in the Creator's handler (its drivers cannot be built), a traceback each time, and the
+    controller logged them not delivered. They are moot: dropped, said in one line."""
+    from drd.hw.drivers import DriverError
+
+    def make(world: str) -> Drivers:
+        raise DriverError("no simulation is running (the controller resets it when a mission starts)")
+
+    pool: Any = Pool()
+    creator = Creator(None, cluster, "ranger1", catalog, pool=pool, drivers=make)
+    try:
+        with caplog.at_level("WARNING", logger="drd.cluster.creator"):
+            reply = creator.update_gates(watch(1))
+        assert reply.records == []
+        assert [r.getMessage() for r in caplog.records] == [
+            "creator ranger1: 1 gate operations of world corridor (generation 1) not applied: no simulation is running"
+            " (the controller resets it when a mission starts)"]
+    finally:
+        creator.close()
