@@ -771,9 +771,11 @@ class WorldRun:
             records = runner.take_pending(self)
             with runner.lock:
                 deliver(records, runner.controller.executive.record, runner.telemetry.seen)
-                for mid in self._unfinished():  # they cannot go on: fail them saying why (not "lost r (expired)")
-                    runner.controller.executive.missions[mid].stop(frozen_reason(away),
-                                                                   outcome="failure")
+                from drd.runtime.interpreter import stop_together  # the runtime: only on the controller
+
+                executive = runner.controller.executive  # they cannot go on: fail them saying why (not "lost r
+                stop_together([executive.missions[mid] for mid in self._unfinished()],  # (expired)"), together: none
+                              frozen_reason(away), "failure")  # is granted what another's failure gives back
         return time.monotonic()
 
     def _cycle(self, sim_time: float) -> float | None:
@@ -802,8 +804,10 @@ class WorldRun:
             sim = runner.simulator or ""
             why = (host_down_reason(sim, simulator=True) if sim and runner.host_down(sim)  # the dry-run's words
                    else f"the simulator on {sim} stopped answering: {self.cycle.sim_error}")
-            for mid in self._unfinished():  # the world is gone: a failure, as when a component finds it gone first
-                executive.missions[mid].stop(why, "failure")
+            from drd.runtime.interpreter import stop_together  # the runtime: only on the controller
+
+            stop_together([executive.missions[mid] for mid in self._unfinished()], why,  # the world is gone: a failure,
+                          "failure")  # as when a component finds it gone first; none granted what another gives back
             return None
         sim_time = self.cycle.sim_time
         runner.clock.set_sim(sim_time)

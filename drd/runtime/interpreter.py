@@ -1377,7 +1377,8 @@ def _violation_fields(a: Active, m: Measure) -> dict[str, Any]:
     return {"name": a.name, "resource": ", ".join(a.robots), "value": known(m.value), "limit": known(m.limit)}
 
 
-def stop_together(missions: Iterable[Interpreter], reason: str) -> None:
+def stop_together(missions: Iterable[Interpreter], reason: str,
+                  outcome: Literal["stopped", "failure"] = "stopped") -> None:
     """Stop several missions sharing a manager as one stop: first every request of theirs the manager may still
     grant is withdrawn, the worst placed first (a withdrawn waiter frees only what it claimed ahead of those behind
     it, withdrawn already), then each stops. One at a time, a stop's releases were granted to (and entered states
@@ -1390,7 +1391,7 @@ def stop_together(missions: Iterable[Interpreter], reason: str) -> None:
             m, node = requests[holder]
             m.withdraw(node)
     for m in live:
-        m.stop(reason)
+        m.stop(reason, outcome)
 
 
 def describe_devices(pool: ResourcePool) -> tuple[dict[str, str], dict[str, str]]:

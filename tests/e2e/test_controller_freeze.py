@@ -11,7 +11,16 @@ from collections.abc import Iterator
 
 import pytest
 
-from tests.cluster_support import LEASE, DaemonCluster, corridor_hosts, eventually, serving_cluster
+from tests.cluster_support import (
+    LEASE,
+    MISSIONCTL,
+    DaemonCluster,
+    corridor_hosts,
+    eventually,
+    read_trace,
+    running,
+    serving_cluster,
+)
 
 pytest.importorskip("zenoh", reason="eclipse-zenoh is not installed")
 
@@ -72,13 +81,26 @@ def test_a_mission_of_a_controller_frozen_past_the_lease_fails_saying_so(cluster
         return found[0] if found else {}
 
     eventually(lambda: mission().get("time", 0) > 1.0, "the mission to run", 30, explain=lambda: cluster.tails())
-    pid = cluster.pid("controller")
-    os.kill(pid, signal.SIGSTOP)
-    try:
-        time.sleep(FREEZE)
-    finally:
-        os.kill(pid, signal.SIGCONT)
-    eventually(lambda: mission().get("outcome") is not None, "the mission to end", 30, explain=lambda: cluster.tails())
+    # a waiter for the Ranger (faults audit 21, #4): the holder's failure must not hand it the Ranger before its own
+    (folder / "wait.mission").write_text("mission WaitFor priority 2 {\n    needs r: Ranger\n"
+                                         "    Observe(duration: 5s)\n}\n")
+    trace = folder / "wait.jsonl"
+    cmd = [*MISSIONCTL, "run", str(folder / "wait.mission"), *config, "--json", "--trace", str(trace)]
+    with running(cmd) as waiter:
+        eventually(lambda: trace.exists() and any(r["kind"] == "waiting" for r in read_trace(trace)),
+                   "the waiter to wait", 30, explain=lambda: cluster.tails())
+        pid = cluster.pid("controller")
+        os.kill(pid, signal.SIGSTOP)
+        try:
+            time.sleep(FREEZE)
+        finally:
+            os.kill(pid, signal.SIGCONT)
+        eventually(lambda: mission().get("outcome") is not None, "the mission to end", 30,
+                   explain=lambda: cluster.tails())
+        out, _ = waiter.communicate(timeout=60)
     ended = mission()
     assert ended["outcome"] == "failure", ended
     assert str(ended["reason"]).startswith("ControllerFrozen: this controller was frozen for"), ended
+    assert json.loads(out)["reason"].startswith("ControllerFrozen: "), out[-1000:]
+    assert [r["kind"] for r in read_trace(trace) if r["kind"] in ("granted", "entered")] == ["entered"], \
+        "the waiter failed as it waited, granted nothing"  # its root entered at its start, nothing after
