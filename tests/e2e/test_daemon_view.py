@@ -349,16 +349,23 @@ class Clocks:
         return 1_000_000.0 + self.sim.now()
 
 
-def test_daemons_on_a_local_bus_see_each_other_and_the_controller_follows(cluster: Cluster,
-                                                                          catalog: Catalog) -> None:
+def started(cluster: Cluster, catalog: Catalog, clocks: Clocks) -> tuple[LocalNetwork, dict[str, Daemon]]:
+    """The controller's and ranger1's daemons on a LocalBus, started and stepped once (what starting made due is
+    published: announcements to the newcomer); ranger2 is never started."""
     net = LocalNetwork()
-    clocks = Clocks()
     daemons = {h: Daemon(DaemonConfig(cluster, h, catalog, load_period=0.25), net.session(h), clock=clocks.mono,
                          wall=clocks.wall, controller_clock=clocks.sim) for h in ("controller", "ranger1")}
     for d in daemons.values():
         d.start()
     for d in daemons.values():
-        d.step()  # publishes what starting made due (announcements to the newcomer)
+        d.step()
+    return net, daemons
+
+
+def test_daemons_on_a_local_bus_see_each_other_and_the_controller_follows(cluster: Cluster,
+                                                                          catalog: Catalog) -> None:
+    clocks = Clocks()
+    net, daemons = started(cluster, catalog, clocks)
     ctl = daemons["controller"]
     try:
         assert ctl.view.up() == ["controller", "ranger1"]
@@ -417,14 +424,8 @@ def test_a_host_a_call_found_silent_is_granted_to_no_one_until_it_reports_again(
     (`ComponentRouter(on_down=Controller.apply_offline)`) ends its holder, whose robot must go to no waiter then
     (CI: granted in that instant, the waiter failed at once); its next load report, through the daemon, brings it
     back. Asserted from the manager's decisions."""
-    net = LocalNetwork()
     clocks = Clocks()
-    daemons = {h: Daemon(DaemonConfig(cluster, h, catalog, load_period=0.25), net.session(h), clock=clocks.mono,
-                         wall=clocks.wall, controller_clock=clocks.sim) for h in ("controller", "ranger1")}
-    for d in daemons.values():
-        d.start()
-    for d in daemons.values():
-        d.step()
+    _, daemons = started(cluster, catalog, clocks)
     ctl = daemons["controller"]
     try:
         assert ctl.controller is not None and ctl.view.state("ranger1") is HostState.UP
