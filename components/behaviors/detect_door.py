@@ -16,7 +16,17 @@ import math
 import re
 from typing import Any
 
-from components.behaviors.scan import SAME_LINE, Openings, ScanMemo, along, corridor, expected, wall_across, wrap
+from components.behaviors.scan import (
+    SAME_LINE,
+    Openings,
+    ScanMemo,
+    Wall,
+    along,
+    corridor,
+    expected,
+    wall_across,
+    wrap,
+)
 from drd.hw.interfaces import Scan
 from drd.runtime.component import Component, Status
 
@@ -31,6 +41,9 @@ LEAVE = 0.5
 #: How long (s) a wall across may stand before a Ranger that has not left it yet ends the search all the same: turning
 #: away takes FollowCorridor a few seconds; one that stands there did not (it ended, and the search stood for ever).
 SETTLE = 20.0
+#: How much (m) the corridor's width (left + right wall) may change from scan to scan while the Ranger keeps to its
+#: line, and for how many scans in a row a changed width is taken for something beside the Ranger.
+WIDTH_SLACK, SETTLE_SCANS = 0.25, 20
 #: A maximal run of beams through the wall with a beam at the wall on both sides.
 _GAP = re.compile(r"(?<=w)s{0,8}b+s{0,8}(?=w)")
 
@@ -103,11 +116,44 @@ def find_gaps(scan: Any, min_width: float, expect: tuple[float | None, float | N
     return out
 
 
+def same_width(walls: tuple[Wall | None, Wall | None], expect: tuple[float | None, float | None],
+               width: float | None, odd: int) -> tuple[tuple[Wall | None, Wall | None], float | None, int]:
+    """The two fits, less one that changes the corridor's width (left + right): something beside the Ranger, not its
+    wall; with the width and the count of such scans in a row after this one. An object coming close on one side
+    dragged that side's expected distance along, each fit within `jump` of the last, until the real wall was
+    rejected for good and no door on that side was seen (the ROS 2 cluster run missed the door at x = 23). A width
+    that stays changed for `SETTLE_SCANS` scans is the corridor's. Pure."""
+    left, right = walls
+    if left is None or right is None:
+        return walls, width, odd
+    now = left.distance + right.distance
+    if width is None or odd >= SETTLE_SCANS:  # kept, not followed: a slow drag would move it too
+        return walls, now, 0
+    if abs(now - width) <= WIDTH_SLACK:
+        return walls, width, 0
+    moved = [abs(w.distance - e) if e is not None else 0.0 for w, e in ((left, expect[0]), (right, expect[1]))]
+    return ((left, None) if moved[0] <= moved[1] else (None, right)), width, odd + 1  # the one that moved less
+
+
+def across(walls: tuple[Wall | None, Wall | None], expect: tuple[float | None, float | None],
+           width: float | None) -> tuple[float | None, float | None]:
+    """The last known distances, but a side whose wall was not seen is expected across the corridor from the other
+    one when the width is known: an expectation gone astray comes back. Pure."""
+    left, right = walls
+    if width is None or (left is None) == (right is None):
+        return expect
+    if left is None and right is not None:
+        return width - right.distance, expect[1]
+    return expect[0], width - left.distance if left is not None else expect[1]
+
+
 class DetectDoor(Component):
     """Succeeds with output `door` (odometry coordinates) and event DoorDetected on a new open door."""
 
     def start(self) -> None:
         self.expect: tuple[float | None, float | None] = (None, None)
+        self.width: float | None = None  # the corridor's width (left + right), while on its line
+        self.odd = 0  # scans in a row whose two walls gave another width
         self.memo = ScanMemo()  # what the scan helpers derive from this cycle's scan
         self.openings = Openings()  # an L's or a T's corner is no end: FollowCorridor turns there
         self.origin: tuple[float, float] | None = None  # where it started (odometry), once known
@@ -143,8 +189,10 @@ class DetectDoor(Component):
         not by turn rate: a rate per step depends on how often it is stepped (on a cluster a door was missed)."""
         heading = pose[2] if pose is not None else None
         if heading is not None and (self.heading is None or abs(wrap(heading - self.heading)) > SAME_LINE):
-            self.heading, self.expect = heading, (None, None)
-        return expected(corridor(scan, self.expect, memo=self.memo), self.expect)
+            self.heading, self.expect, self.width, self.odd = heading, (None, None), None, 0
+        walls, self.width, self.odd = same_width(corridor(scan, self.expect, memo=self.memo), self.expect,
+                                                 self.width, self.odd)
+        return expected(walls, across(walls, self.expect, self.width))
 
     def step(self, now: float) -> Status:
         min_width = float(self.ctx.params["min_width"])

@@ -110,3 +110,23 @@ def test_a_door_into_a_narrow_room_is_found(room: float) -> None:
              ((x0, h), (x0, h + 4)), ((x1, h), (x1, h + 4)), ((x0, h + 4), (x1, h + 4))]
     gaps = find_gaps(cast(walls), 0.7, (h, h))
     assert len(gaps) == 1 and gaps[0]["width"] == pytest.approx(door, abs=0.15), gaps
+
+
+def test_an_object_beside_the_ranger_does_not_drag_the_expected_wall_and_a_lost_one_comes_back() -> None:
+    """The ROS 2 cluster run missed a door: something came close on the Ranger's left, the left wall's expected
+    distance followed it (1.25 -> 0.34 -> 0.19 m, each fit within the jump of the last), and the real wall was then
+    rejected at every scan. Fits that change the corridor's width are of something beside it; a side not seen is
+    expected across the corridor from the other."""
+    from components.behaviors.detect_door import SETTLE_SCANS, across, same_width
+    from components.behaviors.scan import Wall, expected
+
+    expect: tuple[float | None, float | None] = (1.25, 1.25)
+    width, odd = None, 0
+    right = Wall(1.25, 0.0, 40)
+    for left_at in (1.25, 1.25, 0.95, 0.7, 0.45, 0.3):  # the corridor, then an object closing in on the left
+        walls, width, odd = same_width((Wall(left_at, 0.0, 30), right), expect, width, odd)
+        expect = expected(walls, across(walls, expect, width))
+    assert expect == (1.25, 1.25) and width == 2.5 and odd == 4
+    assert across((None, Wall(1.1, 0.0, 40)), (0.19, 1.25), 2.5) == (1.4, 1.25)  # an expectation gone astray
+    walls, width, odd = same_width((Wall(2.25, 0.0, 30), right), expect, 2.5, SETTLE_SCANS)
+    assert walls[0] is not None and width == 3.5 and odd == 0  # a wider corridor, for long enough: the corridor's
