@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 import subprocess
 from pathlib import Path
+from typing import Any, cast
 
 import pytest
 
@@ -268,11 +269,9 @@ def test_a_need_through_the_carrier_of_a_host_down_is_told_that_the_host_is_down
         "mission Late {\n    plan {\n        Pause < TakeScout\n    }\n}\n\n"
         "behavior Pause {\n    Wait(duration: 10s)\n}\n\n"
         'behavior TakeScout {\n    needs s: Scout where s.carrier.id == "ranger2"\n    Wait(duration: 2s)\n}\n')
-    r = subprocess.run(["missionctl", "dry-run", str(tmp_path / "late.mission"), "--config",
-                        str(ROOT / "hosts.two_rangers.yaml"), "--json", "--inject", "kill ranger2 at 2s"],
-                       cwd=ROOT, capture_output=True, text=True, timeout=300, check=False)
-    assert r.returncode == 1, r.stderr[-2000:]
-    report = json.loads(r.stdout)
+    code, report, err = dry_run(str(tmp_path / "late.mission"), "--config", str(ROOT / "hosts.two_rangers.yaml"),
+                                "--inject", "kill ranger2 at 2s")
+    assert code == 1, err[-2000:]
     assert report["reason"] == ("resource need s can never be satisfied: no Scout satisfies the constraint while host"
                                 " ranger2 is down (its resources are not in the manager)"), report["reason"]
 
@@ -283,14 +282,12 @@ def test_a_host_killed_at_0s_is_down_before_the_first_grants(tmp_path: Path) -> 
     restart."""
     (tmp_path / "hold.mission").write_text('mission HoldTwo {\n    needs ranger: Ranger where ranger.id == "ranger2"\n'
                                            "    Observe(duration: 5s)\n}\n")
-    r = subprocess.run(["missionctl", "dry-run", str(tmp_path / "hold.mission"), "--config",
-                        str(ROOT / "hosts.two_rangers.yaml"), "--json", "--inject", "kill ranger2 at 0s",
-                        "--inject", "restart ranger2 at 2s"], cwd=ROOT, capture_output=True, text=True, timeout=300,
-                       check=False)
-    report = json.loads(r.stdout)
-    assert report["outcome"] == "success", report["reason"]
-    assert [(h["from"], h["ended"]) for h in report["holds"]] == [(2.0, "exited")], report["holds"]
-    assert [i["at"] for i in report["injections"]] == [0.0, 2.0], report["injections"]
+    code, report, err = dry_run(str(tmp_path / "hold.mission"), "--config", str(ROOT / "hosts.two_rangers.yaml"),
+                                "--inject", "kill ranger2 at 0s", "--inject", "restart ranger2 at 2s")
+    holds, injections = cast(list[dict[str, Any]], report["holds"]), cast(list[dict[str, Any]], report["injections"])
+    assert (code, report["outcome"]) == (0, "success"), (report.get("reason"), err[-2000:])
+    assert [(h["from"], h["ended"]) for h in holds] == [(2.0, "exited")], holds
+    assert [i["at"] for i in injections] == [0.0, 2.0], injections
 
 
 def test_a_controller_restarted_waits_for_the_hosts_with_devices_as_drd_start_does(tmp_path: Path) -> None:
