@@ -301,7 +301,8 @@ def test_a_batch_runs_in_one_round_trip_per_process_and_stops_at_an_event(creato
     replies = creator.handle_batch(ComponentBatch(calls)).replies
     assert len(replies) == 4  # stopped after M/C's event: M/D is stepped by a later call
     assert [(r.shared or {}).get("log") for r in replies[:3]] == [["M/A"], ["M/A", "M/B"], ["M/A", "M/B", "M/X"]]
-    assert replies[3].events == [["Seen", {"at": 2.0}]]
+    assert replies[3].events == [["Seen", {"at": 2.0}, "tests/e2e/test_workers.py:60, in step"]]  # with where it
+    # was emitted, for a refusal on the controller to name (users audit 21, #3)
 
 
 def test_after_losing_its_controller_a_host_answers_that_it_runs_no_such_instance(creator: Creator) -> None:
