@@ -28,6 +28,7 @@ from drd.inject import Action, Injection
 from drd.record import Recorder
 from drd.restart import ControllerLife
 from drd.runtime import records as rec
+from drd.runtime.interpreter import stop_together
 from drd.runtime.trace import TraceWriter
 from drd.sim.model import DoorState
 from drd.sim.physics import Simulation
@@ -581,9 +582,8 @@ def _inject(inj: Injection, sim: Simulation, life: ControllerLife, cluster: Clus
 
 def _world_lost(executive: Executive | None, host: str) -> None:
     """The simulator's host died: every mission still running fails with a cluster's words."""
-    for interp in list(executive.missions.values()) if executive is not None else ():
-        if not interp.finished:
-            interp.stop(host_down_reason(host, simulator=True), outcome="failure")
+    if executive is not None:  # together: none is granted what another's failure gives back, as on a cluster
+        stop_together(list(executive.missions.values()), host_down_reason(host, simulator=True), "failure")
 
 
 def _halt_host_robots(sim: Simulation, cluster: Cluster, host: str) -> list[str]:
@@ -629,12 +629,7 @@ class _Injections:
                     self.killed[host]["effect"] += f"; at {sim.time:.1f} s its resources left the manager"
         while self.pending and self.pending[0].at <= sim.time + 1e-9:
             before = (life.takeover, life.resuming)
-            inj = self.pending.pop(0)
-            effect = _inject(inj, sim, life, self.cluster, self.pending, self.leaving)
-            if inj.target in self.leaving:
-                self.killed[inj.target] = effect
-            for result in self.results:
-                result.injections.append(effect)
+            effect = self._apply(self.pending.pop(0))
             if (life.takeover, life.resuming) != before and (life.takeover or life.resuming) is not None:
                 self.electing = effect  # it says when the standby took over, or the controller resumed
         taken = life.tick(sim.time)
@@ -649,12 +644,16 @@ class _Injections:
             inj = self.pending[0]
             if inj.action in (Action.KILL, Action.RESTART) and Role.CONTROLLER in self.cluster.host(inj.target).roles:
                 return
-            self.pending.pop(0)
-            effect = _inject(inj, self.sim, self.life, self.cluster, self.pending, self.leaving)
-            if inj.target in self.leaving:
-                self.killed[inj.target] = effect
-            for result in self.results:
-                result.injections.append(effect)
+            self._apply(self.pending.pop(0))
+
+    def _apply(self, inj: Injection) -> dict[str, Any]:
+        """Apply one injection now; its row, added to every report (and kept as its host's kill)."""
+        effect = _inject(inj, self.sim, self.life, self.cluster, self.pending, self.leaving)
+        if inj.target in self.leaving:
+            self.killed[inj.target] = effect
+        for result in self.results:
+            result.injections.append(effect)
+        return effect
 
     def left_over(self) -> None:
         """The missions ended first: say so of those never applied, rather than drop them without a word."""

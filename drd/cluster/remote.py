@@ -324,12 +324,17 @@ class ComponentRouter:
         except Exception as e:
             self.sim_error = e
             sim = self.simulator
-            if sim and self.is_down(sim):  # the first words a leaf fails with name the host, as the mission's do
-                raise ComponentError(host_down_reason(sim, simulator=True)) from None
-            raise ComponentError(f"the simulator{f' on host {sim}' if sim else ''} did not step: {e}") from None
+            raise ComponentError(self.world_gone() or  # the first words a leaf fails with name the host
+                                 f"the simulator{f' on host {sim}' if sim else ''} did not step: {e}") from None
         self.steps_alone.add("simulator", time.perf_counter() - t0)
         self.sim_time, self.sim_version = reply.time, reply.version
         return 0.0
+
+    def world_gone(self) -> str | None:
+        """Why every component of this world fails, in the dry-run's words, when the simulator's host is seen down
+        (or taken for gone by this mission); None otherwise."""
+        sim = self.simulator
+        return host_down_reason(sim, simulator=True) if sim and self.is_down(sim) else None
 
     def implements(self, component: str) -> bool:
         """Whether an instance of `component` can be started: with a placer and a catalog, its manifest names an
@@ -544,10 +549,8 @@ class RemoteComponent(Component):
         self._apply(reply)
         if reply.error:
             self._failed = reply.error
-            sim = self.router.simulator
-            if sim and self.router.dead(sim):  # its reading found the world gone (a BusTimeout on the simulator's
-                raise ComponentError(host_down_reason(sim, simulator=True))  # key): the dry-run's words (faults
-            raise ComponentError(reply.error)  # audit 21, #1)
+            raise ComponentError(self.router.world_gone() or reply.error)  # a reading that found the world gone
+            # (a BusTimeout on the simulator's key) says the dry-run's words (faults audit 21, #1)
         return step_status(reply.status, self.name) if reply.status else Status.RUNNING  # one rule in both modes
 
     def _step_placed(self, now: float) -> ComponentReply:
