@@ -28,6 +28,7 @@ from rich.text import Text
 from typer.core import TyperCommand
 from typer.models import CommandInfo, OptionInfo
 
+from drd.cli.arrivals import SignalArrivals
 from drd.cli.common import (
     INVALID,
     OK,
@@ -771,18 +772,20 @@ def _interrupt_once() -> Iterator[list[float]]:
     done, and one raised while the report is printed or the trace closed escaped every handler (the client died of
     SIGINT, exit -2). Python runs the handler when the main thread is back from a blocking call, so the second
     delivery of one Ctrl-C, held through the stop's call on a busy machine, could run it more than `SAME_INTERRUPT`
-    after the first. Yields the times of the interrupts taken (a caller that raised one itself, held while it could
-    not be, adds its time)."""
+    after the first: what is compared is when each came (`SignalArrivals`). Yields the times of the interrupts taken
+    (a caller that raised one itself, held while it could not be, adds its time)."""
     first: list[float] = []
     ended: list[bool] = []
 
     def interrupted(signum: int, frame: FrameType | None) -> None:
-        if ended or first and time.monotonic() - first[0] < SAME_INTERRUPT:
+        came = arrivals.take()  # when it came, not when this runs
+        if ended or first and came[-1] - first[0] < SAME_INTERRUPT:
             return
-        first.append(time.monotonic())
+        first.append(came[-1] if first else came[0])
         raise KeyboardInterrupt
 
-    with _signal_handled(signal.SIGINT, interrupted, kept=lambda: bool(first)):
+    with SignalArrivals(signal.SIGINT) as arrivals, \
+            _signal_handled(signal.SIGINT, interrupted, kept=lambda: bool(first)):
         try:
             yield first
         finally:

@@ -4,7 +4,10 @@ first interrupt raises, its second delivery within the window is ignored, and on
 
 from __future__ import annotations
 
+import ctypes
 import signal
+import threading
+import time
 from collections.abc import Iterator
 
 import pytest
@@ -43,3 +46,42 @@ def test_without_an_interrupt_the_previous_handler_comes_back() -> None:
     with cluster._interrupt_once():
         assert signal.getsignal(signal.SIGINT) is not before
     assert signal.getsignal(signal.SIGINT) is before
+
+
+def test_a_second_delivery_whose_handler_runs_late_is_still_the_same_ctrl_c() -> None:
+    """The stop's call blocks the main thread (a C call, here libc's usleep) while the second delivery comes, 0.1 s
+    after the first, to another thread: its handler runs only after the call, 2 s on. What counts is when it came."""
+    libc = ctypes.CDLL(None)
+    with cluster._interrupt_once() as taken:
+        sent = threading.Event()
+
+        def deliver_twice() -> None:
+            signal.pthread_kill(threading.get_ident(), signal.SIGINT)  # to this thread: the main one is not woken
+            sent.set()
+            time.sleep(0.1)
+            signal.pthread_kill(threading.get_ident(), signal.SIGINT)
+
+        sender = threading.Thread(target=deliver_twice)
+        with pytest.raises(KeyboardInterrupt):
+            sender.start()
+            while True:  # back in the interpreter every millisecond: the first's handler runs at once
+                time.sleep(0.001)
+        sender_done = sent.wait(5.0)
+        try:
+            libc.usleep(2_000_000)  # the stop's call: the second's handler waits for it to return
+            time.sleep(0.01)  # back in the interpreter: the second's handler has run
+        except KeyboardInterrupt:
+            pytest.fail("the second delivery of one Ctrl-C, handled 2 s after the first, was taken for another")
+        sender.join()
+    assert sender_done and len(taken) == 1
+
+
+def test_a_ctrl_c_pressed_again_later_still_raises() -> None:
+    """The window is from when the first came: a press a window later is the operator's second."""
+    with cluster._interrupt_once() as taken:
+        with pytest.raises(KeyboardInterrupt):
+            signal.raise_signal(signal.SIGINT)
+        time.sleep(cluster.SAME_INTERRUPT + 0.1)
+        with pytest.raises(KeyboardInterrupt):
+            signal.raise_signal(signal.SIGINT)
+    assert len(taken) == 2 and taken[1] - taken[0] >= cluster.SAME_INTERRUPT
