@@ -175,6 +175,18 @@ DOOR_COLOURS = {DoorState.OPEN: "#2e9e44", DoorState.CLOSED: "#d32f2f", DoorStat
 RANGER_COLOUR, SCOUT_COLOUR, INTRUDER_COLOUR, WALL_COLOUR = "#1f4e9c", "#f28e2b", "#c2185b", "#1d2330"
 
 
+class Twins:
+    """One channel in two contexts, the file's and the live view's: what is logged goes to both (`live` alone: what
+    a late viewer is sent again)."""
+
+    def __init__(self, file: Any, live: Any) -> None:
+        self.file, self.live = file, live
+
+    def log(self, message: Any, *, log_time: int) -> None:
+        self.file.log(message, log_time=log_time)
+        self.live.log(message, log_time=log_time)
+
+
 class Recorder:
     """Writes one run into `path` (None: no file) and serves it live on `serve` (host, port; None: not served):
     `scene` and `watch` once, `record` for each trace record, `poses` each control cycle, `end` once."""
@@ -185,6 +197,9 @@ class Recorder:
         from foxglove.mcap import MCAPCompression, MCAPWriteOptions
 
         self.path, self.context = path, foxglove.Context()  # this run's own: several recorders may coexist
+        # the live view's own when there is a file too: what is sent again to a viewer that joins late must not go
+        # into the file (the SDK logs to every sink of a context, and its Python API gives no sink's id)
+        self.live_context = foxglove.Context() if path is not None and serve is not None else self.context
         self.writer: Any = None
         self.server: Any = None
         if path is not None:
@@ -210,11 +225,11 @@ class Recorder:
         self.channels: dict[str, Any] = {topic: self._json_channel(topic) for topic in JSON_SCHEMAS}
         self.lock = threading.Lock()
         self.viewers = 0  # subscriptions of the live view's clients (`close` lets them have the last messages)
-        self.tf = FrameTransformsChannel(TF, context=self.context)
-        self.world = SceneUpdateChannel(WORLD, context=self.context)
-        self.trails = SceneUpdateChannel(TRAILS, context=self.context)
-        self.seen = SceneUpdateChannel(SEEN, context=self.context)
-        self.log = LogChannel(LOG, context=self.context)
+        self.tf = self._made(lambda context: FrameTransformsChannel(TF, context=context))
+        self.world = self._made(lambda context: SceneUpdateChannel(WORLD, context=context))
+        self.trails = self._made(lambda context: SceneUpdateChannel(TRAILS, context=context))
+        self.seen = self._made(lambda context: SceneUpdateChannel(SEEN, context=context))
+        self.log = self._made(lambda context: LogChannel(LOG, context=context))
         self.scans: dict[str, Any] = {}
         for robot in robots:  # `robots`: whose laser channels to make now, before the live view starts
             self._scan_channel(robot)
@@ -231,19 +246,27 @@ class Recorder:
         if serve is not None:
             self._serve(*serve)
 
+    def _made(self, make: Callable[[Any], Any]) -> Any:
+        """The channel `make(context)` makes, in the file's context and, when the live view has its own, in that
+        too (`Twins`)."""
+        if self.live_context is self.context:
+            return make(self.context)
+        return Twins(make(self.context), make(self.live_context))
+
     def _json_channel(self, topic: str) -> Any:
         import foxglove
 
         name, schema = JSON_SCHEMAS[topic]
-        return foxglove.Channel(topic, message_encoding="json", context=self.context, schema=foxglove.Schema(
-            name=name, encoding="jsonschema", data=json.dumps(schema).encode()))
+        return self._made(lambda context: foxglove.Channel(
+            topic, message_encoding="json", context=context,
+            schema=foxglove.Schema(name=name, encoding="jsonschema", data=json.dumps(schema).encode())))
 
     def _serve(self, host: str, port: int) -> None:
         """The live view: the Foxglove WebSocket server on `host:port` only, serving this recorder's channels."""
         import foxglove
 
         try:
-            self.server = foxglove.start_server(name="drd", host=host, port=port, context=self.context,
+            self.server = foxglove.start_server(name="drd", host=host, port=port, context=self.live_context,
                                                 server_listener=_late_viewers(self))
         except Exception as e:  # the SDK's own errors: the port is taken, the address is not this machine's
             self.close()
@@ -260,6 +283,13 @@ class Recorder:
 
     def _channel(self, topic: str) -> Any:
         return self.channels[topic]
+
+    def resend(self, topic: str, at: float, message: Any) -> None:
+        """`message` again on `topic`'s channel (`/drd/world`, or a JSON one) for a viewer that joined late: to the
+        live view only, not into the file, which has it already."""
+        channel = self.world if topic == WORLD else self._channel(topic)
+        live = channel.live if isinstance(channel, Twins) else channel
+        live.log(message if topic == WORLD else _json(message), log_time=_ns(at))
 
     def scene(self, world: World, starts: bool = False) -> None:
         """The world as a scene at time 0, and its file as the attachment `world.yaml`, so a replay can draw the
@@ -328,7 +358,7 @@ class Recorder:
         if channel is None:
             with self.lock:  # a cluster run writes from several threads (`drd.cli.cluster._ClusterView`)
                 channel = self.scans.get(robot) or self.scans.setdefault(
-                    robot, LaserScanChannel(SCAN + robot, context=self.context))
+                    robot, self._made(lambda context: LaserScanChannel(SCAN + robot, context=context)))
         return channel
 
     def scan(self, robot: str, at: float, ranges: list[float], max_range: float, fov: float) -> None:
@@ -578,14 +608,14 @@ def _late_viewers(r: Recorder) -> Any:
                 r.viewers += 1
             scene = r.scene_now() if channel.topic == WORLD else None
             if scene is not None:
-                r.world.log(scene, log_time=_ns(r.now))
+                r.resend(WORLD, r.now, scene)
             elif channel.topic == ACTIVE:
                 for view in list(r.views.values()):
                     try:
                         state = view.state(r.now)
                     except RuntimeError:  # the run changed it meanwhile (this is the server's thread): it sends
                         continue  # the next change anyway
-                    r.json(ACTIVE, r.now, state)
+                    r.resend(ACTIVE, r.now, state)
 
     return LateViewers()
 

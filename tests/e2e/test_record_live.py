@@ -164,3 +164,32 @@ def test_a_live_view_that_cannot_be_served_says_where_and_why(tmp_path: Path) ->
 ])
 def test_foxglove_alone_is_loopbacks_default_port(argv: list[str], expected: list[str]) -> None:
     assert live_default(argv) == expected
+
+
+def test_what_a_late_viewer_is_sent_again_is_not_written_into_the_file(tmp_path: Path) -> None:
+    """A viewer that joins after the start is sent the world's scene as it is now (and each active configuration);
+    the file has them already, at their times: a second full scene in it at the join was a message the run never
+    logged (records audit, D4)."""
+    from mcap.reader import make_reader
+
+    port = free_port()
+    with (tmp_path / "stderr").open("wb") as stderr:
+        proc = subprocess.Popen([*MISSIONCTL, "dry-run", str(CORRIDOR), "--config", str(ROOT / "hosts.yaml"),
+                                 "--foxglove", f"127.0.0.1:{port}", "--speed", "2", "--until", "12", "--record",
+                                 "run.mcap"], cwd=tmp_path, stdout=subprocess.DEVNULL, stderr=stderr)
+        try:
+            with connect_when_up(port, proc):  # the view is up; join once the run is well under way
+                time.sleep(2.0)
+            with connect_when_up(port, proc) as ws:
+                got = receive(ws, {"/drd/world": 1, "/drd/tf": 1})
+            proc.wait(timeout=60)
+        finally:
+            proc.kill()
+            proc.wait(timeout=30)
+    [(sent_at, scene), *_] = got["/drd/world"]
+    assert sent_at > 0 and "walls" in {e.id for e in scene.entities}, "the late viewer was sent the whole scene"
+    factory = DecoderFactory()
+    with (tmp_path / "run.mcap").open("rb") as fh:
+        whole = [m.log_time for _s, _c, m, scene in make_reader(fh, decoder_factories=[factory])
+                 .iter_decoded_messages(topics=["/drd/world"]) if "walls" in {e.id for e in scene.entities}]
+    assert whole == [0], "the whole scene is in the file once, at the start"
