@@ -1,9 +1,11 @@
-"""A component call that never returns, in a process that runs components itself (the dry-run): found and ended.
+"""A component call that never returns, in a process that runs components (the dry-run's, a cluster's worker): found
+and ended, so the process and the other components in it go on.
 
-On a cluster each component runs in a worker process, killed when a call does not answer within 0.8 s. The
-dry-run runs every component in its own process, so a step in a busy loop, a `start` blocked on a lock or a
-`sleep(1e9)` held the whole run, with no report, and `--until` (sim time) never came (wedge audit D4). Here a
-thread looks at the main thread's stack every `poll` seconds: the outermost frame of a component's own code (not
+The dry-run runs every component in its own process, so a step in a busy loop, a `start` blocked on a lock or a
+`sleep(1e9)` held the whole run, with no report, and `--until` (sim time) never came (wedge audit D4). A cluster's
+worker (a container shared by a mission's instances on a host) was killed when a call did not answer within 0.8 s,
+failing every instance in it with the stuck one (users audit 22, #1). Here a thread looks at the main thread's
+stack every `poll` seconds: the outermost frame of a component's own code (not
 drd's, not the standard library's: `drd.errors.components_own`) is the call drd made into it. When one such frame
 is still there after `limit` seconds, the main thread is interrupted (a signal, whose handler raises
 `ComponentStuck` there, if that call is still running): the exception leaves the component like any it raises,
@@ -23,6 +25,7 @@ import os
 import signal
 import sys
 import threading
+import time
 from collections.abc import Iterator
 from contextlib import contextmanager
 from types import FrameType
@@ -30,13 +33,17 @@ from types import FrameType
 from drd import runtime
 from drd.errors import ComponentStuck, components_own
 
-#: Wall seconds a component call may run in the dry-run before it is interrupted (a cluster's worker: 0.8 s).
+#: Wall seconds a component call may run in the dry-run before it is interrupted.
 STUCK_AFTER = 5.0
+#: The same in a cluster's worker: below the 0.8 s after which the Creator kills a worker that does not answer
+#: (`drd.cluster.workers.CALL_TIMEOUT`), which is left for a call stuck in one C function.
+WORKER_STUCK_AFTER = 0.6
 
 
-#: Where drd calls component code from (the interpreter, the component host, the device proxies).
+#: Where drd calls component code from (the interpreter, the component host, the device proxies; a worker's loop).
 _RUNTIME = os.path.join(os.path.dirname(os.path.realpath(runtime.__file__)), "")
 _DRD = os.path.join(os.path.dirname(os.path.dirname(_RUNTIME)), "")  # drd's own code, never cut in the middle
+_WORKER = os.path.join(_DRD, "cluster", "workers.py")
 
 
 @functools.lru_cache(maxsize=4096)
@@ -51,7 +58,8 @@ def _in_drd(filename: str) -> bool:
 
 @functools.lru_cache(maxsize=4096)
 def _in_runtime(filename: str) -> bool:
-    return os.path.realpath(filename).startswith(_RUNTIME)
+    path = os.path.realpath(filename)
+    return path.startswith(_RUNTIME) or path == _WORKER
 
 
 def boundary(frame: FrameType | None) -> FrameType | None:
@@ -77,8 +85,9 @@ def _within(frame: FrameType | None, call: FrameType) -> bool:
 class StuckWatch:
     """The thread that watches the main thread's component calls (see the module)."""
 
-    def __init__(self, limit: float = STUCK_AFTER, poll: float = 0.25) -> None:
-        self.limit, self.poll = limit, poll
+    def __init__(self, limit: float = STUCK_AFTER, poll: float = 0.25, rule: str = "the dry-run stops a component's"
+                 f" call after that; a cluster's worker after {WORKER_STUCK_AFTER:g} s") -> None:
+        self.limit, self.poll, self.rule = limit, poll, rule
         self.main = threading.main_thread()
         self.stopped = threading.Event()
         self.stuck: FrameType | None = None  # the call being interrupted (read by the handler)
@@ -88,15 +97,14 @@ class StuckWatch:
     def _watch(self) -> None:
         seen: FrameType | None = None
         since = 0.0
-        ticks = 0
         while not self.stopped.wait(self.poll):
-            ticks += 1
+            now = time.monotonic()  # not a count of polls: on a loaded machine a poll takes longer than `poll`
             call = boundary(sys._current_frames().get(self.main.ident or 0))
             if call is not seen:
-                seen, since = call, ticks * self.poll
+                seen, since = call, now
                 continue
-            if call is not None and (ticks * self.poll - since >= self.limit or self.deferred):
-                self.stuck, since, self.deferred = call, ticks * self.poll, False  # again after another `limit`
+            if call is not None and (now - since >= self.limit or self.deferred):
+                self.stuck, since, self.deferred = call, now, False  # again after another `limit`
                 signal.pthread_kill(self.main.ident or 0, signal.SIGUSR1)
             del call
 
@@ -108,17 +116,19 @@ class StuckWatch:
         if frame is not None and _in_drd(frame.f_code.co_filename):  # drd's own code runs (a device proxy the
             self.deferred = True  # component called): never cut it in the middle; the next look tries again
             return
-        raise ComponentStuck(f"{stuck.f_code.co_name} did not return within {self.limit:g} s of wall time (the"
-                             " dry-run stops a component's call after that; a cluster's worker after 0.8 s)")
+        raise ComponentStuck(f"{stuck.f_code.co_name} did not return within {self.limit:g} s of wall time"
+                             f" ({self.rule})")
 
 
 @contextmanager
-def stuck_calls_end(limit: float = STUCK_AFTER) -> Iterator[StuckWatch | None]:
-    """While the body runs in the main thread, a component call stuck for `limit` seconds is interrupted."""
+def stuck_calls_end(limit: float = STUCK_AFTER, poll: float = 0.25,
+                    rule: str | None = None) -> Iterator[StuckWatch | None]:
+    """While the body runs in the main thread, a component call stuck for `limit` seconds is interrupted; `rule`
+    (how the error explains the limit) defaults to the dry-run's."""
     if threading.current_thread() is not threading.main_thread():
         yield None
         return
-    watch = StuckWatch(limit)
+    watch = StuckWatch(limit, poll) if rule is None else StuckWatch(limit, poll, rule)
     previous = signal.signal(signal.SIGUSR1, watch.interrupt)
     watch.thread.start()
     try:

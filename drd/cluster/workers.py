@@ -87,6 +87,7 @@ from drd.cluster.pipe import (
 from drd.cluster.pipe import Message as PipeMessage
 from drd.errors import COMPONENT_RAISES, ComponentFailure, debug_traceback, raised
 from drd.hw.commands import spec_of
+from drd.stuck import STUCK_AFTER, WORKER_STUCK_AFTER, stuck_calls_end
 
 log = logging.getLogger("drd.cluster.workers")
 
@@ -678,17 +679,21 @@ def worker_main(conn: Connection) -> None:
     link = _Link(conn)
     hosted: dict[str, _Hosted] = {}
     link.send(Ready(os.getpid()))
-    try:
-        while True:
-            match decode(conn.recv_bytes(), trusted=True):  # the Creator is the trusted side (see drd.cluster.pipe)
-                case Run(calls, latest):
-                    link.send(Done(tuple(run_calls(calls, latest, link, hosted))))
-                case Drop(paths):
-                    _shutdown_all([hosted.pop(path, None) for path in paths], SHUTDOWN_GRACE)
-                case _:  # nothing else comes unasked
-                    pass
-    except (EOFError, OSError):  # the Creator retired this worker (or died): its end of the pipe is closed
-        pass
+    # a call stuck in a component's Python code is interrupted before the Creator would kill this process with
+    # every instance in it (`CALL_TIMEOUT`): its state fails, the others go on, as in a dry-run
+    with stuck_calls_end(WORKER_STUCK_AFTER, poll=0.05, rule=f"a cluster's worker stops a component's call after"
+                         f" that; the dry-run after {STUCK_AFTER:g} s"):
+        try:
+            while True:
+                match decode(conn.recv_bytes(), trusted=True):  # the Creator is trusted (see drd.cluster.pipe)
+                    case Run(calls, latest):
+                        link.send(Done(tuple(run_calls(calls, latest, link, hosted))))
+                    case Drop(paths):
+                        _shutdown_all([hosted.pop(path, None) for path in paths], SHUTDOWN_GRACE)
+                    case _:  # nothing else comes unasked
+                        pass
+        except (EOFError, OSError):  # the Creator retired this worker (or died): its end of the pipe is closed
+            pass
     os._exit(0)
 
 

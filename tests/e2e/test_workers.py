@@ -60,6 +60,10 @@ class Probe(Component):
             ctx.emit("Seen", at=now)
         if mode == "huge":
             ctx.outputs["blob"] = "x" * 2_000_000
+        if mode == "sleep":
+            time.sleep(1e9)
+        while mode == "spin":
+            pass
         if mode == "shared":
             log = ctx.services.shared.setdefault("log", [])
             log.append(ctx.path)
@@ -266,6 +270,22 @@ def test_a_component_that_exits_fails_its_state_and_the_creator_keeps_serving(cr
     assert not _alive(crashed)
     assert pool.wait_ready(60.0) and pool.idle() == 2  # refilled
 
+
+
+@pytest.mark.parametrize("mode", ["sleep", "spin"])
+def test_a_stuck_call_fails_its_instance_alone_and_its_container_goes_on(creator: Creator, mode: str) -> None:
+    """Users audit 22, #1: a component blocked in its step had its container killed, failing its healthy
+    container-mates with it, where the dry-run failed it alone. The worker now interrupts it (ComponentStuck) before
+    the Creator's deadline; the pool here gives 10 s, so a kill would not have come by then anyway."""
+    pid = (start(creator, "M/A").outputs or {})["pid"]
+    assert (start(creator, "M/Stuck", mode=mode).outputs or {})["pid"] == pid  # one container
+    r = step(creator, "M/Stuck")
+    assert r.error.startswith("component raised ComponentStuck: step did not return within 0.6 s of wall time"), r
+    assert "(at tests/e2e/test_workers.py" in r.error or "test_workers.py:" in r.error, r.error  # the line it was at
+    ok = step(creator, "M/A")
+    assert ok.error == "" and ok.status == "running" and (ok.outputs or {})["pid"] == pid  # the same process
+    again = step(creator, "M/Stuck", now=2.0)  # it raised, as any component may: the controller ends its state
+    assert again.error.startswith("component raised ComponentStuck"), again
 
 
 def test_a_process_that_dies_in_a_batch_is_named_with_every_instance_of_that_call(creator: Creator) -> None:
