@@ -582,7 +582,7 @@ class Creator:
         if call.op == "terminate" and call.status == MOVED:  # it goes on elsewhere: nothing of it stays here
             self._forget(_key(call))
         return ComponentReply(reply.status, reply.outputs, reply.events, logs, reply.shared, reply.dependencies,
-                              reply.error, snapshot=reply.snapshot)
+                              reply.error, snapshot=reply.snapshot, raised=reply.raised)
 
     def _exchange(self, worker: Worker, run: Run) -> tuple[CallReply, ...]:
         """Send `run`, serve the worker's driver requests until its final `Done`; WorkerDied if it goes."""

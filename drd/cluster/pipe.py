@@ -82,7 +82,8 @@ class Call:
 class CallReply:
     """What one call did, as `drd.cluster.remote.ComponentReply` carries it; `setup_failed`: the instance could
     not be built (the Creator forgets it); `unused`: the keys of the call's `ahead` it did not read; `snapshot`:
-    `[state]` when the instance's snapshot changed since the last one sent (None: unchanged, or not taken)."""
+    `[state]` when the instance's snapshot changed since the last one sent (None: unchanged, or not taken);
+    `raised`: the `error` is the component's own code raising in the call (any host would run the same code)."""
 
     status: str = ""
     outputs: dict[str, Any] | None = None
@@ -94,6 +95,7 @@ class CallReply:
     setup_failed: bool = False
     unused: list[ReadingKey] = field(default_factory=list)
     snapshot: list[Any] | None = None
+    raised: bool = False
 
 
 # -- the messages ---------------------------------------------------------------------------------------------
@@ -318,7 +320,7 @@ _CHECKS: dict[type[Any], tuple[Check, ...]] = {
     Setup: (_STR, _DICT, _DICT, _DICT),
     Call: (_STR, _STR, _is(int, float), _STR, _OPT_DICT, _OPT_DICT, _OPT_DICT, _OPT_DICT, _optional_record(Setup),
            _OPT_DICT, _OPT_LIST),
-    CallReply: (_STR, _OPT_DICT, _LIST, _LIST, _OPT_DICT, _LIST, _STR, _BOOL, _LIST, _OPT_LIST),
+    CallReply: (_STR, _OPT_DICT, _LIST, _LIST, _OPT_DICT, _LIST, _STR, _BOOL, _LIST, _OPT_LIST, _BOOL),
     Run: (_records(Call), _DICT),
     Drop: (_seq(str),),
     Ok: (_ANY, _BOOL),

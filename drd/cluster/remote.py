@@ -82,14 +82,16 @@ class ComponentCall(Message):
     restore: list[Any] | None = None
 
 
-@message("drd.component.reply", 4)
+@message("drd.component.reply", 5)
 class ComponentReply(Message):
     """What the call did: `status` (after a step), outputs, events `[name, fields, where]` (`where`: the line of the
     component's emit, for a refusal), log lines, shared data,
     dependency changes `[resource, key, value]`, and `error` if the component raised (the state fails);
     `records`: what the host's gates recorded meanwhile (`drd.cluster.gates.wire_record`); `snapshot`:
     `[state]` when the instance's snapshot changed (after its start, every few steps, when it is moved); `lost`:
-    the host runs no such instance (it retired it, e.g. when it lost its controller): a movable one is placed again."""
+    the host runs no such instance (it retired it, e.g. when it lost its controller): a movable one is placed again;
+    `raised`: the error is the component's own code raising in the call, which another host would run alike (a
+    start that raised is not tried elsewhere)."""
 
     status: str = ""
     outputs: dict[str, Any] | None = None
@@ -101,6 +103,7 @@ class ComponentReply(Message):
     records: list[dict[str, Any]] | None = None
     snapshot: list[Any] | None = None
     lost: bool = False
+    raised: bool = False
 
 
 @message("drd.component.batch", 3)
@@ -140,6 +143,11 @@ class ComponentError(ComponentFailure):
 
 class HostDown(ComponentError):
     """The host of the call is down or did not answer: a movable component is placed again elsewhere."""
+
+
+class ComponentRaised(ComponentError):
+    """The component's own code raised in the call: its state fails, as in process; a start is not tried on
+    another host, which would run the same code again (users audit 22, #3)."""
 
 
 class InstanceLost(ComponentError):
@@ -639,6 +647,9 @@ class RemoteComponent(Component):
             self.host = host
             try:
                 self._call("start", params=self._params, bindings={}, rank=self._rank, restore=restore)
+            except ComponentRaised:  # its own code: it is started, and failed, as in process
+                self.router.placed.append((path, host, how))
+                raise
             except ComponentError as e:  # it did not answer, or the start failed there: the next host by policy
                 refused[host] = str(e)
                 continue
@@ -740,7 +751,7 @@ class RemoteComponent(Component):
         reply = self.router.call(self.host, msg)
         self._apply(reply)
         if reply.error:
-            raise (InstanceLost if reply.lost else ComponentError)(reply.error)
+            raise (InstanceLost if reply.lost else ComponentRaised if reply.raised else ComponentError)(reply.error)
         return reply
 
     def _apply(self, reply: ComponentReply) -> None:

@@ -756,7 +756,7 @@ def run_calls(calls: Sequence[Call], latest: dict[str, Any], link: _Link,
             try:  # before start: the state it had elsewhere (or None: it was lost)
                 h.comp.restore(call.restore[0] if call.restore else None)
             except COMPONENT_RAISES as e:  # component code is not ours to trust: its start fails
-                replies.append(CallReply(error=f"component raised {type(e).__name__} in restore: {e}"))
+                replies.append(CallReply(error=f"component raised {type(e).__name__} in restore: {e}", raised=True))
                 break
         if h is None:
             replies.append(CallReply(error=f"no instance {call.path} in worker {os.getpid()}"))
@@ -794,6 +794,7 @@ def _run_call(h: _Hosted, call: Call, link: _Link) -> CallReply:
     h.ctx.inputs = {**(call.inputs or {}), **services.shared}  # shared data: the objects sent back
     result = ""
     error = ""
+    raised_here = False  # the error is the component's own code raising
     snapshot: list[Any] | None = None
     link.begin(call.ahead)
     try:
@@ -815,13 +816,13 @@ def _run_call(h: _Hosted, call: Call, link: _Link) -> CallReply:
             error = f"unknown op {op!r}"
     except COMPONENT_RAISES as e:  # component code is not ours to trust (a `sys.exit` too): the state fails,
         # the worker goes on
-        error = raised(e)
+        error, raised_here = raised(e), True
         if (tb := debug_traceback(e)) is not None:  # DRD_DEBUG=1 on this daemon: the traceback in the mission's log
             h.logs.append(tb)
     if not error and (call.op == "start" or call.op == "step" and _due(h)):
         snapshot = take_snapshot(h, force=call.op == "start")  # a new entry: the controller forgot the last
     reply = CallReply(result, plain(h.ctx.outputs), h.events, h.logs, plain(services.shared), h.deps, error, False,
-                      link.unused(), snapshot)
+                      link.unused(), snapshot, raised=raised_here)
     h.events, h.logs, h.deps = [], [], []
     return reply
 

@@ -37,6 +37,7 @@ class Hosts:
         self.asked: list[frozenset[str]] = []
         self.why: list[dict[str, str]] = []  # each call's exclusions with their reasons
         self.failing: set[str] = set()  # hosts whose Creator answers a start with an error
+        self.raising: set[str] = set()  # hosts where the component's own start raises
         self.silent: set[str] = set()  # hosts whose Creator takes calls and answers none (gone as they came)
         self.slow: set[str] = set()  # hosts whose Creator takes 0.2 s over a start (longer than it is given)
         self.retired: set[str] = set()  # hosts that retired their instances: other calls than a start are `lost`
@@ -68,6 +69,9 @@ class Hosts:
                                       error="Wait failed to start here: no worker" if host in self.failing
                                       and c.op == "start" else self.killed.get(host, "") if c.op != "start"
                                       else "") for c in calls]
+            if host in self.raising:
+                replies = [ComponentReply(error="component raised RuntimeError: jammed (at kit/w.py:7, in start)",
+                                          raised=True) if c.op == "start" else r for c, r in zip(calls, replies)]
             return ComponentBatchReply(replies) if isinstance(msg, ComponentBatch) else replies[0]
         return serve
 
@@ -125,6 +129,18 @@ def test_a_host_whose_start_fails_is_excluded_and_the_next_one_tried() -> None:
     assert comp.host == "b"
     assert hosts.asked == [frozenset(), frozenset({"a"})]
     assert hosts.calls == [("a", "start"), ("b", "start")]
+
+
+def test_a_start_whose_component_raised_fails_as_in_process_and_is_not_tried_elsewhere() -> None:
+    """Users audit 22, #3: the component's own `start` raising was taken for a host refusing it, so its start (and
+    whatever it does) ran again on every worker host, and the reason became "no host can run it"."""
+    hosts = Hosts(LocalBus(), ["a", "b"], ["a", "b"])
+    hosts.raising.update({"a", "b"})
+    comp, _ = movable(hosts)
+    with pytest.raises(ComponentError) as raised:
+        comp.start()
+    assert str(raised.value) == "component raised RuntimeError: jammed (at kit/w.py:7, in start)"
+    assert hosts.calls == [("a", "start")] and comp.host == "a"  # where it ran: its stop goes there
 
 
 def test_a_call_that_reached_nothing_is_asked_again_until_the_host_answers(monkeypatch: pytest.MonkeyPatch) -> None:
