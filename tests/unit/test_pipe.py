@@ -123,8 +123,9 @@ def test_a_wrong_number_of_fields_is_refused(wire: tuple[Any, ...]) -> None:
     ("cmd", "M/A", "drive", "set_velocity", 0.5, {}),
     ("drop", ["M/A", 7]),
     ("done", "replies"),
-    ("done", [("running", "outputs", [], [], None, [], "", False, [], None)]),
-    ("done", [("running", None, [], [], None, [], "", False, [], "a snapshot not in a list")]),
+    ("done", [("running", "outputs", [], [], None, [], "", False, [], None, False)]),
+    ("done", [("running", None, [], [], None, [], "", False, [], "a snapshot not in a list", False)]),
+    ("done", [("running", None, [], [], None, [], "", False, [], None, "raised, not a bool")]),
     ("ok", 1, "changed"),
 ], ids=repr)
 def test_a_field_of_a_wrong_type_is_refused(wire: tuple[Any, ...]) -> None:
