@@ -45,6 +45,7 @@ class Layout(PostLex):
         self.openers: list[Token] = []  # the `(` and `[` not closed yet, innermost last (where one was left open)
         self.deadline = deadline
         self.count = 0
+        self.emitted = 0  # tokens given to the parser: which one an error is at (`dsl.parser._Recovery`)
 
     def save(self) -> tuple[list[Token], list[Token], list[Token]]:
         return self.history, self.pending, self.openers
@@ -84,6 +85,7 @@ class Layout(PostLex):
             yield self._emit(held)
 
     def _emit(self, tok: Token) -> Token:
+        self.emitted += 1
         self.history.append(tok)
         if len(self.history) > 4:
             del self.history[0]

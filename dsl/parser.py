@@ -542,14 +542,30 @@ class _Recovery:
         self.diagnostics: list[Diagnostic] = []
         self.lines: set[int] = set()
         self.seen = 0
+        self.skipped_at = -1  # the token (`Layout.emitted`) of the last error the parser went on past unrepaired
+        self.closed_early = 0  # `}` inserted by a repair: the user's own `}` for that block comes later, stray
 
     def __call__(self, e: UnexpectedInput) -> bool:
-        self.report(e)
+        at = self.parser.layout.emitted
+        # the token right after one skipped is the same mistake (`parallel any {` in a parallel block: each of its
+        # tokens); a `}` where none can be is the one a repair put in earlier: neither is a mistake of its own
+        echo = at == self.skipped_at + 1 and isinstance(e, UnexpectedToken)
+        if not echo and not self._stray_close(e):
+            self.report(e)
         self.seen += 1  # every error, also those not reported (one per line): garbage on one line stops too
         if len(self.diagnostics) >= MAX_SYNTAX_ERRORS or self.seen >= MAX_RECOVERIES:
             return False
-        if isinstance(e, UnexpectedToken) and e.interactive_parser is not None:
-            self._repair(e)
+        repaired = isinstance(e, UnexpectedToken) and e.interactive_parser is not None and self._repair(e)
+        self.skipped_at = -1 if repaired else at
+        return True
+
+    def _stray_close(self, e: UnexpectedInput) -> bool:
+        """A `}` where no block is open, after a repair closed one early: the user's own `}` of that block (an
+        error at it and at each `}` after it said nothing new: users audit 22, #4)."""
+        if not (isinstance(e, UnexpectedToken) and e.token.type == "RBRACE" and "RBRACE" not in e.expected
+                and self.closed_early):
+            return False
+        self.closed_early -= 1
         return True
 
     def report(self, e: UnexpectedInput) -> None:
@@ -559,16 +575,19 @@ class _Recovery:
             self.lines.add(d.span.line)
             self.diagnostics.append(d)
 
-    def _repair(self, e: UnexpectedToken) -> None:
+    def _repair(self, e: UnexpectedToken) -> bool:
         """Insert the one missing token that lets the parser accept the bad one, if any (or close the bracket
-        left open before it, see `left_open`)."""
+        left open before it, see `left_open`); whether it did."""
         ip = e.interactive_parser
         if self._close(e):
-            return
+            return True
         for name in sorted(ip.accepts() - {"$END"}, key=_repair_order):  # type: ignore[no-untyped-call]
             if self._takes(e, [name]):
                 self._insert(e, [name])
-                return
+                if name == "RBRACE":
+                    self.closed_early += 1
+                return True
+        return False
 
     def _close(self, e: UnexpectedToken) -> bool:
         """Brackets left open before the bad token (`left_open`): close the fewest of them, innermost first, end
@@ -654,7 +673,10 @@ def syntax_diagnostic(e: UnexpectedInput, history: Sequence[Token], file: str, t
     tok = e.token
     earlier = [t for t in history if t is not tok]
     prev = earlier[-1] if earlier else None
-    at_end = tok.type in ("_SEP", "$END", "RBRACE")
+    # what is missing goes before a line's end, the file's or a `}` on the same line; a `}` on a line of its own is
+    # what the message is about (it pointed past the line before)
+    at_end = tok.type in ("_SEP", "$END") or (tok.type == "RBRACE" and prev is not None and prev.type != "_SEP"
+                                              and prev.end_line == tok.line)
     span = _after(file, prev) if (at_end and prev is not None) else _span(file, tok)
     if "RBRACE" in e.expected and tok.type in ("$END", *DECLARATION_STARTS) and text:
         unclosed = _unclosed(file, text, tok)

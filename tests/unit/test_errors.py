@@ -276,6 +276,25 @@ def test_several_syntax_errors_in_one_run(catalog: Catalog) -> None:
         (3, "syntax: expected a state or done/fail after ->")]
 
 
+def test_a_parallel_block_in_a_parallel_block_is_one_error_and_a_later_one_is_still_found(catalog: Catalog) -> None:
+    """Users audit 22, #4: after the nested block's error, recovery closed the outer block early, and each `}` after
+    it was an error of its own (four errors for one mistake, their carets past the `}` or on the line before). The
+    tokens right after a skipped one are the same mistake, and the `}` a repair put in early is the user's own."""
+    source = ("mission M {\n    parallel all {\n        Observe\n        parallel any {\n            Wait(duration: 1s)\n"
+              "            Wait(duration: 2s)\n        }\n    }\n}\n")
+    got = [(d.span.line, d.span.column, d.message) for d in compile_text(source, catalog, "t.mission").diagnostics]
+    assert got == [(4, 9, "syntax: expected `}` or a name, got `parallel`")], got
+    later = source + "behavior B {\n    Wait(duration 3s)\n}\n"
+    got = [(d.span.line, d.message) for d in compile_text(later, catalog, "t.mission").diagnostics]
+    assert got == [(4, "syntax: expected `}` or a name, got `parallel`"), (11, "syntax: expected `:`, got `3s`")], got
+
+
+def test_a_stray_close_on_a_line_of_its_own_is_pointed_at() -> None:
+    result = compile_text("mission M {\n    Observe\n}\n}\n", Catalog.of([]), "t.mission")
+    got = [(d.span.line, d.span.column, d.message) for d in result.diagnostics]
+    assert got == [(4, 1, "syntax: expected behavior, import or mission, got `}`")], got
+
+
 def test_a_paren_left_open_is_one_error_and_the_items_after_it_are_read(catalog: Catalog) -> None:
     """Interfaces audit D1: the `)` forgotten at a line's end was reported as a missing newline, with a hint to
     put the (already separate) next item on its own line, and error recovery then reported a second, spurious
