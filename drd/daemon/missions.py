@@ -234,7 +234,9 @@ class MissionRunner:
         self._queryable = bus.serve(run_key(cluster.name), self._serve)
         self._migrations = Migrations(bus, self)  # `missionctl migrate` (drd.daemon.migrate)
         threading.Thread(target=self._warm_up, name="drd-compiler-warm-up", daemon=True).start()
-        if journal is not None and journal.running():
+        # the journal's missions waiting to be resumed (their hosts are not all back yet): no new run meanwhile
+        self.resuming: list[str] = [job.id for job in journal.running()] if journal is not None else []
+        if self.resuming:
             threading.Thread(target=self._resume, name="drd-resume", daemon=True).start()
 
     def _resume(self) -> None:
@@ -243,14 +245,16 @@ class MissionRunner:
         assert self.journal is not None
         hosts = sorted({h.name for h in self.cluster.hosts if h.devices} | ({self.simulator} if self.simulator else
                                                                                set()))
-        down = wait_for_hosts(self, hosts, self.cluster.resume_grace)
-        if down:
-            log.warning("resuming without %s (still down)", ", ".join(down))
         try:
+            down = wait_for_hosts(self, hosts, self.cluster.resume_grace)
+            if down:
+                log.warning("resuming without %s (still down)", ", ".join(down))
             resumed = resume(self, self.journal)
         except Exception:  # never leave the operator guessing: the journal stays for the next start
             log.exception("the journal's missions could not be resumed")
             return
+        finally:
+            self.resuming = []
         if resumed:
             log.info("resumed %d mission(s) from the journal: %s", len(resumed), ", ".join(resumed))
 
@@ -424,6 +428,10 @@ class MissionRunner:
             raise ValueError("mission source (with its imports) larger than 1 MB")
         if self.simulator is None:
             real_run_refusal(self.cluster, req)
+        if self.resuming:  # a world started now would be the one the resume rejoins: its clock went backwards
+            raise ValueError(f"the controller is resuming {', '.join(self.resuming)} from its journal, once their"
+                             f" hosts are back (at most {self.cluster.resume_grace:g} s after it started): run this"
+                             " mission again when `missionctl status` lists them")
         limits = self.cluster.limits
         budget = limits.compile_seconds if not req.give_up_at else min(limits.compile_seconds,
                                                                        req.give_up_at - time.time())

@@ -8,7 +8,9 @@ and trace, `missionctl status`, ranger1's announced instances, the simulated Ran
 from __future__ import annotations
 
 import json
+import os
 import signal
+import subprocess
 import time
 from collections.abc import Iterator
 from pathlib import Path
@@ -214,3 +216,36 @@ def test_a_resumed_missions_report_ends_what_was_in_force_at_the_loss_not_at_its
     [lost] = [row for row in report["timeline"] if row["path"] == "GoOn/Go" and row["status"] == "controller lost"]
     assert lost["exited"] == pytest.approx(restored["since"], abs=0.051) and lost["exited"] >= 3.0, lost
     assert f"resumed from its state at {restored['since']:.1f} s" in err, err[-2000:]
+
+
+def test_a_run_while_the_journal_waits_for_its_hosts_is_refused_and_the_controller_goes_on(
+        cluster: DaemonCluster, tmp_path: Path) -> None:
+    """ROS 2 audit 22, #1: a mission run while a restarted controller waited for its hosts to resume the journal
+    opened a world; the resume then rejoined another on top of it, the manager's clock went backwards, and every
+    later run failed (`time went backwards`) until the controller was restarted. Now a run meanwhile is refused,
+    saying why, and the resume and the runs after it go as usual."""
+    wait = tmp_path / "short.mission"
+    wait.write_text("mission Short {\n    Wait(duration: 1s)\n}\n")
+    short = [*MISSIONCTL, "run", str(wait), "--config", str(cluster.hosts_file), "--json", "--timeout", "20"]
+    with corridor_run(cluster, tmp_path / "run.jsonl") as (run, mission):
+        eventually(lambda: (mission_time(cluster, mission) or 0.0) > 5.0, "5 s of the mission", 60, poll=0.2)
+        cluster.procs["controller"].send_signal(signal.SIGKILL)
+        cluster.procs["controller"].wait(timeout=10)
+        ranger = cluster.pid("ranger1")
+        os.kill(ranger, signal.SIGSTOP)  # down for the controller started again: it waits for it to resume
+        try:
+            cluster.start("controller")
+            cluster.wait_ready(["controller"])
+            refused = subprocess.run(short, cwd=ROOT, capture_output=True, text=True, timeout=60, check=False)
+        finally:
+            os.kill(ranger, signal.SIGCONT)
+        assert refused.returncode == 2, (refused.stdout, refused.stderr)
+        assert f"the controller is resuming {mission} from its journal" in refused.stderr, refused.stderr
+        cluster.wait_up(cluster.client(), timeout=60)
+        eventually(lambda: any(m.get("id") == mission and (m.get("outcome") is not None or m.get("resumed"))
+                               for m in cluster.client().missions()), "the journal's mission to be resumed", 60)
+        after = subprocess.run(short, cwd=ROOT, capture_output=True, text=True, timeout=90, check=False)
+        run.kill()
+    assert after.returncode == 0, (after.stdout, after.stderr, cluster.log("controller")[-3000:])
+    assert json.loads(after.stdout)["outcome"] == "success"
+    assert "time went backwards" not in cluster.log("controller")
