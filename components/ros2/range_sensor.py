@@ -44,8 +44,12 @@ class Ros2RangeSensor(Ros2Driver):
                                 "not a scan drd reads (a 2D laser has a few thousand)")
         if count == 0 or 2 * count < said:  # a laser that lost its data but still heartbeats: never free space
             raise HardwareError(f"{self.describe()}: the laser gives {count} beams where its scan's angles say "
-                                f"{said}: a faulted laser (ROS 2 audit 17: an empty scan read as free space)")
-        scan = Scan(scan_ranges(msg.ranges, low, top), first, step, top)
+                                f"{said}: a faulted laser (an empty scan is never read as free space)")
+        try:
+            ranges = scan_ranges(msg.ranges, low, top)
+        except HardwareError as e:  # which laser, as every other fault of it says (ros2 audit 22, #3)
+            raise HardwareError(f"{self.describe()}: {e}") from None
+        scan = Scan(ranges, first, step, top)
         self._latest = (msg, scan)
         return scan
 

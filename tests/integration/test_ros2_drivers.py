@@ -76,6 +76,7 @@ class FakeRobot:
         self.silent = threading.Event()
         self.faulted = threading.Event()  # NaN in the scan's geometry and the odometry's pose (ROS 2 audit 12)
         self.blind = threading.Event()  # scans with no beams (ROS 2 audit 17), or fewer than the angles say
+        self.nan = threading.Event()  # scans whose every beam is NaN (REP 117: invalid)
         self.beams = 0
         self.stopped = threading.Event()
         self.thread = threading.Thread(target=self._run, daemon=True)
@@ -106,6 +107,8 @@ class FakeRobot:
             ranges[:10] = np.inf
             if self.blind.is_set():
                 ranges = ranges[:self.beams]
+            if self.nan.is_set():
+                ranges[:] = np.nan
             self.scan.publish(header=odom.header, angle_min=-math.pi / 2, angle_max=math.pi / 2,
                               angle_increment=math.nan if bad else math.pi / 89, time_increment=0.0,
                               scan_time=period, range_min=0.1, range_max=4.0, ranges=ranges,
@@ -320,6 +323,21 @@ def test_a_scan_without_its_beams_is_a_faulted_laser_not_free_space(robot: FakeR
         eventually(lambda: _reads(ranges.scan), "a scan one beam short read")
         assert len(ranges.scan().ranges) == 89
     finally:
+        ranges.close()
+
+
+def test_a_scan_of_nan_beams_is_a_faulted_laser_named_as_every_other_fault(robot: FakeRobot, router: int,
+                                                                          link: Ros2Link) -> None:
+    """ROS 2 audit 22, #3: the refusal of a scan with every beam NaN did not say which laser (with several robots,
+    which one failed?), where every other fault of a laser names it."""
+    ranges = Ros2RangeSensor(device("RangeSensor", "ranges", endpoint=f"tcp/127.0.0.1:{router}"), "bot", link)
+    try:
+        eventually(lambda: _reads(ranges.scan), "the robot's scan")
+        robot.nan.set()
+        eventually(lambda: "90 of 90 beams are NaN" in _refusal(ranges.scan), "the scan refused")
+        assert _refusal(ranges.scan).startswith(ranges.describe() + ": the laser gives no valid reading")
+    finally:
+        robot.nan.clear()
         ranges.close()
 
 
