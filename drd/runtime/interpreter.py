@@ -1131,6 +1131,12 @@ class Interpreter:
             active.refused = functools.partial(self._breached, node, active)
             actives.append(active)
             self.guard.add(active)
+            try:  # broken already: the behavior is violated before anything of it commands (a battery below its
+                m = active.measure()  # floor let one step drive the robot: ROS 2 audit 22, #2)
+            except EvalError:  # not known yet (a robot not read at the first instant): the monitor's to judge
+                continue
+            if not m.holds:
+                self._violated(node, active, m)
 
     def _measure(self, node: Node, condition: ast.Expr) -> Measure:
         return measure(condition, self._names(node), self.pool.count, self.pool.place)
@@ -1161,10 +1167,16 @@ class Interpreter:
                         a.violated = False
                     continue
                 if not a.violated:
-                    for robot in a.robots:
-                        for unit in self.pool.units(robot):
-                            self.resources.gates.unbind(unit, a.holder, now, f"constraint {a.name} violated")
-                    self._breached(node, a, m)
+                    self._violated(node, a, m)
+
+    def _violated(self, node: Node, a: Active, m: Measure) -> None:
+        """A constraint of `node` does not hold: stop what its subtree set moving on the robots it names, and
+        `node` gets a `violation`."""
+        now = self.clock.now()
+        for robot in a.robots:
+            for unit in self.pool.units(robot):
+                self.resources.gates.unbind(unit, a.holder, now, f"constraint {a.name} violated")
+        self._breached(node, a, m)
 
     def _breached(self, node: Node, a: Active, m: Measure) -> None:
         """A constraint broke, or a command that would have broken it was refused (`m`: where it would have led)."""

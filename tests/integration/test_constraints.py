@@ -133,6 +133,10 @@ def test_a_battery_floor_can_be_read_and_checked(catalog: Catalog) -> None:
     report, records = dry(catalog, text, until=10.0)
     assert report.outcome == "failure" and "constraint fence violated: ranger.battery >= 2" in report.reason
     assert final_x(report) < 1.2  # it never drove: the floor was broken from the start
+    # not even one step's worth: broken at entry, the behavior is violated before its first step (ROS 2 audit 22,
+    # #2: the robot got one driving Twist, then the stop); its only command is the stop of its terminate
+    assert [(r["method"], r["accepted"]) for r in records if r["kind"] == "command"] == [("stop", True)], records
+    assert [r["at"] for r in records if r["kind"] == "exited"] == [0.0, 0.0]
 
 
 def test_a_constraint_that_cannot_be_measured_for_two_seconds_counts_as_broken(catalog: Catalog) -> None:
