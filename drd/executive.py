@@ -91,11 +91,12 @@ class Executive:
     def __init__(self, bus: Bus, clock: Clock, registry: Mapping[str, Callable[[], Component]], *,
                  cluster: str = "local", resources: Iterable[Any] = (), lease: float = 3.0,
                  default_slice: float = 5.0, services: Mapping[str, Any] | None = None, preallocate: bool = False,
-                 gates: Gates | None = None, history: int = 100):
+                 gates: Gates | None = None, history: int = 100, origin: Callable[[], float] = lambda: 0.0):
         """`gates`: the devices' gates; by default, gates over the in-process drivers of `services["drivers"]`
         (the dry-run), shared by every mission so that ownership holds across missions."""
         self.bus = bus
         self.clock = clock
+        self.origin = origin  # when the current world began on `clock` (`Interpreter`'s `origin`)
         self.registry = registry
         self.cluster = cluster
         self.services = dict(services or {})
@@ -171,7 +172,7 @@ class Executive:
             raise ValueError(f"a mission id has no '/': {mid!r}")
         interp = Interpreter(chart, registry if registry is not None else self.registry, self.broker, self.clock,
                              pool=self.pool, mission=mid, services=self.services, preallocate=self.preallocate,
-                             gates=self.gates, priority=priority, guard=self.guard)
+                             gates=self.gates, priority=priority, guard=self.guard, origin=self.origin)
         key = f"drd/{self.cluster}/mission/{mid}/record"
         interp.attach(functools.partial(self._send, key, mid))
         for listener in listeners:

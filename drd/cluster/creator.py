@@ -537,7 +537,8 @@ class Creator:
             self.calls += 1
             ahead = self._read_ahead(inst) if call.op == "step" else None
             aheads.append(ahead)
-            calls.append(Call(call.path, call.op, call.now, call.status, call.shared, call.shared_ids, call.inputs,
+            calls.append(Call(call.path, call.op, call.now - call.origin, call.status, call.shared, call.shared_ids,
+                              call.inputs,
                               call.params if call.op == "start" else None, inst.setup, ahead,
                               call.restore if call.op == "start" else None))
             inst.setup = None

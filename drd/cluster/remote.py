@@ -47,7 +47,7 @@ from drd.runtime.emits import EmitError
 from drd.runtime.records import Record, plain
 
 
-@message("drd.component.call", 5)
+@message("drd.component.call", 6)
 class ComponentCall(Message):
     """One lifecycle call for the instance `path` of mission `mission` (see the module docstring).
 
@@ -57,7 +57,8 @@ class ComponentCall(Message):
     `gates`: the gate operations for this host, applied before the call (`drd.cluster.gates.GateUpdate`);
     `retire` (no path) ends mission `mission` on that host: its instances and processes go; `restore`, on a
     start: `[state]`, the instance's state to go on from (`Component.restore`; state None: it was lost); a
-    `terminate` whose status is `moved` brings back the instance's snapshot and drops it there."""
+    `terminate` whose status is `moved` brings back the instance's snapshot and drops it there. `now` is on the
+    executive's clock (records, halts), `origin` when the world began on it: the component sees `now - origin`."""
 
     op: str
     mission: str
@@ -80,6 +81,7 @@ class ComponentCall(Message):
     term: float = 0.0  # when the calling controller started: a host refuses calls of a controller older than one
     #                    it has heard (one revived after another took over must not act)
     restore: list[Any] | None = None
+    origin: float = 0.0
 
 
 @message("drd.component.reply", 5)
@@ -206,6 +208,7 @@ class SimCycle:
         self.pending_step = 0.0
         self.sim_error: Exception | None = None
         self.steps_alone = RouterStats()
+        self.origin = 0.0  # when the world began on the executive's clock (`drd.daemon.missions.SimTimeClock`)
 
 
 class ComponentRouter:
@@ -225,14 +228,16 @@ class ComponentRouter:
                  records: Callable[[str, Record | Breach], None] = lambda mission, record: None,
                  cycle: SimCycle | None = None, generation: int = 0, term: float = 0.0,
                  frozen: Callable[[float], float] = lambda since: 0.0,
-                 on_down: Callable[[str], None] = lambda host: None):
+                 on_down: Callable[[str], None] = lambda host: None, clock: Callable[[], float] | None = None):
         """`frozen(since)`: seconds this controller's daemon was frozen after `since` (`time.monotonic()`), 0.0 if
         not (`Daemon.frozen_since`); `on_down(host)`: told when a call fails because `host` is down or did not
-        answer, before the failure is raised (the manager takes its resources offline first)."""
+        answer, before the failure is raised (the manager takes its resources offline first); `clock`: the
+        executive's, which a call's `now` is on (components see the world's time: `now - origin`, the cycle's)."""
         self.bus = bus
         self.cluster = cluster
         self.frozen = frozen
         self.on_down = on_down
+        self.clock = clock
         self.resource_hosts = dict(resource_hosts)
         self.me = me
         self.active = active
@@ -737,12 +742,14 @@ class RemoteComponent(Component):
         shared = ctx.services.shared  # the inputs bound to shared data, by input name
         inputs = {k: v for k, v in ctx.inputs.items() if k not in shared}
         ids = {k: str(id(v)) for k, v in shared.items() if isinstance(v, dict)}
+        seen = fields.pop("now", None)  # the world's time the interpreter stepped it at (the executive's is sent)
+        now = router.clock() if router.clock is not None else ctx.now() if seen is None else seen
         return ComponentCall(op, router.mission, ctx.path, self.name, router.world, generation=router.generation,
                              term=router.term,
                              epochs=self._epochs(), sim_time=router.sim_time, sim_version=router.sim_version,
                              shared=plain(shared) if shared else None,
                              inputs=plain(inputs) if inputs else None,
-                             now=fields.pop("now", ctx.now()), shared_ids=ids or None, **fields)
+                             now=now, shared_ids=ids or None, origin=router.cycle.origin, **fields)
 
     def _call(self, op: str, **fields: Any) -> ComponentReply:
         assert self.host is not None

@@ -361,7 +361,8 @@ class Controller:
         self.mission_clock = SimTimeClock()
         self.executive = Executive(serialized, clock or self.mission_clock, EntryPoints(catalog), cluster=cluster.name,
                                    resources=host_resources(cluster, me), lease=cluster.lease,
-                                   history=cluster.history)
+                                   history=cluster.history,
+                                   origin=(lambda: 0.0) if clock is not None else lambda: self.mission_clock.origin)
         self.executive.absent(c for c in cluster.resources() if c.host != me)  # until each host is seen up
         self.membership = Membership(cluster.lease, {me})
         self._pending: list[Action] = []  # membership actions the executive has not applied yet

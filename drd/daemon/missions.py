@@ -104,17 +104,21 @@ class RunReply(Message):
 
 
 class SimTimeClock:
-    """The executive's clock: the simulator's time plus an offset that keeps it monotonic across missions."""
+    """The executive's clock: the simulator's time plus an offset that keeps it monotonic across missions;
+    `origin`, when the current world began on it (components see the world's time, `now - origin`, from 0 as in a
+    dry-run). The same as `base` but for real robots resumed after a loss, whose clock goes on from the last save
+    while their world's time goes on from its start."""
 
     def __init__(self) -> None:
         self.base = 0.0
         self.t = 0.0
+        self.origin = 0.0
 
     def now(self) -> float:
         return self.t
 
     def start_mission(self) -> None:
-        self.base = self.t
+        self.base = self.origin = self.t
 
     def set_sim(self, sim_time: float) -> None:
         self.t = self.base + sim_time
@@ -502,7 +506,8 @@ class MissionRunner:
                                  place=functools.partial(self.place, mission=mid) if self.host_views else None,
                                  gates=self.gates,
                                  records=executive.record, cycle=world.cycle, generation=world.generation,
-                                 term=self.term, frozen=self.frozen, on_down=self.controller.apply_offline)
+                                 term=self.term, frozen=self.frozen, on_down=self.controller.apply_offline,
+                                 clock=self.clock.now)
         world.add(mid, router, base, until)
         listeners = [functools.partial(self.checkpoints.note, mid)] if self.checkpoints is not None else []
         executive.submit(chart, mid, listeners=listeners, registry=router.registry(), priority=priority,
@@ -547,6 +552,7 @@ class MissionRunner:
         else:
             world.cycle.sim_time = 0.0
         self.clock.set_sim(world.cycle.sim_time)
+        world.cycle.origin = self.clock.origin
         self.telemetry.reset()  # the hosts build their drivers (and guards) again for the new world
         rooms = loaded.rooms if loaded is not None else ()
         self.controller.executive.pool.places = {r.id: (r.x0, r.y0, r.x1, r.y1) for r in rooms}

@@ -73,7 +73,7 @@ class Checkpoints:
                 if mid in dirty or states != self._components.get(mid):
                     changed[mid] = (now, capture(interp.root).to_dict())
                     self._components[mid] = states
-            state = WorldState(world.name, world.generation, runner.clock.base, now, executive.sent,
+            state = WorldState(world.name, world.generation, runner.clock.origin, now, executive.sent,
                                property_changes(runner.cluster.resources(), executive.pool))
         self._clock_saved = wall
         self.journal.save(changed, state)
@@ -124,7 +124,7 @@ def _rejoin(runner: Any, state: WorldState, first: Journaled) -> Any:
 
     if runner.simulator is None:
         with runner.lock:
-            runner.clock.base = state.now
+            runner.clock.base, runner.clock.origin = state.now, state.base  # the world's time goes on too
             return runner.open_world(NO_WORLD, None, None, state.generation + 1, 1.0)
     name = (state.name if state.name != NO_WORLD else "") or str(first.request.get("world") or runner.cluster.world)
     path = world_file(name, world_dirs(runner.cluster))
@@ -140,7 +140,7 @@ def _rejoin(runner: Any, state: WorldState, first: Journaled) -> Any:
         runner.sim(SimRequest("reset", world=path.stem, seed=int(first.request.get("seed") or 0)))
         return None
     with runner.lock:
-        runner.clock.base = state.base
+        runner.clock.base = runner.clock.origin = state.base
         return runner.open_world(path.stem, loaded, reply, state.generation + 1,
                                  float(first.request.get("speed") or 1.0))
 

@@ -30,11 +30,12 @@ class ComponentHost:
     def __init__(self, registry: Registry, resources: ResourceClient, arbiter: Arbiter, clock: Callable[[], float],
                  services: Mapping[str, Any], *, notify: Callable[[rec.Record], None],
                  emit: Callable[..., None], on_failure: Callable[[Node, str], None],
-                 rank: Mapping[str, int]) -> None:
+                 rank: Mapping[str, int], origin: Callable[[], float] = lambda: 0.0) -> None:
         self.registry = registry
         self.resources = resources
         self.arbiter = arbiter
         self.now = clock
+        self.origin = origin  # the world's start on `clock`: components see the world's time (`world_now`)
         self.services = services
         self.notify = notify
         self.emit = emit
@@ -77,7 +78,7 @@ class ComponentHost:
             path = node.path
             ctx = Context(path, dict(node.scope), resources, self._emitter(path, name),
                           lambda text: self.notify(rec.Log(self.now(), path, text)),
-                          self.now, devices=devices,
+                          self.world_now, devices=devices,
                           services=Services(dependencies=self.services.get("dependencies")),
                           bindings=bindings, rank=rank)
             try:
@@ -189,10 +190,15 @@ class ComponentHost:
                 if b.last and not b.shared:
                     self._previous[(node.path, b.name)] = _output(node, b.state, b.field)
 
+    def world_now(self) -> float:
+        """The time components see: the world's, from 0 when it began, in a dry-run as on a cluster (whose
+        executive's clock goes on across worlds: users audit 22, #2)."""
+        return self.now() - self.origin()
+
     def step(self, node: Node, comp: Component, now: float) -> Status | None:
         """One control cycle of one component: its status, or None when it raised (its state fails)."""
         try:
-            return comp.step(now)
+            return comp.step(now - self.origin())
         except COMPONENT_RAISES as e:  # component code is not ours to trust
             self.failed(node, e)
             return None

@@ -133,10 +133,10 @@ class Interpreter:
     def __init__(self, chart: Statechart, registry: Registry, rcm: ResourceManager | ResourceBroker, clock: Clock, *,
                  pool: ResourcePool | None = None, mission: str = "", services: Mapping[str, Any] | None = None,
                  lease: float = 3.0, preallocate: bool = False, gates: Gates | None = None, priority: int = 1,
-                 guard: ConstraintGuard | None = None):
+                 guard: ConstraintGuard | None = None, origin: Callable[[], float] = lambda: 0.0):
         """`gates`: the devices' gates (default: gates over `services["drivers"]` when given, else none);
         `priority`: the mission's rank against the other missions sharing the manager (1 first); `guard`: the
-        constraints in force of every mission sharing the gates (default: this mission's own)."""
+        constraints in force of every mission sharing the gates (default: its own); `origin`: the world's start."""
         self.chart = chart
         self.registry = registry
         self.clock = clock
@@ -188,7 +188,7 @@ class Interpreter:
         self.host = ComponentHost(registry, self.resources, self.arbiter, clock.now,
                                   {**self.services, "dependencies": self._dependency}, notify=self._heard,
                                   emit=self.emit, on_failure=lambda node, why: self._finish(node, False, why),
-                                  rank=rank)
+                                  rank=rank, origin=origin)
         self.rcm.attach(self._apply)
 
     def _heard(self, record: rec.Record) -> None:
@@ -262,6 +262,7 @@ class Interpreter:
                 self._monitor()
         stepped = 0
         host = self.host
+        seen = now - host.origin()  # the world's time, as components see it
         self._stepping = True  # what a step emits waits until that step has returned (as on a cluster)
         try:
             for node in list(host.running):
@@ -272,7 +273,7 @@ class Interpreter:
                 if node.state.inputs:
                     host.read_inputs(node)
                 try:
-                    status = comp.step(now)
+                    status = comp.step(seen)
                     if status is not _RUNNING and status is not _SUCCESS and status is not _FAILURE:
                         status = step_status(status, node.state.component or node.state.name)  # or StatusError
                 except COMPONENT_RAISES as e:  # component code is not ours to trust
