@@ -12,6 +12,8 @@ import struct
 import subprocess
 import sys
 import time
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
@@ -106,6 +108,15 @@ def test_the_live_view_serves_scans_records_and_the_world_while_a_dry_run_runs(t
     assert {"walls", "door/door_n1", "body/ranger1"} <= {e.id for e in world.entities}
 
 
+@contextmanager
+def recorded_and_served(tmp_path: Path, port: int) -> Iterator[subprocess.Popen[bytes]]:
+    """The corridor dry-run's first 12 s at twice real time, recorded into `run.mcap` and served live on `port`."""
+    with (tmp_path / "stderr").open("wb") as stderr:
+        yield subprocess.Popen([*MISSIONCTL, "dry-run", str(CORRIDOR), "--config", str(ROOT / "hosts.yaml"),
+                                "--foxglove", f"127.0.0.1:{port}", "--speed", "2", "--until", "12", "--record",
+                                "run.mcap"], cwd=tmp_path, stdout=subprocess.DEVNULL, stderr=stderr)
+
+
 def test_a_viewer_from_the_start_gets_every_message_the_file_has_the_first_launch_and_the_summary(
         tmp_path: Path) -> None:
     """Readers audit 13, D1, D2: a channel made mid-run went out with its first message (the first launch, the first
@@ -113,10 +124,7 @@ def test_a_viewer_from_the_start_gets_every_message_the_file_has_the_first_launc
     from mcap.reader import make_reader
 
     port = free_port()
-    with (tmp_path / "stderr").open("wb") as stderr:
-        proc = subprocess.Popen([*MISSIONCTL, "dry-run", str(CORRIDOR), "--config", str(ROOT / "hosts.yaml"),
-                                 "--foxglove", f"127.0.0.1:{port}", "--speed", "2", "--until", "12", "--record",
-                                 "run.mcap"], cwd=tmp_path, stdout=subprocess.DEVNULL, stderr=stderr)
+    with recorded_and_served(tmp_path, port) as proc:
         try:
             with connect_when_up(port, proc) as ws:
                 got = receive(ws, {"/drd/runs": 1, "/drd/flights": 0, "/drd/tf": 0, "/drd/scan/ranger1": 0})
@@ -173,10 +181,7 @@ def test_what_a_late_viewer_is_sent_again_is_not_written_into_the_file(tmp_path:
     from mcap.reader import make_reader
 
     port = free_port()
-    with (tmp_path / "stderr").open("wb") as stderr:
-        proc = subprocess.Popen([*MISSIONCTL, "dry-run", str(CORRIDOR), "--config", str(ROOT / "hosts.yaml"),
-                                 "--foxglove", f"127.0.0.1:{port}", "--speed", "2", "--until", "12", "--record",
-                                 "run.mcap"], cwd=tmp_path, stdout=subprocess.DEVNULL, stderr=stderr)
+    with recorded_and_served(tmp_path, port) as proc:
         try:
             with connect_when_up(port, proc):  # the view is up; join once the run is well under way
                 time.sleep(2.0)

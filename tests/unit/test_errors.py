@@ -280,8 +280,8 @@ def test_a_parallel_block_in_a_parallel_block_is_one_error_and_a_later_one_is_st
     """Users audit 22, #4: after the nested block's error, recovery closed the outer block early, and each `}` after
     it was an error of its own (four errors for one mistake, their carets past the `}` or on the line before). The
     tokens right after a skipped one are the same mistake, and the `}` a repair put in early is the user's own."""
-    source = ("mission M {\n    parallel all {\n        Observe\n        parallel any {\n            Wait(duration: 1s)\n"
-              "            Wait(duration: 2s)\n        }\n    }\n}\n")
+    source = ("mission M {\n    parallel all {\n        Observe\n        parallel any {\n"
+              "            Wait(duration: 1s)\n            Wait(duration: 2s)\n        }\n    }\n}\n")
     got = [(d.span.line, d.span.column, d.message) for d in compile_text(source, catalog, "t.mission").diagnostics]
     assert got == [(4, 9, "syntax: expected `}` or a name, got `parallel`")], got
     later = source + "behavior B {\n    Wait(duration 3s)\n}\n"

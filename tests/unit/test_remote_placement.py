@@ -70,8 +70,9 @@ class Hosts:
                                       and c.op == "start" else self.killed.get(host, "") if c.op != "start"
                                       else "") for c in calls]
             if host in self.raising:
-                replies = [ComponentReply(error="component raised RuntimeError: jammed (at kit/w.py:7, in start)",
-                                          raised=True) if c.op == "start" else r for c, r in zip(calls, replies)]
+                jammed = ComponentReply(error="component raised RuntimeError: jammed (at kit/w.py:7, in start)",
+                                        raised=True)
+                replies = [jammed if c.op == "start" else r for c, r in zip(calls, replies, strict=True)]
             return ComponentBatchReply(replies) if isinstance(msg, ComponentBatch) else replies[0]
         return serve
 
