@@ -742,8 +742,11 @@ class RemoteComponent(Component):
         shared = ctx.services.shared  # the inputs bound to shared data, by input name
         inputs = {k: v for k, v in ctx.inputs.items() if k not in shared}
         ids = {k: str(id(v)) for k, v in shared.items() if isinstance(v, dict)}
-        seen = fields.pop("now", None)  # the world's time the interpreter stepped it at (the executive's is sent)
-        now = router.clock() if router.clock is not None else ctx.now() if seen is None else seen
+        seen = fields.pop("now", None)  # the world's time the interpreter stepped it at
+        if router.clock is not None:  # a call carries the executive's time: the host's records and halts are on it
+            now = router.clock()
+        else:  # a router of a test: its components' time is the only one
+            now = ctx.now() if seen is None else seen
         return ComponentCall(op, router.mission, ctx.path, self.name, router.world, generation=router.generation,
                              term=router.term,
                              epochs=self._epochs(), sim_time=router.sim_time, sim_version=router.sim_version,
