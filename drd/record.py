@@ -1040,9 +1040,40 @@ def _take_views(out: Recording, scene: Any, log_time: int = 0) -> None:
                 continue
 
 
+class BadMessage(ValueError):
+    """A message of a drd channel that is not what the channel's schema says (not the file's damage: the reader
+    read it whole)."""
+
+
+def _loaded(topic: str, data: bytes) -> Any:
+    """A JSON message of `topic`, or BadMessage: not JSON (NaN and the infinities are not JSON either)."""
+    def constant(name: str) -> Any:
+        raise BadMessage(f"a message on {topic} holds {name}, which is not JSON")
+
+    try:
+        return json.loads(data, parse_constant=constant)
+    except BadMessage:
+        raise
+    except ValueError as e:  # a UnicodeDecodeError too, which the reader's damage must not be taken for
+        raise BadMessage(f"a message on {topic} is not JSON ({type(e).__name__}: {e})") from None
+
+
+def _run_problem(run: dict[str, Any]) -> str | None:
+    """What a run summary (`/drd/runs`) lacks of its schema (`JSON_SCHEMAS[RUNS]`), in words (None: it is one)."""
+    for key, kind, said in (("mission", str, "a string"), ("records", str, "a string"),
+                            ("sim_time", (int, float), "a number"), ("wall_time", (int, float), "a number"),
+                            ("order", int, "an integer")):
+        value = run.get(key)
+        if value is None and key in ("wall_time", "order"):  # optional
+            continue
+        if not isinstance(value, kind) or isinstance(value, bool):
+            return f"has {key} {value!r}, not {said}"
+    return None
+
+
 def _take(out: Recording, topic: str, data: bytes) -> None:
     if topic == RECORDS:
-        d = json.loads(data)
+        d = _loaded(topic, data)
         r = rec.from_dict(d)
         if r is not None:
             key, seq = str(d.get("mission", "")), d.get("seq")
@@ -1050,9 +1081,13 @@ def _take(out: Recording, topic: str, data: bytes) -> None:
             out.seqs.setdefault(key, []).append(seq if isinstance(seq, int) else None)
             out.order.append(key)
     elif topic == RUNS:
-        run = json.loads(data)
-        if run.get("format") != FORMAT:
-            raise ValueError(f"a run summary of format {run.get('format')!r}, not {FORMAT}")
+        run = _loaded(topic, data)
+        if not isinstance(run, dict) or run.get("format") != FORMAT:
+            raise BadMessage(f"a run summary of format {run.get('format') if isinstance(run, dict) else run!r},"
+                             f" not {FORMAT}")
+        problem = _run_problem(run)
+        if problem is not None:
+            raise BadMessage(f"a run summary (mission {run.get('mission')!r}) {problem}")
         out.runs.append(run)
 
 

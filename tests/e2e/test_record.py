@@ -90,6 +90,40 @@ def test_an_empty_or_very_short_file_says_so(tmp_path: Path, data: bytes, why: s
     assert done.returncode == 2 and f"x.mcap: cannot read it as a drd recording: {why}" in done.stderr, done.stderr
 
 
+def _forged(path: Path, topic: str, *messages: bytes) -> None:
+    """An intact MCAP file with `messages` on drd's JSON channel `topic`, as another tool could write one."""
+    from mcap.writer import Writer
+
+    with path.open("wb") as f:
+        w = Writer(f)
+        w.start(profile="", library="a test")
+        schema = w.register_schema(name="drd.Thing", encoding="jsonschema", data=b'{"type":"object"}')
+        channel = w.register_channel(topic=topic, message_encoding="json", schema_id=schema)
+        for i, data in enumerate(messages):
+            w.add_message(channel, log_time=i, publish_time=i, data=data)
+        w.finish()
+
+
+@pytest.mark.parametrize(("topic", "messages", "why"), [
+    ("/drd/runs", [b'{"format":"drd-run-1","mission":"M","records":"M-1","sim_time":"x"}'],
+     "a run summary (mission 'M') has sim_time 'x', not a number"),
+    ("/drd/records", [b'{"kind":"entered","at":0,"path":"X","state":"X","mission":"X-1"}',
+                      b'{"kind":"granted","at":NaN,"path":"X","mission":"X-1"}'],
+     "a message on /drd/records holds NaN, which is not JSON"),
+    ("/drd/records", [b'{"kind":"entered","at":0,"path":"X","state":"X","mission":"X-1"}', b"\xff\xfe not json"],
+     "a message on /drd/records is not JSON"),
+], ids=["summary-time-not-a-number", "nan", "not-json"])
+def test_an_intact_file_whose_messages_break_their_schema_is_refused_as_input(tmp_path: Path, topic: str,
+                                                                              messages: list[bytes], why: str) -> None:
+    """Records audit 23, #2 and #4: a summary whose sim_time was a string crashed replay (exit 70, "could not convert
+    string to float"), a NaN time was kept (and written as null into `replay --trace`), and a message that is not
+    JSON was said to be the file's damage ("cut or damaged"), though the reader read it whole."""
+    _forged(tmp_path / "x.mcap", topic, *messages)
+    done = missionctl("replay", "x.mcap", cwd=tmp_path)
+    assert done.returncode == 2 and f"x.mcap: cannot read it as a drd recording: {why}" in done.stderr, done.stderr
+    assert "cut" not in done.stderr and "damaged" not in done.stderr
+
+
 def test_replay_at_shows_the_mission_and_every_robot_at_that_time(tmp_path: Path) -> None:
     run = missionctl("dry-run", str(CORRIDOR), "--config", str(ROOT / "hosts.yaml"), "--until", "30", "--record",
                      "run.mcap", cwd=tmp_path)
