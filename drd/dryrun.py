@@ -364,6 +364,8 @@ def run_many(missions: Sequence[Mission], cluster: Cluster, world: World, catalo
                           grace=cluster.resume_grace,
                           down=[h.name for h in cluster.hosts if h.devices and h.name in late],
                           **_controllers(cluster))
+    if recorder is not None:  # served live: a viewer there from the start gets the messages at 0 too
+        recorder.wait_for_viewer()
     start = time.perf_counter()
     if recorder is not None:
         recorder.scene(world, starts=True)

@@ -81,6 +81,11 @@ LIVE_DEFAULT = ("127.0.0.1", 8765)
 #: How long (s) the live view stays up after the run's last message when a viewer is subscribed: the server drops
 #: what it has not sent yet when it stops (a viewer missed `/drd/runs`, readers audit 16, D2).
 LINGER = 1.0
+#: How long (s) a dry-run served live waits at its start for a first viewer (`Recorder.wait_for_viewer`): its first
+#: messages are at 0, and one logged before a viewer subscribed never reaches it (records audit 23, #1).
+FIRST_VIEWER = 3.0
+#: How long (s) after a viewer's first subscription its others are given (a viewer subscribes channel by channel).
+SUBSCRIBING = 0.3
 
 
 class RecordingError(ConfigurationError):
@@ -225,6 +230,7 @@ class Recorder:
         self.channels: dict[str, Any] = {topic: self._json_channel(topic) for topic in JSON_SCHEMAS}
         self.lock = threading.Lock()
         self.viewers = 0  # subscriptions of the live view's clients (`close` lets them have the last messages)
+        self.subscribed = threading.Event()  # a viewer subscribed to something (`wait_for_viewer`)
         self.tf = self._made(lambda context: FrameTransformsChannel(TF, context=context))
         self.world = self._made(lambda context: SceneUpdateChannel(WORLD, context=context))
         self.trails = self._made(lambda context: SceneUpdateChannel(TRAILS, context=context))
@@ -271,6 +277,15 @@ class Recorder:
         except Exception as e:  # the SDK's own errors: the port is taken, the address is not this machine's
             self.close()
             raise RecordingError(f"cannot serve the live view on {host}:{port}: {e}") from e
+
+    def wait_for_viewer(self, limit: float = FIRST_VIEWER) -> bool:
+        """Before a dry-run's first message: wait up to `limit` seconds for a viewer, and then `SUBSCRIBING` for
+        the rest of its subscriptions, so a viewer there from the start gets every message; whether one came (none
+        is waited for when the run is not served)."""
+        if self.server is None or not self.subscribed.wait(limit):
+            return False
+        time.sleep(SUBSCRIBING)
+        return True
 
     @property
     def port(self) -> int | None:
@@ -606,6 +621,7 @@ def _late_viewers(r: Recorder) -> Any:
         def on_subscribe(self, client: Client, channel: ChannelView) -> None:
             with r.lock:
                 r.viewers += 1
+            r.subscribed.set()
             scene = r.scene_now() if channel.topic == WORLD else None
             if scene is not None:
                 r.resend(WORLD, r.now, scene)

@@ -1195,12 +1195,14 @@ def shown_property(value: Any) -> str:
     return "0" if text == "-0" else text
 
 
-def live_recorder(record: Path | None, foxglove: str | None, robots: Sequence[str] = ()) -> Recorder | None:
+def live_recorder(record: Path | None, foxglove: str | None, robots: Sequence[str] = (),
+                  waits: bool = False) -> Recorder | None:
     """The recorder of `--record FILE` and `--foxglove [HOST:PORT]` (None when neither is asked), or a clear exit;
-    `robots`: those whose laser the live view advertises from its start."""
+    `robots`: those whose laser the live view advertises from its start; `waits`: the run waits for a first viewer
+    (a dry-run's, `Recorder.wait_for_viewer`), which the line saying where it is served says."""
     if record is None and foxglove is None:
         return None
-    from drd.record import Recorder, RecordingError
+    from drd.record import FIRST_VIEWER, Recorder, RecordingError
 
     try:
         recorder = Recorder(record, serve=None if foxglove is None else live_address(foxglove), robots=robots)
@@ -1209,8 +1211,9 @@ def live_recorder(record: Path | None, foxglove: str | None, robots: Sequence[st
     if recorder.port is not None:
         host = live_address(foxglove or "")[0]
         host = f"[{host}]" if ":" in host else host
+        waiting = f"; the run waits up to {FIRST_VIEWER:g} s for a first viewer" if waits else ""
         err.print(Text.assemble(("● ", "bold green"), f"live view on ws://{host}:{recorder.port} (Foxglove: Open"
-                                " connection, Foxglove WebSocket; layout docs/foxglove-layout.json)"))
+                                f" connection, Foxglove WebSocket; layout docs/foxglove-layout.json){waiting}"))
     return recorder
 
 

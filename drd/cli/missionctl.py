@@ -424,7 +424,7 @@ def dry_run(
     fh = open_trace(trace)
     stop = threading.Event()
     runs = [Mission(chart, priority[i] if i < len(priority) else None) for i, chart in enumerate(charts)]
-    recorder = live_recorder(record, foxglove, [r.id for r in cluster.robots])
+    recorder = live_recorder(record, foxglove, [r.id for r in cluster.robots], waits=True)
     sims: list[Simulation] = []  # the simulation, for where each Scout looked at the end (the picture)
     reports = _run_live(runs, cluster, sim_world, cat, fh, stop, sims, seed=seed, until=until,
                         speed=1.0 if speed is None and foxglove is not None else speed,  # watched: real time

@@ -174,6 +174,28 @@ def test_foxglove_alone_is_loopbacks_default_port(argv: list[str], expected: lis
     assert live_default(argv) == expected
 
 
+def test_a_viewer_from_the_start_gets_the_messages_at_zero(tmp_path: Path) -> None:
+    """Records audit 23, #1: the dry-run began as the port opened, and a viewer that connected and subscribed at once
+    still missed the records, the scene and the poses at 0 in 3 tries of 4. A dry-run served live now waits for a
+    first viewer (up to `FIRST_VIEWER` s) before its first message."""
+    from mcap.reader import make_reader
+
+    port = free_port()
+    with recorded_and_served(tmp_path, port) as proc:
+        try:
+            with connect_when_up(port, proc) as ws:
+                got = receive(ws, {"/drd/records": 3, "/drd/world": 1})
+            proc.wait(timeout=60)
+        finally:
+            proc.kill()
+            proc.wait(timeout=30)
+    assert "the run waits up to 3 s for a first viewer" in (tmp_path / "stderr").read_text()
+    with (tmp_path / "run.mcap").open("rb") as fh:
+        recorded = [json.loads(m.data) for _s, c, m in make_reader(fh).iter_messages() if c.topic == "/drd/records"]
+    assert [m for _t, m in got["/drd/records"]] == recorded[:3] and recorded[0]["at"] == 0.0
+    assert got["/drd/world"][0][0] == 0, "the scene at 0, not sent again at the viewer's arrival"
+
+
 def test_what_a_late_viewer_is_sent_again_is_not_written_into_the_file(tmp_path: Path) -> None:
     """A viewer that joins after the start is sent the world's scene as it is now (and each active configuration);
     the file has them already, at their times: a second full scene in it at the join was a message the run never
@@ -183,11 +205,12 @@ def test_what_a_late_viewer_is_sent_again_is_not_written_into_the_file(tmp_path:
     port = free_port()
     with recorded_and_served(tmp_path, port) as proc:
         try:
-            with connect_when_up(port, proc):  # the view is up; join once the run is well under way
+            with connect_when_up(port, proc) as first:  # a viewer from the start; another joins 2 s later
+                receive(first, {"/drd/tf": 1})
                 time.sleep(2.0)
-            with connect_when_up(port, proc) as ws:
-                got = receive(ws, {"/drd/world": 1, "/drd/tf": 1})
-            proc.wait(timeout=60)
+                with connect_when_up(port, proc) as ws:
+                    got = receive(ws, {"/drd/world": 1, "/drd/tf": 1})
+                proc.wait(timeout=60)
         finally:
             proc.kill()
             proc.wait(timeout=30)
