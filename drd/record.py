@@ -1056,9 +1056,9 @@ def _take_views(out: Recording, scene: Any, log_time: int = 0) -> None:
                 continue
 
 
-class BadMessage(ValueError):
+class BadMessage(RecordingError, ValueError):
     """A message of a drd channel that is not what the channel's schema says (not the file's damage: the reader
-    read it whole)."""
+    read it whole); a ValueError too, which the reading turns into `cannot read it as a drd recording: ...`."""
 
 
 def _loaded(topic: str, data: bytes) -> Any:
