@@ -35,6 +35,7 @@ controller is up and its report is at most a lease old, each with its age (`Offe
 from __future__ import annotations
 
 import math
+from collections import deque
 from collections.abc import Iterable
 from dataclasses import dataclass
 from enum import StrEnum
@@ -58,6 +59,11 @@ class HostState(StrEnum):
 
 #: How a down host that went silent (rather than closing its link) is shown: frozen, partitioned or overloaded.
 UNRESPONSIVE = "unresponsive"
+#: A gap in a view's own ticks longer than the lease over this is one nobody listened through (`_wake`): its ticks
+#: come every 0.25 s, a late one on a loaded machine in well under a second.
+GAP_SHARE = 4
+#: How many such gaps a view remembers (a host's silence is judged against those since it was last heard).
+GAPS_KEPT = 32
 
 
 @dataclass(frozen=True, slots=True)
@@ -115,6 +121,7 @@ class ClusterView:
         self.live_at: float | None = None  # when they arrived (monotonic)
         self.ticked: float | None = None  # the last tick (or wake-up): a longer gap than the lease is a freeze
         self.woke: tuple[float, float] | None = None  # the last freeze of its own: (wake-up, seconds frozen)
+        self.deaf: deque[tuple[float, float]] = deque(maxlen=GAPS_KEPT)  # gaps in its own ticks: (from, to)
         mine = self.records[self.me]
         mine.state, mine.since, mine.reason = HostState.UP, now, "this host"
         #: Through routers, a vanished token is not evidence at once: a router's loss takes every token behind it,
@@ -241,10 +248,17 @@ class ClusterView:
         return out
 
     def _wake(self, now: float) -> list[Change]:
-        """The freeze of this view's own, if its last tick is more than a lease ago: the others' silence over the gap
-        is not evidence (nobody listened), so each gets a lease from now before it is judged. Reported once."""
+        """A gap in this view's own ticks: the others' silence over it is not evidence (nobody listened, and what
+        they sent meanwhile is still being delivered), so it does not count in their silence (`deaf`): a worker
+        frozen for 2.85 s of a 3 s lease woke and took its controller, last heard 0.85 s before the freeze, for dead
+        (faults audit 23, #1). A gap over the lease is a freeze: reported once, and each host gets a lease from now
+        before it is judged."""
         last, self.ticked = self.ticked, now
-        if last is None or now - last <= self.lease:
+        if last is None:
+            return []
+        if now - last > self.lease / GAP_SHARE:
+            self.deaf.append((last, now))
+        if now - last <= self.lease:
             return []
         self.woke = (now, now - last)
         for rec in self.records.values():
@@ -362,7 +376,11 @@ class ClusterView:
         if not rec.token:
             return False
         last = max((t for t in (rec.heard, rec.token_since) if t is not None), default=None)
-        return last is not None and now - last <= self.lease
+        return last is not None and now - last - self._deaf_since(last) <= self.lease
+
+    def _deaf_since(self, t: float) -> float:
+        """Seconds after `t` this view did not tick (its own gaps, `_wake`): nobody listened then."""
+        return sum(end - max(start, t) for start, end in self.deaf if end > t)
 
     @staticmethod
     def _set(rec: HostRecord, state: HostState, now: float, reason: str) -> Change:

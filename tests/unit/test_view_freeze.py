@@ -7,7 +7,7 @@ import pytest
 import yaml
 
 from drd.bus import LoadReport
-from drd.daemon.view import ClusterView, HostState
+from drd.daemon.view import Change, ClusterView, HostState
 from drd.hosts import Cluster, parse_hosts
 from dsl.catalog import Catalog
 
@@ -43,6 +43,15 @@ def running(cluster: Cluster, until: float) -> ClusterView:
     return view
 
 
+def ticking(view: ClusterView, start: float, end: float) -> list[Change]:
+    """The view ticking every 0.25 s from `start` to `end` (listening all along): what changed."""
+    out, t = [], start
+    while t <= end + 1e-9:
+        out += view.tick(t)
+        t += 0.25
+    return out
+
+
 def test_a_gap_of_its_own_longer_than_the_lease_marks_nobody_down_and_is_reported_once(cluster: Cluster) -> None:
     view = running(cluster, 18.0)  # last reports at 18 s; then the controller is frozen until 28.39 s
     [frozen] = view.tick(28.39)
@@ -60,7 +69,7 @@ def test_real_silence_after_the_wake_up_still_counts_after_its_grace(cluster: Cl
     view = running(cluster, 18.0)
     assert [c.kind for c in view.tick(28.39)] == ["frozen"]
     view.load(report("spare"), 29.0)  # spare reports again; ranger1 stays silent
-    assert view.tick(28.39 + LEASE) == []  # exactly a lease after the wake-up: not yet
+    assert ticking(view, 28.64, 28.39 + LEASE) == []  # exactly a lease after the wake-up: not yet
     [down] = view.tick(28.39 + LEASE + 0.01)
     assert (down.kind, down.host) == ("down", "ranger1")
     assert down.detail.startswith("silent: no load report for 13.40 s")
@@ -90,11 +99,25 @@ def test_a_goodbye_is_not_held_by_the_grace(cluster: Cluster) -> None:
     assert (down.kind, down.host, down.detail) == ("down", "spare", "stopped: SIGTERM")
 
 
-def test_a_gap_within_the_lease_is_no_freeze(cluster: Cluster) -> None:
+def test_a_gap_within_the_lease_is_no_freeze_and_its_silence_is_not_counted(cluster: Cluster) -> None:
+    """Faults audit 23, #1: a worker frozen for 2.85 s (lease 3 s) woke, and at its first tick took its controller,
+    last heard 0.85 s before the freeze, for dead ("silent: no load report for 3.70 s"). The view's own gap is not
+    the others' silence: it is left out of theirs, and no freeze is reported."""
+    view = running(cluster, 18.0)  # the last reports at 18 s, then a gap of its own until 20.85 s
+    assert view.tick(18.0 + LEASE - 0.15) == [] and view.tick(18.0 + LEASE + 0.05) == []
+    assert view.up() == ["controller", "ranger1", "spare"]
+    view.load(report("spare"), 21.1)  # what spare sent meanwhile comes in; ranger1 is really silent
+    assert ticking(view, 21.3, 23.8) == []  # silent for less than a lease while the view listened
+    [down] = view.tick(23.9)  # 0.15 s before the gap and 3.05 s after it: a lease of listening
+    assert (down.kind, down.host) == ("down", "ranger1") and view.up() == ["controller", "spare"]
+    assert down.detail.startswith("silent: no load report for 5.90 s")
+
+
+def test_a_tick_a_little_late_is_no_gap(cluster: Cluster) -> None:
     view = running(cluster, 18.0)
-    assert view.tick(18.0 + LEASE) == []  # a late tick, but within the lease: nothing to excuse
-    [down, _] = view.tick(18.0 + LEASE + 0.05)  # and the silence over it counts as before
-    assert down.kind == "down" and down.detail.startswith("silent: no load report for 3.05 s")
+    assert view.tick(18.5) == []  # half a second late: within what a loaded machine does
+    [down, _] = ticking(view, 18.75, 18.0 + LEASE + 0.25)  # the silence counts as it always did
+    assert down.kind == "down" and down.detail.startswith("silent: no load report for 3.")
 
 
 def test_whoever_timed_out_across_the_freeze_can_ask_whether_this_host_was_frozen(cluster: Cluster) -> None:
