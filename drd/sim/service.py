@@ -415,7 +415,12 @@ class RemoteSimulation:
         if not self._queued:
             return refused
         queued, self._queued = self._queued, []
-        results = self._request(SimRequest("multi", args=[[m, a] for _, m, a in queued]))
+        try:
+            results = self._request(SimRequest("multi", args=[[m, a] for _, m, a in queued]))
+        except Exception as e:  # the simulator did not answer (its host frozen or gone): each command failed, and
+            # its owner says so; never the handler that flushed (the host serving it is not the one at fault)
+            why = f"the simulator did not take the command: {type(e).__name__}: {e}"
+            return refused + [(owner, why) for owner, _, _ in queued]
         return refused + [(owner, str(err)) for (owner, _, _), (_, err) in zip(queued, results, strict=False) if err]
 
     def _fresh(self) -> dict[tuple[Any, ...], Any]:
