@@ -112,9 +112,14 @@ def test_the_live_view_serves_scans_records_and_the_world_while_a_dry_run_runs(t
 def recorded_and_served(tmp_path: Path, port: int) -> Iterator[subprocess.Popen[bytes]]:
     """The corridor dry-run's first 12 s at twice real time, recorded into `run.mcap` and served live on `port`."""
     with (tmp_path / "stderr").open("wb") as stderr:
-        yield subprocess.Popen([*MISSIONCTL, "dry-run", str(CORRIDOR), "--config", str(ROOT / "hosts.yaml"),
-                                "--foxglove", f"127.0.0.1:{port}", "--speed", "2", "--until", "12", "--record",
-                                "run.mcap"], cwd=tmp_path, stdout=subprocess.DEVNULL, stderr=stderr)
+        proc = subprocess.Popen([*MISSIONCTL, "dry-run", str(CORRIDOR), "--config", str(ROOT / "hosts.yaml"),
+                                 "--foxglove", f"127.0.0.1:{port}", "--speed", "2", "--until", "12", "--record",
+                                 "run.mcap"], cwd=tmp_path, stdout=subprocess.DEVNULL, stderr=stderr)
+        try:
+            yield proc
+        finally:  # ours, killed by pid whatever happened
+            proc.kill()
+            proc.wait(timeout=30)
 
 
 def test_a_viewer_from_the_start_gets_every_message_the_file_has_the_first_launch_and_the_summary(
@@ -125,13 +130,9 @@ def test_a_viewer_from_the_start_gets_every_message_the_file_has_the_first_launc
 
     port = free_port()
     with recorded_and_served(tmp_path, port) as proc:
-        try:
-            with connect_when_up(port, proc) as ws:
-                got = receive(ws, {"/drd/runs": 1, "/drd/flights": 0, "/drd/tf": 0, "/drd/scan/ranger1": 0})
-            proc.wait(timeout=60)
-        finally:
-            proc.kill()
-            proc.wait(timeout=30)
+        with connect_when_up(port, proc) as ws:
+            got = receive(ws, {"/drd/runs": 1, "/drd/flights": 0, "/drd/tf": 0, "/drd/scan/ranger1": 0})
+        proc.wait(timeout=60)
     since = got["/drd/tf"][0][0]  # the viewer had subscribed by then
     with (tmp_path / "run.mcap").open("rb") as fh:
         recorded = [(m.log_time, json.loads(m.data)) for _s, c, m in make_reader(fh).iter_messages()
@@ -182,13 +183,9 @@ def test_a_viewer_from_the_start_gets_the_messages_at_zero(tmp_path: Path) -> No
 
     port = free_port()
     with recorded_and_served(tmp_path, port) as proc:
-        try:
-            with connect_when_up(port, proc) as ws:
-                got = receive(ws, {"/drd/records": 3, "/drd/world": 1})
-            proc.wait(timeout=60)
-        finally:
-            proc.kill()
-            proc.wait(timeout=30)
+        with connect_when_up(port, proc) as ws:
+            got = receive(ws, {"/drd/records": 3, "/drd/world": 1})
+        proc.wait(timeout=60)
     assert "the run waits up to 3 s for a first viewer" in (tmp_path / "stderr").read_text()
     with (tmp_path / "run.mcap").open("rb") as fh:
         recorded = [json.loads(m.data) for _s, c, m in make_reader(fh).iter_messages() if c.topic == "/drd/records"]
@@ -204,16 +201,12 @@ def test_what_a_late_viewer_is_sent_again_is_not_written_into_the_file(tmp_path:
 
     port = free_port()
     with recorded_and_served(tmp_path, port) as proc:
-        try:
-            with connect_when_up(port, proc) as first:  # a viewer from the start; another joins 2 s later
-                receive(first, {"/drd/tf": 1})
-                time.sleep(2.0)
-                with connect_when_up(port, proc) as ws:
-                    got = receive(ws, {"/drd/world": 1, "/drd/tf": 1})
-                proc.wait(timeout=60)
-        finally:
-            proc.kill()
-            proc.wait(timeout=30)
+        with connect_when_up(port, proc) as first:  # a viewer from the start; another joins 2 s later
+            receive(first, {"/drd/tf": 1})
+            time.sleep(2.0)
+            with connect_when_up(port, proc) as ws:
+                got = receive(ws, {"/drd/world": 1, "/drd/tf": 1})
+            proc.wait(timeout=60)
     [(sent_at, scene), *_] = got["/drd/world"]
     assert sent_at > 0 and "walls" in {e.id for e in scene.entities}, "the late viewer was sent the whole scene"
     factory = DecoderFactory()
