@@ -101,7 +101,8 @@ def _status(mission: str, outcome: str, reason: str, status: str | dict[str, Any
 
 @dataclass(frozen=True)
 class WorldState:
-    """The world the missions ran in: its name, the Creators' generation, the executive clock's base and time,
+    """The world the missions ran in: its name, the Creators' generation, when it began on the executive's clock
+    (`base`: `SimTimeClock.origin`) and the clock's time,
     the number of the last record sent, the Static Dependency Database's changes (resource -> key -> value: a
     launched Scout's `carrier`), and when it was saved."""
 

@@ -256,7 +256,7 @@ class Daemon:
         self.clock, self.wall = clock, wall
         self.digest = config_digest(config.cluster)
         self.started = wall()
-        self.view = ClusterView(config.cluster, config.host, digest=self.digest, now=clock())
+        self.view = ClusterView(config.cluster, config.host, digest=self.digest, now=clock(), tick=config.tick)
         self.events: deque[ClusterEvent] = deque(maxlen=MAX_EVENTS)
         self.rejected: Counter[str] = Counter()
         self.unreachable: dict[str, str] = {}

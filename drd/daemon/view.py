@@ -59,9 +59,10 @@ class HostState(StrEnum):
 
 #: How a down host that went silent (rather than closing its link) is shown: frozen, partitioned or overloaded.
 UNRESPONSIVE = "unresponsive"
-#: A gap in a view's own ticks longer than the lease over this is one nobody listened through (`_wake`): its ticks
-#: come every 0.25 s, a late one on a loaded machine in well under a second.
-GAP_SHARE = 4
+#: A gap in a view's own ticks longer than this many tick periods is one nobody listened through (`_wake`); what
+#: it lasted beyond one period does not count in the others' silence. A tick a little late is no gap: with a lease
+#: of 1 s, four periods, excusing every late tick would never let a silent host go down.
+GAP_TICKS = 2
 #: How many such gaps a view remembers (a host's silence is judged against those since it was last heard).
 GAPS_KEPT = 32
 
@@ -108,7 +109,7 @@ class ClusterView:
     """The full view of one cluster, as seen from host `me` (see the module docstring)."""
 
     def __init__(self, cluster: Cluster, me: str, *, lease: float | None = None, digest: str = "",
-                 now: float = 0.0) -> None:
+                 now: float = 0.0, tick: float = 0.25) -> None:
         self.cluster = cluster
         self.me = cluster.host(me).name
         self.lease = cluster.lease if lease is None else lease
@@ -122,6 +123,7 @@ class ClusterView:
         self.ticked: float | None = None  # the last tick (or wake-up): a longer gap than the lease is a freeze
         self.woke: tuple[float, float] | None = None  # the last freeze of its own: (wake-up, seconds frozen)
         self.deaf: deque[tuple[float, float]] = deque(maxlen=GAPS_KEPT)  # gaps in its own ticks: (from, to)
+        self.tick_period = tick  # how often it is ticked (`DaemonConfig.tick`)
         mine = self.records[self.me]
         mine.state, mine.since, mine.reason = HostState.UP, now, "this host"
         #: Through routers, a vanished token is not evidence at once: a router's loss takes every token behind it,
@@ -248,16 +250,17 @@ class ClusterView:
         return out
 
     def _wake(self, now: float) -> list[Change]:
-        """A gap in this view's own ticks: the others' silence over it is not evidence (nobody listened, and what
-        they sent meanwhile is still being delivered), so it does not count in their silence (`deaf`): a worker
+        """A gap in this view's own ticks (over `GAP_TICKS` periods): the others' silence over it, beyond a period,
+        is not evidence (nobody listened, and what they sent meanwhile is still being delivered), so it does not
+        count in their silence (`deaf`): a worker
         frozen for 2.85 s of a 3 s lease woke and took its controller, last heard 0.85 s before the freeze, for dead
         (faults audit 23, #1). A gap over the lease is a freeze: reported once, and each host gets a lease from now
         before it is judged."""
         last, self.ticked = self.ticked, now
         if last is None:
             return []
-        if now - last > self.lease / GAP_SHARE:
-            self.deaf.append((last, now))
+        if now - last > GAP_TICKS * self.tick_period:
+            self.deaf.append((last + self.tick_period, now))
         if now - last <= self.lease:
             return []
         self.woke = (now, now - last)

@@ -389,10 +389,11 @@ def test_daemons_on_a_local_bus_see_each_other_and_the_controller_follows(cluste
         granted = broker.request(Request("m/a", 1, (NeedRequest("cam", "Camera"),)), clocks.sim.now())
         assert type(granted[0]).__name__ == "Granted"
 
-        def advance(dt: float) -> None:  # the holder renews its lease at half-lease, as the executive does; the
-            while dt > 0:  # controller's daemon ticks meanwhile (a gap of a lease would be a freeze of its own)
-                clocks.sim.advance(min(dt, LEASE / 2))
-                dt -= LEASE / 2
+        def advance(dt: float) -> None:  # the holder renews its lease, as the executive does; the controller's
+            tick = ctl.config.tick  # daemon ticks meanwhile, as often as it does (a gap of its own is not listened
+            while dt > 0:  # through: the others' silence over it does not count)
+                clocks.sim.advance(min(dt, tick))
+                dt -= tick
                 broker.renew("m/a", clocks.sim.now())
                 ctl.step()
 
