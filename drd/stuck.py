@@ -92,12 +92,29 @@ class StuckWatch:
         self.stopped = threading.Event()
         self.stuck: FrameType | None = None  # the call being interrupted (read by the handler)
         self.deferred = False  # the handler found drd's own code running: interrupt again at the next look
+        self.calling = threading.Event()  # set while the main thread makes calls (`calls`); always, by default
+        self.calling.set()
         self.thread = threading.Thread(target=self._watch, name="drd-stuck-watch", daemon=True)
+
+    @contextmanager
+    def calls(self) -> Iterator[None]:
+        """The main thread makes component calls in this block: looked at only then (`gated`), so a process that
+        waits for work (a cluster's idle worker) is not woken `1 / poll` times a second for nothing."""
+        self.calling.set()
+        try:
+            yield
+        finally:
+            self.calling.clear()
 
     def _watch(self) -> None:
         seen: FrameType | None = None
         since = 0.0
-        while not self.stopped.wait(self.poll):
+        while True:
+            if not self.calling.is_set():
+                seen = None  # a call after the wait is a new one
+                self.calling.wait()
+            if self.stopped.wait(self.poll):
+                return
             now = time.monotonic()  # not a count of polls: on a loaded machine a poll takes longer than `poll`
             call = boundary(sys._current_frames().get(self.main.ident or 0))
             if call is not seen:
@@ -121,19 +138,22 @@ class StuckWatch:
 
 
 @contextmanager
-def stuck_calls_end(limit: float = STUCK_AFTER, poll: float = 0.25,
-                    rule: str | None = None) -> Iterator[StuckWatch | None]:
+def stuck_calls_end(limit: float = STUCK_AFTER, poll: float = 0.25, rule: str | None = None,
+                    gated: bool = False) -> Iterator[StuckWatch | None]:
     """While the body runs in the main thread, a component call stuck for `limit` seconds is interrupted; `rule`
-    (how the error explains the limit) defaults to the dry-run's."""
+    (how the error explains the limit) defaults to the dry-run's; `gated`: only within the watch's `calls()`."""
     if threading.current_thread() is not threading.main_thread():
         yield None
         return
     watch = StuckWatch(limit, poll) if rule is None else StuckWatch(limit, poll, rule)
+    if gated:
+        watch.calling.clear()
     previous = signal.signal(signal.SIGUSR1, watch.interrupt)
     watch.thread.start()
     try:
         yield watch
     finally:
         watch.stopped.set()
+        watch.calling.set()  # out of its wait, to see it is stopped
         watch.thread.join(timeout=2 * watch.poll + 1)
         signal.signal(signal.SIGUSR1, previous)

@@ -682,12 +682,14 @@ def worker_main(conn: Connection) -> None:
     # a call stuck in a component's Python code is interrupted before the Creator would kill this process with
     # every instance in it (`CALL_TIMEOUT`): its state fails, the others go on, as in a dry-run
     with stuck_calls_end(WORKER_STUCK_AFTER, poll=0.05, rule=f"a cluster's worker stops a component's call after"
-                         f" that; the dry-run after {STUCK_AFTER:g} s"):
+                         f" that; the dry-run after {STUCK_AFTER:g} s", gated=True) as watch:
         try:
             while True:
                 match decode(conn.recv_bytes(), trusted=True):  # the Creator is trusted (see drd.cluster.pipe)
                     case Run(calls, latest):
-                        link.send(Done(tuple(run_calls(calls, latest, link, hosted))))
+                        with watch.calls() if watch is not None else contextlib.nullcontext():
+                            done = tuple(run_calls(calls, latest, link, hosted))
+                        link.send(Done(done))
                     case Drop(paths):
                         _shutdown_all([hosted.pop(path, None) for path in paths], SHUTDOWN_GRACE)
                     case _:  # nothing else comes unasked

@@ -195,14 +195,6 @@ class ComponentHost:
         executive's clock goes on across worlds: users audit 22, #2)."""
         return self.now() - self.origin()
 
-    def step(self, node: Node, comp: Component, now: float) -> Status | None:
-        """One control cycle of one component: its status, or None when it raised (its state fails)."""
-        try:
-            return comp.step(now - self.origin())
-        except COMPONENT_RAISES as e:  # component code is not ours to trust
-            self.failed(node, e)
-            return None
-
     def suspend(self, node: Node) -> None:
         comp = node.component
         if comp is not None:
