@@ -997,6 +997,7 @@ class _RecordWatch:
         #: order (a resumed mission's first live records would otherwise go before the old ones caught up)
         self.held: list[Any] = []
         self.away_total = 0.0  # seconds the controller did not answer, over the run (a restart, a failover)
+        self.resumed: dict[str, Any] | None = None  # the mission's `resumed` as the controller last said it
         self.gate = ProgressGate(err.is_terminal)  # on a pipe, a progress line only when it changed
         self.view: _ClusterView | None = None
         self.priority = 1  # the started mission's, as the controller said it (`started`)
@@ -1126,7 +1127,7 @@ class _RecordWatch:
                     return missions
                 fail(f"mission {mission}: the controller came back without it (it kept no journal of it): see"
                      " `missionctl status`", code=1)
-            away, self.away_since = time.monotonic() - self.away_since, None
+            away, self.away_since = self._away(mission, missions), None
             self.away_total += away
             # "resumed" only once its `restored` record says so (`_take`): a controller that was frozen past the
             # lease carries on with a mission whose hosts stopped it, which then ends, saying why
@@ -1134,7 +1135,17 @@ class _RecordWatch:
             self.behind = True
         if self.behind:  # until the executive answered: it may be busy with the resumed mission's first cycles
             self.behind = not self._catch_up(mission)
+        self.resumed = _resumed(mission, missions)
         return missions
+
+    def _away(self, mission: str, missions: list[dict[str, Any]]) -> float:
+        """How long `mission` had no controller: as the controller that resumed it says (`resumed.paused`, what
+        `missionctl status` shows), or, when it was not resumed since (a controller frozen, not restarted), as this
+        client timed it, from its first unanswered poll to the first answered one."""
+        resumed = _resumed(mission, missions)
+        if resumed is not None and resumed != self.resumed and isinstance(resumed.get("paused"), int | float):
+            return float(resumed["paused"])
+        return time.monotonic() - (self.away_since or time.monotonic())
 
     def _catch_up(self, mission: str) -> bool:
         """The records of `mission` sent while this client could not hear the controller (it resumed the mission
@@ -1724,3 +1735,11 @@ def _count(node: dict[str, Any], shown: list[int]) -> None:
 
 def _pct(value: float | None) -> str:
     return "—" if value is None else f"{value:.0f}%"
+
+
+def _resumed(mission: str, missions: list[dict[str, Any]]) -> dict[str, Any] | None:
+    """`mission`'s `resumed` in the executive's list (when, from what, after how long without a controller)."""
+    for m in missions:
+        if m.get("id") == mission and isinstance(m.get("resumed"), dict):
+            return dict(m["resumed"])
+    return None

@@ -85,12 +85,13 @@ class ClusterClient:
             NoDaemon: nobody answered within `timeout`.
             ClientError: the daemons seen belong to several clusters (pass `cluster`).
         """
+        from drd.bus.base import RECONNECT_EACH_SECOND
         from drd.bus.zenoh_bus import ZenohBus
 
         began = time.monotonic()
         if timeout <= 0:
             raise ValueError(f"timeout must be positive, not {timeout!r}")
-        opts = {"scouting/delay": 0, **dict(options or {})}
+        opts = {"scouting/delay": 0, "connect/retry": RECONNECT_EACH_SECOND, **dict(options or {})}
         if opts.get("mode") == "client":  # zenoh opens a client once a router answered, trying them in turn
             opts.setdefault("transport/unicast/open_timeout", max(50, int(timeout * HANDSHAKE_SHARE * 1000)))
         try:

@@ -38,7 +38,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from drd.bus import DEFAULT_TIMEOUT, Bus, BusError, LoadReport, Message, Ping, Pong, Query, Reply, Sample
-from drd.bus.base import BusWrapper, Declaration, Handler, Queryable
+from drd.bus.base import RECONNECT_EACH_SECOND, BusWrapper, Declaration, Handler, Queryable
 from drd.bus.messages import encode
 from drd.cluster.instances import InstanceInfo
 from drd.cluster.keys import ClusterKeys, cluster_of
@@ -169,11 +169,11 @@ def config_digest(cluster: Cluster) -> str:
 #: priority that the router's tx thread goes over for each batch (idle router at 50 daemons: 0.96-0.99 % of a core
 #: with it, 0.70 % without; docs/design.md "Load reports in step"). A ROS 2 session (`drd.bus.ros2`) keeps zenoh's.
 #: One dialer per pair (`Transport.dials`): no link made on gossip (it would dial back), and a dialer tries again
-#: each second (not backing off to 4 s), so a host started before the one it dials meets it within a second.
+#: each second (`RECONNECT_EACH_SECOND`).
 CLUSTER_LINKS: dict[str, object] = {
     "transport/unicast/qos/enabled": False,
     "scouting/gossip/autoconnect": [],
-    "connect/retry": {"period_init_ms": 1000, "period_max_ms": 1000, "period_increase_factor": 1},
+    "connect/retry": RECONNECT_EACH_SECOND,
 }
 
 

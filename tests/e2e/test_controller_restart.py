@@ -71,6 +71,9 @@ def test_a_mission_goes_on_after_its_controller_is_killed_and_started_again(clus
     [status] = [m for m in cluster.client().missions() if m.get("id") == mission]
     assert status["outcome"] == "success"
     assert status["resumed"]["paused"] > 1.5, status.get("resumed")  # what `missionctl status` says of it
+    # the run says the same time without a controller as status (it said 2-3 s more: its own reconnection's delay)
+    assert report["controller_away"] == pytest.approx(status["resumed"]["paused"], abs=1e-3), report
+    assert f"the controller is back after {status['resumed']['paused']:.1f} s" in err, err[-2000:]
     assert 0 < restored[0]["since"] <= restored[0]["at"] + 1e-6 and restored[0]["paused"] > 1.5
     # no ghost: what ranger1 announces of the mission is gone once it ended (its instances were retired)
     eventually(lambda: not [i for i in cluster.client().components().instances if i.mission == mission],
