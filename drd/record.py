@@ -56,6 +56,7 @@ from drd.explain import Waiters, within
 from drd.runtime import records as rec
 from drd.sim.model import INTRUDER_RADIUS, RANGER_RADIUS, SCOUT_RADIUS, DoorState, World
 from drd.sim.observe import SCAN_EVERY, SensorTap
+from drd.tracecheck import record_problem
 
 RECORDS, TF, RUNS, WORLD = "/drd/records", "/drd/tf", "/drd/runs", "/drd/world"
 ACTIVE, LOG, TRAILS = "/drd/active", "/drd/log", "/drd/trails"
@@ -1090,6 +1091,9 @@ def _run_problem(run: dict[str, Any]) -> str | None:
 def _take(out: Recording, topic: str, data: bytes) -> None:
     if topic == RECORDS:
         d = _loaded(topic, data)
+        problem = record_problem(d)  # what `replay --trace` writes back out must be a trace `check-trace` takes
+        if problem is not None:
+            raise BadMessage(f"a message on {topic}: {problem}")
         r = rec.from_dict(d)
         if r is not None:
             key, seq = str(d.get("mission", "")), d.get("seq")

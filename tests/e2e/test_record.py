@@ -112,7 +112,11 @@ def _forged(path: Path, topic: str, *messages: bytes) -> None:
      "a message on /drd/records holds NaN, which is not JSON"),
     ("/drd/records", [b'{"kind":"entered","at":0,"path":"X","state":"X","mission":"X-1"}', b"\xff\xfe not json"],
      "a message on /drd/records is not JSON"),
-], ids=["summary-time-not-a-number", "nan", "not-json"])
+    ("/drd/records", [b'{"kind":"granted","at":1,"path":"X","mission":"X-1"}'],
+     "a message on /drd/records: `granted` record without `resources`"),
+    ("/drd/records", [b'{"kind":"entered","at":"1","path":"X","state":"X"}'],
+     "a message on /drd/records: `entered` record: `at` is \"1\", not a number"),
+], ids=["summary-time-not-a-number", "nan", "not-json", "record-without-a-field", "record-time-a-string"])
 def test_an_intact_file_whose_messages_break_their_schema_is_refused_as_input(tmp_path: Path, topic: str,
                                                                               messages: list[bytes], why: str) -> None:
     """Records audit 23, #2 and #4: a summary whose sim_time was a string crashed replay (exit 70, "could not convert
