@@ -603,9 +603,11 @@ class ResourceManager:
             return None  # nothing to search: every candidate of some need is full
         solution = first_solution(needs, self._reg, lambda u: self._room(u, wait, False), given)
         if solution is None and self._overtime:
-            # Preempt as few holders as possible: free units first, then overtime holders.
+            # Preempt as few holders as possible, and of those, take as few held units as possible: free units
+            # first. A victim is resumed on its very units only, so taking a unit it did not have to give (its
+            # Scout, when only its camera was needed) would make it wait for that unit while others stand free.
             ranked = islice(solutions(needs, self._reg, lambda u: self._room(u, wait, True), given), 64)
-            solution = min(ranked, key=lambda s: len(self._victims(s)), default=None)
+            solution = min(ranked, key=lambda s: (len(self._victims(s)), self._held_taken(s)), default=None)
         if solution is None:
             return None
         touched: set[str] = set()
@@ -634,6 +636,11 @@ class ResourceManager:
             else:
                 return True
         return False
+
+    def _held_taken(self, solution: Solution) -> int:
+        """How many of a solution's exclusive units someone holds now (each would be taken from its holder)."""
+        used = self._reg.used
+        return sum(1 for u in solution.units if not self._reg.units[u].sharable and used.get(u))
 
     def _victims(self, solution: Solution) -> list[str]:
         """The holders a solution takes exclusive units from (all preemptible by construction)."""

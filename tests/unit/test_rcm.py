@@ -119,6 +119,19 @@ def test_a_holder_in_overtime_is_preempted_as_soon_as_a_contender_arrives() -> N
     assert rm.queue() == ("A",)
 
 
+def test_a_preemption_takes_only_the_units_it_must_and_free_ones_for_the_rest() -> None:
+    """Semantics audit 24, D1: two instances each needing a Scout (three free) and the one camera. The second
+    preempted the first for the camera and took its Scout too (the first candidate, free once revoked), so the two
+    took turns on one Scout while the others stood idle: a victim is resumed on its very units only."""
+    rm = manager(Unit("cam1", "Camera"), *(Unit(f"scout{i}", "Scout") for i in (1, 2, 3)))
+    needs = (NeedRequest("s", "Scout"), CAMERA)
+    assert granted(rm.request(Request("A", 1, needs), 0.0))["A"].assignment == {"s": "scout1", "camera": "cam1"}
+    revoked, grant = rm.request(Request("B", 1, needs), 6.0)  # A is in overtime: preempted for the camera
+    assert isinstance(revoked, Revoked) and revoked.holder == "A"
+    assert isinstance(grant, Granted) and grant.assignment == {"s": "scout2", "camera": "cam1"}
+    assert granted(rm.tick(11.0))["A"].assignment == {"s": "scout1", "camera": "cam1"}  # back on its own Scout
+
+
 def test_lower_priority_never_preempts_a_higher_one() -> None:
     rm = manager(Unit("cam1", "Camera"))
     rm.request(Request("High", 1, (CAMERA,)), 0.0)
