@@ -874,8 +874,9 @@ class Interpreter:
                         continue
                 else:
                     continue
-                if self._enabled_guard(domain, t, None):
-                    choice = self._choose(node, domain, None) if self.events else None  # an earlier `on` may win
+                if self._enabled_guard(domain, t, None):  # an earlier `on`, or an `after` due earlier, may win
+                    several = self.events or len(node.state.transitions) > 1
+                    choice = self._choose(node, domain, None) if several else None
                     self._take_chosen(node, choice or (t, None), None)
                     return True
         return False
@@ -894,28 +895,39 @@ class Interpreter:
         wins"), with the event it takes: its completion (`ok`) or `on error` (`not ok`) when it has just finished,
         an `after` due, a `when` that holds, an `on E` whose event was emitted at this instant and is not yet
         dispatched (`current`, the one being dispatched, then the queue, in emission order). A false guard does
-        not enable."""
+        not enable. An `after` that came due between two control cycles (`250ms`, or on a resume) was enabled
+        alone before this instant, so the one due first wins over everything enabled only now (semantics audit
+        24, D4: `after 290ms` declared first beat `after 250ms`)."""
         finished = None if ok is None else ast.TriggerKind.COMPLETION if ok else ast.TriggerKind.ERROR
         now = self.clock.now()
+        first: tuple[Transition, rec.Event | None] | None = None
+        late: tuple[float, Transition] | None = None  # the `after` due first, before this instant
         for t in node.state.transitions:
             kind = t.kind
-            if kind is ast.TriggerKind.EVENT:
-                event = self._pending(domain, t, current)
-                if event is not None:
-                    return t, event
-                continue
             if kind is ast.TriggerKind.TIMEOUT:
                 delay = self._delay(domain, t)
                 if delay is None or now - self._since(node) < delay - TIME_EPS:
                     continue
+                due = self._since(node) + delay
+                if due < now - TIME_EPS:
+                    if (late is None or due < late[0] - TIME_EPS) and self._enabled_guard(domain, t, None):
+                        late = (due, t)
+                    continue
+            elif first is not None:
+                continue  # only an `after` due earlier can still win
+            elif kind is ast.TriggerKind.EVENT:
+                event = self._pending(domain, t, current)
+                if event is not None:
+                    first = (t, event)
+                continue
             elif kind is ast.TriggerKind.CHANGE:
                 if t.condition is None or not self._truthy(domain, t.condition, None):
                     continue
             elif kind is not finished:
                 continue
-            if self._enabled_guard(domain, t, None):
-                return t, None
-        return None
+            if first is None and self._enabled_guard(domain, t, None):
+                first = (t, None)
+        return first if late is None else (late[1], None)
 
     def _pending(self, domain: Node, t: Transition, current: rec.Event | None) -> rec.Event | None:
         """The first event of this instant not yet dispatched that enables `on` transition `t` (heard by `domain`,

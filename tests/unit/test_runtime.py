@@ -411,6 +411,32 @@ def test_preallocation_is_cancelled_when_the_mission_goes_elsewhere(catalog: Cat
     assert rcm.holders("cam") == () and not rcm.queue()
 
 
+@pytest.mark.parametrize("other", ["Calibrate -> Observe after 290ms", "Calibrate -> Observe on MotionDetected"])
+def test_an_after_due_between_two_cycles_wins_over_what_is_enabled_only_at_the_next(catalog: Catalog,
+                                                                                    other: str) -> None:
+    """Semantics audit 24, D4: `after 250ms` was due alone at 0.25 s, but at the 0.3 s cycle the first declared of
+    the two timers won (`after 290ms`); so did an event declared first and emitted at 0.3 s."""
+    text = f"""
+mission M {{
+    needs r: Ranger
+    start -> Calibrate
+    {other}
+    Calibrate -> TurnToWatch after 250ms
+    TurnToWatch -> done after 1s
+    Observe -> fail after 1s
+}}"""
+    fakes = {"Calibrate": Forever, "TurnToWatch": Forever, "Observe": Forever}
+    h = Harness(compiled(text, catalog), fakes, ranger_world())
+    h.interp.start()
+    for _ in range(3):  # the control cycles at 0.1, 0.2 and 0.3 s
+        h.clock.advance(0.1)
+        if " on " in other and h.clock.now() > 0.25:
+            h.interp.emit("MotionDetected", area=1.0)
+        h.interp.step()
+    taken = [(r.target.rsplit("/", 1)[-1], r.trigger) for r in h.of(rec.Taken) if r.path.endswith("Calibrate")]
+    assert taken == [("TurnToWatch", "timeout")], taken
+
+
 def test_a_timeout_can_be_a_parameter(catalog: Catalog) -> None:
     text = """
 mission M { Patient(limit: 3s) }
