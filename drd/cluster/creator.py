@@ -572,6 +572,9 @@ class Creator:
         logs = reply.logs
         if inst.notes:
             logs, inst.notes = [*inst.notes, *logs], []
+        if call.op == "terminate" and call.status == MOVED and reply.error and not reply.raised:  # it cannot take
+            return ComponentReply(reply.status, reply.outputs, reply.events, logs, reply.shared,  # its state along:
+                                  reply.dependencies, reply.error)  # it was not stopped, and runs on here, bound
         state = _STATE_AFTER.get(call.op)
         if state is not None and state != inst.state:
             inst.state = state

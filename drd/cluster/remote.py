@@ -363,6 +363,12 @@ class ComponentRouter:
         ct = self.catalog.get(component) if self.catalog is not None else None
         return None if ct is None else {p.name for p in ct.params}
 
+    def portable(self, component: str) -> bool:
+        """Whether the manifest says `movable: true`: the component's state may be given back on another host (a
+        component it does not know: yes, as before manifests said it)."""
+        ct = self.catalog.get(component) if self.catalog is not None else None
+        return ct is None or bool(ct.movable)
+
     def creator_key(self, host: str) -> str:
         return f"drd/{self.cluster}/host/{host}/creator"
 
@@ -519,6 +525,7 @@ class RemoteComponent(Component):
         self._restore: list[Any] | None = None  # [state] to restore at its next start (`restore`)
         self._failed = ""  # the error its last step failed with (its `terminate` does not say it again)
         self._started = False  # its host accepted its last start (else a terminate finds no instance there)
+        self._raised = ""  # its own code raised as a migration started it elsewhere: its next step fails with that
 
     # -- lifecycle ------------------------------------------------------------------------------------
 
@@ -537,7 +544,7 @@ class RemoteComponent(Component):
 
     def start(self) -> None:
         self._resolve()
-        restore, self._restore, self.state, self._failed = self._restore, None, None, ""
+        restore, self._restore, self.state, self._failed, self._raised = self._restore, None, None, "", ""
         if self.host is None and not self.movable:
             if self.local is None:
                 self.local = self.router.local[self.name]()
@@ -558,6 +565,8 @@ class RemoteComponent(Component):
     def step(self, now: float) -> Status:
         if self.local is not None and self.host is None:
             return self.local.step(now)
+        if self._raised:  # started by a migration, its own code raised: the state fails with that
+            raise ComponentRaised(self._raised)
         reply = self._step_placed(now)
         self._apply(reply)
         if reply.error:
@@ -668,9 +677,11 @@ class RemoteComponent(Component):
         old = self.host or ""
         why = f"its host {old} " + ("was lost" if host_lost else "no longer ran it")
         self.router.forget_reply(self)  # a step reply batched from the old host is no longer ours
-        restore = self.state if self.state is not None else [None]
+        portable = self.router.portable(self.name)  # its manifest says its state may go elsewhere (`movable`)
+        restore = self.state if self.state is not None and portable else [None]
         self._place("re-placed", {old} if host_lost else set(), restore)
-        said = "from its last snapshot" if restore[0] is not None else "afresh (no snapshot)"
+        said = "from its last snapshot" if restore[0] is not None else "afresh (no snapshot)" if portable else \
+            "afresh (its manifest does not say movable: true, so its state stays behind)"
         self._ctx.log(f"{self.name} placed again on {self.host} {said}: {why}")
 
     def migrate(self, host: str) -> list[Any]:
@@ -693,6 +704,12 @@ class RemoteComponent(Component):
         try:
             self.host = host
             self._call("start", params=self._params, bindings={}, rank=self._rank, restore=moved)
+        except ComponentRaised as e:  # its own `restore` or `start` raised: any host would run the same code, so
+            # its state fails with that, at its next step, as a start that raises does (placement audit 24, #1)
+            self._raised = self._failed = str(e)
+            self.router.placed.append((self._ctx.path, host, "migrated"))
+            raise ComponentError(f"{self._ctx.path}: {self.name} raised as it was started on {host} ({e}): its state"
+                                 " fails with that") from None
         except ComponentError as e:
             self.host = None if self.router.is_down(old) else old
             if self.host is None:

@@ -788,7 +788,6 @@ def _chain_in(call: Call, latest: dict[str, Any]) -> None:
 def _run_call(h: _Hosted, call: Call, link: _Link) -> CallReply:
     """One lifecycle call of a hosted instance; what it did, and what it emitted since the last reply."""
     from drd.runtime.component import Status
-    from drd.runtime.records import plain
 
     h.now = call.now
     services = h.ctx.services
@@ -812,7 +811,12 @@ def _run_call(h: _Hosted, call: Call, link: _Link) -> CallReply:
         elif op == "terminate":
             status = call.status
             if status == MOVED:  # stopped to go on elsewhere: its state as it leaves, then stopped while running
+                said = len(h.logs)
                 snapshot = take_snapshot(h, force=True)
+                if snapshot is None:  # its snapshot raised or is too large: it stays, running (placement audit 24)
+                    why = h.logs.pop(said) if len(h.logs) > said else "its snapshot was not taken"
+                    return _reply(h, services, f"it cannot move with its state ({why}): it goes on where it is",
+                                  unused=link.unused())
             h.comp.terminate(Status(status) if status in Status.__members__.values() else Status.RUNNING)
         else:
             error = f"unknown op {op!r}"
@@ -823,8 +827,16 @@ def _run_call(h: _Hosted, call: Call, link: _Link) -> CallReply:
             h.logs.append(tb)
     if not error and (call.op == "start" or call.op == "step" and _due(h)):
         snapshot = take_snapshot(h, force=call.op == "start")  # a new entry: the controller forgot the last
+    return _reply(h, services, error, result, snapshot, raised_here, link.unused())
+
+
+def _reply(h: _Hosted, services: Any, error: str, result: str = "", snapshot: list[Any] | None = None,
+           raised_here: bool = False, unused: list[Any] | None = None) -> CallReply:
+    """The reply to a call of `h`, with what it emitted, logged and shared since the last one (then forgotten)."""
+    from drd.runtime.records import plain
+
     reply = CallReply(result, plain(h.ctx.outputs), h.events, h.logs, plain(services.shared), h.deps, error, False,
-                      link.unused(), snapshot, raised=raised_here)
+                      unused or [], snapshot, raised=raised_here)
     h.events, h.logs, h.deps = [], [], []
     return reply
 
