@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import bisect
 import math
+import os
 from collections.abc import Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from itertools import pairwise
@@ -114,7 +115,18 @@ def render(world: World, report: RunReport, path: Path, *, title: str | None = N
 
     with matplotlib.rc_context(_STYLE):
         fig = figure(world, report, title=title, views=views, types=types)
-        fig.savefig(path, format=fmt, dpi=150, metadata=_METADATA[fmt])
+        if path.exists() and not path.is_file():  # a device or a pipe (/dev/stdout) is written as it is
+            fig.savefig(path, format=fmt, dpi=150, metadata=_METADATA[fmt])
+            return
+        # drawn beside it, then put in its place: a picture cut short (a Ctrl-C, a full disk) is never left at
+        # `path`, and one already there stays whole (cli audit 24, #1)
+        real = Path(os.path.realpath(path))  # a link stays a link: the file it names is replaced
+        part = real.with_name(f".{real.name}.{os.getpid()}.part")
+        try:
+            fig.savefig(part, format=fmt, dpi=150, metadata=_METADATA[fmt])
+            os.replace(part, real)
+        finally:
+            part.unlink(missing_ok=True)
 
 
 #: Text stays text in SVG (searchable, selectable, small); ids are salted with a constant, not at random.

@@ -33,6 +33,7 @@ from drd.cli.common import (
     INVALID,
     OK,
     VERSION_CALLBACKS,
+    distinct_files,
     duration_text,
     err,
     fail,
@@ -502,6 +503,7 @@ def run(mission: Path = typer.Argument(..., help="The mission file.", show_defau
     from drd.dryrun import summary
     from dsl.params import ParamError, parse_assignments
 
+    distinct_files({"the mission file": [mission], "the hosts file": [config]}, {"--trace": trace, "--record": record})
     source, imports, aliases = _mission_source(mission)
     try:
         params = parse_assignments(param)

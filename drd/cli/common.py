@@ -241,6 +241,25 @@ def open_trace(trace: Path | None) -> IO[str] | None:
         fail(f"{trace}: cannot write the trace: {e.strerror or e}")
 
 
+def distinct_files(inputs: Mapping[str, Sequence[Path | None]], outputs: Mapping[str, Path | None]) -> None:
+    """Refuse, before anything runs (exit 2), an output file that is one of the command's inputs or another of its
+    outputs: writing it would destroy the input (a `--trace` over the mission file, a `replay --trace` over the
+    recording) or mix two outputs in one file that is neither (cli audit 24, #2). Paths are compared as the
+    system resolves them (links, `..`)."""
+    seen: dict[str, str] = {}  # resolved path -> what it already is
+    for what, paths in inputs.items():
+        for path in paths:
+            if path is not None:
+                seen.setdefault(os.path.realpath(path), what)
+    for option, path in outputs.items():
+        if path is None:
+            continue
+        real = os.path.realpath(path)
+        if real in seen:
+            fail(f"{option} {path}: it is {seen[real]}; writing it there would destroy it", hint="give another path")
+        seen[real] = f"the {option} file"
+
+
 def write_file(path: Path, text: str, what: str) -> None:
     """Write `text` to `path` (`plan -o`), or a clear exit naming the file (a missing folder, a full disk)."""
     try:

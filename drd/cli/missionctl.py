@@ -22,6 +22,7 @@ from drd.cli.common import (
     OK,
     as_text,
     catalog,
+    distinct_files,
     err,
     error_json,
     fail,
@@ -150,6 +151,11 @@ def plan(
         fail(f"--json and --format {fmt.value} ask for two formats: give one")
     if as_json:
         fmt = Format.json
+    distinct_files({"the mission file": [file], "the hosts file": [config]}, {"-o": output})
+    suffix = output.suffix.lower() if output else ""
+    if suffix and suffix not in IMAGE_SUFFIXES and suffix not in FORMAT_BY_SUFFIX:  # none: the tree, as text
+        known = ", ".join([*FORMAT_BY_SUFFIX, *IMAGE_SUFFIXES])
+        fail(f"-o {output}: its suffix picks the format, and {suffix} is not one ({known})")
     result = _compile(file, catalog(components))
     if not show_diagnostics([result]):
         return INVALID
@@ -157,7 +163,6 @@ def plan(
     if chart is None:
         fail(f"{file} declares no mission, so there is nothing to plan",
              hint="add `mission Name { ... }` or plan the file that imports this one")
-    suffix = output.suffix.lower() if output else ""
     if config is not None:
         if suffix in IMAGE_SUFFIXES:
             fail(f"-o {output}: with --config, plan writes text (.txt) or JSON (.json), not a picture",
@@ -411,6 +416,8 @@ def dry_run(
     from drd.cli.cluster import live_recorder
     from drd.dryrun import Mission
 
+    distinct_files({"a mission file": missions, "the hosts file": [hosts]},
+                   {"--trace": trace, "--record": record, "--render": render})
     cat = catalog(components)
     if len(priority) > len(missions):
         fail(f"{len(priority)} --priority for {len(missions)} mission{'s' if len(missions) > 1 else ''}:"
@@ -652,6 +659,7 @@ def replay(
                                                        "`--record` wrote)" if inside else ""))
     if not file.is_file():
         fail(f"{file}: no such file (looked at {file.absolute()})")
+    distinct_files({"the recording": [file]}, {"--render": render, "--trace": trace, "--ros2-bag": ros2_bag})
     try:
         recording = read(file)
     except RecordingError as e:
@@ -746,6 +754,8 @@ def _picture(reports: list[DryRun], sim_world: World | None, render: Path | None
             draw(sim_world, reports[0] if len(reports) == 1 else merged(reports), render, views=views, types=types)
         except OSError as e:
             fail(f"--render {render}: cannot write the picture: {e.strerror or e} (the report above is complete)")
+        except KeyboardInterrupt:  # the run is over and reported: the picture alone is not drawn (cli audit 24, #1)
+            fail(f"--render {render}: not drawn: interrupted (Ctrl-C); the report above is complete")
         err.print(Text.assemble(("✓ ", "bold green"), f"drew {render}"))
 
 

@@ -1,0 +1,106 @@
+"""Output files that would destroy an input or another output, and a picture cut short (cli audit 24, #1, #2, #8):
+each was written over without a word, exit 0 (a `--trace` over the mission file, `replay --trace` over the
+recording, `--trace` and `--record` into one file that was neither), a Ctrl-C while the picture was drawn left a
+cut one (and cut the good one that was there), and `plan -o plan.jsn` wrote the text tree under a suffix it does
+not know."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[2]
+MISSIONCTL = [sys.executable, "-c", "from drd.cli.missionctl import main; main()"]
+HOSTS = ROOT / "hosts.yaml"
+MISSION = "mission Stroll {\n    needs r: Ranger\n    Calibrate(samples: 5)\n}\n"
+
+
+def missionctl(*args: str, cwd: Path) -> subprocess.CompletedProcess[str]:
+    return subprocess.run([*MISSIONCTL, *args], cwd=cwd, capture_output=True, text=True, timeout=300, check=False)
+
+
+@pytest.fixture
+def work(tmp_path: Path) -> Path:
+    (tmp_path / "stroll.mission").write_text(MISSION)
+    (tmp_path / "hosts.yaml").write_text(HOSTS.read_text())
+    return tmp_path
+
+
+@pytest.mark.parametrize(("args", "said"), [
+    (["--trace", "stroll.mission"], "--trace stroll.mission: it is a mission file"),
+    (["--record", "./hosts.yaml"], "--record hosts.yaml: it is the hosts file"),
+    (["--trace", "run.out", "--record", "run.out"], "--record run.out: it is the --trace file"),
+    (["--render", "../x/../{dir}/stroll.mission"], "it is a mission file"),
+], ids=["trace-over-the-mission", "record-over-the-hosts-file", "trace-and-record-in-one", "a-path-around"])
+def test_a_dry_run_refuses_an_output_over_an_input_or_another_output(work: Path, args: list[str],
+                                                                     said: str) -> None:
+    (work.parent / "x").mkdir(exist_ok=True)
+    args = [a.format(dir=work.name) for a in args]
+    run = missionctl("dry-run", "stroll.mission", "--config", "hosts.yaml", *args, cwd=work)
+    assert run.returncode == 2 and said in run.stderr, run.stderr[-2000:]
+    assert run.stdout == ""  # refused before anything ran
+    assert (work / "stroll.mission").read_text() == MISSION and (work / "hosts.yaml").read_text() == HOSTS.read_text()
+    assert not (work / "run.out").exists()
+
+
+def test_replay_refuses_to_write_its_trace_over_the_recording(work: Path) -> None:
+    run = missionctl("dry-run", "stroll.mission", "--config", "hosts.yaml", "--record", "run.mcap", cwd=work)
+    assert run.returncode == 0, run.stderr[-2000:]
+    before = (work / "run.mcap").read_bytes()
+    again = missionctl("replay", "run.mcap", "--trace", "run.mcap", cwd=work)
+    assert again.returncode == 2 and "--trace run.mcap: it is the recording" in again.stderr, again.stderr
+    assert (work / "run.mcap").read_bytes() == before
+    assert missionctl("replay", "run.mcap", cwd=work).returncode == 0
+
+
+def test_plan_refuses_its_own_mission_as_output_and_a_suffix_it_does_not_know(work: Path) -> None:
+    over = missionctl("plan", "stroll.mission", "-o", "stroll.mission", cwd=work)
+    assert over.returncode == 2 and "-o stroll.mission: it is the mission file" in over.stderr, over.stderr
+    assert (work / "stroll.mission").read_text() == MISSION
+    typo = missionctl("plan", "stroll.mission", "-o", "plan.jsn", cwd=work)
+    assert typo.returncode == 2 and "-o plan.jsn: its suffix picks the format, and .jsn is not one" in typo.stderr
+    assert not (work / "plan.jsn").exists()
+    plain = missionctl("plan", "stroll.mission", "-o", "plan", cwd=work)  # no suffix: the text tree, as before
+    assert plain.returncode == 0 and "Stroll" in (work / "plan").read_text()
+
+
+def test_a_picture_cut_short_leaves_the_one_that_was_there_whole(tmp_path: Path,
+                                                                 monkeypatch: pytest.MonkeyPatch) -> None:
+    """A Ctrl-C arrives while matplotlib writes the file: what it wrote so far never reaches the picture's path."""
+    from matplotlib.figure import Figure
+
+    from drd.dryrun import DryRun
+    from drd.render import render
+    from drd.sim import load_world
+
+    picture = tmp_path / "run.svg"
+    picture.write_text("<svg>the last run's</svg>")
+
+    def cut_short(self: Figure, fname: Path, **_: object) -> None:
+        Path(fname).write_text("<svg><g>")  # half a picture, then the Ctrl-C
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(Figure, "savefig", cut_short)
+    world = load_world(ROOT / "worlds" / "corridor.yaml")
+    with pytest.raises(KeyboardInterrupt):
+        render(world, DryRun("M", None, "success", 1.0, 1.0), picture)
+    assert picture.read_text() == "<svg>the last run's</svg>"
+    assert [p.name for p in tmp_path.iterdir()] == ["run.svg"]  # nothing half-written left beside it
+
+
+def test_a_ctrl_c_while_the_picture_is_drawn_keeps_the_report_and_says_the_picture_was_not_drawn(
+        work: Path) -> None:
+    """The Ctrl-C is raised where the picture is drawn (`drd.render.render`), in the real command."""
+    code = ("import sys, drd.render\n"
+            "def interrupted(*a, **k):\n    raise KeyboardInterrupt\n"
+            "drd.render.render = interrupted\n"
+            "from drd.cli.missionctl import main\nsys.argv[0] = 'missionctl'\nmain()\n")
+    run = subprocess.run([sys.executable, "-c", code, "dry-run", "stroll.mission", "--config", "hosts.yaml",
+                          "--render", "run.png"], cwd=work, capture_output=True, text=True, timeout=300, check=False)
+    assert run.returncode == 2, (run.stdout[-1000:], run.stderr[-2000:])
+    assert "mission Stroll" in run.stdout and "success" in run.stdout  # the report, as printed
+    assert "--render run.png: not drawn: interrupted (Ctrl-C)" in run.stderr and "Traceback" not in run.stderr
+    assert not (work / "run.png").exists()
