@@ -54,7 +54,16 @@ if TYPE_CHECKING:
     from drd.record import Recorder
     from dsl.checker import Program
 
-from drd.cli.options import MAX_PRIORITY, ConfigOption, ConnectOption, JsonOption, TimeoutOption
+from drd.cli.options import (
+    MAX_PRIORITY,
+    MAX_SIM_TIME,
+    MAX_SPEED,
+    MAX_WAIT,
+    ConfigOption,
+    ConnectOption,
+    JsonOption,
+    TimeoutOption,
+)
 
 
 def register(app: typer.Typer) -> None:
@@ -284,7 +293,8 @@ def hosts(config: Path = ConfigOption, connect: list[str] = ConnectOption, as_js
 def status(config: Path = ConfigOption, connect: list[str] = ConnectOption, as_json: bool = JsonOption,
            timeout: float = TimeoutOption,
            watch: bool = typer.Option(False, "--watch", "-w", help="Refresh until Ctrl-C (JSON: one line each)."),
-           interval: float = typer.Option(1.0, "--interval", min=0.1, help="Seconds between refreshes with --watch."),
+           interval: float = typer.Option(1.0, "--interval", min=0.1, max=MAX_WAIT,
+                                          help="Seconds between refreshes with --watch."),
            events: int = typer.Option(20, "--events", min=0, help="How many recent events to show."),
            explain: bool = typer.Option(False, "--explain", help="Every placement decision of every mission, each "
                                         "with its hosts' scores and the hosts filtered and why (default: the last "
@@ -481,8 +491,10 @@ def run(mission: Path = typer.Argument(..., help="The mission file.", show_defau
         world: str = typer.Option("", "--world", "-w", show_default=False,
                                   help="The simulator's world (a name under worlds/) [default: the controller's"
                                        " hosts.yaml cluster.world, else corridor]."),
-        speed: float = typer.Option(1.0, "--speed", min=0.01, help="Run at most this multiple of real time."),
-        until: float = typer.Option(1800.0, "--until", min=0.1, help="Stop after this much sim time, in seconds."),
+        speed: float = typer.Option(1.0, "--speed", min=0.01, max=MAX_SPEED,
+                                    help="Run at most this multiple of real time."),
+        until: float = typer.Option(1800.0, "--until", min=0.1, max=MAX_SIM_TIME,
+                                    help="Stop after this much sim time, in seconds."),
         seed: int = typer.Option(0, "--seed", help="Seed of the simulation."),
         param: list[str] = typer.Option([], "--param", "-p", show_default=False,
                                         help="NAME=VALUE: start the mission's variable NAME at VALUE (repeatable)."),

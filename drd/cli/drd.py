@@ -39,7 +39,7 @@ from drd.cli.common import (
     version_option,
 )
 from drd.cli.common import version as installed_version
-from drd.cli.options import ComponentsOption
+from drd.cli.options import MAX_WAIT, ComponentsOption
 from drd.signals import set_soon
 from dsl.catalog import Kind
 
@@ -159,9 +159,9 @@ def start(
                                   help="Log here instead of stderr (default with --detach: RUN_DIR/HOST.log);"
                                   " it rolls over at 10 MB, keeping 3 old files."),
     run_dir_opt: Path = RunDirOption,
-    load_period: float = typer.Option(1.0, "--load-period", min=0.01,
+    load_period: float = typer.Option(1.0, "--load-period", min=0.01, max=MAX_WAIT,
                                       help="Seconds between load reports (at most a third of the lease is used)."),
-    peer_grace: float = typer.Option(3.0, "--peer-grace", min=0.0,
+    peer_grace: float = typer.Option(3.0, "--peer-grace", min=0.0, max=MAX_WAIT,
                                      help="Seconds to wait for the peers before naming the unreachable ones."),
     log_level: str = typer.Option("info", "--log-level", help="debug, info, warning or error."),
     as_json: bool = typer.Option(False, "--json", help="With --detach: print the started daemon as JSON."),
@@ -387,7 +387,7 @@ def stop(
     cluster: str = typer.Option(None, "--cluster", help="The cluster whose daemons to stop, when the run dir holds "
                                                         "several.", show_default=False),
     run_dir_opt: Path = RunDirOption,
-    timeout: float = typer.Option(10.0, "--timeout", min=0.0, help="Seconds to wait before SIGKILL."),
+    timeout: float = typer.Option(10.0, "--timeout", min=0.0, max=MAX_WAIT, help="Seconds to wait before SIGKILL."),
     as_json: bool = typer.Option(False, "--json", help="Print what was stopped as JSON."),
 ) -> int:
     """Stop daemons started on this machine: SIGTERM, wait (bounded), then SIGKILL. Only one cluster's: two

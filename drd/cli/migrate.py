@@ -18,7 +18,7 @@ from rich.text import Text
 
 from drd.cli.cluster import cluster_client
 from drd.cli.common import OK, fail, out
-from drd.cli.options import ConfigOption, ConnectOption, JsonOption
+from drd.cli.options import MAX_WAIT, ConfigOption, ConnectOption, JsonOption
 
 #: Seconds the controller may take by default: the instance is stopped on one host and started on another (a
 #: first start on a host may load the component's module).
@@ -40,7 +40,7 @@ def migrate(instance: str = typer.Argument(..., metavar="INSTANCE", show_default
             to: str = typer.Option(..., "--to", metavar="HOST", show_default=False,
                                    help="The host to move it to: up, and one that runs components."),
             config: Path = ConfigOption, connect: list[str] = ConnectOption, as_json: bool = JsonOption,
-            timeout: float = typer.Option(TIMEOUT, "--timeout", min=0.05,
+            timeout: float = typer.Option(TIMEOUT, "--timeout", min=0.05, max=MAX_WAIT,
                                           help="Seconds to wait for the controller to move it.")) -> int:
     """Move a running movable component to another host; it goes on from its state there."""
     from drd.bus import BusTimeout

@@ -36,7 +36,7 @@ from drd.cli.common import (
     version_option,
     write_file,
 )
-from drd.cli.options import MAX_PRIORITY, ComponentsOption
+from drd.cli.options import MAX_PRIORITY, MAX_SIM_TIME, MAX_SPEED, ComponentsOption
 from drd.errors import ConfigurationError
 from drd.signals import set_soon
 from dsl import Compiled, Limits, compile_file
@@ -394,9 +394,10 @@ def dry_run(
     hosts: Path = typer.Option(Path("hosts.yaml"), "--config", "-c", "--hosts",
                                help="The cluster's hosts file (its robots and devices; `--hosts` is an alias)."),
     seed: int = typer.Option(0, "--seed", help="Seed of the simulation (same seed, same run)."),
-    speed: float = typer.Option(None, "--speed", min=0.01, help="Run at this multiple of real time (default: as"
-                                                                " fast as the CPU allows).", show_default=False),
-    until: float = typer.Option(1800.0, "--until", min=0.1, help="Stop after this much sim time, in seconds."),
+    speed: float = typer.Option(None, "--speed", min=0.01, max=MAX_SPEED, show_default=False,
+                                help="Run at this multiple of real time (default: as fast as the CPU allows)."),
+    until: float = typer.Option(1800.0, "--until", min=0.1, max=MAX_SIM_TIME,
+                                help="Stop after this much sim time, in seconds."),
     trace: Path = typer.Option(None, "--trace", help="Write every record as JSON lines to this file.",
                                show_default=False),
     render: Path = typer.Option(None, "--render", help="Draw the world, trajectories, placed Scouts and detections "

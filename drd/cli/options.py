@@ -23,4 +23,9 @@ ConnectOption = typer.Option(None, "--connect", show_default=False,
                              help="Connect to this endpoint instead (tcp/HOST:PORT; repeatable: one at a time, the"
                                   " next if it fails).")
 JsonOption = typer.Option(False, "--json", help="Print JSON.")
-TimeoutOption = typer.Option(2.0, "--timeout", min=0.05, help="Seconds to wait for a daemon to answer.")
+#: The largest number of seconds an option takes (a day; a week of sim time for `--until`) and the largest speed:
+#: `inf` and `1e308` are floats typer takes, and a wait for ever then hung a script (cli audit 24, #3, #4).
+MAX_WAIT = 86400.0
+MAX_SIM_TIME = 7 * 86400.0
+MAX_SPEED = 10000.0
+TimeoutOption = typer.Option(2.0, "--timeout", min=0.05, max=MAX_WAIT, help="Seconds to wait for a daemon to answer.")

@@ -40,13 +40,22 @@ def test_an_empty_or_comment_only_file_declares_no_mission(text: str, tmp_path: 
 
 
 @pytest.mark.parametrize(("option", "value"), [("--speed", "0"), ("--speed", "-1"), ("--until", "-5"),
-                                               ("--until", "0")])
+                                               ("--until", "0"), ("--until", "inf"), ("--speed", "inf")])
 @pytest.mark.parametrize("command", ["dry-run", "run"])
 def test_values_that_make_no_sense_are_refused_before_anything_runs(command: str, option: str, value: str) -> None:
     r = missionctl(command, "missions/corridor_surveillance.mission", option, value)
     assert r.returncode == 2, r.stdout + r.stderr
     assert f"Invalid value for '{option}'" in r.stderr
     assert "mission" not in r.stdout.lower(), "nothing ran"
+
+
+@pytest.mark.parametrize("command", ["status", "hosts", "resources"])
+@pytest.mark.parametrize("value", ["inf", "1e308"])
+def test_a_wait_for_ever_is_refused_before_anything_is_asked(command: str, value: str) -> None:
+    """Cli audit 24, #3: `--timeout inf` was taken, and with no daemon answering the command never returned."""
+    r = subprocess.run([*MISSIONCTL, command, "--timeout", value, "--connect", "tcp/127.0.0.1:9"], cwd=ROOT,
+                       capture_output=True, text=True, timeout=60, check=False)
+    assert r.returncode == 2 and "Invalid value for '--timeout'" in r.stderr, r.stderr
 
 
 def test_both_tools_say_their_version() -> None:
