@@ -56,13 +56,13 @@ if TYPE_CHECKING:
 
 from drd.cli.options import (
     MAX_PRIORITY,
-    MAX_SIM_TIME,
     MAX_SPEED,
     MAX_WAIT,
     ConfigOption,
     ConnectOption,
     JsonOption,
     TimeoutOption,
+    UntilOption,
 )
 
 
@@ -83,7 +83,8 @@ def register(app: typer.Typer) -> None:
 FAST_COMMANDS = ("hosts", "status", "components", "resources")
 _PLAIN_NUMBER = {int: re.compile(r"0|[1-9][0-9]*"), float: re.compile(r"[0-9]+(?:\.[0-9]+)?")}
 #: OptionInfo fields that change only the help text; any other field set makes an option "not plain".
-_COSMETIC = frozenset({"default", "param_decls", "help", "min", "show_default", "metavar", "rich_help_panel", "hidden"})
+_COSMETIC = frozenset({"default", "param_decls", "help", "min", "max", "show_default", "metavar", "rich_help_panel",
+                       "hidden"})
 
 
 def fast_command(app: typer.Typer, argv: Sequence[str],
@@ -95,7 +96,7 @@ def fast_command(app: typer.Typer, argv: Sequence[str],
     itself, reading them (names, defaults, minimums, types) from the command's typer signature,
     so nothing is declared twice. It accepts only what it is sure typer would accept with the same
     values: `--help`, an unknown or repeated option, a value that is not a plain number, a number
-    below its minimum, an option typer would treat specially (env var, callback, parser...) all
+    out of its range, an option typer would treat specially (env var, callback, parser...) all
     return None, and typer then parses, answers or refuses as always (the same help, the same errors).
     """
     callback = app.registered_callback
@@ -126,7 +127,8 @@ def fast_command(app: typer.Typer, argv: Sequence[str],
                 text = args.pop(0)
             else:
                 return None
-            value = _plain_value(text, kind.__args__[0] if kind in (list[str], list[Path]) else kind, info.min)
+            value = _plain_value(text, kind.__args__[0] if kind in (list[str], list[Path]) else kind, info.min,
+                                 info.max)
             if value is None:
                 return None
             if kind in (list[str], list[Path]):
@@ -178,7 +180,7 @@ def _option_spec(fn: Callable[..., object]) -> dict[str, tuple[str, tuple[Option
     return spec
 
 
-def _plain_value(text: str, kind: Any, minimum: float | None) -> Any:
+def _plain_value(text: str, kind: Any, minimum: float | None, maximum: float | None = None) -> Any:
     """`text` as typer would convert it to `kind`, or None when unsure (typer then decides)."""
     if not text or text.startswith("-"):
         return None
@@ -186,7 +188,9 @@ def _plain_value(text: str, kind: Any, minimum: float | None) -> Any:
         if not _PLAIN_NUMBER[kind].fullmatch(text):
             return None
         value = kind(text)
-        return None if minimum is not None and value < minimum else value
+        if minimum is not None and value < minimum or maximum is not None and value > maximum:
+            return None  # out of range: typer says so
+        return value
     return Path(text) if kind is Path else text
 
 
@@ -493,8 +497,7 @@ def run(mission: Path = typer.Argument(..., help="The mission file.", show_defau
                                        " hosts.yaml cluster.world, else corridor]."),
         speed: float = typer.Option(1.0, "--speed", min=0.01, max=MAX_SPEED,
                                     help="Run at most this multiple of real time."),
-        until: float = typer.Option(1800.0, "--until", min=0.1, max=MAX_SIM_TIME,
-                                    help="Stop after this much sim time, in seconds."),
+        until: float = UntilOption,
         seed: int = typer.Option(0, "--seed", help="Seed of the simulation."),
         param: list[str] = typer.Option([], "--param", "-p", show_default=False,
                                         help="NAME=VALUE: start the mission's variable NAME at VALUE (repeatable)."),
@@ -515,13 +518,12 @@ def run(mission: Path = typer.Argument(..., help="The mission file.", show_defau
     from drd.dryrun import summary
     from dsl.params import ParamError, parse_assignments
 
-    distinct_files({"the mission file": [mission], "the hosts file": [config]}, {"--trace": trace, "--record": record})
     source, imports, aliases = _mission_source(mission)
     try:
         params = parse_assignments(param)
     except ParamError as e:
         fail(str(e))
-    trace_out, recorder = _outputs(trace, record, foxglove, detach, _robot_ids(config) if foxglove else ())
+    trace_out, recorder = _outputs((mission, config), trace, record, foxglove, detach)
     wait = max(timeout, 15.0)
     request = RunMission(source, str(mission), world, speed, until, seed, params or None, priority,
                          give_up_at=time.time() + wait - 0.5,  # the reply must still reach us after it
@@ -626,13 +628,16 @@ def _robot_ids(config: Path) -> list[str]:
         return []
 
 
-def _outputs(trace: Path | None, record: Path | None, foxglove: str | None, detach: bool,
-             robots: Sequence[str] = ()) -> tuple[IO[str] | None, Recorder | None]:
-    """The `--trace` file and the recorder of `--record` and `--foxglove`, which need the records as they come."""
+def _outputs(inputs: tuple[Path, Path], trace: Path | None, record: Path | None, foxglove: str | None,
+             detach: bool) -> tuple[IO[str] | None, Recorder | None]:
+    """The `--trace` file and the recorder of `--record` and `--foxglove`, which need the records as they come;
+    neither may be an input (`inputs`: the mission and the hosts file) or the other (`distinct_files`)."""
+    mission, hosts = inputs
+    distinct_files({"the mission file": [mission], "the hosts file": [hosts]}, {"--trace": trace, "--record": record})
     if (trace is not None or record is not None or foxglove is not None) and detach:
         given = "--trace" if trace is not None else "--record" if record is not None else "--foxglove"
         fail(f"{given} needs the records as they come: it cannot be used with --detach")
-    return open_trace(trace), live_recorder(record, foxglove, robots)
+    return open_trace(trace), live_recorder(record, foxglove, _robot_ids(hosts) if foxglove else ())
 
 
 def _run_and_follow(client: ClusterClient, watch: _RecordWatch, request: Any, wait: float,

@@ -463,6 +463,8 @@ def _run_app(app: Callable[..., object], prog: str,
         _error(f"internal error: {type(e).__name__}: {e}", INTERNAL,
                "(set DRD_DEBUG=1 to see the traceback, and report it)")
     rc = rc if isinstance(rc, int) else OK
+    if rc == INTERRUPTED:  # typer's answer to a Ctrl-C in a command (exit 130, and not a word): said as the others
+        _error("interrupted", INTERRUPTED)
     _said_unwritten(rc)
     sys.exit(rc)
 

@@ -36,7 +36,7 @@ from drd.cli.common import (
     version_option,
     write_file,
 )
-from drd.cli.options import MAX_PRIORITY, MAX_SIM_TIME, MAX_SPEED, ComponentsOption
+from drd.cli.options import MAX_PRIORITY, MAX_SPEED, ComponentsOption, UntilOption
 from drd.errors import ConfigurationError
 from drd.signals import set_soon
 from dsl import Compiled, Limits, compile_file
@@ -151,11 +151,7 @@ def plan(
         fail(f"--json and --format {fmt.value} ask for two formats: give one")
     if as_json:
         fmt = Format.json
-    distinct_files({"the mission file": [file], "the hosts file": [config]}, {"-o": output})
-    suffix = output.suffix.lower() if output else ""
-    if suffix and suffix not in IMAGE_SUFFIXES and suffix not in FORMAT_BY_SUFFIX:  # none: the tree, as text
-        known = ", ".join([*FORMAT_BY_SUFFIX, *IMAGE_SUFFIXES])
-        fail(f"-o {output}: its suffix picks the format, and {suffix} is not one ({known})")
+    suffix = _output_suffix(file, config, output)
     result = _compile(file, catalog(components))
     if not show_diagnostics([result]):
         return INVALID
@@ -187,6 +183,17 @@ def plan(
     if output:
         err.print(Text.assemble(("✓ ", "bold green"), f"wrote {output}"))
     return OK
+
+
+def _output_suffix(file: Path, config: Path | None, output: Path | None) -> str:
+    """`plan -o`'s suffix, lower case ("" without one: the text tree); a clear exit for one it does not know, or
+    for an output that is the mission or the hosts file (`distinct_files`)."""
+    distinct_files({"the mission file": [file], "the hosts file": [config]}, {"-o": output})
+    suffix = output.suffix.lower() if output else ""
+    if suffix and suffix not in IMAGE_SUFFIXES and suffix not in FORMAT_BY_SUFFIX:
+        known = ", ".join([*FORMAT_BY_SUFFIX, *IMAGE_SUFFIXES])
+        fail(f"-o {output}: its suffix picks the format, and {suffix} is not one ({known})")
+    return suffix
 
 
 def _preview(chart: Statechart, config: Path, world: str | None, components: list[Path], as_json: bool,
@@ -396,8 +403,7 @@ def dry_run(
     seed: int = typer.Option(0, "--seed", help="Seed of the simulation (same seed, same run)."),
     speed: float = typer.Option(None, "--speed", min=0.01, max=MAX_SPEED, show_default=False,
                                 help="Run at this multiple of real time (default: as fast as the CPU allows)."),
-    until: float = typer.Option(1800.0, "--until", min=0.1, max=MAX_SIM_TIME,
-                                help="Stop after this much sim time, in seconds."),
+    until: float = UntilOption,
     trace: Path = typer.Option(None, "--trace", help="Write every record as JSON lines to this file.",
                                show_default=False),
     render: Path = typer.Option(None, "--render", help="Draw the world, trajectories, placed Scouts and detections "
@@ -417,8 +423,7 @@ def dry_run(
     from drd.cli.cluster import live_recorder
     from drd.dryrun import Mission
 
-    distinct_files({"a mission file": missions, "the hosts file": [hosts]},
-                   {"--trace": trace, "--record": record, "--render": render})
+    _check_outputs(missions, hosts, {"--trace": trace, "--record": record, "--render": render})
     cat = catalog(components)
     if len(priority) > len(missions):
         fail(f"{len(priority)} --priority for {len(missions)} mission{'s' if len(missions) > 1 else ''}:"
@@ -428,7 +433,6 @@ def dry_run(
         return INVALID
     charts, cluster, sim_world = loaded
     injections = _injections(inject, cluster, sim_world, until)
-    _check_render(render)
     fh = open_trace(trace)
     stop = threading.Event()
     runs = [Mission(chart, priority[i] if i < len(priority) else None) for i, chart in enumerate(charts)]
@@ -609,6 +613,12 @@ def _seconds(text: str, option: str) -> float:
     if not (seconds >= 0 and seconds < float("inf")):
         fail(f"{option} {text!r}: expected a time of 0 or more")
     return seconds
+
+
+def _check_outputs(missions: list[Path], hosts: Path, outputs: dict[str, Path | None]) -> None:
+    """A dry-run's output files: none an input or another output (`distinct_files`), the picture's folder there."""
+    distinct_files({"a mission file": missions, "the hosts file": [hosts]}, outputs)
+    _check_render(outputs["--render"])
 
 
 def _check_render(render: Path | None) -> None:

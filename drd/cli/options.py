@@ -28,4 +28,6 @@ JsonOption = typer.Option(False, "--json", help="Print JSON.")
 MAX_WAIT = 86400.0
 MAX_SIM_TIME = 7 * 86400.0
 MAX_SPEED = 10000.0
+UntilOption = typer.Option(1800.0, "--until", min=0.1, max=MAX_SIM_TIME,
+                           help="Stop after this much sim time, in seconds.")
 TimeoutOption = typer.Option(2.0, "--timeout", min=0.05, max=MAX_WAIT, help="Seconds to wait for a daemon to answer.")

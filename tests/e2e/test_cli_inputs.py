@@ -3,6 +3,7 @@ one, values that make no sense, `--version`."""
 
 from __future__ import annotations
 
+import json
 import subprocess
 import sys
 from pathlib import Path
@@ -65,3 +66,29 @@ def test_both_tools_say_their_version() -> None:
     assert r.returncode == 0 and r.stdout.strip() == f"missionctl (drd) {version('drd')}"
     r = subprocess.run([*DRD, "--version"], cwd=ROOT, capture_output=True, text=True, timeout=60, check=False)
     assert r.returncode == 0 and r.stdout.strip() == f"drd (drd) {version('drd')}"
+
+
+#: A child that runs `missionctl validate --json` through its console entry point, with a Ctrl-C landing where
+#: `{where}` says: while the tool imports itself, or in the command (typer then answered exit 130 without a word).
+CTRL_C_CHILD = """
+import builtins, os, signal, sys
+sys.argv = ["missionctl", "validate", "--json", "missions/corridor_surveillance.mission"]
+real = builtins.__import__
+def importing(name, *args, **kwargs):
+    if name == "{where}":
+        os.kill(os.getpid(), signal.SIGINT)
+    return real(name, *args, **kwargs)
+builtins.__import__ = importing
+from drd.cli.entry import missionctl
+missionctl()
+"""
+
+
+@pytest.mark.parametrize("where", ["drd.cli.missionctl", "drd.manifests"], ids=["while-importing", "in-the-command"])
+def test_a_ctrl_c_at_any_moment_is_said_in_one_line_never_a_traceback(where: str) -> None:
+    """Cli audit 24, #6: a Ctrl-C in the first tenths of a second printed a Python traceback (the tool was still
+    importing itself, before its safety net), and one in a command was exit 130 and not a word."""
+    r = subprocess.run([sys.executable, "-c", CTRL_C_CHILD.format(where=where)], cwd=ROOT, capture_output=True,
+                       text=True, timeout=120, check=False)
+    assert r.returncode == 130, (r.stdout, r.stderr[-2000:])
+    assert "Traceback" not in r.stderr and json.loads(r.stderr) == {"error": "interrupted", "code": 130}, r.stderr
