@@ -603,11 +603,9 @@ class ResourceManager:
             return None  # nothing to search: every candidate of some need is full
         solution = first_solution(needs, self._reg, lambda u: self._room(u, wait, False), given)
         if solution is None and self._overtime:
-            # Preempt as few holders as possible, and of those, take as few held units as possible: free units
-            # first. A victim is resumed on its very units only, so taking a unit it did not have to give (its
-            # Scout, when only its camera was needed) would make it wait for that unit while others stand free.
+            # Preempt as few holders as possible: free units first, then overtime holders.
             ranked = islice(solutions(needs, self._reg, lambda u: self._room(u, wait, True), given), 64)
-            solution = min(ranked, key=lambda s: (len(self._victims(s)), self._held_taken(s)), default=None)
+            solution = self._least_taken(list(ranked))
         if solution is None:
             return None
         touched: set[str] = set()
@@ -637,10 +635,26 @@ class ResourceManager:
                 return True
         return False
 
-    def _held_taken(self, solution: Solution) -> int:
-        """How many of a solution's exclusive units someone holds now (each would be taken from its holder)."""
-        used = self._reg.used
-        return sum(1 for u in solution.units if not self._reg.units[u].sharable and used.get(u))
+    def _least_taken(self, ranked: list[Solution]) -> Solution | None:
+        """Of preempting solutions in the search's order, the first of those with the fewest victims, or one that
+        takes fewer held units for the same victims with candidates of the same kinds (the same robot types): a
+        victim is resumed on its very units only, so taking a unit it did not have to give (its Scout, when only
+        its camera was needed) made it wait for that unit while others of its kind stood free (semantics audit 24,
+        D1). A candidate of another kind (a Scout's wheels for a Ranger's drive) is never swapped in: the order
+        of the search is the preference."""
+        if not ranked:
+            return None
+        fewest = min(len(self._victims(s)) for s in ranked)
+        best = [s for s in ranked if len(self._victims(s)) == fewest]
+        owners = {u: a.type for a in self._reg.aggregates.values() for u in a.units}
+
+        def kinds(s: Solution) -> tuple[str, ...]:
+            return tuple(c.type if isinstance(c, Aggregate) else owners.get(c.id, c.type) for c in s.chosen.values())
+
+        first = kinds(best[0])
+        used, units = self._reg.used, self._reg.units
+        return min((s for s in best if kinds(s) == first),
+                   key=lambda s: sum(1 for u in s.units if not units[u].sharable and used.get(u)))
 
     def _victims(self, solution: Solution) -> list[str]:
         """The holders a solution takes exclusive units from (all preemptible by construction)."""

@@ -132,6 +132,20 @@ def test_a_preemption_takes_only_the_units_it_must_and_free_ones_for_the_rest() 
     assert granted(rm.tick(11.0))["A"].assignment == {"s": "scout1", "camera": "cam1"}  # back on its own Scout
 
 
+def test_a_preemption_keeps_to_the_kind_of_robot_the_search_prefers() -> None:
+    """The free-units-first tie (above) never swaps in a candidate of another kind: a behavior steering with a
+    drive of [Ranger, Scout] and a Ranger's laser that preempts the Ranger's holder takes the Ranger's drive, not
+    the free wheels of a Scout in its magazine (the cluster's two-missions test caught that)."""
+    rm = manager(Unit("ranger1.drive", "Drive"), Unit("ranger1.laser", "Ranges"), Unit("scout1.wheels", "Drive"))
+    rm.add_aggregate(Aggregate("ranger1", "Ranger", {"drive": "ranger1.drive", "laser": "ranger1.laser"}), 0.0)
+    rm.add_aggregate(Aggregate("scout1", "Scout", {"wheels": "scout1.wheels"}), 0.0)
+    rm.request(Request("Patrol", 2, (NeedRequest("ranger", "Ranger"),)), 0.0)
+    steer = (NeedRequest("drive", "Drive"), NeedRequest("ranges", "Ranges"))
+    revoked, grant = rm.request(Request("Drive", 1, steer), 6.0)  # the patrol is in overtime
+    assert isinstance(revoked, Revoked) and revoked.holder == "Patrol"
+    assert isinstance(grant, Granted) and grant.assignment == {"drive": "ranger1.drive", "ranges": "ranger1.laser"}
+
+
 def test_lower_priority_never_preempts_a_higher_one() -> None:
     rm = manager(Unit("cam1", "Camera"))
     rm.request(Request("High", 1, (CAMERA,)), 0.0)
