@@ -239,8 +239,9 @@ def _endpoints(config: Path, connect: list[str] | None,
     from drd.daemon.security import SecurityError, transport
 
     if not config.is_file():
-        fail(f"{config}: no such file (looked at {config.absolute()})",
-             hint="pass --config FILE, or --connect tcp/HOST:PORT")
+        what = "is a folder, not a hosts file" if config.is_dir() else "is not a regular file" if config.exists() \
+            else "no such file"  # a folder is not "no such file" (cli audit 24, #7)
+        fail(f"{config}: {what} (looked at {config.absolute()})", hint="pass --config FILE, or --connect tcp/HOST:PORT")
     try:
         cluster = load_endpoints(config)  # endpoints, roles and security: no hardware, so no component catalog
         tr = transport(cluster)

@@ -793,7 +793,9 @@ def _world_file(world: str | None, configured: str, hosts: Path) -> Path:
     found, tried = locate_world(name, roots)
     if found is None:
         source = "--world" if world else f"{hosts}'s cluster.world"
-        fail(f"world {name!r} ({source}): no such file; looked at {', '.join(map(str, tried))}",
+        folders = [p for p in tried if p.is_dir()]  # a folder there is not "no such file" (cli audit 24, #7)
+        why = f"{folders[0]} is a folder, not a world file" if folders else "no such file"
+        fail(f"world {name!r} ({source}): {why}; looked at {', '.join(map(str, tried))}",
              hint="give --world a name under worlds/ or a path to a world file (docs/worlds.md)",
              looked=[str(t) for t in tried])
     return found

@@ -92,3 +92,15 @@ def test_a_ctrl_c_at_any_moment_is_said_in_one_line_never_a_traceback(where: str
                        text=True, timeout=120, check=False)
     assert r.returncode == 130, (r.stdout, r.stderr[-2000:])
     assert "Traceback" not in r.stderr and json.loads(r.stderr) == {"error": "interrupted", "code": 130}, r.stderr
+
+
+@pytest.mark.parametrize("args", [["status", "--config", "{d}"], ["hosts", "--config", "{d}"],
+                                  ["dry-run", "missions/corridor_surveillance.mission", "--world", "{d}"]],
+                         ids=["status", "hosts", "dry-run-world"])
+def test_a_folder_given_as_a_file_is_called_a_folder(args: list[str], tmp_path: Path) -> None:
+    """Cli audit 24, #7: a folder given as `--config` or `--world` was "no such file", though the path exists."""
+    folder = tmp_path / "site.yaml"
+    folder.mkdir()
+    r = missionctl(*[a.format(d=folder) for a in args])
+    said = r.stderr.replace(f"{folder}: is", f"{folder} is")  # `FILE: is a folder` (hosts), `FILE is a folder`
+    assert r.returncode == 2 and f"{folder} is a folder" in said and "no such file" not in said, r.stderr
