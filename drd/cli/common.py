@@ -297,6 +297,18 @@ def catalog(extra: Sequence[Path] | None) -> Catalog:
         fail_all(e.problems)
 
 
+def utf8_json(data: Any, default: Callable[[Any], Any] | None = None) -> str:
+    """`data` as indented JSON, text as it is (not `\\u` escapes), unless some string holds bytes that are not UTF-8
+    (a file name, `caf\\xe9.mission`, as the system passes it): then escaped, so the output stays UTF-8 JSON that a
+    strict reader takes, as the errors on stderr are (cli audit 24, #5)."""
+    text = json.dumps(data, indent=2, ensure_ascii=False, default=default)
+    try:
+        text.encode("utf-8")
+    except UnicodeEncodeError:
+        return json.dumps(data, indent=2, default=default)
+    return text
+
+
 def print_json(data: Any, default: Callable[[Any], Any] | None = None) -> None:
     """Print `data` as indented JSON on stdout: highlighted on a terminal, else plain `json.dumps`.
 
@@ -311,7 +323,7 @@ def print_json(data: Any, default: Callable[[Any], Any] | None = None) -> None:
         out.print_json(text)
         return
     try:
-        sys.stdout.write(json.dumps(json.loads(text), indent=2, ensure_ascii=False) + "\n")
+        sys.stdout.write(utf8_json(json.loads(text)) + "\n")
         sys.stdout.flush()
     except BrokenPipeError:  # here, not in run_app: click would make it exit 1 first
         _reader_gone()

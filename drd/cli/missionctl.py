@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import json
 import re
 import shutil
 import subprocess
@@ -33,6 +32,7 @@ from drd.cli.common import (
     render_diagnostics,
     run_app,
     show_diagnostics,
+    utf8_json,
     version_option,
     write_file,
 )
@@ -174,7 +174,7 @@ def plan(
         else:
             print_tree(_tree(chart))
     else:
-        text = {Format.json: lambda: json.dumps(to_dict(chart), indent=2, ensure_ascii=False) + "\n",
+        text = {Format.json: lambda: utf8_json(to_dict(chart)) + "\n",
                 Format.dot: lambda: to_dot(chart), Format.mermaid: lambda: to_mermaid(chart)}[fmt]()
         if output:
             write_file(output, text, "plan")
@@ -243,7 +243,7 @@ def _preview_text(chart: Statechart, p: Preview, hosts_file: Path, as_json: bool
     from dsl.export import to_dict
 
     if as_json:
-        return json.dumps({**to_dict(chart), "preview": p.to_dict()}, indent=2, ensure_ascii=False, default=str) + "\n"
+        return utf8_json({**to_dict(chart), "preview": p.to_dict()}, default=str) + "\n"
     text = io.StringIO()
     print_preview(p, hosts_file, chart.name, Console(file=text, width=160, color_system=None, soft_wrap=True))
     return _whole_lines(_tree(chart)) + text.getvalue()

@@ -4,6 +4,7 @@ one, values that make no sense, `--version`."""
 from __future__ import annotations
 
 import json
+import os
 import subprocess
 import sys
 from pathlib import Path
@@ -104,3 +105,13 @@ def test_a_folder_given_as_a_file_is_called_a_folder(args: list[str], tmp_path: 
     r = missionctl(*[a.format(d=folder) for a in args])
     said = r.stderr.replace(f"{folder}: is", f"{folder} is")  # `FILE: is a folder` (hosts), `FILE is a folder`
     assert r.returncode == 2 and f"{folder} is a folder" in said and "no such file" not in said, r.stderr
+
+
+@pytest.mark.parametrize("command", [["validate", "--json"], ["plan", "--json"], ["plan", "--format", "json"]])
+def test_json_on_stdout_stays_utf8_with_a_file_name_that_is_not(command: list[str], tmp_path: Path) -> None:
+    """Cli audit 24, #5: a file name's byte 0xE9 went raw into the JSON result, which a strict reader refused."""
+    name = os.fsdecode(b"caf\xe9.mission")
+    (tmp_path / name).write_text("mission Cafe {\n    needs r: Ranger\n    Calibrate\n}\n")
+    r = subprocess.run([*MISSIONCTL, *command, name], cwd=tmp_path, capture_output=True, timeout=120, check=False)
+    assert r.returncode == 0, r.stderr[-2000:]
+    assert "caf\udce9.mission" in json.dumps(json.loads(r.stdout.decode("utf-8")), ensure_ascii=False)
