@@ -274,21 +274,33 @@ def refused_last(recent: Sequence[Recent], component: str, exclude: Collection[s
     return bool(recent) and recent[-1].component == component and recent[-1].host in exclude
 
 
-def with_recent(views: Iterable[HostView], recent: Sequence[Recent]) -> list[HostView]:
+def with_recent(views: Iterable[HostView], recent: Sequence[Recent], ended: Sequence[Recent] = ()) -> list[HostView]:
     """The views with the recent placements (oldest first) their hosts do not announce yet: each instance counts
     once. Of k placements of a type on a host that announced `seen` of it before the first, those beyond what it
-    announces now (`seen + k - now`, 0 to k) are added (an instance that ended meanwhile hides one for a while)."""
-    groups: dict[tuple[str, str], list[Recent]] = {}
-    for r in recent:
-        groups.setdefault((r.host, r.component), []).append(r)
+    announces now (`seen + k - now`, 0 to k) are added (an instance that ended meanwhile hides one for a while).
+    Likewise the instances that `ended` lately (`seen`: what the host announced as the first ended) and that it
+    still announces (`now - (seen - k)`, 0 to k) are taken off: the next state's instance, placed in the instant
+    the last one ended, counted it still there (placement audit 24, #3)."""
     out = []
     for view in views:
-        for (host, component), made in groups.items():
+        for (host, component), made in _groups(recent).items():
             if host == view.name:
                 pending = min(len(made), max(0, made[0].seen + len(made) - view.running.get(component, 0)))
                 view = with_more(view, component, pending) if pending else view
+        for (host, component), gone in _groups(ended).items():
+            if host == view.name:
+                still = min(len(gone), max(0, view.running.get(component, 0) - (gone[0].seen - len(gone))))
+                view = with_more(view, component, -still) if still else view
         out.append(view)
     return out
+
+
+def _groups(recent: Sequence[Recent]) -> dict[tuple[str, str], list[Recent]]:
+    """`recent` by (host, component), each in its order."""
+    groups: dict[tuple[str, str], list[Recent]] = {}
+    for r in recent:
+        groups.setdefault((r.host, r.component), []).append(r)
+    return groups
 
 
 def required_devices(component: ComponentType) -> frozenset[str]:

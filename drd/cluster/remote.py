@@ -228,11 +228,14 @@ class ComponentRouter:
                  records: Callable[[str, Record | Breach], None] = lambda mission, record: None,
                  cycle: SimCycle | None = None, generation: int = 0, term: float = 0.0,
                  frozen: Callable[[float], float] = lambda since: 0.0,
-                 on_down: Callable[[str], None] = lambda host: None, clock: Callable[[], float] | None = None):
+                 on_down: Callable[[str], None] = lambda host: None, clock: Callable[[], float] | None = None,
+                 ended: Callable[[str, str], None] = lambda host, component: None):
         """`frozen(since)`: seconds this controller's daemon was frozen after `since` (`time.monotonic()`), 0.0 if
         not (`Daemon.frozen_since`); `on_down(host)`: told when a call fails because `host` is down or did not
         answer, before the failure is raised (the manager takes its resources offline first); `clock`: the
-        executive's, which a call's `now` is on (components see the world's time: `now - origin`, the cycle's)."""
+        executive's, which a call's `now` is on (components see the world's time: `now - origin`, the cycle's);
+        `ended(host, component)`: a placed instance on `host` ended or moved away (it no longer counts there)."""
+        self.ended = ended
         self.bus = bus
         self.cluster = cluster
         self.frozen = frozen
@@ -608,6 +611,8 @@ class RemoteComponent(Component):
             self.local.terminate(status)
             return
         if self.host is not None and not (self.movable and self.router.is_down(self.host)):
+            if self.movable:  # placed by the policy: from now on it no longer counts on its host
+                self.router.ended(self.host, self.name)
             try:
                 self._call("terminate", status=str(status))  # a movable one on a lost host went with it
             except InstanceLost:
@@ -718,6 +723,7 @@ class RemoteComponent(Component):
                 self._call("start", params=self._params, bindings={}, rank=self._rank, restore=moved)
             raise ComponentError(f"{host} did not start {self._ctx.path}: {e}; it goes on on {self.host}") from None
         self.router.placed.append((self._ctx.path, host, "migrated"))
+        self.router.ended(old, self.name)
         self._ctx.log(f"{self.name} moved from {old} to {host}")
         return moved
 

@@ -204,6 +204,7 @@ class MissionRunner:
         self.host_views = host_views
         self.frozen = frozen
         self._recent: list[Recent] = []  # placements their hosts may not announce yet, oldest first
+        self._ended: list[Recent] = []  # placed instances that ended, which their hosts may still announce
         self.placements = PlacementLog(lambda: controller.executive.missions)  # for `missionctl status`
         self.began: dict[str, float] = {}  # mission -> the executive's time it began, while the executive lists it
         self.undelivered: set[str] = set()  # hosts whose last gate operations did not arrive (said once each)
@@ -504,6 +505,7 @@ class MissionRunner:
                                  active=functools.partial(_active, executive, mid), timeout=self.patience,
                                  dead=self.host_down, catalog=self.catalog,
                                  place=functools.partial(self.place, mission=mid) if self.host_views else None,
+                                 ended=self.unplaced,
                                  gates=self.gates,
                                  records=executive.record, cycle=world.cycle, generation=world.generation,
                                  term=self.term, frozen=self.frozen, on_down=self.controller.apply_offline,
@@ -559,6 +561,13 @@ class MissionRunner:
         self.world, self.halting = world, []
         return world
 
+    def unplaced(self, host: str, component: str) -> None:
+        """A placed instance of `component` on `host` ended (or moved away): it no longer counts there, though the
+        host may announce it a while yet (`drd.placement.with_recent`)."""
+        if self.host_views is not None:
+            seen = next((v.running.get(component, 0) for v in self.host_views() if v.name == host), 0)
+            self._ended.append(Recent(host, component, seen, time.monotonic()))
+
     def place(self, component: str, params: Mapping[str, Any], exclude: Mapping[str, str] | frozenset[str],
               mission: str = "") -> str:
         """The host for one more instance of a movable component (`drd.placement.place` over the Component
@@ -582,9 +591,11 @@ class MissionRunner:
             placement_log.warning("placement: %s refused %s: %s", last.host, component, reasons[last.host])
         now = time.monotonic()
         self._recent = [r for r in self._recent if now - r.at < RECENT_PLACEMENT]
+        self._ended = [r for r in self._ended if now - r.at < RECENT_PLACEMENT]
         announced = self.host_views()
-        # placements the hosts do not announce yet count, each once, so that a cycle's starts spread
-        views = with_recent(announced, self._recent)
+        # placements the hosts do not announce yet count, each once, so that a cycle's starts spread; instances
+        # that ended and that they still announce do not
+        views = with_recent(announced, self._recent, self._ended)
         interp = self.controller.executive.missions.get(mission) if mission else None
         path, devices = near_devices(getattr(interp, "root", None), component, self.resource_hosts)
         decision = place(ct, views, self.cluster.placement, params=params, exclude=exclude, role=str(Role.WORKER),

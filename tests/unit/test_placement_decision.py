@@ -3,6 +3,7 @@ controller's log of decisions and their lines in `missionctl status`. Pure: no b
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Iterator
 from dataclasses import dataclass, field
 from typing import Any
@@ -253,6 +254,18 @@ def test_a_recent_placement_counts_once_until_its_host_announces_it() -> None:
     assert isinstance(decision, Placed) and decision.decision is not None
     parts = {s.host: s.part("instances") for s in decision.decision.scored}
     assert parts["b"] is not None and parts["b"].value == 10.0 * 2, "b's announced one plus the pending one"
+
+
+def test_an_instance_that_ended_counts_no_more_though_its_host_still_announces_it() -> None:
+    """Placement audit 24, #3: the next state's instance, placed in the instant the last one ended, counted the
+    ended one still on its host (`ranger2 10 = instances 10`, running nothing) and went to a busier host."""
+    ended = [Recent("b", "Wait", 1)]  # b announced one Wait when it ended
+    [still] = with_recent([HostView("b", running={"Wait": 1}, instances=1)], [], ended)
+    [said] = with_recent([HostView("b", running={}, instances=0)], [], ended)
+    assert (still.instances, still.running) == (0, {"Wait": 0}) and (said.instances, said.running) == (0, {})
+    busy = [dataclasses.replace(hv(name, instances=1), running={"Wait": 1}) for name in ("a", "b")]
+    decision = place(WAIT, with_recent(busy, [], ended), W)
+    assert isinstance(decision, Placed) and decision.host == "b", "b runs nothing now; a runs one"
 
 
 def test_a_refused_start_is_recognised_by_its_retry_so_it_counts_nowhere() -> None:
