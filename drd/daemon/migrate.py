@@ -140,6 +140,7 @@ class Migrations:
                 raise MigrateError(f"{mission}/{path}: {why}")
             assert isinstance(comp, RemoteComponent) and source is not None
             state = comp.migrate(req.host)
+            runner.placements.moved(mission, path, req.host, source)
         log.info("mission %s: %s (%s) moved from %s to %s with its state %s", mission, path, name, source,
                  req.host, state[0] if state else None)
         return Migrated(mission, path, name, source, req.host, list(state))

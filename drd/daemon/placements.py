@@ -33,6 +33,7 @@ class PlacementLog:
         self.known = known
         self._lock = threading.Lock()
         self._by_mission: dict[str, OrderedDict[str, tuple[str, Decision]]] = {}
+        self._moved: dict[tuple[str, str], tuple[str, str]] = {}  # (mission, instance) -> (host, from) of a migrate
 
     def note(self, mission: str, instance: str, decision: Decision) -> None:
         """The policy decided where `instance` (its path, or the component's name when unknown) goes: `placed`
@@ -44,14 +45,29 @@ class PlacementLog:
             kept = self._by_mission.setdefault(mission, OrderedDict())
             how = "re-placed" if kept.pop(instance, None) is not None else "placed"
             kept[instance] = (how, decision)
+            self._moved.pop((mission, instance), None)
             while len(kept) > KEPT_PER_MISSION:
                 kept.popitem(last=False)
+
+    def moved(self, mission: str, instance: str, host: str, source: str) -> None:
+        """`missionctl migrate` moved `instance` from `source` to `host`: its entry says so (its last decision, the
+        policy's, is kept for what it weighed), until the policy places it again (placement audit 24, #5: status
+        went on saying the host it had left)."""
+        with self._lock:
+            if instance in self._by_mission.get(mission, {}):
+                self._moved[(mission, instance)] = (host, source)
 
     def of(self, mission: str) -> list[dict[str, Any]]:
         """The mission's decisions, oldest placement first, as plain JSON (`status_entry`)."""
         with self._lock:
             kept = list(self._by_mission.get(mission, {}).items())
-        return [status_entry(instance, how, d) for instance, (how, d) in kept]
+            moved = {i: self._moved[(mission, i)] for i, _ in kept if (mission, i) in self._moved}
+        out = [status_entry(instance, how, d) for instance, (how, d) in kept]
+        for entry in out:
+            if entry["instance"] in moved:
+                host, source = moved[entry["instance"]]
+                entry.update(host=host, how="migrated", summary=f"{host} (moved from {source} by missionctl migrate)")
+        return out
 
     def extras(self, mission: str) -> dict[str, Any]:
         """What the executive's status adds to the mission: `placements`, when it placed anything."""

@@ -93,6 +93,9 @@ def test_a_wait_moved_twice_keeps_its_deadline_and_its_count(cluster: DaemonClus
         time.sleep(1.0)  # a few seconds of mission time on the first host
         there = moved(migrate(cluster, f"{mid}/Pause/Hold", other))
         assert (there["source"], there["host"], there["component"]) == (first, other, "Wait")
+        status = json.loads(cluster.missionctl("status", "--config", str(cluster.hosts_file), "--json").stdout)
+        [placed] = [p for m in status["missions"] if m["id"] == mid for p in m["placements"]]
+        assert (placed["host"], placed["how"]) == (other, "migrated"), placed  # not where it was (audit 24, #5)
         time.sleep(1.0)
         back = moved(migrate(cluster, "Pause/Hold", first))  # its path alone: one mission runs it
         assert (back["source"], back["host"]) == (other, first)
