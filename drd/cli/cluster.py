@@ -1684,8 +1684,13 @@ def _missions_view(missions: list[dict[str, Any]], width: int = 80, explain: boo
             began = m.get("started")
             since = float(began) if isinstance(began, int | float) else 0.0
             head.append(f"  {duration_text(round(float(m['time']) - since, 1))}", style="dim")
-        if m.get("outcome") and m.get("reason"):
-            head.append(f"  {m['reason']}", style="dim")
+        if m.get("outcome") and m.get("reason"):  # on its own lines when it does not fit, cut with `…` past
+            reason = str(m["reason"])  # WHY_LINES: a long one was cut at the width, and read as whole (audit 24 #9)
+            if head.cell_len + 2 + len(reason) <= width:
+                head.append(f"  {reason}", style="dim")
+            else:
+                head.append("".join("\n" + line for line in wrap_cut(reason, max(20, width - 5), WHY_LINES)),
+                            style="dim")
         resumed = m.get("resumed")
         if isinstance(resumed, dict) and isinstance(resumed.get("paused"), int | float):
             head.append(f"  resumed after its controller was lost ({float(resumed['paused']):.1f} s without one)",

@@ -185,3 +185,16 @@ def test_a_mission_that_holds_or_waits_at_its_top_says_so_on_its_line() -> None:
     assert "CamHog-91 running 9s ranger2" in shown
     assert 'Starved-92 running 8s waiting for ranger: Ranger where ranger.id == "ranger2" (mission priority 3, ' \
            "priority 1) blocked by CamHog-91/HoldEast (ranger: ranger2)" in shown, shown
+
+
+def test_a_failed_missions_long_reason_wraps_below_it_at_80_columns() -> None:
+    """Placement audit 24, #9: the reason was cropped at the width with no mark, and read as the whole reason."""
+    reason = ("no host can run Solo: controller: no worker role; pc1: multiplicity 1 reached; ranger1: multiplicity 1"
+              " reached; ranger2: down")
+    data = {**status(), "missions": [{"id": "TwoSolos-93", "outcome": "failure", "reason": reason, "time": 2.0}]}
+    lines = cli_text(status_view(data, 80), 80).splitlines()
+    assert max(len(line) for line in lines) <= 80, "\n".join(lines)
+    head = next(i for i, line in enumerate(lines) if "TwoSolos-93  failure" in line)
+    assert " ".join(line.strip() for line in lines[head + 1:head + 3]) == reason, lines
+    short = {**status(), "missions": [{"id": "Bad-94", "outcome": "failure", "reason": "stopped", "time": 2.0}]}
+    assert "Bad-94  failure  stopped" in cli_text(status_view(short, 80), 80)
