@@ -393,9 +393,11 @@ class ClusterView:
 
 
 def runnable_components(host: Host, catalog: Catalog) -> list[str]:
-    """The component types whose device needs this host's devices cover (behaviors and data need none)."""
+    """The component types whose device needs this host's devices cover (behaviors and data need none); never an
+    abstract type (`Robot`, `Sensor`): nothing runs one (placement audit 24, #8: `Robot`, an arc without parts, was
+    listed on every host, the controller too)."""
     types = {d.type for d in host.devices}
-    return sorted(t.name for t in catalog.components.values() if required_devices(t) <= types)
+    return sorted(t.name for t in catalog.components.values() if not t.abstract and required_devices(t) <= types)
 
 
 #: At most this many instances on one host (a 64-bit count: the wire's JSON decoder takes any integer, and a 400-digit

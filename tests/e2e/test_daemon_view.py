@@ -142,6 +142,7 @@ def test_offers_and_runnable_components_come_from_the_hosts_that_are_up(cluster:
     assert [o.id for o in found] == ["ranger2.camera", "ranger1.camera"]
     assert found[0].host["load"] == pytest.approx(0.2)
     assert view.runnable(catalog)["Ranger"] == ["ranger1", "ranger2"]
+    assert "Robot" not in view.runnable(catalog) and "Sensor" not in view.runnable(catalog)  # abstract (audit 24, #8)
     view.token("ranger2", False, 0.5)
     assert [o.id for o in query("Camera", view.offers(), catalog=catalog)] == ["ranger1.camera"]
     views = {v.name: v for v in view.host_views()}
