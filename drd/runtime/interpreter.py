@@ -800,6 +800,9 @@ class Interpreter:
         if node.state.transitions:
             choice = self._choose(node, parent, ok)
             if choice is not None and (ok or choice[0].kind is ast.TriggerKind.ERROR or self._caught(node, parent)):
+                if ok and self._states[choice[0].target].kind is not FINAL and self._ancestor_first(parent):
+                    return  # an ancestor's transition of this instant is taken instead (a final's is the parent's
+                    # completion, which its own transitions weigh by declaration order)
                 self._take_chosen(node, choice, None, why)
                 return
         pk = parent.state.kind
@@ -812,6 +815,26 @@ class Interpreter:
             self._region_done(parent, node)
         elif pk is COMPOUND:
             self._finish(parent, True)
+
+    def _ancestor_first(self, parent: Node) -> bool:
+        """Take, if one is enabled at this instant, the transition of the outermost ancestor state (`parent` or
+        above) that has one: of an outer and an inner transition of one instant the ancestor's is taken, events and
+        timers alike (docs/design.md "Where the language spec is silent", 1), completions too (semantics audit 24,
+        D5: the inner completion's action ran and its target was entered, then left at once). Whether it did."""
+        chain: list[Node] = []
+        node: Node | None = parent
+        while node is not None and node.parent is not None:
+            chain.append(node)
+            node = node.parent
+        for outer in reversed(chain):  # the outermost first
+            domain = outer.parent
+            if domain is None or domain.closing or outer.phase is DONE or not outer.state.transitions:
+                continue
+            choice = self._choose(outer, domain, None)
+            if choice is not None:
+                self._take_chosen(outer, choice, None)
+                return True
+        return False
 
     def _region_done(self, parent: Node, node: Node) -> None:
         state = parent.state

@@ -239,3 +239,34 @@ def test_other_multiplicities_queue_as_before(catalog: Catalog, bounds: str, ins
     h = Harness(compiled(SPOTS.format(bounds=bounds), catalog), {"Wait": Timed}, ranger_world(1, 6))
     assert h.run(until=60) == "success"
     assert len({r.path for r in h.of(rec.Entered) if r.path.count("/") == 1 and "Spot[" in r.path}) == instances
+
+
+@pytest.mark.parametrize("outer", ["Box -> Esc after 2s", "Box -> Esc on Zap"])
+def test_an_ancestors_transition_wins_over_an_inner_completion_of_the_same_instant(catalog: Catalog,
+                                                                                   outer: str) -> None:
+    """Semantics audit 24, D5: at 2 s `In` ends (its completion goes to `In2`) as the outer `after 2s` falls due
+    (or a sibling emits `Zap`): the inner completion was taken first, its action ran and `In2` was entered, then
+    left at once. docs/design.md's rule for one instant: the ancestor's is taken."""
+    text = f"""
+mission M {{
+    parallel any {{
+        Zapper
+        Outer
+    }}
+}}
+behavior Zapper {{ Wait(duration: 2s); Wait -> done / emit Zap(k: 1) }}
+behavior Outer {{
+    needs r: Ranger
+    start -> Box
+    {outer} / log "outer"
+    Esc -> done after 10s
+    Wait(duration: 1s) as Esc
+}}
+behavior Box {{ start -> In; Wait(duration: 2s) as In; In -> In2 / log "inner"; Wait(duration: 5s) as In2 }}
+"""
+    h = Harness(compiled(text, catalog), {"Wait": Timed}, ranger_world(1, 2))
+    h.run(until=3)
+    logs = [r.text for r in h.of(rec.Log)]
+    entered = [r.path for r in h.of(rec.Entered)]
+    assert "outer" in logs and "inner" not in logs, logs
+    assert not any(p.endswith("/In2") for p in entered), entered
