@@ -16,11 +16,10 @@ from __future__ import annotations
 import json
 import signal
 from collections.abc import Iterator
-from pathlib import Path
 from typing import Any
 
 import pytest
-from cluster_support import DaemonCluster, eventually, instances_only_hosts, running_cluster, user_kit
+from cluster_support import DaemonCluster, eventually, instances_only_hosts, serving_cluster, user_kit
 
 NAMES = ["controller", "w1", "w2"]
 KIT = '''import json
@@ -82,11 +81,7 @@ def cluster(tmp_path_factory: pytest.TempPathFactory) -> Iterator[DaemonCluster]
                                                for n in ("Hoard", "Brittle", "Keeper")})
         (folder / "out").mkdir()
         mp.setenv("TALLY_OUT", str(folder / "out"))
-        with running_cluster(folder, NAMES) as c:
-            c.hosts_file.write_text(instances_only_hosts(c))
-            c.start_all()
-            c.wait_ready()
-            c.wait_up()
+        with serving_cluster(folder, NAMES, instances_only_hosts) as c:
             yield c
 
 
