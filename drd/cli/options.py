@@ -27,7 +27,7 @@ JsonOption = typer.Option(False, "--json", help="Print JSON.")
 #: `inf` and `1e308` are floats typer takes, and a wait for ever then hung a script (cli audit 24, #3, #4).
 MAX_WAIT = 86400.0
 MAX_SIM_TIME = 7 * 86400.0
-MAX_SPEED = 10000.0
+MAX_SPEED = 1_000_000.0
 UntilOption = typer.Option(1800.0, "--until", min=0.1, max=MAX_SIM_TIME,
                            help="Stop after this much sim time, in seconds.")
 TimeoutOption = typer.Option(2.0, "--timeout", min=0.05, max=MAX_WAIT, help="Seconds to wait for a daemon to answer.")
