@@ -831,8 +831,9 @@ class Interpreter:
             if domain is None or domain.closing or outer.phase is DONE or not outer.state.transitions:
                 continue
             choice = self._choose(outer, domain, None)
-            if choice is not None:
-                self._take_chosen(outer, choice, None)
+            event = choice[1] if choice is not None else None
+            if choice is not None and not any(e is event and outer in nodes for e, nodes in self._deaf):
+                self._take_chosen(outer, choice, None)  # (a state an event just entered does not hear it again)
                 return True
         return False
 
@@ -932,9 +933,9 @@ class Interpreter:
                 if delay is None or now - self._since(node) < delay - TIME_EPS:
                     continue
                 due = self._since(node) + delay
-                if due < now - TIME_EPS:
-                    if (late is None or due < late[0] - TIME_EPS) and self._enabled_guard(domain, t, None):
-                        late = (due, t)
+                if due < now - TIME_EPS and t.guard is None and not isinstance(t.delay, ast.Expr):
+                    if late is None or due < late[0] - TIME_EPS:  # enabled alone since it fell due (a guarded
+                        late = (due, t)  # one, or one whose delay is an expression, may have been enabled only now)
                     continue
             elif first is not None:
                 continue  # only an `after` due earlier can still win

@@ -270,3 +270,85 @@ behavior Box {{ start -> In; Wait(duration: 2s) as In; In -> In2 / log "inner"; 
     entered = [r.path for r in h.of(rec.Entered)]
     assert "outer" in logs and "inner" not in logs, logs
     assert not any(p.endswith("/In2") for p in entered), entered
+
+
+GUARDED_LATE = """
+mission M {
+    parallel all {
+        Zapper
+        Target
+    }
+}
+behavior Zapper { Wait(duration: 2s); Wait -> done / emit Zap(k: 1) }
+behavior Target {
+    needs r: Ranger
+    start -> Step
+    Step -> A on Zap
+    Step -> B after 1s [count(Scout where scout.carrier == r) < 2]
+    A -> done / log "A"
+    B -> done / log "B"
+}
+behavior Step { Wait(duration: 1h) }
+behavior A { Wait(duration: 1s) }
+behavior B { Wait(duration: 1s) }
+"""
+
+
+class ZapMarks(Timed):
+    """The Zapper's Wait launches scout1 as it ends: the guard on the Scouts carried holds from that instant."""
+
+    def step(self, now: float) -> Status:
+        status = super().step(now)
+        assert self.ctx is not None
+        if status is Status.SUCCESS and self.ctx.path.endswith("Zapper/Wait"):
+            self.update_dependency("ranger1.scout1", "carrier", "")
+        return status
+
+
+def test_a_guarded_after_due_earlier_but_enabled_only_now_keeps_to_the_declaration_order(catalog: Catalog) -> None:
+    """Review of semantics audit 24, D4: the `after` due at 1 s whose guard holds only from 2 s beat the `on Zap`
+    declared before it at 2 s; it was not enabled alone before, so the first declared wins."""
+    h = Harness(compiled(GUARDED_LATE, catalog), {"Wait": ZapMarks}, ranger_world(1, 2))
+    h.run(until=30)
+    assert [r.text for r in h.of(rec.Log)] == ["A"]
+
+
+DEAF = """
+mission M {
+    parallel all {
+        Zapper
+        Target
+    }
+}
+behavior Zapper { Wait(duration: 2s); Wait -> done / emit Zap(k: 1) }
+behavior Target {
+    needs r: Ranger
+    start -> Step
+    Step -> Box on Zap
+    Step -> X after 2s
+    Box -> Esc on Zap / log "moved again"
+    Box -> done
+    X -> done
+    Esc -> done
+}
+behavior Step { Wait(duration: 1h) }
+behavior X { Wait(duration: 1s) }
+behavior Esc { Wait(duration: 1s) }
+behavior Box {
+    start -> Scan
+    Spot[0..count(Scout where scout.id == "nobody")] as Scan
+    Scan -> Rest / log "inner"
+    Wait(duration: 5s) as Rest
+}
+behavior Spot { needs s: Scout
+ Wait(duration: 2s) }
+"""
+
+
+def test_a_state_an_event_entered_is_not_moved_again_by_it_through_an_inner_completion(catalog: Catalog) -> None:
+    """Review of semantics audit 24, D5: `Zap` took `Step -> Box`, Box's empty multiplicity completed on entry,
+    and the ancestor-first rule then let the same `Zap` take `Box -> Esc`: one event moved a state twice."""
+    h = Harness(compiled(DEAF, catalog), {"Wait": Timed}, ranger_world(1, 2))
+    h.run(until=4)
+    assert "moved again" not in [r.text for r in h.of(rec.Log)]
+    assert [r.target.rsplit("/", 1)[-1] for r in h.of(rec.Taken) if r.path.endswith("/Step")] == ["Box"]
