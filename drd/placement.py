@@ -283,13 +283,16 @@ def with_recent(views: Iterable[HostView], recent: Sequence[Recent], ended: Sequ
     the last one ended, counted it still there (placement audit 24, #3)."""
     out = []
     for view in views:
+        announced = view  # both counts are of what the host announced, not of each other's result
         for (host, component), made in _groups(recent).items():
             if host == view.name:
-                pending = min(len(made), max(0, made[0].seen + len(made) - view.running.get(component, 0)))
+                now = announced.running.get(component, 0)
+                pending = min(len(made), max(0, made[0].seen + len(made) - now))
                 view = with_more(view, component, pending) if pending else view
         for (host, component), gone in _groups(ended).items():
             if host == view.name:
-                still = min(len(gone), max(0, view.running.get(component, 0) - (gone[0].seen - len(gone))))
+                now = announced.running.get(component, 0)
+                still = min(len(gone), max(0, now - (gone[0].seen - len(gone))))
                 view = with_more(view, component, -still) if still else view
         out.append(view)
     return out

@@ -266,6 +266,11 @@ def test_an_instance_that_ended_counts_no_more_though_its_host_still_announces_i
     busy = [dataclasses.replace(hv(name, instances=1), running={"Wait": 1}) for name in ("a", "b")]
     decision = place(WAIT, with_recent(busy, [], ended), W)
     assert isinstance(decision, Placed) and decision.host == "b", "b runs nothing now; a runs one"
+    # the next one placed on b at once, b still announcing the ended one (or already neither): one runs there
+    for announced in ({"Wait": 1}, {}):
+        [b] = with_recent([HostView("b", running=announced, instances=len(announced))], [Recent("b", "Wait", 1)],
+                          ended)
+        assert b.running.get("Wait") == 1 and b.instances == 1, (announced, b)
 
 
 def test_a_refused_start_is_recognised_by_its_retry_so_it_counts_nowhere() -> None:
