@@ -99,6 +99,44 @@ def _unpinned(where: Where | None) -> Where | None:
     return where.where if isinstance(where, Pinned) else where
 
 
+class _FreeFirst:
+    """The registry as a preempting search reads it (`solver.Catalog`): each type's candidates grouped by kind (the
+    robot type a unit is part of; an aggregate's own type), the kinds in the order they first come, and within a
+    kind the free candidates before the held ones, each group in its own order. Made for one search."""
+
+    def __init__(self, reg: Registry) -> None:
+        self._reg = reg
+        self._owners = {u: a.type for a in reg.aggregates.values() for u in a.units}
+        self._typed: dict[str, tuple[Candidate, ...]] = {}
+
+    def kind(self, candidate: Candidate) -> str:
+        return candidate.type if isinstance(candidate, Aggregate) else self._owners.get(candidate.id, candidate.type)
+
+    def kinds(self, solution: Solution) -> tuple[str, ...]:
+        return tuple(self.kind(c) for c in solution.chosen.values())
+
+    def candidates(self, type: str) -> tuple[Candidate, ...]:
+        found = self._typed.get(type)
+        if found is None:
+            ordered = self._reg.candidates(type)
+            rank: dict[str, int] = {}
+            for c in ordered:
+                rank.setdefault(self.kind(c), len(rank))
+            used, units = self._reg.used, self._reg.units
+
+            def held(c: Candidate) -> bool:
+                return any(used.get(u) and not units[u].sharable for u in units_of(c))
+
+            found = self._typed[type] = tuple(sorted(ordered, key=lambda c: (rank[self.kind(c)], held(c))))
+        return found
+
+    def unit(self, unit_id: str) -> Unit:
+        return self._reg.unit(unit_id)
+
+    def demand(self, candidate: Candidate, need: NeedRequest) -> Mapping[str, float]:
+        return self._reg.demand(candidate, need)
+
+
 class ResourceManager:
     """The Resource Controller Manager's decisions, as a pure state machine (see module docstring).
 
@@ -604,8 +642,9 @@ class ResourceManager:
         solution = first_solution(needs, self._reg, lambda u: self._room(u, wait, False), given)
         if solution is None and self._overtime:
             # Preempt as few holders as possible: free units first, then overtime holders.
-            ranked = islice(solutions(needs, self._reg, lambda u: self._room(u, wait, True), given), 64)
-            solution = self._least_taken(list(ranked))
+            free_first = _FreeFirst(self._reg)
+            ranked = islice(solutions(needs, free_first, lambda u: self._room(u, wait, True), given), 64)
+            solution = self._least_taken(list(ranked), free_first)
         if solution is None:
             return None
         touched: set[str] = set()
@@ -635,25 +674,21 @@ class ResourceManager:
                 return True
         return False
 
-    def _least_taken(self, ranked: list[Solution]) -> Solution | None:
+    def _least_taken(self, ranked: list[Solution], free_first: _FreeFirst) -> Solution | None:
         """Of preempting solutions in the search's order, the first of those with the fewest victims, or one that
-        takes fewer held units for the same victims with candidates of the same kinds (the same robot types): a
+        takes fewer held units from the same victims with candidates of the same kinds (the same robot types): a
         victim is resumed on its very units only, so taking a unit it did not have to give (its Scout, when only
         its camera was needed) made it wait for that unit while others of its kind stood free (semantics audit 24,
         D1). A candidate of another kind (a Scout's wheels for a Ranger's drive) is never swapped in: the order
-        of the search is the preference."""
+        of the search is the preference. The search reads the candidates `free_first`, so that the solutions it
+        yields (the first 64) take free units where a kind has them, however many candidates a need has."""
         if not ranked:
             return None
         fewest = min(len(self._victims(s)) for s in ranked)
         best = [s for s in ranked if len(self._victims(s)) == fewest]
-        owners = {u: a.type for a in self._reg.aggregates.values() for u in a.units}
-
-        def kinds(s: Solution) -> tuple[str, ...]:
-            return tuple(c.type if isinstance(c, Aggregate) else owners.get(c.id, c.type) for c in s.chosen.values())
-
-        first = kinds(best[0])
+        first, victims = free_first.kinds(best[0]), self._victims(best[0])
         used, units = self._reg.used, self._reg.units
-        return min((s for s in best if kinds(s) == first),
+        return min((s for s in best if free_first.kinds(s) == first and self._victims(s) == victims),
                    key=lambda s: sum(1 for u in s.units if not units[u].sharable and used.get(u)))
 
     def _victims(self, solution: Solution) -> list[str]:

@@ -130,6 +130,13 @@ def test_a_preemption_takes_only_the_units_it_must_and_free_ones_for_the_rest() 
     assert isinstance(revoked, Revoked) and revoked.holder == "A"
     assert isinstance(grant, Granted) and grant.assignment == {"s": "scout2", "camera": "cam1"}
     assert granted(rm.tick(11.0))["A"].assignment == {"s": "scout1", "camera": "cam1"}  # back on its own Scout
+    # however many candidates a later need has (only the search's first 64 solutions are ranked)
+    many = manager(Unit("cam1", "Camera"), *(Unit(f"scout{i}", "Scout") for i in (1, 2, 3)),
+                   *(Unit(f"drone{i}", "Drone") for i in range(1, 71)))
+    three = (NeedRequest("s", "Scout"), CAMERA, NeedRequest("d", "Drone"))
+    many.request(Request("A", 1, three), 0.0)
+    grant = granted(many.request(Request("B", 1, three), 6.0))["B"]
+    assert grant.assignment["s"] == "scout2" and grant.assignment["d"] != "drone1", grant.assignment
 
 
 def test_a_preemption_keeps_to_the_kind_of_robot_the_search_prefers() -> None:
