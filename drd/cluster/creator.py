@@ -75,6 +75,7 @@ from drd.cluster.pipe import (
 from drd.cluster.remote import ComponentBatch, ComponentBatchReply, ComponentCall, ComponentReply
 from drd.cluster.terms import TermFence, Witness
 from drd.cluster.workers import (
+    CANNOT_MOVE,
     DEFAULT_SIZE,
     MOVED,
     Tune,
@@ -572,8 +573,8 @@ class Creator:
         logs = reply.logs
         if inst.notes:
             logs, inst.notes = [*inst.notes, *logs], []
-        if call.op == "terminate" and call.status == MOVED and reply.error and not reply.raised:  # it cannot take
-            return ComponentReply(reply.status, reply.outputs, reply.events, logs, reply.shared,  # its state along:
+        if call.op == "terminate" and call.status == MOVED and reply.error.startswith(CANNOT_MOVE):  # its state
+            return ComponentReply(reply.status, reply.outputs, reply.events, logs, reply.shared,  # cannot go along:
                                   reply.dependencies, reply.error)  # it was not stopped, and runs on here, bound
         state = _STATE_AFTER.get(call.op)
         if state is not None and state != inst.state:

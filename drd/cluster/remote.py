@@ -611,8 +611,6 @@ class RemoteComponent(Component):
             self.local.terminate(status)
             return
         if self.host is not None and not (self.movable and self.router.is_down(self.host)):
-            if self.movable:  # placed by the policy: from now on it no longer counts on its host
-                self.router.ended(self.host, self.name)
             try:
                 self._call("terminate", status=str(status))  # a movable one on a lost host went with it
             except InstanceLost:
@@ -622,6 +620,8 @@ class RemoteComponent(Component):
             except ComponentError as e:
                 if str(e) != self._failed:  # a dead process answers each call as its step's failure said
                     raise  # (users audit 12, D6: logged twice)
+            if self.movable:  # placed by the policy, and gone: it no longer counts on its host
+                self.router.ended(self.host, self.name)
 
     # -- helpers --------------------------------------------------------------------------------------
 
@@ -713,6 +713,7 @@ class RemoteComponent(Component):
             # its state fails with that, at its next step, as a start that raises does (placement audit 24, #1)
             self._raised = self._failed = str(e)
             self.router.placed.append((self._ctx.path, host, "migrated"))
+            self.router.ended(old, self.name)
             raise ComponentError(f"{self._ctx.path}: {self.name} raised as it was started on {host} ({e}): its state"
                                  " fails with that") from None
         except ComponentError as e:

@@ -815,7 +815,7 @@ def _run_call(h: _Hosted, call: Call, link: _Link) -> CallReply:
                 snapshot = take_snapshot(h, force=True)
                 if snapshot is None:  # its snapshot raised or is too large: it stays, running (placement audit 24)
                     why = h.logs.pop(said) if len(h.logs) > said else "its snapshot was not taken"
-                    return _reply(h, services, f"it cannot move with its state ({why}): it goes on where it is",
+                    return _reply(h, services, f"{CANNOT_MOVE} ({why}): it goes on where it is",
                                   unused=link.unused())
             h.comp.terminate(Status(status) if status in Status.__members__.values() else Status.RUNNING)
         else:
@@ -846,6 +846,9 @@ def _reply(h: _Hosted, services: Any, error: str, result: str = "", snapshot: li
 SNAPSHOT_EVERY = 10
 #: The status of a `terminate` that moves an instance elsewhere: its snapshot comes back with the reply.
 MOVED = "moved"
+#: How a worker's refusal of such a `terminate` begins (its snapshot could not be taken): the instance was not
+#: stopped, and the Creator keeps it running and bound (any other error of the call is the instance's end).
+CANNOT_MOVE = "it cannot move with its state"
 
 
 def _due(h: _Hosted) -> bool:

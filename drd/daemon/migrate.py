@@ -139,8 +139,11 @@ class Migrations:
             if why:
                 raise MigrateError(f"{mission}/{path}: {why}")
             assert isinstance(comp, RemoteComponent) and source is not None
-            state = comp.migrate(req.host)
-            runner.placements.moved(mission, path, req.host, source)
+            try:
+                state = comp.migrate(req.host)
+            finally:  # moved, or started there and its own code raised (it is there, failed): status says where
+                if comp.host == req.host:
+                    runner.placements.moved(mission, path, req.host, source)
         log.info("mission %s: %s (%s) moved from %s to %s with its state %s", mission, path, name, source,
                  req.host, state[0] if state else None)
         return Migrated(mission, path, name, source, req.host, list(state))

@@ -96,8 +96,10 @@ def run(c: DaemonCluster, name: str) -> str:
     mission.write_text(f"mission Run{name} {{\n    {name}\n}}\n")
     r = c.missionctl("run", str(mission), "--config", str(c.hosts_file), "--detach", timeout=60)
     assert r.returncode == 0, (r.stdout, r.stderr, c.tails("controller"))
-    eventually(lambda: starts(c, name), f"{name} to start", 30, explain=lambda: c.tails("controller"))
-    return r.stdout.strip()
+    mid = r.stdout.strip()
+    eventually(lambda: starts(c, name) and where(c, mid), f"{name} to start and its host to announce it", 30,
+               explain=lambda: c.tails("controller"))
+    return mid
 
 
 def where(c: DaemonCluster, mid: str) -> str | None:
