@@ -17,6 +17,7 @@ from __future__ import annotations
 import bisect
 import math
 import os
+import stat
 from collections.abc import Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from itertools import pairwise
@@ -115,18 +116,36 @@ def render(world: World, report: RunReport, path: Path, *, title: str | None = N
 
     with matplotlib.rc_context(_STYLE):
         fig = figure(world, report, title=title, views=views, types=types)
-        if path.exists() and not path.is_file():  # a device or a pipe (/dev/stdout) is written as it is
-            fig.savefig(path, format=fmt, dpi=150, metadata=_METADATA[fmt])
-            return
-        # drawn beside it, then put in its place: a picture cut short (a Ctrl-C, a full disk) is never left at
-        # `path`, and one already there stays whole (cli audit 24, #1)
-        real = Path(os.path.realpath(path))  # a link stays a link: the file it names is replaced
-        part = real.with_name(f".{real.name}.{os.getpid()}.part")
+        _write_whole(fig, path, format=fmt, dpi=150, metadata=_METADATA[fmt])
+
+
+def _write_whole(fig: Any, path: Path, **options: Any) -> None:
+    """Draw `fig` beside `path`, then put it in its place: a picture cut short (a Ctrl-C, a full disk) is never
+    left at `path`, and one already there stays whole (cli audit 24, #1). A link stays a link (the file it names is
+    replaced); the file keeps its mode; one with hard links, a device or a pipe, or one whose folder takes no file
+    beside it (a name too long, a folder not writable) is written in place, as before."""
+    real = Path(os.path.realpath(path))
+    try:
+        old: os.stat_result | None = real.stat()
+    except FileNotFoundError:
+        old = None
+    if old is not None and (old.st_nlink > 1 or not stat.S_ISREG(old.st_mode)):  # its other names would keep the
+        fig.savefig(path, **options)  # old picture; a device or a pipe (/dev/full in the disk-full tests) is
+        return  # written as it is: replacing it would replace the device node
+    part = real.with_name(f".{real.name}.{os.getpid()}.part")
+    try:
         try:
-            fig.savefig(part, format=fmt, dpi=150, metadata=_METADATA[fmt])
-            os.replace(part, real)
-        finally:
-            part.unlink(missing_ok=True)
+            fig.savefig(part, **options)
+        except OSError:
+            if part.exists():  # it failed while writing (a full disk): so would the file itself
+                raise
+            fig.savefig(path, **options)  # no file could be made beside it: in place
+            return
+        if old is not None:
+            os.chmod(part, stat.S_IMODE(old.st_mode))
+        os.replace(part, real)
+    finally:
+        part.unlink(missing_ok=True)
 
 
 #: Text stays text in SVG (searchable, selectable, small); ids are salted with a constant, not at random.

@@ -246,18 +246,30 @@ def distinct_files(inputs: Mapping[str, Sequence[Path | None]], outputs: Mapping
     outputs: writing it would destroy the input (a `--trace` over the mission file, a `replay --trace` over the
     recording) or mix two outputs in one file that is neither (cli audit 24, #2). Paths are compared as the
     system resolves them (links, `..`)."""
-    seen: dict[str, str] = {}  # resolved path -> what it already is
+    seen: dict[str | tuple[int, int], str] = {}  # resolved path, and (device, inode) if it exists -> what it is
     for what, paths in inputs.items():
         for path in paths:
             if path is not None:
-                seen.setdefault(os.path.realpath(path), what)
+                for key in _file_keys(path):
+                    seen.setdefault(key, what)
     for option, path in outputs.items():
         if path is None:
             continue
-        real = os.path.realpath(path)
-        if real in seen:
-            fail(f"{option} {path}: it is {seen[real]}; writing it there would destroy it", hint="give another path")
-        seen[real] = f"the {option} file"
+        keys = _file_keys(path)
+        if (same := next((seen[k] for k in keys if k in seen), None)) is not None:
+            fail(f"{option} {path}: it is {same}; writing it there would destroy it", hint="give another path")
+        for key in keys:
+            seen[key] = f"the {option} file"
+
+
+def _file_keys(path: Path) -> list[str | tuple[int, int]]:
+    """What names one file: its resolved path (links, `..`), and, if it exists, its device and inode (a hard
+    link to it has another path)."""
+    try:
+        st = os.stat(path)
+    except OSError:
+        return [os.path.realpath(path)]
+    return [os.path.realpath(path), (st.st_dev, st.st_ino)]
 
 
 def write_file(path: Path, text: str, what: str) -> None:

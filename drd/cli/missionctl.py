@@ -151,7 +151,7 @@ def plan(
         fail(f"--json and --format {fmt.value} ask for two formats: give one")
     if as_json:
         fmt = Format.json
-    suffix = _output_suffix(file, config, output)
+    suffix = _output_suffix(file, config, output, picked=fmt is not None)
     result = _compile(file, catalog(components))
     if not show_diagnostics([result]):
         return INVALID
@@ -185,12 +185,13 @@ def plan(
     return OK
 
 
-def _output_suffix(file: Path, config: Path | None, output: Path | None) -> str:
-    """`plan -o`'s suffix, lower case ("" without one: the text tree); a clear exit for one it does not know, or
-    for an output that is the mission or the hosts file (`distinct_files`)."""
+def _output_suffix(file: Path, config: Path | None, output: Path | None, picked: bool = False) -> str:
+    """`plan -o`'s suffix, lower case ("" without one: the text tree); a clear exit for one it does not know when
+    it picks the format (not when `--format` or `--json` did: `-f mermaid -o chart.md`), or for an output that is
+    the mission or the hosts file (`distinct_files`)."""
     distinct_files({"the mission file": [file], "the hosts file": [config]}, {"-o": output})
     suffix = output.suffix.lower() if output else ""
-    if suffix and suffix not in IMAGE_SUFFIXES and suffix not in FORMAT_BY_SUFFIX:
+    if suffix and not picked and suffix not in IMAGE_SUFFIXES and suffix not in FORMAT_BY_SUFFIX:
         known = ", ".join([*FORMAT_BY_SUFFIX, *IMAGE_SUFFIXES])
         fail(f"-o {output}: its suffix picks the format, and {suffix} is not one ({known})")
     return suffix
@@ -633,7 +634,7 @@ def _check_render(render: Path | None) -> None:
     if render.suffix.lower() not in SUPPORTED_SUFFIXES:
         fail(f"--render {render}: cannot draw it: its suffix chooses the format, one of "
              f"{', '.join(SUPPORTED_SUFFIXES)}")
-    folder = render.parent
+    folder = Path(os.path.realpath(render)).parent  # the picture is drawn beside the file a link names
     why = ("is a folder" if render.is_dir() else
            f"its folder {folder} does not exist" if not folder.exists() else
            f"{folder} is not a folder" if not folder.is_dir() else

@@ -34,10 +34,13 @@ def work(tmp_path: Path) -> Path:
     (["--record", "./hosts.yaml"], "--record hosts.yaml: it is the hosts file"),
     (["--trace", "run.out", "--record", "run.out"], "--record run.out: it is the --trace file"),
     (["--render", "../x/../{dir}/stroll.mission"], "it is a mission file"),
-], ids=["trace-over-the-mission", "record-over-the-hosts-file", "trace-and-record-in-one", "a-path-around"])
+    (["--trace", "twin.mission"], "--trace twin.mission: it is a mission file"),
+], ids=["trace-over-the-mission", "record-over-the-hosts-file", "trace-and-record-in-one", "a-path-around",
+        "a-hard-link"])
 def test_a_dry_run_refuses_an_output_over_an_input_or_another_output(work: Path, args: list[str],
                                                                      said: str) -> None:
     (work.parent / "x").mkdir(exist_ok=True)
+    (work / "twin.mission").hardlink_to(work / "stroll.mission")
     args = [a.format(dir=work.name) for a in args]
     run = missionctl("dry-run", "stroll.mission", "--config", "hosts.yaml", *args, cwd=work)
     assert run.returncode == 2 and said in run.stderr, run.stderr[-2000:]
@@ -104,3 +107,30 @@ def test_a_ctrl_c_while_the_picture_is_drawn_keeps_the_report_and_says_the_pictu
     assert "mission Stroll" in run.stdout and "success" in run.stdout  # the report, as printed
     assert "--render run.png: not drawn: interrupted (Ctrl-C)" in run.stderr and "Traceback" not in run.stderr
     assert not (work / "run.png").exists()
+
+
+def test_a_picture_drawn_again_keeps_its_mode_and_its_hard_links(tmp_path: Path) -> None:
+    """Review of cli audit 24, #1: drawn beside and put in place, a picture got the umask's mode and lost its
+    hard links' view of it; it keeps its mode, and a picture with hard links is written in place."""
+    import os
+
+    from drd.dryrun import DryRun
+    from drd.render import render
+    from drd.sim import load_world
+
+    world = load_world(ROOT / "worlds" / "corridor.yaml")
+    picture, twin = tmp_path / "run.svg", tmp_path / "twin.svg"
+    picture.write_text("old")
+    os.chmod(picture, 0o640)
+    render(world, DryRun("M", None, "success", 1.0, 1.0), picture)
+    assert picture.read_text().startswith("<?xml") and (picture.stat().st_mode & 0o777) == 0o640
+    os.link(picture, twin)
+    picture.write_text("old")
+    render(world, DryRun("M", None, "success", 1.0, 1.0), picture)
+    assert twin.read_text() == picture.read_text() and picture.read_text().startswith("<?xml")
+
+
+def test_plan_takes_any_suffix_when_the_format_is_given(work: Path) -> None:
+    """Review of cli audit 24, #8: `-f mermaid -o chart.md` was refused for its suffix, which picks nothing here."""
+    r = missionctl("plan", "stroll.mission", "-f", "mermaid", "-o", "chart.md", cwd=work)
+    assert r.returncode == 0 and (work / "chart.md").read_text().startswith(("stateDiagram", "---", "%%")), r.stderr
