@@ -272,7 +272,8 @@ behavior Box {{ start -> In; Wait(duration: 2s) as In; In -> In2 / log "inner"; 
     assert not any(p.endswith("/In2") for p in entered), entered
 
 
-GUARDED_LATE = """
+#: `Zapper` emits `Zap` at 2 s beside `Target`, whose transitions each test gives.
+ZAP_AT_2S = """
 mission M {
     parallel all {
         Zapper
@@ -280,7 +281,8 @@ mission M {
     }
 }
 behavior Zapper { Wait(duration: 2s); Wait -> done / emit Zap(k: 1) }
-behavior Target {
+"""
+GUARDED_LATE = ZAP_AT_2S + """behavior Target {
     needs r: Ranger
     start -> Step
     Step -> A on Zap
@@ -313,15 +315,7 @@ def test_a_guarded_after_due_earlier_but_enabled_only_now_keeps_to_the_declarati
     assert [r.text for r in h.of(rec.Log)] == ["A"]
 
 
-DEAF = """
-mission M {
-    parallel all {
-        Zapper
-        Target
-    }
-}
-behavior Zapper { Wait(duration: 2s); Wait -> done / emit Zap(k: 1) }
-behavior Target {
+DEAF = ZAP_AT_2S + """behavior Target {
     needs r: Ranger
     start -> Step
     Step -> Box on Zap
