@@ -919,15 +919,18 @@ class Interpreter:
         wins"), with the event it takes: its completion (`ok`) or `on error` (`not ok`) when it has just finished,
         an `after` due, a `when` that holds, an `on E` whose event was emitted at this instant and is not yet
         dispatched (`current`, the one being dispatched, then the queue, in emission order). A false guard does
-        not enable. An `after` that came due between two control cycles (`250ms`, or on a resume) was enabled
-        alone before this instant, so the one due first wins over everything enabled only now (semantics audit
-        24, D4: `after 290ms` declared first beat `after 250ms`)."""
+        not enable. An unguarded `after` of a constant delay that came due between two control cycles (`250ms`, or
+        on a resume) was enabled alone before this instant, so the one due first wins over everything enabled only
+        now (semantics audit 24, D4: `after 290ms` declared first beat `after 250ms`)."""
         finished = None if ok is None else ast.TriggerKind.COMPLETION if ok else ast.TriggerKind.ERROR
         now = self.clock.now()
         first: tuple[Transition, rec.Event | None] | None = None
         late: tuple[float, Transition] | None = None  # the `after` due first, before this instant
         for t in node.state.transitions:
             kind = t.kind
+            if first is not None and (kind is not ast.TriggerKind.TIMEOUT or t.guard is not None
+                                      or isinstance(t.delay, ast.Expr)):
+                continue  # only an unguarded, constant `after` due earlier can still win (nothing else evaluated)
             if kind is ast.TriggerKind.TIMEOUT:
                 delay = self._delay(domain, t)
                 if delay is None or now - self._since(node) < delay - TIME_EPS:
@@ -937,8 +940,6 @@ class Interpreter:
                     if late is None or due < late[0] - TIME_EPS:  # enabled alone since it fell due (a guarded
                         late = (due, t)  # one, or one whose delay is an expression, may have been enabled only now)
                     continue
-            elif first is not None:
-                continue  # only an `after` due earlier can still win
             elif kind is ast.TriggerKind.EVENT:
                 event = self._pending(domain, t, current)
                 if event is not None:
