@@ -155,6 +155,7 @@ def plan(
     result = _compile(file, catalog(components))
     if not show_diagnostics([result]):
         return INVALID
+    distinct_files({"a file the mission imports": _imported(result)}, {"-o": output})
     chart = result.statechart
     if chart is None:
         fail(f"{file} declares no mission, so there is nothing to plan",
@@ -424,7 +425,6 @@ def dry_run(
     from drd.cli.cluster import live_recorder
     from drd.dryrun import Mission
 
-    _check_outputs(missions, hosts, {"--trace": trace, "--record": record, "--render": render})
     cat = catalog(components)
     if len(priority) > len(missions):
         fail(f"{len(priority)} --priority for {len(missions)} mission{'s' if len(missions) > 1 else ''}:"
@@ -432,7 +432,8 @@ def dry_run(
     loaded = _missions_and_team(missions, param, hosts, world, cat)
     if loaded is None:
         return INVALID
-    charts, cluster, sim_world = loaded
+    charts, cluster, sim_world, read = loaded
+    _check_outputs(read, {"--trace": trace, "--record": record, "--render": render})
     injections = _injections(inject, cluster, sim_world, until)
     fh = open_trace(trace)
     stop = threading.Event()
@@ -450,10 +451,11 @@ def dry_run(
 
 
 def _missions_and_team(missions: list[Path], param: list[str], hosts: Path, world: str | None,
-                       cat: Catalog) -> tuple[list[Statechart], Cluster, World] | None:
-    """The missions compiled under the hosts file's `cluster.limits`, then the team they run on; None when a mission
-    has errors (shown). A mission's errors come before the hosts file's: when it does not load, the missions are
-    checked against the default limits first, and its own problems are said after."""
+                       cat: Catalog) -> tuple[list[Statechart], Cluster, World, dict[str, list[Path]]] | None:
+    """The missions compiled under the hosts file's `cluster.limits`, then the team they run on, and every file read
+    for them (what no output may be); None when a mission has errors (shown). A mission's errors come before the
+    hosts file's: when it does not load, the missions are checked against the default limits first, and its own
+    problems are said after."""
     from drd.config import ConfigError
     from drd.hosts import load_hosts
     from dsl.limits import DEFAULT
@@ -462,11 +464,14 @@ def _missions_and_team(missions: list[Path], param: list[str], hosts: Path, worl
         cluster: Cluster | None = load_hosts(hosts, cat) if hosts.is_file() else None
     except ConfigError:
         cluster = None
-    charts = _charts(missions, param, cat, cluster.limits if cluster is not None else DEFAULT)
-    if charts is None:
+    compiled = _charts(missions, param, cat, cluster.limits if cluster is not None else DEFAULT)
+    if compiled is None:
         return None
+    charts, imported = compiled
     team, sim_world = _team_files(hosts, world, cat, charts, cluster)
-    return None if _unknown_rooms(charts, sim_world) else (charts, team, sim_world)
+    read = {"a mission file": missions, "the hosts file": [hosts], "a file a mission imports": imported,
+            "the world file": [Path(sim_world.source)]}
+    return None if _unknown_rooms(charts, sim_world) else (charts, team, sim_world, read)
 
 
 def _unknown_rooms(charts: list[Statechart], sim_world: World) -> bool:
@@ -489,8 +494,10 @@ def _unknown_rooms(charts: list[Statechart], sim_world: World) -> bool:
     return bool(results) and not show_diagnostics(results)
 
 
-def _charts(missions: list[Path], param: list[str], cat: Catalog, limits: Limits) -> list[Statechart] | None:
-    """The missions compiled, their `--param`s applied; None when one has errors (shown)."""
+def _charts(missions: list[Path], param: list[str], cat: Catalog,
+            limits: Limits) -> tuple[list[Statechart], list[Path]] | None:
+    """The missions compiled, their `--param`s applied, and the files they import; None when one has errors
+    (shown)."""
     from dsl.params import ParamError, parse_assignments
 
     results = [_compile(mission, cat, limits) for mission in missions]
@@ -501,10 +508,16 @@ def _charts(missions: list[Path], param: list[str], cat: Catalog, limits: Limits
         if result.statechart is None:
             fail(f"{mission} declares no mission to run", hint="dry-run the file that declares `mission Name {...}`")
         charts.append(result.statechart)
+    imported = [path for result in results for path in _imported(result)]
     try:
-        return _with_params(charts, parse_assignments(param))
+        return _with_params(charts, parse_assignments(param)), imported
     except ParamError as e:
         fail_all([str(e)])
+
+
+def _imported(result: Compiled) -> list[Path]:
+    """The files a compiled mission file imports (read too: no output may be one)."""
+    return [Path(name) for name in result.sources if name != result.file]
 
 
 def _preflight(cluster: Cluster, cat: Catalog, charts: list[Statechart]) -> None:
@@ -616,9 +629,10 @@ def _seconds(text: str, option: str) -> float:
     return seconds
 
 
-def _check_outputs(missions: list[Path], hosts: Path, outputs: dict[str, Path | None]) -> None:
-    """A dry-run's output files: none an input or another output (`distinct_files`), the picture's folder there."""
-    distinct_files({"a mission file": missions, "the hosts file": [hosts]}, outputs)
+def _check_outputs(read: dict[str, list[Path]], outputs: dict[str, Path | None]) -> None:
+    """A dry-run's output files, before any is written: none a file it read (`read`: the missions, the files they
+    import, the hosts and the world file) or another output (`distinct_files`), the picture's folder there."""
+    distinct_files(read, outputs)
     _check_render(outputs["--render"])
 
 

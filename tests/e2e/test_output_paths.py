@@ -49,6 +49,34 @@ def test_a_dry_run_refuses_an_output_over_an_input_or_another_output(work: Path,
     assert not (work / "run.out").exists()
 
 
+LIB = "behavior Settle { Calibrate(samples: 5) }\n"
+
+
+@pytest.mark.parametrize(("args", "said"), [
+    (["dry-run", "main.mission", "--config", "hosts.yaml", "--trace", "lib/common.mission"],
+     "--trace lib/common.mission: it is a file a mission imports"),
+    (["dry-run", "main.mission", "--config", "hosts.yaml", "--world", "mine.yaml", "--render", "mine.yaml"],
+     "--render mine.yaml: it is the world file"),
+    (["plan", "main.mission", "-o", "lib/common.mission", "--format", "dot"],
+     "-o lib/common.mission: it is a file the mission imports"),
+    (["run", "main.mission", "--config", "hosts.yaml", "--record", "lib/common.mission"],  # before any connection
+     "--record lib/common.mission: it is a file the mission imports"),
+], ids=["dry-run-trace-over-an-import", "dry-run-picture-over-the-world", "plan-over-an-import", "run-over-an-import"])
+def test_no_output_over_a_file_the_mission_imports_or_the_world(work: Path, args: list[str], said: str) -> None:
+    """What a run reads besides the mission and the hosts file is an input too (review of cli audit 24, #7)."""
+    (work / "lib").mkdir()
+    (work / "lib" / "common.mission").write_text(LIB)
+    (work / "main.mission").write_text('import "lib/common.mission"\n'
+                                       'mission Main {\n    needs r: Ranger\n    Settle\n}\n')
+    world = (ROOT / "worlds" / "corridor.yaml").read_text()
+    (work / "mine.yaml").write_text(world)
+    run = missionctl(*args, cwd=work)
+    assert run.returncode == 2 and said in run.stderr, run.stderr[-2000:]
+    assert (work / "lib" / "common.mission").read_text() == LIB and (work / "mine.yaml").read_text() == world
+    if args[0] != "plan":
+        assert run.stdout == ""  # refused before anything ran
+
+
 def test_replay_refuses_to_write_its_trace_over_the_recording(work: Path) -> None:
     run = missionctl("dry-run", "stroll.mission", "--config", "hosts.yaml", "--record", "run.mcap", cwd=work)
     assert run.returncode == 0, run.stderr[-2000:]
