@@ -524,8 +524,7 @@ def run(mission: Path = typer.Argument(..., help="The mission file.", show_defau
         params = parse_assignments(param)
     except ParamError as e:
         fail(str(e))
-    trace_out, recorder = _outputs((mission, config, [Path(name) for name in imports]), trace, record, foxglove,
-                                   detach)
+    trace_out, recorder = _outputs((mission, config, list(imports)), trace, record, foxglove, detach)
     wait = max(timeout, 15.0)
     request = RunMission(source, str(mission), world, speed, until, seed, params or None, priority,
                          give_up_at=time.time() + wait - 0.5,  # the reply must still reach us after it
@@ -630,13 +629,14 @@ def _robot_ids(config: Path) -> list[str]:
         return []
 
 
-def _outputs(inputs: tuple[Path, Path, list[Path]], trace: Path | None, record: Path | None, foxglove: str | None,
+def _outputs(inputs: tuple[Path, Path, list[str]], trace: Path | None, record: Path | None, foxglove: str | None,
              detach: bool) -> tuple[IO[str] | None, Recorder | None]:
     """The `--trace` file and the recorder of `--record` and `--foxglove`, which need the records as they come;
     neither may be an input (`inputs`: the mission, the hosts file, the files the mission imports) or the other
     (`distinct_files`)."""
     mission, hosts, imported = inputs
-    distinct_files({"the mission file": [mission], "the hosts file": [hosts], "a file the mission imports": imported},
+    distinct_files({"the mission file": [mission], "the hosts file": [hosts],
+                    "a file the mission imports": [Path(name) for name in imported]},
                    {"--trace": trace, "--record": record})
     if (trace is not None or record is not None or foxglove is not None) and detach:
         given = "--trace" if trace is not None else "--record" if record is not None else "--foxglove"
