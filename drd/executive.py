@@ -209,8 +209,16 @@ class Executive:
         self.forget_finished()
 
     def continue_records(self, after: int) -> None:
-        """Number the next records after `after` (a controller resuming goes on with its journal's numbering)."""
+        """Number the next records after `after` (a controller resuming goes on with its journal's numbering), and
+        grant the next epochs above it: each grant is a record, so no unit's epoch exceeds the number of records
+        its executive sent, and a resumed one gives no epoch a dead one gave (safety audit 25, D1)."""
         self.sent = max(self.sent, after)
+        self.broker.rcm.epochs_above(after)
+
+    def highest_number(self) -> int:
+        """What a controller taking over from this one continues after (`continue_records`): the number of the last
+        record sent, or the highest epoch granted if that is more."""
+        return max(self.sent, self.broker.rcm.highest_epoch())
 
     def _send(self, key: str, mission: str, record: rec.Record) -> None:
         self.sent += 1

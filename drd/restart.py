@@ -57,6 +57,7 @@ class ControllerLife:
         self._saved: dict[str, NodeImage] = {}
         self._properties: dict[str, dict[str, Any]] = {}
         self._died_at = 0.0
+        self._numbered = 0  # the dead executive's last record number or highest epoch (`Executive.highest_number`)
         self.grace = grace
         self.down: set[str] = set(down)  # hosts with devices down now (killed, or not joined yet)
         self.resuming: tuple[float, str] | None = None  # (until when, which controller) waits for `down` to resume
@@ -104,6 +105,7 @@ class ControllerLife:
         if orphan is not None:  # the hosts stop every robot, and record it (`halted`), as a cluster's Creators do
             orphan(now, f"controller {host} lost (killed)")
         executive.abandon()  # a dead process says nothing more
+        self._numbered = executive.highest_number()  # what the next controller numbers and grants above
         self.executive, self._died_at = None, now
         if self.takeover is not None:
             return (f"every robot stopped; {len(self._saved)} mission(s) wait for standby {self.takeover[1]}, which"
@@ -146,6 +148,7 @@ class ControllerLife:
         """This controller acts: a new executive resumes the journaled missions."""
         self.acting = host or self.acting
         executive = self.executive = self.make(self.gone)
+        executive.continue_records(self._numbered)  # as a journal's numbering, with no gap: nothing went unsaved
         for rid, values in self._properties.items():
             for key, value in values.items():
                 if executive.pool.view(rid) is not None:

@@ -168,6 +168,7 @@ def check(records: Iterable[Mapping[str, Any]], sharable: Collection[str] = ()) 
     """Check a trace's records in order; `sharable`: unit ids that several holders may hold at once."""
     report = OwnershipReport()
     holders: dict[tuple[str, str], dict[str, int]] = {}  # (mission, unit) -> {holder path: epoch}
+    epochs: dict[str, int] = {}  # exclusive unit -> the epoch of its last grant
     finished: set[str] = set()
     seen: list[Mapping[str, Any]] = []
     for r in records:
@@ -177,16 +178,7 @@ def check(records: Iterable[Mapping[str, Any]], sharable: Collection[str] = ()) 
         at = float(r.get("at", 0.0) or 0.0)
         if kind == "granted":
             report.grants += 1
-            shares = set(dict(r.get("shares") or {}).values())  # a share of a sharable unit, not a hold
-            for unit, epoch in dict(r.get("epochs") or {}).items():
-                held = holders.setdefault((mission, unit), {})
-                others = [h for h in held if h != path]
-                shared_by_missions = [(m, u) for (m, u), hs in holders.items() if u == unit and m != mission and hs]
-                if unit not in sharable and unit not in shares and (others or shared_by_missions):
-                    who = others or [f"{m}: {', '.join(holders[(m, u)])}" for m, u in shared_by_missions]
-                    report.breaches.append(Breach(at, "double hold", f"{unit} granted to {path} while held by "
-                                                  f"{', '.join(who)}"))
-                held[path] = int(epoch)
+            report.breaches += _grant_breaches(r, holders, epochs, sharable)
         elif kind in ("revoked", "released"):
             for unit in r.get("resources") or ():
                 holders.get((mission, str(unit)), {}).pop(path, None)
@@ -213,6 +205,31 @@ def check(records: Iterable[Mapping[str, Any]], sharable: Collection[str] = ()) 
                                               f"{r.get('method')} at epoch {epoch}; holders: {have}"))
     report.breaches += order_breaches(seen)
     return report
+
+
+def _grant_breaches(r: Mapping[str, Any], holders: dict[tuple[str, str], dict[str, int]], epochs: dict[str, int],
+                    sharable: Collection[str]) -> list[Breach]:
+    """A `granted` record's units taken into `holders` (and an exclusive one's epoch into `epochs`): a double hold,
+    and an exclusive unit granted at an epoch not above its previous grant's (epochs strictly increase per unit,
+    across a controller's restart too: a reused one would let a stale command pass a gate)."""
+    out = []
+    at, mission, path = float(r.get("at", 0.0) or 0.0), str(r.get("mission", "")), str(r.get("path", ""))
+    shares = set(dict(r.get("shares") or {}).values())  # a share of a sharable unit, not a hold
+    for unit, epoch in dict(r.get("epochs") or {}).items():
+        held = holders.setdefault((mission, unit), {})
+        exclusive = unit not in sharable and unit not in shares
+        others = [h for h in held if h != path]
+        shared_by_missions = [(m, u) for (m, u), hs in holders.items() if u == unit and m != mission and hs]
+        if exclusive and (others or shared_by_missions):
+            who = others or [f"{m}: {', '.join(holders[(m, u)])}" for m, u in shared_by_missions]
+            out.append(Breach(at, "double hold", f"{unit} granted to {path} while held by {', '.join(who)}"))
+        if exclusive and unit in epochs and int(epoch) <= epochs[unit]:
+            out.append(Breach(at, "epoch reused", f"{unit} granted to {path} at epoch {epoch}, not above the epoch "
+                                                  f"of its grant before ({epochs[unit]})"))
+        if exclusive:
+            epochs[unit] = max(epochs.get(unit, 0), int(epoch))
+        held[path] = int(epoch)
+    return out
 
 
 def unfinished(records: Iterable[Mapping[str, Any]]) -> list[Breach]:

@@ -405,6 +405,16 @@ class ResourceManager:
         found = self._diagnose(needs)
         return None if found is None else f"resource need {found[0]} can never be satisfied: {found[1]}"
 
+    def epochs_above(self, floor: int) -> None:
+        """Grant every unit from now on at epochs above `floor`: a controller that takes over the grants of another
+        (restarted, elected) must never give an epoch the other gave, or a grant of its would look like one of the
+        other's (safety audit 25, D1)."""
+        self._reg.raise_epochs(floor)
+
+    def highest_epoch(self) -> int:
+        """The highest epoch given (or started above) so far, of any unit."""
+        return max(self._reg.epochs.values(), default=self._reg.epoch_floor)
+
     def queue(self) -> tuple[str, ...]:
         """The waiting holders in the order they would be served (due reservations first)."""
         return tuple(self._queue.order())

@@ -124,6 +124,7 @@ class Registry:
         self.units: dict[str, Unit] = {}
         self.aggregates: dict[str, Aggregate] = {}
         self.epochs: dict[str, int] = {}
+        self.epoch_floor = 0  # every unit's epochs are above it, those of units added later too (`raise_epochs`)
         self.used: dict[str, dict[str, float]] = {}  # unit -> holder -> quantity
         self.load: dict[str, float] = {}
         self.full: set[str] = set()  # units with no room left (capacity - load <= EPS), or offline
@@ -196,7 +197,7 @@ class Registry:
             self.aggregates[candidate.id] = candidate
         else:
             self.units[candidate.id] = candidate
-            self.epochs.setdefault(candidate.id, 0)
+            self.epochs.setdefault(candidate.id, self.epoch_floor)
         self.version += 1
         insort(self._by_type.setdefault(candidate.type, []), candidate.id)
         self._typed.pop(candidate.type, None)
@@ -307,6 +308,12 @@ class Registry:
     def next_epoch(self, unit_id: str) -> int:
         self.epochs[unit_id] += 1
         return self.epochs[unit_id]
+
+    def raise_epochs(self, floor: int) -> None:
+        """Every unit's next epochs above `floor`, the units known now and those added later."""
+        self.epoch_floor = max(self.epoch_floor, floor)
+        for unit_id, epoch in self.epochs.items():
+            self.epochs[unit_id] = max(epoch, floor)
 
 
 @dataclass(slots=True, eq=False)

@@ -202,15 +202,6 @@ def live_children(image: NodeImage) -> list[tuple[str, int | None]]:
     return out
 
 
-def epochs_of(root: NodeImage) -> dict[str, int]:
-    """The highest epoch of each unit the tree held (a new manager starts above them)."""
-    out: dict[str, int] = {}
-    for n in root.walk():
-        for unit, epoch in n.epochs.items():
-            out[unit] = max(out.get(unit, 0), epoch)
-    return out
-
-
 def property_changes(resources: Iterable[Any], pool: Any) -> dict[str, dict[str, Any]]:
     """The Static Dependency Database's values (`pool.properties`) that differ from the resources' own (hosts.yaml):
     resource -> key -> value (a launched Scout's `carrier`), what a resumed mission must find again."""

@@ -14,6 +14,7 @@ from typing import Any
 
 import pytest
 
+from drd.daemon.resume import SEQ_GAP
 from drd.dryrun import SimulationClock, merged_drivers
 from drd.executive import EntryPoints, Executive
 from drd.hosts import load_hosts
@@ -78,7 +79,8 @@ class Team:
         gates: Any = self.executive.gates
         gates.orphan_all(self.sim.time, "controller lost")
         self.executive.close()
-        self.executive = self._executive()
+        sent, self.executive = self.executive.sent, self._executive()
+        self.executive.continue_records(sent + SEQ_GAP)  # as `drd.daemon.resume` does: records and epochs go on
         return image
 
     def records(self) -> list[dict[str, Any]]:

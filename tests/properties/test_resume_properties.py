@@ -21,6 +21,7 @@ from hypothesis import HealthCheck, given, note, settings
 from hypothesis import strategies as st
 
 from drd.bus import LocalNetwork
+from drd.daemon.resume import SEQ_GAP
 from drd.dryrun import SimulationClock, merged_drivers
 from drd.executive import EntryPoints, Executive
 from drd.hosts import Cluster
@@ -102,6 +103,7 @@ def resume_once(catalog: Catalog, setting: tuple[Cluster, World], text: str, cyc
     first.close()
 
     second = executive(cluster, world, sim, catalog, network)
+    second.continue_records(first.sent + SEQ_GAP)  # as `drd.daemon.resume` does: records and epochs go on
     second.submit(chart, "M-1", listeners=[TraceWriter(trace, "M-1")], resume=saved, since=sim.time)
     again = second.missions["M-1"]
     exercised = []

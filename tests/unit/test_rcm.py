@@ -275,6 +275,20 @@ def test_epochs_strictly_increase_with_each_grant() -> None:
     assert second.epochs["radio"] > first.epochs["radio"]
 
 
+def test_a_manager_taking_over_grants_above_the_epochs_it_is_given() -> None:
+    """A restarted or elected controller's manager starts empty: `epochs_above` keeps it from giving an epoch the
+    one before gave, for the units it knows and for those that join later (safety audit 25, D1)."""
+    rm = manager(Unit("cam1", "Camera"))
+    rm.epochs_above(7)
+    assert granted(rm.request(Request("A", 1, (CAMERA,)), 0.0))["A"].epochs == {"cam1": 8}
+    rm.add_unit(Unit("cam2", "Camera"), 0.0)
+    assert granted(rm.request(Request("B", 1, (CAMERA,)), 0.0))["B"].epochs == {"cam2": 8}
+    rm.epochs_above(3)  # never lowers
+    rm.release("A", 1.0)
+    assert granted(rm.request(Request("C", 1, (CAMERA,)), 1.0))["C"].epochs == {"cam1": 9}
+    assert rm.highest_epoch() == 9
+
+
 # -- constraints, dependencies and the Static Dependency Database -------------------------------
 
 

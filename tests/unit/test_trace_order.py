@@ -54,3 +54,16 @@ def test_a_restore_enters_a_finished_mission_again_but_nothing_else_does() -> No
                                                                                      paused=1.0)]
     assert kinds([*ended, *again, r("entered", 1.0, state="M")]) == []
     assert kinds([*ended, r("released", 1.0, resources=["ranger1"], reason="exit")]) == ["after finished"]
+
+
+def test_an_exclusive_units_epoch_must_grow_from_grant_to_grant_but_a_shares_need_not() -> None:
+    """Safety audit 25, D1: a restarted controller granted ranger1.drive at epoch 1 again."""
+    def grant(at: float, path: str, epoch: int, shares: dict[str, str] | None = None) -> dict[str, Any]:
+        unit = "ranger1.radio" if shares else "ranger1.drive"
+        return {**r("granted", at, resources={"r": unit}, epochs={unit: epoch}, shares=shares or {}), "path": path}
+
+    released = {**r("released", 2.0, resources=["ranger1.drive"], reason="done"), "path": "M/a"}
+    assert kinds([grant(0.0, "M/a", 1), released, grant(3.0, "M/b", 1)]) == ["epoch reused"]
+    assert kinds([grant(0.0, "M/a", 1), released, grant(3.0, "M/b", 100_002)]) == []
+    radio = {"r": "ranger1.radio"}
+    assert kinds([grant(0.0, "M/a", 2, radio), grant(0.0, "M/b", 1, radio)]) == []  # shares, in any order
