@@ -185,11 +185,11 @@ class Builder:
         kind, initial, policy, until = StateKind.COMPOUND, None, None, None
         generated: list[Transition] = []
         entry: tuple[str, ...] = ()
-        if body.parallel is not None:
+        if body.parallel is not None and kids:  # with no child, a sequence's empty body: done at once
             kind, policy = StateKind.PARALLEL, body.parallel.policy
             until = kids[body.parallel.until] if body.parallel.until in kids else None
             entry = self._producers_first(list(kids.values()), body.parallel.span)
-        elif body.plan is not None and body.plan.concurrent:
+        elif body.plan is not None and body.plan.concurrent and kids:
             kind, policy = StateKind.PARALLEL, ast.Policy.ALL
             for step, preds in predecessors(plan_graph(body.plan)).items():
                 s = self.states[kids[step]]

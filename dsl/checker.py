@@ -516,7 +516,7 @@ class Checker:
         reached = nx.descendants(g, "start")
         for key, child in body.children.items():
             if key not in reached:
-                src = next(iter(entry), "start")
+                src = next((e for e in entry if e not in ("done", "fail")), "start")  # no transition leaves those
                 self.report.error("unreachable", f"{key} is never reached: no transition leads to it", child.span,
                                   f"add a transition such as `{src} -> {key}`, or remove it")
 

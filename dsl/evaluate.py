@@ -135,7 +135,10 @@ class _Evaluator:
             case ast.Name(id=n):
                 if n not in self.names:
                     raise EvalError(f"{n} has no value here", e.span)
-                return self.names[n]
+                value = self.names[n]
+                if value is None:  # a `var x: int` not set yet (users audit 25, D8: "cannot apply > to None and 0")
+                    raise EvalError(f"{n} has no value yet", e.span)
+                return value
             case ast.Attr(obj=o, attr=a):
                 return _attribute(self.eval(o), a, e.span)
             case ast.Call():

@@ -193,6 +193,9 @@ class Typer:
                               else f"{expr.func} takes at least one argument", expr.span)
         types = [self.infer(a, scope) for a in expr.args]
         if expr.func == "len":
+            for a, t in zip(expr.args, types, strict=True):
+                if t in (*NUMBERS, "duration", "bool"):  # a text or shared data has entries; a number has none
+                    self.report.error("type", f"len expects a text or shared data, got {show(t)}", a.span)
             return "int"
         for a, t in zip(expr.args, types, strict=True):
             if t not in (*NUMBERS, "duration", ANY):

@@ -110,6 +110,12 @@ class _Builder(Transformer):  # type: ignore[type-arg]
         self.column_offset = 0
         self.subparse: Callable[[str, Token], ast.Expr | None] | None = None
 
+    def say(self, found: Diagnostic) -> None:
+        """Report a syntax error once: error recovery may transform one token again, and a string's parts are split
+        for its text and for its expressions (users audit 25, D7: one unclosed `{` said twice)."""
+        if found not in self.errors:
+            self.errors.append(found)
+
     # -- positions
     def tspan(self, tok: Token) -> Span:
         s = _span(self.file, tok)
@@ -341,8 +347,7 @@ class _Builder(Transformer):  # type: ignore[type-arg]
 
     def _too_large(self, tok: Token, message: str) -> None:
         found = Diagnostic("literal", message, self.tspan(tok))
-        if found not in self.errors:  # error recovery may transform one token again: say it once
-            self.errors.append(found)
+        self.say(found)
 
     def true_lit(self, c: list[Any]) -> ast.Expr:
         return ast.Literal(True, span=self.tspan(c[0]))
@@ -391,7 +396,7 @@ class _Builder(Transformer):  # type: ignore[type-arg]
             if ch == "\\" and i + 1 < len(raw):
                 esc = raw[i + 1]
                 if esc not in _ESCAPES:
-                    self.errors.append(Diagnostic(
+                    self.say(Diagnostic(
                         "syntax", f"unknown escape \\{esc} in string", self._inner(tok, i, i + 2),
                         'write \\\\ for a backslash; known escapes: \\n \\t \\" \\\\ \\{ \\}'))
                 buf.append(_ESCAPES.get(esc, esc))
@@ -399,7 +404,7 @@ class _Builder(Transformer):  # type: ignore[type-arg]
             elif ch == "{":
                 close = raw.find("}", i)
                 if close < 0:
-                    self.errors.append(Diagnostic("syntax", "unclosed { in string", self._inner(tok, i, i + 1),
+                    self.say(Diagnostic("syntax", "unclosed { in string", self._inner(tok, i, i + 1),
                                                   "close it with } or write \\{ for a brace"))
                     break
                 if buf:
@@ -411,7 +416,7 @@ class _Builder(Transformer):  # type: ignore[type-arg]
                     parts.append(inner)
                 i = close + 1
             elif ch == "}":
-                self.errors.append(Diagnostic("syntax", "unmatched } in string", self._inner(tok, i, i + 1),
+                self.say(Diagnostic("syntax", "unmatched } in string", self._inner(tok, i, i + 1),
                                               "write \\} for a literal brace"))
                 i += 1
             else:

@@ -36,7 +36,9 @@ class Wait(Component):
             self.ctx.log(f"Wait restarted: its state was lost, it waits {self.duration:g} s again")
 
     def step(self, now: float) -> Status:
-        waited = now - self.began
+        # to the microsecond, as records' times are: the clock adds 0.1 s a cycle, so 1 s read 0.9999999999999999
+        # and a guard `[w.waited.seconds >= 1.0]` held on a cluster and not in a dry-run (users audit 25, D1)
+        waited = round(now - self.began, 6)
         self.steps += 1
         self.ctx.outputs["waited"] = {"seconds": waited, "pid": os.getpid(), "steps": self.steps}
         return Status.SUCCESS if waited >= self.duration - 1e-6 else Status.RUNNING
