@@ -137,9 +137,7 @@ class Interpreter:
         """`gates`: the devices' gates (default: gates over `services["drivers"]` when given, else none);
         `priority`: the mission's rank against the other missions sharing the manager (1 first); `guard`: the
         constraints in force of every mission sharing the gates (default: its own); `origin`: the world's start."""
-        self.chart = chart
-        self.registry = registry
-        self.clock = clock
+        self.chart, self.registry, self.clock = chart, registry, clock
         self.pool = pool or ResourcePool(rcm)
         self.rcm = self.pool.broker  # every decision reaches every mission sharing the manager
         self.mission = mission or chart.name
@@ -182,8 +180,9 @@ class Interpreter:
         self._restoring: dict[str, NodeImage] = {}  # nodes entered again whose children are not entered yet
         self.resources = ResourceClient(self.rcm, self.pool, self.mission, gates or self._own_gates(), self.arbiter,
                                         clock.now, self._names, priority)
-        #: each component's last log line, by path: the reason of a plain failure (`Status.FAILURE` says no why)
+        # each component's last log line by path (why a plain failure); (path, condition) -> its error, said once
         self._said: dict[str, str] = {}
+        self._unreadable: dict[tuple[str, int], str] = {}  # conditions are the chart's: alive as long as `self`
         rank = {sid: i for i, sid in enumerate(s.id for s in chart.walk())}  # declaration order
         self.host = ComponentHost(registry, self.resources, self.arbiter, clock.now,
                                   {**self.services, "dependencies": self._dependency}, notify=self._heard,
@@ -1406,11 +1405,18 @@ class Interpreter:
         return names
 
     def _truthy(self, node: Node, expr: ast.Expr, event: rec.Event | None) -> bool:
+        """A guard or `when` condition's value; an error in it is false, and logged once until the condition
+        evaluates again (users audit 25, D3: a `when` that cannot be read logged the same line every cycle)."""
         try:
-            return truthy(expr, self._names(node, event), self.pool.count)
+            value = truthy(expr, self._names(node, event), self.pool.count)
         except EvalError as e:
-            self._notify(rec.Log(self.clock.now(), node.path, f"condition error: {e.message}"))
+            if self._unreadable.get((node.path, id(expr))) != e.message:
+                self._unreadable[node.path, id(expr)] = e.message
+                self._notify(rec.Log(self.clock.now(), node.path, f"condition error: {e.message}"))
             return False
+        if self._unreadable:
+            self._unreadable.pop((node.path, id(expr)), None)
+        return value
 
     def _enabled_guard(self, domain: Node, t: Transition, event: rec.Event | None) -> bool:
         return t.guard is None or self._truthy(domain, t.guard, event)

@@ -35,3 +35,13 @@ def test_an_empty_parallel_block_is_done_at_once(catalog: Catalog, body: str) ->
     report = dry_run(catalog, f"behavior Nothing {{ {body} }}\nmission Seq {{\n    Nothing\n"
                               "    Wait(duration: 1s)\n    start -> Nothing\n    Nothing -> Wait\n}\n")
     assert report.outcome == "success" and report.sim_time < 2.0, (report.outcome, report.reason, report.sim_time)
+
+
+def test_a_condition_that_cannot_be_read_is_logged_once_not_every_cycle(catalog: Catalog) -> None:
+    """D3: a `when` reading its own source's output (published only when it exits) logged its error 10 times a
+    second; it is said once, until the condition reads again."""
+    report = dry_run(catalog, "mission EarlyExit {\n    Wait(duration: 10s) as a\n"
+                              "    a -> done when a.waited.seconds > 5.0\n}\n", until=20.0)
+    errors = [line for line in report.logs() if "condition error" in line["text"]]
+    assert report.outcome == "success" and len(errors) == 1, errors[:3]
+    assert errors[0]["text"] == "condition error: a has no value here"
