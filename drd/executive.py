@@ -23,7 +23,7 @@ import orjson
 
 from drd import entrypoints
 from drd.bus import Bus, Message, Query, Reply
-from drd.bus.messages import encode
+from drd.bus.messages import MalformedMessage, encode
 from drd.entrypoints import EntryPointError
 from drd.errors import host_down_reason
 from drd.executive_messages import MissionCommand, MissionRecord, MissionRecords, MissionStatus
@@ -385,6 +385,10 @@ class Executive:
                 return MissionRecords(page, nxt)
             case "emit" if cmd.event:
                 targets = [cmd.mission] if cmd.mission else list(self.missions)
+                try:  # what its record could not carry is refused before any mission hears it (wire audit 25, D4)
+                    encode(_to_message("", rec.Event(0.0, "operator", cmd.event, dict(cmd.fields or {}))))
+                except MalformedMessage as e:
+                    return query.error(f"emit {cmd.event}: its fields cannot be recorded: {e.reason}")
                 for mid in targets:
                     self.missions[mid].emit(cmd.event, "operator", **(cmd.fields or {}))
                 return self.status(0, cmd.count, targets)

@@ -14,12 +14,13 @@ import json
 import os
 import sys
 import traceback
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from pathlib import Path
 from typing import IO, TYPE_CHECKING, Any, NoReturn
 
 import typer
 from rich.console import Console
+from rich.segment import Segment
 from rich.text import Text
 
 from drd import outputs
@@ -49,12 +50,24 @@ def _reader_gone() -> NoReturn:
     sys.exit(BROKEN_PIPE)
 
 
+#: The control characters a terminal acts on (C0 but newline and tab, DEL, C1), each shown as its escape instead.
+_INERT = {c: f"\\x{c:02x}" for c in (*range(0x00, 0x09), *range(0x0B, 0x20), *range(0x7F, 0xA0))}
+
+
 class _Console(Console):
-    """rich's Console, ending on a closed pipe with `BROKEN_PIPE`: rich's own exit code, 1, means a failed mission."""
+    """rich's Console, ending on a closed pipe with `BROKEN_PIPE` (rich's own exit code, 1, means a failed mission),
+    and printing text as inert: a control character in what it prints shows as `\x1b`, so a name, a reason or an
+    event field from the wire cannot clear the operator's screen, paint over a report or set the clipboard (wire
+    audit 25, D2). rich's own control segments (a live display's cursor moves) and styles pass as they are."""
 
     def on_broken_pipe(self) -> None:
         self.quiet = True
         _reader_gone()
+
+    def _render_buffer(self, buffer: Iterable[Segment]) -> str:
+        return super()._render_buffer(
+            Segment(text.translate(_INERT), style, control) if control is None else Segment(text, style, control)
+            for text, style, control in buffer)
 
 
 out = _Console(highlight=False, soft_wrap=True)

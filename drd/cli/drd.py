@@ -334,7 +334,7 @@ def _configure_logging(host: str, log_file: Path | None, level: int) -> None:
         handler = logs.RotatingLog(log_file)  # bounded, and reopened after an external logrotate
     else:
         handler = logging.StreamHandler(sys.stderr)
-    handler.setFormatter(logging.Formatter(f"%(asctime)s {host} %(levelname)s %(name)s: %(message)s"))
+    handler.setFormatter(logs.OneLine(f"%(asctime)s {host} %(levelname)s %(name)s: %(message)s"))
     root = logging.getLogger()
     root.handlers[:] = [handler]
     root.setLevel(level)

@@ -17,6 +17,21 @@ import threading
 import time
 from collections.abc import Callable
 
+#: What a log line's message shows of a control character: a newline or carriage return, which would start a line of
+#: a peer's own making, and the rest of C0, DEL and C1, which a terminal tailing the log would act on.
+_ONE_LINE = {**{c: f"\\x{c:02x}" for c in (*range(0x00, 0x20), *range(0x7F, 0xA0))}, 0x0A: "\\n", 0x0D: "\\r",
+             0x09: "\\t"}
+
+
+class OneLine(logging.Formatter):
+    """A daemon's log format, one line per message: a message's control characters are shown as escapes, so text a
+    peer sent (a mission id with a newline, as `_reject` logs it) cannot forge a line of the log (wire audit 25, D5).
+    A traceback still follows on its own lines: it is ours."""
+
+    def formatMessage(self, record: logging.LogRecord) -> str:
+        record.message = record.message.translate(_ONE_LINE)
+        return super().formatMessage(record)
+
 
 class RateLimit(logging.Filter):
     """At most `burst` records per message template and subject per `window` seconds, and `burst * SUBJECTS` per

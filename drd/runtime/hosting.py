@@ -144,10 +144,10 @@ class ComponentHost:
         catalog = self.services.get("catalog")
         ct = catalog.get(component) if catalog is not None else None
         if ct is None:
-            return lambda ev, **f: self.emit(ev, path, **f)
+            return lambda ev, /, **f: self.emit(ev, path, **f)
         declared = ct.events
 
-        def emit(ev: str, **fields: Any) -> None:
+        def emit(ev: str, /, **fields: Any) -> None:
             self.emit(ev, path, **check_emit(component, declared, ev, fields))
         return emit
 

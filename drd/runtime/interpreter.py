@@ -294,8 +294,9 @@ class Interpreter:
             self._flush()
         return MacroStep(now, stepped, tuple(self._taken), self.outcome)
 
-    def emit(self, name: str, source: str = "operator", **fields: Any) -> None:
-        """Queue an event (from a component, an action or the operator)."""
+    def emit(self, name: str, source: str = "operator", /, **fields: Any) -> None:
+        """Queue an event (from a component, an action or the operator). Its name and source are positional only, so
+        a field may be called `name` or `source` too (wire audit 25, D4: an operator's such field was a TypeError)."""
         record = rec.Event(self.clock.now(), source, name, fields)  # `**fields` is already a fresh dict
         if self.listeners:
             self._notify(record)

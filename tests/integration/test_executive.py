@@ -101,3 +101,32 @@ def test_the_executive_keeps_a_bounded_history_of_finished_missions() -> None:
             ex.step()
     assert ex.missions["Quick-7"].finished
     assert list(ex.missions) == ["Slow-1", "Quick-5", "Quick-6", "Quick-7"]  # 3 finished kept, the running one too
+
+
+def test_an_operators_event_may_have_any_field_name_and_one_it_cannot_record_is_refused_whole(
+        catalog: Catalog) -> None:
+    """Wire audit 25, D4: a field called `name` or `source` was a TypeError sent back to the client with a
+    traceback in the log, and a field of 2**70 (which the decoder takes, the encoder refuses) was kept among the
+    mission's records, so every later `records` query of that mission failed."""
+    from drd.bus import encode
+
+    net = LocalNetwork()
+    controller, operator = net.session("controller"), net.session("operator")
+    clock = SimClock()
+    ex = Executive(controller, clock, {"Calibrate": Forever}, resources=[Unit("r.ranges", "RangeSensor")])
+    text = "mission M {\n start -> Calibrate\n Calibrate -> done on MotionDetected [event.area > 0.5]\n}"
+    chart = compile_text(text, catalog, "m.mission").statechart
+    assert chart is not None
+    first, second = ex.submit(chart), ex.submit(chart)
+    clock.advance(1.0)
+    ex.step()
+    fields = {"area": 0.9, "name": "x", "source": "me"}
+    operator.call("drd/local/executive", MissionCommand("emit", first, "MotionDetected", fields))
+    assert ex.missions[first].outcome == "success", ex.missions[first].reason
+    raw = encode(MissionCommand("emit", second, "MotionDetected", {"area": 1})).replace(b'"area":1',
+                                                                                      b'"area":%d' % 2**70)
+    [reply] = operator.request_raw("drd/local/executive", raw)
+    assert reply.error is not None and "its fields cannot be recorded" in reply.error, reply
+    records = operator.call("drd/local/executive", MissionCommand("records", second))
+    assert not [r for r in records.records if r.kind == "event"]  # type: ignore[attr-defined]  # nobody heard it
+    assert ex.missions[second].outcome is None

@@ -46,3 +46,31 @@ def test_a_log_moved_away_by_logrotate_is_reopened(tmp_path: Path) -> None:
 
 def test_the_default_bound_is_a_few_tens_of_megabytes() -> None:
     assert 1 << 20 <= MAX_BYTES and MAX_BYTES * (BACKUPS + 1) <= 100 << 20
+
+
+def test_a_peers_text_cannot_start_a_line_of_the_log() -> None:
+    """Wire audit 25, D5: a `stop` of the mission `M\\n2026-01-01 ... FORGED` wrote a whole forged line into the
+    controller's log (`_reject` logs the reason, which names the mission); a traceback stays on its own lines."""
+    import io
+    import logging
+
+    from drd.daemon.logs import OneLine
+
+    stream = io.StringIO()
+    handler = logging.StreamHandler(stream)
+    handler.setFormatter(OneLine("%(levelname)s %(name)s: %(message)s"))
+    log = logging.getLogger("test.one_line")
+    log.addHandler(handler)
+    log.propagate = False
+    try:
+        log.warning("rejected a message on %s: %s", "drd/c/executive", "no mission M\n2026 WARNING FORGED\r\x1b[2J")
+        try:
+            raise ValueError("ours")
+        except ValueError:
+            log.exception("failed")
+    finally:
+        log.removeHandler(handler)
+    lines = stream.getvalue().splitlines()
+    assert lines[0] == "WARNING test.one_line: rejected a message on drd/c/executive: no mission M\\n2026 WARNING " \
+                       "FORGED\\r\\x1b[2J", lines
+    assert lines[1] == "ERROR test.one_line: failed" and lines[2] == "Traceback (most recent call last):", lines
