@@ -30,6 +30,7 @@ from typer.models import CommandInfo, OptionInfo
 
 from drd.cli.arrivals import SignalArrivals
 from drd.cli.common import (
+    INTERNAL,
     INVALID,
     OK,
     VERSION_CALLBACKS,
@@ -462,6 +463,8 @@ def query(text: str = typer.Argument(..., metavar="QUERY", show_default=False,
         try:
             reply = client.query(text, seed)
         except RemoteError as e:
+            if e.reason.startswith("handler "):  # the daemon's failure, not the query's (wire audit 25, D3)
+                fail(f"the daemon could not answer the query: {e.reason}", INTERNAL)
             fail(query_error(e.reason))
     if as_json:
         print_json(reply.offers)

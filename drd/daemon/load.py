@@ -63,8 +63,16 @@ def live_robots(robots: Iterable[Robot], properties: Callable[[str], Mapping[str
     return out
 
 
+#: The integers a live property may hold: those the bus can send again (64 bits). A larger one, which the decoder takes,
+#: made every daemon's trader reply unsendable, so `missionctl query` failed on every host (wire audit 25, D3).
+LIVE_INTS = range(-(2**63), 2**63)
+
+
 def live_value(value: object) -> bool:
-    """A value a live property may take: a string of at most `MAX_TEXT` characters, a bool, a finite number."""
+    """A value a live property may take: a string of at most `MAX_TEXT` characters, a bool, a finite float, an
+    integer of 64 bits."""
     if isinstance(value, str):
         return len(value) <= MAX_TEXT
-    return isinstance(value, bool) or (isinstance(value, int | float) and math.isfinite(value))
+    if isinstance(value, int):
+        return isinstance(value, bool) or value in LIVE_INTS
+    return isinstance(value, float) and math.isfinite(value)

@@ -110,3 +110,12 @@ def test_only_a_controller_reports_and_only_configured_robots_and_keys(cluster: 
     view.live_report(LiveReport("controller", 0.0, {"ghost": {"x": 1.0}, "scout1": {"carrier": ["a"], "x": 1.0,
                                                                                     "secret": "s"}}), 1.0)
     assert view.live == {"scout1": {"x": 1.0}}
+
+
+def test_a_live_integer_the_bus_cannot_send_again_is_dropped_on_receipt(cluster: Cluster) -> None:
+    """Wire audit 25, D3: a report of `battery: 2**70` was taken, and every daemon's trader reply holding it could
+    not be encoded: `missionctl query` failed on every host."""
+    view = up_view(cluster, "controller")
+    view.live_report(LiveReport("controller", 0.0, {"ranger1": {"battery": 2**70, "magazine": 2**63 - 1},
+                                                    "scout1": {"battery": -(2**63) - 1}}), 1.0)
+    assert view.live == {"ranger1": {"magazine": 2**63 - 1}, "scout1": {}}
