@@ -88,6 +88,9 @@ BUS_MAX_MESSAGE = MAX_SIZE + (64 << 10)
 #: zenoh's own default, for sessions that carry other protocols' messages (ROS 2 images may be several MB).
 ZENOH_MAX_MESSAGE = 1 << 30
 
+#: Handshakes a session accepts at once, and how long one may take (ms): see `make_config`.
+ACCEPT_PENDING, ACCEPT_TIMEOUT_MS = 1024, 5000
+
 _ALL = zenoh.QueryTarget.ALL
 #: A request on one concrete key goes to the complete queryables only, which every `serve` declares: a peer's
 #: queryable on `drd/<cluster>/**` that never answers (a buggy tool's, zenoh's default is not complete) held every
@@ -121,6 +124,12 @@ def make_config(
         # messages that are small and at most 1 MiB (docs/design.md "Load reports in step").
         "transport/shared_memory/enabled": False,
         "transport/link/rx/max_message_size": BUS_MAX_MESSAGE,
+        # A TCP connection that never completes a handshake holds one of these slots until the timeout: with zenoh's
+        # 100 for 10 s, 110 idle connections from anyone, credentials or not, locked every client and peer out of a
+        # daemon (wire audit 25, D1). More slots, held half as long: the bar is raised, not removed (a per-source
+        # connection limit in front of the endpoint removes it, docs/security.md).
+        "transport/unicast/accept_pending": ACCEPT_PENDING,
+        "transport/unicast/accept_timeout": ACCEPT_TIMEOUT_MS,
     }
     if lease_ms is not None:  # how long a silently vanished peer (power cut) keeps its tokens
         settings["transport/link/tx/lease"] = lease_ms

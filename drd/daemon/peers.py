@@ -43,7 +43,8 @@ def probe(endpoint: str, timeout: float = 0.5) -> str | None:
 
 
 REFUSED = ("it accepts connections but no session was established: the peers refused each other's"
-           " credentials (a different password file, certificate or security mode?)")
+           " credentials (a different password file, certificate or security mode?), or its handshakes are all"
+           " taken (many connections to it that never complete one)")
 UNRESPONSIVE = ("unresponsive: its session was up, then it went silent, and its port still accepts connections (a"
                 " frozen or SIGSTOPped daemon, or one too loaded to answer)")
 
