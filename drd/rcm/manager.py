@@ -78,25 +78,19 @@ TIME_EPS = 1e-6
 @dataclasses.dataclass(frozen=True, slots=True)
 class Pinned:
     """The `where` of a suspended holder's re-queued need: only the resource it held (spec: "resumed when it gets
-    it back"), and only while it still satisfies the need's own `where` (a Scout moved to another Ranger does
-    not). Equal pins are equal, so the waiters' alternatives are cached as for any `where`."""
+    it back"), whatever the need's own `where` says of it now. A `where` chooses what a holder gets; a holder keeps
+    its grant when it no longer holds (a Scout its own LaunchScout threw is no longer carried), and so does one
+    suspended meanwhile (safety audit 25, D2: such a holder could never resume, and failed its mission). Equal pins
+    are equal, so the waiters' alternatives are cached as for any `where`."""
 
     id: str
-    where: Where | None = None
 
     def __call__(self, candidate: Candidate, chosen: Mapping[str, Candidate]) -> bool:
-        return candidate.id == self.id and (self.where is None or self.where(candidate, chosen))
+        return candidate.id == self.id
 
     def narrow(self, candidates: Iterable[Candidate], chosen: Mapping[str, Candidate]) -> Iterable[Candidate]:
         """Only the pinned one: the solver need not look at the others."""
         return [c for c in candidates if c.id == self.id]
-
-
-def _unpinned(where: Where | None) -> Where | None:
-    """The need's own `where` under the pin of an earlier suspension: pinned again at each preemption, a holder
-    taking turns would wrap it once more per slice, until comparing two of them overflowed the stack (users
-    audit 9, D1: a RecursionError after some 650 slices)."""
-    return where.where if isinstance(where, Pinned) else where
 
 
 class _FreeFirst:
@@ -750,18 +744,18 @@ class ResourceManager:
             return units, frozenset()
         given = dict(hold.given)
         given.update({name: c for name, c in hold.chosen.items() if name not in hold.alloc})
-        needs = tuple(dataclasses.replace(n, where=Pinned(hold.chosen[n.name].id, _unpinned(n.where)))
+        needs = tuple(dataclasses.replace(n, where=Pinned(hold.chosen[n.name].id))
                       for n in hold.request.needs if n.name in hold.alloc)  # resumed on what was taken from it
         request = dataclasses.replace(hold.request, needs=needs)
         key = (*request.rank, 1, 0.0, next(self._order))
         wait = Wait(request, key, hold.since, resumed=True, given=given)
         alts, capped = self._reg.alternatives(request.needs, given, self.max_alternatives)
-        if not alts:  # what it held no longer fits its needs (a Scout moved to another Ranger): never resumable
+        if not alts:  # what it held is gone (removed with its host): never resumable
             need, reason = self._diagnose(request.needs, given) or ("", "")
             out.append(Unsatisfiable(holder, need, reason))
             return units, frozenset()
         self._enqueue(wait, alts, capped)
-        return units, wait.claims  # it may resume at once elsewhere (another free camera)
+        return units, wait.claims  # it may resume at once (what it held is free again)
 
     def _end_hold(self, holder: str) -> tuple[str, ...]:
         hold = self._holds.pop(holder)
