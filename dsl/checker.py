@@ -173,7 +173,7 @@ class Checker:
                     continue
                 ct = self.catalog.get(b.name)
                 if ct is not None:
-                    self.report.error("duplicate", f"{b.name} is already a {_kind_word(ct)} component",
+                    self.report.error("duplicate", f"{b.name} is already {_kind_word(ct)} component",
                                       b.name_span, f"rename the behavior (declared in {ct.source})")
                     continue
                 self.behaviors[b.name] = b
@@ -405,7 +405,7 @@ class Checker:
         if ct is not None and ct.kind is Kind.BEHAVIOR:
             return ct
         if ct is not None:
-            self.report.error("not-a-behavior", f"{name} is a {_kind_word(ct)}, not a behavior", span,
+            self.report.error("not-a-behavior", f"{name} is {_kind_word(ct)}, not a behavior", span,
                               f"resources are acquired with needs: needs x: {name}" if ct.is_resource else
                               f"data is declared with shared: shared x: {name}")
             return None
@@ -638,8 +638,8 @@ def _is_resource(catalog: Catalog, type_name: str) -> bool:
 
 
 def _kind_word(ct: ComponentType) -> str:
-    return {Kind.BEHAVIOR: "elementary behavior", Kind.RC: "resource", Kind.ARC: "resource",
-            Kind.DATA: "data type"}[ct.kind]
+    return {Kind.BEHAVIOR: "an elementary behavior", Kind.RC: "a resource", Kind.ARC: "a resource",
+            Kind.DATA: "a data type"}[ct.kind]
 
 
 def _written_type(e: ast.Expr) -> str:

@@ -193,7 +193,7 @@ ERRORS: list[tuple[str, str, str, str | None]] = [
     ("duplicate-behavior", m("  A", "behavior A { Observe }\nbehavior A { Watch }"),
      "5:10 behavior A is declared twice", None),
     ("behavior-shadows-component", m("  Observe", "behavior Watch { Observe }"),
-     "4:10 Watch is already a elementary behavior component", None),
+     "4:10 Watch is already an elementary behavior component", None),
     ("duplicate-declaration", m("  var n: int = 0\n  var n: int = 1\n  Observe"), "3:3 n is declared twice in M",
      None),
     ("duplicate-child", m("  parallel { Observe; Observe }"), "2:23 two children of M are named Observe",
