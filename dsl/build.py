@@ -198,8 +198,9 @@ class Builder:
             graph = plan_graph(body.plan) if body.plan is not None else None
             order = total_order(graph) if graph is not None and find_cycle(graph) is None else []
             ahead = body.plan is not None and body.plan.preallocate
-            for a, b in zip(order, order[1:], strict=False):
-                generated.append(_completion(sid, kids[a], kids[b], ahead))
+            steps = {st.name: st.span for chain in body.plan.chains for st in chain} if body.plan is not None else {}
+            for a, b in zip(order, order[1:], strict=False):  # located at the step it leads to, in the plan
+                generated.append(_completion(sid, kids[a], kids[b], ahead, steps.get(b, NOWHERE)))
             # an empty body is done at once (spec: a behavior whose children have all finished is done)
             initial = kids[order[0]] if order else (starts[0].target if starts else next(iter(kids.values()),
                                                                                           final("done")))
@@ -539,8 +540,9 @@ def _literal(value: object, type_name: str) -> ast.Expr:
     return ast.Literal(value)
 
 
-def _completion(domain: str, source: str, target: str, preallocate: bool = False) -> Transition:
-    return Transition(source, target, domain, ast.TriggerKind.COMPLETION, generated=True, preallocate=preallocate)
+def _completion(domain: str, source: str, target: str, preallocate: bool = False, span: Span = NOWHERE) -> Transition:
+    return Transition(source, target, domain, ast.TriggerKind.COMPLETION, generated=True, preallocate=preallocate,
+                      span=span)
 
 
 def _folder(source: str) -> str:

@@ -198,7 +198,11 @@ class Reporter:
             self.diagnostics.append(Diagnostic(code, message, span, hint, tuple(notes)))
 
     def warning(self, code: str, message: str, span: Span, hint: str | None = None) -> None:
-        self.diagnostics.append(Diagnostic(code, message, span, hint, severity=Severity.WARNING))
+        """A warning, once: a behavior used twice is built twice, and its warnings would be said twice, at one place
+        (users audit 25, D5)."""
+        found = Diagnostic(code, message, span, hint, severity=Severity.WARNING)
+        if found not in self.diagnostics:
+            self.diagnostics.append(found)
 
     @property
     def failed(self) -> bool:

@@ -42,3 +42,11 @@ def test_a_variable_not_set_yet_is_named_not_shown_as_none() -> None:
     x = ast.Name("x")
     with pytest.raises(EvalError, match="x has no value yet$"):
         evaluate(ast.Binary(">", x, ast.Literal(0)), {"x": None})
+
+
+def test_a_plans_warning_is_located_at_the_plan_and_said_once(catalog: Catalog) -> None:
+    """D5: "nothing to preallocate" pointed at the line where the behavior is used (each use: twice for two)."""
+    text = ("mission P {\n    needs ranger: Ranger\n    Inner as a\n    Inner as b\n    start -> a\n    a -> b\n}\n"
+            "behavior Inner {\n    plan preallocate { Calibrate < Observe }\n}\n")
+    found = problems(catalog, text)
+    assert [(p[0], p[1], p[2]) for p in found] == [("preallocate", 9, 36)], found
