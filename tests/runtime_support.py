@@ -201,3 +201,24 @@ class Idle(Component):
 
     def step(self, now: float) -> Status:
         return Status.RUNNING
+
+
+def traced_dry_run(chart: Statechart, catalog: Any, injections: Iterable[str], until: float) -> list[dict[str, Any]]:
+    """The trace's records of a dry-run of `chart` on hosts.yaml's team in the corridor world, with `--inject`s."""
+    import io
+    import json
+    from pathlib import Path
+
+    from drd import inject
+    from drd.dryrun import run
+    from drd.hosts import load_hosts
+    from drd.sim.world import load_world
+
+    root = Path(__file__).resolve().parents[1]
+    cluster, world = load_hosts(root / "hosts.yaml", catalog), load_world(root / "worlds" / "corridor.yaml")
+    known = {"hosts": {h.name for h in cluster.hosts}, "robots": {r.id for r in cluster.robots},
+             "doors": {d.id for d in world.doors}}
+    trace = io.StringIO()
+    run(chart, cluster, world, catalog, until=until, trace=trace,
+        injections=inject.parse_all(list(injections), **known))
+    return [json.loads(line) for line in trace.getvalue().splitlines()]

@@ -54,7 +54,7 @@ def _reader_gone() -> NoReturn:
 _INERT = {c: f"\\x{c:02x}" for c in (*range(0x00, 0x09), *range(0x0B, 0x20), *range(0x7F, 0xA0))}
 
 
-class _Console(Console):
+class InertConsole(Console):
     """rich's Console, ending on a closed pipe with `BROKEN_PIPE` (rich's own exit code, 1, means a failed mission),
     and printing text as inert: a control character in what it prints shows as `\x1b`, so a name, a reason or an
     event field from the wire cannot clear the operator's screen, paint over a report or set the clipboard (wire
@@ -70,8 +70,8 @@ class _Console(Console):
             for text, style, control in buffer)
 
 
-out = _Console(highlight=False, soft_wrap=True)
-err = _Console(stderr=True, highlight=False, soft_wrap=True)
+out = InertConsole(highlight=False, soft_wrap=True)
+err = InertConsole(stderr=True, highlight=False, soft_wrap=True)
 
 
 

@@ -5,16 +5,9 @@ every unit's epochs over the `granted` records strictly increase, across the res
 
 from __future__ import annotations
 
-import io
-import json
-
-from drd import inject
-from drd.dryrun import run
-from drd.hosts import load_hosts
-from drd.sim.world import load_world
 from dsl import compile_text
 from dsl.catalog import Catalog
-from tests.conftest import ROOT
+from tests.runtime_support import traced_dry_run
 
 TURNS = """mission Turns {
     parallel all {
@@ -33,13 +26,7 @@ behavior Turn {
 def test_a_restarted_controller_never_grants_an_epoch_the_dead_one_gave(catalog: Catalog) -> None:
     chart = compile_text(TURNS, catalog, "turns.mission").statechart
     assert chart is not None
-    cluster, world = load_hosts(ROOT / "hosts.yaml", catalog), load_world(ROOT / "worlds" / "corridor.yaml")
-    known = {"hosts": {h.name for h in cluster.hosts}, "robots": {r.id for r in cluster.robots},
-             "doors": {d.id for d in world.doors}}
-    trace = io.StringIO()
-    run(chart, cluster, world, catalog, until=12.0, trace=trace,
-        injections=inject.parse_all(["kill controller at 3s", "restart controller at 5s"], **known))
-    records = [json.loads(line) for line in trace.getvalue().splitlines()]
+    records = traced_dry_run(chart, catalog, ["kill controller at 3s", "restart controller at 5s"], 12.0)
     assert any(r["kind"] == "restored" for r in records)  # the restart happened and resumed the mission
     last: dict[str, int] = {}
     grants_after = 0

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from drd.bus import LocalNetwork, RemoteError
+from drd.bus import Bus, LocalNetwork, RemoteError
 from drd.executive import EntryPoints, Executive, MissionCommand, MissionRecord, MissionStatus
 from drd.hosts import load_hosts
 from drd.rcm import Unit
@@ -34,7 +34,9 @@ def test_shared_camera_over_the_local_bus(catalog: Catalog) -> None:
     assert isinstance(status, MissionStatus) and status.missions[0]["outcome"] == "success"
 
 
-def test_operator_stops_and_emits_over_the_bus(catalog: Catalog) -> None:
+def two_waiting_missions(catalog: Catalog) -> tuple[Executive, Bus, str, str]:
+    """An executive on a local bus, an operator's session, and two missions waiting for a `MotionDetected` of
+    `area` > 0.5, a second into their run."""
     net = LocalNetwork()
     controller, operator = net.session("controller"), net.session("operator")
     clock = SimClock()
@@ -45,6 +47,11 @@ def test_operator_stops_and_emits_over_the_bus(catalog: Catalog) -> None:
     first, second = ex.submit(chart), ex.submit(chart)
     clock.advance(1.0)
     ex.step()
+    return ex, operator, first, second
+
+
+def test_operator_stops_and_emits_over_the_bus(catalog: Catalog) -> None:
+    ex, operator, first, second = two_waiting_missions(catalog)
     operator.call("drd/local/executive", MissionCommand("emit", first, "MotionDetected", {"area": 0.9}))
     assert ex.missions[first].outcome == "success" and ex.missions[second].outcome is None
     reply = operator.call("drd/local/executive", MissionCommand("stop", second))
@@ -110,16 +117,7 @@ def test_an_operators_event_may_have_any_field_name_and_one_it_cannot_record_is_
     mission's records, so every later `records` query of that mission failed."""
     from drd.bus import encode
 
-    net = LocalNetwork()
-    controller, operator = net.session("controller"), net.session("operator")
-    clock = SimClock()
-    ex = Executive(controller, clock, {"Calibrate": Forever}, resources=[Unit("r.ranges", "RangeSensor")])
-    text = "mission M {\n start -> Calibrate\n Calibrate -> done on MotionDetected [event.area > 0.5]\n}"
-    chart = compile_text(text, catalog, "m.mission").statechart
-    assert chart is not None
-    first, second = ex.submit(chart), ex.submit(chart)
-    clock.advance(1.0)
-    ex.step()
+    ex, operator, first, second = two_waiting_missions(catalog)
     fields = {"area": 0.9, "name": "x", "source": "me"}
     operator.call("drd/local/executive", MissionCommand("emit", first, "MotionDetected", fields))
     assert ex.missions[first].outcome == "success", ex.missions[first].reason

@@ -4,26 +4,15 @@
 
 from __future__ import annotations
 
-import io
-import json
-
-from drd import inject
-from drd.dryrun import run
-from drd.hosts import load_hosts
-from drd.sim.world import load_world
 from dsl import compile_file
 from dsl.catalog import Catalog
 from tests.conftest import ROOT
+from tests.runtime_support import traced_dry_run
 
 
 def test_a_restores_since_and_paused_are_rounded_sim_seconds_in_a_dry_run(catalog: Catalog) -> None:
     chart = compile_file(ROOT / "missions" / "corridor_surveillance.mission", catalog).statechart
     assert chart is not None
-    cluster, world = load_hosts(ROOT / "hosts.yaml", catalog), load_world(ROOT / "worlds" / "corridor.yaml")
-    known = {"hosts": {h.name for h in cluster.hosts}, "robots": {r.id for r in cluster.robots},
-             "doors": {d.id for d in world.doors}}
-    trace = io.StringIO()
-    run(chart, cluster, world, catalog, until=120.0, trace=trace,
-        injections=inject.parse_all(["kill controller at 50s", "restart controller at 58s"], **known))
-    [restored] = [r for line in trace.getvalue().splitlines() if (r := json.loads(line))["kind"] == "restored"]
+    records = traced_dry_run(chart, catalog, ["kill controller at 50s", "restart controller at 58s"], 120.0)
+    [restored] = [r for r in records if r["kind"] == "restored"]
     assert (restored["at"], restored["since"], restored["paused"]) == (58.0, 50.0, 8.0), restored

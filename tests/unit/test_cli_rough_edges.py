@@ -53,13 +53,13 @@ def test_text_from_the_wire_reaches_the_terminal_inert_and_rich_styles_it_still(
     painted over the report (`ESC[2J`), or set the clipboard (OSC 52); rich's `Text` strips only a few controls."""
     import io
 
-    from rich.text import Text
-
-    from drd.cli.common import _Console
+    from drd.cli.common import InertConsole
 
     screen = io.StringIO()
-    console = _Console(file=screen, force_terminal=True, color_system="standard", highlight=False, soft_wrap=True)
-    console.print(Text.assemble(("error: ", "bold red"), "door\x1b[2J\x1b[H ALL CLEAR \x1b]52;c;cm0=\x1b\\ \x9b1m\x07"))
+    console = InertConsole(file=screen, force_terminal=True, color_system="standard", highlight=False,
+                           soft_wrap=True)
+    console.out("error: ", style="bold red", end="")
+    console.out("door\x1b[2J\x1b[H ALL CLEAR \x1b]52;c;cm0=\x1b\\ \x9b1m\x07")
     shown = screen.getvalue()
     assert "\x1b[2J" not in shown and "\x1b]52" not in shown and "\x9b" not in shown and "\x07" not in shown, shown
     assert "door\\x1b[2J\\x1b[H ALL CLEAR \\x1b]52;c;cm0=\\x1b\\ \\x9b1m" in shown, shown  # BEL: rich drops it
