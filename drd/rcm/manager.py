@@ -62,7 +62,6 @@ from drd.rcm.model import (
     Unit,
     Unsatisfiable,
     Waiting,
-    Where,
     units_of,
 )
 from drd.rcm.solver import EPS, Solution, diagnose, first_solution, solutions
