@@ -76,6 +76,12 @@ def test_with_every_controller_lost_the_one_started_again_resumes() -> None:
         def abandon(self) -> None:
             pass
 
+        def highest_number(self) -> int:  # what the next one numbers its records and grants its epochs above
+            return 0
+
+        def continue_records(self, after: int) -> None:
+            pass
+
         def together(self) -> contextlib.nullcontext[None]:  # missions resumed at once ask as one
             return contextlib.nullcontext()
 
