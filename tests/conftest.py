@@ -27,7 +27,7 @@ _E2E = ("subprocess", "cluster_support", "MISSIONCTL", "Popen", "WorkerPool", "e
 #: `module.name`): it runs a whole mission or robot through time (a dry-run, the executive), opens a real transport
 #: (ROS 2 over loopback zenoh), or measures the compiler's cost with an instrument that slows every line it watches.
 _INTEGRATION = ("drd.dryrun", "drd.dryrun.run", "drd.dryrun.run_many", "drd.executive", "drd.executive.Executive",
-                "tests.ros2_support*", "tracemalloc")
+                "tests.ros2_support*", "tracemalloc", "tests.runtime_support.traced_dry_run")
 
 
 def _imported(tree: ast.Module) -> set[str]:
