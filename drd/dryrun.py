@@ -470,7 +470,8 @@ def summary(r: DryRun) -> dict[str, Any]:
     return {"mission": r.mission, "id": r.mission_id, "records": r.mission_id or r.mission,  # their mission key
             "priority": r.priority, "speed": r.speed,
             "sim_time": r.sim_time, "wall_time": r.wall_time, "on_cluster": r.on_cluster,
-            "injections": r.injections, "scouts": r.scouts}
+            "injections": r.injections, "scouts": r.scouts,
+            **({"controller_away": r.away} if r.away else {})}  # its replay's pace leaves it out too
 
 
 def rebuilt(run: Mapping[str, Any], records: Sequence[rec.Record],
@@ -482,12 +483,13 @@ def rebuilt(run: Mapping[str, Any], records: Sequence[rec.Record],
     end = f"the recording ends at {float(run['sim_time']):.1f} s, before the run did"
     result = DryRun(str(run["mission"]), finished.outcome if finished else "unfinished",
                     finished.reason if finished else end,
-                    float(run["sim_time"]), float(run["wall_time"]), speed=run.get("speed"),
+                    float(run["sim_time"]), float(run.get("wall_time") or 0.0), speed=run.get("speed"),
                     on_cluster=bool(run.get("on_cluster")), priority=int(run.get("priority") or 1),
                     mission_id=str(run.get("id") or ""))
     for r in records:
         result.records.append(r)
         facts(result, r)
+    result.away = float(run.get("controller_away") or 0.0)  # records audit 26, D1
     result.injections = list(run.get("injections") or [])
     if "scouts" in run:
         result.scouts = list(run.get("scouts") or [])

@@ -842,7 +842,10 @@ JSON_SCHEMAS: dict[str, tuple[str, dict[str, Any]]] = {
     RECORDS: ("drd.Record", {"type": "object", "required": ["kind", "at", "path", "mission"], "properties": {
         "kind": _STR, "at": _NUM, "path": _STR, "mission": _STR}}),
     RUNS: ("drd.Run", {"type": "object", "required": ["format", "mission", "records", "sim_time"], "properties": {
-        "format": _STR, "mission": _STR, "records": _STR, "sim_time": _NUM, "wall_time": _NUM, "order": _INT}}),
+        "format": _STR, "mission": _STR, "records": _STR, "sim_time": _NUM, "wall_time": _NUM, "order": _INT,
+        "controller_away": _NUM, "id": _STR, "priority": _INT, "speed": _NUM, "on_cluster": {"type": "boolean"},
+        "injections": {"type": "array", "items": {"type": "object"}},
+        "scouts": {"type": "array", "items": {"type": "object"}}}}),
     ACTIVE: ("drd.Active", {"type": "object", "required": ["mission", "id", "at", "active", "holds", "waiting"],
                             "properties": {"mission": _STR, "id": _STR, "at": _NUM, "outcome": {
                                 "type": ["string", "null"]}, "active": {"type": "array", "items": {
@@ -954,16 +957,16 @@ def read(path: Path | str) -> Recording:
                         decoder = decoders.get(schema.id) or decoders.setdefault(
                             schema.id, factory.decoder_for(channel.message_encoding, schema))
                         if decoder is not None and channel.topic == TF:
-                            _take_poses(out, decoder(message.data), message.log_time)
+                            _take_poses(out, _decoded(channel.topic, decoder, message.data), message.log_time)
                         elif decoder is not None:  # each camera's view, drawn when it is first read
-                            _take_views(out, decoder(message.data), message.log_time)
+                            _take_views(out, _decoded(channel.topic, decoder, message.data), message.log_time)
                     elif channel.message_encoding != "json":  # not drd's (a ROS 2 bag's CDR of the same topics)
                         continue
                     elif channel.topic in (RECORDS, RUNS):
                         _take(out, channel.topic, message.data)
                     elif channel.topic in (CAMERA, LIGHT) and len(out.fovs) < 64:
-                        frame = orjson.loads(message.data)
-                        out.fovs.setdefault(str(frame.get("robot")), float(frame.get("fov") or 0.0))
+                        robot, fov = _camera_fov(channel.topic, message.data)
+                        out.fovs.setdefault(robot, fov)
             except damaged as e:  # a file cut short, or a damaged chunk: keep what the chunks before it held
                 if not out.records:
                     raise
@@ -988,6 +991,26 @@ def read(path: Path | str) -> Recording:
         out.runs = [{"format": FORMAT, "mission": records[0].path.split("/", 1)[0], "id": key, "records": key,
                      "sim_time": max(r.at for r in records), "wall_time": 0.0} for key, records in out.records.items()]
     return out
+
+
+def _decoded(topic: str, decode: Callable[[bytes], Any], data: bytes) -> Any:
+    """A protobuf message of `topic` (`/drd/tf`, `/drd/world`), or BadMessage: its bytes are not one (records audit
+    26, D3: protobuf's DecodeError, no ValueError, ended `replay` with exit 70)."""
+    from google.protobuf.message import DecodeError  # type: ignore[import-untyped]
+
+    try:
+        return decode(data)
+    except DecodeError as e:
+        raise BadMessage(f"a message on {topic} is not what its schema says: {e}") from None
+
+
+def _camera_fov(topic: str, data: bytes) -> tuple[str, float]:
+    """A camera frame's or brightness message's robot and field of view, or BadMessage (records audit 26, D3)."""
+    frame = _loaded(topic, data)
+    fov = frame.get("fov") if isinstance(frame, dict) else None
+    if not isinstance(frame, dict) or not (fov is None or _seconds(fov)):
+        raise BadMessage(f"a message on {topic} is not an object with a number fov: {str(frame)[:80]}")
+    return str(frame.get("robot")), float(fov or 0.0)
 
 
 def _damaged() -> tuple[type[BaseException], ...]:
@@ -1073,17 +1096,39 @@ def _loaded(topic: str, data: bytes) -> Any:
         raise
     except ValueError as e:  # a UnicodeDecodeError too, which the reader's damage must not be taken for
         raise BadMessage(f"a message on {topic} is not JSON ({type(e).__name__}: {e})") from None
+    except RecursionError:  # a RuntimeError, which the reader's damage must not be taken for (records audit 26, D4)
+        raise BadMessage(f"a message on {topic} is nested too deeply to be a drd message") from None
+
+
+#: A run summary's fields (`drd.dryrun.summary`): (key, what it must be, in words, whether it may be left out).
+_RUN_FIELDS: tuple[tuple[str, Callable[[Any], bool], str, bool], ...] = (
+    ("mission", lambda v: isinstance(v, str), "a string", False),
+    ("records", lambda v: isinstance(v, str), "a string", False),
+    ("sim_time", lambda v: _seconds(v), "a number of 0 or more", False),
+    ("wall_time", lambda v: _seconds(v), "a number of 0 or more", True),
+    ("controller_away", lambda v: _seconds(v), "a number of 0 or more", True),
+    ("order", lambda v: isinstance(v, int) and not isinstance(v, bool), "an integer", True),
+    ("id", lambda v: isinstance(v, str), "a string", True),
+    ("priority", lambda v: isinstance(v, int) and not isinstance(v, bool) and v >= 1, "an integer of 1 or more", True),
+    ("speed", lambda v: _seconds(v) and v > 0, "a positive number", True),
+    ("on_cluster", lambda v: isinstance(v, bool), "true or false", True),
+    ("injections", lambda v: isinstance(v, list) and all(isinstance(i, dict) for i in v), "a list of objects", True),
+    ("scouts", lambda v: isinstance(v, list) and all(isinstance(i, dict) for i in v), "a list of objects", True),
+)
+
+
+def _seconds(value: Any) -> bool:
+    return isinstance(value, int | float) and not isinstance(value, bool) and 0 <= value < math.inf
 
 
 def _run_problem(run: dict[str, Any]) -> str | None:
-    """What a run summary (`/drd/runs`) lacks of its schema (`JSON_SCHEMAS[RUNS]`), in words (None: it is one)."""
-    for key, kind, said in (("mission", str, "a string"), ("records", str, "a string"),
-                            ("sim_time", (int, float), "a number"), ("wall_time", (int, float), "a number"),
-                            ("order", int, "an integer")):
+    """What a run summary (`/drd/runs`) lacks of its schema (`JSON_SCHEMAS[RUNS]`), in words (None: it is one):
+    every field `dryrun.rebuilt` reads is checked here, so a replay never fails on one (records audit 26, D2)."""
+    for key, fits, said, optional in _RUN_FIELDS:
         value = run.get(key)
-        if value is None and key in ("wall_time", "order"):  # optional
+        if value is None and optional:
             continue
-        if not isinstance(value, kind) or isinstance(value, bool):
+        if not fits(value):
             return f"has {key} {value!r}, not {said}"
     return None
 
@@ -1167,7 +1212,7 @@ def to_ros2_bag(path: Path, bag: Path) -> dict[str, int]:
                     decode = None if schema is None or channel.message_encoding == "json" else \
                         factory.decoder_for(channel.message_encoding, schema)
                     converted = _ros2(store, channel.topic, message.log_time,
-                                      message.data if decode is None else decode(message.data))
+                                      message.data if decode is None else _decoded(channel.topic, decode, message.data))
                     if converted is None:
                         continue
                     topic, kind, msg = converted

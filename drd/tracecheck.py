@@ -116,6 +116,8 @@ def read_trace(lines: Iterable[bytes], name: str) -> list[dict[str, Any]]:
             record = json.loads(text)
         except json.JSONDecodeError as e:
             raise TraceError(f"not a JSON record: {e.msg} (column {e.colno})", where=where) from None
+        except (ValueError, RecursionError) as e:  # a number of 4,300 digits or more, nesting too deep for Python:
+            raise TraceError(f"not a JSON record drd reads: {_why(e)}", where=where) from None  # records audit 26, D4
         problem = record_problem(record)
         if problem is not None:
             raise TraceError(problem, where=where)
@@ -157,6 +159,10 @@ class OwnershipReport:
     def summary(self) -> str:
         return (f"ownership: {self.accepted} accepted commands of {self.commands} ({self.refused} refused),"
                 f" {self.grants} grants; {len(self.breaches)} breaches")
+
+
+def _why(e: BaseException) -> str:
+    return "nested too deeply" if isinstance(e, RecursionError) else str(e)
 
 
 def under(path: str, holder: str) -> bool:

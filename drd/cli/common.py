@@ -177,8 +177,11 @@ def wrap_cut(text: str, width: int, lines: int) -> list[str]:
     more is left: a long reason reads whole in a few lines, and a very long one still says it was cut."""
     import textwrap
 
-    wrapped = textwrap.wrap(text, max(2, width), break_on_hyphens=False) or [""]
-    if len(wrapped) <= lines:
+    # only what the lines can show is wrapped: textwrap splits a long word in time quadratic in its length (a 10 MB
+    # log line took 45 s to print: records audit 26, D6)
+    limit = lines * (max(2, width) + 1) + 1
+    wrapped = textwrap.wrap(text[:limit], max(2, width), break_on_hyphens=False) or [""]
+    if len(wrapped) <= lines and len(text) <= limit:
         return wrapped
     last = " ".join(wrapped[lines - 1:])
     return wrapped[:lines - 1] + [last[:max(1, width - 1)].rstrip() + "…"]

@@ -116,7 +116,20 @@ def _forged(path: Path, topic: str, *messages: bytes) -> None:
      "a message on /drd/records: `granted` record without `resources`"),
     ("/drd/records", [b'{"kind":"entered","at":"1","path":"X","state":"X"}'],
      "a message on /drd/records: `entered` record: `at` is \"1\", not a number"),
-], ids=["summary-time-not-a-number", "nan", "not-json", "record-without-a-field", "record-time-a-string"])
+    # records audit 26, D2: every field `rebuilt` reads is checked (these were exit 70, or passed into the report)
+    *((("/drd/runs", [b'{"format":"drd-run-1","mission":"M","records":"M-1","sim_time":1,' + field + b'}'],
+        "a run summary (mission 'M') has " + said)
+       for field, said in ((b'"priority":"high"', "priority 'high', not an integer of 1 or more"),
+                           (b'"injections":5', "injections 5, not a list of objects"),
+                           (b'"scouts":[1,2]', "scouts [1, 2], not a list of objects"),
+                           (b'"speed":"fast"', "speed 'fast', not a positive number"),
+                           (b'"wall_time":-5', "wall_time -5, not a number of 0 or more"),
+                           (b'"controller_away":1e400', "controller_away inf, not a number of 0 or more")))),
+    # D3, D4: a camera frame that is no object, and nesting no drd message has, were exit 70 or "damage"
+    ("/drd/camera", [b'[1, 2]'], "a message on /drd/camera is not an object with a number fov"),
+    ("/drd/records", [b"[" * 50_000 + b"]" * 50_000], "a message on /drd/records is nested too deeply"),
+], ids=["summary-time-not-a-number", "nan", "not-json", "record-without-a-field", "record-time-a-string",
+        "priority", "injections", "scouts", "speed", "wall-time", "away", "camera-not-an-object", "too-deep"])
 def test_an_intact_file_whose_messages_break_their_schema_is_refused_as_input(tmp_path: Path, topic: str,
                                                                               messages: list[bytes], why: str) -> None:
     """Records audit 23, #2 and #4: a summary whose sim_time was a string crashed replay (exit 70, "could not convert

@@ -388,3 +388,15 @@ def test_a_replay_knows_the_view_of_a_camera_that_never_saw_anyone(corridor: Run
     recorder.view("lookout", 1.0, 1.2, 5.0)  # a camera read, nobody seen: no frame, no brightness
     recorder.end([{"mission": "M", "id": "M-1", "records": "M-1", "sim_time": 2.0}], 2.0)
     assert read(path).fovs == {"lookout": 1.2}
+
+
+def test_a_runs_time_without_a_controller_is_kept_for_its_replay() -> None:
+    """Records audit 26, D1: the run's report said `controller_away` 4.45 s and 11.7x real time; its replay had no
+    `controller_away` and said 6.3x (a cluster that could not keep up)."""
+    from drd.dryrun import rebuilt, summary
+
+    ran = DryRun("M", "success", "", 60.0, 9.6, speed=20.0, on_cluster=True, mission_id="M-1")
+    ran.away = 4.45
+    again = rebuilt(orjson.loads(orjson.dumps(summary(ran))), [])
+    assert again.away == 4.45 and again.to_dict()["controller_away"] == 4.45
+    assert again.to_dict()["real_time_factor"] == ran.to_dict()["real_time_factor"]

@@ -103,3 +103,23 @@ def test_a_read_trace_is_what_the_checker_counts() -> None:
         '{"kind":"released","at":2,"path":"M/a","resources":["d1"],"reason":"exit","mission":"M-1"}'), "t")
     report = check(got)
     assert (report.commands, report.accepted, report.ok) == (1, 1, True)
+
+
+@pytest.mark.parametrize(("line", "why"), [(b"[" * 100_000 + b"]" * 100_000, "nested too deeply"),
+                                           (b'{"seq": ' + b"7" * 5000 + b"}", "4300")],
+                         ids=["nesting", "digits"])
+def test_a_line_json_takes_but_python_cannot_hold_is_the_files_error_at_its_line(line: bytes, why: str) -> None:
+    """Records audit 26, D4: `check-trace` exited 70 (RecursionError, and the 4,300-digit limit's ValueError)."""
+    with pytest.raises(TraceError) as e:
+        read_trace([b'{"kind": "log", "at": 0, "path": "M", "text": "x"}', line], "t.jsonl")
+    said = str(e.value)
+    assert e.value.where == "t.jsonl:2" and said.startswith("not a JSON record drd reads") and why in said, said
+
+
+def test_a_very_long_line_is_cut_to_what_its_lines_show() -> None:
+    """Records audit 26, D6: a 10 MB log line was wrapped whole (quadratic in textwrap) before 3 lines were kept."""
+    from drd.cli.common import wrap_cut
+
+    assert wrap_cut("x" * 10_000_000, 80, 3) == ["x" * 80, "x" * 80, "x" * 79 + "…"]
+    assert wrap_cut("word " * 100, 20, 3) == ["word word word word"] * 2 + ["word word word word…"]
+    assert wrap_cut("a b c", 80, 3) == ["a b c"]
