@@ -124,6 +124,9 @@ class Executive:
         self.kept: dict[str, collections.deque[MissionRecord]] = {}  # each mission's latest records, for catch-up
         #: More of a mission's status from its host (the cluster controller's placement decisions), if any.
         self.status_extras: Callable[[str], Mapping[str, Any]] | None = None
+        #: Its host's missions not entered yet, for `stop` to refuse and `unknown` to name (a controller resuming its
+        #: journal's once their hosts are back), with what to say of them.
+        self.pending: Callable[[], tuple[list[str], str]] = lambda: ([], "")
         self._queryable = bus.serve(f"drd/{cluster}/executive", self._command)
         self._reads = bus.serve(f"drd/{cluster}/executive/status", self._read)  # what an observer may ask
 
@@ -374,6 +377,10 @@ class Executive:
             return self.status(cmd.after, cmd.count, [cmd.mission] if cmd.mission else None)
         if cmd.mission and cmd.mission in self.past and cmd.op == "stop":  # it ended before the restart
             return MissionStatus(self.clock.now(), [{**self.past[cmd.mission], "already_ended": True}])
+        pending, why = self.pending()
+        if cmd.op == "stop" and pending and (not cmd.mission or cmd.mission in pending):  # cluster audit 26, D1:
+            return query.error(f"cannot stop {', '.join(pending)} yet: the controller is resuming them {why}; stop"
+                               " them once `missionctl status` lists them")  # it said "nothing to stop", then ran
         if cmd.mission and cmd.mission not in self.missions:
             return query.error(self.unknown(cmd.mission))
         match cmd.op:
@@ -399,8 +406,10 @@ class Executive:
         nor sent an event that changes anything), and how many ended ones it still knows."""
         running = [mid for mid, interp in self.missions.items() if not interp.finished]
         ended = len(self.missions) + len(self.past) - len(running)
+        pending = self.pending()[0]
         return (f"no mission {mission}; running: {', '.join(running[-20:]) or 'none'}"
                 + (f" (and {len(running) - 20} more)" if len(running) > 20 else "")
+                + (f"; resuming from the journal: {', '.join(pending[:20])}" if pending else "")
                 + (f"; {ended} ended mission{'s' if ended != 1 else ''} known (missionctl status lists them)"
                    if ended else ""))
 

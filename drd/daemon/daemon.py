@@ -603,9 +603,12 @@ class Daemon:
         infos = []
         with self._briefly():
             for rec in self.view.records.values():
-                report, ann = rec.report, rec.announcement
+                state, ann = self.view.shown_state(rec.name), rec.announcement
+                # a host down runs nothing: its last load report is not its load (cluster audit 26, D2: `instances`
+                # 1 on a killed host whose instance ran elsewhere); an unresponsive one keeps it, with its age
+                report = rec.report if state != "down" else None
                 infos.append(HostInfo(
-                    rec.name, self.view.shown_state(rec.name), None if rec.since is None else self._to_wall(rec.since),
+                    rec.name, state, None if rec.since is None else self._to_wall(rec.since),
                     rec.reason,
                     self.transport.endpoints.get(rec.name, rec.config.endpoint), [str(r) for r in rec.config.roles],
                     report.cpu if report else None, report.memory if report else None,

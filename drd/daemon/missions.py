@@ -241,6 +241,7 @@ class MissionRunner:
         threading.Thread(target=self._warm_up, name="drd-compiler-warm-up", daemon=True).start()
         # the journal's missions waiting to be resumed (their hosts are not all back yet): no new run meanwhile
         self.resuming: list[str] = [job.id for job in journal.running()] if journal is not None else []
+        executive.pending = lambda: (list(self.resuming), self._resuming_why())
         if self.resuming:
             threading.Thread(target=self._resume, name="drd-resume", daemon=True).start()
 
@@ -262,6 +263,10 @@ class MissionRunner:
             self.resuming = []
         if resumed:
             log.info("resumed %d mission(s) from the journal: %s", len(resumed), ", ".join(resumed))
+
+    def _resuming_why(self) -> str:
+        return (f"from its journal, once their hosts are back (at most {self.cluster.resume_grace:g} s after it"
+                " started)")
 
     def _status_extras(self, mission: str) -> dict[str, Any]:
         """What the executive's status adds to a mission of this controller: `started`, the executive's time when
@@ -434,9 +439,8 @@ class MissionRunner:
         if self.simulator is None:
             real_run_refusal(self.cluster, req)
         if self.resuming:  # a world started now would be the one the resume rejoins: its clock went backwards
-            raise ValueError(f"the controller is resuming {', '.join(self.resuming)} from its journal, once their"
-                             f" hosts are back (at most {self.cluster.resume_grace:g} s after it started): run this"
-                             " mission again when `missionctl status` lists them")
+            raise ValueError(f"the controller is resuming {', '.join(self.resuming)} {self._resuming_why()}: run"
+                             " this mission again when `missionctl status` lists them")
         limits = self.cluster.limits
         budget = limits.compile_seconds if not req.give_up_at else min(limits.compile_seconds,
                                                                        req.give_up_at - time.time())

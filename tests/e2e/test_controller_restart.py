@@ -240,10 +240,13 @@ def test_a_run_while_the_journal_waits_for_its_hosts_is_refused_and_the_controll
             cluster.start("controller")
             cluster.wait_ready(["controller"])
             refused = subprocess.run(short, cwd=ROOT, capture_output=True, text=True, timeout=60, check=False)
+            # cluster audit 26, D1: `stop --all` said "no mission is running: nothing to stop", then the mission ran
+            unstopped = cluster.missionctl("stop", "--all", "--config", str(cluster.hosts_file), "--timeout", "20")
         finally:
             os.kill(ranger, signal.SIGCONT)
         assert refused.returncode == 2, (refused.stdout, refused.stderr)
         assert f"the controller is resuming {mission} from its journal" in refused.stderr, refused.stderr
+        assert unstopped.returncode == 2 and f"cannot stop {mission} yet" in unstopped.stderr, unstopped.stderr
         cluster.wait_up(cluster.client(), timeout=60)
         eventually(lambda: any(m.get("id") == mission and (m.get("outcome") is not None or m.get("resumed"))
                                for m in cluster.client().missions()), "the journal's mission to be resumed", 60)

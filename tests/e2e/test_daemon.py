@@ -301,6 +301,8 @@ def test_a_killed_host_is_seen_down_at_once_and_its_resources_leave_after_the_le
     eventually(lambda: cluster.states(client)["ranger1"] == "down", "ranger1 to be seen down", 5)
     down = last_event(client, "ranger1", "down")
     assert down is not None and down.detail == "lost: its liveliness token vanished"
+    [seen] = [h for h in client.hosts().hosts if h.name == "ranger1"]  # it runs nothing now (cluster audit 26, D2)
+    assert (seen.instances, seen.cpu, seen.memory, seen.load1) == (0, None, None, None), seen
     delay = down.at - killed_at
     print(f"\nkill -9 seen after {delay:.3f} s (bound {KILL_BOUND:g} s)")
     assert 0 < delay <= KILL_BOUND
