@@ -217,8 +217,7 @@ class MissionRunner:
         self.gates = RemoteGates({u.id: u.host for u in cluster.resources() if u.host and type(u).__name__ == "Unit"},
                                  self._deliver_gates)
         executive = controller.executive
-        executive.gates = self.gates
-        executive.status_extras = self._status_extras
+        executive.gates, executive.status_extras, executive.pending = self.gates, self._status_extras, self._pending
         # robots' pose and battery come with the hosts' replies; constraints are guarded on the devices' hosts
         self.telemetry = RemoteTelemetry({r.id: r.host for r in cluster.robots if r.host}, self._fetch,
                                          self.gates.send, clock.now, lambda host: self.host_down(host))
@@ -239,9 +238,8 @@ class MissionRunner:
         self._queryable = bus.serve(run_key(cluster.name), self._serve)
         self._migrations = Migrations(bus, self)  # `missionctl migrate` (drd.daemon.migrate)
         threading.Thread(target=self._warm_up, name="drd-compiler-warm-up", daemon=True).start()
-        # the journal's missions waiting to be resumed (their hosts are not all back yet): no new run meanwhile
+        # the journal's missions waiting to be resumed (their hosts are not all back yet): no new run nor stop meanwhile
         self.resuming: list[str] = [job.id for job in journal.running()] if journal is not None else []
-        executive.pending = lambda: (list(self.resuming), self._resuming_why())
         if self.resuming:
             threading.Thread(target=self._resume, name="drd-resume", daemon=True).start()
 
@@ -263,6 +261,10 @@ class MissionRunner:
             self.resuming = []
         if resumed:
             log.info("resumed %d mission(s) from the journal: %s", len(resumed), ", ".join(resumed))
+
+    def _pending(self) -> tuple[list[str], str]:
+        """The executive's `pending`: asked from its queryable, which may serve before `resuming` is set."""
+        return list(getattr(self, "resuming", ())), self._resuming_why()
 
     def _resuming_why(self) -> str:
         return (f"from its journal, once their hosts are back (at most {self.cluster.resume_grace:g} s after it"
