@@ -1086,6 +1086,8 @@ class _RecordWatch:
                     active.pop(r.path, None)
                 elif isinstance(r, rec.Finished):
                     finished = (r.outcome, r.reason)
+                    if self.view is not None:  # what the shared world reads after it is not this mission's
+                        self.view.ended_at = r.at
             now = time.monotonic()
             if now >= next_poll and finished is None:  # a missed record must not hang us: ask the executive
                 next_poll = now + self.every
@@ -1294,6 +1296,7 @@ class _ClusterView:
         self.world = self._world(str(reply.world), worlds)
         self.offset: float | None = None  # mission time = simulator time + offset (None: not known yet)
         self.cursor = 0  # the simulator host's next reading to ask for (`drd.sim.observe.Observations`)
+        self.ended_at = math.inf  # the mission's `finished` (mission time): nothing after it is recorded
         from drd.daemon.missions import NO_WORLD
 
         self.real = str(reply.world) == NO_WORLD  # real robots: each host with robots says what its drivers read
@@ -1395,9 +1398,9 @@ class _ClusterView:
             seen = reply
             if self.offset is None:
                 self.offset = self._calibrate(reply.time)
-            for reading in reply.readings:  # those of the world before this mission began are not its own
-                if float(reading.get("at", 0.0)) + self.offset >= 0.0:
-                    replay(reading, self.recorder, self.offset)
+            for reading in reply.readings:  # those of the world before this mission began, or after it ended, are
+                if 0.0 <= float(reading.get("at", 0.0)) + self.offset <= self.ended_at:  # not its own (records
+                    replay(reading, self.recorder, self.offset)  # audit 26, D5: seconds of another mission's)
             self.cursor = reply.next
             if not reply.more:
                 break
@@ -1406,6 +1409,8 @@ class _ClusterView:
         poses = {rid: (v[0], v[1], v[2]) for rid, v in seen.poses.items()}
         poses.update({INTRUDER + iid: (v[0], v[1], 0.0) for iid, v in seen.intruders.items()})
         at = seen.time + self.offset
+        if at > self.ended_at:
+            return
         self.recorder.transforms(at, poses, dict(seen.carried))
         self.recorder.land(at)
 

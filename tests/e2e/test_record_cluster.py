@@ -110,3 +110,23 @@ def seqs_of_records(tmp_path: Path, got: list[tuple[str, int, Any]]) -> None:
                                str(tmp_path / "other.jsonl"), "--json"], cwd=tmp_path, capture_output=True,
                               text=True, timeout=60, check=False)
     assert "without seq" not in together.stderr and together.returncode in (0, 1), together.stderr[-2000:]
+
+
+def test_a_recording_ends_with_its_mission_though_the_world_runs_on(cluster: DaemonCluster, tmp_path: Path) -> None:
+    """Records audit 26, D5: a mission sharing the world with another kept recording that world's poses and readings
+    for seconds after its own `finished` (the observer runs until the report is done)."""
+    config = str(cluster.hosts_file)
+    other = cluster.missionctl("run", "missions/corridor_surveillance.mission", "--config", config, "--speed", "10",
+                               "--until", "150", "--priority", "2", "--detach")
+    assert other.returncode == 0, other.stderr[-2000:]
+    try:
+        run = cluster.missionctl("run", "missions/shared_camera.mission", "--config", config, "--priority", "1",
+                                 "--record", str(tmp_path / "b.mcap"), "--json", timeout=180)
+        assert run.returncode in (0, 1), run.stderr[-2000:]
+        got = messages(tmp_path / "b.mcap")
+        [end] = [t for topic, t, _m in got if topic == "/drd/runs"]
+        assert end == round(json.loads(run.stdout)["sim_time"] * 1e9)
+        late = Counter(topic for topic, t, _m in got if t > end)
+        assert not late, late  # the other mission's world went on: none of it is this mission's
+    finally:
+        cluster.missionctl("stop", "--all", "--config", config)
