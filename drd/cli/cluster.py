@@ -897,9 +897,10 @@ def stop_missions(client: Any, mission: str, every: bool, timeout: float) -> lis
     targets = [mission]
     if not mission:
         running = [str(m.get("id")) for m in client.missions() if m.get("outcome") is None]
-        if not running:  # the executive still answers: a controller resuming its journal says it cannot stop those
-            client.bus.call(client.keys.executive, MissionCommand("stop", ""), timeout=max(timeout, 5.0))
-            return []  # (cluster audit 26, D1: "nothing to stop", then the journal's mission ran)
+        if not running:  # `--all` asks anyway: a controller resuming its journal says it cannot stop those yet
+            if every:  # (cluster audit 26, D1: "nothing to stop", then the journal's mission ran)
+                client.bus.call(client.keys.executive, MissionCommand("stop", ""), timeout=max(timeout, 5.0))
+            return []
         if len(running) > 1 and not every:
             fail(f"{len(running)} missions run ({', '.join(running)}): say which to stop",
                  hint=f"missionctl stop {running[0]}, or missionctl stop --all", running=running)
