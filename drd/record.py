@@ -1008,7 +1008,7 @@ def _camera_fov(topic: str, data: bytes) -> tuple[str, float]:
     """A camera frame's or brightness message's robot and field of view, or BadMessage (records audit 26, D3)."""
     frame = _loaded(topic, data)
     fov = frame.get("fov") if isinstance(frame, dict) else None
-    if not isinstance(frame, dict) or not (fov is None or _seconds(fov)):
+    if not isinstance(frame, dict) or not (fov is None or _amount(fov)):
         raise BadMessage(f"a message on {topic} is not an object with a number fov: {str(frame)[:80]}")
     return str(frame.get("robot")), float(fov or 0.0)
 
@@ -1100,25 +1100,26 @@ def _loaded(topic: str, data: bytes) -> Any:
         raise BadMessage(f"a message on {topic} is nested too deeply to be a drd message") from None
 
 
+def _amount(value: Any) -> bool:
+    """A finite number of 0 or more (not a bool): a time, a speed, a field of view."""
+    return isinstance(value, int | float) and not isinstance(value, bool) and 0 <= value < math.inf
+
+
 #: A run summary's fields (`drd.dryrun.summary`): (key, what it must be, in words, whether it may be left out).
 _RUN_FIELDS: tuple[tuple[str, Callable[[Any], bool], str, bool], ...] = (
     ("mission", lambda v: isinstance(v, str), "a string", False),
     ("records", lambda v: isinstance(v, str), "a string", False),
-    ("sim_time", lambda v: _seconds(v), "a number of 0 or more", False),
-    ("wall_time", lambda v: _seconds(v), "a number of 0 or more", True),
-    ("controller_away", lambda v: _seconds(v), "a number of 0 or more", True),
+    ("sim_time", _amount, "a number of 0 or more", False),
+    ("wall_time", _amount, "a number of 0 or more", True),
+    ("controller_away", _amount, "a number of 0 or more", True),
     ("order", lambda v: isinstance(v, int) and not isinstance(v, bool), "an integer", True),
     ("id", lambda v: isinstance(v, str), "a string", True),
     ("priority", lambda v: isinstance(v, int) and not isinstance(v, bool) and v >= 1, "an integer of 1 or more", True),
-    ("speed", lambda v: _seconds(v) and v > 0, "a positive number", True),
+    ("speed", lambda v: _amount(v) and v > 0, "a positive number", True),
     ("on_cluster", lambda v: isinstance(v, bool), "true or false", True),
     ("injections", lambda v: isinstance(v, list) and all(isinstance(i, dict) for i in v), "a list of objects", True),
     ("scouts", lambda v: isinstance(v, list) and all(isinstance(i, dict) for i in v), "a list of objects", True),
 )
-
-
-def _seconds(value: Any) -> bool:
-    return isinstance(value, int | float) and not isinstance(value, bool) and 0 <= value < math.inf
 
 
 def _run_problem(run: dict[str, Any]) -> str | None:

@@ -25,6 +25,7 @@ from rich.text import Text
 
 from drd import outputs
 from drd.errors import DrdError, debugging
+from drd.inert import escapes
 from drd.runtime.trace import finite
 
 if TYPE_CHECKING:  # the mission language loads only for the commands that use it
@@ -51,7 +52,7 @@ def _reader_gone() -> NoReturn:
 
 
 #: The control characters a terminal acts on (C0 but newline and tab, DEL, C1), each shown as its escape instead.
-_INERT = {c: f"\\x{c:02x}" for c in (*range(0x00, 0x09), *range(0x0B, 0x20), *range(0x7F, 0xA0))}
+_INERT = escapes(keep="\n\t")
 
 
 class InertConsole(Console):

@@ -17,10 +17,11 @@ import threading
 import time
 from collections.abc import Callable
 
+from drd.inert import escapes
+
 #: What a log line's message shows of a control character: a newline or carriage return, which would start a line of
 #: a peer's own making, and the rest of C0, DEL and C1, which a terminal tailing the log would act on.
-_ONE_LINE = {**{c: f"\\x{c:02x}" for c in (*range(0x00, 0x20), *range(0x7F, 0xA0))}, 0x0A: "\\n", 0x0D: "\\r",
-             0x09: "\\t"}
+_ONE_LINE = escapes()
 
 
 class OneLine(logging.Formatter):
